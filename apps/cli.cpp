@@ -1,0 +1,156 @@
+#include "cli.h"
+
+#include <cerrno>
+#include <charconv>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <new>
+#include <sstream>
+
+#include "heightcast/grid/error.h"
+
+namespace hc::cli {
+
+Parser::Parser(std::string program, std::string synopsis, std::string description)
+    : program_(std::move(program)), synopsis_(std::move(synopsis)), description_(std::move(description)) {}
+
+void Parser::flag(const std::string& name, const std::string& help, bool& target) {
+    opts_.push_back({name, "", help, [&target](const std::string&) { target = true; }, true});
+}
+void Parser::option(const std::string& name, const std::string& value, const std::string& help, std::string& target) {
+    opts_.push_back({name, value, help, [&target](const std::string& v) { target = v; }});
+}
+void Parser::option(const std::string& name, const std::string& value, const std::string& help, double& target) {
+    opts_.push_back({name, value, help, [&target, name](const std::string& v) { target = parseNumber(v, name); }});
+}
+void Parser::option(const std::string& name, const std::string& value, const std::string& help, std::optional<double>& target) {
+    opts_.push_back({name, value, help, [&target, name](const std::string& v) { target = parseNumber(v, name); }});
+}
+void Parser::option(const std::string& name, const std::string& value, const std::string& help, int& target) {
+    opts_.push_back({name, value, help, [&target, name](const std::string& v) {
+                         double d = parseNumber(v, name);
+                         if (d != std::floor(d) || std::abs(d) > 1e9) throw Error(name + " " + v + ": not an integer");
+                         target = static_cast<int>(d);
+                     }});
+}
+void Parser::option(const std::string& name, const std::string& value, const std::string& help, unsigned& target) {
+    opts_.push_back({name, value, help, [&target, name](const std::string& v) {
+                         double d = parseNumber(v, name);
+                         if (d != std::floor(d) || d < 0 || d > 4096) throw Error(name + " " + v + ": not a count in 0..4096");
+                         target = static_cast<unsigned>(d);
+                     }});
+}
+void Parser::positional(const std::string& name, const std::string& help, std::string& target) {
+    pos_.push_back({name, help, &target});
+}
+void Parser::exclusive(std::vector<std::string> names) { exclusive_.push_back(std::move(names)); }
+
+Parser::Opt* Parser::find(const std::string& name) {
+    for (auto& o : opts_)
+        if (o.name == name) return &o;
+    return nullptr;
+}
+
+bool Parser::given(const std::string& name) const {
+    for (const auto& o : opts_)
+        if (o.name == name) return o.seen;
+    return false;
+}
+
+bool Parser::parse(int argc, char** argv) {
+    size_t nextPos = 0;
+    for (int i = 1; i < argc; ++i) {
+        std::string a = argv[i];
+        if (a == "--help" || a == "-h") {
+            std::fputs(help().c_str(), stdout);
+            return false;
+        }
+        if (a.size() > 1 && a[0] == '-' && !(a.size() > 1 && (std::isdigit(static_cast<unsigned char>(a[1])) || a[1] == '.'))) {
+            std::string value;
+            bool inlineValue = false;
+            if (auto eq = a.find('='); eq != std::string::npos && a.rfind("--", 0) == 0) {
+                value = a.substr(eq + 1);
+                a = a.substr(0, eq);
+                inlineValue = true;
+            }
+            Opt* o = find(a);
+            if (!o) throw Error("unknown option " + a + " (see --help)");
+            if (o->seen) throw Error(a + " given twice");
+            o->seen = true;
+            if (o->isFlag) {
+                if (inlineValue) throw Error(a + " takes no value");
+                o->set("");
+                continue;
+            }
+            if (!inlineValue) {
+                if (i + 1 >= argc) throw Error(a + " needs a value: " + a + " " + o->value);
+                value = argv[++i];
+            }
+            o->set(value);
+            continue;
+        }
+        if (nextPos >= pos_.size()) throw Error("unexpected argument '" + a + "' (see --help)");
+        *pos_[nextPos++].target = a;
+    }
+    if (nextPos < pos_.size()) throw Error("missing " + pos_[nextPos].name + " (see --help)");
+    for (const auto& group : exclusive_) {
+        std::vector<std::string> seen;
+        for (const auto& n : group)
+            if (given(n)) seen.push_back(n);
+        if (seen.size() > 1) throw Error(seen[0] + " and " + seen[1] + " cannot be combined");
+    }
+    return true;
+}
+
+std::string Parser::help() const {
+    std::ostringstream s;
+    s << "usage: " << program_ << " " << synopsis_ << "\n\n" << description_ << "\n";
+    if (!pos_.empty()) {
+        s << "\narguments:\n";
+        for (const auto& p : pos_) s << "  " << p.name << "\n      " << p.help << "\n";
+    }
+    s << "\noptions:\n";
+    for (const auto& o : opts_) {
+        s << "  " << o.name;
+        if (!o.isFlag) s << " " << o.value;
+        s << "\n      " << o.help << "\n";
+    }
+    s << "  --help\n      print this help and exit\n";
+    return s.str();
+}
+
+double parseNumber(const std::string& text, const std::string& what) {
+    double v = 0;
+    const char* b = text.data();
+    const char* e = b + text.size();
+    auto r = std::from_chars(b, e, v);
+    if (text.empty() || r.ec != std::errc() || r.ptr != e || !std::isfinite(v))
+        throw Error(what + " " + text + ": not a finite number");
+    return v;
+}
+
+int run(const char* program, const std::function<int()>& body) {
+    try {
+        return body();
+    } catch (const Error& e) {
+        std::fprintf(stderr, "%s: error: %s\n", program, e.what());
+    } catch (const std::bad_alloc&) {
+        std::fprintf(stderr, "%s: error: out of memory\n", program);
+    } catch (const std::exception& e) {
+        std::fprintf(stderr, "%s: error: %s\n", program, e.what());
+    }
+    return 1;
+}
+
+void checkWritable(const std::string& path, const std::string& what) {
+    namespace fs = std::filesystem;
+    std::error_code ec;
+    fs::path p(path);
+    if (p.filename().empty()) throw Error(path + ": " + what + " must name a file");
+    if (fs::is_directory(p, ec)) throw Error(path + ": is a directory (" + what + ")");
+    fs::path dir = p.parent_path();
+    if (!dir.empty() && !fs::is_directory(dir, ec)) throw Error(path + ": directory " + dir.string() + " does not exist (" + what + ")");
+}
+
+}  // namespace hc::cli

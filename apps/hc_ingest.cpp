@@ -1,0 +1,95 @@
+// hc-ingest: raster DEM (+ water) -> adaptive quadtree grid file (.hcg).
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+
+#include "cli.h"
+#include "heightcast/grid/error.h"
+#include "heightcast/grid/grid_file.h"
+#include "heightcast/grid/progress.h"
+#include "heightcast/ingest/ingest.h"
+
+namespace {
+
+void printSummary(const hc::Grid& g, const hc::ingest::LoadReport& r, const std::string& out, double writeSeconds) {
+    std::printf("hc-ingest: %s -> %s\n", g.stats.sourcePath.c_str(), out.c_str());
+    std::printf("  input        %s\n", r.sourceDescription.c_str());
+    std::printf("  input CRS    %s\n", r.sourceCrsName.empty() ? "none" : r.sourceCrsName.c_str());
+    std::printf("  grid CRS     %s\n", r.gridCrsName.empty() ? "none (local metres)" : r.gridCrsName.c_str());
+    std::printf("  method       %s\n", r.method.c_str());
+    std::printf("  working      %llu x %llu px of %.6g m, %llu valid\n", (unsigned long long)g.stats.sourceWidth,
+                (unsigned long long)g.stats.sourceHeight, g.finestCellM, (unsigned long long)g.stats.validPixels);
+    std::printf("  cells        %zu (%.3f pixels per cell), %zu layer%s:", g.cellCount(),
+                g.cellCount() ? double(g.stats.validPixels) / double(g.cellCount()) : 0.0, g.layerCount(),
+                g.layerCount() == 1 ? "" : "s");
+    for (const auto& l : g.layers) std::printf(" %s [%s]", l.name.c_str(), l.units.c_str());
+    std::printf("\n");
+    auto perLevel = g.cellsPerLevel();
+    for (size_t l = 0; l < perLevel.size(); ++l)
+        std::printf("    level %zu  %10.4g m  %10llu cells  %6.2f %%\n", l, g.levelSizeM(int(l)),
+                    (unsigned long long)perLevel[l], g.cellCount() ? 100.0 * double(perLevel[l]) / double(g.cellCount()) : 0.0);
+    if (int w = g.findLayer("water_depth"); w >= 0) {
+        size_t wet = 0;
+        for (float d : g.values[size_t(w)]) wet += d > 0;
+        std::printf("  water        %zu wet cells of %zu\n", wet, g.cellCount());
+    }
+    std::printf("  deviation    max %.4g m, RMS %.4g m (tolerance %.4g m, every valid pixel checked)\n", g.stats.maxDevM,
+                g.stats.rmsDevM, g.stats.toleranceM);
+    std::printf("  time         %.3f s ingest + %.3f s write\n", g.stats.seconds, writeSeconds);
+    std::printf("  memory       peak %.1f MB resident; grid %.1f MB (%zu bytes per cell)\n", double(hc::peakRssBytes()) / 1e6,
+                double(g.cellCount() * (8 + 4 * g.layerCount())) / 1e6, size_t(8 + 4 * g.layerCount()));
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+    return hc::cli::run("hc-ingest", [&] {
+        hc::ingest::Options o;
+        std::string out, water, waterSurface;
+        std::optional<double> waterLevel, nodata;
+        bool quiet = false;
+        hc::cli::Parser p("hc-ingest", "INPUT -o OUT.hcg [options]",
+                          "Converts a raster DEM (any format GDAL reads, any CRS) into an adaptive quadtree grid file.\n"
+                          "Four cells merge into one while their mean stays within --tolerance of every pixel they\n"
+                          "cover (in every layer); the achieved max and RMS deviation is measured and reported.");
+        p.positional("INPUT", "terrain raster: GeoTIFF, SRTM .hgt / .hgt.zip, ESRI ASCII, NetCDF, PNG, ... (GDAL)", o.input);
+        p.option("-o", "OUT.hcg", "output grid file (required; written atomically)", out);
+        p.option("--tolerance", "M", "max |pixel - cell value| in every layer, metres (default 0.25)", o.toleranceM);
+        p.option("--min-cell", "M", "finest cell size, metres (default: the source pixel size after projection)", o.minCellM);
+        p.option("--max-cell", "M", "coarsest cell size, metres, rounded down to finest * 2^k (default: largest <= 96 m)", o.maxCellM);
+        p.option("--t_srs", "CRS", "project into this CRS (EPSG:xxxx, WKT, PROJ string) with GDAL, bilinear (default: a projected\n"
+                 "      input keeps its CRS; a geographic one goes to the UTM zone of its centre via GeographicLib)", o.targetSrs);
+        p.option("--s_srs", "CRS", "CRS of the input, overriding or supplying its own (e.g. EPSG:27700 for an .asc without .prj)", o.sourceSrs);
+        p.option("--band", "N", "band to read, 1-based (default 1)", o.band);
+        p.option("--nodata", "V", "a further nodata value (the band's own nodata and NaN always count)", nodata);
+        p.option("--z-scale", "F", "multiply elevations by F after unit conversion (default 1)", o.zScale);
+        p.flag("--terrain-rgb", "decode Terrain-RGB bands 1-3: h = -10000 + 0.1 * (R * 65536 + G * 256 + B) metres", o.terrainRgb);
+        p.option("--water", "RASTER", "water depth raster, metres (resampled onto the terrain; nodata and <= 0 are dry)", water);
+        p.option("--water-surface", "RASTER", "water surface elevation raster, metres (depth = surface - terrain; <= 0 is dry)", waterSurface);
+        p.option("--water-level", "L", "bathtub flood: depth = L - z, metres, where below L and connected to the domain boundary", waterLevel);
+        p.option("--threads", "N", "worker threads (default 0 = all cores)", o.threads);
+        p.flag("--quiet", "no progress output", quiet);
+        p.exclusive({"--water", "--water-surface", "--water-level"});
+        if (!p.parse(argc, argv)) return 0;
+        if (out.empty()) throw hc::Error("no output file: give -o OUT.hcg");
+        o.nodata = nodata;
+        if (!water.empty()) o.water = hc::ingest::WaterSource::Depth, o.waterPath = water;
+        if (!waterSurface.empty()) o.water = hc::ingest::WaterSource::Surface, o.waterPath = waterSurface;
+        if (waterLevel) o.water = hc::ingest::WaterSource::Level, o.waterLevelM = *waterLevel;
+        o.progress = !quiet;
+        hc::ingest::validateOptions(o);
+        hc::cli::checkWritable(out, "output grid");
+        std::error_code ec;
+        if (std::filesystem::equivalent(out, o.input, ec)) throw hc::Error(out + ": output would overwrite the input");
+
+        hc::ingest::LoadReport report;
+        hc::Grid g = hc::ingest::ingest(o, report);
+        auto t0 = std::chrono::steady_clock::now();
+        hc::writeGrid(g, out);
+        double writeSeconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+        for (const auto& w : report.warnings) std::fprintf(stderr, "hc-ingest: warning: %s\n", w.c_str());
+        printSummary(g, report, out, writeSeconds);
+        return 0;
+    });
+}

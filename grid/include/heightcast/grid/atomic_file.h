@@ -1,0 +1,39 @@
+// heightcast/grid/atomic_file.h: write a file so that it appears whole or not at all.
+//
+// Bytes go to a temporary file beside the target; commit() flushes, fsyncs and renames it over
+// the target. If the writer is destroyed without commit() (an exception, a failed check), the
+// temporary file is removed: no half-written file ever exists under the real name.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <cstdio>
+#include <span>
+#include <string>
+
+namespace hc {
+
+class AtomicFileWriter {
+public:
+    explicit AtomicFileWriter(std::string path);  // throws hc::Error if the temporary cannot be created
+    ~AtomicFileWriter();
+    AtomicFileWriter(const AtomicFileWriter&) = delete;
+    AtomicFileWriter& operator=(const AtomicFileWriter&) = delete;
+
+    void write(std::span<const std::byte> bytes);
+    void writeZeros(size_t count);
+    uint64_t position() const { return position_; }
+    void commit();  // throws hc::Error on any I/O failure; the target is then untouched
+
+    const std::string& path() const { return path_; }
+
+private:
+    void fail(const std::string& what);
+    std::string path_;
+    std::string tempPath_;
+    std::FILE* file_ = nullptr;
+    uint64_t position_ = 0;
+    bool committed_ = false;
+};
+
+}  // namespace hc

@@ -1,0 +1,109 @@
+// heightcast/grid/grid.h: the adaptive quadtree grid, in memory.
+//
+// Frames and units
+//   World: the grid's CRS (crsWkt), metres, x east, y north. Only doubles ever hold world values.
+//   Local: metres relative to the domain's south-west corner (originWorld). Queries take local
+//          coordinates, so no absolute coordinate (UTM northings are ~5e6 m) reaches float maths.
+//   Finest units: integers, one per finest cell; cell (ix, iy) covers local
+//          [ix * finestCellM, (ix + 2^level) * finestCellM) in x, likewise in y.
+//
+// The domain is a square of 2^rootLevel finest cells per side. Its leaves that carry data are the
+// cells; the rest of the domain is holes (nodata, outside the survey). A hole is never a value.
+//
+// Storage: one sorted array of packed cell codes (morton.h) and one float32 array per layer,
+// 8 + 4 * layers bytes per cell (12 bytes for elevation alone). Layer 0 is always elevation.
+#pragma once
+
+#include <cstdint>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "heightcast/grid/morton.h"
+
+namespace hc {
+
+struct LayerInfo {
+    std::string name;   // "elevation", "water_depth", "velocity", ...
+    std::string units;  // "m", "m/s", ...
+};
+
+// What ingest measured when it built the grid (absent fields are NaN / 0 / empty).
+struct IngestStats {
+    std::string sourcePath;      // the input raster as given
+    std::string sourceCrsName;   // the input's CRS name ("" when it had none)
+    uint64_t sourceWidth = 0;    // pixels of the working raster (after projection / resampling)
+    uint64_t sourceHeight = 0;
+    uint64_t validPixels = 0;    // working-raster pixels that carry data
+    double toleranceM = 0;       // requested: max |pixel - cell| in every layer
+    double maxDevM = 0;          // achieved max |pixel - covering cell value| over every layer
+    double rmsDevM = 0;          // achieved RMS of the same, over elevation
+    double seconds = 0;          // ingest wall time
+};
+
+class Grid {
+public:
+    // ---- geometry (set before adding cells) ----
+    double originWorldX = 0;   // domain's south-west corner in the grid CRS [m]
+    double originWorldY = 0;
+    double finestCellM = 1;    // size of a level-0 cell [m], > 0
+    int rootLevel = 0;         // domain side = finestCellM * 2^rootLevel, 0..kMaxRootLevel
+    int minLevel = 0;          // every cell's level lies in [minLevel, maxLevel]
+    int maxLevel = 0;
+    std::string crsWkt;        // "" = local metres with no CRS
+    std::vector<LayerInfo> layers{{"elevation", "m"}};
+    IngestStats stats;
+
+    // ---- cells: codes sorted ascending; values[l][i] is layer l of cell i ----
+    std::vector<uint64_t> codes;
+    std::vector<std::vector<float>> values{std::vector<float>{}};
+
+    size_t cellCount() const { return codes.size(); }
+    size_t layerCount() const { return layers.size(); }
+    // Index of a layer by name, or -1.
+    int findLayer(const std::string& name) const;
+
+    double domainSizeM() const { return finestCellM * static_cast<double>(uint64_t{1} << rootLevel); }
+    double cellSizeM(size_t i) const { return levelSizeM(codeLevel(codes[i])); }
+    double levelSizeM(int level) const { return finestCellM * static_cast<double>(uint64_t{1} << level); }
+    int level(size_t i) const { return codeLevel(codes[i]); }
+    // South-west corner and centre of cell i, local frame [m].
+    void cellMinLocal(size_t i, double& x, double& y) const;
+    void cellCenterLocal(size_t i, double& x, double& y) const;
+
+    // Appends a cell; cells must arrive in strictly increasing code order (asserted).
+    void appendCell(uint32_t ix, uint32_t iy, int level, const float* layerValues);
+
+    // ---- queries (local frame, metres) ----
+    // The cell whose half-open square [min, min + size) contains (x, y), or nullopt for a hole or a
+    // point outside the domain. O(log n).
+    std::optional<uint32_t> locate(double xLocal, double yLocal) const;
+    // Appends to `out` every cell whose closed square meets the closed box. O(log n + k) per
+    // quadtree level touched by the box boundary.
+    void cellsInBox(double xMin, double yMin, double xMax, double yMax, std::vector<uint32_t>& out) const;
+    // Appends every cell whose closed square meets the closed disk (centre, radius).
+    void cellsInDisk(double cx, double cy, double radius, std::vector<uint32_t>& out) const;
+    // Appends the cells whose squares touch cell i's square (share an edge or a corner), i excluded.
+    void neighbours(uint32_t i, std::vector<uint32_t>& out) const;
+
+    // Counts of cells per level, index = level (size maxLevel + 1).
+    std::vector<uint64_t> cellsPerLevel() const;
+    // Bounding box (local) of all cells; all zero for an empty grid.
+    void boundsLocal(double& xMin, double& yMin, double& xMax, double& yMax) const;
+
+    // Identity of the tree alone (geometry + codes): influence caches key on it, so a new water
+    // time step on the same tree reuses its cache.
+    uint64_t structureHash() const;
+    // Identity of everything the surface depends on (structure + layer names + values).
+    uint64_t contentHash() const;
+
+    // Checks every invariant (sorted, aligned, inside the domain, no overlap, levels in range,
+    // sizes consistent, finite values). Returns "" when valid, else what is wrong.
+    std::string validate() const;
+
+private:
+    template <typename Pred, typename Emit>
+    void visitNodes(Pred&& nodeMeets, Emit&& emit, std::vector<uint32_t>& out) const;
+};
+
+}  // namespace hc

@@ -1,0 +1,239 @@
+#include "heightcast/grid/grid.h"
+
+#include <algorithm>
+#include <cassert>
+#include <cmath>
+#include <sstream>
+
+#include "heightcast/grid/checksum.h"
+
+namespace hc {
+
+int Grid::findLayer(const std::string& name) const {
+    for (size_t l = 0; l < layers.size(); ++l)
+        if (layers[l].name == name) return static_cast<int>(l);
+    return -1;
+}
+
+void Grid::cellMinLocal(size_t i, double& x, double& y) const {
+    uint64_t key = codeKey(codes[i]);
+    x = static_cast<double>(mortonX(key)) * finestCellM;
+    y = static_cast<double>(mortonY(key)) * finestCellM;
+}
+
+void Grid::cellCenterLocal(size_t i, double& x, double& y) const {
+    cellMinLocal(i, x, y);
+    double half = 0.5 * cellSizeM(i);
+    x += half;
+    y += half;
+}
+
+void Grid::appendCell(uint32_t ix, uint32_t iy, int cellLevel, const float* layerValues) {
+    uint64_t code = makeCellCode(mortonEncode(ix, iy), cellLevel);
+    assert(codes.empty() || codeKey(code) >= codeKey(codes.back()) + mortonSpan(codeLevel(codes.back())));
+    codes.push_back(code);
+    for (size_t l = 0; l < layers.size(); ++l) values[l].push_back(layerValues[l]);
+}
+
+std::optional<uint32_t> Grid::locate(double xLocal, double yLocal) const {
+    double side = domainSizeM();
+    // Written so that NaN fails the test too.
+    if (!(xLocal >= 0 && yLocal >= 0 && xLocal < side && yLocal < side)) return std::nullopt;
+    uint64_t limit = (uint64_t{1} << rootLevel) - 1;
+    auto ix = std::min(static_cast<uint64_t>(xLocal / finestCellM), limit);
+    auto iy = std::min(static_cast<uint64_t>(yLocal / finestCellM), limit);
+    uint64_t key = mortonEncode(static_cast<uint32_t>(ix), static_cast<uint32_t>(iy));
+    // The last cell whose corner key is <= key is the only one that can contain it.
+    auto it = std::upper_bound(codes.begin(), codes.end(), makeCellCode(key, (1 << kLevelBits) - 1));
+    if (it == codes.begin()) return std::nullopt;
+    --it;
+    uint64_t cellKey = codeKey(*it);
+    if (key - cellKey >= mortonSpan(codeLevel(*it))) return std::nullopt;
+    return static_cast<uint32_t>(it - codes.begin());
+}
+
+// Depth-first walk over the implicit quadtree. A node (level L, corner key k) owns exactly the
+// cells with keys in [k, k + 4^L): one binary search splits a node's run into its children's.
+template <typename Pred, typename Emit>
+void Grid::visitNodes(Pred&& nodeMeets, Emit&& emit, std::vector<uint32_t>& out) const {
+    struct Node {
+        uint64_t key;
+        int level;
+        size_t lo, hi;  // cell index range [lo, hi)
+    };
+    if (codes.empty()) return;
+    std::vector<Node> stack;
+    stack.push_back({0, rootLevel, 0, codes.size()});
+    while (!stack.empty()) {
+        Node n = stack.back();
+        stack.pop_back();
+        double size = levelSizeM(n.level);
+        double x0 = static_cast<double>(mortonX(n.key)) * finestCellM;
+        double y0 = static_cast<double>(mortonY(n.key)) * finestCellM;
+        int meets = nodeMeets(x0, y0, size);  // 0: disjoint, 1: partly, 2: node inside the query
+        if (meets == 0) continue;
+        if (meets == 2) {
+            for (size_t i = n.lo; i < n.hi; ++i) out.push_back(static_cast<uint32_t>(i));
+            continue;
+        }
+        if (n.hi - n.lo == 1 || n.level == 0 || codeLevel(codes[n.lo]) == n.level) {
+            // A single cell (or the leaf itself): test the cells directly.
+            for (size_t i = n.lo; i < n.hi; ++i) emit(i);
+            continue;
+        }
+        uint64_t quarter = mortonSpan(n.level - 1);
+        size_t bounds[5];
+        bounds[0] = n.lo;
+        bounds[4] = n.hi;
+        for (int q = 1; q < 4; ++q) {
+            uint64_t childCode = makeCellCode(n.key + quarter * static_cast<uint64_t>(q), 0);
+            bounds[q] = static_cast<size_t>(
+                std::lower_bound(codes.begin() + static_cast<std::ptrdiff_t>(bounds[q - 1]),
+                                 codes.begin() + static_cast<std::ptrdiff_t>(n.hi), childCode) -
+                codes.begin());
+        }
+        for (int q = 3; q >= 0; --q)  // pushed in reverse so children pop in Morton order
+            if (bounds[q] < bounds[q + 1])
+                stack.push_back({n.key + quarter * static_cast<uint64_t>(q), n.level - 1, bounds[q], bounds[q + 1]});
+    }
+}
+
+void Grid::cellsInBox(double xMin, double yMin, double xMax, double yMax, std::vector<uint32_t>& out) const {
+    if (!(xMin <= xMax && yMin <= yMax)) return;
+    auto meets = [&](double x0, double y0, double size) {
+        double x1 = x0 + size, y1 = y0 + size;
+        if (x1 < xMin || x0 > xMax || y1 < yMin || y0 > yMax) return 0;
+        if (x0 >= xMin && x1 <= xMax && y0 >= yMin && y1 <= yMax) return 2;
+        return 1;
+    };
+    auto emit = [&](size_t i) {
+        double x0, y0;
+        cellMinLocal(i, x0, y0);
+        if (meets(x0, y0, cellSizeM(i)) != 0) out.push_back(static_cast<uint32_t>(i));
+    };
+    visitNodes(meets, emit, out);
+}
+
+void Grid::cellsInDisk(double cx, double cy, double radius, std::vector<uint32_t>& out) const {
+    if (!(radius >= 0)) return;
+    double r2 = radius * radius;
+    auto meets = [&](double x0, double y0, double size) {
+        double x1 = x0 + size, y1 = y0 + size;
+        double dx = std::max({x0 - cx, 0.0, cx - x1});
+        double dy = std::max({y0 - cy, 0.0, cy - y1});
+        if (dx * dx + dy * dy > r2) return 0;
+        // Inside when the farthest corner is within the radius.
+        double fx = std::max(std::abs(cx - x0), std::abs(cx - x1));
+        double fy = std::max(std::abs(cy - y0), std::abs(cy - y1));
+        return fx * fx + fy * fy <= r2 ? 2 : 1;
+    };
+    auto emit = [&](size_t i) {
+        double x0, y0;
+        cellMinLocal(i, x0, y0);
+        if (meets(x0, y0, cellSizeM(i)) != 0) out.push_back(static_cast<uint32_t>(i));
+    };
+    visitNodes(meets, emit, out);
+}
+
+void Grid::neighbours(uint32_t i, std::vector<uint32_t>& out) const {
+    double x0, y0;
+    cellMinLocal(i, x0, y0);
+    double s = cellSizeM(i);
+    size_t first = out.size();
+    cellsInBox(x0, y0, x0 + s, y0 + s, out);  // closed box: touching squares are included
+    out.erase(std::remove(out.begin() + static_cast<std::ptrdiff_t>(first), out.end(), i), out.end());
+}
+
+std::vector<uint64_t> Grid::cellsPerLevel() const {
+    std::vector<uint64_t> counts(static_cast<size_t>(maxLevel) + 1, 0);
+    for (uint64_t c : codes) {
+        auto l = static_cast<size_t>(codeLevel(c));
+        if (l >= counts.size()) counts.resize(l + 1, 0);
+        ++counts[l];
+    }
+    return counts;
+}
+
+void Grid::boundsLocal(double& xMin, double& yMin, double& xMax, double& yMax) const {
+    xMin = yMin = xMax = yMax = 0;
+    if (codes.empty()) return;
+    xMin = yMin = HUGE_VAL;
+    xMax = yMax = -HUGE_VAL;
+    for (size_t i = 0; i < codes.size(); ++i) {
+        double x0, y0;
+        cellMinLocal(i, x0, y0);
+        double s = cellSizeM(i);
+        xMin = std::min(xMin, x0);
+        yMin = std::min(yMin, y0);
+        xMax = std::max(xMax, x0 + s);
+        yMax = std::max(yMax, y0 + s);
+    }
+}
+
+namespace {
+void hashGeometry(Hash64& h, const Grid& g) {
+    h.updateValue(g.finestCellM);
+    h.updateValue(static_cast<int32_t>(g.rootLevel));
+    uint64_t n = g.codes.size();
+    h.updateValue(n);
+    h.update(std::as_bytes(std::span<const uint64_t>(g.codes)));
+}
+}  // namespace
+
+uint64_t Grid::structureHash() const {
+    Hash64 h;
+    hashGeometry(h, *this);
+    return h.digest();
+}
+
+uint64_t Grid::contentHash() const {
+    Hash64 h(0x6863636f6e74656eull);
+    hashGeometry(h, *this);
+    for (size_t l = 0; l < layers.size(); ++l) {
+        h.update(std::as_bytes(std::span<const char>(layers[l].name.data(), layers[l].name.size() + 1)));
+        h.update(std::as_bytes(std::span<const float>(values[l])));
+    }
+    return h.digest();
+}
+
+std::string Grid::validate() const {
+    std::ostringstream err;
+    if (!(finestCellM > 0) || !std::isfinite(finestCellM)) err << "finest cell size " << finestCellM << " m is not positive";
+    else if (!std::isfinite(originWorldX) || !std::isfinite(originWorldY)) err << "origin is not finite";
+    else if (rootLevel < 0 || rootLevel > kMaxRootLevel) err << "root level " << rootLevel << " outside 0.." << kMaxRootLevel;
+    else if (minLevel < 0 || minLevel > maxLevel || maxLevel > rootLevel)
+        err << "level range " << minLevel << ".." << maxLevel << " invalid for root level " << rootLevel;
+    else if (layers.empty() || layers[0].name != "elevation") err << "layer 0 must be elevation";
+    else if (values.size() != layers.size()) err << values.size() << " value arrays for " << layers.size() << " layers";
+    if (!err.str().empty()) return err.str();
+    for (size_t l = 0; l < layers.size(); ++l) {
+        if (values[l].size() != codes.size())
+            return "layer " + layers[l].name + " has " + std::to_string(values[l].size()) + " values for " +
+                   std::to_string(codes.size()) + " cells";
+        for (size_t m = 0; m < l; ++m)
+            if (layers[m].name == layers[l].name) return "layer name " + layers[l].name + " appears twice";
+    }
+    uint64_t domainSpan = mortonSpan(rootLevel);
+    uint64_t nextFree = 0;  // first key not covered by the previous cell
+    for (size_t i = 0; i < codes.size(); ++i) {
+        uint64_t key = codeKey(codes[i]);
+        int lv = codeLevel(codes[i]);
+        if (lv < minLevel || lv > maxLevel) {
+            err << "cell " << i << " has level " << lv << " outside " << minLevel << ".." << maxLevel;
+            return err.str();
+        }
+        uint64_t span = mortonSpan(lv);
+        if ((key & (span - 1)) != 0) { err << "cell " << i << " is not aligned to its level " << lv; return err.str(); }
+        if (key >= domainSpan || span > domainSpan - key) { err << "cell " << i << " lies outside the domain"; return err.str(); }
+        if (i > 0 && key < nextFree) { err << "cell " << i << " overlaps or precedes cell " << i - 1; return err.str(); }
+        nextFree = key + span;
+        for (size_t l = 0; l < layers.size(); ++l)
+            if (!std::isfinite(values[l][i])) {
+                err << "cell " << i << " has a non-finite " << layers[l].name << " value";
+                return err.str();
+            }
+    }
+    return {};
+}
+
+}  // namespace hc

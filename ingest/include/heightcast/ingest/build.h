@@ -1,0 +1,36 @@
+// heightcast/ingest/build.h: the error-bounded bottom-up quadtree build (DESIGN.md section 3).
+//
+// Input: a terrain raster and optional water-depth raster of the same geometry (raster.h).
+// Every valid pixel starts as a level-0 cell (size = pixelSizeM). Four sibling cells merge into their
+// parent while
+//   - all four exist (no hole, not outside the raster) and the parent is no larger than maxLevel;
+//   - in every layer, the parent's value (the float32 mean of the four, i.e. the mean of every
+//     pixel it covers) lies within toleranceM of every pixel it covers;
+//   - for water, all four are wet or all four are dry (depth 0): merges never blur a wet/dry edge.
+// Merging by the mean keeps volumes: a cell holds exactly the water its pixels held.
+// Guarantee (checked pixel by pixel, reported in Grid::stats): every valid pixel differs from the
+// stored value of the cell covering it by at most toleranceM, in every layer.
+#pragma once
+
+#include <functional>
+#include <optional>
+
+#include "heightcast/grid/grid.h"
+#include "heightcast/ingest/raster.h"
+
+namespace hc::ingest {
+
+struct BuildOptions {
+    double toleranceM = 0.25;  // >= 0
+    int maxLevel = 0;          // coarsest cell = pixelSizeM * 2^maxLevel
+    unsigned threads = 0;      // 0 = all cores
+    bool progress = false;     // terminal progress on stderr
+};
+
+// Builds the grid. The grid's origin is the raster's south-west corner; its CRS the raster's.
+// waterDepth, when given, must have the raster's geometry; it becomes layer "water_depth" [m]
+// (dry = 0, holes wherever the terrain has one). Fills grid.stats deviations (max over every
+// layer, RMS over elevation) and sourceWidth/Height/validPixels/toleranceM.
+Grid buildGrid(const Raster& terrain, const Raster* waterDepth, const BuildOptions& options);
+
+}  // namespace hc::ingest

@@ -1,0 +1,67 @@
+// heightcast/ingest/ingest.h: raster files (any format GDAL reads, any CRS) -> adaptive grid.
+//
+// Stages, each a plain function so tools and tests can run them one by one:
+//   loadTerrain   read the band (nodata -> NaN, Terrain-RGB decoding, vertical units), then bring it
+//                 into a metric, north-up, square-pixel working raster:
+//                   projected CRS, square pixels      kept as is (foot units scaled to metres)
+//                   geographic CRS                    UTM zone of the raster centre (GeographicLib)
+//                   --t_srs                           that CRS, warped by GDAL (bilinear)
+//                   no CRS                            local metres, with a warning
+//                   non-square, rotated, south-up     resampled / flipped north-up, never mis-placed
+//   loadWater     a water depth or water surface raster warped onto the terrain's working raster, or
+//                 a bathtub level flood-filled from the domain boundary
+//   buildGrid     the error-bounded quadtree (build.h)
+#pragma once
+
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "heightcast/grid/grid.h"
+#include "heightcast/ingest/raster.h"
+
+namespace hc::ingest {
+
+enum class WaterSource { None, Depth, Surface, Level };
+
+struct Options {
+    std::string input;                  // raster path (anything GDAL opens, /vsizip/ included)
+    int band = 1;                       // 1-based
+    std::optional<double> nodata;       // extra nodata value (beside the band's own and NaN)
+    bool terrainRgb = false;            // decode h = -10000 + 0.1 * (R * 65536 + G * 256 + B) from bands 1-3
+    double zScale = 1.0;                // multiply elevations (e.g. 0.3048 for feet); applied after units
+    std::string sourceSrs;              // --s_srs: CRS to assume for the input (overrides its own)
+    std::string targetSrs;              // --t_srs: project into this CRS (GDAL/PROJ) instead of UTM
+    double toleranceM = 0.25;           // max |pixel - cell| [m], >= 0
+    std::optional<double> minCellM;     // finest cell [m]; default: source pixel size after projection
+    std::optional<double> maxCellM;     // coarsest cell [m]; default: largest finest * 2^k <= 96 m
+    WaterSource water = WaterSource::None;
+    std::string waterPath;              // for Depth and Surface
+    double waterLevelM = 0;             // for Level: bathtub water surface elevation [m]
+    unsigned threads = 0;               // 0 = all cores
+    bool progress = false;              // terminal progress on stderr
+};
+
+// What the loading stages did, for the tool's summary.
+struct LoadReport {
+    std::string sourceDescription;      // "384 x 284 px, Int16, 1 band"
+    std::string sourceCrsName;          // "WGS 84" or "" if none
+    std::string gridCrsName;            // name of the working raster's CRS
+    std::string method;                 // how it got there ("kept as is", "projected to UTM 32N (GeographicLib), bilinear")
+    size_t sourceWidth = 0, sourceHeight = 0;
+    std::vector<std::string> warnings;  // things the user should know (no CRS, assumed units, ...)
+};
+
+// Checks options that need no file (ranges, combinations). Throws hc::Error.
+void validateOptions(const Options& options);
+
+Raster loadTerrain(const Options& options, LoadReport& report);
+// Depth raster [m] of the terrain's geometry (0 = dry; NaN where terrain is a hole).
+Raster loadWater(const Options& options, const Raster& terrain, LoadReport& report);
+// Finest cell and max level for the working raster, from the options (throws on absurd values).
+int chooseMaxLevel(const Options& options, double pixelSizeM, LoadReport& report);
+
+// All stages: the tool's job. Throws hc::Error for bad input; never returns a partial grid.
+Grid ingest(const Options& options, LoadReport& report);
+
+}  // namespace hc::ingest

@@ -1,0 +1,29 @@
+// GDAL plumbing private to ingest/: one-time registration, quiet error capture, owned handles.
+#pragma once
+
+#include <memory>
+#include <string>
+
+#include <gdal_priv.h>
+#include <ogr_spatialref.h>
+
+namespace hc::ingest::detail {
+
+// Registers drivers once and routes GDAL's own messages into CPLGetLastErrorMsg (our errors quote
+// it) instead of letting GDAL print "ERROR 1: ..." lines of its own.
+void ensureGdal();
+std::string lastGdalError();
+
+struct DatasetCloser {
+    void operator()(GDALDataset* ds) const { GDALClose(GDALDataset::ToHandle(ds)); }
+};
+using DatasetPtr = std::unique_ptr<GDALDataset, DatasetCloser>;
+
+// Opens a raster read-only; throws hc::Error naming `path` (and `role`, e.g. "water raster").
+DatasetPtr openRaster(const std::string& path, const std::string& role);
+
+// Short name of a CRS ("WGS 84 / UTM zone 32N"), or "" for none.
+std::string crsName(const OGRSpatialReference* srs);
+std::string toWkt(const OGRSpatialReference& srs);
+
+}  // namespace hc::ingest::detail
