@@ -143,12 +143,19 @@ int run(const char* program, const std::function<int()>& body) {
     return 1;
 }
 
+void checkNotSame(const std::string& output, const std::string& input, const std::string& what) {
+    std::error_code ec;
+    if (std::filesystem::equivalent(output, input, ec)) throw Error(output + ": " + what + " would overwrite the input " + input);
+}
+
 void checkWritable(const std::string& path, const std::string& what) {
     namespace fs = std::filesystem;
     std::error_code ec;
     fs::path p(path);
     if (p.filename().empty()) throw Error(path + ": " + what + " must name a file");
     if (fs::is_directory(p, ec)) throw Error(path + ": is a directory (" + what + ")");
+    if (fs::exists(p, ec) && !fs::is_regular_file(p, ec))
+        throw Error(path + ": exists and is not a regular file (" + what + "); it would be replaced");
     fs::path dir = p.parent_path();
     if (!dir.empty() && !fs::is_directory(dir, ec)) throw Error(path + ": directory " + dir.string() + " does not exist (" + what + ")");
 }

@@ -57,7 +57,10 @@ double parseNumber(const std::string& text, const std::string& what);
 // exit status 1. Returns the process exit status.
 int run(const char* program, const std::function<int()>& body);
 
-// Throws hc::Error unless `path`'s directory exists and `path` is not a directory.
+// Throws hc::Error unless `path`'s directory exists and `path` is neither a directory nor another
+// non-regular file (a device, a pipe) that an atomic rename would replace.
 void checkWritable(const std::string& path, const std::string& what);
+// Throws hc::Error if `output` names the same file as `input` (through any path or link).
+void checkNotSame(const std::string& output, const std::string& input, const std::string& what);
 
 }  // namespace hc::cli

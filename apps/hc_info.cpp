@@ -117,7 +117,7 @@ void printText(const hc::Grid& g, const Summary& s, const std::string& path) {
     std::printf("  extent       %.17g, %.17g .. %.17g, %.17g\n", s.extent[0], s.extent[1], s.extent[2], s.extent[3]);
     std::string crs = g.crsWkt.empty() ? "none (local metres)" : g.crsWkt.substr(0, g.crsWkt.find('\n'));
     std::printf("  CRS          %s\n", crs.c_str());
-    std::printf("  source       %s (%s), %llu x %llu px, %llu valid\n", g.stats.sourcePath.c_str(),
+    std::printf("  source       %s (%s); working raster %llu x %llu px, %llu valid\n", g.stats.sourcePath.c_str(),
                 g.stats.sourceCrsName.empty() ? "no CRS" : g.stats.sourceCrsName.c_str(),
                 (unsigned long long)g.stats.sourceWidth, (unsigned long long)g.stats.sourceHeight,
                 (unsigned long long)g.stats.validPixels);
@@ -168,7 +168,10 @@ int main(int argc, char** argv) {
         p.option("--cells-csv", "OUT.csv", "write one line per cell: x,y,size,level,elevation[,layers...] (cell centres in the\n"
                  "      grid CRS, metres, full double precision)", csv);
         if (!p.parse(argc, argv)) return 0;
-        if (!csv.empty()) hc::cli::checkWritable(csv, "cells CSV");
+        if (!csv.empty()) {
+            hc::cli::checkWritable(csv, "cells CSV");
+            hc::cli::checkNotSame(csv, path, "cells CSV");
+        }
         hc::Grid g = hc::readGrid(path);
         Summary s = summarise(g);
         if (json)

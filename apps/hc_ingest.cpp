@@ -80,8 +80,7 @@ int main(int argc, char** argv) {
         o.progress = !quiet;
         hc::ingest::validateOptions(o);
         hc::cli::checkWritable(out, "output grid");
-        std::error_code ec;
-        if (std::filesystem::equivalent(out, o.input, ec)) throw hc::Error(out + ": output would overwrite the input");
+        hc::cli::checkNotSame(out, o.input, "output grid");
 
         hc::ingest::LoadReport report;
         hc::Grid g = hc::ingest::ingest(o, report);

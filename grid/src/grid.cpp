@@ -40,8 +40,14 @@ std::optional<uint32_t> Grid::locate(double xLocal, double yLocal) const {
     // Written so that NaN fails the test too.
     if (!(xLocal >= 0 && yLocal >= 0 && xLocal < side && yLocal < side)) return std::nullopt;
     uint64_t limit = (uint64_t{1} << rootLevel) - 1;
-    auto ix = std::min(static_cast<uint64_t>(xLocal / finestCellM), limit);
-    auto iy = std::min(static_cast<uint64_t>(yLocal / finestCellM), limit);
+    // floor(x / c), corrected so it agrees exactly with the edges cellSquare() computes as ix * c.
+    auto finest = [&](double v) {
+        auto i = std::min(static_cast<uint64_t>(v / finestCellM), limit);
+        if (i > 0 && v < static_cast<double>(i) * finestCellM) --i;
+        if (i < limit && v >= static_cast<double>(i + 1) * finestCellM) ++i;
+        return i;
+    };
+    uint64_t ix = finest(xLocal), iy = finest(yLocal);
     uint64_t key = mortonEncode(static_cast<uint32_t>(ix), static_cast<uint32_t>(iy));
     // The last cell whose corner key is <= key is the only one that can contain it.
     auto it = std::upper_bound(codes.begin(), codes.end(), makeCellCode(key, (1 << kLevelBits) - 1));
@@ -67,10 +73,7 @@ void Grid::visitNodes(Pred&& nodeMeets, Emit&& emit, std::vector<uint32_t>& out)
     while (!stack.empty()) {
         Node n = stack.back();
         stack.pop_back();
-        double size = levelSizeM(n.level);
-        double x0 = static_cast<double>(mortonX(n.key)) * finestCellM;
-        double y0 = static_cast<double>(mortonY(n.key)) * finestCellM;
-        int meets = nodeMeets(x0, y0, size);  // 0: disjoint, 1: partly, 2: node inside the query
+        int meets = nodeMeets(squareOf(n.key, n.level));  // 0: disjoint, 1: partly, 2: node inside the query
         if (meets == 0) continue;
         if (meets == 2) {
             for (size_t i = n.lo; i < n.hi; ++i) out.push_back(static_cast<uint32_t>(i));
@@ -98,18 +101,26 @@ void Grid::visitNodes(Pred&& nodeMeets, Emit&& emit, std::vector<uint32_t>& out)
     }
 }
 
+Grid::Square Grid::squareOf(uint64_t key, int lv) const {
+    // Edges from integers, each with one rounding: a cell and a node sharing an edge get the very
+    // same double, and containment in integers stays containment in doubles (rounding is monotonic).
+    uint64_t ix = mortonX(key), iy = mortonY(key), span = uint64_t{1} << lv;
+    return {static_cast<double>(ix) * finestCellM, static_cast<double>(iy) * finestCellM,
+            static_cast<double>(ix + span) * finestCellM, static_cast<double>(iy + span) * finestCellM};
+}
+
+Grid::Square Grid::cellSquare(size_t i) const { return squareOf(codeKey(codes[i]), codeLevel(codes[i])); }
+
 void Grid::cellsInBox(double xMin, double yMin, double xMax, double yMax, std::vector<uint32_t>& out) const {
     if (!(xMin <= xMax && yMin <= yMax)) return;
-    auto meets = [&](double x0, double y0, double size) {
-        double x1 = x0 + size, y1 = y0 + size;
+    auto meets = [&](const Square& q) {
+        double x0 = q.x0, y0 = q.y0, x1 = q.x1, y1 = q.y1;
         if (x1 < xMin || x0 > xMax || y1 < yMin || y0 > yMax) return 0;
         if (x0 >= xMin && x1 <= xMax && y0 >= yMin && y1 <= yMax) return 2;
         return 1;
     };
     auto emit = [&](size_t i) {
-        double x0, y0;
-        cellMinLocal(i, x0, y0);
-        if (meets(x0, y0, cellSizeM(i)) != 0) out.push_back(static_cast<uint32_t>(i));
+        if (meets(cellSquare(i)) != 0) out.push_back(static_cast<uint32_t>(i));
     };
     visitNodes(meets, emit, out);
 }
@@ -117,8 +128,8 @@ void Grid::cellsInBox(double xMin, double yMin, double xMax, double yMax, std::v
 void Grid::cellsInDisk(double cx, double cy, double radius, std::vector<uint32_t>& out) const {
     if (!(radius >= 0)) return;
     double r2 = radius * radius;
-    auto meets = [&](double x0, double y0, double size) {
-        double x1 = x0 + size, y1 = y0 + size;
+    auto meets = [&](const Square& q) {
+        double x0 = q.x0, y0 = q.y0, x1 = q.x1, y1 = q.y1;
         double dx = std::max({x0 - cx, 0.0, cx - x1});
         double dy = std::max({y0 - cy, 0.0, cy - y1});
         if (dx * dx + dy * dy > r2) return 0;
@@ -128,19 +139,15 @@ void Grid::cellsInDisk(double cx, double cy, double radius, std::vector<uint32_t
         return fx * fx + fy * fy <= r2 ? 2 : 1;
     };
     auto emit = [&](size_t i) {
-        double x0, y0;
-        cellMinLocal(i, x0, y0);
-        if (meets(x0, y0, cellSizeM(i)) != 0) out.push_back(static_cast<uint32_t>(i));
+        if (meets(cellSquare(i)) != 0) out.push_back(static_cast<uint32_t>(i));
     };
     visitNodes(meets, emit, out);
 }
 
 void Grid::neighbours(uint32_t i, std::vector<uint32_t>& out) const {
-    double x0, y0;
-    cellMinLocal(i, x0, y0);
-    double s = cellSizeM(i);
+    Square q = cellSquare(i);
     size_t first = out.size();
-    cellsInBox(x0, y0, x0 + s, y0 + s, out);  // closed box: touching squares are included
+    cellsInBox(q.x0, q.y0, q.x1, q.y1, out);  // closed box: touching squares are included
     out.erase(std::remove(out.begin() + static_cast<std::ptrdiff_t>(first), out.end(), i), out.end());
 }
 
@@ -160,13 +167,11 @@ void Grid::boundsLocal(double& xMin, double& yMin, double& xMax, double& yMax) c
     xMin = yMin = HUGE_VAL;
     xMax = yMax = -HUGE_VAL;
     for (size_t i = 0; i < codes.size(); ++i) {
-        double x0, y0;
-        cellMinLocal(i, x0, y0);
-        double s = cellSizeM(i);
-        xMin = std::min(xMin, x0);
-        yMin = std::min(yMin, y0);
-        xMax = std::max(xMax, x0 + s);
-        yMax = std::max(yMax, y0 + s);
+        Square q = cellSquare(i);
+        xMin = std::min(xMin, q.x0);
+        yMin = std::min(yMin, q.y0);
+        xMax = std::max(xMax, q.x1);
+        yMax = std::max(yMax, q.y1);
     }
 }
 

@@ -6,6 +6,8 @@
 #include <limits>
 #include <sstream>
 
+#include <unistd.h>
+
 #include <GeographicLib/TransverseMercator.hpp>
 #include <GeographicLib/UTMUPS.hpp>
 #include <gdal_alg.h>
@@ -110,6 +112,8 @@ SourceBand readSource(GDALDataset& ds, const Options& opt, LoadReport& report) {
                 bool isNodata = std::isnan(v) || (hasNodata && (v == nodata || static_cast<float>(v) == static_cast<float>(nodata))) ||
                                 (opt.nodata && v == *opt.nodata) || std::isinf(v);
                 dst[i] = isNodata ? kNaN : static_cast<float>(v * zScale);
+                if (!isNodata && !std::isfinite(dst[i]))
+                    throw Error(opt.input + ": elevation " + fmt(v) + " x " + fmt(zScale) + " is beyond the float32 range");
             }
         }
         if (useMask) {
@@ -131,6 +135,17 @@ struct GeoTransform {
     // Source pixel coordinates of world (x, y), via the inverse affine map.
     bool invert(double inv[6]) const { return GDALInvGeoTransform(const_cast<double*>(g), inv) != 0; }
 };
+
+// Refuses a working raster this machine cannot hold (a --min-cell far below the pixel size, say)
+// before allocating it: the raster takes 4 bytes per pixel and the grid up to 12 more.
+void checkWorkingSize(double width, double height, double pixelM, const Options& opt) {
+    double bytes = 16.0 * width * height;
+    double ram = static_cast<double>(sysconf(_SC_PHYS_PAGES)) * static_cast<double>(sysconf(_SC_PAGESIZE));
+    if (width > double(size_t{1} << 29) || height > double(size_t{1} << 29) || bytes > ram)
+        throw Error(opt.input + ": the working raster would be " + fmt(width, 4) + " x " + fmt(height, 4) + " px of " +
+                    fmt(pixelM, 4) + " m" + (opt.minCellM ? " (--min-cell)" : "") + ", about " + fmt(bytes / 1e9, 3) +
+                    " GB with its grid, more than this machine's " + fmt(ram / 1e9, 3) + " GB");
+}
 
 Raster fromSourceAffine(SourceBand&& src, const GeoTransform& gt, double pixelM, const std::string& wkt,
                         const Options& opt, LoadReport& report) {
@@ -178,6 +193,7 @@ Raster fromSourceAffine(SourceBand&& src, const GeoTransform& gt, double pixelM,
     double xmin = *std::min_element(xs, xs + 4), xmax = *std::max_element(xs, xs + 4);
     double ymin = *std::min_element(ys, ys + 4), ymax = *std::max_element(ys, ys + 4);
     r.pixelSizeM = opt.minCellM ? *opt.minCellM : pixelM;
+    checkWorkingSize(std::ceil((xmax - xmin) / r.pixelSizeM), std::ceil((ymax - ymin) / r.pixelSizeM), r.pixelSizeM, opt);
     r.width = static_cast<size_t>(std::ceil((xmax - xmin) / r.pixelSizeM - 1e-9));
     r.height = static_cast<size_t>(std::ceil((ymax - ymin) / r.pixelSizeM - 1e-9));
     r.westWorld = xmin;
@@ -190,7 +206,7 @@ Raster fromSourceAffine(SourceBand&& src, const GeoTransform& gt, double pixelM,
         col = inv[0] + x * inv[1] + y * inv[2];
         row = inv[3] + x * inv[4] + y * inv[5];
         return true;
-    }, r, 1, opt.threads);
+    }, r, 16, 1e-9, opt.threads);  // affine: the lattice interpolation is exact (the check confirms it)
     return r;
 }
 
@@ -266,6 +282,7 @@ Raster projectToUtm(SourceBand&& src, const GeoTransform& gt, const OGRSpatialRe
         ymin = std::min(ymin, y);
         ymax = std::max(ymax, y);
     }
+    checkWorkingSize(std::ceil((xmax - xmin) / r.pixelSizeM), std::ceil((ymax - ymin) / r.pixelSizeM), r.pixelSizeM, opt);
     r.width = static_cast<size_t>(std::ceil((xmax - xmin) / r.pixelSizeM - 1e-9));
     r.height = static_cast<size_t>(std::ceil((ymax - ymin) / r.pixelSizeM - 1e-9));
     r.westWorld = xmin;
@@ -286,14 +303,16 @@ Raster projectToUtm(SourceBand&& src, const GeoTransform& gt, const OGRSpatialRe
 
     double inv[6];
     if (!gt.invert(inv)) throw Error(opt.input + ": geotransform cannot be inverted (degenerate pixel size)");
-    resample(src, [&](double x, double y, double& col, double& row) {
+    // 1e-5 pixel: at slopes of 100 m per pixel (alpine SRTM) that is 1 mm of elevation.
+    int lattice = resample(src, [&](double x, double y, double& col, double& row) {
         double lat, lon;
         tm.Reverse(lon0, x - fe, y - fn, lat, lon);
         double gx = (lon - pm) / degPerUnit, gy = lat / degPerUnit;
         col = inv[0] + gx * inv[1] + gy * inv[2];
         row = inv[3] + gx * inv[4] + gy * inv[5];
         return std::isfinite(col) && std::isfinite(row);
-    }, r, 16, opt.threads);
+    }, r, 16, 1e-5, opt.threads);
+    report.method += ", map exact every " + std::to_string(lattice) + " px";
     return r;
 }
 

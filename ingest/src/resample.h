@@ -19,10 +19,12 @@ struct SourceBand {
 // pixel (c, r) covers [c, c+1) x [r, r+1). Returns false where the position has no source.
 using TargetToSource = std::function<bool(double x, double y, double& col, double& row)>;
 
-// Fills target.values (target geometry already set) by bilinear interpolation of `source`; where a
-// 2x2 neighbourhood touches nodata, the nearest pixel's value (or nodata). The map is evaluated
-// exactly every `lattice` pixels and bilinearly in between (exact for affine maps; for a UTM
-// inverse over 16 pixels the error is below 1e-6 pixel, see tests/ingest_test.cpp).
-void resample(const SourceBand& source, const TargetToSource& map, Raster& target, int lattice, unsigned threads);
+// Fills target.values (target geometry already set) by bilinear interpolation of `source`; next to
+// nodata, bilinear weights renormalised over the valid neighbours, with the hole's edge where the
+// nearest pixel puts it. The map is evaluated exactly every `lattice` pixels and bilinearly in
+// between; the lattice is refined (halved) until that interpolation is within maxErrorPx of the
+// exact map at every lattice-cell centre. Returns the lattice step used.
+int resample(const SourceBand& source, const TargetToSource& map, Raster& target, int lattice, double maxErrorPx,
+             unsigned threads);
 
 }  // namespace hc::ingest::detail

@@ -67,6 +67,11 @@ public:
     double cellSizeM(size_t i) const { return levelSizeM(codeLevel(codes[i])); }
     double levelSizeM(int level) const { return finestCellM * static_cast<double>(uint64_t{1} << level); }
     int level(size_t i) const { return codeLevel(codes[i]); }
+    // A cell's closed square, local frame [m]. Every query and every test uses these edges.
+    struct Square {
+        double x0, y0, x1, y1;
+    };
+    Square cellSquare(size_t i) const;
     // South-west corner and centre of cell i, local frame [m].
     void cellMinLocal(size_t i, double& x, double& y) const;
     void cellCenterLocal(size_t i, double& x, double& y) const;
@@ -102,6 +107,7 @@ public:
     std::string validate() const;
 
 private:
+    Square squareOf(uint64_t key, int level) const;
     template <typename Pred, typename Emit>
     void visitNodes(Pred&& nodeMeets, Emit&& emit, std::vector<uint32_t>& out) const;
 };

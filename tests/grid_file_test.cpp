@@ -1,0 +1,272 @@
+// The .hcg format: round trip, golden bytes, every truncation, every flipped byte, versions,
+// content validation behind valid checksums, and atomic writes that leave nothing on failure.
+#include <gtest/gtest.h>
+
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <random>
+
+#include "heightcast/grid/checksum.h"
+#include "heightcast/grid/error.h"
+#include "heightcast/grid/grid_file.h"
+
+namespace {
+
+namespace fs = std::filesystem;
+using hc::Grid;
+
+// A small grid with two layers, two levels and a hole; every field set to a non-default value.
+Grid tinyGrid() {
+    Grid g;
+    g.originWorldX = 652000.25;
+    g.originWorldY = 5189000.5;  // a UTM northing: must survive as a double
+    g.finestCellM = 2.5;
+    g.rootLevel = 2;
+    g.minLevel = 0;
+    g.maxLevel = 1;
+    g.crsWkt = "PROJCRS[\"test\"]";
+    g.layers.push_back({"water_depth", "m"});
+    g.values.emplace_back();
+    g.stats.sourcePath = "tiny.tif";
+    g.stats.sourceCrsName = "test";
+    g.stats.sourceWidth = 4;
+    g.stats.sourceHeight = 4;
+    g.stats.validPixels = 13;
+    g.stats.toleranceM = 0.25;
+    g.stats.maxDevM = 0.125;
+    g.stats.rmsDevM = 0.0625;
+    const float v0[2] = {100.5f, 0.0f}, v1[2] = {101.0f, 0.25f}, v2[2] = {-11000.0f, 3.0f}, v3[2] = {8900.0f, 0.0f};
+    g.appendCell(0, 0, 1, v0);  // SW quadrant: one level-1 cell
+    g.appendCell(2, 0, 0, v1);  // SE quadrant: three level-0 cells and a hole at (3, 1)
+    g.appendCell(3, 0, 0, v2);
+    g.appendCell(2, 1, 0, v3);
+    g.appendCell(0, 2, 1, v1);  // NW
+    g.appendCell(2, 2, 1, v2);  // NE
+    return g;
+}
+
+std::vector<char> readBytes(const std::string& path) {
+    std::ifstream in(path, std::ios::binary);
+    return {std::istreambuf_iterator<char>(in), {}};
+}
+void writeBytes(const std::string& path, const std::vector<char>& bytes, size_t n) {
+    std::ofstream out(path, std::ios::binary | std::ios::trunc);
+    out.write(bytes.data(), static_cast<std::streamsize>(n));
+}
+
+class GridFile : public ::testing::Test {
+protected:
+    void SetUp() override {
+        dir_ = fs::temp_directory_path() / ("hc_grid_file_" + std::to_string(::getpid()) + "_" +
+                                            ::testing::UnitTest::GetInstance()->current_test_info()->name());
+        fs::remove_all(dir_);
+        fs::create_directories(dir_);
+    }
+    void TearDown() override { fs::remove_all(dir_); }
+    std::string path(const std::string& name) const { return (dir_ / name).string(); }
+    fs::path dir_;
+};
+
+void expectEqualGrids(const Grid& a, const Grid& b) {
+    EXPECT_EQ(a.originWorldX, b.originWorldX);
+    EXPECT_EQ(a.originWorldY, b.originWorldY);
+    EXPECT_EQ(a.finestCellM, b.finestCellM);
+    EXPECT_EQ(a.rootLevel, b.rootLevel);
+    EXPECT_EQ(a.minLevel, b.minLevel);
+    EXPECT_EQ(a.maxLevel, b.maxLevel);
+    EXPECT_EQ(a.crsWkt, b.crsWkt);
+    ASSERT_EQ(a.layers.size(), b.layers.size());
+    for (size_t l = 0; l < a.layers.size(); ++l) {
+        EXPECT_EQ(a.layers[l].name, b.layers[l].name);
+        EXPECT_EQ(a.layers[l].units, b.layers[l].units);
+        EXPECT_EQ(0, std::memcmp(a.values[l].data(), b.values[l].data(), a.values[l].size() * 4));  // bit-exact
+    }
+    EXPECT_EQ(a.codes, b.codes);
+    EXPECT_EQ(a.stats.sourcePath, b.stats.sourcePath);
+    EXPECT_EQ(a.stats.validPixels, b.stats.validPixels);
+    EXPECT_EQ(a.stats.toleranceM, b.stats.toleranceM);
+    EXPECT_EQ(a.stats.maxDevM, b.stats.maxDevM);
+    EXPECT_EQ(a.stats.rmsDevM, b.stats.rmsDevM);
+}
+
+TEST_F(GridFile, RoundTripIsExact) {
+    Grid g = tinyGrid();
+    ASSERT_EQ(g.validate(), "");
+    hc::writeGrid(g, path("t.hcg"));
+    Grid r = hc::readGrid(path("t.hcg"));
+    expectEqualGrids(g, r);
+    EXPECT_EQ(r.contentHash(), g.contentHash());
+    EXPECT_EQ(r.locate(3 * 2.5 + 0.1, 1 * 2.5 + 0.1), std::nullopt) << "the hole stays a hole";
+}
+
+TEST_F(GridFile, EmptyLayerValuesAndLargeGridRoundTrip) {
+    Grid g;
+    g.finestCellM = 0.75;
+    g.rootLevel = 10;
+    g.maxLevel = 3;
+    std::mt19937 rng(7);
+    for (uint64_t k = 0; k < 128 * 128; ++k) {  // level-3 cells, appended in Morton order
+        float v = static_cast<float>(rng() % 100000) * 0.01f;
+        g.appendCell(hc::mortonX(k) * 8, hc::mortonY(k) * 8, 3, &v);
+    }
+    hc::writeGrid(g, path("big.hcg"));
+    expectEqualGrids(g, hc::readGrid(path("big.hcg")));
+}
+
+// Golden bytes pin format 1.0: a change to the layout fails here. Regenerate deliberately with
+// HC_UPDATE_GOLDEN=1 only when the format version changes.
+TEST_F(GridFile, GoldenBytes) {
+    const std::string golden = std::string(HC_GOLDEN_DIR) + "/tiny_v1_0.hcg";
+    Grid g = tinyGrid();
+    hc::writeGrid(g, path("t.hcg"));
+    std::vector<char> bytes = readBytes(path("t.hcg"));
+    if (std::getenv("HC_UPDATE_GOLDEN")) writeBytes(golden, bytes, bytes.size());
+    std::vector<char> want = readBytes(golden);
+    ASSERT_FALSE(want.empty()) << golden << " missing";
+    ASSERT_EQ(bytes.size(), want.size());
+    for (size_t i = 0; i < bytes.size(); ++i) ASSERT_EQ(bytes[i], want[i]) << "first difference at byte " << i;
+    expectEqualGrids(g, hc::readGrid(golden));
+    // Spot-check documented offsets (grid_file.h).
+    EXPECT_EQ(0, std::memcmp(want.data(), "\x89HCGRID\n", 8));
+    uint16_t major;
+    double originY;
+    std::memcpy(&major, want.data() + 8, 2);
+    std::memcpy(&originY, want.data() + 40, 8);
+    EXPECT_EQ(major, 1);
+    EXPECT_EQ(originY, 5189000.5);
+}
+
+TEST_F(GridFile, EveryTruncationIsRefused) {
+    hc::writeGrid(tinyGrid(), path("t.hcg"));
+    std::vector<char> bytes = readBytes(path("t.hcg"));
+    for (size_t n = 0; n < bytes.size(); ++n) {
+        writeBytes(path("cut.hcg"), bytes, n);
+        try {
+            hc::readGrid(path("cut.hcg"));
+            FAIL() << "a file cut to " << n << " bytes was accepted";
+        } catch (const hc::Error& e) {
+            std::string m = e.what();
+            ASSERT_NE(m.find("cut.hcg"), std::string::npos) << m;
+            if (n >= hc::kGridHeaderBytes) {
+                ASSERT_NE(m.find("truncated"), std::string::npos) << m;
+            }
+        }
+    }
+}
+
+TEST_F(GridFile, EveryFlippedByteIsCaught) {
+    hc::writeGrid(tinyGrid(), path("t.hcg"));
+    std::vector<char> bytes = readBytes(path("t.hcg"));
+    for (size_t i = 0; i < bytes.size(); ++i)
+        for (char mask : {char(0x01), char(0x80)}) {
+            std::vector<char> bad = bytes;
+            bad[i] = static_cast<char>(bad[i] ^ mask);
+            writeBytes(path("bad.hcg"), bad, bad.size());
+            EXPECT_THROW(hc::readGrid(path("bad.hcg")), hc::Error) << "flipping byte " << i << " went unnoticed";
+        }
+}
+
+// Rewrites the header checksum after an edit, to reach the checks behind it.
+void fixHeaderCrc(std::vector<char>& b) {
+    uint32_t crc = hc::crc32(std::as_bytes(std::span(b.data(), 124)));
+    std::memcpy(b.data() + 124, &crc, 4);
+}
+
+TEST_F(GridFile, VersionsNewerMajorRefusedNewerMinorRead) {
+    hc::writeGrid(tinyGrid(), path("t.hcg"));
+    std::vector<char> bytes = readBytes(path("t.hcg"));
+    std::vector<char> major = bytes;
+    uint16_t two = 2;
+    std::memcpy(major.data() + 8, &two, 2);
+    fixHeaderCrc(major);
+    writeBytes(path("v2.hcg"), major, major.size());
+    try {
+        hc::readGrid(path("v2.hcg"));
+        FAIL() << "a newer major version was accepted";
+    } catch (const hc::Error& e) {
+        EXPECT_NE(std::string(e.what()).find("newer"), std::string::npos) << e.what();
+    }
+    std::vector<char> minor = bytes;
+    uint16_t seven = 7;
+    std::memcpy(minor.data() + 10, &seven, 2);
+    fixHeaderCrc(minor);
+    writeBytes(path("v1_7.hcg"), minor, minor.size());
+    expectEqualGrids(tinyGrid(), hc::readGrid(path("v1_7.hcg")));
+}
+
+TEST_F(GridFile, InvalidCellsBehindValidChecksumsAreRefused) {
+    // Two cells swapped, with every checksum recomputed: only the content validation can catch it.
+    Grid g = tinyGrid();
+    hc::writeGrid(g, path("t.hcg"));
+    std::vector<char> b = readBytes(path("t.hcg"));
+    uint64_t cellsOffset, cellsBytes;
+    std::memcpy(&cellsOffset, b.data() + 128 + 32 + 8, 8);  // section 1 = CELLS
+    std::memcpy(&cellsBytes, b.data() + 128 + 32 + 16, 8);
+    std::swap_ranges(b.begin() + static_cast<long>(cellsOffset), b.begin() + static_cast<long>(cellsOffset) + 8,
+                     b.begin() + static_cast<long>(cellsOffset) + 8);
+    uint32_t crc = hc::crc32(std::as_bytes(std::span(b.data() + cellsOffset, cellsBytes)));
+    std::memcpy(b.data() + 128 + 32 + 24, &crc, 4);
+    uint32_t tableCrc = hc::crc32(std::as_bytes(std::span(b.data() + 128, 32 * 4)));
+    std::memcpy(b.data() + 120, &tableCrc, 4);
+    fixHeaderCrc(b);
+    writeBytes(path("swapped.hcg"), b, b.size());
+    try {
+        hc::readGrid(path("swapped.hcg"));
+        FAIL() << "unsorted cells were accepted";
+    } catch (const hc::Error& e) {
+        EXPECT_NE(std::string(e.what()).find("invalid grid"), std::string::npos) << e.what();
+    }
+}
+
+TEST_F(GridFile, FailedWritesLeaveNothingBehind) {
+    Grid bad = tinyGrid();
+    bad.values[1][2] = NAN;  // invalid: refused before any byte is written
+    EXPECT_THROW(hc::writeGrid(bad, path("bad.hcg")), hc::Error);
+    EXPECT_THROW(hc::writeGrid(tinyGrid(), path("no/such/dir/t.hcg")), hc::Error);
+    EXPECT_TRUE(fs::is_empty(dir_)) << "a failed write left a file (or a temporary) behind";
+    // A failed rewrite keeps the previous good file intact.
+    hc::writeGrid(tinyGrid(), path("keep.hcg"));
+    EXPECT_THROW(hc::writeGrid(bad, path("keep.hcg")), hc::Error);
+    expectEqualGrids(tinyGrid(), hc::readGrid(path("keep.hcg")));
+}
+
+TEST_F(GridFile, MissingAndForeignFilesGetClearErrors) {
+    try {
+        hc::readGrid(path("absent.hcg"));
+        FAIL();
+    } catch (const hc::Error& e) {
+        EXPECT_NE(std::string(e.what()).find("no such file"), std::string::npos);
+    }
+    std::vector<char> text(500, 'a');
+    writeBytes(path("text.hcg"), text, text.size());
+    try {
+        hc::readGrid(path("text.hcg"));
+        FAIL();
+    } catch (const hc::Error& e) {
+        EXPECT_NE(std::string(e.what()).find("magic"), std::string::npos) << e.what();
+    }
+}
+
+TEST(Checksum, KnownValues) {
+    // CRC-32 check value of "123456789" (the standard test vector): 0xCBF43926.
+    const char* s = "123456789";
+    EXPECT_EQ(hc::crc32(std::as_bytes(std::span(s, 9))), 0xCBF43926u);
+    // Incremental CRC equals one-shot; Hash64 is split-invariant.
+    std::vector<std::byte> data(1000);
+    for (size_t i = 0; i < data.size(); ++i) data[i] = static_cast<std::byte>(i * 7 + 3);
+    uint32_t whole = hc::crc32(data);
+    EXPECT_EQ(hc::crc32(std::span(data).subspan(333), hc::crc32(std::span(data).first(333))), whole);
+    hc::Hash64 a, b;
+    a.update(data);
+    b.update(std::span(data).first(5));
+    b.update(std::span(data).subspan(5, 600));
+    b.update(std::span(data).subspan(605));
+    EXPECT_EQ(a.digest(), b.digest());
+    hc::Hash64 c;
+    data[999] ^= std::byte{1};
+    c.update(data);
+    EXPECT_NE(a.digest(), c.digest());
+}
+
+}  // namespace
