@@ -104,6 +104,19 @@ void printJson(const hc::Grid& g, const Summary& s, const std::string& path) {
     std::fputs(j.c_str(), stdout);
 }
 
+// "NAME (EPSG:CODE)" from a WKT: its first quoted string and its last top-level ID.
+std::string crsLabel(const std::string& wkt) {
+    auto q0 = wkt.find('"'), q1 = q0 == std::string::npos ? q0 : wkt.find('"', q0 + 1);
+    std::string label = q1 == std::string::npos ? "unnamed CRS" : wkt.substr(q0 + 1, q1 - q0 - 1);
+    auto id = wkt.rfind("ID[\"");
+    if (id != std::string::npos && wkt.find("]]", id) != std::string::npos && wkt.find(']', id) + 1 >= wkt.size() - 2) {
+        auto a0 = id + 4, a1 = wkt.find('"', a0), c0 = wkt.find(',', a1), c1 = wkt.find(']', c0);
+        if (a1 != std::string::npos && c0 != std::string::npos && c1 != std::string::npos)
+            label += " (" + wkt.substr(a0, a1 - a0) + ":" + wkt.substr(c0 + 1, c1 - c0 - 1) + ")";
+    }
+    return label;
+}
+
 void printText(const hc::Grid& g, const Summary& s, const std::string& path) {
     std::printf("%s: heightcast grid, format %d.%d, valid (all checksums and invariants checked)\n", path.c_str(),
                 hc::kGridFileMajor, hc::kGridFileMinor);
@@ -115,7 +128,7 @@ void printText(const hc::Grid& g, const Summary& s, const std::string& path) {
         std::printf("    level %zu  %10.4g m  %10llu cells\n", l, g.levelSizeM(int(l)), (unsigned long long)s.perLevel[l]);
     std::printf("  origin       %.17g, %.17g\n", g.originWorldX, g.originWorldY);
     std::printf("  extent       %.17g, %.17g .. %.17g, %.17g\n", s.extent[0], s.extent[1], s.extent[2], s.extent[3]);
-    std::string crs = g.crsWkt.empty() ? "none (local metres)" : g.crsWkt.substr(0, g.crsWkt.find('\n'));
+    std::string crs = g.crsWkt.empty() ? "none (local metres)" : crsLabel(g.crsWkt) + " (full WKT: --json)";
     std::printf("  CRS          %s\n", crs.c_str());
     std::printf("  source       %s (%s); working raster %llu x %llu px, %llu valid\n", g.stats.sourcePath.c_str(),
                 g.stats.sourceCrsName.empty() ? "no CRS" : g.stats.sourceCrsName.c_str(),

@@ -8,17 +8,13 @@
 
 namespace hc::ingest {
 
-int chooseMaxLevel(const Options& opt, double pixelSizeM, LoadReport& report) {
+int chooseMaxLevel(const Options& opt, double pixelSizeM, LoadReport&) {
     const double target = opt.maxCellM ? *opt.maxCellM : 96.0;  // the report's coarsest cell
     if (opt.maxCellM && *opt.maxCellM < pixelSizeM * (1 - 1e-9))
         throw Error("--max-cell " + std::to_string(*opt.maxCellM) + " m is smaller than the finest cell (" +
                     std::to_string(pixelSizeM) + " m)");
     int level = 0;
     while (pixelSizeM * std::ldexp(1.0, level + 1) <= target * (1 + 1e-9) && level < kMaxLevel) ++level;
-    double chosen = pixelSizeM * std::ldexp(1.0, level);
-    if (opt.maxCellM && std::abs(chosen - *opt.maxCellM) > 1e-6 * chosen)
-        report.warnings.push_back("--max-cell " + std::to_string(*opt.maxCellM) + " m is not a power-of-two multiple of the finest cell; using " +
-                                  std::to_string(chosen) + " m");
     return level;
 }
 

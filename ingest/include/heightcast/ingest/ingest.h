@@ -58,7 +58,8 @@ void validateOptions(const Options& options);
 Raster loadTerrain(const Options& options, LoadReport& report);
 // Depth raster [m] of the terrain's geometry (0 = dry; NaN where terrain is a hole).
 Raster loadWater(const Options& options, const Raster& terrain, LoadReport& report);
-// Finest cell and max level for the working raster, from the options (throws on absurd values).
+// Coarsest level for the working raster: --max-cell rounded down to finest * 2^k (default 96 m).
+// Throws if --max-cell is below the finest cell.
 int chooseMaxLevel(const Options& options, double pixelSizeM, LoadReport& report);
 
 // All stages: the tool's job. Throws hc::Error for bad input; never returns a partial grid.
