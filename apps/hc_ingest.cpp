@@ -1,5 +1,4 @@
 // hc-ingest: raster DEM (+ water) -> adaptive quadtree grid file (.hcg).
-#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
@@ -12,33 +11,29 @@
 
 namespace {
 
-void printSummary(const hc::Grid& g, const hc::ingest::LoadReport& r, const std::string& out, double writeSeconds) {
-    std::printf("hc-ingest: %s -> %s\n", g.stats.sourcePath.c_str(), out.c_str());
+void printSummary(const hc::ingest::BuildSummary& b, const hc::ingest::LoadReport& r, const std::string& out) {
+    const hc::Grid& g = b.shape;
+    const hc::IngestStats& s = g.stats;
+    std::printf("hc-ingest: %s -> %s\n", s.sourcePath.c_str(), out.c_str());
     std::printf("  input        %s\n", r.sourceDescription.c_str());
     std::printf("  input CRS    %s\n", r.sourceCrsName.empty() ? "none" : r.sourceCrsName.c_str());
     std::printf("  grid CRS     %s\n", r.gridCrsName.empty() ? "none (local metres)" : r.gridCrsName.c_str());
     std::printf("  method       %s\n", r.method.c_str());
-    std::printf("  working      %llu x %llu px of %.6g m, %llu valid\n", (unsigned long long)g.stats.sourceWidth,
-                (unsigned long long)g.stats.sourceHeight, g.finestCellM, (unsigned long long)g.stats.validPixels);
-    std::printf("  cells        %zu (%.3f pixels per cell), %zu layer%s:", g.cellCount(),
-                g.cellCount() ? double(g.stats.validPixels) / double(g.cellCount()) : 0.0, g.layerCount(),
-                g.layerCount() == 1 ? "" : "s");
+    std::printf("  working      %llu x %llu px of %.6g m, %llu valid\n", (unsigned long long)s.sourceWidth,
+                (unsigned long long)s.sourceHeight, g.finestCellM, (unsigned long long)s.validPixels);
+    std::printf("  cells        %llu (%.3f pixels per cell), %zu layer%s:", (unsigned long long)b.cellCount,
+                b.cellCount ? double(s.validPixels) / double(b.cellCount) : 0.0, g.layerCount(), g.layerCount() == 1 ? "" : "s");
     for (const auto& l : g.layers) std::printf(" %s [%s]", l.name.c_str(), l.units.c_str());
     std::printf("\n");
-    auto perLevel = g.cellsPerLevel();
-    for (size_t l = 0; l < perLevel.size(); ++l)
+    for (size_t l = 0; l < b.cellsPerLevel.size(); ++l)
         std::printf("    level %zu  %10.4g m  %10llu cells  %6.2f %%\n", l, g.levelSizeM(int(l)),
-                    (unsigned long long)perLevel[l], g.cellCount() ? 100.0 * double(perLevel[l]) / double(g.cellCount()) : 0.0);
-    if (int w = g.findLayer("water_depth"); w >= 0) {
-        size_t wet = 0;
-        for (float d : g.values[size_t(w)]) wet += d > 0;
-        std::printf("  water        %zu wet cells of %zu\n", wet, g.cellCount());
-    }
-    std::printf("  deviation    max %.4g m, RMS %.4g m (tolerance %.4g m, every valid pixel checked)\n", g.stats.maxDevM,
-                g.stats.rmsDevM, g.stats.toleranceM);
-    std::printf("  time         %.3f s ingest + %.3f s write\n", g.stats.seconds, writeSeconds);
-    std::printf("  memory       peak %.1f MB resident; grid %.1f MB (%zu bytes per cell)\n", double(hc::peakRssBytes()) / 1e6,
-                double(g.cellCount() * (8 + 4 * g.layerCount())) / 1e6, size_t(8 + 4 * g.layerCount()));
+                    (unsigned long long)b.cellsPerLevel[l], b.cellCount ? 100.0 * double(b.cellsPerLevel[l]) / double(b.cellCount) : 0.0);
+    if (g.layerCount() > 1) std::printf("  water        %llu wet cells of %llu\n", (unsigned long long)b.wetCells, (unsigned long long)b.cellCount);
+    std::printf("  deviation    max %.4g m, RMS %.4g m (tolerance %.4g m, every valid pixel checked)\n", s.maxDevM, s.rmsDevM,
+                s.toleranceM);
+    std::printf("  time         %.3f s (read, project, build, write)\n", s.seconds);
+    std::printf("  memory       peak %.1f MB resident (the grid streams to disk: %zu bytes per cell there)\n",
+                double(hc::peakRssBytes()) / 1e6, size_t(8 + 4 * g.layerCount()));
 }
 
 }  // namespace
@@ -83,12 +78,9 @@ int main(int argc, char** argv) {
         hc::cli::checkNotSame(out, o.input, "output grid");
 
         hc::ingest::LoadReport report;
-        hc::Grid g = hc::ingest::ingest(o, report);
-        auto t0 = std::chrono::steady_clock::now();
-        hc::writeGrid(g, out);
-        double writeSeconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+        hc::ingest::BuildSummary summary = hc::ingest::ingestToFile(o, out, report);
         for (const auto& w : report.warnings) std::fprintf(stderr, "hc-ingest: warning: %s\n", w.c_str());
-        printSummary(g, report, out, writeSeconds);
+        printSummary(summary, report, out);
         return 0;
     });
 }

@@ -201,12 +201,12 @@ TEST_F(GridFile, InvalidCellsBehindValidChecksumsAreRefused) {
     hc::writeGrid(g, path("t.hcg"));
     std::vector<char> b = readBytes(path("t.hcg"));
     uint64_t cellsOffset, cellsBytes;
-    std::memcpy(&cellsOffset, b.data() + 128 + 32 + 8, 8);  // section 1 = CELLS
-    std::memcpy(&cellsBytes, b.data() + 128 + 32 + 16, 8);
+    std::memcpy(&cellsOffset, b.data() + 128 + 8, 8);  // section 0 = CELLS
+    std::memcpy(&cellsBytes, b.data() + 128 + 16, 8);
     std::swap_ranges(b.begin() + static_cast<long>(cellsOffset), b.begin() + static_cast<long>(cellsOffset) + 8,
                      b.begin() + static_cast<long>(cellsOffset) + 8);
     uint32_t crc = hc::crc32(std::as_bytes(std::span(b.data() + cellsOffset, cellsBytes)));
-    std::memcpy(b.data() + 128 + 32 + 24, &crc, 4);
+    std::memcpy(b.data() + 128 + 24, &crc, 4);
     uint32_t tableCrc = hc::crc32(std::as_bytes(std::span(b.data() + 128, 32 * 4)));
     std::memcpy(b.data() + 120, &tableCrc, 4);
     fixHeaderCrc(b);
@@ -267,6 +267,49 @@ TEST(Checksum, KnownValues) {
     data[999] ^= std::byte{1};
     c.update(data);
     EXPECT_NE(a.digest(), c.digest());
+}
+
+}  // namespace
+
+namespace {
+
+TEST_F(GridFile, StreamedWriteEqualsWholeWrite) {
+    // Any batching gives the very same bytes as writeGrid().
+    Grid g = tinyGrid();
+    hc::writeGrid(g, path("whole.hcg"));
+    for (size_t batch : {size_t{1}, size_t{2}, size_t{4}, size_t{6}}) {
+        hc::GridFileWriter w(path("stream.hcg"), g, g.cellCount());
+        for (size_t i = 0; i < g.cellCount(); i += batch) {
+            size_t n = std::min(batch, g.cellCount() - i);
+            w.append(std::span(g.codes).subspan(i, n),
+                     {std::span<const float>(g.values[0]).subspan(i, n), std::span<const float>(g.values[1]).subspan(i, n)});
+        }
+        w.commit(g.stats);
+        EXPECT_EQ(readBytes(path("stream.hcg")), readBytes(path("whole.hcg"))) << "batch " << batch;
+    }
+}
+
+TEST_F(GridFile, StreamedWriteRefusesBadStreams) {
+    Grid g = tinyGrid();
+    auto values = [&](size_t i, size_t n) {
+        return std::vector<std::span<const float>>{std::span<const float>(g.values[0]).subspan(i, n),
+                                                   std::span<const float>(g.values[1]).subspan(i, n)};
+    };
+    {  // too few cells: commit refuses and nothing is left
+        hc::GridFileWriter w(path("short.hcg"), g, g.cellCount());
+        w.append(std::span(g.codes).first(3), values(0, 3));
+        EXPECT_THROW(w.commit(g.stats), hc::Error);
+    }
+    {  // out of order
+        hc::GridFileWriter w(path("order.hcg"), g, g.cellCount());
+        w.append(std::span(g.codes).subspan(3, 1), values(3, 1));
+        EXPECT_THROW(w.append(std::span(g.codes).subspan(2, 1), values(2, 1)), hc::Error);
+    }
+    {  // more than announced
+        hc::GridFileWriter w(path("long.hcg"), g, 2);
+        EXPECT_THROW(w.append(std::span(g.codes).first(3), values(0, 3)), hc::Error);
+    }
+    EXPECT_TRUE(fs::is_empty(dir_)) << "a failed streamed write left a file behind";
 }
 
 }  // namespace

@@ -473,3 +473,31 @@ TEST(Options, AbsurdValuesAreRefused) {
 }
 
 }  // namespace
+
+namespace {
+
+TEST(Ingest, StreamedFileEqualsInMemoryGrid) {
+    HC_REQUIRE_DATA(path, "lidar1m_minnesota_utm15.tif");
+    for (bool water : {false, true}) {
+        Options o;
+        o.input = path;
+        if (water) o.water = hc::ingest::WaterSource::Level, o.waterLevelM = 392;
+        LoadReport rep;
+        Grid mem = hc::ingest::ingest(o, rep);
+        fs::path f = tempDir() / "streamed.hcg";
+        hc::ingest::BuildSummary s = hc::ingest::ingestToFile(o, f.string(), rep);
+        Grid back = hc::readGrid(f.string());
+        EXPECT_EQ(back.contentHash(), mem.contentHash());
+        EXPECT_EQ(s.cellCount, mem.cellCount());
+        EXPECT_EQ(s.cellsPerLevel, mem.cellsPerLevel());
+        EXPECT_EQ(back.stats.maxDevM, mem.stats.maxDevM);
+        EXPECT_EQ(back.stats.validPixels, mem.stats.validPixels);
+        size_t wet = 0;
+        if (water)
+            for (float d : mem.values[1]) wet += d > 0;
+        EXPECT_EQ(s.wetCells, wet);
+        fs::remove(f);
+    }
+}
+
+}  // namespace

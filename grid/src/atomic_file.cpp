@@ -1,6 +1,7 @@
 #include "heightcast/grid/atomic_file.h"
 
 #include <cerrno>
+#include <cstdio>
 #include <cstring>
 #include <filesystem>
 #include <vector>
@@ -18,20 +19,14 @@ AtomicFileWriter::AtomicFileWriter(std::string path) : path_(std::move(path)) {
     std::string pattern = path_ + ".tmp.XXXXXX";
     std::vector<char> buf(pattern.begin(), pattern.end());
     buf.push_back('\0');
-    int fd = mkstemp(buf.data());
-    if (fd < 0) throw Error(path_ + ": cannot create a file there: " + std::strerror(errno));
+    fd_ = mkstemp(buf.data());
+    if (fd_ < 0) throw Error(path_ + ": cannot create a file there: " + std::strerror(errno));
     tempPath_ = buf.data();
-    fchmod(fd, 0644);
-    file_ = fdopen(fd, "wb");
-    if (!file_) {
-        ::close(fd);
-        std::remove(tempPath_.c_str());
-        throw Error(path_ + ": cannot open for writing: " + std::strerror(errno));
-    }
+    fchmod(fd_, 0644);
 }
 
 AtomicFileWriter::~AtomicFileWriter() {
-    if (file_) std::fclose(file_);
+    if (fd_ >= 0) ::close(fd_);
     if (!committed_ && !tempPath_.empty()) std::remove(tempPath_.c_str());
 }
 
@@ -40,14 +35,26 @@ void AtomicFileWriter::fail(const std::string& what) {
     throw Error(path_ + ": " + what + ": " + std::strerror(err));
 }
 
+void AtomicFileWriter::writeAt(uint64_t offset, std::span<const std::byte> bytes) {
+    const std::byte* p = bytes.data();
+    size_t left = bytes.size();
+    while (left > 0) {
+        ssize_t n = ::pwrite(fd_, p, left, static_cast<off_t>(offset));
+        if (n < 0 && errno == EINTR) continue;
+        if (n <= 0) fail("write failed");
+        p += n;
+        left -= static_cast<size_t>(n);
+        offset += static_cast<uint64_t>(n);
+    }
+}
+
 void AtomicFileWriter::write(std::span<const std::byte> bytes) {
-    if (bytes.empty()) return;
-    if (std::fwrite(bytes.data(), 1, bytes.size(), file_) != bytes.size()) fail("write failed");
+    writeAt(position_, bytes);
     position_ += bytes.size();
 }
 
 void AtomicFileWriter::writeZeros(size_t count) {
-    static const std::byte zeros[256] = {};
+    static const std::byte zeros[4096] = {};
     while (count > 0) {
         size_t n = count < sizeof zeros ? count : sizeof zeros;
         write(std::span<const std::byte>(zeros, n));
@@ -56,10 +63,9 @@ void AtomicFileWriter::writeZeros(size_t count) {
 }
 
 void AtomicFileWriter::commit() {
-    if (std::fflush(file_) != 0) fail("write failed");
-    if (fsync(fileno(file_)) != 0) fail("fsync failed");
-    int rc = std::fclose(file_);
-    file_ = nullptr;
+    if (::fsync(fd_) != 0) fail("fsync failed");
+    int rc = ::close(fd_);
+    fd_ = -1;
     if (rc != 0) fail("close failed");
     if (std::rename(tempPath_.c_str(), path_.c_str()) != 0) fail("cannot rename the temporary file into place");
     committed_ = true;

@@ -175,33 +175,60 @@ void Grid::boundsLocal(double& xMin, double& yMin, double& xMax, double& yMax) c
     }
 }
 
-namespace {
-void hashGeometry(Hash64& h, const Grid& g) {
-    h.updateValue(g.finestCellM);
-    h.updateValue(static_cast<int32_t>(g.rootLevel));
-    uint64_t n = g.codes.size();
-    h.updateValue(n);
-    h.update(std::as_bytes(std::span<const uint64_t>(g.codes)));
-}
-}  // namespace
-
-uint64_t Grid::structureHash() const {
-    Hash64 h;
-    hashGeometry(h, *this);
-    return h.digest();
+GridHasher::GridHasher(const Grid& shape, uint64_t cellCount) : shape_(shape), layers_(shape.layers.size()) {
+    structure_.updateValue(shape.finestCellM);
+    structure_.updateValue(static_cast<int32_t>(shape.rootLevel));
+    structure_.updateValue(cellCount);
 }
 
-uint64_t Grid::contentHash() const {
+void GridHasher::addCodes(std::span<const uint64_t> c) { structure_.update(std::as_bytes(c)); }
+void GridHasher::addValues(size_t layer, std::span<const float> v) { layers_[layer].update(std::as_bytes(v)); }
+uint64_t GridHasher::structureHash() const { return structure_.digest(); }
+
+uint64_t GridHasher::contentHash() const {
     Hash64 h(0x6863636f6e74656eull);
-    hashGeometry(h, *this);
-    for (size_t l = 0; l < layers.size(); ++l) {
-        h.update(std::as_bytes(std::span<const char>(layers[l].name.data(), layers[l].name.size() + 1)));
-        h.update(std::as_bytes(std::span<const float>(values[l])));
+    h.updateValue(structure_.digest());
+    for (size_t l = 0; l < layers_.size(); ++l) {
+        const std::string& name = shape_.layers[l].name;
+        h.update(std::as_bytes(std::span<const char>(name.data(), name.size() + 1)));
+        h.updateValue(layers_[l].digest());
     }
     return h.digest();
 }
 
-std::string Grid::validate() const {
+uint64_t Grid::structureHash() const {
+    GridHasher h(*this, codes.size());
+    h.addCodes(codes);
+    return h.structureHash();
+}
+
+uint64_t Grid::contentHash() const {
+    GridHasher h(*this, codes.size());
+    h.addCodes(codes);
+    for (size_t l = 0; l < layers.size(); ++l) h.addValues(l, values[l]);
+    return h.contentHash();
+}
+
+std::string CellStreamCheck::next(uint64_t code, const float* layerValues) {
+    // Hot path (every cell a writer streams): no allocation unless something is wrong.
+    const uint64_t i = count_++;
+    const uint64_t key = codeKey(code);
+    const int lv = codeLevel(code);
+    auto cell = [&](const std::string& what) { return "cell " + std::to_string(i) + " " + what; };
+    if (lv < shape_.minLevel || lv > shape_.maxLevel)
+        return cell("has level " + std::to_string(lv) + " outside " + std::to_string(shape_.minLevel) + ".." +
+                    std::to_string(shape_.maxLevel));
+    const uint64_t span = mortonSpan(lv), domainSpan = mortonSpan(shape_.rootLevel);
+    if ((key & (span - 1)) != 0) return cell("is not aligned to its level " + std::to_string(lv));
+    if (key >= domainSpan || span > domainSpan - key) return cell("lies outside the domain");
+    if (i > 0 && key < nextFree_) return cell("overlaps or precedes cell " + std::to_string(i - 1));
+    nextFree_ = key + span;
+    for (size_t l = 0; l < shape_.layers.size(); ++l)
+        if (!std::isfinite(layerValues[l])) return cell("has a non-finite " + shape_.layers[l].name + " value");
+    return {};
+}
+
+std::string Grid::validateShape() const {
     std::ostringstream err;
     if (!(finestCellM > 0) || !std::isfinite(finestCellM)) err << "finest cell size " << finestCellM << " m is not positive";
     else if (!std::isfinite(originWorldX) || !std::isfinite(originWorldY)) err << "origin is not finite";
@@ -209,34 +236,28 @@ std::string Grid::validate() const {
     else if (minLevel < 0 || minLevel > maxLevel || maxLevel > rootLevel)
         err << "level range " << minLevel << ".." << maxLevel << " invalid for root level " << rootLevel;
     else if (layers.empty() || layers[0].name != "elevation") err << "layer 0 must be elevation";
-    else if (values.size() != layers.size()) err << values.size() << " value arrays for " << layers.size() << " layers";
+    else if (layers.size() > 255) err << layers.size() << " layers (at most 255)";
     if (!err.str().empty()) return err.str();
-    for (size_t l = 0; l < layers.size(); ++l) {
+    for (size_t l = 0; l < layers.size(); ++l)
+        for (size_t m = 0; m < l; ++m)
+            if (layers[m].name == layers[l].name) return "layer name " + layers[l].name + " appears twice";
+    return {};
+}
+
+std::string Grid::validate() const {
+    if (std::string shape = validateShape(); !shape.empty()) return shape;
+    if (values.size() != layers.size())
+        return std::to_string(values.size()) + " value arrays for " + std::to_string(layers.size()) + " layers";
+    for (size_t l = 0; l < layers.size(); ++l)
         if (values[l].size() != codes.size())
             return "layer " + layers[l].name + " has " + std::to_string(values[l].size()) + " values for " +
                    std::to_string(codes.size()) + " cells";
-        for (size_t m = 0; m < l; ++m)
-            if (layers[m].name == layers[l].name) return "layer name " + layers[l].name + " appears twice";
-    }
-    uint64_t domainSpan = mortonSpan(rootLevel);
-    uint64_t nextFree = 0;  // first key not covered by the previous cell
+    CellStreamCheck check(*this);
+    std::vector<float> v(layers.size());
     for (size_t i = 0; i < codes.size(); ++i) {
-        uint64_t key = codeKey(codes[i]);
-        int lv = codeLevel(codes[i]);
-        if (lv < minLevel || lv > maxLevel) {
-            err << "cell " << i << " has level " << lv << " outside " << minLevel << ".." << maxLevel;
-            return err.str();
-        }
-        uint64_t span = mortonSpan(lv);
-        if ((key & (span - 1)) != 0) { err << "cell " << i << " is not aligned to its level " << lv; return err.str(); }
-        if (key >= domainSpan || span > domainSpan - key) { err << "cell " << i << " lies outside the domain"; return err.str(); }
-        if (i > 0 && key < nextFree) { err << "cell " << i << " overlaps or precedes cell " << i - 1; return err.str(); }
-        nextFree = key + span;
-        for (size_t l = 0; l < layers.size(); ++l)
-            if (!std::isfinite(values[l][i])) {
-                err << "cell " << i << " has a non-finite " << layers[l].name << " value";
-                return err.str();
-            }
+        for (size_t l = 0; l < layers.size(); ++l) v[l] = values[l][i];
+        std::string problem = check.next(codes[i], v.data());
+        if (!problem.empty()) return problem;
     }
     return {};
 }

@@ -6,6 +6,7 @@
 #include <filesystem>
 #include <fstream>
 #include <map>
+#include <memory>
 #include <sstream>
 #include <vector>
 
@@ -261,32 +262,101 @@ void Reader::parseMeta(const SectionEntry& s, Grid& g) {
 
 }  // namespace
 
-void writeGrid(const Grid& g, const std::string& path) {
-    std::string problem = g.validate();
-    if (!problem.empty()) throw Error(path + ": refusing to write an invalid grid: " + problem);
-    if (g.layers.size() > 255) throw Error(path + ": too many layers (at most 255)");
+struct GridFileWriter::Impl {
+    Impl(std::string path, const Grid& gridShape, uint64_t cells)
+        : out(std::move(path)), shape(gridShape), cellCount(cells), check(shape), hasher(shape, cells) {}
+    AtomicFileWriter out;
+    Grid shape;  // geometry, CRS and layers; no cells
+    uint64_t cellCount;
+    CellStreamCheck check;
+    GridHasher hasher;
+    std::vector<SectionEntry> sections;  // CELLS, LAYER 0..L-1; META is appended at commit
+    uint64_t written = 0;
+    uint64_t dataEnd = 0;
+};
 
-    std::vector<std::byte> meta = encodeMeta(g);
-    const uint64_t n = g.cellCount();
-    std::vector<SectionEntry> sections;
-    sections.push_back({kMeta, 0, 0, meta.size(), crc32(meta)});
-    sections.push_back({kCells, 0, 0, n * 8, crc32(std::as_bytes(std::span(g.codes)))});
-    for (size_t l = 0; l < g.layers.size(); ++l)
-        sections.push_back({kLayer, static_cast<uint32_t>(l), 0, n * 4, crc32(std::as_bytes(std::span(g.values[l])))});
-    uint64_t cursor = kGridHeaderBytes + sections.size() * kGridSectionEntryBytes;
-    for (auto& s : sections) {
-        s.offset = alignUp(cursor);
+GridFileWriter::GridFileWriter(const std::string& path, const Grid& shape, uint64_t cellCount) {
+    std::string problem = shape.validateShape();
+    if (!problem.empty()) throw Error(path + ": refusing to write an invalid grid: " + problem);
+    Grid bare;  // copy the shape only, never its cells
+    bare.originWorldX = shape.originWorldX;
+    bare.originWorldY = shape.originWorldY;
+    bare.finestCellM = shape.finestCellM;
+    bare.rootLevel = shape.rootLevel;
+    bare.minLevel = shape.minLevel;
+    bare.maxLevel = shape.maxLevel;
+    bare.crsWkt = shape.crsWkt;
+    bare.layers = shape.layers;
+    bare.values.assign(shape.layers.size(), {});
+    impl_ = std::make_unique<Impl>(path, bare, cellCount);
+    // Layout: header, table, CELLS, LAYER..., META (last: its statistics are known only at the end).
+    uint64_t cursor = kGridHeaderBytes + (shape.layers.size() + 2) * kGridSectionEntryBytes;
+    auto place = [&](uint32_t kind, uint32_t index, uint64_t bytes) {
+        uint64_t at = alignUp(cursor);
+        impl_->sections.push_back({kind, index, at, bytes, 0});
+        cursor = at + bytes;
+    };
+    place(kCells, 0, cellCount * 8);
+    for (size_t l = 0; l < shape.layers.size(); ++l) place(kLayer, static_cast<uint32_t>(l), cellCount * 4);
+    impl_->dataEnd = cursor;
+}
+
+GridFileWriter::~GridFileWriter() = default;
+
+void GridFileWriter::append(std::span<const uint64_t> codes, const std::vector<std::span<const float>>& layerValues) {
+    Impl& w = *impl_;
+    const size_t layers = w.shape.layers.size();
+    if (layerValues.size() != layers) throw Error(w.out.path() + ": " + std::to_string(layerValues.size()) + " value arrays for " + std::to_string(layers) + " layers");
+    for (const auto& v : layerValues)
+        if (v.size() != codes.size()) throw Error(w.out.path() + ": layer values and cells differ in number");
+    if (codes.size() > w.cellCount - w.written) throw Error(w.out.path() + ": more cells than the " + std::to_string(w.cellCount) + " announced");
+    float v[256];
+    for (size_t i = 0; i < codes.size(); ++i) {
+        for (size_t l = 0; l < layers; ++l) v[l] = layerValues[l][i];
+        std::string problem = w.check.next(codes[i], v);
+        if (!problem.empty()) throw Error(w.out.path() + ": refusing to write an invalid grid: " + problem);
+    }
+    SectionEntry& cells = w.sections[0];
+    auto codeBytes = std::as_bytes(codes);
+    w.out.writeAt(cells.offset + w.written * 8, codeBytes);
+    cells.crc = crc32(codeBytes, cells.crc);
+    w.hasher.addCodes(codes);
+    for (size_t l = 0; l < layers; ++l) {
+        SectionEntry& s = w.sections[1 + l];
+        auto bytes = std::as_bytes(layerValues[l]);
+        w.out.writeAt(s.offset + w.written * 4, bytes);
+        s.crc = crc32(bytes, s.crc);
+        w.hasher.addValues(l, layerValues[l]);
+    }
+    w.written += codes.size();
+}
+
+void GridFileWriter::commit(const IngestStats& stats) {
+    Impl& w = *impl_;
+    if (w.written != w.cellCount)
+        throw Error(w.out.path() + ": " + std::to_string(w.written) + " cells written of " + std::to_string(w.cellCount) + " announced");
+    w.shape.stats = stats;
+    std::vector<std::byte> meta = encodeMeta(w.shape);
+    const uint64_t metaAt = alignUp(w.dataEnd);
+    w.sections.push_back({kMeta, 0, metaAt, meta.size(), crc32(meta)});
+    const uint64_t fileBytes = metaAt + meta.size();
+    // Zero padding between sections (the file is sparse until then).
+    uint64_t cursor = kGridHeaderBytes + w.sections.size() * kGridSectionEntryBytes;
+    std::vector<std::byte> zeros(kGridSectionAlign, std::byte{0});
+    for (const auto& s : w.sections) {
+        if (s.offset > cursor) w.out.writeAt(cursor, std::span(zeros).first(s.offset - cursor));
         cursor = s.offset + s.bytes;
     }
-    const uint64_t fileBytes = cursor;
+    w.out.writeAt(metaAt, meta);
 
-    std::vector<std::byte> head(kGridHeaderBytes + sections.size() * kGridSectionEntryBytes, std::byte{0});
+    const Grid& g = w.shape;
+    std::vector<std::byte> head(kGridHeaderBytes + w.sections.size() * kGridSectionEntryBytes, std::byte{0});
     std::memcpy(head.data(), kMagic, 8);
     put(head, off::major, kGridFileMajor);
     put(head, off::minor, kGridFileMinor);
     put(head, off::headerBytes, kGridHeaderBytes);
     put(head, off::fileBytes, fileBytes);
-    put(head, off::cellCount, n);
+    put(head, off::cellCount, w.cellCount);
     put(head, off::originX, g.originWorldX);
     put(head, off::originY, g.originWorldY);
     put(head, off::finestCell, g.finestCellM);
@@ -294,30 +364,31 @@ void writeGrid(const Grid& g, const std::string& path) {
     put(head, off::minLevel, static_cast<uint8_t>(g.minLevel));
     put(head, off::maxLevel, static_cast<uint8_t>(g.maxLevel));
     put(head, off::layerCount, static_cast<uint8_t>(g.layers.size()));
-    put(head, off::sectionCount, static_cast<uint32_t>(sections.size()));
-    put(head, off::contentHash, g.contentHash());
-    put(head, off::structureHash, g.structureHash());
-    for (size_t s = 0; s < sections.size(); ++s) {
+    put(head, off::sectionCount, static_cast<uint32_t>(w.sections.size()));
+    put(head, off::contentHash, w.hasher.contentHash());
+    put(head, off::structureHash, w.hasher.structureHash());
+    for (size_t s = 0; s < w.sections.size(); ++s) {
         size_t at = kGridHeaderBytes + s * kGridSectionEntryBytes;
-        put(head, at, sections[s].kind);
-        put(head, at + 4, sections[s].index);
-        put(head, at + 8, sections[s].offset);
-        put(head, at + 16, sections[s].bytes);
-        put(head, at + 24, sections[s].crc);
+        put(head, at, w.sections[s].kind);
+        put(head, at + 4, w.sections[s].index);
+        put(head, at + 8, w.sections[s].offset);
+        put(head, at + 16, w.sections[s].bytes);
+        put(head, at + 24, w.sections[s].crc);
     }
     put(head, off::tableCrc, crc32(std::span(head).subspan(kGridHeaderBytes)));
     put(head, off::headerCrc, crc32(std::span(head).first(off::headerCrc)));
+    w.out.writeAt(0, head);
+    w.out.commit();
+}
 
-    AtomicFileWriter out(path);
-    out.write(head);
-    auto writeSection = [&](const SectionEntry& s, std::span<const std::byte> bytes) {
-        out.writeZeros(s.offset - out.position());
-        out.write(bytes);
-    };
-    writeSection(sections[0], meta);
-    writeSection(sections[1], std::as_bytes(std::span(g.codes)));
-    for (size_t l = 0; l < g.layers.size(); ++l) writeSection(sections[2 + l], std::as_bytes(std::span(g.values[l])));
-    out.commit();
+void writeGrid(const Grid& g, const std::string& path) {
+    std::string problem = g.validate();
+    if (!problem.empty()) throw Error(path + ": refusing to write an invalid grid: " + problem);
+    GridFileWriter w(path, g, g.cellCount());
+    std::vector<std::span<const float>> values;
+    for (const auto& v : g.values) values.emplace_back(v);
+    w.append(g.codes, values);
+    w.commit(g.stats);
 }
 
 Grid readGrid(const std::string& path) {

@@ -10,8 +10,12 @@
 #include <algorithm>
 #include <array>
 #include <cassert>
+#include <chrono>
 #include <cmath>
 #include <limits>
+#include <memory>
+
+#include "heightcast/grid/grid_file.h"
 
 #include "heightcast/grid/error.h"
 #include "heightcast/grid/parallel.h"
@@ -29,6 +33,18 @@ struct Node {
     bool wet = false;
 };
 
+// Cells on their way to the sink: one batch at a time, so the grid never has to be in memory.
+struct Batch {
+    std::vector<uint64_t> codes;
+    std::vector<std::vector<float>> values;
+};
+
+struct Stats {
+    double maxDev = 0, sumSq = 0;
+    uint64_t pixels = 0, wetCells = 0;
+    std::vector<uint64_t> perLevel;
+};
+
 class Builder {
 public:
     Builder(const Raster& terrain, const Raster* water, const BuildOptions& opt, int rootLevel, int maxLevel)
@@ -36,7 +52,8 @@ public:
           tileLevel_(std::min(rootLevel, kTileLevelMax)), tile_(size_t{1} << tileLevel_),
           ntx_((terrain.width + tile_ - 1) / tile_), nty_((terrain.height + tile_ - 1) / tile_) {}
 
-    void run(Grid& grid);
+    // Builds the tree and hands its cells, in Morton order, to the sink. Returns the measurements.
+    Stats run(CellSink& sink);
 
 private:
     // Pixel at finest coordinates (ix east, iy north) from the SW corner; false if none.
@@ -99,7 +116,7 @@ private:
     }
 
     // Emits the leaves of a built tile pyramid in Morton order; returns how many.
-    size_t emitTile(size_t tx, size_t ty, const std::vector<std::vector<Node>>& scratch, Grid* grid, size_t at) const {
+    size_t emitTile(size_t tx, size_t ty, const std::vector<std::vector<Node>>& scratch, Batch* grid, size_t at) const {
         size_t count = 0;
         auto visit = [&](auto&& self, int l, size_t x, size_t y) -> void {
             size_t side = tile_ >> l;
@@ -116,12 +133,14 @@ private:
         return count;
     }
 
-    void writeCell(Grid& g, size_t at, size_t ix, size_t iy, int level, const Node& n) const {
-        g.codes[at] = makeCellCode(mortonEncode(static_cast<uint32_t>(ix), static_cast<uint32_t>(iy)), level);
-        for (int l = 0; l < layers_; ++l) g.values[static_cast<size_t>(l)][at] = n.mean[static_cast<size_t>(l)];
+    void writeCell(Batch& b, size_t at, size_t ix, size_t iy, int level, const Node& n) const {
+        b.codes[at] = makeCellCode(mortonEncode(static_cast<uint32_t>(ix), static_cast<uint32_t>(iy)), level);
+        for (int l = 0; l < layers_; ++l) b.values[static_cast<size_t>(l)][at] = n.mean[static_cast<size_t>(l)];
     }
 
-    void measureDeviation(Grid& g) const;
+    // The guarantee, measured: every valid pixel under cells [begin, end) of the batch against the
+    // stored value of its cell; also counts cells per level and wet cells.
+    void measure(const Batch& b, size_t begin, size_t end, Stats& acc) const;
 
     const Raster& t_;
     const Raster* w_;
@@ -131,7 +150,7 @@ private:
     size_t tile_, ntx_, nty_;
 };
 
-void Builder::run(Grid& grid) {
+Stats Builder::run(CellSink& sink) {
     const unsigned threads = resolveThreads(opt_.threads);
     const size_t tiles = ntx_ * nty_;
 
@@ -195,76 +214,91 @@ void Builder::run(Grid& grid) {
         };
         walk(walk, rootLevel_, 0, 0);
 
-        grid.codes.resize(total);
-        for (int l = 0; l < layers_; ++l) grid.values[static_cast<size_t>(l)].resize(total);
+        sink.begin(total);
 
-        // Pass C, write: every unit fills its own slice of the final arrays.
-        parallelFor(units.size(), 16, threads, [&](size_t b, size_t e, unsigned worker) {
-            size_t tilesDone = 0;
-            for (size_t u = b; u < e; ++u) {
-                const Unit& unit = units[u];
-                if (unit.level > tileLevel_) {
-                    auto k = static_cast<size_t>(unit.level - tileLevel_);
-                    const Node& n = coarse[k][unit.y * dims[k].first + unit.x];
-                    size_t span = size_t{1} << unit.level;
-                    writeCell(grid, unit.offset, unit.x * span, unit.y * span, unit.level, n);
-                    continue;
+        // Pass C, write: batches of consecutive units (about 64 k cells, a few MB), filled in
+        // parallel, measured, and handed to the sink in order.
+        std::vector<Stats> acc(threads);
+        for (auto& a : acc) a.perLevel.assign(static_cast<size_t>(maxLevel_) + 1, 0);
+        Batch batch;
+        batch.values.resize(static_cast<size_t>(layers_));
+        size_t u0 = 0;
+        while (u0 < units.size()) {
+            size_t u1 = u0;
+            const size_t first = units[u0].offset;
+            while (u1 < units.size() && (u1 == u0 || units[u1].offset - first < (size_t{1} << 16))) ++u1;
+            const size_t last = u1 < units.size() ? units[u1].offset : total;
+            batch.codes.resize(last - first);
+            for (auto& v : batch.values) v.resize(last - first);
+            parallelFor(u1 - u0, 1, threads, [&](size_t b, size_t e, unsigned worker) {
+                size_t tilesDone = 0;
+                for (size_t k = u0 + b; k < u0 + e; ++k) {
+                    const Unit& unit = units[k];
+                    const size_t at = unit.offset - first;
+                    size_t written = 1;
+                    if (unit.level > tileLevel_) {
+                        auto lk = static_cast<size_t>(unit.level - tileLevel_);
+                        const Node& n = coarse[lk][unit.y * dims[lk].first + unit.x];
+                        size_t span = size_t{1} << unit.level;
+                        writeCell(batch, at, unit.x * span, unit.y * span, unit.level, n);
+                    } else {
+                        buildTile(unit.x, unit.y, scratch[worker]);
+                        written = emitTile(unit.x, unit.y, scratch[worker], &batch, at);
+                        assert(written == leafCount[unit.y * ntx_ + unit.x]);
+                        ++tilesDone;
+                    }
+                    measure(batch, at, at + written, acc[worker]);
                 }
-                buildTile(unit.x, unit.y, scratch[worker]);
-                size_t written = emitTile(unit.x, unit.y, scratch[worker], &grid, unit.offset);
-                assert(written == leafCount[unit.y * ntx_ + unit.x]);
-                (void)written;
-                ++tilesDone;
-            }
-            progress.advance(tilesDone);
-        });
+                progress.advance(tilesDone);
+            });
+            std::vector<std::span<const float>> values(batch.values.begin(), batch.values.end());
+            sink.append(batch.codes, values);
+            u0 = u1;
+        }
         progress.advance(2 * tiles);  // units cover fewer than all tiles; fill the bar
         progress.finish();
+        Stats total_;
+        total_.perLevel.assign(static_cast<size_t>(maxLevel_) + 1, 0);
+        for (const Stats& a : acc) {
+            total_.maxDev = std::max(total_.maxDev, a.maxDev);
+            total_.sumSq += a.sumSq;
+            total_.pixels += a.pixels;
+            total_.wetCells += a.wetCells;
+            for (size_t l = 0; l < a.perLevel.size(); ++l) total_.perLevel[l] += a.perLevel[l];
+        }
+        return total_;
     }
-    measureDeviation(grid);
 }
 
-// The guarantee, measured: every valid pixel against the stored value of its cell.
-void Builder::measureDeviation(Grid& g) const {
-    const unsigned threads = resolveThreads(opt_.threads);
-    struct Acc {
-        double maxDev = 0, sumSq = 0;
-        uint64_t pixels = 0;
-    };
-    std::vector<Acc> acc(threads);
-    parallelFor(g.cellCount(), 4096, threads, [&](size_t b, size_t e, unsigned worker) {
-        Acc& a = acc[worker];
-        for (size_t i = b; i < e; ++i) {
-            uint64_t key = codeKey(g.codes[i]);
-            size_t span = size_t{1} << codeLevel(g.codes[i]);
-            size_t ix0 = mortonX(key), iy0 = mortonY(key);
-            for (size_t iy = iy0; iy < iy0 + span; ++iy) {
-                size_t row = t_.height - 1 - iy;
-                for (size_t ix = ix0; ix < ix0 + span; ++ix) {
-                    size_t idx = row * t_.width + ix;
-                    double dz = static_cast<double>(t_.values[idx]) - g.values[0][i];
-                    a.sumSq += dz * dz;
-                    a.maxDev = std::max(a.maxDev, std::abs(dz));
-                    if (w_) a.maxDev = std::max(a.maxDev, std::abs(static_cast<double>(w_->values[idx]) - g.values[1][i]));
-                    ++a.pixels;
-                }
+void Builder::measure(const Batch& b, size_t begin, size_t end, Stats& a) const {
+    for (size_t i = begin; i < end; ++i) {
+        const uint64_t key = codeKey(b.codes[i]);
+        const int level = codeLevel(b.codes[i]);
+        ++a.perLevel[static_cast<size_t>(level)];
+        if (w_ && b.values[1][i] > 0) ++a.wetCells;
+        const size_t span = size_t{1} << level;
+        const size_t ix0 = mortonX(key), iy0 = mortonY(key);
+        const double z = b.values[0][i];
+        for (size_t iy = iy0; iy < iy0 + span; ++iy) {
+            const size_t row = t_.height - 1 - iy;
+            for (size_t ix = ix0; ix < ix0 + span; ++ix) {
+                const size_t idx = row * t_.width + ix;
+                const double dz = static_cast<double>(t_.values[idx]) - z;
+                a.sumSq += dz * dz;
+                a.maxDev = std::max(a.maxDev, std::abs(dz));
+                if (w_) a.maxDev = std::max(a.maxDev, std::abs(static_cast<double>(w_->values[idx]) - b.values[1][i]));
+                ++a.pixels;
             }
         }
-    });
-    Acc total;
-    for (const Acc& a : acc) {
-        total.maxDev = std::max(total.maxDev, a.maxDev);
-        total.sumSq += a.sumSq;
-        total.pixels += a.pixels;
     }
-    g.stats.maxDevM = total.maxDev;
-    g.stats.rmsDevM = total.pixels ? std::sqrt(total.sumSq / static_cast<double>(total.pixels)) : 0.0;
-    g.stats.validPixels = total.pixels;
 }
 
 }  // namespace
 
-Grid buildGrid(const Raster& terrain, const Raster* waterDepth, const BuildOptions& options) {
+namespace {
+
+// The grid's geometry for a raster: origin at its south-west corner, finest cell = its pixel.
+Grid shapeFor(const Raster& terrain, const Raster* waterDepth, const BuildOptions& options, int& rootLevel, int& maxLevel) {
     if (terrain.width == 0 || terrain.height == 0 || terrain.values.size() != terrain.width * terrain.height)
         throw Error("raster is empty or inconsistent");
     if (!(options.toleranceM >= 0) || !std::isfinite(options.toleranceM)) throw Error("tolerance must be a finite number >= 0");
@@ -272,13 +306,11 @@ Grid buildGrid(const Raster& terrain, const Raster* waterDepth, const BuildOptio
     if (waterDepth && (waterDepth->width != terrain.width || waterDepth->height != terrain.height ||
                        waterDepth->values.size() != terrain.values.size()))
         throw Error("water depth raster does not match the terrain raster's geometry");
-
-    int rootLevel = 0;
+    rootLevel = 0;
     while ((size_t{1} << rootLevel) < std::max(terrain.width, terrain.height)) ++rootLevel;
     if (rootLevel > kMaxRootLevel) throw Error("raster of " + std::to_string(terrain.width) + " x " +
                                                std::to_string(terrain.height) + " pixels is too large for one grid");
-    int maxLevel = std::clamp(options.maxLevel, 0, rootLevel);
-
+    maxLevel = std::clamp(options.maxLevel, 0, rootLevel);
     Grid g;
     g.originWorldX = terrain.westWorld;
     g.originWorldY = terrain.southWorld();
@@ -294,10 +326,82 @@ Grid buildGrid(const Raster& terrain, const Raster* waterDepth, const BuildOptio
     g.stats.sourceWidth = terrain.width;
     g.stats.sourceHeight = terrain.height;
     g.stats.toleranceM = options.toleranceM;
-    Builder(terrain, waterDepth, options, rootLevel, maxLevel).run(g);
+    return g;
+}
+
+void fillStats(const Stats& st, IngestStats& out) {
+    out.maxDevM = st.maxDev;
+    out.rmsDevM = st.pixels ? std::sqrt(st.sumSq / static_cast<double>(st.pixels)) : 0.0;
+    out.validPixels = st.pixels;
+}
+
+class GridSink : public CellSink {
+public:
+    explicit GridSink(Grid& g) : g_(g) {}
+    void begin(uint64_t cellCount) override {
+        g_.codes.reserve(cellCount);
+        for (auto& v : g_.values) v.reserve(cellCount);
+    }
+    void append(std::span<const uint64_t> codes, const std::vector<std::span<const float>>& values) override {
+        g_.codes.insert(g_.codes.end(), codes.begin(), codes.end());
+        for (size_t l = 0; l < values.size(); ++l) g_.values[l].insert(g_.values[l].end(), values[l].begin(), values[l].end());
+    }
+
+private:
+    Grid& g_;
+};
+
+class FileSink : public CellSink {
+public:
+    FileSink(const std::string& path, const Grid& shape) : path_(path), shape_(shape) {}
+    void begin(uint64_t cellCount) override {
+        if (cellCount == 0) throw Error("the raster holds no valid pixel (all nodata): nothing to build");
+        writer_ = std::make_unique<GridFileWriter>(path_, shape_, cellCount);
+    }
+    void append(std::span<const uint64_t> codes, const std::vector<std::span<const float>>& values) override {
+        writer_->append(codes, values);
+    }
+    GridFileWriter& writer() { return *writer_; }
+
+private:
+    std::string path_;
+    const Grid& shape_;
+    std::unique_ptr<GridFileWriter> writer_;
+};
+
+}  // namespace
+
+Grid buildGrid(const Raster& terrain, const Raster* waterDepth, const BuildOptions& options) {
+    int rootLevel = 0, maxLevel = 0;
+    Grid g = shapeFor(terrain, waterDepth, options, rootLevel, maxLevel);
+    GridSink sink(g);
+    Stats st = Builder(terrain, waterDepth, options, rootLevel, maxLevel).run(sink);
     if (g.cellCount() == 0) throw Error("the raster holds no valid pixel (all nodata): nothing to build");
+    fillStats(st, g.stats);
     assert(g.validate().empty());
     return g;
+}
+
+BuildSummary buildGridFile(const Raster& terrain, const Raster* waterDepth, const BuildOptions& options,
+                           const std::string& path, const IngestStats& extraStats) {
+    const auto start = std::chrono::steady_clock::now();
+    int rootLevel = 0, maxLevel = 0;
+    BuildSummary out;
+    out.shape = shapeFor(terrain, waterDepth, options, rootLevel, maxLevel);
+    FileSink sink(path, out.shape);
+    Stats st = Builder(terrain, waterDepth, options, rootLevel, maxLevel).run(sink);
+    IngestStats stats = extraStats;
+    stats.sourceWidth = out.shape.stats.sourceWidth;
+    stats.sourceHeight = out.shape.stats.sourceHeight;
+    stats.toleranceM = options.toleranceM;
+    fillStats(st, stats);
+    stats.seconds = extraStats.seconds + std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    sink.writer().commit(stats);
+    out.shape.stats = stats;
+    out.cellsPerLevel = st.perLevel;
+    out.wetCells = st.wetCells;
+    for (uint64_t c : st.perLevel) out.cellCount += c;
+    return out;
 }
 
 }  // namespace hc::ingest

@@ -82,7 +82,9 @@ SourceBand readSource(GDALDataset& ds, const Options& opt, LoadReport& report) {
     const double zScale = zUnit * opt.zScale;
 
     out.values.assign(out.width * out.height, kNaN);
-    const size_t strip = std::max<size_t>(1, (size_t{1} << 22) / (out.width * 8 + 1));  // ~4 MB buffers
+    const GDALDataType sampleType = band->GetRasterDataType();
+    const bool exactInFloat = sampleType == GDT_Byte || sampleType == GDT_UInt16 || sampleType == GDT_Int16 || sampleType == GDT_Float32;
+    const size_t strip = std::max<size_t>(1, (size_t{1} << 20) / (out.width * 8 + 1));  // ~1 MB buffers
     std::vector<double> buf;
     std::vector<uint8_t> rgb, mask;
     Progress progress("reading " + opt.input, out.height, opt.progress);
@@ -103,6 +105,17 @@ SourceBand readSource(GDALDataset& ds, const Options& opt, LoadReport& report) {
             for (size_t i = 0; i < n; ++i) {
                 double h = -10000.0 + 0.1 * (rgb[i] * 65536.0 + rgb[n + i] * 256.0 + rgb[2 * n + i]);
                 dst[i] = static_cast<float>(h * zScale);
+            }
+        } else if (exactInFloat) {
+            // Read straight into place: float32 holds every value of these types exactly.
+            rasterIO(band, dst, GDT_Float32);
+            for (size_t i = 0; i < n; ++i) {
+                double v = dst[i];
+                bool isNodata = std::isnan(v) || (hasNodata && static_cast<float>(v) == static_cast<float>(nodata)) ||
+                                (opt.nodata && static_cast<float>(v) == static_cast<float>(*opt.nodata)) || std::isinf(v);
+                dst[i] = isNodata ? kNaN : static_cast<float>(v * zScale);
+                if (!isNodata && !std::isfinite(dst[i]))
+                    throw Error(opt.input + ": elevation " + fmt(v) + " x " + fmt(zScale) + " is beyond the float32 range");
             }
         } else {
             buf.resize(n);
@@ -412,6 +425,7 @@ Raster loadTerrain(const Options& opt, LoadReport& report) {
     if (hasGt && (gt.g[1] == 0 || gt.g[5] == 0) && !gt.rotated())
         throw Error(opt.input + ": geotransform has a zero pixel size");
     SourceBand src = readSource(*ds, opt, report);
+    ds.reset();  // releases GDAL's cached blocks of the file before the working raster is made
     if (!hasGt) {
         // No georeferencing: pixel (c, r) -> (c, -r) metres; the file itself can't say more.
         gt = GeoTransform{};

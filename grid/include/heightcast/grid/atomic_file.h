@@ -7,7 +7,6 @@
 
 #include <cstddef>
 #include <cstdint>
-#include <cstdio>
 #include <span>
 #include <string>
 
@@ -20,7 +19,8 @@ public:
     AtomicFileWriter(const AtomicFileWriter&) = delete;
     AtomicFileWriter& operator=(const AtomicFileWriter&) = delete;
 
-    void write(std::span<const std::byte> bytes);
+    void write(std::span<const std::byte> bytes);          // at position(), which then advances
+    void writeAt(uint64_t offset, std::span<const std::byte> bytes);  // anywhere; position() unchanged
     void writeZeros(size_t count);
     uint64_t position() const { return position_; }
     void commit();  // throws hc::Error on any I/O failure; the target is then untouched
@@ -31,7 +31,7 @@ private:
     void fail(const std::string& what);
     std::string path_;
     std::string tempPath_;
-    std::FILE* file_ = nullptr;
+    int fd_ = -1;
     uint64_t position_ = 0;
     bool committed_ = false;
 };

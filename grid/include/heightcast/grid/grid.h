@@ -16,9 +16,11 @@
 
 #include <cstdint>
 #include <optional>
+#include <span>
 #include <string>
 #include <vector>
 
+#include "heightcast/grid/checksum.h"
 #include "heightcast/grid/morton.h"
 
 namespace hc {
@@ -105,11 +107,48 @@ public:
     // Checks every invariant (sorted, aligned, inside the domain, no overlap, levels in range,
     // sizes consistent, finite values). Returns "" when valid, else what is wrong.
     std::string validate() const;
+    // The geometry and layer rules alone (what a streaming writer needs before any cell).
+    std::string validateShape() const;
+
+    // Position in finest units of cell i's south-west corner.
+    static uint32_t keyX(uint64_t code) { return mortonX(codeKey(code)); }
+    static uint32_t keyY(uint64_t code) { return mortonY(codeKey(code)); }
 
 private:
     Square squareOf(uint64_t key, int level) const;
     template <typename Pred, typename Emit>
     void visitNodes(Pred&& nodeMeets, Emit&& emit, std::vector<uint32_t>& out) const;
+};
+
+// The rules of Grid::validate() for cells that arrive one at a time (writers that never hold a whole
+// grid). `shape` supplies the geometry and layers; its own cells are ignored.
+class CellStreamCheck {
+public:
+    explicit CellStreamCheck(const Grid& shape) : shape_(shape) {}
+    // "" if the cell may follow the ones before it, else what is wrong with it.
+    std::string next(uint64_t code, const float* layerValues);
+    uint64_t count() const { return count_; }
+
+private:
+    const Grid& shape_;
+    uint64_t nextFree_ = 0;  // first key not covered by the previous cell
+    uint64_t count_ = 0;
+};
+
+// Grid::structureHash and Grid::contentHash, computed incrementally: codes in order, and each
+// layer's values in order (layers may interleave).
+class GridHasher {
+public:
+    GridHasher(const Grid& shape, uint64_t cellCount);
+    void addCodes(std::span<const uint64_t> codes);
+    void addValues(size_t layer, std::span<const float> values);
+    uint64_t structureHash() const;
+    uint64_t contentHash() const;
+
+private:
+    const Grid& shape_;
+    Hash64 structure_;
+    std::vector<Hash64> layers_;
 };
 
 }  // namespace hc

@@ -25,13 +25,19 @@
 //   128     32*S  section table: { u32 kind, u32 index, u64 offset, u64 bytes, u32 crc32, u32 zero }
 //   ...           sections, each at a 64-byte aligned offset (mmap- and SIMD-friendly), zero padding
 //
-// Sections: META (kind 1: u32-length-prefixed key/value strings: crs_wkt, layer.N.name,
-// layer.N.units, ingest.*), CELLS (kind 2: u64 cell codes, sorted), LAYER (kind 3, index = layer:
-// float32 values).
+// Sections, in file order: CELLS (kind 2: u64 cell codes, sorted), LAYER (kind 3, index = layer:
+// float32 values, one section per layer), META (kind 1: u32-length-prefixed key/value strings:
+// crs_wkt, layer.N.name, layer.N.units, ingest.*). Readers locate sections by the table, not by order.
+//
+// Hashes: structure = Hash64 over (finest size f64, root level i32, cell count u64, codes);
+// content = Hash64 over (structure hash, then per layer its name + NUL and Hash64 of its values).
 #pragma once
 
 #include <cstdint>
+#include <memory>
+#include <span>
 #include <string>
+#include <vector>
 
 #include "heightcast/grid/grid.h"
 
@@ -46,6 +52,27 @@ constexpr uint32_t kGridSectionAlign = 64;
 // Writes `grid` to `path` atomically (temporary file + rename). Throws hc::Error on I/O failure or if
 // the grid is invalid (Grid::validate), leaving no file behind.
 void writeGrid(const Grid& grid, const std::string& path);
+
+// Streams a grid to a file without ever holding it: cells arrive in order, in batches of any size,
+// straight to their final place; CRCs, hashes and every cell invariant are computed on the way.
+// Nothing appears under `path` unless commit() succeeds. Throws hc::Error.
+class GridFileWriter {
+public:
+    // `shape` gives geometry, CRS and layers (its cells, if any, are ignored).
+    GridFileWriter(const std::string& path, const Grid& shape, uint64_t cellCount);
+    ~GridFileWriter();
+    GridFileWriter(const GridFileWriter&) = delete;
+    GridFileWriter& operator=(const GridFileWriter&) = delete;
+
+    // Next cells in Morton order; layerValues[l][i] is layer l of codes[i].
+    void append(std::span<const uint64_t> codes, const std::vector<std::span<const float>>& layerValues);
+    // After exactly cellCount cells: writes the statistics, header and table, and renames into place.
+    void commit(const IngestStats& stats);
+
+private:
+    struct Impl;
+    std::unique_ptr<Impl> impl_;
+};
 
 // Reads and fully validates a grid file: header, section table, every checksum, every cell
 // invariant, both hashes. Throws hc::Error naming the file, the byte offset and the problem.

@@ -14,6 +14,9 @@
 
 #include <functional>
 #include <optional>
+#include <span>
+#include <string>
+#include <vector>
 
 #include "heightcast/grid/grid.h"
 #include "heightcast/ingest/raster.h"
@@ -27,10 +30,34 @@ struct BuildOptions {
     bool progress = false;     // terminal progress on stderr
 };
 
-// Builds the grid. The grid's origin is the raster's south-west corner; its CRS the raster's.
+// Receives the cells of a build in Morton order, in batches.
+class CellSink {
+public:
+    virtual ~CellSink() = default;
+    virtual void begin(uint64_t cellCount) = 0;
+    virtual void append(std::span<const uint64_t> codes, const std::vector<std::span<const float>>& values) = 0;
+};
+
+// What a streamed build produced: the grid's shape (geometry, CRS, layers, statistics; no cells)
+// and counts.
+struct BuildSummary {
+    Grid shape;
+    uint64_t cellCount = 0;
+    std::vector<uint64_t> cellsPerLevel;  // index = level
+    uint64_t wetCells = 0;
+};
+
+// Builds the grid in memory. The grid's origin is the raster's south-west corner; its CRS the raster's.
 // waterDepth, when given, must have the raster's geometry; it becomes layer "water_depth" [m]
 // (dry = 0, holes wherever the terrain has one). Fills grid.stats deviations (max over every
 // layer, RMS over elevation) and sourceWidth/Height/validPixels/toleranceM.
 Grid buildGrid(const Raster& terrain, const Raster* waterDepth, const BuildOptions& options);
+
+// Builds the grid straight into a .hcg file (GridFileWriter): the same cells, bytes identical to
+// writeGrid(buildGrid(...)) with the same statistics, but memory stays at the rasters plus a few MB
+// of batch buffers whatever the cell count. `extraStats` supplies source path, CRS name and the
+// seconds spent before the build (the build's own time is added).
+BuildSummary buildGridFile(const Raster& terrain, const Raster* waterDepth, const BuildOptions& options,
+                           const std::string& path, const IngestStats& extraStats);
 
 }  // namespace hc::ingest

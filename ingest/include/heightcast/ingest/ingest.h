@@ -18,6 +18,7 @@
 #include <vector>
 
 #include "heightcast/grid/grid.h"
+#include "heightcast/ingest/build.h"
 #include "heightcast/ingest/raster.h"
 
 namespace hc::ingest {
@@ -62,7 +63,10 @@ Raster loadWater(const Options& options, const Raster& terrain, LoadReport& repo
 // Throws if --max-cell is below the finest cell.
 int chooseMaxLevel(const Options& options, double pixelSizeM, LoadReport& report);
 
-// All stages: the tool's job. Throws hc::Error for bad input; never returns a partial grid.
+// All stages, the grid in memory (tests, small rasters). Throws hc::Error for bad input.
 Grid ingest(const Options& options, LoadReport& report);
+// All stages, the grid streamed into `path` (the tool's job): peak memory is the working rasters
+// plus a few MB, however many cells. Nothing is left at `path` on failure.
+BuildSummary ingestToFile(const Options& options, const std::string& path, LoadReport& report);
 
 }  // namespace hc::ingest
