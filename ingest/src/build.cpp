@@ -105,6 +105,10 @@ private:
             side /= 2;
             auto& cur = scratch[static_cast<size_t>(l)];
             const auto& ch = scratch[static_cast<size_t>(l) - 1];
+            if (l > maxLevel_) {  // nothing merges above the coarsest level: skip the arithmetic
+                cur.assign(side * side, Node{});
+                continue;
+            }
             cur.resize(side * side);
             for (size_t y = 0; y < side; ++y)
                 for (size_t x = 0; x < side; ++x) {
@@ -257,16 +261,16 @@ Stats Builder::run(CellSink& sink) {
         }
         progress.advance(2 * tiles);  // units cover fewer than all tiles; fill the bar
         progress.finish();
-        Stats total_;
-        total_.perLevel.assign(static_cast<size_t>(maxLevel_) + 1, 0);
+        Stats sum;
+        sum.perLevel.assign(static_cast<size_t>(maxLevel_) + 1, 0);
         for (const Stats& a : acc) {
-            total_.maxDev = std::max(total_.maxDev, a.maxDev);
-            total_.sumSq += a.sumSq;
-            total_.pixels += a.pixels;
-            total_.wetCells += a.wetCells;
-            for (size_t l = 0; l < a.perLevel.size(); ++l) total_.perLevel[l] += a.perLevel[l];
+            sum.maxDev = std::max(sum.maxDev, a.maxDev);
+            sum.sumSq += a.sumSq;
+            sum.pixels += a.pixels;
+            sum.wetCells += a.wetCells;
+            for (size_t l = 0; l < a.perLevel.size(); ++l) sum.perLevel[l] += a.perLevel[l];
         }
-        return total_;
+        return sum;
     }
 }
 

@@ -2,17 +2,25 @@
 
 #include <chrono>
 #include <cmath>
+#include <cstdio>
 
 #include "heightcast/grid/error.h"
 #include "heightcast/ingest/build.h"
 
 namespace hc::ingest {
 
+namespace {
+std::string fmtM(double v) {
+    char b[32];
+    std::snprintf(b, sizeof b, "%.6g", v);
+    return b;
+}
+}  // namespace
+
 int chooseMaxLevel(const Options& opt, double pixelSizeM, LoadReport&) {
     const double target = opt.maxCellM ? *opt.maxCellM : 96.0;  // the report's coarsest cell
     if (opt.maxCellM && *opt.maxCellM < pixelSizeM * (1 - 1e-9))
-        throw Error("--max-cell " + std::to_string(*opt.maxCellM) + " m is smaller than the finest cell (" +
-                    std::to_string(pixelSizeM) + " m)");
+        throw Error("--max-cell " + fmtM(*opt.maxCellM) + " m is smaller than the finest cell (" + fmtM(pixelSizeM) + " m)");
     int level = 0;
     while (pixelSizeM * std::ldexp(1.0, level + 1) <= target * (1 + 1e-9) && level < kMaxLevel) ++level;
     return level;

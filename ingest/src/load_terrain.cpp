@@ -135,6 +135,10 @@ SourceBand readSource(GDALDataset& ds, const Options& opt, LoadReport& report) {
             for (size_t i = 0; i < n; ++i)
                 if (mask[i] == 0) dst[i] = kNaN;
         }
+        // Drop GDAL's cached blocks of the rows just read: otherwise its block cache holds a second
+        // copy of the whole file at the peak of the read.
+        for (int b = 1; b <= bandCount; ++b) ds.GetRasterBand(b)->FlushCache(false);
+        if (useMask) band->GetMaskBand()->FlushCache(false);
         progress.advance(rows);
     }
     progress.finish();
