@@ -3,17 +3,12 @@
 set -euo pipefail
 
 packages=(build-essential cmake pkg-config libgdal-dev gdal-bin libgtest-dev)
-# GeographicLib's package was renamed in Debian 12 / Ubuntu 23.04 (libgeographic-dev before).
-if apt-cache show libgeographiclib-dev >/dev/null 2>&1 || dpkg-query -W libgeographiclib-dev >/dev/null 2>&1; then
-  packages+=(libgeographiclib-dev)
-else
-  packages+=(libgeographic-dev)
-fi
+installed() { dpkg-query -W -f='${Status}' "$1" 2>/dev/null | grep -q "install ok installed"; }
 
 missing=()
-for p in "${packages[@]}"; do
-  dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
-done
+for p in "${packages[@]}"; do installed "$p" || missing+=("$p"); done
+# GeographicLib's package is libgeographiclib-dev since Debian 12 / Ubuntu 23.04, libgeographic-dev before.
+installed libgeographiclib-dev || installed libgeographic-dev || missing+=(geographiclib)
 [ ${#missing[@]} -eq 0 ] && exit 0
 
 sudo=""
@@ -21,6 +16,11 @@ if [ "$(id -u)" -ne 0 ]; then
   command -v sudo >/dev/null || { echo "deps.sh: need root or sudo to install: ${missing[*]}" >&2; exit 1; }
   sudo="sudo"
 fi
-echo "deps.sh: installing ${missing[*]}"
 $sudo apt-get update -qq
+for i in "${!missing[@]}"; do
+  if [ "${missing[$i]}" = geographiclib ]; then
+    if apt-cache show libgeographiclib-dev >/dev/null 2>&1; then missing[$i]=libgeographiclib-dev; else missing[$i]=libgeographic-dev; fi
+  fi
+done
+echo "deps.sh: installing ${missing[*]}"
 DEBIAN_FRONTEND=noninteractive $sudo apt-get install -y -qq --no-install-recommends "${missing[@]}" >/dev/null
