@@ -100,6 +100,20 @@ TEST_F(GridFile, RoundTripIsExact) {
     EXPECT_EQ(r.locate(3 * 2.5 + 0.1, 1 * 2.5 + 0.1), std::nullopt) << "the hole stays a hole";
 }
 
+TEST_F(GridFile, NamedScalarLayersRoundTrip) {
+    // Layers beyond water depth (velocity, ...) keep their names, units and values.
+    Grid g = tinyGrid();
+    g.layers.push_back({"velocity", "m/s"});
+    g.values.push_back({0.0f, 1.5f, 2.25f, 0.0f, 0.5f, 3.0f});
+    g.layers.push_back({"manning_n", "s/m^(1/3)"});
+    g.values.push_back({0.03f, 0.03f, 0.05f, 0.1f, 0.03f, 0.03f});
+    hc::writeGrid(g, path("layers.hcg"));
+    Grid r = hc::readGrid(path("layers.hcg"));
+    expectEqualGrids(g, r);
+    EXPECT_EQ(r.findLayer("velocity"), 2);
+    EXPECT_EQ(r.layers[3].units, "s/m^(1/3)");
+}
+
 TEST_F(GridFile, EmptyLayerValuesAndLargeGridRoundTrip) {
     Grid g;
     g.finestCellM = 0.75;

@@ -304,6 +304,43 @@ TEST(Ingest, SouthUpAndRotatedRastersLandWhereTheyBelong) {
     }
 }
 
+TEST(Ingest, NearlySquarePixelsAreKeptOthersResampled) {
+    // 50 x 50.001 m pixels (0.002 % apart) are square for ingest; 50 x 60 m are resampled to 50 m.
+    fs::path d = tempDir();
+    GDALAllRegister();
+    GDALDriver* gtiff = GetGDALDriverManager()->GetDriverByName("GTiff");
+    OGRSpatialReference srs;
+    srs.importFromEPSG(32633);
+    auto make = [&](const std::string& name, double dy) {
+        std::string p = (d / name).string();
+        std::unique_ptr<GDALDataset> ds(gtiff->Create(p.c_str(), 20, 10, 1, GDT_Float32, nullptr));
+        double gt[6] = {400000, 50, 0, 5000000, 0, -dy};
+        ds->SetGeoTransform(gt);
+        ds->SetSpatialRef(&srs);
+        std::vector<float> v(200);
+        for (size_t i = 0; i < v.size(); ++i) v[i] = 100.0f + float(i % 20) + 10.0f * float(i / 20);  // a plane
+        EXPECT_EQ(ds->GetRasterBand(1)->RasterIO(GF_Write, 0, 0, 20, 10, v.data(), 20, 10, GDT_Float32, 0, 0, nullptr), CE_None);
+        return p;
+    };
+    Options o;
+    LoadReport rep;
+    o.input = make("nearly.tif", 50.001);
+    Raster r = hc::ingest::loadTerrain(o, rep);
+    EXPECT_EQ(r.width, 20u);
+    EXPECT_EQ(r.height, 10u);
+    EXPECT_EQ(r.pixelSizeM, 50.0);
+    EXPECT_EQ(r.at(3, 2), 123.0f) << "kept as is: no resampling";
+    ASSERT_FALSE(rep.warnings.empty()) << "the 1 cm shift of the south edge is reported";
+    LoadReport rep2;
+    o.input = make("oblong.tif", 60);
+    Raster q = hc::ingest::loadTerrain(o, rep2);
+    EXPECT_EQ(q.pixelSizeM, 50.0);
+    EXPECT_EQ(q.height, 12u);  // 600 m of extent in 50 m rows
+    EXPECT_NE(rep2.method.find("resampled"), std::string::npos) << rep2.method;
+    // A plane is reproduced exactly by bilinear interpolation, away from the clamped edges.
+    EXPECT_NEAR(q.at(5, 6), 100.0 + (5.5 * 50 / 50 - 0.5) + 10.0 * ((6.5 * 50) / 60 - 0.5), 1e-3);
+}
+
 TEST(Ingest, SinglePixelAndAllNodata) {
     fs::path d = tempDir();
     {
