@@ -1,0 +1,122 @@
+// hc-probe: the exact smooth surface at given points.
+#include <charconv>
+#include <cstdio>
+#include <fstream>
+#include <string>
+#include <vector>
+
+#include "cli.h"
+#include "heightcast/grid/atomic_file.h"
+#include "heightcast/grid/error.h"
+#include "heightcast/grid/grid_file.h"
+#include "heightcast/grid/parallel.h"
+#include "heightcast/influence/surface.h"
+
+namespace {
+
+struct Point {
+    double x, y;
+};
+
+// Reads "x,y" lines after a header whose first two columns are x and y.
+std::vector<Point> readPoints(const std::string& path) {
+    std::ifstream in(path);
+    if (!in) throw hc::Error(path + ": cannot open for reading");
+    std::string line;
+    if (!std::getline(in, line)) throw hc::Error(path + ": empty file (expected a header line x,y)");
+    if (!line.empty() && line.back() == '\r') line.pop_back();
+    if (line.rfind("x,y", 0) != 0) throw hc::Error(path + ": line 1: header must start with x,y (got '" + line + "')");
+    std::vector<Point> pts;
+    size_t lineNo = 1;
+    while (std::getline(in, line)) {
+        ++lineNo;
+        if (!line.empty() && line.back() == '\r') line.pop_back();
+        if (line.empty()) continue;
+        Point p{};
+        const char* b = line.data();
+        const char* e = b + line.size();
+        auto r1 = std::from_chars(b, e, p.x);
+        bool ok = r1.ec == std::errc() && r1.ptr < e && *r1.ptr == ',';
+        if (ok) {
+            auto r2 = std::from_chars(r1.ptr + 1, e, p.y);
+            ok = r2.ec == std::errc() && (r2.ptr == e || *r2.ptr == ',');
+        }
+        if (!ok || !std::isfinite(p.x) || !std::isfinite(p.y))
+            throw hc::Error(path + ": line " + std::to_string(lineNo) + ": expected two numbers x,y, got '" + line + "'");
+        pts.push_back(p);
+    }
+    return pts;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+    return hc::cli::run("hc-probe", [&] {
+        std::string gridPath, cachePath, layerName = "elevation", pointsPath, xy, out;
+        hc::influence::KernelParams params;
+        unsigned threads = 0;
+        hc::cli::Parser p("hc-probe", "GRID.hcg [--cache C.hci] [--layer L] (--points IN.csv | --xy X,Y) [-o OUT.csv]",
+                          "Evaluates the exact smooth surface (double precision) at points given in the grid's CRS [m].\n"
+                          "Prints or writes x,y,value with full precision; the value is empty where the surface is\n"
+                          "undefined (holes, outside the grid, or dry land for water_surface).");
+        p.positional("GRID.hcg", "grid file", gridPath);
+        p.option("--cache", "C.hci", "influence cache (default: the grid's path with .hci; built if missing or stale)", cachePath);
+        p.option("--layer", "L", "elevation, water_depth, water_surface or another layer of the grid (default elevation)", layerName);
+        p.option("--points", "IN.csv", "CSV with a header line starting x,y and one point per line", pointsPath);
+        p.option("--xy", "X,Y", "a single point", xy);
+        p.option("-o", "OUT.csv", "output CSV (default: standard output)", out);
+        p.option("--sigma", "S", "kernel width in cell sizes (default 1.0)", params.sigma);
+        p.option("--truncation", "R", "kernel cut-off in sigmas (default 3.5)", params.truncation);
+        p.option("--threads", "N", "worker threads (default 0 = all cores)", threads);
+        p.exclusive({"--points", "--xy"});
+        if (!p.parse(argc, argv)) return 0;
+        if (pointsPath.empty() && xy.empty()) throw hc::Error("give --points IN.csv or --xy X,Y");
+        if (std::string why = params.validate(); !why.empty()) throw hc::Error("--sigma/--truncation: " + why);
+        if (!out.empty()) {
+            hc::cli::checkWritable(out, "output CSV");
+            hc::cli::checkNotSame(out, gridPath, "output CSV");
+            if (!pointsPath.empty()) hc::cli::checkNotSame(out, pointsPath, "output CSV");
+        }
+        std::vector<Point> pts;
+        if (!xy.empty()) {
+            auto comma = xy.find(',');
+            if (comma == std::string::npos) throw hc::Error("--xy " + xy + ": expected X,Y");
+            pts.push_back({hc::cli::parseNumber(xy.substr(0, comma), "--xy"), hc::cli::parseNumber(xy.substr(comma + 1), "--xy")});
+        } else {
+            pts = readPoints(pointsPath);
+        }
+
+        hc::Grid grid = hc::readGrid(gridPath);
+        const auto layer = hc::influence::Layer::byName(grid, layerName);
+        if (cachePath.empty()) cachePath = hc::influence::defaultCachePath(gridPath);
+        std::string note;
+        auto lists = hc::influence::loadOrBuildCache(grid, params, cachePath, threads, false, note);
+        std::fprintf(stderr, "hc-probe: %s\n", note.c_str());
+        hc::influence::SurfaceEvaluator eval(grid, lists);
+
+        std::vector<std::optional<double>> values(pts.size());
+        hc::parallelFor(pts.size(), 4096, threads, [&](size_t b, size_t e, unsigned) {
+            for (size_t i = b; i < e; ++i)
+                values[i] = eval.value(pts[i].x - grid.originWorldX, pts[i].y - grid.originWorldY, layer);
+        });
+        std::string text = "x,y,value\n";
+        char buf[96];
+        for (size_t i = 0; i < pts.size(); ++i) {
+            std::snprintf(buf, sizeof buf, "%.17g,%.17g,", pts[i].x, pts[i].y);
+            text += buf;
+            if (values[i]) {
+                std::snprintf(buf, sizeof buf, "%.17g", *values[i]);
+                text += buf;
+            }
+            text += '\n';
+        }
+        if (out.empty()) {
+            std::fwrite(text.data(), 1, text.size(), stdout);
+        } else {
+            hc::AtomicFileWriter w(out);
+            w.write(std::as_bytes(std::span(text)));
+            w.commit();
+        }
+        return 0;
+    });
+}

@@ -1,0 +1,60 @@
+// heightcast/influence/surface.h: the exact smooth surface (DESIGN.md section 4), the reference
+// every faster path is tested against.
+//
+//   v(p) = sum_i w_i(p) v_i / sum_i w_i(p)     over the influence list of the cell containing p
+//
+// in double precision (evaluated relative to the containing cell's value: surface.cpp). Outside every cell (holes, outside the domain) the surface is undefined:
+// std::nullopt, never 0, never NaN. Inside a cell the cell's own weight is at least
+// exp(-1 / (4 sigma^2)) - exp(-R^2 / 2) > 0, so the denominator cannot vanish.
+#pragma once
+
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "heightcast/grid/grid.h"
+#include "heightcast/influence/influence.h"
+
+namespace hc::influence {
+
+// What to evaluate. Elevation and water depth are grid layers; the water surface is
+// elevation + depth where the smooth depth is positive (undefined where dry).
+struct Layer {
+    enum Kind { Cells, WaterSurface } kind = Cells;
+    size_t index = 0;  // grid layer, for Cells
+
+    // "elevation", "water_depth", any other layer name, or "water_surface". Throws hc::Error naming
+    // the layers the grid has when it has no such layer.
+    static Layer byName(const Grid& grid, const std::string& name);
+};
+
+struct ValueGradient {
+    double value;  // [layer units]
+    double dx, dy; // d value / d x, d value / d y [layer units per metre]
+};
+
+class SurfaceEvaluator {
+public:
+    // Both must outlive the evaluator. Throws hc::Error if the lists are not the grid's.
+    SurfaceEvaluator(const Grid& grid, const InfluenceLists& lists);
+
+    std::optional<double> value(double xLocal, double yLocal, const Layer& layer) const;
+    std::optional<ValueGradient> valueGradient(double xLocal, double yLocal, const Layer& layer) const;
+    // The same by brute force over every cell (tests only: O(n) per point).
+    std::optional<double> valueBruteForce(double xLocal, double yLocal, const Layer& layer) const;
+
+    const Grid& grid() const { return grid_; }
+
+private:
+    // Weighted sums for grid layer `l` at p over cell k's list; also the gradient sums if asked.
+    void sums(size_t k, double x, double y, size_t l, double& num, double& den, double* dnum, double* dden) const;
+    std::optional<ValueGradient> evaluate(double x, double y, const Layer& layer, bool gradient) const;
+
+    const Grid& grid_;
+    const InfluenceLists& lists_;
+    double tail_;
+    std::vector<double> cx_, cy_, r2_, a_;  // per cell: centre [m local], squared radius, 1 / (2 sigma^2 c^2)
+    int depthLayer_ = -1;
+};
+
+}  // namespace hc::influence

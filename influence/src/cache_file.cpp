@@ -1,0 +1,144 @@
+// The .hci influence cache, format 1.0: a sectioned container (grid/sectioned_file.h) with
+//
+//   offset  size  field
+//   0       8     magic "\x89HCINFL\n"
+//   24      8     cell count n
+//   32      8     entry count m
+//   40      8     grid structure hash (Grid::structureHash): the key; a cache of another tree is refused
+//   48      8     grid content hash (Grid::contentHash) of the grid it was built from: informative
+//   56      4     kernel id (kernel.h)
+//   64      8     sigma, double
+//   72      8     truncation R, double
+//   80      4     longest list
+//   84      36    reserved, zero
+//
+// Sections: OFFSETS (kind 1: u64[n + 1], offsets[0] = 0, non-decreasing, offsets[n] = m) and
+// INDICES (kind 2: u32[m], each < n, every cell in its own list). Both mmap-ready (64-byte aligned).
+#include <cstring>
+#include <filesystem>
+
+#include "heightcast/grid/error.h"
+#include "heightcast/grid/sectioned_file.h"
+#include "heightcast/influence/influence.h"
+
+namespace hc::influence {
+namespace {
+
+enum : uint32_t { kOffsets = 1, kIndices = 2 };
+const FileFormat kFormat{{'\x89', 'H', 'C', 'I', 'N', 'F', 'L', '\n'}, 1, 0, "heightcast influence cache (.hci)", {kOffsets, kIndices}};
+
+namespace off {
+constexpr size_t cellCount = 24, entryCount = 32, structureHash = 40, contentHash = 48, kernelId = 56, sigma = 64,
+                 truncation = 72, longest = 80, reserved = 84, reservedEnd = 120;
+}
+
+template <typename T>
+T get(const std::byte* p) {
+    T v;
+    std::memcpy(&v, p, sizeof v);
+    return v;
+}
+template <typename T>
+void put(std::vector<std::byte>& b, size_t at, T v) {
+    std::memcpy(b.data() + at, &v, sizeof v);
+}
+
+std::string hex(uint64_t v) {
+    char b[24];
+    std::snprintf(b, sizeof b, "%016llx", static_cast<unsigned long long>(v));
+    return b;
+}
+
+}  // namespace
+
+void writeInfluenceCache(const InfluenceLists& lists, const std::string& path) {
+    const auto offsets = lists.offsets();
+    const auto indices = lists.indices();
+    SectionedFileWriter out(path, kFormat, {{kOffsets, 0, 0, offsets.size_bytes(), 0}, {kIndices, 0, 0, indices.size_bytes(), 0}});
+    out.append(0, std::as_bytes(offsets));
+    out.append(1, std::as_bytes(indices));
+    std::vector<std::byte> head(kFileHeaderBytes, std::byte{0});
+    put(head, off::cellCount, static_cast<uint64_t>(lists.cellCount()));
+    put(head, off::entryCount, static_cast<uint64_t>(lists.entryCount()));
+    put(head, off::structureHash, lists.gridStructureHash());
+    put(head, off::contentHash, lists.gridContentHash());
+    put(head, off::kernelId, lists.params().kernelId);
+    put(head, off::sigma, lists.params().sigma);
+    put(head, off::truncation, lists.params().truncation);
+    put(head, off::longest, static_cast<uint32_t>(lists.stats().maxLength));
+    out.commit(std::move(head));
+}
+
+InfluenceLists readInfluenceCache(const std::string& path, const Grid& grid, const KernelParams& params) {
+    SectionedFileReader file(path, kFormat);
+    const std::byte* h = file.header();
+    for (size_t i = off::reserved; i < off::reservedEnd; ++i)
+        if (h[i] != std::byte{0}) file.fail(i, "reserved header byte is not zero");
+    const uint64_t n = get<uint64_t>(h + off::cellCount), m = get<uint64_t>(h + off::entryCount);
+    KernelParams stored;
+    stored.kernelId = get<uint32_t>(h + off::kernelId);
+    stored.sigma = get<double>(h + off::sigma);
+    stored.truncation = get<double>(h + off::truncation);
+    const uint64_t structure = get<uint64_t>(h + off::structureHash), content = get<uint64_t>(h + off::contentHash);
+
+    // Whose cache is it? Say exactly what differs.
+    if (structure != grid.structureHash() || n != grid.cellCount())
+        throw Error(path + ": stale or foreign cache: built for a grid of " + std::to_string(n) + " cells with structure hash " +
+                    hex(structure) + ", this grid has " + std::to_string(grid.cellCount()) + " cells and " + hex(grid.structureHash()));
+    if (stored.kernelId != params.kernelId)
+        throw Error(path + ": cache built for kernel " + std::to_string(stored.kernelId) + ", wanted " + std::to_string(params.kernelId));
+    if (stored.sigma != params.sigma || stored.truncation != params.truncation)
+        throw Error(path + ": cache built for sigma " + std::to_string(stored.sigma) + ", R " + std::to_string(stored.truncation) +
+                    "; wanted sigma " + std::to_string(params.sigma) + ", R " + std::to_string(params.truncation));
+
+    const FileSection* offs = nullptr;
+    const FileSection* idx = nullptr;
+    for (const FileSection& s : file.sections()) {
+        if (s.kind == kOffsets) offs = &s;
+        if (s.kind == kIndices) idx = &s;
+    }
+    if (!offs || !idx) file.failFile("lacks its OFFSETS or INDICES section");
+    if (offs->bytes != (n + 1) * 8) file.fail(offs->offset, "OFFSETS holds " + std::to_string(offs->bytes) + " bytes, expected " + std::to_string((n + 1) * 8));
+    if (idx->bytes != m * 4) file.fail(idx->offset, "INDICES holds " + std::to_string(idx->bytes) + " bytes, expected " + std::to_string(m * 4));
+    // 64-byte aligned in a page-aligned mapping: the spans are properly aligned for u64 and u32.
+    std::span<const uint64_t> o(reinterpret_cast<const uint64_t*>(file.data(*offs).data()), n + 1);
+    std::span<const uint32_t> ix(reinterpret_cast<const uint32_t*>(file.data(*idx).data()), m);
+    if (o[0] != 0 || o[n] != m) file.fail(offs->offset, "OFFSETS do not start at 0 and end at the entry count");
+    for (uint64_t k = 0; k < n; ++k) {
+        if (o[k + 1] < o[k]) file.fail(offs->offset + 8 * (k + 1), "OFFSETS decrease at cell " + std::to_string(k));
+        bool self = false;
+        for (uint64_t e = o[k]; e < o[k + 1]; ++e) {
+            if (ix[e] >= n) file.fail(idx->offset + 4 * e, "index " + std::to_string(ix[e]) + " is not a cell");
+            self |= ix[e] == k;
+        }
+        if (!self) file.fail(offs->offset + 8 * k, "cell " + std::to_string(k) + " is missing from its own list");
+    }
+    return InfluenceLists(stored, structure, content, o, ix, file.mapping());
+}
+
+std::string defaultCachePath(const std::string& gridPath) {
+    std::filesystem::path p(gridPath);
+    p.replace_extension(".hci");
+    return p.string();
+}
+
+InfluenceLists loadOrBuildCache(const Grid& grid, const KernelParams& params, const std::string& cachePath, unsigned threads,
+                                bool progress, std::string& note) {
+    std::error_code ec;
+    if (std::filesystem::exists(cachePath, ec)) {
+        try {
+            InfluenceLists lists = readInfluenceCache(cachePath, grid, params);
+            note = "using influence cache " + cachePath;
+            return lists;
+        } catch (const Error& e) {
+            note = std::string(e.what()) + ": rebuilt";
+        }
+    } else {
+        note = "no influence cache at " + cachePath + ": built";
+    }
+    InfluenceLists lists = buildInfluenceLists(grid, params, threads, progress);
+    writeInfluenceCache(lists, cachePath);
+    return lists;
+}
+
+}  // namespace hc::influence

@@ -1,0 +1,435 @@
+// Influence lists against brute force, the exact surface against a sum over every cell, its
+// mathematical properties (constants, bounds, continuity, holes, shifts, gradients), and the .hci
+// cache format (round trip, golden bytes, truncation, flipped bytes, stale and foreign caches).
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <random>
+
+#include "heightcast/grid/checksum.h"
+#include "heightcast/grid/error.h"
+#include "heightcast/grid/grid_file.h"
+#include "heightcast/influence/influence.h"
+#include "heightcast/influence/surface.h"
+#include "heightcast/ingest/build.h"
+#include "heightcast/ingest/ingest.h"
+#include "test_data.h"
+
+namespace {
+
+namespace fs = std::filesystem;
+using hc::Grid;
+using hc::influence::InfluenceLists;
+using hc::influence::KernelParams;
+using hc::influence::Layer;
+using hc::influence::SurfaceEvaluator;
+
+Grid ingestFile(const std::string& path, double tol, double waterLevel = NAN) {
+    hc::ingest::Options o;
+    o.input = path;
+    o.toleranceM = tol;
+    if (!std::isnan(waterLevel)) o.water = hc::ingest::WaterSource::Level, o.waterLevelM = waterLevel;
+    hc::ingest::LoadReport r;
+    return hc::ingest::ingest(o, r);
+}
+
+// Cell-size ratio 128: a plateau of 96 m cells (level 7) beside a rough strip of 0.75 m cells, with a
+// hole: the extreme the report's Petzenkirchen scenario has (0.75 - 96 m).
+Grid ratio128Grid() {
+    hc::ingest::Raster r;
+    r.width = 640;
+    r.height = 512;
+    r.pixelSizeM = 0.75;
+    r.westWorld = 1000;
+    r.northWorld = 5000;
+    r.values.resize(r.width * r.height);
+    std::mt19937 rng(3);
+    for (size_t row = 0; row < r.height; ++row)
+        for (size_t col = 0; col < r.width; ++col) {
+            bool rough = col >= 300 && col < 316 && row >= 128 && row < 384;
+            bool hole = col >= 500 && col < 520 && row >= 100 && row < 140;
+            r.at(col, row) = hole ? NAN : rough ? 200.0f + static_cast<float>(rng() % 1000) * 0.01f : 100.0f + 0.001f * float(col);
+        }
+    hc::ingest::BuildOptions b;
+    b.toleranceM = 0.5;
+    b.maxLevel = 7;
+    Grid g = hc::ingest::buildGrid(r, nullptr, b);
+    return g;
+}
+
+struct Case {
+    std::string name;
+    Grid grid;
+};
+
+std::vector<Case> grids() {
+    std::vector<Case> out;
+    out.push_back({"ratio128", ratio128Grid()});
+    for (auto [file, tol] : {std::pair{"tin_valid_3857.tif", 0.25}, {"west_bijou_gully_3m.asc", 0.25},
+                             {"lux_elev.tif", 5.0}, {"lidar1m_minnesota_utm15.tif", 0.25}}) {
+        std::string p = hc::test::dataFile(file);
+        if (!p.empty()) out.push_back({file, ingestFile(p, tol)});
+    }
+    return out;
+}
+
+TEST(InfluenceLists, Ratio128GridSpansTheExtremes) {
+    Grid g = ratio128Grid();
+    auto perLevel = g.cellsPerLevel();
+    EXPECT_GT(perLevel.front(), 1000u);
+    EXPECT_GT(perLevel.back(), 0u);
+    EXPECT_EQ(g.levelSizeM(7) / g.levelSizeM(0), 128.0);
+}
+
+TEST(InfluenceLists, EqualBruteForce) {
+    for (const Case& c : grids()) {
+        SCOPED_TRACE(c.name);
+        const Grid& g = c.grid;
+        for (double sigma : {1.0, 0.5}) {
+            KernelParams p;
+            p.sigma = sigma;
+            InfluenceLists lists = hc::influence::buildInfluenceLists(g, p);
+            ASSERT_EQ(lists.cellCount(), g.cellCount());
+            // Every cell against every cell on small grids; a fixed sample of cells k on large ones.
+            const size_t n = g.cellCount();
+            const size_t step = n > 5000 ? n / 1500 : 1;
+            for (size_t k = 0; k < n; k += step) {
+                std::vector<uint32_t> got(lists.list(k).begin(), lists.list(k).end());
+                std::sort(got.begin(), got.end());
+                ASSERT_TRUE(std::adjacent_find(got.begin(), got.end()) == got.end()) << "duplicate entry in cell " << k;
+                std::vector<uint32_t> want;
+                for (size_t i = 0; i < n; ++i)
+                    if (hc::influence::influences(g, p, i, k)) want.push_back(static_cast<uint32_t>(i));
+                ASSERT_EQ(got, want) << "cell " << k << ", sigma " << sigma;
+            }
+        }
+    }
+}
+
+TEST(InfluenceLists, RejectParametersThatLeaveGaps) {
+    Grid g = ratio128Grid();
+    KernelParams p;
+    p.sigma = 0.2;  // R sigma = 0.7 < sqrt(2)/2: a cell's corners would get no weight from anyone
+    EXPECT_THROW(hc::influence::buildInfluenceLists(g, p), hc::Error);
+    p.sigma = -1;
+    EXPECT_THROW(hc::influence::buildInfluenceLists(g, p), hc::Error);
+}
+
+// Random points in the domain, plus points exactly on cell edges and corners.
+std::vector<std::pair<double, double>> probePoints(const Grid& g, size_t count, unsigned seed) {
+    std::mt19937_64 rng(seed);
+    double x0, y0, x1, y1;
+    g.boundsLocal(x0, y0, x1, y1);
+    std::uniform_real_distribution<double> ux(x0, x1), uy(y0, y1);
+    std::vector<std::pair<double, double>> pts;
+    for (size_t i = 0; i < count; ++i) pts.emplace_back(ux(rng), uy(rng));
+    for (size_t i = 0; i < g.cellCount(); i += std::max<size_t>(1, g.cellCount() / 200)) {
+        auto q = g.cellSquare(i);
+        pts.emplace_back(q.x0, q.y0);
+        pts.emplace_back(q.x1 - 1e-9, (q.y0 + q.y1) / 2);
+    }
+    return pts;
+}
+
+TEST(Surface, EqualsBruteForceOverEveryCell) {
+    for (const Case& c : grids()) {
+        SCOPED_TRACE(c.name);
+        InfluenceLists lists = hc::influence::buildInfluenceLists(c.grid, KernelParams{});
+        SurfaceEvaluator eval(c.grid, lists);
+        const Layer elevation = Layer::byName(c.grid, "elevation");
+        size_t defined = 0;
+        for (auto [x, y] : probePoints(c.grid, c.grid.cellCount() > 5000 ? 300 : 2000, 11)) {
+            auto fast = eval.value(x, y, elevation);
+            auto brute = eval.valueBruteForce(x, y, elevation);
+            ASSERT_EQ(fast.has_value(), brute.has_value()) << x << "," << y;
+            if (!fast) continue;
+            ++defined;
+            // 1e-12 relative: the same terms summed in another order, relative to another base.
+            ASSERT_NEAR(*fast, *brute, 1e-12 * std::max(1.0, std::abs(*brute))) << x << "," << y;
+        }
+        EXPECT_GT(defined, 100u);
+    }
+}
+
+TEST(Surface, ConstantFieldIsExactlyConstant) {
+    Grid g = ratio128Grid();
+    for (float& v : g.values[0]) v = 1234.5678f;
+    InfluenceLists lists = hc::influence::buildInfluenceLists(g, KernelParams{});
+    SurfaceEvaluator eval(g, lists);
+    for (auto [x, y] : probePoints(g, 5000, 12)) {
+        auto v = eval.valueGradient(x, y, Layer{});
+        if (!v) continue;
+        ASSERT_EQ(v->value, static_cast<double>(1234.5678f)) << x << "," << y;
+        ASSERT_EQ(v->dx, 0.0);
+        ASSERT_EQ(v->dy, 0.0);
+    }
+}
+
+TEST(Surface, StaysWithinTheValuesThatInfluenceIt) {
+    for (const Case& c : grids()) {
+        SCOPED_TRACE(c.name);
+        const Grid& g = c.grid;
+        KernelParams p;
+        InfluenceLists lists = hc::influence::buildInfluenceLists(g, p);
+        SurfaceEvaluator eval(g, lists);
+        for (auto [x, y] : probePoints(g, 2000, 13)) {
+            auto v = eval.value(x, y, Layer{});
+            if (!v) continue;
+            const uint32_t k = *g.locate(x, y);
+            double lo = HUGE_VAL, hi = -HUGE_VAL;
+            for (uint32_t i : lists.list(k)) {
+                double cx, cy;
+                g.cellCenterLocal(i, cx, cy);
+                double d = std::hypot(x - cx, y - cy);
+                if (d >= p.radiusM(g.cellSizeM(i))) continue;  // weight zero here
+                lo = std::min(lo, double(g.values[0][i]));
+                hi = std::max(hi, double(g.values[0][i]));
+            }
+            // A convex combination: inside [lo, hi] up to rounding (1e-12 relative).
+            const double slack = 1e-12 * std::max(std::abs(lo), std::abs(hi));
+            ASSERT_GE(*v, lo - slack);
+            ASSERT_LE(*v, hi + slack);
+        }
+    }
+}
+
+TEST(Surface, ContinuousAcrossCellBoundaries) {
+    // Pairs of points straddling an edge converge as they approach it: |v+ - v-| <= 2 G delta, with
+    // G the largest gradient seen nearby (the surface is Lipschitz; only the list changes at the edge).
+    for (const Case& c : grids()) {
+        SCOPED_TRACE(c.name);
+        const Grid& g = c.grid;
+        InfluenceLists lists = hc::influence::buildInfluenceLists(g, KernelParams{});
+        SurfaceEvaluator eval(g, lists);
+        std::mt19937 rng(14);
+        size_t checked = 0;
+        for (size_t t = 0; t < 400 && g.cellCount() > 1; ++t) {
+            const size_t i = rng() % g.cellCount();
+            const auto q = g.cellSquare(i);
+            const double y = q.y0 + (q.y1 - q.y0) * (0.1 + 0.8 * double(rng() % 1000) / 1000.0);
+            double gmax = 0;
+            for (double dd : {-0.01, 0.0, 0.01}) {
+                auto vg = eval.valueGradient(q.x1 + dd * (q.x1 - q.x0) - 1e-9, y, Layer{});
+                if (vg) gmax = std::max(gmax, std::hypot(vg->dx, vg->dy));
+            }
+            for (double delta : {1e-2, 1e-5, 1e-8}) {
+                auto left = eval.value(q.x1 - delta, y, Layer{});
+                auto right = eval.value(q.x1 + delta, y, Layer{});
+                if (!left || !right) continue;  // a hole or the domain edge on one side
+                ASSERT_LE(std::abs(*left - *right), 2.5 * gmax * delta + 1e-9 * std::abs(*left))
+                    << "edge x = " << q.x1 << ", y = " << y << ", delta " << delta;
+                ++checked;
+            }
+        }
+        EXPECT_GT(checked, 100u);
+    }
+}
+
+TEST(Surface, HolesAreUndefinedTheirEdgesAreNot) {
+    Grid g = ratio128Grid();
+    InfluenceLists lists = hc::influence::buildInfluenceLists(g, KernelParams{});
+    SurfaceEvaluator eval(g, lists);
+    // The hole: columns 500..519, rows 100..139 of the 0.75 m raster (row 0 north, 512 rows).
+    const double c = 0.75, top = 512 * c;
+    const double hx0 = 500 * c, hx1 = 520 * c, hyTop = top - 100 * c, hyBottom = top - 140 * c;
+    EXPECT_FALSE(eval.value((hx0 + hx1) / 2, (hyTop + hyBottom) / 2, Layer{}));
+    EXPECT_FALSE(eval.value(hx0 + 1e-6, hyBottom + 1e-6, Layer{}));
+    for (double inside : {hx0 - 1e-6, hx0 - 0.3}) {  // just west of the hole: inside a cell
+        auto v = eval.value(inside, (hyTop + hyBottom) / 2, Layer{});
+        ASSERT_TRUE(v);
+        EXPECT_TRUE(std::isfinite(*v));
+        EXPECT_GT(*v, 99.0);
+        EXPECT_LT(*v, 211.0);
+    }
+    EXPECT_FALSE(eval.value(-1, 10, Layer{})) << "outside the domain";
+    EXPECT_FALSE(eval.value(1e9, 10, Layer{}));
+    EXPECT_FALSE(eval.value(NAN, 10, Layer{}));
+}
+
+TEST(Surface, ShiftedBy1e7MetresGivesTheSameValues) {
+    Grid a = ratio128Grid();
+    Grid b = a;
+    b.originWorldX += 1e7;
+    b.originWorldY += 1e7;
+    InfluenceLists la = hc::influence::buildInfluenceLists(a, KernelParams{});
+    InfluenceLists lb = hc::influence::buildInfluenceLists(b, KernelParams{});
+    SurfaceEvaluator ea(a, la), eb(b, lb);
+    for (auto [x, y] : probePoints(a, 2000, 15)) {
+        // The same world offsets from each origin: probes take world - origin, computed in double.
+        const double wxA = a.originWorldX + x, wyA = a.originWorldY + y;
+        const double wxB = b.originWorldX + x, wyB = b.originWorldY + y;
+        auto va = ea.value(wxA - a.originWorldX, wyA - a.originWorldY, Layer{});
+        auto vb = eb.value(wxB - b.originWorldX, wyB - b.originWorldY, Layer{});
+        ASSERT_EQ(va.has_value(), vb.has_value());
+        // World coordinates of 1e7 m keep 2e-9 m of resolution: values agree to 1e-9 relative.
+        if (va) {
+            ASSERT_NEAR(*va, *vb, 1e-9 * std::abs(*va));
+        }
+    }
+}
+
+TEST(Surface, GradientMatchesFiniteDifferences) {
+    // The report's kernel subtracts its tail, so each weight is continuous at the truncation radius
+    // but its slope jumps there by 2 a R sigma c e^(-R^2/2): the surface is smooth except on those
+    // circles, where the gradient jumps by about 1e-3 (m per m, for metre-scale relief). Random
+    // points straddle such a circle within h only rarely: at most 2 % may differ by more than the
+    // central-difference tolerance, and none by more than the jump.
+    HC_REQUIRE_DATA(path, "lidar1m_minnesota_utm15.tif");
+    Grid g = ingestFile(path, 0.25);
+    InfluenceLists lists = hc::influence::buildInfluenceLists(g, KernelParams{});
+    SurfaceEvaluator eval(g, lists);
+    std::mt19937_64 rng(16);
+    double x0, y0, x1, y1;
+    g.boundsLocal(x0, y0, x1, y1);
+    std::uniform_real_distribution<double> ux(x0, x1), uy(y0, y1);
+    size_t checked = 0, offKink = 0;
+    for (int t = 0; t < 2000; ++t) {
+        const double x = ux(rng), y = uy(rng), h = 1e-4;
+        auto c = eval.valueGradient(x, y, Layer{});
+        auto px = eval.value(x + h, y, Layer{}), mx = eval.value(x - h, y, Layer{});
+        auto py = eval.value(x, y + h, Layer{}), my = eval.value(x, y - h, Layer{});
+        if (!c || !px || !mx || !py || !my) continue;
+        ++checked;
+        // Central differences: O(h^2) truncation plus rounding of ~1e-13 m / 1e-4 m.
+        const double ex = std::abs(c->dx - (*px - *mx) / (2 * h)), ey = std::abs(c->dy - (*py - *my) / (2 * h));
+        const double tol = 1e-6 + 1e-5 * std::hypot(c->dx, c->dy);
+        if (ex > tol || ey > tol) ++offKink;
+        ASSERT_LT(std::max(ex, ey), 2e-3) << "at " << x << "," << y;
+    }
+    EXPECT_GT(checked, 1500u);
+    EXPECT_LE(offKink, checked / 50) << offKink << " of " << checked << " points off";
+}
+
+TEST(Surface, WaterSurfaceOnlyWhereWet) {
+    HC_REQUIRE_DATA(path, "lidar1m_minnesota_utm15.tif");
+    Grid g = ingestFile(path, 0.25, 397.0);
+    InfluenceLists lists = hc::influence::buildInfluenceLists(g, KernelParams{});
+    SurfaceEvaluator eval(g, lists);
+    const Layer depth = Layer::byName(g, "water_depth"), surface = Layer::byName(g, "water_surface");
+    size_t wet = 0, dry = 0;
+    for (auto [x, y] : probePoints(g, 3000, 17)) {
+        auto d = eval.value(x, y, depth);
+        auto s = eval.value(x, y, surface);
+        auto z = eval.value(x, y, Layer{});
+        if (!d) continue;
+        if (*d > 0) {
+            ++wet;
+            ASSERT_TRUE(s);
+            EXPECT_NEAR(*s, *z + *d, 1e-9);
+        } else {
+            ++dry;
+            EXPECT_FALSE(s) << "a water surface over dry land";
+        }
+    }
+    EXPECT_GT(wet, 50u);
+    EXPECT_GT(dry, 50u);
+    EXPECT_THROW(Layer::byName(g, "velocity"), hc::Error);
+}
+
+// ---- the .hci format ----
+
+class CacheFile : public ::testing::Test {
+protected:
+    void SetUp() override {
+        dir_ = fs::temp_directory_path() / ("hc_cache_" + std::to_string(::getpid()) + "_" +
+                                            ::testing::UnitTest::GetInstance()->current_test_info()->name());
+        fs::remove_all(dir_);
+        fs::create_directories(dir_);
+    }
+    void TearDown() override { fs::remove_all(dir_); }
+    std::string path(const std::string& n) const { return (dir_ / n).string(); }
+    fs::path dir_;
+};
+
+std::vector<char> readBytes(const std::string& p) {
+    std::ifstream in(p, std::ios::binary);
+    return {std::istreambuf_iterator<char>(in), {}};
+}
+void writeBytes(const std::string& p, const std::vector<char>& b, size_t n) {
+    std::ofstream out(p, std::ios::binary | std::ios::trunc);
+    out.write(b.data(), static_cast<std::streamsize>(n));
+}
+
+// Six cells of two sizes (the grid of grid_file_test's golden file).
+Grid tinyGrid() {
+    Grid g;
+    g.finestCellM = 2.5;
+    g.rootLevel = 2;
+    g.maxLevel = 1;
+    const float v = 1;
+    g.appendCell(0, 0, 1, &v);
+    g.appendCell(2, 0, 0, &v);
+    g.appendCell(3, 0, 0, &v);
+    g.appendCell(2, 1, 0, &v);
+    g.appendCell(0, 2, 1, &v);
+    g.appendCell(2, 2, 1, &v);
+    return g;
+}
+
+TEST_F(CacheFile, RoundTripAndGoldenBytes) {
+    Grid g = tinyGrid();
+    InfluenceLists lists = hc::influence::buildInfluenceLists(g, KernelParams{});
+    hc::influence::writeInfluenceCache(lists, path("t.hci"));
+    InfluenceLists back = hc::influence::readInfluenceCache(path("t.hci"), g, KernelParams{});
+    ASSERT_EQ(back.cellCount(), lists.cellCount());
+    EXPECT_TRUE(std::equal(back.offsets().begin(), back.offsets().end(), lists.offsets().begin()));
+    EXPECT_TRUE(std::equal(back.indices().begin(), back.indices().end(), lists.indices().begin()));
+    const std::string golden = std::string(HC_GOLDEN_DIR) + "/tiny_v1_0.hci";
+    if (std::getenv("HC_UPDATE_GOLDEN")) writeBytes(golden, readBytes(path("t.hci")), readBytes(path("t.hci")).size());
+    EXPECT_EQ(readBytes(path("t.hci")), readBytes(golden)) << "format 1.0 changed: update deliberately";
+}
+
+TEST_F(CacheFile, EveryTruncationAndEveryFlippedByteIsRefused) {
+    Grid g = tinyGrid();
+    hc::influence::writeInfluenceCache(hc::influence::buildInfluenceLists(g, KernelParams{}), path("t.hci"));
+    std::vector<char> bytes = readBytes(path("t.hci"));
+    for (size_t n = 0; n < bytes.size(); ++n) {
+        writeBytes(path("cut.hci"), bytes, n);
+        EXPECT_THROW(hc::influence::readInfluenceCache(path("cut.hci"), g, KernelParams{}), hc::Error) << "cut to " << n;
+    }
+    for (size_t i = 0; i < bytes.size(); ++i) {
+        std::vector<char> bad = bytes;
+        bad[i] = static_cast<char>(bad[i] ^ 0x10);
+        writeBytes(path("bad.hci"), bad, bad.size());
+        EXPECT_THROW(hc::influence::readInfluenceCache(path("bad.hci"), g, KernelParams{}), hc::Error) << "byte " << i;
+    }
+}
+
+TEST_F(CacheFile, StaleAndForeignCachesAreRefusedAndRebuilt) {
+    Grid g = ratio128Grid();
+    hc::influence::writeInfluenceCache(hc::influence::buildInfluenceLists(g, KernelParams{}), path("g.hci"));
+    auto message = [&](const Grid& grid, const KernelParams& p) {
+        try {
+            hc::influence::readInfluenceCache(path("g.hci"), grid, p);
+        } catch (const hc::Error& e) {
+            return std::string(e.what());
+        }
+        return std::string("accepted");
+    };
+    // New values on the same tree (the next water time step): the cache stays valid.
+    Grid wetter = g;
+    for (float& v : wetter.values[0]) v += 1.0f;
+    EXPECT_EQ(message(wetter, KernelParams{}), "accepted");
+    // Another tree: stale.
+    Grid other = tinyGrid();
+    EXPECT_NE(message(other, KernelParams{}).find("stale or foreign"), std::string::npos);
+    // Other parameters: says which.
+    KernelParams wide;
+    wide.sigma = 1.5;
+    EXPECT_NE(message(g, wide).find("sigma 1.000000"), std::string::npos) << message(g, wide);
+    // Tools rebuild and say so.
+    std::string note;
+    InfluenceLists rebuilt = hc::influence::loadOrBuildCache(g, wide, path("g.hci"), 0, false, note);
+    EXPECT_NE(note.find("rebuilt"), std::string::npos) << note;
+    EXPECT_EQ(rebuilt.params().sigma, 1.5);
+    hc::influence::loadOrBuildCache(g, wide, path("g.hci"), 0, false, note);
+    EXPECT_NE(note.find("using"), std::string::npos) << note;
+    hc::influence::loadOrBuildCache(g, wide, path("none.hci"), 0, false, note);
+    EXPECT_NE(note.find("no influence cache"), std::string::npos) << note;
+}
+
+}  // namespace
