@@ -2,7 +2,8 @@
 # Installs heightcast's build and test dependencies from Debian/Ubuntu packages (only what is missing).
 set -euo pipefail
 
-packages=(build-essential cmake pkg-config libgdal-dev gdal-bin libgtest-dev)
+packages=(build-essential cmake pkg-config libgdal-dev gdal-bin libgtest-dev libopenexr-dev libopenvdb-dev
+          libboost-iostreams-dev libtbb-dev libblosc-dev)
 installed() { dpkg-query -W -f='${Status}' "$1" 2>/dev/null | grep -q "install ok installed"; }
 
 missing=()

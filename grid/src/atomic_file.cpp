@@ -71,4 +71,34 @@ void AtomicFileWriter::commit() {
     committed_ = true;
 }
 
+AtomicPath::AtomicPath(std::string path) : path_(std::move(path)) {
+    std::filesystem::path p(path_);
+    const std::string ext = p.extension().string();
+    std::string pattern = (p.parent_path() / (p.stem().string() + ".tmp.XXXXXX" + ext)).string();
+    if (p.parent_path().empty()) pattern = p.stem().string() + ".tmp.XXXXXX" + ext;
+    std::vector<char> buf(pattern.begin(), pattern.end());
+    buf.push_back('\0');
+    int fd = mkstemps(buf.data(), static_cast<int>(ext.size()));
+    if (fd < 0) throw Error(path_ + ": cannot create a file there: " + std::strerror(errno));
+    ::close(fd);
+    temp_ = buf.data();
+    std::remove(temp_.c_str());  // libraries create it themselves; the unique name is reserved by us
+}
+
+AtomicPath::~AtomicPath() {
+    if (!committed_) std::remove(temp_.c_str());
+}
+
+void AtomicPath::commit() {
+    // Flush the library's bytes to disk before the rename makes them the real file.
+    int fd = ::open(temp_.c_str(), O_RDONLY);
+    if (fd < 0) throw Error(path_ + ": the temporary output " + temp_ + " was not written");
+    ::fsync(fd);
+    ::close(fd);
+    ::chmod(temp_.c_str(), 0644);
+    if (std::rename(temp_.c_str(), path_.c_str()) != 0)
+        throw Error(path_ + ": cannot rename the temporary file into place: " + std::strerror(errno));
+    committed_ = true;
+}
+
 }  // namespace hc

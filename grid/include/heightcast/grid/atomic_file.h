@@ -36,4 +36,22 @@ private:
     bool committed_ = false;
 };
 
+// For libraries that insist on writing a file by name (GDAL, OpenEXR, OpenVDB): a unique temporary
+// path beside the target, with the target's extension, renamed over the target by commit() and
+// removed by the destructor otherwise.
+class AtomicPath {
+public:
+    explicit AtomicPath(std::string path);  // throws hc::Error if the directory is not writable
+    ~AtomicPath();
+    AtomicPath(const AtomicPath&) = delete;
+    AtomicPath& operator=(const AtomicPath&) = delete;
+    const std::string& temp() const { return temp_; }
+    const std::string& path() const { return path_; }
+    void commit();  // throws hc::Error; the temporary must have been written and closed
+
+private:
+    std::string path_, temp_;
+    bool committed_ = false;
+};
+
 }  // namespace hc

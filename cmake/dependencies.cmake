@@ -1,0 +1,14 @@
+# Every third-party dependency, found once, with the version we need (all from Debian packages).
+# Which folder may use which is a rule of the layout (CONTRIBUTING.md): GDAL and GeographicLib in
+# ingest/ and export/, OpenEXR and OpenVDB in export/ only; tests may read files back with any.
+find_package(Threads REQUIRED)
+find_package(GDAL 3.0 REQUIRED)
+find_library(GEOGRAPHICLIB_LIBRARY GeographicLib REQUIRED)
+find_path(GEOGRAPHICLIB_INCLUDE_DIR GeographicLib/TransverseMercator.hpp REQUIRED)
+find_package(OpenEXR 3 CONFIG REQUIRED)
+# OpenVDB ships a find module, not a config file (Debian: libopenvdb-dev).
+list(APPEND CMAKE_MODULE_PATH /usr/lib/x86_64-linux-gnu/cmake/OpenVDB /usr/lib/cmake/OpenVDB /usr/local/lib/cmake/OpenVDB)
+find_package(OpenVDB 9 REQUIRED)
+if(HC_BUILD_TESTS)
+  find_package(GTest 1.10 REQUIRED)
+endif()

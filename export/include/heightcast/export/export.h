@@ -1,0 +1,64 @@
+// heightcast/export/export.h: the smooth surface sampled on a regular raster and written for other
+// tools: GeoTIFF (GIS: QGIS, gdalinfo), OpenEXR (float images) and OpenVDB (film and VFX tools).
+//
+// A sampled raster is north-up with square pixels of resolutionM, row 0 the northern-most; pixel
+// (col, row) holds the surface at its centre. Undefined samples (holes, outside the grid, dry land
+// for the water surface) are NaN here and are written as each format marks missing data. Every writer
+// writes to a temporary file beside the target and renames it into place: no partial file survives.
+#pragma once
+
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "heightcast/influence/surface.h"
+
+namespace hc::exporting {
+
+struct BoxWorld {
+    double xMin, yMin, xMax, yMax;  // grid CRS [m]
+};
+
+struct SampledRaster {
+    size_t width = 0, height = 0;
+    double westWorld = 0, northWorld = 0;  // the raster's north-west corner, grid CRS [m]
+    double pixelSizeM = 1;
+    double originWorldX = 0, originWorldY = 0;  // the grid's origin (local frame = world - origin)
+    std::string crsWkt;                          // "" = local metres
+    std::string layer, units;                    // "elevation", "m"
+    std::vector<float> values;                   // NaN = undefined
+    std::vector<float> gradX, gradY;             // d value / d x, d y [units per m]; only if asked
+
+    size_t definedCount() const;
+};
+
+// The raster that sampleSurface() would fill (geometry only, no values): checks the request first, so
+// tools refuse it before any expensive work. Throws hc::Error as sampleSurface() does.
+SampledRaster planRaster(const Grid& grid, double resolutionM, std::optional<BoxWorld> box, size_t maxPixels = size_t{1} << 30);
+
+// Samples `layer` over `box` (default: the grid's cells' extent) every resolutionM metres.
+// Throws hc::Error for a non-positive resolution, an empty or inverted box, or a raster beyond
+// maxPixels (it would not fit: the error says how many pixels it would be).
+SampledRaster sampleSurface(const influence::SurfaceEvaluator& eval, const influence::Layer& layer, const std::string& layerName,
+                            double resolutionM, std::optional<BoxWorld> box, bool gradients, unsigned threads, bool progress,
+                            size_t maxPixels = size_t{1} << 30);
+
+// GeoTIFF through GDAL: Float32, deflate, tiled; CRS and geotransform set; nodata -3.4028234663852886e+38
+// (float32's lowest: below any elevation) where undefined.
+void writeGeoTiff(const SampledRaster& raster, const std::string& path);
+
+// OpenEXR: one FLOAT channel named after the layer (NaN where undefined) and "A" (coverage: 1 defined,
+// 0 undefined), ZIP compression. Header attributes (double unless noted): heightcast.originX/Y (the
+// grid origin), heightcast.westX, heightcast.northY, heightcast.pixelSizeM, and strings
+// heightcast.crsWkt, heightcast.layer, heightcast.units.
+void writeExr(const SampledRaster& raster, const std::string& path);
+
+// OpenVDB: narrow-band level sets (FloatGrid, GRID_LEVEL_SET, half width 3 voxels, voxel = the
+// raster's pixel): "terrain" from `terrain`, and "water_surface" from `water` where defined. Values
+// are signed distances [m], negative below the surface, approximated by the vertical distance times
+// the cosine of the slope. Index space is the grid's local frame (x east, y north, z up; index
+// (i, j, k) at ((i + 0.5) v, (j + 0.5) v, k v) relative to the raster's south-west corner);
+// metadata: heightcast.originX/Y (world position of that corner, double), heightcast.crsWkt.
+void writeVdb(const SampledRaster& terrain, const SampledRaster* water, const std::string& path);
+
+}  // namespace hc::exporting

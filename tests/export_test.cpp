@@ -1,0 +1,217 @@
+// Exports read back with each format's own library: GeoTIFF through GDAL, EXR through OpenEXR, VDB
+// through OpenVDB; each compared with the exact evaluator.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <filesystem>
+
+#include <ImfChannelList.h>
+#include <ImfDoubleAttribute.h>
+#include <ImfFrameBuffer.h>
+#include <ImfHeader.h>
+#include <ImfInputFile.h>
+#include <ImfStringAttribute.h>
+#include <gdal_priv.h>
+#include <ogr_spatialref.h>
+#include <openvdb/openvdb.h>
+
+#include "heightcast/export/export.h"
+#include "heightcast/grid/error.h"
+#include "heightcast/ingest/ingest.h"
+#include "test_data.h"
+
+namespace {
+
+namespace fs = std::filesystem;
+using hc::exporting::SampledRaster;
+
+struct Scene {
+    hc::Grid grid;
+    hc::influence::InfluenceLists lists;
+    std::unique_ptr<hc::influence::SurfaceEvaluator> eval;
+};
+
+// The bundled demo DEM with a bathtub flood: geographic input projected to UTM, holes at the corners.
+Scene& scene() {
+    static Scene s = [] {
+        Scene sc;
+        hc::ingest::Options o;
+        o.input = hc::test::dataFile("hef_srtm.tif");
+        o.water = hc::ingest::WaterSource::Level;
+        o.waterLevelM = 2600;
+        hc::ingest::LoadReport r;
+        sc.grid = hc::ingest::ingest(o, r);
+        sc.lists = hc::influence::buildInfluenceLists(sc.grid, {});
+        sc.eval = std::make_unique<hc::influence::SurfaceEvaluator>(sc.grid, sc.lists);
+        return sc;
+    }();
+    return s;
+}
+
+fs::path dir() {
+    fs::path d = fs::temp_directory_path() / ("hc_export_test_" + std::to_string(::getpid()));
+    fs::create_directories(d);
+    return d;
+}
+
+SampledRaster sample(const std::string& layer, double res, bool gradients = false) {
+    Scene& s = scene();
+    return hc::exporting::sampleSurface(*s.eval, hc::influence::Layer::byName(s.grid, layer), layer, res, std::nullopt, gradients, 0, false);
+}
+
+TEST(Export, SamplesAreTheExactSurfaceAtPixelCentres) {
+    Scene& s = scene();
+    SampledRaster r = sample("elevation", 250);
+    ASSERT_GT(r.definedCount(), r.values.size() / 2);
+    ASSERT_LT(r.definedCount(), r.values.size()) << "the projected footprint leaves holes at the corners";
+    for (size_t row = 0; row < r.height; row += 7)
+        for (size_t col = 0; col < r.width; col += 5) {
+            double x = r.westWorld + (double(col) + 0.5) * r.pixelSizeM - s.grid.originWorldX;
+            double y = r.northWorld - (double(row) + 0.5) * r.pixelSizeM - s.grid.originWorldY;
+            auto v = s.eval->value(x, y, hc::influence::Layer{});
+            float got = r.values[row * r.width + col];
+            if (!v) {
+                EXPECT_TRUE(std::isnan(got));
+                continue;
+            }
+            EXPECT_EQ(got, static_cast<float>(*v));  // rounded once, to float32
+        }
+}
+
+TEST(Export, RefusesAbsurdRequests) {
+    Scene& s = scene();
+    auto layer = hc::influence::Layer{};
+    EXPECT_THROW(hc::exporting::sampleSurface(*s.eval, layer, "elevation", 0, std::nullopt, false, 0, false), hc::Error);
+    EXPECT_THROW(hc::exporting::sampleSurface(*s.eval, layer, "elevation", 0.001, std::nullopt, false, 0, false), hc::Error)
+        << "a raster of 6e14 pixels must be refused before any allocation";
+    EXPECT_THROW(hc::exporting::sampleSurface(*s.eval, layer, "elevation", 10, hc::exporting::BoxWorld{5, 5, 1, 1}, false, 0, false),
+                 hc::Error);
+}
+
+TEST(Export, GeoTiffReadsBackThroughGdal) {
+    Scene& s = scene();
+    SampledRaster r = sample("elevation", 200);
+    const std::string path = (dir() / "e.tif").string();
+    hc::exporting::writeGeoTiff(r, path);
+    GDALAllRegister();
+    std::unique_ptr<GDALDataset> ds(GDALDataset::Open(path.c_str(), GDAL_OF_RASTER | GDAL_OF_READONLY));
+    ASSERT_TRUE(ds);
+    ASSERT_EQ(ds->GetRasterXSize(), int(r.width));
+    ASSERT_EQ(ds->GetRasterYSize(), int(r.height));
+    double gt[6];
+    ASSERT_EQ(ds->GetGeoTransform(gt), CE_None);
+    EXPECT_EQ(gt[0], r.westWorld);
+    EXPECT_EQ(gt[3], r.northWorld);
+    EXPECT_EQ(gt[1], 200.0);
+    EXPECT_EQ(gt[5], -200.0);
+    OGRSpatialReference want;
+    want.importFromWkt(s.grid.crsWkt.c_str());
+    ASSERT_TRUE(ds->GetSpatialRef());
+    EXPECT_TRUE(ds->GetSpatialRef()->IsSame(&want)) << "CRS lost";
+    GDALRasterBand* b = ds->GetRasterBand(1);
+    int has = 0;
+    const double nd = b->GetNoDataValue(&has);
+    ASSERT_TRUE(has);
+    std::vector<float> v(r.values.size());
+    ASSERT_EQ(b->RasterIO(GF_Read, 0, 0, int(r.width), int(r.height), v.data(), int(r.width), int(r.height), GDT_Float32, 0, 0, nullptr),
+              CE_None);
+    for (size_t i = 0; i < v.size(); ++i) {
+        if (std::isnan(r.values[i])) {
+            ASSERT_EQ(v[i], static_cast<float>(nd)) << "a hole must be nodata, pixel " << i;
+        } else {
+            ASSERT_EQ(v[i], r.values[i]) << "pixel " << i;
+        }
+    }
+}
+
+TEST(Export, ExrReadsBackThroughOpenExr) {
+    SampledRaster r = sample("water_depth", 200);
+    const std::string path = (dir() / "d.exr").string();
+    hc::exporting::writeExr(r, path);
+    Imf::InputFile in(path.c_str());
+    const Imf::Header& h = in.header();
+    ASSERT_TRUE(h.channels().findChannel("water_depth"));
+    ASSERT_TRUE(h.channels().findChannel("A"));
+    EXPECT_EQ(h.typedAttribute<Imf::DoubleAttribute>("heightcast.originX").value(), r.originWorldX);
+    EXPECT_EQ(h.typedAttribute<Imf::DoubleAttribute>("heightcast.northY").value(), r.northWorld);
+    EXPECT_EQ(h.typedAttribute<Imf::DoubleAttribute>("heightcast.pixelSizeM").value(), 200.0);
+    EXPECT_EQ(h.typedAttribute<Imf::StringAttribute>("heightcast.crsWkt").value(), r.crsWkt);
+    auto dw = h.dataWindow();
+    ASSERT_EQ(size_t(dw.max.x - dw.min.x + 1), r.width);
+    ASSERT_EQ(size_t(dw.max.y - dw.min.y + 1), r.height);
+    std::vector<float> v(r.values.size()), a(r.values.size());
+    Imf::FrameBuffer fb;
+    fb.insert("water_depth", Imf::Slice(Imf::FLOAT, reinterpret_cast<char*>(v.data()), 4, 4 * r.width));
+    fb.insert("A", Imf::Slice(Imf::FLOAT, reinterpret_cast<char*>(a.data()), 4, 4 * r.width));
+    in.setFrameBuffer(fb);
+    in.readPixels(dw.min.y, dw.max.y);
+    size_t wet = 0;
+    for (size_t i = 0; i < v.size(); ++i) {
+        if (std::isnan(r.values[i])) {
+            ASSERT_TRUE(std::isnan(v[i]));
+            ASSERT_EQ(a[i], 0.0f);
+        } else {
+            ASSERT_EQ(v[i], r.values[i]);
+            ASSERT_EQ(a[i], 1.0f);
+            wet += v[i] > 0;
+        }
+    }
+    EXPECT_GT(wet, 100u);
+}
+
+TEST(Export, VdbLevelSetsCrossZeroOnTheSurface) {
+    SampledRaster terrain = sample("elevation", 100, true);
+    SampledRaster water = sample("water_surface", 100, true);
+    ASSERT_GT(water.definedCount(), 100u);
+    const std::string path = (dir() / "s.vdb").string();
+    hc::exporting::writeVdb(terrain, &water, path);
+    openvdb::initialize();
+    openvdb::io::File file(path);
+    file.open();
+    auto grids = file.getGrids();
+    file.close();
+    ASSERT_EQ(grids->size(), 2u);
+    for (const auto& base : *grids) {
+        auto grid = openvdb::gridPtrCast<openvdb::FloatGrid>(base);
+        ASSERT_TRUE(grid);
+        EXPECT_EQ(grid->getGridClass(), openvdb::GRID_LEVEL_SET);
+        const SampledRaster& r = grid->getName() == "terrain" ? terrain : water;
+        ASSERT_TRUE(grid->getName() == "terrain" || grid->getName() == "water_surface") << grid->getName();
+        EXPECT_EQ(grid->metaValue<double>("heightcast.originX"), r.westWorld);
+        EXPECT_NEAR(grid->metaValue<double>("heightcast.originY"), r.northWorld - double(r.height) * 100.0, 1e-6);
+        EXPECT_NEAR(grid->voxelSize()[0], 100.0, 1e-12);
+        auto acc = grid->getConstAccessor();
+        size_t checked = 0;
+        for (size_t row = 0; row < r.height; row += 3)
+            for (size_t col = 0; col < r.width; col += 3) {
+                const float h = r.values[row * r.width + col];
+                if (std::isnan(h)) continue;
+                const int i = int(col), j = int(r.height - 1 - row);
+                const int k = int(std::floor(h / 100.0));
+                const float below = acc.getValue(openvdb::Coord(i, j, k)), above = acc.getValue(openvdb::Coord(i, j, k + 1));
+                ASSERT_LE(below, 0.0f) << grid->getName() << " col " << col << " row " << row;
+                ASSERT_GT(above, 0.0f);
+                // The zero crossing, interpolated between the two voxels, lies at the surface height,
+                // within what the slope projection changes (both scale by the same cosine).
+                const double zCross = k * 100.0 + 100.0 * (-below) / (above - below);
+                ASSERT_NEAR(zCross, h, 1e-3 * 100.0);
+                // The voxel centre's world position is the pixel centre's.
+                const auto world = grid->transform().indexToWorld(openvdb::Coord(i, j, 0));
+                ASSERT_NEAR(world.x() + r.westWorld, r.westWorld + (double(col) + 0.5) * 100.0, 1e-6);
+                ++checked;
+            }
+        EXPECT_GT(checked, 50u);
+    }
+}
+
+TEST(Export, FailedWritesLeaveNothing) {
+    SampledRaster r = sample("elevation", 500);
+    fs::path d = dir() / "nothing";
+    fs::create_directories(d);
+    EXPECT_THROW(hc::exporting::writeGeoTiff(r, (d / "missing_dir" / "x.tif").string()), hc::Error);
+    EXPECT_THROW(hc::exporting::writeExr(r, (d / "missing_dir" / "x.exr").string()), hc::Error);
+    EXPECT_THROW(hc::exporting::writeVdb(r, nullptr, (d / "missing_dir" / "x.vdb").string()), hc::Error);
+    EXPECT_TRUE(fs::is_empty(d));
+}
+
+}  // namespace
