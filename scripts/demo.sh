@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # The main job on the bundled real DEM (data/hef_srtm.tif, Hintereisferner, Oetztal Alps, SRTM 3"):
-# install dependencies, build, ingest it with a bathtub flood at 2000 m into an adaptive grid, check
-# the grid file, and print where everything is and how long each stage took.
+# install dependencies, build, ingest it with a bathtub flood at 2000 m into an adaptive grid, build
+# its influence cache, export the smooth surface (GeoTIFF elevation, EXR water depth, VDB level sets),
+# probe it, and print where everything is and how long each stage took.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 now() { date +%s.%N; }
@@ -12,11 +13,22 @@ mkdir -p out
 ./build/bin/hc-info out/hef.hcg; t4=$(now)
 ./build/bin/hc-info out/hef.hcg --json > out/hef.json
 ./build/bin/hc-info out/hef.hcg --cells-csv out/hef_cells.csv >/dev/null
+./build/bin/hc-influence out/hef.hcg; t5=$(now)
+./build/bin/hc-export out/hef.hcg --resolution 30 -o out/hef_elevation.tif
+./build/bin/hc-export out/hef.hcg --resolution 30 --layer water_depth -o out/hef_water_depth.exr
+./build/bin/hc-export out/hef.hcg --resolution 60 -o out/hef.vdb; t6=$(now)
+# The smooth surface (UTM 32N): elevation on the Hintereisferner (10.7528 E, 46.7975 N), and
+# the water depth in the flooded valley at the domain's south-west corner.
+./build/bin/hc-probe out/hef.hcg --xy 633759,5184153
+./build/bin/hc-probe out/hef.hcg --xy 622800,5170600 --layer water_depth | tail -n 1; t7=$(now)
 echo
 echo "outputs:"
-echo "  grid        $(pwd)/out/hef.hcg"
-echo "  summary     $(pwd)/out/hef.json"
-echo "  cells       $(pwd)/out/hef_cells.csv"
+echo "  grid              $(pwd)/out/hef.hcg"
+echo "  grid summary      $(pwd)/out/hef.json"
+echo "  cells             $(pwd)/out/hef_cells.csv"
+echo "  influence cache   $(pwd)/out/hef.hci"
+echo "  smooth surface    $(pwd)/out/hef_elevation.tif (GeoTIFF), $(pwd)/out/hef_water_depth.exr (EXR), $(pwd)/out/hef.vdb (OpenVDB)"
 echo "stage timings (s):"
-awk -v a="$t0" -v b="$t1" -v c="$t2" -v d="$t3" -v e="$t4" 'BEGIN {
-  printf "  dependencies  %7.2f\n  build         %7.2f\n  ingest        %7.2f\n  validate      %7.2f\n", b-a, c-b, d-c, e-d }'
+awk -v a="$t0" -v b="$t1" -v c="$t2" -v d="$t3" -v e="$t4" -v f="$t5" -v g="$t6" -v h="$t7" 'BEGIN {
+  printf "  dependencies  %7.2f\n  build         %7.2f\n  ingest        %7.2f\n  validate      %7.2f\n", b-a, c-b, d-c, e-d
+  printf "  influence     %7.2f\n  export        %7.2f\n  probe         %7.2f\n", f-e, g-f, h-g }'
