@@ -285,7 +285,7 @@ InfluenceLists timeBuild(const Grid& g, const KernelParams& params, unsigned thr
 // ---- table 3 ----
 
 struct AccuracyRow {
-    std::string dem;
+    std::string dem, path;  // file name, path as given
     size_t width = 0, height = 0;
     double pixelM = 0, toleranceM = 0, sigma = 0, maxCellM = 0;
     uint64_t validPx = 0, cells = 0, evaluated = 0, undefined = 0;
@@ -328,8 +328,8 @@ int main(int argc, char** argv) {
                  "      SRTM's 90 m pixels can merge and the tolerance matters)", maxCellM);
         p.option("--repeat", "N", "runs per timed case in tables 1 and 2; times are the best run (default 3)", repeat);
         p.option("--points", "N", "random points per evaluator case in table 2 (default 1000000)", points);
-        p.option("--max-eval-px", "N", "table 3 evaluates every valid pixel of rasters with at most N valid pixels and a fixed\n"
-                 "      random sample of 1 M valid pixels of larger ones (default 2000000)", maxEvalPx);
+        p.option("--max-eval-px", "N", "table 3 evaluates every valid pixel of rasters with at most N valid pixels, and a fixed\n"
+                 "      random sample of min(N, 1000000) valid pixels of larger ones (default 2000000)", maxEvalPx);
         p.option("--threads", "N", "worker threads for building, ingest and the all-threads cases (default 0 = all cores)", threads);
         p.option("--csv", "OUT.csv", "also write every row of every table as CSV, with a 'table' column (default: none)", csv);
         p.flag("--quick", "smoke run: one tolerance (0.5 m, or the first of --tolerances), one sigma (1, or the first of\n"
@@ -487,75 +487,80 @@ int main(int argc, char** argv) {
                 skipped.push_back(dem);
                 continue;
             }
-            hc::ingest::Options o;
-            o.input = dem;
-            o.maxCellM = maxCellM;
-            o.threads = threads;
-            hc::ingest::LoadReport rep;
-            const hc::ingest::Raster raster = hc::ingest::loadTerrain(o, rep);
-            const uint64_t valid = raster.validCount();
-            // The pixels to evaluate: every valid one, or a fixed sample of 1 M of them (kept in raster order).
-            std::vector<uint32_t> pixels;
-            pixels.reserve(valid);
-            for (size_t i = 0; i < raster.values.size(); ++i)
-                if (!std::isnan(raster.values[i])) pixels.push_back(static_cast<uint32_t>(i));
-            const bool sampled = valid > static_cast<uint64_t>(maxEvalPx);
-            if (sampled) {
-                std::mt19937_64 rng(7);
-                const size_t m = std::min<size_t>(1000000, pixels.size());
-                for (size_t i = 0; i < m; ++i) std::swap(pixels[i], pixels[i + rng() % (pixels.size() - i)]);
-                pixels.resize(m);
-                std::sort(pixels.begin(), pixels.end());
-            }
-            const std::string name = fs::path(dem).filename().string();
-            for (double tol : tols) {
-                o.toleranceM = tol;
-                hc::ingest::LoadReport gridReport;
-                const Grid g = hc::ingest::ingest(o, gridReport);
-                if (g.stats.sourceWidth != raster.width || g.stats.sourceHeight != raster.height || g.stats.validPixels != valid)
-                    throw hc::Error(dem + ": the grid's working raster (" + fmt("%llu x %llu", (unsigned long long)g.stats.sourceWidth,
-                                                                                (unsigned long long)g.stats.sourceHeight) +
-                                    ") is not the one loadTerrain gave: the comparison would be meaningless");
-                for (double sigma : sigmaList) {
-                    KernelParams params;
-                    params.sigma = sigma;
-                    AccuracyRow r;
-                    r.dem = name;
-                    r.width = raster.width;
-                    r.height = raster.height;
-                    r.pixelM = raster.pixelSizeM;
-                    r.toleranceM = tol;
-                    r.sigma = sigma;
-                    r.maxCellM = g.levelSizeM(g.maxLevel);
-                    r.validPx = valid;
-                    r.cells = g.cellCount();
-                    r.levels = levelRange(g);
-                    r.gridRms = g.stats.rmsDevM;
-                    r.gridMax = g.stats.maxDevM;
-                    r.sampled = sampled;
-                    auto t0 = Clock::now();
-                    const InfluenceLists lists = hc::influence::buildInfluenceLists(g, params, threads, false);
-                    r.buildS = secondsSince(t0);
-                    r.entriesMean = lists.stats().meanLength;
-                    SurfaceEvaluator ev(g, lists);
-                    Accum a;
-                    r.evalS = evaluatePixels(ev, raster, pixels, threads, a);
-                    r.evaluated = a.defined;
-                    r.undefined = a.undefined;
-                    const double n = static_cast<double>(std::max<uint64_t>(a.defined, 1));
-                    r.surfRms = std::sqrt(a.sumSq / n);
-                    r.surfMax = a.maxAbs;
-                    r.checkRms = std::sqrt(a.gridSumSq / n);
-                    r.checkMax = a.gridMaxAbs;
-                    if (a.undefined)
-                        warnings.push_back(fmt("%s tol %g sigma %g: the surface is undefined at %llu valid pixel centres", name.c_str(), tol,
-                                               sigma, (unsigned long long)a.undefined));
-                    // Our own pixel-by-pixel grid error must match the ingest's (same pixels, same cells).
-                    if (!sampled && (std::abs(r.checkMax - r.gridMax) > 1e-4 || std::abs(r.checkRms - r.gridRms) > 1e-4))
-                        warnings.push_back(fmt("%s tol %g: grid error measured here (RMS %.5f, max %.5f) differs from Grid::stats "
-                                               "(RMS %.5f, max %.5f)", name.c_str(), tol, r.checkRms, r.checkMax, r.gridRms, r.gridMax));
-                    acc.push_back(r);
+            try {
+                hc::ingest::Options o;
+                o.input = dem;
+                o.maxCellM = maxCellM;
+                o.threads = threads;
+                hc::ingest::LoadReport rep;
+                const hc::ingest::Raster raster = hc::ingest::loadTerrain(o, rep);
+                const uint64_t valid = raster.validCount();
+                // The pixels to evaluate: every valid one, or a fixed sample of 1 M of them (kept in raster order).
+                std::vector<uint32_t> pixels;
+                pixels.reserve(valid);
+                for (size_t i = 0; i < raster.values.size(); ++i)
+                    if (!std::isnan(raster.values[i])) pixels.push_back(static_cast<uint32_t>(i));
+                const bool sampled = valid > static_cast<uint64_t>(maxEvalPx);
+                if (sampled) {
+                    std::mt19937_64 rng(7);
+                    const size_t m = std::min<size_t>(1000000, static_cast<size_t>(maxEvalPx));
+                    for (size_t i = 0; i < m; ++i) std::swap(pixels[i], pixels[i + rng() % (pixels.size() - i)]);
+                    pixels.resize(m);
+                    std::sort(pixels.begin(), pixels.end());
                 }
+                const std::string name = fs::path(dem).filename().string();
+                for (double tol : tols) {
+                    o.toleranceM = tol;
+                    hc::ingest::LoadReport gridReport;
+                    const Grid g = hc::ingest::ingest(o, gridReport);
+                    if (g.stats.sourceWidth != raster.width || g.stats.sourceHeight != raster.height || g.stats.validPixels != valid)
+                        throw hc::Error(dem + ": the grid's working raster (" + fmt("%llu x %llu", (unsigned long long)g.stats.sourceWidth,
+                                                                                    (unsigned long long)g.stats.sourceHeight) +
+                                        ") is not the one loadTerrain gave: the comparison would be meaningless");
+                    for (double sigma : sigmaList) {
+                        KernelParams params;
+                        params.sigma = sigma;
+                        AccuracyRow r;
+                        r.dem = name;
+                        r.path = dem;
+                        r.width = raster.width;
+                        r.height = raster.height;
+                        r.pixelM = raster.pixelSizeM;
+                        r.toleranceM = tol;
+                        r.sigma = sigma;
+                        r.maxCellM = g.levelSizeM(g.maxLevel);
+                        r.validPx = valid;
+                        r.cells = g.cellCount();
+                        r.levels = levelRange(g);
+                        r.gridRms = g.stats.rmsDevM;
+                        r.gridMax = g.stats.maxDevM;
+                        r.sampled = sampled;
+                        auto t0 = Clock::now();
+                        const InfluenceLists lists = hc::influence::buildInfluenceLists(g, params, threads, false);
+                        r.buildS = secondsSince(t0);
+                        r.entriesMean = lists.stats().meanLength;
+                        SurfaceEvaluator ev(g, lists);
+                        Accum a;
+                        r.evalS = evaluatePixels(ev, raster, pixels, threads, a);
+                        r.evaluated = a.defined;
+                        r.undefined = a.undefined;
+                        const double n = static_cast<double>(std::max<uint64_t>(a.defined, 1));
+                        r.surfRms = std::sqrt(a.sumSq / n);
+                        r.surfMax = a.maxAbs;
+                        r.checkRms = std::sqrt(a.gridSumSq / n);
+                        r.checkMax = a.gridMaxAbs;
+                        if (a.undefined)
+                            warnings.push_back(fmt("%s tol %g sigma %g: the surface is undefined at %llu valid pixel centres", name.c_str(), tol,
+                                                   sigma, (unsigned long long)a.undefined));
+                        // Our own pixel-by-pixel grid error must match the ingest's (same pixels, same cells).
+                        if (!sampled && (std::abs(r.checkMax - r.gridMax) > 1e-4 || std::abs(r.checkRms - r.gridRms) > 1e-4))
+                            warnings.push_back(fmt("%s tol %g: grid error measured here (RMS %.5f, max %.5f) differs from Grid::stats "
+                                                   "(RMS %.5f, max %.5f)", name.c_str(), tol, r.checkRms, r.checkMax, r.gridRms, r.gridMax));
+                        acc.push_back(r);
+                    }
+                }
+            } catch (const std::exception& e) {
+                throw hc::Error(std::string("table 3, ") + dem + ": " + e.what());
             }
         }
 
@@ -573,7 +578,7 @@ int main(int argc, char** argv) {
                         r.dem.c_str(), fmt("%zux%zu", r.width, r.height).c_str(), r.pixelM, r.toleranceM, r.sigma, r.maxCellM,
                         (unsigned long long)r.cells, static_cast<double>(r.cells) / static_cast<double>(r.validPx), r.gridRms, r.gridMax,
                         r.surfRms, r.surfMax, r.entriesMean, r.buildS * 1e3, r.evalS * 1e3, rate, r.sampled ? " (sample)" : "");
-            out.add({{"table", "accuracy"}, {"grid", r.dem}, {"source", r.dem}, {"tolerance_m", fmt("%g", r.toleranceM)},
+            out.add({{"table", "accuracy"}, {"grid", r.dem}, {"source", r.path}, {"tolerance_m", fmt("%g", r.toleranceM)},
                      {"sigma", fmt("%g", r.sigma)}, {"truncation", fmt("%g", baseParams.truncation)}, {"max_cell_m", fmt("%g", r.maxCellM)},
                      {"threads", fmt("%u", allThreads)}, {"working_px", fmt("%zux%zu", r.width, r.height)}, {"pixel_m", fmt("%.6g", r.pixelM)},
                      {"valid_px", fmt("%llu", (unsigned long long)r.validPx)}, {"cells", fmt("%llu", (unsigned long long)r.cells)},
@@ -588,7 +593,8 @@ int main(int argc, char** argv) {
         bool anySampled = false;
         for (const AccuracyRow& r : acc) anySampled |= r.sampled;
         if (anySampled)
-            std::printf("(sample): more than %d valid pixels: errors and time over a fixed random sample of 1 M of them\n", maxEvalPx);
+            std::printf("(sample): more than %d valid pixels: errors and time over a fixed random sample of %d of them\n", maxEvalPx,
+                        std::min(maxEvalPx, 1000000));
         for (const std::string& s : skipped) std::printf("skipped %s: missing\n", s.c_str());
         for (const std::string& w : warnings) std::printf("warning: %s\n", w.c_str());
 

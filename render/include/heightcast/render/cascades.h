@@ -1,0 +1,59 @@
+// heightcast/render/cascades.h: cascade fitting (DESIGN.md section 5 step 1; report section 3).
+//
+// The view frustum is intersected with the scene's bounding box; the intersection's vertices,
+// projected to the ground plane, give a convex hull: the potentially visible area. Along the
+// camera's horizontal view direction d (its yaw) the hull spans offsets [n, f] from the camera;
+// it is split logarithmically (Zhang et al.) at n (f/n)^(k/K), with n guarded away from zero.
+// Each cascade's slab of the hull, its far side widened by an overlap for blending, is fitted into
+// a square texture of N x N texels.
+//
+// Stable fitting: texel sizes come from a fixed ladder s = finest * 2^(q/8) and the texture's
+// corner texel sits on the global lattice of multiples of s (local frame). A camera that moves a
+// little keeps s, and every texel centre stays on that lattice: sample positions never swim.
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <vector>
+
+namespace hc::render {
+
+using Vec2 = std::array<double, 2>;
+using Vec3 = std::array<double, 3>;
+
+struct ViewVolume {
+    Vec3 eyeLocal;                  // camera position relative to the grid origin [m]
+    Vec3 forward, right, up;        // camera basis
+    double tanHalfX, tanHalfY;
+    double nearM, farM;             // clip distances along forward
+    double yawRad;                  // d = (sin yaw, cos yaw)
+    Vec3 boxMin, boxMax;            // scene bounds, local [m]
+    double finestCellM;
+};
+
+struct Cascade {
+    double splitNear = 0, splitFar = 0;  // this cascade's share of [n, f] along d (offsets from the eye)
+    double farWithOverlap = 0;           // splitFar widened into the next cascade (== splitFar for the last)
+    double texelM = 0;                   // s
+    double x0 = 0, y0 = 0;               // local position of texel (0, 0)'s centre (a multiple of s)
+    int n = 0;                           // texels per side
+    std::vector<Vec2> polygon;           // the hull's slab [splitNear, farWithOverlap], local xy
+    std::vector<uint8_t> visible;        // n * n, row-major (j * n + i), 1 = inside the polygon (plus a texel)
+    bool empty() const { return polygon.size() < 3; }
+};
+
+struct CascadeFit {
+    Vec2 dir{0, 1};                 // horizontal view direction
+    std::vector<Vec2> hull;         // potentially visible area (local xy), counter-clockwise
+    double nearOffset = 0, farOffset = 0;  // [n, f] along dir, from the eye
+    std::vector<Cascade> cascades;  // near to far
+};
+
+// count 1..4 cascades of texelsPerSide texels. An empty fit (no hull) means nothing is visible.
+CascadeFit fitCascades(const ViewVolume& view, int count, int texelsPerSide);
+
+// Exposed for tests: the ladder texel size for an extent, and the convex hull.
+double ladderTexelSize(double extentM, int texelsPerSide, double finestCellM);
+std::vector<Vec2> convexHull(std::vector<Vec2> points);
+
+}  // namespace hc::render

@@ -1,0 +1,18 @@
+// heightcast/render/image_io.h: a rendered frame to files, atomically (temporary + rename).
+#pragma once
+
+#include <string>
+
+#include "heightcast/render/renderer.h"
+
+namespace hc::render {
+
+// 8-bit sRGB PNG (libpng).
+void writePng(const Frame& frame, const std::string& path);
+
+// OpenEXR with FLOAT channels Z (distance along the ray [m], +inf where the ray misses), P.X, P.Y,
+// P.Z (hit position relative to the grid origin [m]), N.X, N.Y, N.Z (unit normal), cascade (-1 on a
+// miss) and water_depth [m]; the origin as double header attributes heightcast.originX/originY.
+void writeFrameExr(const Frame& frame, const std::string& path);
+
+}  // namespace hc::render

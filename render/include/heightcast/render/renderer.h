@@ -1,0 +1,86 @@
+// heightcast/render/renderer.h: the CPU renderer of the smooth surface (DESIGN.md section 5).
+//
+// Per frame: fit cascades to the view (cascades.h), approximate the surface into each cascade's
+// texture (the Gaussian RBF sum at every visible texel), build max mipmaps, cast one ray per pixel
+// through the cascades near to far with exact ray/bilinear-patch intersection and blending in the
+// cascades' overlaps, and shade. All geometry is camera-relative; world coordinates appear only in
+// the camera and in the outputs' georeference.
+#pragma once
+
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "heightcast/grid/grid.h"
+#include "heightcast/influence/influence.h"
+#include "heightcast/render/camera.h"
+
+namespace hc::render {
+
+enum class ColorMode { Elevation, WaterDepth };
+
+struct RenderOptions {
+    int cascades = 3;             // 1..4
+    int texelsPerSide = 1024;     // 16..8192, cascade texture side N
+    unsigned threads = 0;         // 0 = all cores
+    ColorMode color = ColorMode::Elevation;
+    bool cellOutlines = false;    // draw the adaptive cells' edges
+    bool legend = true;           // colour bar of the water depth (or elevation) in the image
+    double waterMinDepthM = 0.01; // water thinner than this is not drawn (smoothing spreads depth thinly)
+    std::string validate() const; // "" or what is wrong
+};
+
+// Per-pixel results, row 0 at the top. Misses: distance +inf, position/normal 0, cascade -1.
+struct Frame {
+    int width = 0, height = 0;
+    std::vector<uint8_t> rgb;           // 8-bit sRGB, 3 per pixel
+    std::vector<float> distanceM;       // along the ray [m]; +inf where the ray misses
+    std::vector<float> posX, posY, posZ;// hit position relative to the grid origin [m]
+    std::vector<float> nX, nY, nZ;      // unit surface normal (z up)
+    std::vector<float> cascade;         // index of the cascade that gave the hit (blend: the nearer), -1 miss
+    std::vector<float> waterDepthM;     // water depth at the hit [m], 0 where dry or missed
+    double originWorldX = 0, originWorldY = 0;
+};
+
+struct CascadeStats {
+    double nearM = 0, farM = 0;         // offsets along the projected view direction
+    double texelM = 0;                  // texel size
+    uint64_t visibleTexels = 0;
+    uint64_t gaussians = 0;             // kernel evaluations in the approximation
+    double approximationMs = 0;
+};
+
+struct Timings {
+    double fittingMs = 0, approximationMs = 0, mipmapMs = 0, raycastMs = 0, shadingMs = 0, totalMs = 0;
+    std::vector<CascadeStats> cascades;
+    uint64_t rays = 0, hits = 0;
+    std::string toJson() const;
+    std::string toTable() const;
+};
+
+// A grid with its influence lists and per-cell data prepared once for many frames.
+class Scene {
+public:
+    Scene(const Grid& grid, const influence::InfluenceLists& lists);
+    const Grid& grid() const { return grid_; }
+    const influence::InfluenceLists& lists() const { return lists_; }
+    bool hasWater() const { return waterLayer_ >= 0; }
+    int waterLayer() const { return waterLayer_; }  // grid layer of water_depth, or -1
+    // Local bounding box of the cells and the value range (terrain and water surface) [m].
+    double xMin, yMin, xMax, yMax, zMin, zMax;
+    double elevationMin, elevationMax, depthMax;
+
+private:
+    const Grid& grid_;
+    const influence::InfluenceLists& lists_;
+    int waterLayer_ = -1;
+};
+
+// Renders one frame. Throws hc::Error for invalid camera or options.
+Frame renderFrame(const Scene& scene, const Camera& camera, const RenderOptions& options, Timings& timings);
+
+// A camera that frames the whole grid obliquely, as a person would pick: from the south-south-west,
+// 35 degrees down, far enough back that the grid's extent fills the view.
+Camera overviewCamera(const Scene& scene, int width, int height);
+
+}  // namespace hc::render

@@ -1,0 +1,172 @@
+// The approximation pass: the Gaussian RBF sum (DESIGN.md section 4) at every visible texel of a
+// cascade, in float with a vectorised exponential.
+//
+// Texels are taken cell by cell: all texel centres inside cell k share k's influence list, and
+// every quantity is relative to k's centre and value, so float keeps its precision however far the
+// cascade lies from the grid origin (the exact evaluator does the same in double).
+#include <algorithm>
+#include <bit>
+#include <cmath>
+#include <cstring>
+#include <limits>
+
+#include "heightcast/grid/parallel.h"
+#include "textures.h"
+
+namespace hc::render::detail {
+namespace {
+
+constexpr int kLanes = 8;  // candidates per vector step (AVX2: 8 floats)
+
+// exp(x) for x <= 0 in float: 2^(x log2 e) split into an integer power (exponent bits) and 2^f,
+// f in [-0.5, 0.5], by its Taylor polynomial to degree 6 (relative error < 2e-7, float's epsilon).
+// Branch-free, so loops over it vectorise.
+inline float expNeg(float x) {
+    x = x < -87.0f ? -87.0f : x;
+    const float y = x * 1.44269504088896341f;
+    const float n = std::floor(y + 0.5f);
+    const float f = y - n;
+    const float p = 1.0f + f * (0.693147181f + f * (0.240226507f + f * (0.0555041087f + f * (0.00961812911f + f * (0.00133335581f + f * 0.000154035304f)))));
+    const int32_t bits = (static_cast<int32_t>(n) + 127) << 23;
+    return p * std::bit_cast<float>(bits);
+}
+
+struct Candidates {
+    std::vector<float> ex, ey, a, r2, dz, dd;  // relative to the cell's centre / value; padded to kLanes
+    size_t count = 0;                          // real entries (before padding)
+};
+
+}  // namespace
+
+void Heightfield::buildMip() {
+    mip.clear();
+    mipSide.clear();
+    int side = n - 1;
+    std::vector<float> level(size_t(side) * size_t(side));
+    for (int j = 0; j < side; ++j)
+        for (int i = 0; i < side; ++i) {
+            const float* r0 = &h[size_t(j) * size_t(n) + size_t(i)];
+            const float* r1 = r0 + n;
+            level[size_t(j) * size_t(side) + size_t(i)] = std::max(std::max(r0[0], r0[1]), std::max(r1[0], r1[1]));
+        }
+    mip.push_back(std::move(level));
+    mipSide.push_back(side);
+    while (side > 1) {
+        const int next = (side + 1) / 2;
+        std::vector<float> up(size_t(next) * size_t(next), -std::numeric_limits<float>::infinity());
+        const auto& lo = mip.back();
+        for (int j = 0; j < side; ++j)
+            for (int i = 0; i < side; ++i) {
+                float& m = up[size_t(j / 2) * size_t(next) + size_t(i / 2)];
+                m = std::max(m, lo[size_t(j) * size_t(side) + size_t(i)]);
+            }
+        mip.push_back(std::move(up));
+        mipSide.push_back(next);
+        side = next;
+    }
+}
+
+uint64_t approximate(const Scene& scene, const Cascade& c, CascadeTextures& tex, double waterMinDepthM, unsigned threads) {
+    const Grid& g = scene.grid();
+    const auto& lists = scene.lists();
+    const int n = c.n;
+    const float noSurface = -std::numeric_limits<float>::infinity();
+    tex.hasWater = scene.hasWater();
+    tex.terrain.n = tex.water.n = n;
+    tex.terrain.h.assign(size_t(n) * size_t(n), noSurface);
+    if (tex.hasWater) {
+        tex.water.h.assign(size_t(n) * size_t(n), noSurface);
+        tex.depth.assign(size_t(n) * size_t(n), 0.0f);
+    }
+    // The visible texels' bounding box, and the cells that meet it.
+    int i0 = n, i1 = -1, j0 = n, j1 = -1;
+    for (int j = 0; j < n; ++j)
+        for (int i = 0; i < n; ++i)
+            if (c.visible[size_t(j) * size_t(n) + size_t(i)]) {
+                i0 = std::min(i0, i), i1 = std::max(i1, i), j0 = std::min(j0, j), j1 = std::max(j1, j);
+            }
+    if (i1 < 0) return 0;
+    const double s = c.texelM;
+    std::vector<uint32_t> cells;
+    g.cellsInBox(c.x0 + i0 * s, c.y0 + j0 * s, c.x0 + i1 * s, c.y0 + j1 * s, cells);
+
+    const double sigma = lists.params().sigma;
+    const float tail = static_cast<float>(lists.params().tail());
+    const int depthLayer = scene.waterLayer();
+    const float minDepth = static_cast<float>(waterMinDepthM);
+    std::vector<uint64_t> gaussians(resolveThreads(threads), 0);
+    std::vector<Candidates> scratch(gaussians.size());
+    parallelFor(cells.size(), 64, threads, [&](size_t b, size_t e, unsigned worker) {
+        Candidates& cand = scratch[worker];
+        for (size_t ci = b; ci < e; ++ci) {
+            const uint32_t k = cells[ci];
+            const Grid::Square q = g.cellSquare(k);
+            // Texel centres inside k's half-open square [x0, x1) x [y0, y1).
+            auto first = [&](double lo, double origin) {
+                double t = std::ceil((lo - origin) / s);
+                while (origin + (t - 1) * s >= lo) t -= 1;
+                while (origin + t * s < lo) t += 1;
+                return t;
+            };
+            const int ia = std::max(i0, int(first(q.x0, c.x0))), ib = std::min(i1 + 1, int(first(q.x1, c.x0)));
+            const int ja = std::max(j0, int(first(q.y0, c.y0))), jb = std::min(j1 + 1, int(first(q.y1, c.y0)));
+            if (ia >= ib || ja >= jb) continue;
+            double kx, ky;
+            g.cellCenterLocal(k, kx, ky);
+            const double zk = g.values[0][k];
+            const double dk = depthLayer >= 0 ? g.values[size_t(depthLayer)][k] : 0.0;
+            const auto list = lists.list(k);
+            const size_t m = list.size(), padded = (m + kLanes - 1) / kLanes * kLanes;
+            for (auto* v : {&cand.ex, &cand.ey, &cand.a, &cand.dz, &cand.dd}) v->assign(padded, 0.0f);
+            cand.r2.assign(padded, -1.0f);  // padding never counts: d2 < -1 is false
+            for (size_t idx = 0; idx < m; ++idx) {
+                const uint32_t i = list[idx];
+                double cx, cy;
+                g.cellCenterLocal(i, cx, cy);
+                const double size = g.cellSizeM(i), r = lists.params().radiusM(size);
+                cand.ex[idx] = static_cast<float>(cx - kx);
+                cand.ey[idx] = static_cast<float>(cy - ky);
+                cand.a[idx] = static_cast<float>(1.0 / (2.0 * sigma * sigma * size * size));
+                cand.r2[idx] = static_cast<float>(r * r);
+                cand.dz[idx] = static_cast<float>(g.values[0][i] - zk);
+                if (depthLayer >= 0) cand.dd[idx] = static_cast<float>(g.values[size_t(depthLayer)][i] - dk);
+            }
+            for (int j = ja; j < jb; ++j) {
+                const float fy = static_cast<float>(c.y0 + j * s - ky);
+                for (int i = ia; i < ib; ++i) {
+                    const size_t t = size_t(j) * size_t(n) + size_t(i);
+                    if (!c.visible[t]) continue;
+                    const float fx = static_cast<float>(c.x0 + i * s - kx);
+                    gaussians[worker] += m;
+                    float num[kLanes] = {}, den[kLanes] = {}, numD[kLanes] = {};
+                    for (size_t base = 0; base < padded; base += kLanes)
+                        for (int l = 0; l < kLanes; ++l) {
+                            const size_t idx = base + size_t(l);
+                            const float dx = fx - cand.ex[idx], dy = fy - cand.ey[idx];
+                            const float d2 = dx * dx + dy * dy;
+                            float w = expNeg(-d2 * cand.a[idx]) - tail;
+                            w = (d2 < cand.r2[idx] && w > 0.0f) ? w : 0.0f;
+                            num[l] += w * cand.dz[idx];
+                            numD[l] += w * cand.dd[idx];
+                            den[l] += w;
+                        }
+                    float sn = 0, sd = 0, snD = 0;
+                    for (int l = 0; l < kLanes; ++l) sn += num[l], sd += den[l], snD += numD[l];
+                    // sd >= the cell's own weight at its farthest point (kernel.h): never zero here.
+                    const float z = static_cast<float>(zk + double(sn / sd));
+                    tex.terrain.h[t] = z;
+                    if (depthLayer >= 0) {
+                        const float d = static_cast<float>(dk + double(snD / sd));
+                        tex.depth[t] = d > 0 ? d : 0.0f;
+                        if (d > minDepth) tex.water.h[t] = z + d;
+                    }
+                }
+            }
+        }
+    });
+    uint64_t total = 0;
+    for (uint64_t v : gaussians) total += v;
+    return total;
+}
+
+}  // namespace hc::render::detail

@@ -1,0 +1,211 @@
+// Ray casting through the cascades: hierarchical max-mipmap traversal (Tevs et al. 2008) and exact
+// ray/bilinear-patch intersection, cascades near to far, blended in their overlaps.
+#include <algorithm>
+#include <cmath>
+#include <limits>
+
+#include "textures.h"
+
+namespace hc::render::detail {
+namespace {
+
+struct PatchHit {
+    bool hit = false;
+    bool underground = false;  // the ray met the surface first from below: it starts inside the terrain
+    double t = 0;
+    double gx = 0, gy = 0;  // surface slope dz/dx, dz/dy at the hit [m/m]
+};
+
+// The first point in [tIn, tOut] where the ray meets heightfield `hf` of cascade `c`. Texture
+// coordinates: u = (x - x0) / s, v = (y - y0) / s; patch (i, j) spans u in [i, i+1], v in [j, j+1].
+//
+// Solid terrain: the first time a ray meets the surface at all (`touched`, over every cascade and
+// both heightfields of the ray), it must be above it; if it is below (a camera inside the terrain,
+// or a ray passing under the grid's edge) it sees nothing. After that, a ray found below the
+// surface has gone under it where two discretisations meet, and hits where it entered.
+PatchHit traverse(const Heightfield& hf, const Cascade& c, const double o[3], const double d[3], double tIn, double tOut, bool& touched) {
+    PatchHit res;
+    if (hf.mip.empty() || !(tIn < tOut)) return res;
+    const double s = c.texelM;
+    const double u0 = (o[0] - c.x0) / s, v0 = (o[1] - c.y0) / s, du = d[0] / s, dv = d[1] / s;
+    const int top = int(hf.mip.size()) - 1;
+    const int patches = hf.n - 1;
+    // A ray above the whole cascade never hits it.
+    if (std::min(o[2] + d[2] * tIn, o[2] + d[2] * tOut) > hf.mip[size_t(top)][0]) return res;
+    int level = top;
+    double t = tIn;
+    const double tiny = 1e-9 * (1.0 + std::abs(tOut)) ;
+    for (int guard = 0; guard < 1 << 20 && t <= tOut; ++guard) {
+        // The node of this level under the ray a hair past t (so a node boundary belongs to the node
+        // the ray moves into).
+        const double tp = std::min(t + tiny, tOut);
+        const double pu = u0 + du * tp, pv = v0 + dv * tp;
+        const int span = 1 << level;
+        const int side = hf.mipSide[size_t(level)];
+        int iu = int(std::floor(pu / span)), iv = int(std::floor(pv / span));
+        if (iu < 0 || iv < 0 || iu >= side || iv >= side || pu >= patches || pv >= patches || pu < 0 || pv < 0) break;  // left the texture
+        // Where the ray leaves this node.
+        double tExit = tOut;
+        if (du > 0) tExit = std::min(tExit, ((iu + 1.0) * span - u0) / du);
+        if (du < 0) tExit = std::min(tExit, (iu * double(span) - u0) / du);
+        if (dv > 0) tExit = std::min(tExit, ((iv + 1.0) * span - v0) / dv);
+        if (dv < 0) tExit = std::min(tExit, (iv * double(span) - v0) / dv);
+        tExit = std::max(tExit, t);
+        const float nodeMax = hf.mip[size_t(level)][size_t(iv) * size_t(side) + size_t(iu)];
+        const double zLow = std::min(o[2] + d[2] * t, o[2] + d[2] * tExit);
+        if (zLow > nodeMax) {  // empty space: skip the node, and look at a coarser level next
+            t = tExit + tiny;
+            level = std::min(level + 1, top);
+            continue;
+        }
+        if (level > 0) {
+            --level;
+            continue;
+        }
+        // A patch: exact intersection with its bilinear surface.
+        const size_t n = size_t(hf.n);
+        const float* r0 = &hf.h[size_t(iv) * n + size_t(iu)];
+        const double h00 = r0[0], h10 = r0[1], h01 = r0[n], h11 = r0[n + 1];
+        if (std::isfinite(h00) && std::isfinite(h10) && std::isfinite(h01) && std::isfinite(h11)) {
+            const double a0 = u0 + du * t - iu, b0 = v0 + dv * t - iv, z0 = o[2] + d[2] * t;
+            const double e = h00 - h10 - h01 + h11;
+            auto bil = [&](double a, double b) { return h00 + (h10 - h00) * a + (h01 - h00) * b + e * a * b; };
+            // f(tau) = z(tau) - bilinear(tau), tau from t: C + B tau + A tau^2.
+            const double C = z0 - bil(a0, b0);
+            const double B = d[2] - (h10 - h00) * du - (h01 - h00) * dv - e * (a0 * dv + b0 * du);
+            const double A = -e * du * dv;
+            const double len = tExit - t;
+            double tau = -1;
+            if (C <= 0) {
+                if (!touched) {
+                    res.underground = true;
+                    return res;
+                }
+                tau = 0;
+            } else if (std::abs(A) < 1e-12 * (std::abs(B) + 1e-300)) {
+                if (B < 0) tau = -C / B;
+            } else {
+                const double disc = B * B - 4 * A * C;
+                if (disc >= 0) {
+                    const double q = -0.5 * (B + std::copysign(std::sqrt(disc), B));
+                    double r1 = q / A, r2 = q != 0 ? C / q : r1;
+                    if (r1 > r2) std::swap(r1, r2);
+                    tau = r1 >= 0 ? r1 : r2;  // C > 0: the first root is where the ray goes under
+                }
+            }
+            touched = true;
+            if (tau >= 0 && tau <= len) {
+                const double a = std::clamp(a0 + du * tau, 0.0, 1.0), b = std::clamp(b0 + dv * tau, 0.0, 1.0);
+                res.hit = true;
+                res.t = t + tau;
+                res.gx = ((h10 - h00) + e * b) / s;
+                res.gy = ((h01 - h00) + e * a) / s;
+                return res;
+            }
+        }
+        t = tExit + tiny;
+        level = std::min(level + 1, top);
+    }
+    return res;
+}
+
+// The ray parameter interval in which dot(xy - eye, dir) lies in [lo, hi].
+void offsetInterval(const double o[3], const double d[3], const Vec2& dir, double eyeOffset, double lo, double hi, double& t0, double& t1) {
+    const double rate = d[0] * dir[0] + d[1] * dir[1];
+    const double at0 = o[0] * dir[0] + o[1] * dir[1] - eyeOffset;  // offset at t = 0
+    if (std::abs(rate) < 1e-15) {
+        if (at0 >= lo && at0 <= hi) return;  // the whole ray
+        t0 = 1, t1 = 0;
+        return;
+    }
+    double a = (lo - at0) / rate, b = (hi - at0) / rate;
+    if (a > b) std::swap(a, b);
+    t0 = std::max(t0, a);
+    t1 = std::min(t1, b);
+}
+
+Hit hitIn(const RayContext& ctx, size_t k, const double o[3], const double d[3], double lo, double hi, bool& touched, bool& underground) {
+    Hit h;
+    const Cascade& c = ctx.fit->cascades[k];
+    const CascadeTextures& tex = (*ctx.tex)[k];
+    if (c.empty()) return h;
+    const double eyeOffset = o[0] * ctx.fit->dir[0] + o[1] * ctx.fit->dir[1];
+    double t0 = ctx.nearM, t1 = ctx.farM;
+    offsetInterval(o, d, ctx.fit->dir, eyeOffset, lo, hi, t0, t1);
+    // Clip to the texture's patch domain.
+    const double ext = (c.n - 1) * c.texelM;
+    for (int axis = 0; axis < 2; ++axis) {
+        const double lo0 = axis == 0 ? c.x0 : c.y0;
+        if (std::abs(d[axis]) < 1e-300) {
+            if (o[axis] < lo0 || o[axis] > lo0 + ext) return h;
+            continue;
+        }
+        double a = (lo0 - o[axis]) / d[axis], b = (lo0 + ext - o[axis]) / d[axis];
+        if (a > b) std::swap(a, b);
+        t0 = std::max(t0, a);
+        t1 = std::min(t1, b);
+    }
+    if (!(t0 < t1)) return h;
+    // Water first: the terrain under it must not count as the ray's first contact.
+    bool touchedWater = touched, touchedTerrain = touched;
+    PatchHit terrain = traverse(tex.terrain, c, o, d, t0, t1, touchedTerrain);
+    PatchHit water = tex.hasWater ? traverse(tex.water, c, o, d, t0, terrain.hit ? terrain.t : t1, touchedWater) : PatchHit{};
+    if (terrain.underground && !(water.hit && water.t <= t0)) {
+        underground = true;
+        return h;
+    }
+    if (water.underground) water = PatchHit{};  // under water at its start: look at the terrain
+    touched = touched || touchedTerrain || touchedWater;
+    const PatchHit& best = water.hit ? water : terrain;
+    if (!best.hit) return h;
+    h.hit = true;
+    h.t = best.t;
+    h.water = water.hit;
+    const double nl = std::sqrt(best.gx * best.gx + best.gy * best.gy + 1.0);
+    h.nx = -best.gx / nl;
+    h.ny = -best.gy / nl;
+    h.nz = 1.0 / nl;
+    h.cascade = int(k);
+    if (h.water) {  // depth at the hit: bilinear from the depth texture
+        const double u = (o[0] + d[0] * h.t - c.x0) / c.texelM, v = (o[1] + d[1] * h.t - c.y0) / c.texelM;
+        const int i = std::clamp(int(std::floor(u)), 0, c.n - 2), j = std::clamp(int(std::floor(v)), 0, c.n - 2);
+        const double a = std::clamp(u - i, 0.0, 1.0), b = std::clamp(v - j, 0.0, 1.0);
+        const float* r0 = &tex.depth[size_t(j) * size_t(c.n) + size_t(i)];
+        h.depth = (1 - b) * ((1 - a) * r0[0] + a * r0[1]) + b * ((1 - a) * r0[c.n] + a * r0[c.n + 1]);
+    }
+    return h;
+}
+
+}  // namespace
+
+Hit castRay(const RayContext& ctx, const double dir[3]) {
+    const auto& cs = ctx.fit->cascades;
+    bool touched = false, underground = false;
+    for (size_t k = 0; k < cs.size(); ++k) {
+        const double lo = k == 0 ? -HUGE_VAL : cs[k].splitNear;
+        Hit h = hitIn(ctx, k, ctx.eye, dir, lo, cs[k].farWithOverlap, touched, underground);
+        if (underground) return Hit{};
+        if (!h.hit) continue;
+        // In the overlap with the next cascade: blend both hits by a convex combination.
+        if (k + 1 < cs.size()) {
+            const double off = (ctx.eye[0] + dir[0] * h.t - ctx.eye[0]) * ctx.fit->dir[0] + (ctx.eye[1] + dir[1] * h.t - ctx.eye[1]) * ctx.fit->dir[1];
+            const double zoneStart = cs[k].splitFar, zoneEnd = cs[k].farWithOverlap;
+            if (off > zoneStart && zoneEnd > zoneStart) {
+                bool touched2 = true, under2 = false;
+                Hit h2 = hitIn(ctx, k + 1, ctx.eye, dir, cs[k + 1].splitNear, cs[k + 1].farWithOverlap, touched2, under2);
+                if (h2.hit && h2.water == h.water) {
+                    const double w = std::clamp((off - zoneStart) / (zoneEnd - zoneStart), 0.0, 1.0);
+                    h.t = (1 - w) * h.t + w * h2.t;
+                    double nx = (1 - w) * h.nx + w * h2.nx, ny = (1 - w) * h.ny + w * h2.ny, nz = (1 - w) * h.nz + w * h2.nz;
+                    const double nl = std::sqrt(nx * nx + ny * ny + nz * nz);
+                    h.nx = nx / nl, h.ny = ny / nl, h.nz = nz / nl;
+                    h.depth = (1 - w) * h.depth + w * h2.depth;
+                }
+            }
+        }
+        return h;
+    }
+    return Hit{};
+}
+
+}  // namespace hc::render::detail

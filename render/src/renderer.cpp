@@ -1,0 +1,359 @@
+#include "heightcast/render/renderer.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <limits>
+
+#include "heightcast/grid/error.h"
+#include "heightcast/grid/parallel.h"
+#include "textures.h"
+
+namespace hc::render {
+
+using Clock = std::chrono::steady_clock;
+namespace {
+double msSince(Clock::time_point t) { return std::chrono::duration<double, std::milli>(Clock::now() - t).count(); }
+}  // namespace
+
+std::string RenderOptions::validate() const {
+    if (cascades < 1 || cascades > 4) return "--cascades " + std::to_string(cascades) + " is outside 1..4";
+    if (texelsPerSide < 16 || texelsPerSide > 8192) return "--texels " + std::to_string(texelsPerSide) + " is outside 16..8192";
+    if (!(waterMinDepthM >= 0)) return "the minimum water depth must be >= 0";
+    return {};
+}
+
+Scene::Scene(const Grid& grid, const influence::InfluenceLists& lists) : grid_(grid), lists_(lists) {
+    if (grid.cellCount() == 0) throw Error("the grid has no cells: nothing to render");
+    if (lists.cellCount() != grid.cellCount() || lists.gridStructureHash() != grid.structureHash())
+        throw Error("the influence lists do not belong to this grid");
+    waterLayer_ = grid.findLayer("water_depth");
+    grid.boundsLocal(xMin, yMin, xMax, yMax);
+    elevationMin = HUGE_VAL, elevationMax = -HUGE_VAL, depthMax = 0;
+    double surfaceMax = -HUGE_VAL;
+    for (size_t i = 0; i < grid.cellCount(); ++i) {
+        const double z = grid.values[0][i];
+        elevationMin = std::min(elevationMin, z);
+        elevationMax = std::max(elevationMax, z);
+        double top = z;
+        if (waterLayer_ >= 0) {
+            const double d = grid.values[size_t(waterLayer_)][i];
+            depthMax = std::max(depthMax, d);
+            top += std::max(d, 0.0);
+        }
+        surfaceMax = std::max(surfaceMax, top);
+    }
+    // The smooth surface is a convex combination of cell values: it stays within their range.
+    zMin = elevationMin;
+    zMax = surfaceMax;
+}
+
+Camera overviewCamera(const Scene& s, int width, int height) {
+    const Grid& g = s.grid();
+    const double cx = 0.5 * (s.xMin + s.xMax), cy = 0.5 * (s.yMin + s.yMax), cz = 0.5 * (s.zMin + s.zMax);
+    const double diag = std::hypot(s.xMax - s.xMin, s.yMax - s.yMin, s.zMax - s.zMin);
+    Camera c;
+    c.yawDeg = 20;
+    c.pitchDeg = -35;
+    c.fovYDeg = 45;
+    c.width = width;
+    c.height = height;
+    const CameraBasis b = basisOf(c);
+    const double dist = 0.5 * diag / b.tanHalfY;
+    c.xWorld = g.originWorldX + cx - b.forward[0] * dist;
+    c.yWorld = g.originWorldY + cy - b.forward[1] * dist;
+    c.zWorld = cz - b.forward[2] * dist;
+    return c;
+}
+
+namespace {
+
+struct Rgb {
+    double r, g, b;
+};
+
+Rgb ramp(const std::vector<std::pair<double, Rgb>>& stops, double t) {
+    t = std::clamp(t, 0.0, 1.0);
+    for (size_t i = 1; i < stops.size(); ++i)
+        if (t <= stops[i].first) {
+            const double a = (t - stops[i - 1].first) / (stops[i].first - stops[i - 1].first);
+            const Rgb &p = stops[i - 1].second, &q = stops[i].second;
+            return {p.r + a * (q.r - p.r), p.g + a * (q.g - p.g), p.b + a * (q.b - p.b)};
+        }
+    return stops.back().second;
+}
+
+const std::vector<std::pair<double, Rgb>> kElevation{{0.0, {0.24, 0.47, 0.24}}, {0.3, {0.59, 0.67, 0.35}}, {0.55, {0.63, 0.51, 0.35}},
+                                                     {0.8, {0.6, 0.6, 0.6}},    {1.0, {0.98, 0.98, 0.98}}};
+const std::vector<std::pair<double, Rgb>> kDepth{{0.0, {0.6, 0.87, 0.95}}, {0.5, {0.16, 0.47, 0.8}}, {1.0, {0.04, 0.12, 0.45}}};
+
+double toLinear(double c) { return c <= 0.04045 ? c / 12.92 : std::pow((c + 0.055) / 1.055, 2.4); }
+uint8_t toSrgb8(double c) {
+    c = std::clamp(c, 0.0, 1.0);
+    const double s = c <= 0.0031308 ? 12.92 * c : 1.055 * std::pow(c, 1.0 / 2.4) - 0.055;
+    return static_cast<uint8_t>(std::lround(s * 255.0));
+}
+
+// A 3 x 5 pixel font for legend labels: digits, '.', '-', 'm'.
+const char* glyph(char ch) {
+    switch (ch) {
+        case '0': return "111101101101111";
+        case '1': return "010110010010111";
+        case '2': return "111001111100111";
+        case '3': return "111001111001111";
+        case '4': return "101101111001001";
+        case '5': return "111100111001111";
+        case '6': return "111100111101111";
+        case '7': return "111001001001001";
+        case '8': return "111101111101111";
+        case '9': return "111101111001111";
+        case '.': return "000000000000010";
+        case '-': return "000000111000000";
+        case 'm': return "000000111111101";
+        default: return "000000000000000";
+    }
+}
+
+void drawText(Frame& f, int x, int y, const std::string& text, int scale) {
+    for (char ch : text) {
+        const char* gl = glyph(ch);
+        for (int r = 0; r < 5; ++r)
+            for (int c = 0; c < 3; ++c)
+                if (gl[r * 3 + c] == '1')
+                    for (int dy = 0; dy < scale; ++dy)
+                        for (int dx = 0; dx < scale; ++dx) {
+                            const int px = x + c * scale + dx, py = y + r * scale + dy;
+                            if (px < 0 || py < 0 || px >= f.width || py >= f.height) continue;
+                            uint8_t* p = &f.rgb[(size_t(py) * size_t(f.width) + size_t(px)) * 3];
+                            p[0] = p[1] = p[2] = 20;
+                        }
+        x += 4 * scale;
+    }
+}
+
+std::string label(double v) {
+    char b[32];
+    std::snprintf(b, sizeof b, std::abs(v) >= 100 ? "%.0fm" : "%.1fm", v);
+    return b;
+}
+
+// A colour bar with its range, at the image's right edge.
+void drawLegend(Frame& f, const std::vector<std::pair<double, Rgb>>& stops, double lo, double hi) {
+    const int scale = std::max(1, f.height / 360);
+    const int barH = std::max(20, f.height * 2 / 5), barW = std::max(6, 6 * scale);
+    const int x0 = f.width - barW - 8 * scale - 4 * 4 * scale * 2, y0 = f.height / 2 - barH / 2;
+    if (x0 < 0 || y0 < 0) return;
+    for (int y = 0; y < barH; ++y) {
+        const Rgb c = ramp(stops, 1.0 - double(y) / (barH - 1));
+        for (int x = 0; x < barW; ++x) {
+            uint8_t* p = &f.rgb[(size_t(y0 + y) * size_t(f.width) + size_t(x0 + x)) * 3];
+            p[0] = static_cast<uint8_t>(c.r * 255), p[1] = static_cast<uint8_t>(c.g * 255), p[2] = static_cast<uint8_t>(c.b * 255);
+        }
+    }
+    drawText(f, x0 + barW + 2 * scale, y0, label(hi), scale);
+    drawText(f, x0 + barW + 2 * scale, y0 + barH - 5 * scale, label(lo), scale);
+}
+
+}  // namespace
+
+Frame renderFrame(const Scene& scene, const Camera& camera, const RenderOptions& options, Timings& timings) {
+    camera.validate();
+    if (std::string why = options.validate(); !why.empty()) throw Error(why);
+    const auto start = Clock::now();
+    timings = Timings{};
+    const Grid& g = scene.grid();
+    const CameraBasis basis = basisOf(camera);
+    const double eye[3] = {camera.xWorld - g.originWorldX, camera.yWorld - g.originWorldY, camera.zWorld};
+
+    // Near and far from the scene: far reaches the farthest corner of the bounds.
+    double far = 0;
+    for (double x : {scene.xMin, scene.xMax})
+        for (double y : {scene.yMin, scene.yMax})
+            for (double z : {scene.zMin, scene.zMax}) far = std::max(far, std::hypot(x - eye[0], y - eye[1], z - eye[2]));
+    far = far * 1.01 + 1.0;
+    const double near = std::max(1e-3, far * 1e-7);
+
+    // 1. Cascade fitting.
+    auto t = Clock::now();
+    ViewVolume view;
+    view.eyeLocal = {eye[0], eye[1], eye[2]};
+    view.forward = basis.forward;
+    view.right = basis.right;
+    view.up = basis.up;
+    view.tanHalfX = basis.tanHalfX;
+    view.tanHalfY = basis.tanHalfY;
+    view.nearM = near;
+    view.farM = far;
+    view.yawRad = camera.yawDeg * M_PI / 180.0;
+    view.boxMin = {scene.xMin, scene.yMin, scene.zMin};
+    view.boxMax = {scene.xMax, scene.yMax, scene.zMax};
+    view.finestCellM = g.finestCellM;
+    const CascadeFit fit = fitCascades(view, options.cascades, options.texelsPerSide);
+    timings.fittingMs = msSince(t);
+
+    // 2. Approximation, 3. max mipmaps.
+    std::vector<detail::CascadeTextures> tex(fit.cascades.size());
+    for (size_t k = 0; k < fit.cascades.size(); ++k) {
+        const Cascade& c = fit.cascades[k];
+        CascadeStats cs;
+        cs.nearM = c.splitNear;
+        cs.farM = c.farWithOverlap;
+        cs.texelM = c.texelM;
+        for (uint8_t v : c.visible) cs.visibleTexels += v;
+        t = Clock::now();
+        if (!c.empty()) cs.gaussians = detail::approximate(scene, c, tex[k], options.waterMinDepthM, options.threads);
+        cs.approximationMs = msSince(t);
+        timings.approximationMs += cs.approximationMs;
+        t = Clock::now();
+        if (!c.empty()) {
+            tex[k].terrain.buildMip();
+            if (tex[k].hasWater) tex[k].water.buildMip();
+        }
+        timings.mipmapMs += msSince(t);
+        timings.cascades.push_back(cs);
+    }
+
+    // 4. Ray casting, one ray per pixel.
+    const int W = camera.width, H = camera.height;
+    Frame f;
+    f.width = W;
+    f.height = H;
+    f.originWorldX = g.originWorldX;
+    f.originWorldY = g.originWorldY;
+    const size_t pixels = size_t(W) * size_t(H);
+    const float inf = std::numeric_limits<float>::infinity();
+    f.distanceM.assign(pixels, inf);
+    for (auto* v : {&f.posX, &f.posY, &f.posZ, &f.nX, &f.nY, &f.nZ, &f.waterDepthM}) v->assign(pixels, 0.0f);
+    f.cascade.assign(pixels, -1.0f);
+    std::vector<uint8_t> isWater(pixels, 0);
+    std::vector<std::array<float, 3>> dirs(pixels);
+    detail::RayContext ctx{&fit, &tex, {eye[0], eye[1], eye[2]}, near, far};
+    t = Clock::now();
+    parallelFor(size_t(H), 4, options.threads, [&](size_t b, size_t e, unsigned) {
+        for (size_t py = b; py < e; ++py)
+            for (int px = 0; px < W; ++px) {
+                const double sx = (2.0 * (px + 0.5) / W - 1.0) * basis.tanHalfX;
+                const double sy = (1.0 - 2.0 * (double(py) + 0.5) / H) * basis.tanHalfY;
+                double d[3];
+                for (int a = 0; a < 3; ++a) d[a] = basis.forward[size_t(a)] + sx * basis.right[size_t(a)] + sy * basis.up[size_t(a)];
+                const double len = std::sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
+                for (double& v : d) v /= len;
+                const size_t i = py * size_t(W) + size_t(px);
+                dirs[i] = {float(d[0]), float(d[1]), float(d[2])};
+                if (fit.hull.size() < 3) continue;
+                const detail::Hit h = detail::castRay(ctx, d);
+                if (!h.hit) continue;
+                f.distanceM[i] = float(h.t);
+                f.posX[i] = float(eye[0] + d[0] * h.t);
+                f.posY[i] = float(eye[1] + d[1] * h.t);
+                f.posZ[i] = float(eye[2] + d[2] * h.t);
+                f.nX[i] = float(h.nx), f.nY[i] = float(h.ny), f.nZ[i] = float(h.nz);
+                f.cascade[i] = float(h.cascade);
+                f.waterDepthM[i] = float(h.depth);
+                isWater[i] = h.water;
+            }
+    });
+    timings.raycastMs = msSince(t);
+    timings.rays = pixels;
+
+    // 5. Shading: hillshade light, elevation or depth colours, distance fog, sky, outlines, legend.
+    t = Clock::now();
+    f.rgb.assign(pixels * 3, 0);
+    const double sunAz = 315 * M_PI / 180, sunAlt = 45 * M_PI / 180;
+    const double sun[3] = {std::sin(sunAz) * std::cos(sunAlt), std::cos(sunAz) * std::cos(sunAlt), std::sin(sunAlt)};
+    const double fogDist = 3.0 * std::hypot(scene.xMax - scene.xMin, scene.yMax - scene.yMin);
+    const Rgb skyHorizon{0.78, 0.84, 0.92}, skyZenith{0.43, 0.59, 0.82};
+    const double zRange = std::max(scene.elevationMax - scene.elevationMin, 1e-6);
+    const double dRange = std::max(scene.depthMax, 1e-6);
+    const double pixelAngle = 2.0 * basis.tanHalfY / H;
+    std::vector<uint64_t> hits(resolveThreads(options.threads), 0);
+    parallelFor(size_t(H), 16, options.threads, [&](size_t b, size_t e, unsigned worker) {
+        for (size_t py = b; py < e; ++py)
+            for (int px = 0; px < W; ++px) {
+                const size_t i = py * size_t(W) + size_t(px);
+                const auto& d = dirs[i];
+                const double up = std::clamp(double(d[2]), 0.0, 1.0);
+                const Rgb sky{skyHorizon.r + up * (skyZenith.r - skyHorizon.r), skyHorizon.g + up * (skyZenith.g - skyHorizon.g),
+                              skyHorizon.b + up * (skyZenith.b - skyHorizon.b)};
+                Rgb c = sky;
+                if (std::isfinite(f.distanceM[i])) {
+                    ++hits[worker];
+                    const double light = 0.3 + 0.7 * std::max(0.0, f.nX[i] * sun[0] + f.nY[i] * sun[1] + f.nZ[i] * sun[2]);
+                    Rgb base;
+                    if (isWater[i]) {
+                        base = ramp(kDepth, f.waterDepthM[i] / dRange);
+                    } else if (options.color == ColorMode::WaterDepth) {
+                        base = {0.7, 0.7, 0.68};
+                    } else {
+                        base = ramp(kElevation, (f.posZ[i] - scene.elevationMin) / zRange);
+                    }
+                    c = {toLinear(base.r) * light, toLinear(base.g) * light, toLinear(base.b) * light};
+                    if (options.cellOutlines) {
+                        if (auto cell = g.locate(f.posX[i], f.posY[i])) {
+                            const auto q = g.cellSquare(*cell);
+                            const double edge = std::min({f.posX[i] - q.x0, q.x1 - f.posX[i], f.posY[i] - q.y0, q.y1 - f.posY[i]});
+                            if (edge < 0.7 * f.distanceM[i] * pixelAngle) c = {c.r * 0.35, c.g * 0.35, c.b * 0.35};
+                        }
+                    }
+                    const double fog = 0.5 * (1.0 - std::exp(-f.distanceM[i] / fogDist));
+                    const Rgb skyLin{toLinear(sky.r), toLinear(sky.g), toLinear(sky.b)};
+                    c = {c.r + fog * (skyLin.r - c.r), c.g + fog * (skyLin.g - c.g), c.b + fog * (skyLin.b - c.b)};
+                } else {
+                    c = {toLinear(sky.r), toLinear(sky.g), toLinear(sky.b)};
+                }
+                uint8_t* p = &f.rgb[i * 3];
+                p[0] = toSrgb8(c.r), p[1] = toSrgb8(c.g), p[2] = toSrgb8(c.b);
+            }
+    });
+    for (uint64_t h : hits) timings.hits += h;
+    if (options.legend) {
+        if (scene.hasWater() && scene.depthMax > 0)
+            drawLegend(f, kDepth, 0, scene.depthMax);
+        else if (options.color == ColorMode::Elevation)
+            drawLegend(f, kElevation, scene.elevationMin, scene.elevationMax);
+    }
+    timings.shadingMs = msSince(t);
+    timings.totalMs = msSince(start);
+    return f;
+}
+
+std::string Timings::toJson() const {
+    char b[512];
+    std::string j = "{\n";
+    std::snprintf(b, sizeof b,
+                  "  \"fitting_ms\": %.3f,\n  \"approximation_ms\": %.3f,\n  \"mipmap_ms\": %.3f,\n  \"raycast_ms\": %.3f,\n"
+                  "  \"shading_ms\": %.3f,\n  \"total_ms\": %.3f,\n  \"rays\": %llu,\n  \"hits\": %llu,\n  \"cascades\": [",
+                  fittingMs, approximationMs, mipmapMs, raycastMs, shadingMs, totalMs, (unsigned long long)rays, (unsigned long long)hits);
+    j += b;
+    for (size_t k = 0; k < cascades.size(); ++k) {
+        const CascadeStats& c = cascades[k];
+        std::snprintf(b, sizeof b,
+                      "%s\n    {\"index\": %zu, \"near_m\": %.3f, \"far_m\": %.3f, \"texel_m\": %.6g, \"visible_texels\": %llu, "
+                      "\"gaussians\": %llu, \"approximation_ms\": %.3f}",
+                      k ? "," : "", k, c.nearM, c.farM, c.texelM, (unsigned long long)c.visibleTexels, (unsigned long long)c.gaussians,
+                      c.approximationMs);
+        j += b;
+    }
+    j += "\n  ]\n}\n";
+    return j;
+}
+
+std::string Timings::toTable() const {
+    char b[256];
+    std::string s = "stage timings (ms):\n";
+    std::snprintf(b, sizeof b, "  fitting         %9.2f\n  approximation   %9.2f\n", fittingMs, approximationMs);
+    s += b;
+    for (size_t k = 0; k < cascades.size(); ++k) {
+        const CascadeStats& c = cascades[k];
+        std::snprintf(b, sizeof b, "    cascade %zu     %9.2f   offsets %.0f..%.0f m, texel %.3g m, %llu visible texels, %llu Gaussians\n", k,
+                      c.approximationMs, c.nearM, c.farM, c.texelM, (unsigned long long)c.visibleTexels, (unsigned long long)c.gaussians);
+        s += b;
+    }
+    std::snprintf(b, sizeof b, "  mipmaps         %9.2f\n  ray casting     %9.2f   %llu rays, %llu hits\n  shading         %9.2f\n  total           %9.2f\n",
+                  mipmapMs, raycastMs, (unsigned long long)rays, (unsigned long long)hits, shadingMs, totalMs);
+    s += b;
+    return s;
+}
+
+}  // namespace hc::render
