@@ -15,7 +15,7 @@ endfunction()
 
 # hc_add_library(NAME SOURCES...): a folder's library with its public headers in include/.
 function(hc_add_library name)
-  add_library(${name} ${ARGN})
+  add_library(${name} STATIC ${ARGN})  # static whatever a find module sets BUILD_SHARED_LIBS to
   target_include_directories(${name} PUBLIC ${CMAKE_CURRENT_SOURCE_DIR}/include)
   hc_target_defaults(${name})
 endfunction()

@@ -168,29 +168,19 @@ CascadeFit fitCascades(const ViewVolume& v, int count, int texelsPerSide) {
             c.x0 = (std::floor(bx0 / c.texelM) - 1) * c.texelM;
             c.y0 = (std::floor(by0 / c.texelM) - 1) * c.texelM;
             c.visible.assign(size_t(c.n) * size_t(c.n), 0);
-            // Scanline: the polygon's x-range in each texel row, widened by 1.5 texels.
+            // Visible texels: the polygon dilated by 1.5 texels (so every patch a ray can reach inside
+            // the polygon has four known corners). Row by row, the dilation's x-range is the polygon
+            // clipped to the band [y - m, y + m], widened by m.
+            const double m = 1.5 * c.texelM;
+            const Vec2 yAxis{0, 1};
             for (int j = 0; j < c.n; ++j) {
                 const double y = c.y0 + j * c.texelM;
+                const std::vector<Vec2> band = clipSlab(c.polygon, yAxis, y - m, y + m);
+                if (band.empty()) continue;
                 double xl = HUGE_VAL, xr = -HUGE_VAL;
-                const size_t m = c.polygon.size();
-                for (size_t a = 0; a < m; ++a) {
-                    const Vec2& p = c.polygon[a];
-                    const Vec2& q = c.polygon[(a + 1) % m];
-                    const double ylo = std::min(p[1], q[1]) - 1.5 * c.texelM, yhi = std::max(p[1], q[1]) + 1.5 * c.texelM;
-                    if (y < ylo || y > yhi) continue;
-                    if (std::abs(q[1] - p[1]) < 1e-12) {
-                        xl = std::min({xl, p[0], q[0]});
-                        xr = std::max({xr, p[0], q[0]});
-                    } else {
-                        double t = std::clamp((y - p[1]) / (q[1] - p[1]), 0.0, 1.0);
-                        double x = p[0] + t * (q[0] - p[0]);
-                        xl = std::min(xl, x);
-                        xr = std::max(xr, x);
-                    }
-                }
-                if (xl > xr) continue;
-                const int i0 = std::max(0, int(std::floor((xl - c.x0) / c.texelM - 1.5)));
-                const int i1 = std::min(c.n - 1, int(std::ceil((xr - c.x0) / c.texelM + 1.5)));
+                for (const Vec2& p : band) xl = std::min(xl, p[0]), xr = std::max(xr, p[0]);
+                const int i0 = std::max(0, int(std::floor((xl - m - c.x0) / c.texelM)));
+                const int i1 = std::min(c.n - 1, int(std::ceil((xr + m - c.x0) / c.texelM)));
                 for (int i = i0; i <= i1; ++i) c.visible[size_t(j) * size_t(c.n) + size_t(i)] = 1;
             }
         }

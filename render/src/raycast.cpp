@@ -124,7 +124,13 @@ void offsetInterval(const double o[3], const double d[3], const Vec2& dir, doubl
     t1 = std::min(t1, b);
 }
 
-Hit hitIn(const RayContext& ctx, size_t k, const double o[3], const double d[3], double lo, double hi, bool& touched, bool& underground) {
+// What a ray has met so far, over its cascades: each surface's first contact decides whether the ray
+// started above it. Under the water surface (a camera in a lake) the water is not drawn at all.
+struct RayState {
+    bool touchedTerrain = false, touchedWater = false, underWater = false;
+};
+
+Hit hitIn(const RayContext& ctx, size_t k, const double o[3], const double d[3], double lo, double hi, RayState& st, bool& underground) {
     Hit h;
     const Cascade& c = ctx.fit->cascades[k];
     const CascadeTextures& tex = (*ctx.tex)[k];
@@ -146,16 +152,19 @@ Hit hitIn(const RayContext& ctx, size_t k, const double o[3], const double d[3],
         t1 = std::min(t1, b);
     }
     if (!(t0 < t1)) return h;
-    // Water first: the terrain under it must not count as the ray's first contact.
-    bool touchedWater = touched, touchedTerrain = touched;
-    PatchHit terrain = traverse(tex.terrain, c, o, d, t0, t1, touchedTerrain);
-    PatchHit water = tex.hasWater ? traverse(tex.water, c, o, d, t0, terrain.hit ? terrain.t : t1, touchedWater) : PatchHit{};
-    if (terrain.underground && !(water.hit && water.t <= t0)) {
+    PatchHit terrain = traverse(tex.terrain, c, o, d, t0, t1, st.touchedTerrain);
+    if (terrain.underground) {
         underground = true;
         return h;
     }
-    if (water.underground) water = PatchHit{};  // under water at its start: look at the terrain
-    touched = touched || touchedTerrain || touchedWater;
+    PatchHit water;
+    if (tex.hasWater && !st.underWater) {
+        water = traverse(tex.water, c, o, d, t0, terrain.hit ? terrain.t : t1, st.touchedWater);
+        if (water.underground) {
+            st.underWater = true;
+            water = PatchHit{};
+        }
+    }
     const PatchHit& best = water.hit ? water : terrain;
     if (!best.hit) return h;
     h.hit = true;
@@ -180,10 +189,11 @@ Hit hitIn(const RayContext& ctx, size_t k, const double o[3], const double d[3],
 
 Hit castRay(const RayContext& ctx, const double dir[3]) {
     const auto& cs = ctx.fit->cascades;
-    bool touched = false, underground = false;
+    RayState st;
+    bool underground = false;
     for (size_t k = 0; k < cs.size(); ++k) {
         const double lo = k == 0 ? -HUGE_VAL : cs[k].splitNear;
-        Hit h = hitIn(ctx, k, ctx.eye, dir, lo, cs[k].farWithOverlap, touched, underground);
+        Hit h = hitIn(ctx, k, ctx.eye, dir, lo, cs[k].farWithOverlap, st, underground);
         if (underground) return Hit{};
         if (!h.hit) continue;
         // In the overlap with the next cascade: blend both hits by a convex combination.
@@ -191,8 +201,10 @@ Hit castRay(const RayContext& ctx, const double dir[3]) {
             const double off = (ctx.eye[0] + dir[0] * h.t - ctx.eye[0]) * ctx.fit->dir[0] + (ctx.eye[1] + dir[1] * h.t - ctx.eye[1]) * ctx.fit->dir[1];
             const double zoneStart = cs[k].splitFar, zoneEnd = cs[k].farWithOverlap;
             if (off > zoneStart && zoneEnd > zoneStart) {
-                bool touched2 = true, under2 = false;
-                Hit h2 = hitIn(ctx, k + 1, ctx.eye, dir, cs[k + 1].splitNear, cs[k + 1].farWithOverlap, touched2, under2);
+                RayState st2 = st;
+                st2.touchedTerrain = st2.touchedWater = true;
+                bool under2 = false;
+                Hit h2 = hitIn(ctx, k + 1, ctx.eye, dir, cs[k + 1].splitNear, cs[k + 1].farWithOverlap, st2, under2);
                 if (h2.hit && h2.water == h.water) {
                     const double w = std::clamp((off - zoneStart) / (zoneEnd - zoneStart), 0.0, 1.0);
                     h.t = (1 - w) * h.t + w * h2.t;

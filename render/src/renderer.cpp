@@ -191,6 +191,8 @@ Frame renderFrame(const Scene& scene, const Camera& camera, const RenderOptions&
     view.finestCellM = g.finestCellM;
     const CascadeFit fit = fitCascades(view, options.cascades, options.texelsPerSide);
     timings.fittingMs = msSince(t);
+    timings.viewDirX = fit.dir[0];
+    timings.viewDirY = fit.dir[1];
 
     // 2. Approximation, 3. max mipmaps.
     std::vector<detail::CascadeTextures> tex(fit.cascades.size());
@@ -199,6 +201,7 @@ Frame renderFrame(const Scene& scene, const Camera& camera, const RenderOptions&
         CascadeStats cs;
         cs.nearM = c.splitNear;
         cs.farM = c.farWithOverlap;
+        cs.splitFarM = c.splitFar;
         cs.texelM = c.texelM;
         for (uint8_t v : c.visible) cs.visibleTexels += v;
         t = Clock::now();

@@ -43,7 +43,8 @@ struct Frame {
 };
 
 struct CascadeStats {
-    double nearM = 0, farM = 0;         // offsets along the projected view direction
+    double nearM = 0, farM = 0;         // offsets along the projected view direction (far includes the overlap)
+    double splitFarM = 0;               // where the blend with the next cascade starts
     double texelM = 0;                  // texel size
     uint64_t visibleTexels = 0;
     uint64_t gaussians = 0;             // kernel evaluations in the approximation
@@ -51,6 +52,7 @@ struct CascadeStats {
 };
 
 struct Timings {
+    double viewDirX = 0, viewDirY = 1;  // the horizontal direction the cascade offsets are measured along
     double fittingMs = 0, approximationMs = 0, mipmapMs = 0, raycastMs = 0, shadingMs = 0, totalMs = 0;
     std::vector<CascadeStats> cascades;
     uint64_t rays = 0, hits = 0;
