@@ -9,7 +9,6 @@
 #include "heightcast/grid/atomic_file.h"
 #include "heightcast/grid/error.h"
 #include "heightcast/grid/grid_file.h"
-#include "heightcast/grid/parallel.h"
 #include "heightcast/influence/surface.h"
 
 namespace {
@@ -94,11 +93,9 @@ int main(int argc, char** argv) {
         std::fprintf(stderr, "hc-probe: %s\n", note.c_str());
         hc::influence::SurfaceEvaluator eval(grid, lists);
 
-        std::vector<std::optional<double>> values(pts.size());
-        hc::parallelFor(pts.size(), 4096, threads, [&](size_t b, size_t e, unsigned) {
-            for (size_t i = b; i < e; ++i)
-                values[i] = eval.value(pts[i].x - grid.originWorldX, pts[i].y - grid.originWorldY, layer);
-        });
+        std::vector<std::array<double, 2>> local(pts.size());
+        for (size_t i = 0; i < pts.size(); ++i) local[i] = {pts[i].x - grid.originWorldX, pts[i].y - grid.originWorldY};
+        const std::vector<std::optional<double>> values = eval.values(local, layer, threads);
         std::string text = "x,y,value\n";
         char buf[96];
         for (size_t i = 0; i < pts.size(); ++i) {

@@ -239,6 +239,18 @@ InfluenceLists buildInfluenceLists(const Grid& g, const KernelParams& params, un
             for (size_t k = sb.lo; k < sb.hi; ++k) offsets[k + 1] = offsets[k] + batchLengths[b - b0][k - sb.lo];
         }
         const size_t needed = offsets[superBlocks[b1 - 1].hi];
+        if (b0 == 0 && superBlocks[b1 - 1].hi < n) {
+            // The first batch tells the mean list length: size the buffer for all cells now, while
+            // moving it is cheap (lists grow with sigma and with the cell-size ratio).
+            const double perCell = double(needed) / double(superBlocks[b1 - 1].hi);
+            const size_t estimate = size_t(perCell * 1.1 * double(n)) + 1024;
+            if (estimate > capacity) {
+                auto bigger = std::unique_ptr<uint32_t[]>(new uint32_t[estimate]);
+                std::copy(indices.get(), indices.get() + used, bigger.get());
+                indices = std::move(bigger);
+                capacity = estimate;
+            }
+        }
         if (needed > capacity) {
             capacity = std::max(needed, capacity * 2);
             auto bigger = std::unique_ptr<uint32_t[]>(new uint32_t[capacity]);

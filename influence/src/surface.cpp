@@ -1,6 +1,9 @@
 #include "heightcast/influence/surface.h"
 
+#include <algorithm>
 #include <cmath>
+
+#include "heightcast/grid/parallel.h"
 
 #include "heightcast/grid/error.h"
 
@@ -29,17 +32,14 @@ SurfaceEvaluator::SurfaceEvaluator(const Grid& grid, const InfluenceLists& lists
     if (lists.cellCount() != grid.cellCount() || lists.gridStructureHash() != grid.structureHash())
         throw Error("influence lists do not belong to this grid");
     const size_t n = grid.cellCount();
-    cx_.resize(n);
-    cy_.resize(n);
-    r2_.resize(n);
-    a_.resize(n);
+    k_.resize(n);
     const double sigma = lists.params().sigma;
     for (size_t i = 0; i < n; ++i) {
-        grid.cellCenterLocal(i, cx_[i], cy_[i]);
+        grid.cellCenterLocal(i, k_[i].cx, k_[i].cy);
         const double c = grid.cellSizeM(i);
         const double r = lists.params().radiusM(c);
-        r2_[i] = r * r;
-        a_[i] = 1.0 / (2.0 * sigma * sigma * c * c);
+        k_[i].r2 = r * r;
+        k_[i].a = 1.0 / (2.0 * sigma * sigma * c * c);
     }
     depthLayer_ = grid.findLayer("water_depth");
 }
@@ -54,10 +54,11 @@ void SurfaceEvaluator::sums(size_t k, double x, double y, size_t l, double& num,
     num = den = 0;
     double gnx = 0, gny = 0, gdx = 0, gdy = 0;
     for (uint32_t i : lists_.list(k)) {
-        const double dx = x - cx_[i], dy = y - cy_[i];
+        const Kernel& q = k_[i];
+        const double dx = x - q.cx, dy = y - q.cy;
         const double d2 = dx * dx + dy * dy;
-        if (!(d2 < r2_[i])) continue;
-        const double e = std::exp(-d2 * a_[i]);
+        if (!(d2 < q.r2)) continue;
+        const double e = std::exp(-d2 * q.a);
         const double w = e - tail_;
         if (w <= 0) continue;
         const double rel = v[i] - base;
@@ -65,7 +66,7 @@ void SurfaceEvaluator::sums(size_t k, double x, double y, size_t l, double& num,
         den += w;
         if (dnum) {
             // dw/dx = e * (-2 a dx): the tail is constant.
-            const double gx = -2.0 * a_[i] * e * dx, gy = -2.0 * a_[i] * e * dy;
+            const double gx = -2.0 * q.a * e * dx, gy = -2.0 * q.a * e * dy;
             gnx += gx * rel;
             gny += gy * rel;
             gdx += gx;
@@ -110,13 +111,35 @@ std::optional<ValueGradient> SurfaceEvaluator::valueGradient(double x, double y,
     return evaluate(x, y, layer, true);
 }
 
+std::vector<std::optional<double>> SurfaceEvaluator::values(std::span<const std::array<double, 2>> pts, const Layer& layer,
+                                                            unsigned threads) const {
+    std::vector<std::optional<double>> out(pts.size());
+    // Sort by containing cell; points in holes keep their nullopt.
+    std::vector<std::pair<uint32_t, uint32_t>> order;  // (cell, point)
+    order.reserve(pts.size());
+    std::vector<std::vector<std::pair<uint32_t, uint32_t>>> parts(resolveThreads(threads));
+    parallelFor(pts.size(), 16384, threads, [&](size_t b, size_t e, unsigned w) {
+        for (size_t i = b; i < e; ++i)
+            if (auto k = grid_.locate(pts[i][0], pts[i][1])) parts[w].emplace_back(*k, static_cast<uint32_t>(i));
+    });
+    for (auto& p : parts) order.insert(order.end(), p.begin(), p.end());
+    std::sort(order.begin(), order.end());
+    parallelFor(order.size(), 4096, threads, [&](size_t b, size_t e, unsigned) {
+        for (size_t j = b; j < e; ++j) {
+            const uint32_t i = order[j].second;
+            if (auto r = evaluate(pts[i][0], pts[i][1], layer, false)) out[i] = r->value;
+        }
+    });
+    return out;
+}
+
 std::optional<double> SurfaceEvaluator::valueBruteForce(double x, double y, const Layer& layer) const {
     if (!grid_.locate(x, y)) return std::nullopt;
     auto one = [&](size_t l) {
         double num = 0, den = 0;
         for (size_t i = 0; i < grid_.cellCount(); ++i) {
-            const double dx = x - cx_[i], dy = y - cy_[i];
-            const double w = std::max(0.0, std::exp(-(dx * dx + dy * dy) * a_[i]) - tail_);
+            const double dx = x - k_[i].cx, dy = y - k_[i].cy;
+            const double w = std::max(0.0, std::exp(-(dx * dx + dy * dy) * k_[i].a) - tail_);
             num += w * grid_.values[l][i];
             den += w;
         }

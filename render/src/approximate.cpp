@@ -22,7 +22,7 @@ constexpr int kLanes = 8;  // candidates per vector step (AVX2: 8 floats)
 // f in [-0.5, 0.5], by its Taylor polynomial to degree 6 (relative error < 2e-7, float's epsilon).
 // Branch-free, so loops over it vectorise.
 inline float expNeg(float x) {
-    x = x < -87.0f ? -87.0f : x;
+    x = std::max(x, -87.0f);
     const float y = x * 1.44269504088896341f;
     const float n = std::floor(y + 0.5f);
     const float f = y - n;
@@ -139,15 +139,22 @@ uint64_t approximate(const Scene& scene, const Cascade& c, CascadeTextures& tex,
                     const float fx = static_cast<float>(c.x0 + i * s - kx);
                     gaussians[worker] += m;
                     float num[kLanes] = {}, den[kLanes] = {}, numD[kLanes] = {};
+                    const float* __restrict ex = cand.ex.data();
+                    const float* __restrict ey = cand.ey.data();
+                    const float* __restrict ca = cand.a.data();
+                    const float* __restrict cr2 = cand.r2.data();
+                    const float* __restrict cdz = cand.dz.data();
+                    const float* __restrict cdd = cand.dd.data();
+                    // Branch-free (masks as 0/1 factors) so the compiler vectorises across the 8 lanes.
                     for (size_t base = 0; base < padded; base += kLanes)
                         for (int l = 0; l < kLanes; ++l) {
                             const size_t idx = base + size_t(l);
-                            const float dx = fx - cand.ex[idx], dy = fy - cand.ey[idx];
+                            const float dx = fx - ex[idx], dy = fy - ey[idx];
                             const float d2 = dx * dx + dy * dy;
-                            float w = expNeg(-d2 * cand.a[idx]) - tail;
-                            w = (d2 < cand.r2[idx] && w > 0.0f) ? w : 0.0f;
-                            num[l] += w * cand.dz[idx];
-                            numD[l] += w * cand.dd[idx];
+                            const float kernel = expNeg(-d2 * ca[idx]) - tail;
+                            const float w = std::max(kernel, 0.0f) * static_cast<float>(d2 < cr2[idx]);
+                            num[l] += w * cdz[idx];
+                            numD[l] += w * cdd[idx];
                             den[l] += w;
                         }
                     float sn = 0, sd = 0, snD = 0;

@@ -8,7 +8,9 @@
 // exp(-1 / (4 sigma^2)) - exp(-R^2 / 2) > 0, so the denominator cannot vanish.
 #pragma once
 
+#include <array>
 #include <optional>
+#include <span>
 #include <string>
 #include <vector>
 
@@ -40,6 +42,11 @@ public:
 
     std::optional<double> value(double xLocal, double yLocal, const Layer& layer) const;
     std::optional<ValueGradient> valueGradient(double xLocal, double yLocal, const Layer& layer) const;
+    // Many points at once (what hc-probe does): each point is located, the points are evaluated in the
+    // grid's storage order (neighbouring points share cache lines of lists and cells: 2-3x faster than
+    // random order) on `threads` workers, and the results come back in the input order.
+    std::vector<std::optional<double>> values(std::span<const std::array<double, 2>> pointsLocal, const Layer& layer,
+                                              unsigned threads = 0) const;
     // The same by brute force over every cell (tests only: O(n) per point).
     std::optional<double> valueBruteForce(double xLocal, double yLocal, const Layer& layer) const;
 
@@ -53,7 +60,12 @@ private:
     const Grid& grid_;
     const InfluenceLists& lists_;
     double tail_;
-    std::vector<double> cx_, cy_, r2_, a_;  // per cell: centre [m local], squared radius, 1 / (2 sigma^2 c^2)
+    // Per cell, packed in one record so a random list entry costs one cache line, not four:
+    // centre [m local], squared radius, 1 / (2 sigma^2 c^2).
+    struct Kernel {
+        double cx, cy, r2, a;
+    };
+    std::vector<Kernel> k_;
     int depthLayer_ = -1;
 };
 
