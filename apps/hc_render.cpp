@@ -1,5 +1,6 @@
 // hc-render: a picture (PNG, and EXR layers) of the smooth surface of a grid from a camera.
 #include <chrono>
+#include <optional>
 #include <cstdio>
 #include <vector>
 
@@ -81,6 +82,18 @@ int main(int argc, char** argv) {
         std::vector<double> cam, look;
         if (!cameraText.empty()) cam = numbers(cameraText, "--camera", 6, 6);
         if (!lookAt.empty()) look = numbers(lookAt, "--look-at", 6, 7);
+        std::optional<hc::render::Camera> given;
+        if (!cam.empty()) {
+            hc::render::Camera c;
+            c.xWorld = cam[0], c.yWorld = cam[1], c.zWorld = cam[2];
+            c.yawDeg = cam[3], c.pitchDeg = cam[4], c.fovYDeg = cam[5];
+            c.width = int(w), c.height = int(h);
+            given = c;
+        } else if (!look.empty()) {
+            given = hc::render::Camera::lookAt({look[0], look[1], look[2]}, {look[3], look[4], look[5]}, look.size() > 6 ? look[6] : 50.0,
+                                               int(w), int(h));
+        }
+        if (given) given->validate();
 
         hc::Grid grid = hc::readGrid(gridPath);
         if (cachePath.empty()) cachePath = hc::influence::defaultCachePath(gridPath);
@@ -88,15 +101,7 @@ int main(int argc, char** argv) {
         auto lists = hc::influence::loadOrBuildCache(grid, params, cachePath, options.threads, true, note);
         std::fprintf(stderr, "hc-render: %s\n", note.c_str());
         hc::render::Scene scene(grid, lists);
-        hc::render::Camera camera = hc::render::overviewCamera(scene, int(w), int(h));
-        if (!cam.empty()) {
-            camera.xWorld = cam[0], camera.yWorld = cam[1], camera.zWorld = cam[2];
-            camera.yawDeg = cam[3], camera.pitchDeg = cam[4], camera.fovYDeg = cam[5];
-        } else if (!look.empty()) {
-            camera = hc::render::Camera::lookAt({look[0], look[1], look[2]}, {look[3], look[4], look[5]}, look.size() > 6 ? look[6] : 50.0,
-                                                int(w), int(h));
-        }
-        camera.validate();
+        const hc::render::Camera camera = given ? *given : hc::render::overviewCamera(scene, int(w), int(h));
 
         hc::render::Timings timings;
         hc::render::Frame frame = hc::render::renderFrame(scene, camera, options, timings);

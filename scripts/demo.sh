@@ -2,7 +2,8 @@
 # The main job on the bundled real DEM (data/hef_srtm.tif, Hintereisferner, Oetztal Alps, SRTM 3"):
 # install dependencies, build, ingest it with a bathtub flood at 2000 m into an adaptive grid, build
 # its influence cache, export the smooth surface (GeoTIFF elevation, EXR water depth, VDB level sets),
-# probe it, and print where everything is and how long each stage took.
+# probe it, render it (an overview and a view up the flooded valley: PNG + EXR layers), and print
+# where everything is and how long each stage took.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 now() { date +%s.%N; }
@@ -21,6 +22,10 @@ mkdir -p out
 # the water depth in the flooded valley at the domain's south-west corner.
 ./build/bin/hc-probe out/hef.hcg --xy 633759,5184153
 ./build/bin/hc-probe out/hef.hcg --xy 622800,5170600 --layer water_depth | tail -n 1; t7=$(now)
+./build/bin/hc-render out/hef.hcg -o out/hef_overview.png --exr out/hef_overview.exr --timings out/hef_overview_timings.json \
+  --size 1280x720
+./build/bin/hc-render out/hef.hcg -o out/hef_valley.png --size 1280x720 --cells \
+  --look-at 626000,5172000,3200,634000,5184000,2400,60; t8=$(now)
 echo
 echo "outputs:"
 echo "  grid              $(pwd)/out/hef.hcg"
@@ -28,7 +33,8 @@ echo "  grid summary      $(pwd)/out/hef.json"
 echo "  cells             $(pwd)/out/hef_cells.csv"
 echo "  influence cache   $(pwd)/out/hef.hci"
 echo "  smooth surface    $(pwd)/out/hef_elevation.tif (GeoTIFF), $(pwd)/out/hef_water_depth.exr (EXR), $(pwd)/out/hef.vdb (OpenVDB)"
+echo "  images            $(pwd)/out/hef_overview.png (+ .exr layers, _timings.json), $(pwd)/out/hef_valley.png (cell outlines)"
 echo "stage timings (s):"
-awk -v a="$t0" -v b="$t1" -v c="$t2" -v d="$t3" -v e="$t4" -v f="$t5" -v g="$t6" -v h="$t7" 'BEGIN {
+awk -v a="$t0" -v b="$t1" -v c="$t2" -v d="$t3" -v e="$t4" -v f="$t5" -v g="$t6" -v h="$t7" -v i="$t8" 'BEGIN {
   printf "  dependencies  %7.2f\n  build         %7.2f\n  ingest        %7.2f\n  validate      %7.2f\n", b-a, c-b, d-c, e-d
-  printf "  influence     %7.2f\n  export        %7.2f\n  probe         %7.2f\n", f-e, g-f, h-g }'
+  printf "  influence     %7.2f\n  export        %7.2f\n  probe         %7.2f\n  render (x2)   %7.2f\n", f-e, g-f, h-g, i-h }'

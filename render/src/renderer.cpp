@@ -60,7 +60,7 @@ Camera overviewCamera(const Scene& s, int width, int height) {
     c.width = width;
     c.height = height;
     const CameraBasis b = basisOf(c);
-    const double dist = 0.5 * diag / b.tanHalfY;
+    const double dist = 0.4 * diag / b.tanHalfY;
     c.xWorld = g.originWorldX + cx - b.forward[0] * dist;
     c.yWorld = g.originWorldY + cy - b.forward[1] * dist;
     c.zWorld = cz - b.forward[2] * dist;
