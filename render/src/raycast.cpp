@@ -28,6 +28,7 @@ PatchHit traverse(const Heightfield& hf, const Cascade& c, const double o[3], co
     if (hf.mip.empty() || !(tIn < tOut)) return res;
     const double s = c.texelM;
     const double u0 = (o[0] - c.x0) / s, v0 = (o[1] - c.y0) / s, du = d[0] / s, dv = d[1] / s;
+    const double invDu = du != 0 ? 1.0 / du : 0.0, invDv = dv != 0 ? 1.0 / dv : 0.0;
     const int top = int(hf.mip.size()) - 1;
     const int patches = hf.n - 1;
     // A ray above the whole cascade never hits it.
@@ -42,14 +43,15 @@ PatchHit traverse(const Heightfield& hf, const Cascade& c, const double o[3], co
         const double pu = u0 + du * tp, pv = v0 + dv * tp;
         const int span = 1 << level;
         const int side = hf.mipSide[size_t(level)];
-        int iu = int(std::floor(pu / span)), iv = int(std::floor(pv / span));
-        if (iu < 0 || iv < 0 || iu >= side || iv >= side || pu >= patches || pv >= patches || pu < 0 || pv < 0) break;  // left the texture
+        if (!(pu >= 0 && pv >= 0 && pu < patches && pv < patches)) break;  // left the texture
+        const int iu = int(pu) >> level, iv = int(pv) >> level;  // pu, pv >= 0: truncation is floor
+        if (iu >= side || iv >= side) break;
         // Where the ray leaves this node.
         double tExit = tOut;
-        if (du > 0) tExit = std::min(tExit, ((iu + 1.0) * span - u0) / du);
-        if (du < 0) tExit = std::min(tExit, (iu * double(span) - u0) / du);
-        if (dv > 0) tExit = std::min(tExit, ((iv + 1.0) * span - v0) / dv);
-        if (dv < 0) tExit = std::min(tExit, (iv * double(span) - v0) / dv);
+        if (du > 0) tExit = std::min(tExit, ((iu + 1.0) * span - u0) * invDu);
+        if (du < 0) tExit = std::min(tExit, (iu * double(span) - u0) * invDu);
+        if (dv > 0) tExit = std::min(tExit, ((iv + 1.0) * span - v0) * invDv);
+        if (dv < 0) tExit = std::min(tExit, (iv * double(span) - v0) * invDv);
         tExit = std::max(tExit, t);
         const float nodeMax = hf.mip[size_t(level)][size_t(iv) * size_t(side) + size_t(iu)];
         const double zLow = std::min(o[2] + d[2] * t, o[2] + d[2] * tExit);

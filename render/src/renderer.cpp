@@ -1,6 +1,7 @@
 #include "heightcast/render/renderer.h"
 
 #include <algorithm>
+#include <array>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -88,12 +89,23 @@ const std::vector<std::pair<double, Rgb>> kElevation{{0.0, {0.24, 0.47, 0.24}}, 
                                                      {0.8, {0.6, 0.6, 0.6}},    {1.0, {0.98, 0.98, 0.98}}};
 const std::vector<std::pair<double, Rgb>> kDepth{{0.0, {0.6, 0.87, 0.95}}, {0.5, {0.16, 0.47, 0.8}}, {1.0, {0.04, 0.12, 0.45}}};
 
-double toLinear(double c) { return c <= 0.04045 ? c / 12.92 : std::pow((c + 0.055) / 1.055, 2.4); }
-uint8_t toSrgb8(double c) {
-    c = std::clamp(c, 0.0, 1.0);
-    const double s = c <= 0.0031308 ? 12.92 * c : 1.055 * std::pow(c, 1.0 / 2.4) - 0.055;
-    return static_cast<uint8_t>(std::lround(s * 255.0));
-}
+// sRGB transfer functions by table (pow per pixel channel was a sixth of a frame): 4096 steps keep
+// the 8-bit output exact to within one level.
+struct SrgbTables {
+    std::array<float, 4097> toLinear{};
+    std::array<uint8_t, 4097> toSrgb{};
+    SrgbTables() {
+        for (int i = 0; i <= 4096; ++i) {
+            const double c = i / 4096.0;
+            toLinear[size_t(i)] = float(c <= 0.04045 ? c / 12.92 : std::pow((c + 0.055) / 1.055, 2.4));
+            const double s = c <= 0.0031308 ? 12.92 * c : 1.055 * std::pow(c, 1.0 / 2.4) - 0.055;
+            toSrgb[size_t(i)] = static_cast<uint8_t>(std::lround(s * 255.0));
+        }
+    }
+};
+const SrgbTables kSrgb;
+double toLinear(double c) { return kSrgb.toLinear[size_t(std::lround(std::clamp(c, 0.0, 1.0) * 4096.0))]; }
+uint8_t toSrgb8(double c) { return kSrgb.toSrgb[size_t(std::lround(std::clamp(c, 0.0, 1.0) * 4096.0))]; }
 
 // A 3 x 5 pixel font for legend labels: digits, '.', '-', 'm'.
 const char* glyph(char ch) {
