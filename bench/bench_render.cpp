@@ -336,34 +336,45 @@ Generated generate(const Scenario& sc, double scale, unsigned threads) {
         const double sampleScale = double(tiles.size()) / double(sample.size());
         const Refiner refiner(terrain, finest, maxLevel, ex, ey);
 
-        // Estimated cells for threshold T (capped: a count past the cap is only "too many").
-        auto estimate = [&](double T, uint64_t cap) {
+        // Cells for threshold T over a list of tiles, scaled by `factor` (capped: past the cap is only "too many").
+        auto count = [&](double T, const std::vector<size_t>& which, double factor) {
+            const uint64_t cap = uint64_t(4 * target / factor) + 1000;
             std::atomic<uint64_t> total{0};
-            hc::parallelFor(sample.size(), 1, threads, [&](size_t b, size_t e, unsigned) {
+            hc::parallelFor(which.size(), 1, threads, [&](size_t b, size_t e, unsigned) {
                 for (size_t k = b; k < e; ++k) {
                     if (total.load(std::memory_order_relaxed) > cap) return;
-                    const auto& tl = tiles[sample[k]];
+                    const auto& tl = tiles[which[k]];
                     total += refiner.run(tl[0] << tileLevel, tl[1] << tileLevel, tileLevel, T, nullptr, cap);
                 }
             });
-            return double(total.load()) * sampleScale;
+            return double(total.load()) * factor;
         };
+        std::vector<size_t> all(tiles.size());
+        for (size_t k = 0; k < all.size(); ++k) all[k] = k;
         auto t0 = Clock::now();
-        const uint64_t cap = uint64_t(4 * target / sampleScale) + 1000;
-        double lo = 1e-3, hi = 1e4;  // count(lo) >= target >= count(hi), in log space
-        const double fewest = estimate(hi, cap);
+        const double fewest = count(1e4, sample, sampleScale);
         if (fewest > target && finest * 2 < kCoarsestM) {
             finest *= 2;  // the forced cells alone are too many: coarser finest cells
             gen.finestRaised = true;
             continue;
         }
-        gen.thresholdM = hi;  // fewest >= target: as coarse as it gets (the table shows the miss)
-        for (int it = 0; it < 40 && fewest < target; ++it) {
-            const double mid = std::sqrt(lo * hi);
-            const double n = estimate(mid, cap);
-            (n > target ? lo : hi) = mid;
-            gen.thresholdM = mid;
-            if (std::abs(n / target - 1) < 0.01 || hi / lo < 1.001) break;
+        // Bisection in log T on the sample's estimate, aiming at target / bias; then one full count at the
+        // result measures the sample's bias (the river crosses few sample tiles), and the bisection repeats.
+        gen.thresholdM = 1e4;  // fewest >= target: as coarse as it gets (the table shows the miss)
+        double bias = 1;
+        for (int round = 0; round < 3 && fewest < target; ++round) {
+            double lo = 1e-3, hi = 1e4;  // estimate(lo) >= target >= estimate(hi)
+            for (int it = 0; it < 40; ++it) {
+                const double mid = std::sqrt(lo * hi);
+                const double n = count(mid, sample, sampleScale) * bias;
+                (n > target ? lo : hi) = mid;
+                gen.thresholdM = mid;
+                if (std::abs(n / target - 1) < 0.01 || hi / lo < 1.001) break;
+            }
+            if (sample.size() == all.size()) break;  // the sample is every tile: exact already
+            const double full = count(gen.thresholdM, all, 1.0);
+            if (std::abs(full / target - 1) < 0.03) break;
+            bias *= full / target;
         }
         gen.calibrationS = secondsSince(t0);
         gen.sampleTiles = sample.size();
