@@ -636,9 +636,9 @@ void writeJson(const std::vector<const Scenario*>& scs, const std::vector<RunRes
                  "\"peak_rss_mb\": %.1f,\n",
                  (unsigned long long)r.cells, r.approximationMs, r.raycastMs, gaussiansPerS(r), raysPerS(r), mb(r.peakRss));
         f << fmt("   \"scale\": %g, \"target_cells\": %.0f, \"extent_x_m\": %.0f, \"extent_y_m\": %.0f, \"finest_m\": %g, \"coarsest_m\": %g, "
-                 "\"wet_cells\": %llu, \"threshold_m\": %.6g, \"generation_s\": %.3f,\n",
+                 "\"wet_cells\": %llu, \"threshold_m\": %.6g, \"generation_s\": %.3f, \"calibration_s\": %.3f,\n",
                  set.scale, sc.reportCellsM * 1e6 / set.scale, r.extentXM, r.extentYM, r.finestM, r.coarsestM,
-                 (unsigned long long)r.wetCells, r.thresholdM, r.generationS);
+                 (unsigned long long)r.wetCells, r.thresholdM, r.generationS, r.calibrationS);
         f << "   \"cells_per_level\": [";
         for (int l = 0; l <= int(std::lround(std::log2(r.coarsestM / r.finestM))) && l < kMaxLevels; ++l)
             f << (l ? ", " : "") << r.cellsPerLevel[l];
@@ -778,14 +778,15 @@ int main(int argc, char** argv) {
                     "T = calibrated refinement threshold [m]; wet = cells with water; gen s = calibration + build (untimed by the\n"
                     "render table); lists = buildInfluenceLists (sigma 1, R 3.5, all threads, one run): time, mean / p99 / max\n"
                     "entries per cell, offsets + indices\n\n");
-        std::printf("%-14s %13s %10s %10s %10s %7s %8s %6s %7s %9s %6s %5s %5s %8s\n", "scenario", "extents km", "cells m", "target",
-                    "cells", "diff %", "T m", "wet %", "gen s", "lists ms", "mean", "p99", "max", "lists MB");
+        std::printf("%-14s %13s %10s %10s %10s %7s %8s %6s %7s %7s %9s %6s %5s %5s %8s\n", "scenario", "extents km", "cells m", "target",
+                    "cells", "diff %", "T m", "wet %", "calib s", "build s", "lists ms", "mean", "p99", "max", "lists MB");
         for (size_t k = 0; k < results.size(); ++k) {
             const RunResult& r = results[k];
             const double target = chosen[k]->reportCellsM * 1e6 / set.scale;
-            std::printf("%-14s %13s %10s %10.0f %10llu %+7.1f %8.3g %6.1f %7.1f %9.1f %6.1f %5llu %5llu %8.1f\n", chosen[k]->name,
+            std::printf("%-14s %13s %10s %10.0f %10llu %+7.1f %8.3g %6.1f %7.1f %7.1f %9.1f %6.1f %5llu %5llu %8.1f\n", chosen[k]->name,
                         extentText(r).c_str(), sizesText(r).c_str(), target, (unsigned long long)r.cells, (double(r.cells) / target - 1) * 100,
-                        r.thresholdM, 100.0 * double(r.wetCells) / double(r.cells), r.generationS, r.listsMs, r.listMean,
+                        r.thresholdM, 100.0 * double(r.wetCells) / double(r.cells), r.calibrationS, r.generationS - r.calibrationS,
+                        r.listsMs, r.listMean,
                         (unsigned long long)r.listP99, (unsigned long long)r.listMax, mb(r.listBytes));
         }
         for (size_t k = 0; k < results.size(); ++k) {

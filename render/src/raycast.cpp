@@ -47,17 +47,22 @@ PatchHit traverse(const Heightfield& hf, const Cascade& c, const double o[3], co
         const int iu = int(pu) >> level, iv = int(pv) >> level;  // pu, pv >= 0: truncation is floor
         if (iu >= side || iv >= side) break;
         // Where the ray leaves this node.
-        double tExit = tOut;
-        if (du > 0) tExit = std::min(tExit, ((iu + 1.0) * span - u0) * invDu);
-        if (du < 0) tExit = std::min(tExit, (iu * double(span) - u0) * invDu);
-        if (dv > 0) tExit = std::min(tExit, ((iv + 1.0) * span - v0) * invDv);
-        if (dv < 0) tExit = std::min(tExit, (iv * double(span) - v0) * invDv);
-        tExit = std::max(tExit, t);
+        double tExitU = HUGE_VAL, tExitV = HUGE_VAL;
+        if (du > 0) tExitU = ((iu + 1.0) * span - u0) * invDu;
+        if (du < 0) tExitU = (iu * double(span) - u0) * invDu;
+        if (dv > 0) tExitV = ((iv + 1.0) * span - v0) * invDv;
+        if (dv < 0) tExitV = (iv * double(span) - v0) * invDv;
+        double tExit = std::max(std::min({tOut, tExitU, tExitV}), t);
+        // Does the next node have another parent? Only then is a coarser level worth a look.
+        const bool exitU = tExitU <= tExitV;
+        const int idx = exitU ? iu : iv;
+        const bool forward = exitU ? du > 0 : dv > 0;
+        const bool leavesParent = forward ? (idx & 1) == 1 : (idx & 1) == 0;
         const float nodeMax = hf.mip[size_t(level)][size_t(iv) * size_t(side) + size_t(iu)];
         const double zLow = std::min(o[2] + d[2] * t, o[2] + d[2] * tExit);
         if (zLow > nodeMax) {  // empty space: skip the node, and look at a coarser level next
             t = tExit + tiny;
-            level = std::min(level + 1, top);
+            if (leavesParent) level = std::min(level + 1, top);
             continue;
         }
         if (level > 0) {
@@ -106,7 +111,7 @@ PatchHit traverse(const Heightfield& hf, const Cascade& c, const double o[3], co
             }
         }
         t = tExit + tiny;
-        level = std::min(level + 1, top);
+        if (leavesParent) level = std::min(level + 1, top);
     }
     return res;
 }
