@@ -130,6 +130,21 @@ double parseNumber(const std::string& text, const std::string& what) {
     return v;
 }
 
+std::vector<double> parseNumberList(const std::string& text, const std::string& what, size_t minCount, size_t maxCount) {
+    std::vector<double> v;
+    size_t start = 0;
+    for (;;) {
+        const size_t comma = text.find(',', start);
+        v.push_back(parseNumber(text.substr(start, comma == std::string::npos ? std::string::npos : comma - start), what));
+        if (comma == std::string::npos) break;
+        start = comma + 1;
+    }
+    if (v.size() < minCount || v.size() > maxCount)
+        throw Error(what + " " + text + ": expected " + std::to_string(minCount) +
+                    (maxCount > minCount ? " or " + std::to_string(maxCount) : "") + " comma-separated numbers");
+    return v;
+}
+
 int run(const char* program, const std::function<int()>& body) {
     try {
         return body();

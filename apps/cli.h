@@ -52,6 +52,8 @@ private:
 
 // Parses a finite double; throws hc::Error naming `what`.
 double parseNumber(const std::string& text, const std::string& what);
+// Parses "A,B,C..." into minCount..maxCount finite doubles; throws hc::Error naming `what`.
+std::vector<double> parseNumberList(const std::string& text, const std::string& what, size_t minCount, size_t maxCount);
 
 // Runs a tool's body: hc::Error and other failures become "PROGRAM: error: MESSAGE" on stderr and
 // exit status 1. Returns the process exit status.

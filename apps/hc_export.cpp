@@ -47,14 +47,7 @@ int main(int argc, char** argv) {
         if (std::string why = params.validate(); !why.empty()) throw hc::Error("--sigma/--truncation: " + why);
         std::optional<hc::exporting::BoxWorld> box;
         if (!bbox.empty()) {
-            double v[4];
-            size_t start = 0;
-            for (int i = 0; i < 4; ++i) {
-                size_t comma = bbox.find(',', start);
-                if ((i < 3) != (comma != std::string::npos)) throw hc::Error("--bbox " + bbox + ": expected XMIN,YMIN,XMAX,YMAX");
-                v[i] = hc::cli::parseNumber(bbox.substr(start, comma == std::string::npos ? std::string::npos : comma - start), "--bbox");
-                start = comma + 1;
-            }
+            const auto v = hc::cli::parseNumberList(bbox, "--bbox", 4, 4);
             box = hc::exporting::BoxWorld{v[0], v[1], v[2], v[3]};
         }
         hc::cli::checkWritable(out, "export");

@@ -78,9 +78,8 @@ int main(int argc, char** argv) {
         }
         std::vector<Point> pts;
         if (!xy.empty()) {
-            auto comma = xy.find(',');
-            if (comma == std::string::npos) throw hc::Error("--xy " + xy + ": expected X,Y");
-            pts.push_back({hc::cli::parseNumber(xy.substr(0, comma), "--xy"), hc::cli::parseNumber(xy.substr(comma + 1), "--xy")});
+            const auto v = hc::cli::parseNumberList(xy, "--xy", 2, 2);
+            pts.push_back({v[0], v[1]});
         } else {
             pts = readPoints(pointsPath);
         }

@@ -11,24 +11,6 @@
 #include "heightcast/render/image_io.h"
 #include "heightcast/render/renderer.h"
 
-namespace {
-
-std::vector<double> numbers(const std::string& text, const std::string& what, size_t minCount, size_t maxCount) {
-    std::vector<double> v;
-    size_t start = 0;
-    while (true) {
-        size_t comma = text.find(',', start);
-        v.push_back(hc::cli::parseNumber(text.substr(start, comma == std::string::npos ? std::string::npos : comma - start), what));
-        if (comma == std::string::npos) break;
-        start = comma + 1;
-    }
-    if (v.size() < minCount || v.size() > maxCount)
-        throw hc::Error(what + " " + text + ": expected " + std::to_string(minCount) +
-                        (maxCount > minCount ? " or " + std::to_string(maxCount) : "") + " comma-separated numbers");
-    return v;
-}
-
-}  // namespace
 
 int main(int argc, char** argv) {
     return hc::cli::run("hc-render", [&] {
@@ -80,8 +62,8 @@ int main(int argc, char** argv) {
             }
         // Validate the camera's numbers before any expensive work.
         std::vector<double> cam, look;
-        if (!cameraText.empty()) cam = numbers(cameraText, "--camera", 6, 6);
-        if (!lookAt.empty()) look = numbers(lookAt, "--look-at", 6, 7);
+        if (!cameraText.empty()) cam = hc::cli::parseNumberList(cameraText, "--camera", 6, 6);
+        if (!lookAt.empty()) look = hc::cli::parseNumberList(lookAt, "--look-at", 6, 7);
         std::optional<hc::render::Camera> given;
         if (!cam.empty()) {
             hc::render::Camera c;

@@ -10,6 +10,7 @@
 #include "heightcast/ingest/build.h"
 #include "heightcast/ingest/ingest.h"
 #include "test_data.h"
+#include "test_grids.h"
 
 namespace {
 
@@ -48,37 +49,8 @@ TEST(Morton, NodeOwnsAContiguousKeyRange) {
     }
 }
 
-Grid ingestData(const std::string& path, double tol, const std::string& srs = "") {
-    hc::ingest::Options o;
-    o.input = path;
-    o.toleranceM = tol;
-    o.sourceSrs = srs;
-    hc::ingest::LoadReport r;
-    return hc::ingest::ingest(o, r);
-}
-
-// A synthetic grid with cells of level 0 and level 7 side by side (ratio 128): a flat plateau
-// merges to 128-pixel cells, a rough strip stays at single pixels.
-Grid ratio128Grid() {
-    hc::ingest::Raster r;
-    r.width = 512;
-    r.height = 384;
-    r.pixelSizeM = 0.75;
-    r.westWorld = 1000;
-    r.northWorld = 5000;
-    r.values.resize(r.width * r.height);
-    std::mt19937 rng(3);
-    for (size_t row = 0; row < r.height; ++row)
-        for (size_t col = 0; col < r.width; ++col) {
-            bool rough = col >= 256 && col < 300;
-            bool hole = col >= 400 && col < 410 && row >= 100 && row < 140;
-            r.at(col, row) = hole ? NAN : rough ? static_cast<float>(rng() % 1000) * 0.01f : 100.0f;
-        }
-    hc::ingest::BuildOptions b;
-    b.toleranceM = 0.25;
-    b.maxLevel = 7;
-    return hc::ingest::buildGrid(r, nullptr, b);
-}
+using hc::test::ingestFile;
+using hc::test::ratio128Grid;
 
 struct Case {
     const char* name;
@@ -91,7 +63,7 @@ std::vector<Case> realGrids() {
     for (auto [file, tol] : {std::pair{"lidar1m_minnesota_utm15.tif", 0.25}, {"tin_valid_3857.tif", 0.25},
                              {"lux_elev.tif", 5.0}, {"west_bijou_gully_3m.asc", 0.5}}) {
         std::string p = hc::test::dataFile(file);
-        if (!p.empty()) out.push_back({file, ingestData(p, tol)});
+        if (!p.empty()) out.push_back({file, ingestFile(p, tol)});
     }
     return out;
 }

@@ -18,6 +18,7 @@
 #include "heightcast/ingest/build.h"
 #include "heightcast/ingest/ingest.h"
 #include "test_data.h"
+#include "test_grids.h"
 
 namespace {
 
@@ -28,38 +29,8 @@ using hc::influence::KernelParams;
 using hc::influence::Layer;
 using hc::influence::SurfaceEvaluator;
 
-Grid ingestFile(const std::string& path, double tol, double waterLevel = NAN) {
-    hc::ingest::Options o;
-    o.input = path;
-    o.toleranceM = tol;
-    if (!std::isnan(waterLevel)) o.water = hc::ingest::WaterSource::Level, o.waterLevelM = waterLevel;
-    hc::ingest::LoadReport r;
-    return hc::ingest::ingest(o, r);
-}
-
-// Cell-size ratio 128: a plateau of 96 m cells (level 7) beside a rough strip of 0.75 m cells, with a
-// hole: the extreme the report's Petzenkirchen scenario has (0.75 - 96 m).
-Grid ratio128Grid() {
-    hc::ingest::Raster r;
-    r.width = 640;
-    r.height = 512;
-    r.pixelSizeM = 0.75;
-    r.westWorld = 1000;
-    r.northWorld = 5000;
-    r.values.resize(r.width * r.height);
-    std::mt19937 rng(3);
-    for (size_t row = 0; row < r.height; ++row)
-        for (size_t col = 0; col < r.width; ++col) {
-            bool rough = col >= 300 && col < 316 && row >= 128 && row < 384;
-            bool hole = col >= 500 && col < 520 && row >= 100 && row < 140;
-            r.at(col, row) = hole ? NAN : rough ? 200.0f + static_cast<float>(rng() % 1000) * 0.01f : 100.0f + 0.001f * float(col);
-        }
-    hc::ingest::BuildOptions b;
-    b.toleranceM = 0.5;
-    b.maxLevel = 7;
-    Grid g = hc::ingest::buildGrid(r, nullptr, b);
-    return g;
-}
+using hc::test::ingestFile;
+using hc::test::ratio128Grid;
 
 struct Case {
     std::string name;

@@ -10,6 +10,7 @@
 
 #include "heightcast/grid/sectioned_file.h"
 #include "heightcast/grid/checksum.h"
+#include "heightcast/grid/bytes.h"
 #include "heightcast/grid/error.h"
 
 namespace hc {
@@ -27,16 +28,6 @@ constexpr size_t cellCount = 24, originX = 32, originY = 40, finestCell = 48, ro
 }
 static_assert(kGridHeaderBytes == kFileHeaderBytes);
 
-template <typename T>
-void put(std::vector<std::byte>& buf, size_t at, T v) {
-    std::memcpy(buf.data() + at, &v, sizeof v);
-}
-template <typename T>
-T get(const std::byte* p) {
-    T v;
-    std::memcpy(&v, p, sizeof v);
-    return v;
-}
 
 std::string fmtDouble(double v) {
     char buf[32];
@@ -84,7 +75,7 @@ void parseMeta(const SectionedFileReader& file, const FileSection& s, Grid& g) {
     uint64_t p = s.offset, end = s.offset + s.bytes;
     auto readString = [&](std::string& out) {
         if (end - p < 4) fail(p, "META record is truncated");
-        uint32_t n = get<uint32_t>(d + p);
+        uint32_t n = bytes::load<uint32_t>(d + p);
         p += 4;
         if (n > end - p) fail(p - 4, "META string of " + std::to_string(n) + " bytes runs past its section");
         out.assign(reinterpret_cast<const char*>(d + p), n);
@@ -131,14 +122,14 @@ Grid parseGrid(const SectionedFileReader& file) {
     for (size_t i = off::reserved; i < off::reservedEnd; ++i)
         if (h[i] != std::byte{0}) fail(i, "reserved header byte is not zero");
     Grid g;
-    const uint64_t cellCount = get<uint64_t>(h + off::cellCount);
-    g.originWorldX = get<double>(h + off::originX);
-    g.originWorldY = get<double>(h + off::originY);
-    g.finestCellM = get<double>(h + off::finestCell);
-    g.rootLevel = static_cast<int>(get<uint8_t>(h + off::rootLevel));
-    g.minLevel = static_cast<int>(get<uint8_t>(h + off::minLevel));
-    g.maxLevel = static_cast<int>(get<uint8_t>(h + off::maxLevel));
-    const unsigned layerCount = get<uint8_t>(h + off::layerCount);
+    const uint64_t cellCount = bytes::load<uint64_t>(h + off::cellCount);
+    g.originWorldX = bytes::load<double>(h + off::originX);
+    g.originWorldY = bytes::load<double>(h + off::originY);
+    g.finestCellM = bytes::load<double>(h + off::finestCell);
+    g.rootLevel = static_cast<int>(bytes::load<uint8_t>(h + off::rootLevel));
+    g.minLevel = static_cast<int>(bytes::load<uint8_t>(h + off::minLevel));
+    g.maxLevel = static_cast<int>(bytes::load<uint8_t>(h + off::maxLevel));
+    const unsigned layerCount = bytes::load<uint8_t>(h + off::layerCount);
     if (!std::isfinite(g.originWorldX) || !std::isfinite(g.originWorldY)) fail(off::originX, "origin is not finite");
     if (!(g.finestCellM > 0) || !std::isfinite(g.finestCellM)) fail(off::finestCell, "finest cell size is not a positive number");
     if (g.rootLevel > kMaxRootLevel) fail(off::rootLevel, "root level " + std::to_string(g.rootLevel) + " exceeds " + std::to_string(kMaxRootLevel));
@@ -183,8 +174,8 @@ Grid parseGrid(const SectionedFileReader& file) {
     }
     std::string problem = g.validate();
     if (!problem.empty()) fail(cells->offset, "invalid grid: " + problem);
-    if (g.structureHash() != get<uint64_t>(h + off::structureHash)) fail(off::structureHash, "structure hash does not match the cells");
-    if (g.contentHash() != get<uint64_t>(h + off::contentHash)) fail(off::contentHash, "content hash does not match the cells and values");
+    if (g.structureHash() != bytes::load<uint64_t>(h + off::structureHash)) fail(off::structureHash, "structure hash does not match the cells");
+    if (g.contentHash() != bytes::load<uint64_t>(h + off::contentHash)) fail(off::contentHash, "content hash does not match the cells and values");
     return g;
 }
 
@@ -254,16 +245,16 @@ void GridFileWriter::commit(const IngestStats& stats) {
     w.out.addSection(kMeta, 0, encodeMeta(w.shape));
     const Grid& g = w.shape;
     std::vector<std::byte> head(kFileHeaderBytes, std::byte{0});
-    put(head, off::cellCount, w.cellCount);
-    put(head, off::originX, g.originWorldX);
-    put(head, off::originY, g.originWorldY);
-    put(head, off::finestCell, g.finestCellM);
-    put(head, off::rootLevel, static_cast<uint8_t>(g.rootLevel));
-    put(head, off::minLevel, static_cast<uint8_t>(g.minLevel));
-    put(head, off::maxLevel, static_cast<uint8_t>(g.maxLevel));
-    put(head, off::layerCount, static_cast<uint8_t>(g.layers.size()));
-    put(head, off::contentHash, w.hasher.contentHash());
-    put(head, off::structureHash, w.hasher.structureHash());
+    bytes::store(head, off::cellCount, w.cellCount);
+    bytes::store(head, off::originX, g.originWorldX);
+    bytes::store(head, off::originY, g.originWorldY);
+    bytes::store(head, off::finestCell, g.finestCellM);
+    bytes::store(head, off::rootLevel, static_cast<uint8_t>(g.rootLevel));
+    bytes::store(head, off::minLevel, static_cast<uint8_t>(g.minLevel));
+    bytes::store(head, off::maxLevel, static_cast<uint8_t>(g.maxLevel));
+    bytes::store(head, off::layerCount, static_cast<uint8_t>(g.layers.size()));
+    bytes::store(head, off::contentHash, w.hasher.contentHash());
+    bytes::store(head, off::structureHash, w.hasher.structureHash());
     w.out.commit(std::move(head));
 }
 

@@ -11,6 +11,7 @@
 
 #include "heightcast/grid/atomic_file.h"
 #include "heightcast/grid/checksum.h"
+#include "heightcast/grid/bytes.h"
 #include "heightcast/grid/error.h"
 
 namespace hc {
@@ -20,16 +21,6 @@ namespace off {
 constexpr size_t major = 8, minor = 10, headerBytes = 12, fileBytes = 16, sectionCount = 60, tableCrc = 120, headerCrc = 124;
 }
 
-template <typename T>
-T get(const std::byte* p) {
-    T v;
-    std::memcpy(&v, p, sizeof v);
-    return v;
-}
-template <typename T>
-void put(std::vector<std::byte>& b, size_t at, T v) {
-    std::memcpy(b.data() + at, &v, sizeof v);
-}
 uint64_t alignUp(uint64_t v) { return (v + kFileSectionAlign - 1) / kFileSectionAlign * kFileSectionAlign; }
 
 }  // namespace
@@ -76,36 +67,36 @@ SectionedFileReader::SectionedFileReader(const std::string& path, const FileForm
         failFile("truncated: " + std::to_string(size) + " bytes, the header alone is " + std::to_string(kFileHeaderBytes) +
                  " (not a " + format.what + " file?)");
     if (std::memcmp(h, format.magic.data(), 8) != 0) fail(0, std::string("bad magic: not a ") + format.what + " file");
-    const auto major = get<uint16_t>(h + off::major);
-    minor_ = get<uint16_t>(h + off::minor);
+    const auto major = bytes::load<uint16_t>(h + off::major);
+    minor_ = bytes::load<uint16_t>(h + off::minor);
     const std::string version = std::to_string(major) + "." + std::to_string(minor_);
     if (major > format.major)
         fail(off::major, "format version " + version + " is newer than this reader (" + std::to_string(format.major) + "." +
                              std::to_string(format.minor) + "); upgrade heightcast to read it");
     if (major != format.major) fail(off::major, "unknown format version " + version);
-    if (get<uint32_t>(h + off::headerCrc) != crc32(std::span(h, off::headerCrc))) fail(off::headerCrc, "header checksum mismatch (corrupt header)");
-    if (get<uint32_t>(h + off::headerBytes) != kFileHeaderBytes)
-        fail(off::headerBytes, "header size " + std::to_string(get<uint32_t>(h + off::headerBytes)) + " is not " + std::to_string(kFileHeaderBytes));
-    const uint64_t declared = get<uint64_t>(h + off::fileBytes);
+    if (bytes::load<uint32_t>(h + off::headerCrc) != crc32(std::span(h, off::headerCrc))) fail(off::headerCrc, "header checksum mismatch (corrupt header)");
+    if (bytes::load<uint32_t>(h + off::headerBytes) != kFileHeaderBytes)
+        fail(off::headerBytes, "header size " + std::to_string(bytes::load<uint32_t>(h + off::headerBytes)) + " is not " + std::to_string(kFileHeaderBytes));
+    const uint64_t declared = bytes::load<uint64_t>(h + off::fileBytes);
     if (declared != size)
         fail(off::fileBytes, "header declares " + std::to_string(declared) + " bytes but the file has " + std::to_string(size) +
                                  (size < declared ? " (truncated)" : " (trailing data)"));
-    const uint32_t count = get<uint32_t>(h + off::sectionCount);
+    const uint32_t count = bytes::load<uint32_t>(h + off::sectionCount);
     const uint64_t tableEnd = kFileHeaderBytes + uint64_t{count} * kFileSectionEntryBytes;
     if (count > 4096 || tableEnd > size)
         fail(off::sectionCount, "section table of " + std::to_string(count) + " entries runs past the end of the file");
-    if (get<uint32_t>(h + off::tableCrc) != crc32(std::span(h + kFileHeaderBytes, tableEnd - kFileHeaderBytes)))
+    if (bytes::load<uint32_t>(h + off::tableCrc) != crc32(std::span(h + kFileHeaderBytes, tableEnd - kFileHeaderBytes)))
         fail(kFileHeaderBytes, "section table checksum mismatch (corrupt section table)");
     uint64_t cursor = tableEnd;
     for (uint32_t s = 0; s < count; ++s) {
         const uint64_t at = entryOffset(s);
         FileSection e;
-        e.kind = get<uint32_t>(h + at);
-        e.index = get<uint32_t>(h + at + 4);
-        e.offset = get<uint64_t>(h + at + 8);
-        e.bytes = get<uint64_t>(h + at + 16);
-        e.crc = get<uint32_t>(h + at + 24);
-        if (get<uint32_t>(h + at + 28) != 0) fail(at + 28, "reserved section-table field is not zero");
+        e.kind = bytes::load<uint32_t>(h + at);
+        e.index = bytes::load<uint32_t>(h + at + 4);
+        e.offset = bytes::load<uint64_t>(h + at + 8);
+        e.bytes = bytes::load<uint64_t>(h + at + 16);
+        e.crc = bytes::load<uint32_t>(h + at + 24);
+        if (bytes::load<uint32_t>(h + at + 28) != 0) fail(at + 28, "reserved section-table field is not zero");
         if (e.offset % kFileSectionAlign != 0 || e.offset < cursor || e.offset > size || e.bytes > size - e.offset)
             fail(at + 8, "section " + std::to_string(s) + " (offset " + std::to_string(e.offset) + ", " + std::to_string(e.bytes) +
                              " bytes) is misplaced or runs past the end of the file");
@@ -186,22 +177,22 @@ void SectionedFileWriter::commit(std::vector<std::byte> header) {
     }
     header.resize(kFileHeaderBytes + w.sections.size() * kFileSectionEntryBytes, std::byte{0});
     std::memcpy(header.data(), w.format.magic.data(), 8);
-    put(header, off::major, w.format.major);
-    put(header, off::minor, w.format.minor);
-    put(header, off::headerBytes, kFileHeaderBytes);
-    put(header, off::fileBytes, cursor);
-    put(header, off::sectionCount, static_cast<uint32_t>(w.sections.size()));
+    bytes::store(header, off::major, w.format.major);
+    bytes::store(header, off::minor, w.format.minor);
+    bytes::store(header, off::headerBytes, kFileHeaderBytes);
+    bytes::store(header, off::fileBytes, cursor);
+    bytes::store(header, off::sectionCount, static_cast<uint32_t>(w.sections.size()));
     for (size_t s = 0; s < w.sections.size(); ++s) {
         const size_t at = kFileHeaderBytes + s * kFileSectionEntryBytes;
-        put(header, at, w.sections[s].kind);
-        put(header, at + 4, w.sections[s].index);
-        put(header, at + 8, w.sections[s].offset);
-        put(header, at + 16, w.sections[s].bytes);
-        put(header, at + 24, w.sections[s].crc);
-        put(header, at + 28, uint32_t{0});
+        bytes::store(header, at, w.sections[s].kind);
+        bytes::store(header, at + 4, w.sections[s].index);
+        bytes::store(header, at + 8, w.sections[s].offset);
+        bytes::store(header, at + 16, w.sections[s].bytes);
+        bytes::store(header, at + 24, w.sections[s].crc);
+        bytes::store(header, at + 28, uint32_t{0});
     }
-    put(header, off::tableCrc, crc32(std::span(header).subspan(kFileHeaderBytes)));
-    put(header, off::headerCrc, crc32(std::span(header).first(off::headerCrc)));
+    bytes::store(header, off::tableCrc, crc32(std::span(header).subspan(kFileHeaderBytes)));
+    bytes::store(header, off::headerCrc, crc32(std::span(header).first(off::headerCrc)));
     w.out.writeAt(0, header);
     w.out.commit();
 }

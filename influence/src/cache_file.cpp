@@ -17,6 +17,7 @@
 #include <cstring>
 #include <filesystem>
 
+#include "heightcast/grid/bytes.h"
 #include "heightcast/grid/error.h"
 #include "heightcast/grid/sectioned_file.h"
 #include "heightcast/influence/influence.h"
@@ -32,16 +33,6 @@ constexpr size_t cellCount = 24, entryCount = 32, structureHash = 40, contentHas
                  truncation = 72, longest = 80, reserved = 84, reservedEnd = 120;
 }
 
-template <typename T>
-T get(const std::byte* p) {
-    T v;
-    std::memcpy(&v, p, sizeof v);
-    return v;
-}
-template <typename T>
-void put(std::vector<std::byte>& b, size_t at, T v) {
-    std::memcpy(b.data() + at, &v, sizeof v);
-}
 
 std::string hex(uint64_t v) {
     char b[24];
@@ -58,14 +49,14 @@ void writeInfluenceCache(const InfluenceLists& lists, const std::string& path) {
     out.append(0, std::as_bytes(offsets));
     out.append(1, std::as_bytes(indices));
     std::vector<std::byte> head(kFileHeaderBytes, std::byte{0});
-    put(head, off::cellCount, static_cast<uint64_t>(lists.cellCount()));
-    put(head, off::entryCount, static_cast<uint64_t>(lists.entryCount()));
-    put(head, off::structureHash, lists.gridStructureHash());
-    put(head, off::contentHash, lists.gridContentHash());
-    put(head, off::kernelId, lists.params().kernelId);
-    put(head, off::sigma, lists.params().sigma);
-    put(head, off::truncation, lists.params().truncation);
-    put(head, off::longest, static_cast<uint32_t>(lists.stats().maxLength));
+    bytes::store(head, off::cellCount, static_cast<uint64_t>(lists.cellCount()));
+    bytes::store(head, off::entryCount, static_cast<uint64_t>(lists.entryCount()));
+    bytes::store(head, off::structureHash, lists.gridStructureHash());
+    bytes::store(head, off::contentHash, lists.gridContentHash());
+    bytes::store(head, off::kernelId, lists.params().kernelId);
+    bytes::store(head, off::sigma, lists.params().sigma);
+    bytes::store(head, off::truncation, lists.params().truncation);
+    bytes::store(head, off::longest, static_cast<uint32_t>(lists.stats().maxLength));
     out.commit(std::move(head));
 }
 
@@ -74,12 +65,12 @@ InfluenceLists readInfluenceCache(const std::string& path, const Grid& grid, con
     const std::byte* h = file.header();
     for (size_t i = off::reserved; i < off::reservedEnd; ++i)
         if (h[i] != std::byte{0}) file.fail(i, "reserved header byte is not zero");
-    const uint64_t n = get<uint64_t>(h + off::cellCount), m = get<uint64_t>(h + off::entryCount);
+    const uint64_t n = bytes::load<uint64_t>(h + off::cellCount), m = bytes::load<uint64_t>(h + off::entryCount);
     KernelParams stored;
-    stored.kernelId = get<uint32_t>(h + off::kernelId);
-    stored.sigma = get<double>(h + off::sigma);
-    stored.truncation = get<double>(h + off::truncation);
-    const uint64_t structure = get<uint64_t>(h + off::structureHash), content = get<uint64_t>(h + off::contentHash);
+    stored.kernelId = bytes::load<uint32_t>(h + off::kernelId);
+    stored.sigma = bytes::load<double>(h + off::sigma);
+    stored.truncation = bytes::load<double>(h + off::truncation);
+    const uint64_t structure = bytes::load<uint64_t>(h + off::structureHash), content = bytes::load<uint64_t>(h + off::contentHash);
 
     // Whose cache is it? Say exactly what differs.
     if (structure != grid.structureHash() || n != grid.cellCount())
