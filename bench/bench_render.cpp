@@ -775,9 +775,9 @@ int main(int argc, char** argv) {
 
         // ---- table 1: the grids ----
         std::printf("\n1. grids: synthetic, deterministic; extent rounded to whole 96 m cells; target = the report's cells / scale;\n"
-                    "T = calibrated refinement threshold [m]; wet = cells with water; gen s = calibration + build (untimed by the\n"
-                    "render table); lists = buildInfluenceLists (sigma 1, R 3.5, all threads, one run): time, mean / p99 / max\n"
-                    "entries per cell, offsets + indices\n\n");
+                    "T = calibrated refinement threshold [m]; wet = cells with water; calib s = finding T, build s = building the\n"
+                    "grid (neither is part of a frame); lists = buildInfluenceLists (sigma 1, R 3.5, all threads, one run): time,\n"
+                    "mean / p99 / max entries per cell, offsets + indices\n\n");
         std::printf("%-14s %13s %10s %10s %10s %7s %8s %6s %7s %7s %9s %6s %5s %5s %8s\n", "scenario", "extents km", "cells m", "target",
                     "cells", "diff %", "T m", "wet %", "calib s", "build s", "lists ms", "mean", "p99", "max", "lists MB");
         for (size_t k = 0; k < results.size(); ++k) {

@@ -90,7 +90,6 @@ uint64_t approximate(const Scene& scene, const Cascade& c, CascadeTextures& tex,
     std::vector<uint32_t> cells;
     g.cellsInBox(c.x0 + i0 * s, c.y0 + j0 * s, c.x0 + i1 * s, c.y0 + j1 * s, cells);
 
-    const double sigma = lists.params().sigma;
     const float tail = static_cast<float>(lists.params().tail());
     const int depthLayer = scene.waterLayer();
     const float minDepth = static_cast<float>(waterMinDepthM);
@@ -111,25 +110,24 @@ uint64_t approximate(const Scene& scene, const Cascade& c, CascadeTextures& tex,
             const int ia = std::max(i0, int(first(q.x0, c.x0))), ib = std::min(i1 + 1, int(first(q.x1, c.x0)));
             const int ja = std::max(j0, int(first(q.y0, c.y0))), jb = std::min(j1 + 1, int(first(q.y1, c.y0)));
             if (ia >= ib || ja >= jb) continue;
-            double kx, ky;
-            g.cellCenterLocal(k, kx, ky);
+            const auto& kernels = scene.kernels();
+            const double kx = kernels[k].cx, ky = kernels[k].cy;
             const double zk = g.values[0][k];
             const double dk = depthLayer >= 0 ? g.values[size_t(depthLayer)][k] : 0.0;
+            const float* depthValues = depthLayer >= 0 ? g.values[size_t(depthLayer)].data() : nullptr;
             const auto list = lists.list(k);
             const size_t m = list.size(), padded = (m + kLanes - 1) / kLanes * kLanes;
             for (auto* v : {&cand.ex, &cand.ey, &cand.a, &cand.dz, &cand.dd}) v->assign(padded, 0.0f);
             cand.r2.assign(padded, -1.0f);  // padding never counts: d2 < -1 is false
             for (size_t idx = 0; idx < m; ++idx) {
                 const uint32_t i = list[idx];
-                double cx, cy;
-                g.cellCenterLocal(i, cx, cy);
-                const double size = g.cellSizeM(i), r = lists.params().radiusM(size);
-                cand.ex[idx] = static_cast<float>(cx - kx);
-                cand.ey[idx] = static_cast<float>(cy - ky);
-                cand.a[idx] = static_cast<float>(1.0 / (2.0 * sigma * sigma * size * size));
-                cand.r2[idx] = static_cast<float>(r * r);
+                const auto& ck = kernels[i];
+                cand.ex[idx] = static_cast<float>(ck.cx - kx);
+                cand.ey[idx] = static_cast<float>(ck.cy - ky);
+                cand.a[idx] = ck.a;
+                cand.r2[idx] = ck.r2;
                 cand.dz[idx] = static_cast<float>(g.values[0][i] - zk);
-                if (depthLayer >= 0) cand.dd[idx] = static_cast<float>(g.values[size_t(depthLayer)][i] - dk);
+                if (depthValues) cand.dd[idx] = static_cast<float>(depthValues[i] - dk);
             }
             for (int j = ja; j < jb; ++j) {
                 const float fy = static_cast<float>(c.y0 + j * s - ky);

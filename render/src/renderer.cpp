@@ -45,6 +45,15 @@ Scene::Scene(const Grid& grid, const influence::InfluenceLists& lists) : grid_(g
         }
         surfaceMax = std::max(surfaceMax, top);
     }
+    kernels_.resize(grid.cellCount());
+    const double sigma = lists.params().sigma;
+    for (size_t i = 0; i < grid.cellCount(); ++i) {
+        CellKernel& k = kernels_[i];
+        grid.cellCenterLocal(i, k.cx, k.cy);
+        const double size = grid.cellSizeM(i), r = lists.params().radiusM(size);
+        k.a = static_cast<float>(1.0 / (2.0 * sigma * sigma * size * size));
+        k.r2 = static_cast<float>(r * r);
+    }
     // The smooth surface is a convex combination of cell values: it stays within their range.
     zMin = elevationMin;
     zMax = surfaceMax;

@@ -68,6 +68,13 @@ public:
     const influence::InfluenceLists& lists() const { return lists_; }
     bool hasWater() const { return waterLayer_ >= 0; }
     int waterLayer() const { return waterLayer_; }  // grid layer of water_depth, or -1
+    // Per cell, computed once for every frame: centre [m local] and the kernel's 1 / (2 sigma^2 c^2)
+    // and squared radius, in the form the approximation reads.
+    struct CellKernel {
+        double cx, cy;
+        float a, r2;
+    };
+    const std::vector<CellKernel>& kernels() const { return kernels_; }
     // Local bounding box of the cells and the value range (terrain and water surface) [m].
     double xMin, yMin, xMax, yMax, zMin, zMax;
     double elevationMin, elevationMax, depthMax;
@@ -76,6 +83,7 @@ private:
     const Grid& grid_;
     const influence::InfluenceLists& lists_;
     int waterLayer_ = -1;
+    std::vector<CellKernel> kernels_;
 };
 
 // Renders one frame. Throws hc::Error for invalid camera or options.
