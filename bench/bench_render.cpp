@@ -19,8 +19,10 @@
 //             or a channel bank, or the terrain or the water depth varies over it by more than a threshold T,
 //             measured at its 3 x 3 corner / edge / centre points). A leaf's values are terrain and depth at its
 //             centre. T is calibrated per scenario by bisection, counting the cells of a fixed sample of 1/8 of
-//             the 768 m tiles (all tiles of a small domain), so the cell count lands near the report's count
-//             divided by --scale; the actual count is printed beside the target. If even T = infinity gives
+//             the 768 m tiles (all tiles of a small domain); one count over every tile then measures the sample's
+//             bias (the river crosses few sample tiles) and the bisection repeats with it (at most 3 rounds), so
+//             the cell count lands within a few % of the report's count divided by --scale; the actual count is
+//             printed beside the target. If even T = infinity gives
 //             too many cells (the forced wet-edge and bank cells alone exceed the target: large --scale), the
 //             finest size doubles until it fits, and the table says so through its cell sizes.
 // Each scenario then runs in its own forked child (so getrusage's peak RSS is that scenario's alone, and
@@ -148,7 +150,7 @@ const Scenario kScenarios[] = {
 // The terrain and water of one scenario as smooth functions of the local position.
 class Terrain {
 public:
-    Terrain(const Landscape& l, double extentX, double extentY) : l_(l), extentY_(extentY) {
+    Terrain(const Landscape& l, double extentY) : l_(l), extentY_(extentY) {
         std::mt19937_64 rng(l.seed);
         std::uniform_real_distribution<double> unit(0.0, 1.0);
         auto waves = [&](int count, double minLen, double maxLen, std::vector<Wave>& out) {
@@ -166,7 +168,6 @@ public:
         waves(6, 150, 900, hills_);
         waves(3, 200, 900, micro_);
         for (int k = 0; k < 2; ++k) meanderPhase_[k] = 2 * std::numbers::pi * unit(rng);
-        (void)extentX;
     }
 
     struct Sample {
@@ -315,7 +316,7 @@ Generated generate(const Scenario& sc, double scale, unsigned threads) {
     Generated gen;
     const double extentX = std::round(sc.extentXKm * 1000 / kCoarsestM) * kCoarsestM;  // whole coarsest cells
     const double extentY = std::round(sc.extentYKm * 1000 / kCoarsestM) * kCoarsestM;
-    const Terrain terrain(sc.land, extentX, extentY);
+    const Terrain terrain(sc.land, extentY);
     const double target = sc.reportCellsM * 1e6 / scale;
     double finest = sc.finestM;
     for (;;) {
@@ -497,19 +498,19 @@ struct Settings {
 
 // The fixed camera: 1.5 km above the river 10 % of the way downstream, looking along it at pitch -20.
 hc::render::Camera floodCamera(const Scenario& sc, const Grid& g, int width, int height) {
-    double ex, ey, ex2, ey2, dydx;
     const double extentY = std::round(sc.extentYKm * 1000 / kCoarsestM) * kCoarsestM;
     const double extentX = std::round(sc.extentXKm * 1000 / kCoarsestM) * kCoarsestM;
-    const Terrain terrain(sc.land, extentX, extentY);
-    const double height_ = 1500, pitch = -20;
-    ex = 0.1 * extentX;
+    const Terrain terrain(sc.land, extentY);
+    const double aboveM = 1500, pitch = -20;
+    double ey, ey2, dydx;
+    const double ex = 0.1 * extentX;
     terrain.centreline(ex, ey, dydx);
-    ex2 = ex + height_ / std::tan(-pitch * std::numbers::pi / 180);  // where the centre ray meets the floor
+    const double ex2 = ex + aboveM / std::tan(-pitch * std::numbers::pi / 180);  // where the centre ray meets the floor
     terrain.centreline(ex2, ey2, dydx);
     hc::render::Camera c;
     c.xWorld = g.originWorldX + ex;
     c.yWorld = g.originWorldY + ey;
-    c.zWorld = terrain.waterLevelAt(ex) + height_;
+    c.zWorld = terrain.waterLevelAt(ex) + aboveM;
     c.yawDeg = std::atan2(ex2 - ex, ey2 - ey) * 180 / std::numbers::pi;
     c.pitchDeg = pitch;
     c.fovYDeg = 50;
