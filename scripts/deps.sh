@@ -2,8 +2,12 @@
 # Installs heightcast's build and test dependencies from Debian/Ubuntu packages (only what is missing).
 set -euo pipefail
 
+# The GL backend and viewer: EGL + GL headers and Mesa's drivers (llvmpipe runs the GL tests headless; the DRI
+# drivers must be named, nothing pulls them in), GLFW, glslangValidator (shaders are checked at build time),
+# and Xvfb for the viewer's test on machines with no display.
 packages=(build-essential cmake pkg-config libgdal-dev gdal-bin libgtest-dev libopenexr-dev libopenvdb-dev
-          libboost-iostreams-dev libtbb-dev libblosc-dev)
+          libboost-iostreams-dev libtbb-dev libblosc-dev
+          libegl-dev libopengl-dev libgl-dev libegl1 libegl-mesa0 libgl1-mesa-dri libglfw3-dev glslang-tools xvfb xauth)
 installed() { dpkg-query -W -f='${Status}' "$1" 2>/dev/null | grep -q "install ok installed"; }
 
 missing=()

@@ -1,0 +1,52 @@
+// heightcast/render/gl_renderer.h: the OpenGL 4.3 compute backend (DESIGN.md sections 5 and 9).
+//
+// The same stages as the CPU backend (renderer.h): cascade fitting (on the CPU, shared code), then
+// approximation into the cascade textures (visible texels only), max mipmaps, ray casting with exact
+// ray/bilinear-patch intersection and cascade blending, and shading, as compute shaders. It fills the
+// same Frame and Timings as renderFrame(); GPU stage times come from GL timer queries.
+//
+// No GL type appears here: the GL state lives behind the pimpl in render/src/gl/.
+#pragma once
+
+#include <memory>
+#include <string>
+
+#include "heightcast/render/renderer.h"
+
+namespace hc::render {
+
+// Which backend renders: the CPU one, the GL one, or GL where a 4.3 context can be had and the CPU
+// otherwise (the default).
+enum class Backend { Cpu, Gl, Auto };
+// "cpu" | "gl" | "auto"; throws hc::Error naming the bad value.
+Backend parseBackend(const std::string& name);
+const char* backendName(Backend b);
+
+class GlRenderer {
+public:
+    // Uses the GL context current on the calling thread (a GLFW window's, say). Throws hc::Error when
+    // there is none or it lacks OpenGL 4.3 compute shaders. The scene must outlive the renderer.
+    static std::unique_ptr<GlRenderer> inCurrentContext(const Scene& scene);
+    // Creates and owns a headless context (EGL, surfaceless platform: no display needed). Throws
+    // hc::Error saying why when no OpenGL 4.3 core context can be had.
+    static std::unique_ptr<GlRenderer> headless(const Scene& scene);
+    ~GlRenderer();
+
+    // One frame, read back into `frame` (the same content and layout as renderFrame()).
+    // Throws hc::Error for bad camera/options, shader or driver failures (with the driver's log).
+    Frame render(const Camera& camera, const RenderOptions& options, Timings& timings);
+    // One frame left on the GPU: returns the name of an RGBA8 texture of camera.width x camera.height
+    // (row 0 at the bottom, GL's convention) holding the shaded image, for a viewer to draw. Valid until
+    // the next call.
+    unsigned renderToTexture(const Camera& camera, const RenderOptions& options, Timings& timings);
+    // "llvmpipe (LLVM 15.0.6, 256 bits), OpenGL 4.5 (Core Profile) Mesa 22.3.6", say.
+    std::string deviceName() const;
+
+    struct Impl;
+
+private:
+    explicit GlRenderer(std::unique_ptr<Impl> impl);
+    std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace hc::render
