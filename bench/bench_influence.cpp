@@ -34,6 +34,7 @@
 #include <thread>
 #include <vector>
 
+#include "bench_common.h"
 #include "cli.h"
 #include "heightcast/grid/error.h"
 #include "heightcast/grid/morton.h"
@@ -51,6 +52,8 @@ using hc::influence::SurfaceEvaluator;
 
 namespace {
 
+using namespace hc::bench;
+
 // Targets of issue 3 (2 cores).
 constexpr double kTargetBuildMCellsPerS = 2.0;  // influence lists built per second
 constexpr double kTargetEvalMPointsPerS = 1.0;  // defined surface points evaluated per second, all threads
@@ -61,40 +64,6 @@ constexpr size_t kSynthSide = 2048;
 constexpr double kSynthPixelM = 0.75;
 constexpr int kSynthMaxLevel = 7;
 constexpr double kSynthToleranceM = 0.5;
-
-using Clock = std::chrono::steady_clock;
-double secondsSince(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
-
-__attribute__((format(printf, 1, 2))) std::string fmt(const char* format, ...) {
-    char buf[512];
-    va_list args;
-    va_start(args, format);
-    std::vsnprintf(buf, sizeof buf, format, args);
-    va_end(args);
-    return buf;
-}
-
-// The 1-minute load average: the machine may be shared, and a busy core shows up in every time here.
-std::string loadAverage() {
-    double one = -1;
-    if (FILE* f = std::fopen("/proc/loadavg", "r")) {
-        if (std::fscanf(f, "%lf", &one) != 1) one = -1;
-        std::fclose(f);
-    }
-    return one < 0 ? "unknown" : fmt("%.2f", one);
-}
-
-std::vector<std::string> splitList(const std::string& text, const std::string& what) {
-    std::vector<std::string> out;
-    size_t at = 0;
-    while (at <= text.size()) {
-        size_t comma = std::min(text.find(',', at), text.size());
-        out.push_back(text.substr(at, comma - at));
-        if (out.back().empty()) throw hc::Error(what + " '" + text + "': empty entry (give a list separated by commas)");
-        at = comma + 1;
-    }
-    return out;
-}
 
 std::vector<double> numberList(const std::string& text, const std::string& what, double above) {
     std::vector<double> out;

@@ -40,6 +40,7 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include "bench_common.h"
 #include "cli.h"
 #include "heightcast/grid/error.h"
 #include "heightcast/grid/grid_file.h"
@@ -49,6 +50,8 @@
 namespace fs = std::filesystem;
 
 namespace {
+
+using namespace hc::bench;
 
 // Targets of issue 2.
 constexpr double kTargetMpxPerS = 10.0;        // source pixels per second of ingest, projected input
@@ -74,52 +77,6 @@ struct Nothing {};
 
 enum class Path { Memory, Stream };
 const char* pathName(Path p) { return p == Path::Memory ? "mem" : "stream"; }
-
-// Runs body(result) in a forked child and returns the result, or throws hc::Error with the child's
-// own error message (or how it died).
-template <typename Result>
-Result inChild(const std::string& what, const std::function<void(Result&)>& body) {
-    struct Envelope {
-        Result result{};
-        char error[512] = {};
-    };
-    static_assert(std::is_trivially_copyable_v<Envelope>);
-    int fds[2];
-    if (pipe(fds) != 0) throw hc::Error(std::string("pipe: ") + std::strerror(errno));
-    std::fflush(nullptr);  // or the child would flush the parent's pending output a second time
-    pid_t pid = fork();
-    if (pid < 0) throw hc::Error(std::string("fork: ") + std::strerror(errno));
-    if (pid == 0) {
-        close(fds[0]);
-        Envelope env;
-        try {
-            body(env.result);
-        } catch (const std::exception& e) {
-            std::snprintf(env.error, sizeof env.error, "%s", e.what());
-        }
-        ssize_t written = write(fds[1], &env, sizeof env);
-        _exit(written == static_cast<ssize_t>(sizeof env) ? 0 : 1);  // no atexit, no parent destructors
-    }
-    close(fds[1]);
-    Envelope env;
-    size_t got = 0;
-    while (got < sizeof env) {
-        ssize_t n = read(fds[0], reinterpret_cast<char*>(&env) + got, sizeof env - got);
-        if (n < 0 && errno == EINTR) continue;
-        if (n <= 0) break;
-        got += static_cast<size_t>(n);
-    }
-    close(fds[0]);
-    int status = 0;
-    while (waitpid(pid, &status, 0) < 0 && errno == EINTR) {
-    }
-    if (WIFSIGNALED(status))
-        throw hc::Error(what + ": child process killed by signal " + std::to_string(WTERMSIG(status)) +
-                        (WTERMSIG(status) == SIGKILL ? " (out of memory?)" : ""));
-    if (got != sizeof env) throw hc::Error(what + ": child process exited without a result");
-    if (env.error[0]) throw hc::Error(what + ": " + env.error);
-    return env.result;
-}
 
 std::string gdalMessage() {
     const char* m = CPLGetLastErrorMsg();
@@ -243,18 +200,6 @@ struct Row {
     bool meetsSpeed() const { return mpxPerS() >= kTargetMpxPerS; }
     bool meetsMemory() const { return rasterMultiple() <= kTargetRasterMultiple; }
 };
-
-std::vector<std::string> splitList(const std::string& text, const std::string& what) {
-    std::vector<std::string> out;
-    size_t at = 0;
-    while (at <= text.size()) {
-        size_t comma = std::min(text.find(',', at), text.size());
-        out.push_back(text.substr(at, comma - at));
-        if (out.back().empty()) throw hc::Error(what + " '" + text + "': empty entry (give a list separated by commas)");
-        at = comma + 1;
-    }
-    return out;
-}
 
 std::string dims(uint64_t w, uint64_t h) { return std::to_string(w) + "x" + std::to_string(h); }
 double mb(uint64_t bytes) { return double(bytes) / 1e6; }

@@ -58,6 +58,7 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include "bench_common.h"
 #include "cli.h"
 #include "heightcast/grid/error.h"
 #include "heightcast/grid/grid.h"
@@ -73,6 +74,8 @@ using hc::Grid;
 
 namespace {
 
+using namespace hc::bench;
+
 // Targets (2 cores).
 constexpr double kTargetGaussiansPerS = 2e9;  // approximation: kernel evaluations per second
 constexpr double kTargetRaycastMs = 250.0;    // ray casting of a 1920 x 1080 frame
@@ -81,28 +84,6 @@ constexpr double kTargetRaysPerS = 1920.0 * 1080.0 / (kTargetRaycastMs / 1e3);  
 constexpr double kCoarsestM = 96.0;   // every scenario's coarsest cell
 constexpr int kTileLevelsAboveCoarsest = 3;  // generation tiles: 8 x 8 coarsest cells (768 m)
 constexpr int kMaxLevels = 24;        // cells-per-level slots sent back from a child
-
-using Clock = std::chrono::steady_clock;
-double secondsSince(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
-
-__attribute__((format(printf, 1, 2))) std::string fmt(const char* format, ...) {
-    char buf[1024];
-    va_list args;
-    va_start(args, format);
-    std::vsnprintf(buf, sizeof buf, format, args);
-    va_end(args);
-    return buf;
-}
-
-// The 1-minute load average: the machine may be shared, and a busy core shows up in every time here.
-std::string loadAverage() {
-    double one = -1;
-    if (FILE* f = std::fopen("/proc/loadavg", "r")) {
-        if (std::fscanf(f, "%lf", &one) != 1) one = -1;
-        std::fclose(f);
-    }
-    return one < 0 ? "unknown" : fmt("%.2f", one);
-}
 
 // ---------------- the scenarios ----------------
 
@@ -442,52 +423,6 @@ struct RunResult {
     char image[512] = {};         // the PNG written, or empty
 };
 
-// Runs body(result) in a forked child and returns the result, or throws hc::Error with the child's
-// own error message (or how it died). As in hc-bench-ingest.
-template <typename Result>
-Result inChild(const std::string& what, const std::function<void(Result&)>& body) {
-    struct Envelope {
-        Result result{};
-        char error[512] = {};
-    };
-    static_assert(std::is_trivially_copyable_v<Envelope>);
-    int fds[2];
-    if (pipe(fds) != 0) throw hc::Error(std::string("pipe: ") + std::strerror(errno));
-    std::fflush(nullptr);  // or the child would flush the parent's pending output a second time
-    pid_t pid = fork();
-    if (pid < 0) throw hc::Error(std::string("fork: ") + std::strerror(errno));
-    if (pid == 0) {
-        close(fds[0]);
-        Envelope env;
-        try {
-            body(env.result);
-        } catch (const std::exception& e) {
-            std::snprintf(env.error, sizeof env.error, "%s", e.what());
-        }
-        ssize_t written = write(fds[1], &env, sizeof env);
-        _exit(written == static_cast<ssize_t>(sizeof env) ? 0 : 1);  // no atexit, no parent destructors
-    }
-    close(fds[1]);
-    Envelope env;
-    size_t got = 0;
-    while (got < sizeof env) {
-        ssize_t n = read(fds[0], reinterpret_cast<char*>(&env) + got, sizeof env - got);
-        if (n < 0 && errno == EINTR) continue;
-        if (n <= 0) break;
-        got += static_cast<size_t>(n);
-    }
-    close(fds[0]);
-    int status = 0;
-    while (waitpid(pid, &status, 0) < 0 && errno == EINTR) {
-    }
-    if (WIFSIGNALED(status))
-        throw hc::Error(what + ": child process killed by signal " + std::to_string(WTERMSIG(status)) +
-                        (WTERMSIG(status) == SIGKILL ? " (out of memory?)" : ""));
-    if (got != sizeof env) throw hc::Error(what + ": child process exited without a result");
-    if (env.error[0]) throw hc::Error(what + ": " + env.error);
-    return env.result;
-}
-
 struct Settings {
     double scale = 1;
     int width = 1920, height = 1080, repeat = 3;
@@ -692,18 +627,6 @@ void writeCsv(const std::vector<const Scenario*>& scs, const std::vector<RunResu
                  approximationMet(r) ? "met" : "MISSED", raycastMet(r) ? "met" : "MISSED");
     }
     if (!f.flush()) throw hc::Error(path + ": write failed (--csv)");
-}
-
-std::vector<std::string> splitList(const std::string& text, const std::string& what) {
-    std::vector<std::string> out;
-    size_t at = 0;
-    while (at <= text.size()) {
-        size_t comma = std::min(text.find(',', at), text.size());
-        out.push_back(text.substr(at, comma - at));
-        if (out.back().empty()) throw hc::Error(what + " '" + text + "': empty entry (give a list separated by commas)");
-        at = comma + 1;
-    }
-    return out;
 }
 
 }  // namespace
