@@ -40,6 +40,7 @@ std::string num(double v) {
 }
 
 struct Summary {
+    uint16_t fileMinor = 0;  // the file's format minor version (major is kGridFileMajor, or it would not read)
     double minCell = 0, maxCell = 0;
     double extent[4] = {0, 0, 0, 0};  // world xmin, ymin, xmax, ymax
     std::vector<uint64_t> perLevel;
@@ -70,7 +71,7 @@ Summary summarise(const hc::Grid& g) {
 void printJson(const hc::Grid& g, const Summary& s, const std::string& path) {
     std::string j = "{\n";
     j += "  \"file\": " + jsonString(path) + ",\n";
-    j += "  \"format_version\": \"" + std::to_string(hc::kGridFileMajor) + "." + std::to_string(hc::kGridFileMinor) + "\",\n";
+    j += "  \"format_version\": \"" + std::to_string(hc::kGridFileMajor) + "." + std::to_string(s.fileMinor) + "\",\n";
     j += "  \"valid\": true,\n";
     j += "  \"cells\": " + std::to_string(g.cellCount()) + ",\n";
     j += "  \"levels\": [";
@@ -119,7 +120,7 @@ std::string crsLabel(const std::string& wkt) {
 
 void printText(const hc::Grid& g, const Summary& s, const std::string& path) {
     std::printf("%s: heightcast grid, format %d.%d, valid (all checksums and invariants checked)\n", path.c_str(),
-                hc::kGridFileMajor, hc::kGridFileMinor);
+                hc::kGridFileMajor, s.fileMinor);
     std::printf("  cells        %zu, %zu layer%s:", g.cellCount(), g.layerCount(), g.layerCount() == 1 ? "" : "s");
     for (const auto& l : g.layers) std::printf(" %s [%s]", l.name.c_str(), l.units.c_str());
     std::printf("\n  cell sizes   %.6g .. %.6g m (finest %.6g m, domain %.6g m = 2^%d finest)\n", s.minCell, s.maxCell,
@@ -185,8 +186,10 @@ int main(int argc, char** argv) {
             hc::cli::checkWritable(csv, "cells CSV");
             hc::cli::checkNotSame(csv, path, "cells CSV");
         }
-        hc::Grid g = hc::readGrid(path);
+        uint16_t fileMinor = 0;
+        hc::Grid g = hc::readGrid(path, &fileMinor);
         Summary s = summarise(g);
+        s.fileMinor = fileMinor;
         if (json)
             printJson(g, s, path);
         else

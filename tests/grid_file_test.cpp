@@ -206,7 +206,9 @@ TEST_F(GridFile, VersionsNewerMajorRefusedNewerMinorRead) {
     std::memcpy(minor.data() + 10, &seven, 2);
     fixHeaderCrc(minor);
     writeBytes(path("v1_7.hcg"), minor, minor.size());
-    expectEqualGrids(tinyGrid(), hc::readGrid(path("v1_7.hcg")));
+    uint16_t fileMinor = 0;
+    expectEqualGrids(tinyGrid(), hc::readGrid(path("v1_7.hcg"), &fileMinor));
+    EXPECT_EQ(fileMinor, 7);
 }
 
 TEST_F(GridFile, InvalidCellsBehindValidChecksumsAreRefused) {

@@ -268,6 +268,10 @@ void writeGrid(const Grid& g, const std::string& path) {
     w.commit(g.stats);
 }
 
-Grid readGrid(const std::string& path) { return parseGrid(SectionedFileReader(path, kFormat)); }
+Grid readGrid(const std::string& path, uint16_t* fileMinor) {
+    const SectionedFileReader reader(path, kFormat);
+    if (fileMinor) *fileMinor = reader.minor();
+    return parseGrid(reader);
+}
 
 }  // namespace hc

@@ -66,6 +66,8 @@ private:
 
 // Reads (memory-mapped) and fully validates a grid file: header, section table, every checksum,
 // every cell invariant, both hashes. Throws hc::Error naming the file, the byte offset and the problem.
-Grid readGrid(const std::string& path);
+// `fileMinor`, when given, receives the file's minor version (a newer minor than kGridFileMinor is
+// read: it only adds sections this reader skips).
+Grid readGrid(const std::string& path, uint16_t* fileMinor = nullptr);
 
 }  // namespace hc
