@@ -301,6 +301,42 @@ TEST(Surface, WaterSurfaceOnlyWhereWet) {
     EXPECT_THROW(Layer::byName(g, "velocity"), hc::Error);
 }
 
+// The batch path (hc-probe's) is a separate, vectorised implementation with its own exponential: it
+// must give the reference evaluator's values, and undefined exactly where the reference does, for
+// every layer kind (plain layers, and the water surface that is undefined where dry).
+TEST(Surface, BatchEqualsPointByPointOnEveryLayer) {
+    HC_REQUIRE_DATA(lidar, "lidar1m_minnesota_utm15.tif");
+    std::vector<Case> cases = grids();
+    cases.push_back({"lidar flooded", ingestFile(lidar, 0.25, 397.0)});
+    for (const Case& c : cases) {
+        SCOPED_TRACE(c.name);
+        InfluenceLists lists = hc::influence::buildInfluenceLists(c.grid, KernelParams{});
+        SurfaceEvaluator eval(c.grid, lists);
+        std::vector<std::array<double, 2>> pts;
+        for (auto [x, y] : probePoints(c.grid, 4000, 23)) pts.push_back({x, y});
+        pts.push_back({-1e6, -1e6});  // outside the domain
+        std::vector<std::string> layers{"elevation"};
+        if (c.grid.findLayer("water_depth") >= 0) layers = {"elevation", "water_depth", "water_surface"};
+        for (const std::string& name : layers) {
+            SCOPED_TRACE(name);
+            const Layer layer = Layer::byName(c.grid, name);
+            const auto batch = eval.values(pts, layer, 2);
+            ASSERT_EQ(batch.size(), pts.size());
+            size_t defined = 0;
+            for (size_t i = 0; i < pts.size(); ++i) {
+                const auto ref = eval.value(pts[i][0], pts[i][1], layer);
+                ASSERT_EQ(batch[i].has_value(), ref.has_value()) << pts[i][0] << "," << pts[i][1];
+                if (!ref) continue;
+                ++defined;
+                // 1e-12 relative, as against brute force: both sum the same terms relative to the same
+                // base; the exponentials differ by a few ulp.
+                ASSERT_NEAR(*batch[i], *ref, 1e-12 * std::max(1.0, std::abs(*ref))) << pts[i][0] << "," << pts[i][1];
+            }
+            EXPECT_GT(defined, 100u);
+        }
+    }
+}
+
 // ---- the .hci format ----
 
 class CacheFile : public ::testing::Test {
