@@ -12,3 +12,6 @@ find_package(OpenVDB 9 REQUIRED)
 if(HC_BUILD_TESTS)
   find_package(GTest 1.10 REQUIRED)
 endif()
+# hc-view's window (GLFW, X11) and OpenGL through glvnd: libOpenGL exports the core functions, so no loader.
+find_package(glfw3 3.3 REQUIRED)
+find_package(OpenGL REQUIRED COMPONENTS OpenGL)

@@ -1,0 +1,81 @@
+#include "render_setup.h"
+
+#include <cmath>
+#include <cstdio>
+#include <vector>
+
+#include "heightcast/grid/error.h"
+#include "heightcast/grid/grid_file.h"
+
+namespace hc::cli {
+
+void RenderSetup::addCameraOptions(Parser& p, const std::string& alsoExclusive) {
+    p.option("--camera", "X,Y,Z,YAW,PITCH,FOV", "camera position [m], yaw, pitch and vertical field of view [degrees]", cameraText);
+    p.option("--look-at", "EX,EY,EZ,TX,TY,TZ[,FOV]", "camera at the eye E looking at the target T [m] (FOV default 50 degrees)", lookAt);
+    if (alsoExclusive.empty()) p.exclusive({"--camera", "--look-at"});
+    else p.exclusive({"--camera", "--look-at", alsoExclusive});
+}
+
+void RenderSetup::addRenderOptions(Parser& p) {
+    p.option("--size", "WxH", "image size in pixels (default " + size + ")", size);
+    p.option("--cascades", "K", "number of cascades, 1..4 (default 3)", options.cascades);
+    p.option("--texels", "N", "texels per cascade side, 16..8192 (default 1024)", options.texelsPerSide);
+    p.option("--threads", "N", "worker threads (default 0 = all cores)", options.threads);
+    p.option("--color", "MODE", "elevation (hypsometric terrain, water by depth) or water_depth (grey terrain) (default elevation)", color);
+    p.flag("--cells", "overlay the outlines of the adaptive cells", cells);
+    p.flag("--no-legend", "leave the colour bar out", noLegend);
+    p.option("--cache", "C.hci", "influence cache (default: the grid's path with .hci; built if missing or stale)", cachePath);
+    p.option("--sigma", "S", "kernel width in cell sizes (default 1.0)", params.sigma);
+    p.option("--truncation", "R", "kernel cut-off in sigmas (default 3.5)", params.truncation);
+}
+
+void parseSize(const std::string& text, int& width, int& height) {
+    auto wh = text.find('x');
+    if (wh == std::string::npos) throw Error("--size " + text + ": expected WxH, e.g. 1920x1080");
+    const double w = parseNumber(text.substr(0, wh), "--size"), h = parseNumber(text.substr(wh + 1), "--size");
+    if (w != std::floor(w) || h != std::floor(h) || w < 1 || h < 1 || w > 16384 || h > 16384)
+        throw Error("--size " + text + ": width and height must be whole numbers in 1..16384");
+    width = int(w), height = int(h);
+}
+
+void RenderSetup::finish() {
+    if (color == "elevation") options.color = render::ColorMode::Elevation;
+    else if (color == "water_depth") options.color = render::ColorMode::WaterDepth;
+    else throw Error("--color " + color + ": use elevation or water_depth");
+    options.cellOutlines = cells;
+    options.legend = !noLegend;
+    if (std::string why = options.validate(); !why.empty()) throw Error(why);
+    if (std::string why = params.validate(); !why.empty()) throw Error("--sigma/--truncation: " + why);
+    parseSize(size, width, height);
+    std::vector<double> cam, look;
+    if (!cameraText.empty()) cam = parseNumberList(cameraText, "--camera", 6, 6);
+    if (!lookAt.empty()) look = parseNumberList(lookAt, "--look-at", 6, 7);
+    camera.reset();
+    if (!cam.empty()) {
+        render::Camera c;
+        c.xWorld = cam[0], c.yWorld = cam[1], c.zWorld = cam[2];
+        c.yawDeg = cam[3], c.pitchDeg = cam[4], c.fovYDeg = cam[5];
+        c.width = width, c.height = height;
+        camera = c;
+    } else if (!look.empty()) {
+        camera = render::Camera::lookAt({look[0], look[1], look[2]}, {look[3], look[4], look[5]}, look.size() > 6 ? look[6] : 50.0,
+                                        width, height);
+    }
+    if (camera) camera->validate();
+}
+
+std::unique_ptr<LoadedScene> loadScene(const char* program, const std::string& gridPath, const RenderSetup& setup) {
+    auto s = std::make_unique<LoadedScene>(LoadedScene{readGrid(gridPath), {}, nullptr});
+    const std::string cachePath = setup.cachePath.empty() ? influence::defaultCachePath(gridPath) : setup.cachePath;
+    std::string note;
+    s->lists = influence::loadOrBuildCache(s->grid, setup.params, cachePath, setup.options.threads, true, note);
+    std::fprintf(stderr, "%s: %s\n", program, note.c_str());
+    s->scene = std::make_unique<render::Scene>(s->grid, s->lists);
+    return s;
+}
+
+render::Camera initialCamera(const RenderSetup& setup, const render::Scene& scene) {
+    return setup.camera ? *setup.camera : render::overviewCamera(scene, setup.width, setup.height);
+}
+
+}  // namespace hc::cli

@@ -1,0 +1,54 @@
+// apps/render_setup.h: what hc-render and hc-view share: their rendering and camera options (parsed,
+// explained and validated the same way), the grid + influence cache + scene loading, and the camera.
+#pragma once
+
+#include <memory>
+#include <optional>
+#include <string>
+
+#include "cli.h"
+#include "heightcast/grid/grid.h"
+#include "heightcast/influence/influence.h"
+#include "heightcast/render/camera.h"
+#include "heightcast/render/renderer.h"
+
+namespace hc::cli {
+
+struct RenderSetup {
+    std::string cachePath, cameraText, lookAt, size, color = "elevation";
+    render::RenderOptions options;
+    influence::KernelParams params;
+    bool cells = false, noLegend = false;
+
+    // Set by finish():
+    int width = 0, height = 0;                 // from --size [pixels]
+    std::optional<render::Camera> camera;      // from --camera or --look-at, validated; empty: the overview
+
+    explicit RenderSetup(std::string defaultSize) : size(std::move(defaultSize)) {}
+    // --camera, --look-at (exclusive with each other and with `alsoExclusive`, e.g. "--view").
+    void addCameraOptions(Parser& p, const std::string& alsoExclusive = "");
+    // --size, --cascades, --texels, --threads, --color, --cells, --no-legend, --cache, --sigma, --truncation.
+    void addRenderOptions(Parser& p);
+    // After Parser::parse: validates every option and the camera's numbers (before any expensive work).
+    // Throws hc::Error naming the option.
+    void finish();
+};
+
+// "WxH" -> whole numbers in 1..16384; throws hc::Error naming --size.
+void parseSize(const std::string& text, int& width, int& height);
+
+// A grid, its influence lists (read from the cache, or built and written there) and the scene over them,
+// kept together: the scene refers to the other two.
+struct LoadedScene {
+    Grid grid;
+    influence::InfluenceLists lists;
+    std::unique_ptr<render::Scene> scene;
+};
+// Reads the grid, loads or (re)builds the cache (default: the grid's path with .hci) saying why on stderr as
+// "PROGRAM: NOTE", and prepares the scene. Throws hc::Error.
+std::unique_ptr<LoadedScene> loadScene(const char* program, const std::string& gridPath, const RenderSetup& setup);
+
+// The camera the options gave, or the overview framing the whole grid; of the given size.
+render::Camera initialCamera(const RenderSetup& setup, const render::Scene& scene);
+
+}  // namespace hc::cli
