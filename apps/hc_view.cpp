@@ -759,11 +759,11 @@ int main(int argc, char** argv) {
         hc::cli::RenderSetup setup("1280x720");
         hc::cli::Parser p("hc-view", "GRID.hcg [--camera X,Y,Z,YAW,PITCH,FOV | --look-at EX,EY,EZ,TX,TY,TZ[,FOV]] [--backend gl|cpu|auto] [options]",
                           "Opens a window on the smooth surface of a grid (terrain, and water where the grid has water_depth)\n"
-                          "and lets you fly over it; a HUD shows per-stage timings, the camera and the height above ground.\n"
-                          "Press H in the window for the controls. Coordinates in the grid's CRS [m]; angles in degrees: yaw 0\n"
-                          "looks north, 90 east; pitch negative looks down. Without a camera option: the overview of hc-render.\n"
-                          "Bookmarks (Shift+1-9 saves, 1-9 loads) live in GRID.bookmarks.json beside the grid. Needs a display\n"
-                          "(DISPLAY); for a screenshot without one: xvfb-run -a hc-view GRID.hcg --frames 30 --screenshot OUT.png");
+                          "and lets you fly over it (press H in the window for the controls); a HUD shows per-stage timings,\n"
+                          "the camera and the height above ground. Coordinates in the grid's CRS [m]; angles in degrees:\n"
+                          "yaw 0 looks north, 90 east; pitch negative looks down. Without a camera option: hc-render's\n"
+                          "overview. Bookmarks (Shift+1-9 saves, 1-9 loads) live in GRID.bookmarks.json beside the grid.\n"
+                          "Needs a display (DISPLAY); without one: xvfb-run -a hc-view GRID.hcg --frames 30 --screenshot OUT.png");
         p.positional("GRID.hcg", "grid file", gridPath);
         setup.addCameraOptions(p);
         p.option("--backend", "gl|cpu|auto", "renderer: the OpenGL 4.3 compute backend, the CPU one, or GL when it works (default auto)", backendName);
