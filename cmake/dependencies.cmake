@@ -15,3 +15,8 @@ endif()
 # hc-view's window (GLFW, X11) and OpenGL through glvnd: libOpenGL exports the core functions, so no loader.
 find_package(glfw3 3.3 REQUIRED)
 find_package(OpenGL REQUIRED COMPONENTS OpenGL)
+# render/'s GL backend: libglvnd's OpenGL and EGL (headless through the EGL surfaceless platform), and
+# glslangValidator to check the compute shaders at build time (Debian: libegl-dev libgl-dev
+# glslang-tools; Mesa's libgl1-mesa-dri provides llvmpipe where there is no GPU).
+find_package(OpenGL REQUIRED COMPONENTS OpenGL EGL)
+find_program(HC_GLSLANG_VALIDATOR glslangValidator REQUIRED)

@@ -9,6 +9,7 @@
 
 #include "heightcast/grid/error.h"
 #include "heightcast/grid/parallel.h"
+#include "heightcast/render/gpu_layout.h"
 #include "textures.h"
 
 namespace hc::render {
@@ -94,9 +95,15 @@ Rgb ramp(const std::vector<std::pair<double, Rgb>>& stops, double t) {
     return stops.back().second;
 }
 
-const std::vector<std::pair<double, Rgb>> kElevation{{0.0, {0.24, 0.47, 0.24}}, {0.3, {0.59, 0.67, 0.35}}, {0.55, {0.63, 0.51, 0.35}},
-                                                     {0.8, {0.6, 0.6, 0.6}},    {1.0, {0.98, 0.98, 0.98}}};
-const std::vector<std::pair<double, Rgb>> kDepth{{0.0, {0.6, 0.87, 0.95}}, {0.5, {0.16, 0.47, 0.8}}, {1.0, {0.04, 0.12, 0.45}}};
+// The ramps of gpu_layout.h (shared with shade.comp) as stops.
+template <size_t N>
+std::vector<std::pair<double, Rgb>> stopsOf(const double (&ramp)[N][4]) {
+    std::vector<std::pair<double, Rgb>> stops;
+    for (const auto& s : ramp) stops.push_back({s[0], {s[1], s[2], s[3]}});
+    return stops;
+}
+const std::vector<std::pair<double, Rgb>> kElevation = stopsOf(gpu::kElevationRamp);
+const std::vector<std::pair<double, Rgb>> kDepth = stopsOf(gpu::kDepthRamp);
 
 // sRGB transfer functions by table (pow per pixel channel was a sixth of a frame): 4096 steps keep
 // the 8-bit output exact to within one level.
@@ -116,32 +123,12 @@ const SrgbTables kSrgb;
 double toLinear(double c) { return kSrgb.toLinear[size_t(std::lround(std::clamp(c, 0.0, 1.0) * 4096.0))]; }
 uint8_t toSrgb8(double c) { return kSrgb.toSrgb[size_t(std::lround(std::clamp(c, 0.0, 1.0) * 4096.0))]; }
 
-// A 3 x 5 pixel font for legend labels: digits, '.', '-', 'm'.
-const char* glyph(char ch) {
-    switch (ch) {
-        case '0': return "111101101101111";
-        case '1': return "010110010010111";
-        case '2': return "111001111100111";
-        case '3': return "111001111001111";
-        case '4': return "101101111001001";
-        case '5': return "111100111001111";
-        case '6': return "111100111101111";
-        case '7': return "111001001001001";
-        case '8': return "111101111101111";
-        case '9': return "111101111001111";
-        case '.': return "000000000000010";
-        case '-': return "000000111000000";
-        case 'm': return "000000111111101";
-        default: return "000000000000000";
-    }
-}
-
 void drawText(Frame& f, int x, int y, const std::string& text, int scale) {
     for (char ch : text) {
-        const char* gl = glyph(ch);
+        const uint32_t bits = gpu::glyphBits(ch);  // 3 x 5 pixels, bit 14 top-left
         for (int r = 0; r < 5; ++r)
             for (int c = 0; c < 3; ++c)
-                if (gl[r * 3 + c] == '1')
+                if ((bits >> (14 - (r * 3 + c))) & 1u)
                     for (int dy = 0; dy < scale; ++dy)
                         for (int dx = 0; dx < scale; ++dx) {
                             const int px = x + c * scale + dx, py = y + r * scale + dy;
@@ -160,23 +147,78 @@ std::string label(double v) {
 }
 
 // A colour bar with its range, at the image's right edge.
-void drawLegend(Frame& f, const std::vector<std::pair<double, Rgb>>& stops, double lo, double hi) {
-    const int scale = std::max(1, f.height / 360);
-    const int barH = std::max(20, f.height * 2 / 5), barW = std::max(6, 6 * scale);
-    const int x0 = f.width - barW - 8 * scale - 4 * 4 * scale * 2, y0 = f.height / 2 - barH / 2;
-    if (x0 < 0 || y0 < 0) return;
-    for (int y = 0; y < barH; ++y) {
-        const Rgb c = ramp(stops, 1.0 - double(y) / (barH - 1));
-        for (int x = 0; x < barW; ++x) {
-            uint8_t* p = &f.rgb[(size_t(y0 + y) * size_t(f.width) + size_t(x0 + x)) * 3];
+void drawLegend(Frame& f, const detail::LegendLayout& l) {
+    if (!l.shown) return;
+    const auto& stops = l.depth ? kDepth : kElevation;
+    for (int y = 0; y < l.barH; ++y) {
+        const Rgb c = ramp(stops, 1.0 - double(y) / (l.barH - 1));
+        for (int x = 0; x < l.barW; ++x) {
+            uint8_t* p = &f.rgb[(size_t(l.y0 + y) * size_t(f.width) + size_t(l.x0 + x)) * 3];
             p[0] = static_cast<uint8_t>(c.r * 255), p[1] = static_cast<uint8_t>(c.g * 255), p[2] = static_cast<uint8_t>(c.b * 255);
         }
     }
-    drawText(f, x0 + barW + 2 * scale, y0, label(hi), scale);
-    drawText(f, x0 + barW + 2 * scale, y0 + barH - 5 * scale, label(lo), scale);
+    drawText(f, l.x0 + l.barW + 2 * l.scale, l.y0, l.hi, l.scale);
+    drawText(f, l.x0 + l.barW + 2 * l.scale, l.y0 + l.barH - 5 * l.scale, l.lo, l.scale);
 }
 
 }  // namespace
+
+namespace detail {
+
+FrameSetup setUpFrame(const Scene& scene, const Camera& camera) {
+    const Grid& g = scene.grid();
+    FrameSetup s;
+    s.basis = basisOf(camera);
+    s.eye[0] = camera.xWorld - g.originWorldX;
+    s.eye[1] = camera.yWorld - g.originWorldY;
+    s.eye[2] = camera.zWorld;
+    const double* eye = s.eye;
+    // Near and far from the scene: far reaches the farthest corner of the bounds.
+    double far = 0;
+    for (double x : {scene.xMin, scene.xMax})
+        for (double y : {scene.yMin, scene.yMax})
+            for (double z : {scene.zMin, scene.zMax}) far = std::max(far, std::hypot(x - eye[0], y - eye[1], z - eye[2]));
+    far = far * 1.01 + 1.0;
+    s.farM = far;
+    s.nearM = std::max(1e-3, far * 1e-7);
+    ViewVolume& view = s.view;
+    view.eyeLocal = {eye[0], eye[1], eye[2]};
+    view.forward = s.basis.forward;
+    view.right = s.basis.right;
+    view.up = s.basis.up;
+    view.tanHalfX = s.basis.tanHalfX;
+    view.tanHalfY = s.basis.tanHalfY;
+    view.nearM = s.nearM;
+    view.farM = s.farM;
+    view.yawRad = camera.yawDeg * M_PI / 180.0;
+    view.boxMin = {scene.xMin, scene.yMin, scene.zMin};
+    view.boxMax = {scene.xMax, scene.yMax, scene.zMax};
+    view.finestCellM = g.finestCellM;
+    return s;
+}
+
+LegendLayout legendLayout(const Scene& scene, const RenderOptions& options, int width, int height) {
+    LegendLayout l;
+    if (!options.legend) return l;
+    double lo = 0, hi = 0;
+    if (scene.hasWater() && scene.depthMax > 0) {
+        l.depth = true, lo = 0, hi = scene.depthMax;
+    } else if (options.color == ColorMode::Elevation) {
+        lo = scene.elevationMin, hi = scene.elevationMax;
+    } else {
+        return l;
+    }
+    l.scale = std::max(1, height / 360);
+    l.barH = std::max(20, height * 2 / 5), l.barW = std::max(6, 6 * l.scale);
+    l.x0 = width - l.barW - 8 * l.scale - 4 * 4 * l.scale * 2, l.y0 = height / 2 - l.barH / 2;
+    if (l.x0 < 0 || l.y0 < 0) return l;
+    l.shown = true;
+    l.hi = label(hi);
+    l.lo = label(lo);
+    return l;
+}
+
+}  // namespace detail
 
 Frame renderFrame(const Scene& scene, const Camera& camera, const RenderOptions& options, Timings& timings) {
     camera.validate();
@@ -184,32 +226,14 @@ Frame renderFrame(const Scene& scene, const Camera& camera, const RenderOptions&
     const auto start = Clock::now();
     timings = Timings{};
     const Grid& g = scene.grid();
-    const CameraBasis basis = basisOf(camera);
-    const double eye[3] = {camera.xWorld - g.originWorldX, camera.yWorld - g.originWorldY, camera.zWorld};
-
-    // Near and far from the scene: far reaches the farthest corner of the bounds.
-    double far = 0;
-    for (double x : {scene.xMin, scene.xMax})
-        for (double y : {scene.yMin, scene.yMax})
-            for (double z : {scene.zMin, scene.zMax}) far = std::max(far, std::hypot(x - eye[0], y - eye[1], z - eye[2]));
-    far = far * 1.01 + 1.0;
-    const double near = std::max(1e-3, far * 1e-7);
+    const detail::FrameSetup setup = detail::setUpFrame(scene, camera);
+    const CameraBasis& basis = setup.basis;
+    const double* eye = setup.eye;
+    const double near = setup.nearM, far = setup.farM;
 
     // 1. Cascade fitting.
     auto t = Clock::now();
-    ViewVolume view;
-    view.eyeLocal = {eye[0], eye[1], eye[2]};
-    view.forward = basis.forward;
-    view.right = basis.right;
-    view.up = basis.up;
-    view.tanHalfX = basis.tanHalfX;
-    view.tanHalfY = basis.tanHalfY;
-    view.nearM = near;
-    view.farM = far;
-    view.yawRad = camera.yawDeg * M_PI / 180.0;
-    view.boxMin = {scene.xMin, scene.yMin, scene.zMin};
-    view.boxMax = {scene.xMax, scene.yMax, scene.zMax};
-    view.finestCellM = g.finestCellM;
+    const ViewVolume& view = setup.view;
     const CascadeFit fit = fitCascades(view, options.cascades, options.texelsPerSide);
     timings.fittingMs = msSince(t);
     timings.viewDirX = fit.dir[0];
@@ -284,10 +308,11 @@ Frame renderFrame(const Scene& scene, const Camera& camera, const RenderOptions&
     // 5. Shading: hillshade light, elevation or depth colours, distance fog, sky, outlines, legend.
     t = Clock::now();
     f.rgb.assign(pixels * 3, 0);
-    const double sunAz = 315 * M_PI / 180, sunAlt = 45 * M_PI / 180;
+    const double sunAz = gpu::kSunAzimuthDeg * M_PI / 180, sunAlt = gpu::kSunAltitudeDeg * M_PI / 180;
     const double sun[3] = {std::sin(sunAz) * std::cos(sunAlt), std::cos(sunAz) * std::cos(sunAlt), std::sin(sunAlt)};
-    const double fogDist = 3.0 * std::hypot(scene.xMax - scene.xMin, scene.yMax - scene.yMin);
-    const Rgb skyHorizon{0.78, 0.84, 0.92}, skyZenith{0.43, 0.59, 0.82};
+    const double fogDist = gpu::kFogExtents * std::hypot(scene.xMax - scene.xMin, scene.yMax - scene.yMin);
+    const Rgb skyHorizon{gpu::kSkyHorizon[0], gpu::kSkyHorizon[1], gpu::kSkyHorizon[2]};
+    const Rgb skyZenith{gpu::kSkyZenith[0], gpu::kSkyZenith[1], gpu::kSkyZenith[2]};
     const double zRange = std::max(scene.elevationMax - scene.elevationMin, 1e-6);
     const double dRange = std::max(scene.depthMax, 1e-6);
     const double pixelAngle = 2.0 * basis.tanHalfY / H;
@@ -308,7 +333,7 @@ Frame renderFrame(const Scene& scene, const Camera& camera, const RenderOptions&
                     if (isWater[i]) {
                         base = ramp(kDepth, f.waterDepthM[i] / dRange);
                     } else if (options.color == ColorMode::WaterDepth) {
-                        base = {0.7, 0.7, 0.68};
+                        base = {gpu::kDryColor[0], gpu::kDryColor[1], gpu::kDryColor[2]};
                     } else {
                         base = ramp(kElevation, (f.posZ[i] - scene.elevationMin) / zRange);
                     }
@@ -331,12 +356,7 @@ Frame renderFrame(const Scene& scene, const Camera& camera, const RenderOptions&
             }
     });
     for (uint64_t h : hits) timings.hits += h;
-    if (options.legend) {
-        if (scene.hasWater() && scene.depthMax > 0)
-            drawLegend(f, kDepth, 0, scene.depthMax);
-        else if (options.color == ColorMode::Elevation)
-            drawLegend(f, kElevation, scene.elevationMin, scene.elevationMax);
-    }
+    drawLegend(f, detail::legendLayout(scene, options, W, H));
     timings.shadingMs = msSince(t);
     timings.totalMs = msSince(start);
     return f;

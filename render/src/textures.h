@@ -1,8 +1,10 @@
 // Per-cascade textures shared by the CPU stages (private to render/).
 #pragma once
 
+#include <string>
 #include <vector>
 
+#include "heightcast/render/camera.h"
 #include "heightcast/render/cascades.h"
 #include "heightcast/render/renderer.h"
 
@@ -45,5 +47,24 @@ struct RayContext {
 };
 
 Hit castRay(const RayContext& ctx, const double dir[3]);
+
+// Per-frame set-up both backends share (renderer.cpp): the eye in the local frame, near and far from
+// the scene's bounds, and the view volume cascade fitting takes.
+struct FrameSetup {
+    CameraBasis basis;
+    double eye[3];
+    double nearM, farM;
+    ViewVolume view;
+};
+FrameSetup setUpFrame(const Scene& scene, const Camera& camera);
+
+// Where the legend goes and what it says (drawn by renderFrame() and by shade.comp).
+struct LegendLayout {
+    bool shown = false;
+    bool depth = false;  // the water-depth ramp, else the elevation ramp
+    int x0 = 0, y0 = 0, barW = 0, barH = 0, scale = 1;  // bar's top-left pixel (row 0 at the top) and size
+    std::string hi, lo;  // labels at the bar's top and bottom
+};
+LegendLayout legendLayout(const Scene& scene, const RenderOptions& options, int width, int height);
 
 }  // namespace hc::render::detail

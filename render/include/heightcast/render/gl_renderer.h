@@ -42,6 +42,20 @@ public:
     // "llvmpipe (LLVM 15.0.6, 256 bits), OpenGL 4.5 (Core Profile) Mesa 22.3.6", say.
     std::string deviceName() const;
 
+    // ---- test hooks (tests/render_gl_test.cpp); they use this renderer's context ----
+    // Compiles and links `source` as a compute shader named `name` and deletes it again. Throws
+    // hc::Error with the name and the driver's info log when it fails.
+    void compileForTest(const std::string& name, const std::string& source) const;
+    // The driver's layout of a buffer variable ("cells[0].level") in embedded program `program`
+    // ("approximate", "mipmap", "raycast", "shade"): GL_OFFSET and GL_TOP_LEVEL_ARRAY_STRIDE, -1
+    // where the program has no such variable.
+    struct VariableLayout {
+        long offset = -1, topLevelArrayStride = -1;
+    };
+    VariableLayout bufferVariableLayout(const std::string& program, const std::string& variable) const;
+    // GL_BUFFER_DATA_SIZE of a shader storage block ("FrameBlock"), -1 where absent.
+    long bufferBlockSize(const std::string& program, const std::string& block) const;
+
     struct Impl;
 
 private:

@@ -1,0 +1,184 @@
+// heightcast/render/gpu_layout.h: the structs and constants that the CPU side and the GL compute
+// shaders share (DESIGN.md section 5: one header for both backends).
+//
+// Written in the common subset of C++ and GLSL 4.30: scalar members (float, int, uint, double) and
+// fixed-size scalar arrays only, so the std430 layout the shaders see equals the C layout (std430
+// aligns scalars and scalar arrays to their own size, structs to their largest member; no vec3
+// padding traps). The build prepends this file to every render/shaders/*.comp (after #version);
+// tests/render_gl_test.cpp compares the driver's offsets, strides and sizes with offsetof/sizeof.
+//
+// Frames: "local" is metres from the grid origin (as everywhere in render/); "eye-relative" is local
+// minus the camera position. Floats hold eye-relative or local values whose magnitude stays below
+// the scene's extent (float resolves 1/16 mm at 1 km, 8 mm at 100 km).
+#ifndef HEIGHTCAST_RENDER_GPU_LAYOUT_H
+#define HEIGHTCAST_RENDER_GPU_LAYOUT_H
+
+#ifdef __cplusplus
+#include <cstdint>
+namespace hc::render::gpu {
+using uint = std::uint32_t;
+#endif
+
+// Buffer binding points (macros: GLSL 4.30 layout qualifiers take literals only).
+#define HC_BIND_FRAME 0      // FrameBlock: GpuFrame + GpuCascade[kMaxCascades]
+#define HC_BIND_CELLS 1      // GpuCell[cellCount + 1]
+#define HC_BIND_KEYS 2       // uint[2 * cellCount]: each cell's Morton key (lo, hi), sorted
+#define HC_BIND_INDICES 3    // uint[]: the influence lists' entries (CSR indices)
+#define HC_BIND_VISIBLE 4    // uint[]: per cascade n * n bytes (Cascade::visible), packed 4 per uint
+#define HC_BIND_HEIGHTS 5    // float[]: per cascade terrain, water, depth textures and both max mipmaps
+#define HC_BIND_PIXELS 6     // GpuPixel[width * height], row 0 at the top
+#define HC_BIND_COUNTERS 7   // uint[kCounterSlots * (kMaxCascades + 1)]: Gaussians per cascade, then hits
+#define HC_IMAGE_COLOR 0     // rgba8 image unit of the shaded picture (row 0 at the bottom)
+
+// Work-group sizes (macros: they go into layout(local_size_x = ...)).
+#define HC_GROUP_2D 8
+
+const int kMaxCascades = 4;
+const int kMaxMipLevels = 16;   // a 8192^2 cascade has 14 levels
+const int kCounterSlots = 64;   // a counter is spread over slots so that no uint overflows
+const int kMaxLabelChars = 12;  // legend labels ("-10994m")
+
+// One grid cell, plus a sentinel after the last so that cells[k + 1].listBegin ends k's list.
+struct GpuCell {
+    uint ix;          // south-west corner [finest units]
+    uint iy;
+    uint level;       // size = finest * 2^level
+    uint listBegin;   // first entry of the influence list in the indices buffer
+    float a;          // 1 / (2 sigma^2 c^2) (Scene::CellKernel::a)
+    float r2;         // squared kernel radius [m^2]
+    float z;          // elevation [m]
+    float depth;      // water depth [m], 0 without a water layer
+};
+
+// One cascade (Cascade in cascades.h) as the shaders read it.
+struct GpuCascade {
+    double x0;        // local position of texel (0, 0)'s centre [m]; double: texel centres are
+    double y0;        //   located in the grid exactly as the CPU does (approximate.cpp)
+    double texelM;    // texel size s [m]
+    float x0Eye;      // x0 - eye, y0 - eye [m]: the ray caster's frame
+    float y0Eye;
+    float texelF;     // s as float
+    int n;            // texels per side; 0 for an empty cascade
+    float splitNear;  // offsets from the eye along the horizontal view direction [m]
+    float splitFar;
+    float farWithOverlap;
+    int levels;       // max mipmap levels (Heightfield::mip.size())
+    uint terrainOffset;  // into the heights buffer [floats]: terrain heights, n * n
+    uint waterOffset;    // water surface heights, n * n
+    uint depthOffset;    // water depths, n * n
+    uint visibleOffset;  // into the visible buffer [uints]
+    uint terrainMip[kMaxMipLevels];  // per level: offset of the terrain's max mipmap [floats]
+    uint waterMip[kMaxMipLevels];
+    int mipSide[kMaxMipLevels];
+};
+
+// What every stage of one frame reads.
+struct GpuFrame {
+    double eyeX;      // camera position, local [m] (double: cell outlines locate hit points)
+    double eyeY;
+    double finestM;   // grid's finest cell size [m]
+    double domainM;   // grid's domain side [m]
+    float eyeZ;       // camera height, local z (= world z) [m]
+    float tanHalfX;   // image plane half extents at unit distance
+    float tanHalfY;
+    float nearM;
+    float farM;
+    float dirX;       // horizontal view direction the cascade offsets are measured along
+    float dirY;
+    float tail;       // exp(-R^2 / 2): the kernel's cut
+    float forward[3];
+    float right[3];
+    float up[3];
+    float sun[3];     // unit vector towards the sun
+    int width;        // image [pixels]
+    int height;
+    int cascades;     // fitted cascades (<= kMaxCascades)
+    int hasWater;
+    uint cellCount;
+    uint rootLevel;
+    float minDepthM;  // RenderOptions::waterMinDepthM
+    float fogDistM;   // fog reaches 1 - 1/e of its half strength at this distance
+    float elevationMin;
+    float zRange;     // elevation range (>= 1e-6)
+    float dRange;     // water depth range (>= 1e-6)
+    float pixelAngle; // vertical angle of one pixel at the image centre [rad]
+    int colorMode;    // 0 elevation, 1 water depth (ColorMode)
+    int cellOutlines;
+    int legendRamp;   // 0 none, 1 water depth, 2 elevation
+    int legendX0;     // colour bar's top-left pixel (row 0 at the top), size and label scale
+    int legendY0;
+    int legendBarW;
+    int legendBarH;
+    int legendScale;
+    int labelHiLen;   // characters of the two labels; their glyphs are 15-bit masks (glyphBits)
+    int labelLoLen;
+    uint labelHi[kMaxLabelChars];
+    uint labelLo[kMaxLabelChars];
+    float elevationRamp[5 * 4];  // stops (t, r, g, b), sRGB
+    float depthRamp[3 * 4];
+    float skyHorizon[3];
+    float skyZenith[3];
+    float dryColor[3];
+};
+
+// One pixel's ray-cast result, row 0 at the top (Frame's layout).
+struct GpuPixel {
+    float t;          // distance along the ray [m]; +inf where the ray misses
+    float relX;       // hit position minus the eye [m]
+    float relY;
+    float relZ;
+    float nx;         // unit normal
+    float ny;
+    float nz;
+    float depth;      // water depth at a water hit, else 0
+    int cascade;      // -1 where the ray misses
+    int water;        // 1 for a water hit
+};
+
+#ifdef __cplusplus
+// Shading constants both backends use (renderer.cpp and shade.comp through GpuFrame).
+// Colour ramps: stops (t, r, g, b), sRGB.
+inline constexpr double kElevationRamp[5][4] = {
+    {0.0, 0.24, 0.47, 0.24}, {0.3, 0.59, 0.67, 0.35}, {0.55, 0.63, 0.51, 0.35}, {0.8, 0.6, 0.6, 0.6}, {1.0, 0.98, 0.98, 0.98}};
+inline constexpr double kDepthRamp[3][4] = {{0.0, 0.6, 0.87, 0.95}, {0.5, 0.16, 0.47, 0.8}, {1.0, 0.04, 0.12, 0.45}};
+inline constexpr double kDryColor[3] = {0.7, 0.7, 0.68};  // terrain under ColorMode::WaterDepth
+inline constexpr double kSkyHorizon[3] = {0.78, 0.84, 0.92};
+inline constexpr double kSkyZenith[3] = {0.43, 0.59, 0.82};
+inline constexpr double kSunAzimuthDeg = 315, kSunAltitudeDeg = 45;
+inline constexpr double kFogExtents = 3.0;  // fog distance in horizontal scene diagonals
+
+// A 3 x 5 pixel glyph for legend labels (digits, '.', '-', 'm') as 15 bits, row-major from the
+// top-left, bit 14 first.
+constexpr uint glyphBits(char ch) {
+    const char* rows = "000000000000000";
+    switch (ch) {
+        case '0': rows = "111101101101111"; break;
+        case '1': rows = "010110010010111"; break;
+        case '2': rows = "111001111100111"; break;
+        case '3': rows = "111001111001111"; break;
+        case '4': rows = "101101111001001"; break;
+        case '5': rows = "111100111001111"; break;
+        case '6': rows = "111100111101111"; break;
+        case '7': rows = "111001001001001"; break;
+        case '8': rows = "111101111101111"; break;
+        case '9': rows = "111101111001111"; break;
+        case '.': rows = "000000000000010"; break;
+        case '-': rows = "000000111000000"; break;
+        case 'm': rows = "000000111111101"; break;
+        default: break;
+    }
+    uint bits = 0;
+    for (int i = 0; i < 15; ++i) bits = (bits << 1) | (rows[i] == '1' ? 1u : 0u);
+    return bits;
+}
+
+// The whole FrameBlock buffer as the shaders declare it (common.glsl).
+struct FrameBlock {
+    GpuFrame frame;
+    GpuCascade cascades[kMaxCascades];
+};
+
+}  // namespace hc::render::gpu
+#endif
+
+#endif  // HEIGHTCAST_RENDER_GPU_LAYOUT_H

@@ -1,0 +1,74 @@
+#version 430
+// render/shaders/approximate.comp: the approximation pass of one cascade (DESIGN.md section 5 step
+// 2), mirroring detail::approximate() in render/src/approximate.cpp. One invocation per texel: a
+// visible texel's cell is found by binary search of the sorted Morton keys (Grid::locate), and the
+// Gaussian RBF sum over that cell's influence list is taken relative to the cell's centre and value,
+// as the CPU does, so float keeps its precision however far the texel lies from the grid origin.
+// Texels that are invisible, in a hole or outside the domain get -inf ("no surface").
+layout(local_size_x = HC_GROUP_2D, local_size_y = HC_GROUP_2D) in;
+
+layout(std430, binding = HC_BIND_INDICES) readonly buffer IndexBlock { uint indices[]; };
+layout(std430, binding = HC_BIND_VISIBLE) readonly buffer VisibleBlock { uint visible[]; };
+layout(std430, binding = HC_BIND_HEIGHTS) buffer HeightBlock { float heights[]; };
+layout(std430, binding = HC_BIND_COUNTERS) buffer CounterBlock { uint counters[]; };
+
+uniform int uCascade;
+
+// exp(x) for x <= 0, the same branch-free polynomial as expNeg() in approximate.cpp (so both
+// backends round alike; the driver's exp() is allowed 3 ulp and differs between GPUs).
+float expNeg(float x) {
+    x = max(x, -87.0);
+    const float y = x * 1.44269504088896341;
+    const float n = floor(y + 0.5);
+    const float f = y - n;
+    const float p = 1.0 + f * (0.693147181 + f * (0.240226507 + f * (0.0555041087 + f * (0.00961812911 + f * (0.00133335581 + f * 0.000154035304)))));
+    return p * intBitsToFloat((int(n) + 127) << 23);
+}
+
+void main() {
+    const GpuCascade c = cascades[uCascade];
+    const uint i = gl_GlobalInvocationID.x, j = gl_GlobalInvocationID.y;
+    const uint n = uint(c.n);
+    if (i >= n || j >= n) return;
+    const uint t = j * n + i;
+    const float noSurface = -kInf;
+    float z = noSurface, water = noSurface, depth = 0.0;
+    const bool isVisible = ((visible[c.visibleOffset + (t >> 2)] >> ((t & 3u) * 8u)) & 0xffu) != 0u;
+    // The texel centre in double, exactly as c.x0 + i * s on the CPU.
+    const double x = c.x0 + double(i) * c.texelM, y = c.y0 + double(j) * c.texelM;
+    const int k = isVisible ? locateCell(x, y) : -1;
+    if (k >= 0) {
+        const GpuCell ck = cells[k];
+        const uint b = ck.listBegin, e = cells[k + 1].listBegin;
+        // Centres in half finest units: integers, so the offsets between cells are exact.
+        const int kcx2 = int(2u * ck.ix + (1u << ck.level)), kcy2 = int(2u * ck.iy + (1u << ck.level));
+        const double halfFinest = 0.5 * frame.finestM;
+        const float h = float(halfFinest);
+        const float fx = float(x - double(kcx2) * halfFinest), fy = float(y - double(kcy2) * halfFinest);
+        float num = 0.0, den = 0.0, numD = 0.0;
+        for (uint idx = b; idx < e; ++idx) {
+            const GpuCell ci = cells[indices[idx]];
+            const float ex = float(int(2u * ci.ix + (1u << ci.level)) - kcx2) * h;
+            const float ey = float(int(2u * ci.iy + (1u << ci.level)) - kcy2) * h;
+            const float dx = fx - ex, dy = fy - ey;
+            const float d2 = dx * dx + dy * dy;
+            const float w = d2 < ci.r2 ? max(expNeg(-d2 * ci.a) - frame.tail, 0.0) : 0.0;
+            num += w * (ci.z - ck.z);
+            numD += w * (ci.depth - ck.depth);
+            den += w;
+        }
+        // den >= the cell's own weight at its farthest point (kernel.h): never zero here.
+        z = float(double(ck.z) + double(num / den));
+        if (frame.hasWater != 0) {
+            const float d = float(double(ck.depth) + double(numD / den));
+            depth = max(d, 0.0);
+            if (d > frame.minDepthM) water = z + d;
+        }
+        atomicAdd(counters[uint(uCascade) * uint(kCounterSlots) + (gl_WorkGroupID.x + 7u * gl_WorkGroupID.y) % uint(kCounterSlots)], e - b);
+    }
+    heights[c.terrainOffset + t] = z;
+    if (frame.hasWater != 0) {
+        heights[c.waterOffset + t] = water;
+        heights[c.depthOffset + t] = depth;
+    }
+}

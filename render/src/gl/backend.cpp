@@ -1,0 +1,475 @@
+// The OpenGL 4.3 compute backend (DESIGN.md sections 5 and 9): GlRenderer.
+//
+// Per frame: cascade fitting on the CPU (fitCascades, shared with renderFrame()), then four compute
+// stages, each mirroring a CPU function: approximate.comp (detail::approximate), mipmap.comp
+// (Heightfield::buildMip), raycast.comp (detail::castRay) and shade.comp (renderFrame's shading and
+// drawLegend). The scene (cells, sorted Morton keys, influence lists) is uploaded once; per frame only
+// the FrameBlock (gpu_layout.h) and the cascades' visibility masks go up. GPU stage times come from
+// GL_TIMESTAMP queries between the dispatches.
+#include <algorithm>
+#include <array>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <limits>
+
+#include "../textures.h"
+#include "gl/context.h"
+#include "gl/gl.h"
+#include "gl/program.h"
+#include "heightcast/grid/error.h"
+#include "heightcast/render/gl_renderer.h"
+#include "heightcast/render/gpu_layout.h"
+
+namespace hc::render {
+
+Backend parseBackend(const std::string& name) {
+    if (name == "cpu") return Backend::Cpu;
+    if (name == "gl") return Backend::Gl;
+    if (name == "auto") return Backend::Auto;
+    throw Error("--backend " + name + ": use cpu, gl or auto");
+}
+
+const char* backendName(Backend b) {
+    switch (b) {
+        case Backend::Cpu: return "cpu";
+        case Backend::Gl: return "gl";
+        case Backend::Auto: return "auto";
+    }
+    return "?";
+}
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+double msSince(Clock::time_point t) { return std::chrono::duration<double, std::milli>(Clock::now() - t).count(); }
+
+// A buffer that grows (never shrinks) to the size a frame needs.
+struct Buffer {
+    GLuint name = 0;
+    size_t bytes = 0;
+    void reserve(size_t need) {
+        if (name && bytes >= need) return;
+        if (!name) glGenBuffers(1, &name);
+        glBindBuffer(GL_SHADER_STORAGE_BUFFER, name);
+        glBufferData(GL_SHADER_STORAGE_BUFFER, GLsizeiptr(std::max<size_t>(need, 16)), nullptr, GL_DYNAMIC_DRAW);
+        bytes = std::max<size_t>(need, 16);
+    }
+    void upload(const void* data, size_t size, size_t offset = 0) const {
+        glBindBuffer(GL_SHADER_STORAGE_BUFFER, name);
+        glBufferSubData(GL_SHADER_STORAGE_BUFFER, GLintptr(offset), GLsizeiptr(size), data);
+    }
+    void bind(GLuint binding) const { glBindBufferBase(GL_SHADER_STORAGE_BUFFER, binding, name); }
+    void release() {
+        if (name) glDeleteBuffers(1, &name);
+        name = 0;
+        bytes = 0;
+    }
+};
+
+void copyFloats(float* dst, const std::array<double, 3>& v) {
+    for (size_t i = 0; i < 3; ++i) dst[i] = float(v[i]);
+}
+
+}  // namespace
+
+struct GlRenderer::Impl {
+    const Scene& scene;
+    std::unique_ptr<gl::HeadlessContext> headless;  // null when rendering into the caller's context
+    GLuint approximate = 0, mipmap = 0, raycast = 0, shade = 0;
+    Buffer frameBuf, cellsBuf, keysBuf, indicesBuf, visibleBuf, heightsBuf, pixelsBuf, countersBuf;
+    GLuint colorTex = 0;
+    int texWidth = 0, texHeight = 0;
+    static constexpr int kStamps = 4 + gpu::kMaxCascades + 1;
+    std::array<GLuint, kStamps> stamps{};
+    GLint64 maxStorageBlock = 0;
+    std::string device;
+    detail::FrameSetup setup;  // of the last frame, for readback
+
+    Impl(const Scene& s, std::unique_ptr<gl::HeadlessContext> context) : scene(s), headless(std::move(context)) {
+        gl::requireGl43("the GL backend");
+        device = gl::currentDeviceName();
+        glGetInteger64v(GL_MAX_SHADER_STORAGE_BLOCK_SIZE, &maxStorageBlock);
+        approximate = gl::compileEmbedded("approximate");
+        mipmap = gl::compileEmbedded("mipmap");
+        raycast = gl::compileEmbedded("raycast");
+        shade = gl::compileEmbedded("shade");
+        glGenQueries(kStamps, stamps.data());
+        uploadScene();
+    }
+
+    ~Impl() {
+        if (headless) headless->makeCurrent();
+        for (GLuint p : {approximate, mipmap, raycast, shade})
+            if (p) glDeleteProgram(p);
+        for (Buffer* b : {&frameBuf, &cellsBuf, &keysBuf, &indicesBuf, &visibleBuf, &heightsBuf, &pixelsBuf, &countersBuf}) b->release();
+        if (colorTex) glDeleteTextures(1, &colorTex);
+        glDeleteQueries(kStamps, stamps.data());
+    }
+
+    void checkBlock(size_t bytes, const char* what) const {
+        if (maxStorageBlock > 0 && bytes > size_t(maxStorageBlock))
+            throw Error(std::string("the GL backend needs ") + std::to_string(bytes >> 20) + " MiB for " + what +
+                        " in one storage buffer; this driver allows " + std::to_string(maxStorageBlock >> 20) + " MiB" +
+                        (std::strcmp(what, "the cascade textures") == 0 ? " (use fewer --texels or --cascades)" : ""));
+    }
+
+    // Cells (plus a sentinel), their sorted Morton keys and the influence lists: once per renderer.
+    void uploadScene() {
+        const Grid& g = scene.grid();
+        const auto& lists = scene.lists();
+        const size_t count = g.cellCount();
+        if (lists.entryCount() >= (uint64_t{1} << 32) || count >= (uint64_t{1} << 31))
+            throw Error("the GL backend addresses influence lists with 32-bit indices: this grid has " + std::to_string(lists.entryCount()) +
+                        " entries");
+        std::vector<gpu::GpuCell> cells(count + 1);
+        std::vector<uint32_t> keys(2 * count);
+        const int water = scene.waterLayer();
+        const auto offsets = lists.offsets();
+        for (size_t k = 0; k < count; ++k) {
+            gpu::GpuCell& c = cells[k];
+            const uint64_t code = g.codes[k];
+            c.ix = Grid::keyX(code);
+            c.iy = Grid::keyY(code);
+            c.level = uint32_t(codeLevel(code));
+            c.listBegin = uint32_t(offsets[k]);
+            c.a = scene.kernels()[k].a;
+            c.r2 = scene.kernels()[k].r2;
+            c.z = g.values[0][k];
+            c.depth = water >= 0 ? g.values[size_t(water)][k] : 0.0f;
+            const uint64_t key = codeKey(code);
+            keys[2 * k] = uint32_t(key);
+            keys[2 * k + 1] = uint32_t(key >> 32);
+        }
+        cells[count] = gpu::GpuCell{};
+        cells[count].listBegin = uint32_t(offsets[count]);
+        const size_t cellBytes = cells.size() * sizeof(gpu::GpuCell), keyBytes = keys.size() * 4, indexBytes = lists.indices().size_bytes();
+        checkBlock(cellBytes, "the cells");
+        checkBlock(indexBytes, "the influence lists");
+        cellsBuf.reserve(cellBytes);
+        cellsBuf.upload(cells.data(), cellBytes);
+        keysBuf.reserve(keyBytes);
+        keysBuf.upload(keys.data(), keyBytes);
+        indicesBuf.reserve(indexBytes);
+        if (indexBytes) indicesBuf.upload(lists.indices().data(), indexBytes);
+        frameBuf.reserve(sizeof(gpu::FrameBlock));
+        countersBuf.reserve(sizeof(uint32_t) * gpu::kCounterSlots * (gpu::kMaxCascades + 1));
+    }
+
+    // Runs every stage of one frame; leaves the picture in colorTex and the rays in pixelsBuf.
+    CascadeFit runFrame(const Camera& camera, const RenderOptions& options, Timings& timings) {
+        camera.validate();
+        if (std::string why = options.validate(); !why.empty()) throw Error(why);
+        if (headless) headless->makeCurrent();
+        const auto start = Clock::now();
+        timings = Timings{};
+        const Grid& g = scene.grid();
+        setup = detail::setUpFrame(scene, camera);
+
+        // 1. Cascade fitting (CPU).
+        auto t = Clock::now();
+        CascadeFit fit = fitCascades(setup.view, options.cascades, options.texelsPerSide);
+        timings.fittingMs = msSince(t);
+        timings.viewDirX = fit.dir[0];
+        timings.viewDirY = fit.dir[1];
+        if (fit.hull.size() < 3) fit.cascades.clear();  // nothing visible: every ray misses
+
+        // The frame's constants and the cascades' places in the heights and visibility buffers.
+        gpu::FrameBlock block{};
+        gpu::GpuFrame& f = block.frame;
+        const int W = camera.width, H = camera.height;
+        const bool water = scene.hasWater();
+        f.eyeX = setup.eye[0], f.eyeY = setup.eye[1];
+        f.finestM = g.finestCellM;
+        f.domainM = g.domainSizeM();
+        f.eyeZ = float(setup.eye[2]);
+        f.tanHalfX = float(setup.basis.tanHalfX), f.tanHalfY = float(setup.basis.tanHalfY);
+        f.nearM = float(setup.nearM), f.farM = float(setup.farM);
+        f.dirX = float(fit.dir[0]), f.dirY = float(fit.dir[1]);
+        f.tail = float(scene.lists().params().tail());
+        copyFloats(f.forward, setup.basis.forward);
+        copyFloats(f.right, setup.basis.right);
+        copyFloats(f.up, setup.basis.up);
+        const double sunAz = gpu::kSunAzimuthDeg * M_PI / 180, sunAlt = gpu::kSunAltitudeDeg * M_PI / 180;
+        copyFloats(f.sun, {std::sin(sunAz) * std::cos(sunAlt), std::cos(sunAz) * std::cos(sunAlt), std::sin(sunAlt)});
+        f.width = W, f.height = H;
+        f.cascades = int(fit.cascades.size());
+        f.hasWater = water ? 1 : 0;
+        f.cellCount = uint32_t(g.cellCount());
+        f.rootLevel = uint32_t(g.rootLevel);
+        f.minDepthM = float(options.waterMinDepthM);
+        f.fogDistM = float(gpu::kFogExtents * std::hypot(scene.xMax - scene.xMin, scene.yMax - scene.yMin));
+        f.elevationMin = float(scene.elevationMin);
+        f.zRange = float(std::max(scene.elevationMax - scene.elevationMin, 1e-6));
+        f.dRange = float(std::max(scene.depthMax, 1e-6));
+        f.pixelAngle = float(2.0 * setup.basis.tanHalfY / H);
+        f.colorMode = options.color == ColorMode::WaterDepth ? 1 : 0;
+        f.cellOutlines = options.cellOutlines ? 1 : 0;
+        const detail::LegendLayout legend = detail::legendLayout(scene, options, W, H);
+        if (legend.shown) {
+            f.legendRamp = legend.depth ? 1 : 2;
+            f.legendX0 = legend.x0, f.legendY0 = legend.y0, f.legendBarW = legend.barW, f.legendBarH = legend.barH;
+            f.legendScale = legend.scale;
+            f.labelHiLen = int(std::min<size_t>(legend.hi.size(), gpu::kMaxLabelChars));
+            f.labelLoLen = int(std::min<size_t>(legend.lo.size(), gpu::kMaxLabelChars));
+            for (int i = 0; i < f.labelHiLen; ++i) f.labelHi[i] = gpu::glyphBits(legend.hi[size_t(i)]);
+            for (int i = 0; i < f.labelLoLen; ++i) f.labelLo[i] = gpu::glyphBits(legend.lo[size_t(i)]);
+        }
+        for (int i = 0; i < 5; ++i)
+            for (int c = 0; c < 4; ++c) f.elevationRamp[4 * i + c] = float(gpu::kElevationRamp[i][c]);
+        for (int i = 0; i < 3; ++i)
+            for (int c = 0; c < 4; ++c) f.depthRamp[4 * i + c] = float(gpu::kDepthRamp[i][c]);
+        for (int c = 0; c < 3; ++c) {
+            f.skyHorizon[c] = float(gpu::kSkyHorizon[c]);
+            f.skyZenith[c] = float(gpu::kSkyZenith[c]);
+            f.dryColor[c] = float(gpu::kDryColor[c]);
+        }
+
+        size_t heightFloats = 0, visibleWords = 0;
+        for (size_t k = 0; k < fit.cascades.size(); ++k) {
+            const Cascade& c = fit.cascades[k];
+            gpu::GpuCascade& gc = block.cascades[k];
+            CascadeStats cs;
+            cs.nearM = c.splitNear;
+            cs.farM = c.farWithOverlap;
+            cs.splitFarM = c.splitFar;
+            cs.texelM = c.texelM;
+            for (uint8_t v : c.visible) cs.visibleTexels += v;
+            timings.cascades.push_back(cs);
+            gc.splitNear = float(c.splitNear), gc.splitFar = float(c.splitFar), gc.farWithOverlap = float(c.farWithOverlap);
+            if (c.empty()) continue;  // n = 0: the shaders skip it
+            const size_t n = size_t(c.n), texels = n * n;
+            gc.x0 = c.x0, gc.y0 = c.y0, gc.texelM = c.texelM;
+            gc.x0Eye = float(c.x0 - setup.eye[0]), gc.y0Eye = float(c.y0 - setup.eye[1]);
+            gc.texelF = float(c.texelM);
+            gc.n = c.n;
+            gc.terrainOffset = uint32_t(heightFloats), heightFloats += texels;
+            if (water) {
+                gc.waterOffset = uint32_t(heightFloats), heightFloats += texels;
+                gc.depthOffset = uint32_t(heightFloats), heightFloats += texels;
+            }
+            int side = c.n - 1, levels = 0;
+            for (;;) {
+                if (levels >= gpu::kMaxMipLevels) throw Error("the GL backend's max mipmap has more than 16 levels");
+                gc.mipSide[levels] = side;
+                gc.terrainMip[levels] = uint32_t(heightFloats), heightFloats += size_t(side) * size_t(side);
+                if (water) gc.waterMip[levels] = uint32_t(heightFloats), heightFloats += size_t(side) * size_t(side);
+                ++levels;
+                if (side <= 1) break;
+                side = (side + 1) / 2;
+            }
+            gc.levels = levels;
+            gc.visibleOffset = uint32_t(visibleWords);
+            visibleWords += (texels + 3) / 4;
+        }
+        checkBlock(heightFloats * 4, "the cascade textures");
+        heightsBuf.reserve(heightFloats * 4);
+        visibleBuf.reserve(visibleWords * 4);
+        for (size_t k = 0; k < fit.cascades.size(); ++k)
+            if (!fit.cascades[k].empty())
+                visibleBuf.upload(fit.cascades[k].visible.data(), fit.cascades[k].visible.size(), size_t(block.cascades[k].visibleOffset) * 4);
+        frameBuf.upload(&block, sizeof block);
+        const size_t pixels = size_t(W) * size_t(H);
+        checkBlock(pixels * sizeof(gpu::GpuPixel), "the pixels");
+        pixelsBuf.reserve(pixels * sizeof(gpu::GpuPixel));
+        std::vector<uint32_t> zeros(countersBuf.bytes / 4, 0);
+        countersBuf.upload(zeros.data(), countersBuf.bytes);
+        if (!colorTex || texWidth != W || texHeight != H) {
+            if (colorTex) glDeleteTextures(1, &colorTex);
+            glGenTextures(1, &colorTex);
+            glBindTexture(GL_TEXTURE_2D, colorTex);
+            glTexStorage2D(GL_TEXTURE_2D, 1, GL_RGBA8, W, H);
+            glTexParameteri(GL_TEXTURE_2D, GL_TEXTURE_MIN_FILTER, GL_LINEAR);
+            glTexParameteri(GL_TEXTURE_2D, GL_TEXTURE_MAG_FILTER, GL_LINEAR);
+            texWidth = W, texHeight = H;
+        }
+        frameBuf.bind(HC_BIND_FRAME);
+        cellsBuf.bind(HC_BIND_CELLS);
+        keysBuf.bind(HC_BIND_KEYS);
+        indicesBuf.bind(HC_BIND_INDICES);
+        visibleBuf.bind(HC_BIND_VISIBLE);
+        heightsBuf.bind(HC_BIND_HEIGHTS);
+        pixelsBuf.bind(HC_BIND_PIXELS);
+        countersBuf.bind(HC_BIND_COUNTERS);
+        glBindImageTexture(HC_IMAGE_COLOR, colorTex, 0, GL_FALSE, 0, GL_WRITE_ONLY, GL_RGBA8);
+        auto groups = [](int size) { return GLuint((size + HC_GROUP_2D - 1) / HC_GROUP_2D); };
+
+        // 2. Approximation, one dispatch per cascade; 3. max mipmaps, one dispatch per level.
+        int stamp = 0;
+        glQueryCounter(stamps[size_t(stamp++)], GL_TIMESTAMP);
+        glUseProgram(approximate);
+        for (size_t k = 0; k < fit.cascades.size(); ++k) {
+            if (!fit.cascades[k].empty()) {
+                glUniform1i(glGetUniformLocation(approximate, "uCascade"), int(k));
+                glDispatchCompute(groups(fit.cascades[k].n), groups(fit.cascades[k].n), 1);
+            }
+            glQueryCounter(stamps[size_t(stamp++)], GL_TIMESTAMP);
+        }
+        glMemoryBarrier(GL_SHADER_STORAGE_BARRIER_BIT);
+        glUseProgram(mipmap);
+        const GLint uCascade = glGetUniformLocation(mipmap, "uCascade"), uWater = glGetUniformLocation(mipmap, "uWater"),
+                    uLevel = glGetUniformLocation(mipmap, "uLevel");
+        for (size_t k = 0; k < fit.cascades.size(); ++k) {
+            if (fit.cascades[k].empty()) continue;
+            glUniform1i(uCascade, int(k));
+            for (int w = 0; w < (water ? 2 : 1); ++w) {
+                glUniform1i(uWater, w);
+                for (int level = 0; level < block.cascades[k].levels; ++level) {
+                    glUniform1i(uLevel, level);
+                    const int side = block.cascades[k].mipSide[level];
+                    glDispatchCompute(groups(side), groups(side), 1);
+                    glMemoryBarrier(GL_SHADER_STORAGE_BARRIER_BIT);
+                }
+            }
+        }
+        glQueryCounter(stamps[size_t(stamp++)], GL_TIMESTAMP);
+        // 4. Ray casting; 5. shading.
+        glUseProgram(raycast);
+        glDispatchCompute(groups(W), groups(H), 1);
+        glMemoryBarrier(GL_SHADER_STORAGE_BARRIER_BIT);
+        glQueryCounter(stamps[size_t(stamp++)], GL_TIMESTAMP);
+        glUseProgram(shade);
+        glDispatchCompute(groups(W), groups(H), 1);
+        glQueryCounter(stamps[size_t(stamp++)], GL_TIMESTAMP);
+        // The picture is read as a texture (a viewer) or back (render()); the counters and rays back.
+        glMemoryBarrier(GL_ALL_BARRIER_BITS);
+        glUseProgram(0);
+
+        // Timer results (waiting for the GPU), and the counters.
+        std::vector<double> ms(size_t(stamp), 0.0);
+        GLuint64 first = 0;
+        glGetQueryObjectui64v(stamps[0], GL_QUERY_RESULT, &first);
+        for (int i = 1; i < stamp; ++i) {
+            GLuint64 v = 0;
+            glGetQueryObjectui64v(stamps[size_t(i)], GL_QUERY_RESULT, &v);
+            ms[size_t(i)] = double(v - first) * 1e-6;
+        }
+        const size_t nc = fit.cascades.size();
+        for (size_t k = 0; k < nc; ++k) {
+            timings.cascades[k].approximationMs = ms[k + 1] - ms[k];
+            timings.approximationMs += timings.cascades[k].approximationMs;
+        }
+        timings.mipmapMs = ms[nc + 1] - ms[nc];
+        timings.raycastMs = ms[nc + 2] - ms[nc + 1];
+        timings.shadingMs = ms[nc + 3] - ms[nc + 2];
+        std::vector<uint32_t> counters(countersBuf.bytes / 4);
+        glBindBuffer(GL_SHADER_STORAGE_BUFFER, countersBuf.name);
+        glGetBufferSubData(GL_SHADER_STORAGE_BUFFER, 0, GLsizeiptr(countersBuf.bytes), counters.data());
+        for (size_t k = 0; k < nc; ++k)
+            for (int s = 0; s < gpu::kCounterSlots; ++s) timings.cascades[k].gaussians += counters[k * gpu::kCounterSlots + size_t(s)];
+        for (int s = 0; s < gpu::kCounterSlots; ++s) timings.hits += counters[size_t(gpu::kMaxCascades * gpu::kCounterSlots + s)];
+        timings.rays = pixels;
+        if (const GLenum e = glGetError(); e != GL_NO_ERROR) {
+            char b[64];
+            std::snprintf(b, sizeof b, "OpenGL error 0x%04x", unsigned(e));
+            throw Error(std::string("the GL backend failed: ") + b + " on " + device);
+        }
+        timings.totalMs = msSince(start);
+        return fit;
+    }
+
+    GLuint program(const std::string& name) const {
+        if (name == "approximate") return approximate;
+        if (name == "mipmap") return mipmap;
+        if (name == "raycast") return raycast;
+        if (name == "shade") return shade;
+        throw Error("no GL program " + name);
+    }
+
+    Frame readBack(const Camera& camera, Timings& timings) {
+        const auto start = Clock::now();
+        const int W = camera.width, H = camera.height;
+        const size_t pixels = size_t(W) * size_t(H);
+        std::vector<gpu::GpuPixel> px(pixels);
+        glBindBuffer(GL_SHADER_STORAGE_BUFFER, pixelsBuf.name);
+        glGetBufferSubData(GL_SHADER_STORAGE_BUFFER, 0, GLsizeiptr(pixels * sizeof(gpu::GpuPixel)), px.data());
+        std::vector<uint8_t> rgba(pixels * 4);
+        glBindTexture(GL_TEXTURE_2D, colorTex);
+        glPixelStorei(GL_PACK_ALIGNMENT, 1);
+        glGetTexImage(GL_TEXTURE_2D, 0, GL_RGBA, GL_UNSIGNED_BYTE, rgba.data());
+        Frame f;
+        f.width = W;
+        f.height = H;
+        f.originWorldX = scene.grid().originWorldX;
+        f.originWorldY = scene.grid().originWorldY;
+        const float inf = std::numeric_limits<float>::infinity();
+        f.rgb.resize(pixels * 3);
+        f.distanceM.assign(pixels, inf);
+        for (auto* v : {&f.posX, &f.posY, &f.posZ, &f.nX, &f.nY, &f.nZ, &f.waterDepthM}) v->assign(pixels, 0.0f);
+        f.cascade.assign(pixels, -1.0f);
+        for (size_t i = 0; i < pixels; ++i) {
+            const gpu::GpuPixel& p = px[i];
+            const size_t row = i / size_t(W), col = i % size_t(W);
+            const uint8_t* src = &rgba[((size_t(H) - 1 - row) * size_t(W) + col) * 4];  // the texture's row 0 is the bottom
+            std::memcpy(&f.rgb[i * 3], src, 3);
+            if (!(p.t < inf)) continue;
+            f.distanceM[i] = p.t;
+            // Camera-relative offsets back to the local frame in double.
+            f.posX[i] = float(setup.eye[0] + double(p.relX));
+            f.posY[i] = float(setup.eye[1] + double(p.relY));
+            f.posZ[i] = float(setup.eye[2] + double(p.relZ));
+            f.nX[i] = p.nx, f.nY[i] = p.ny, f.nZ[i] = p.nz;
+            f.cascade[i] = float(p.cascade);
+            f.waterDepthM[i] = p.depth;
+        }
+        timings.totalMs += msSince(start);
+        return f;
+    }
+};
+
+GlRenderer::GlRenderer(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {}
+GlRenderer::~GlRenderer() = default;
+
+std::unique_ptr<GlRenderer> GlRenderer::inCurrentContext(const Scene& scene) {
+    return std::unique_ptr<GlRenderer>(new GlRenderer(std::make_unique<Impl>(scene, nullptr)));
+}
+
+std::unique_ptr<GlRenderer> GlRenderer::headless(const Scene& scene) {
+    auto context = gl::HeadlessContext::create();
+    return std::unique_ptr<GlRenderer>(new GlRenderer(std::make_unique<Impl>(scene, std::move(context))));
+}
+
+Frame GlRenderer::render(const Camera& camera, const RenderOptions& options, Timings& timings) {
+    impl_->runFrame(camera, options, timings);
+    return impl_->readBack(camera, timings);
+}
+
+unsigned GlRenderer::renderToTexture(const Camera& camera, const RenderOptions& options, Timings& timings) {
+    impl_->runFrame(camera, options, timings);
+    return impl_->colorTex;
+}
+
+std::string GlRenderer::deviceName() const { return impl_->device; }
+
+void GlRenderer::compileForTest(const std::string& name, const std::string& source) const {
+    if (impl_->headless) impl_->headless->makeCurrent();
+    glDeleteProgram(gl::compileCompute(name, source));
+}
+
+GlRenderer::VariableLayout GlRenderer::bufferVariableLayout(const std::string& program, const std::string& variable) const {
+    if (impl_->headless) impl_->headless->makeCurrent();
+    const GLuint p = impl_->program(program);
+    VariableLayout out;
+    const GLuint index = glGetProgramResourceIndex(p, GL_BUFFER_VARIABLE, variable.c_str());
+    if (index == GL_INVALID_INDEX) return out;
+    const GLenum props[2] = {GL_OFFSET, GL_TOP_LEVEL_ARRAY_STRIDE};
+    GLint values[2] = {-1, -1};
+    glGetProgramResourceiv(p, GL_BUFFER_VARIABLE, index, 2, props, 2, nullptr, values);
+    out.offset = values[0];
+    out.topLevelArrayStride = values[1];
+    return out;
+}
+
+long GlRenderer::bufferBlockSize(const std::string& program, const std::string& block) const {
+    if (impl_->headless) impl_->headless->makeCurrent();
+    const GLuint p = impl_->program(program);
+    const GLuint index = glGetProgramResourceIndex(p, GL_SHADER_STORAGE_BLOCK, block.c_str());
+    if (index == GL_INVALID_INDEX) return -1;
+    const GLenum prop = GL_BUFFER_DATA_SIZE;
+    GLint value = -1;
+    glGetProgramResourceiv(p, GL_SHADER_STORAGE_BLOCK, index, 1, &prop, 1, nullptr, &value);
+    return value;
+}
+
+}  // namespace hc::render

@@ -1,0 +1,336 @@
+// The OpenGL compute backend against the CPU backend (DESIGN.md section 5: "tested against each
+// other"): the shared std430 layouts as the driver sees them, the same pixels hit at the same depth
+// with the same colours on real DEMs from several cameras, finite outputs, a 1e7 m shifted grid, and
+// shader failures reported with the driver's log.
+//
+// The tests run headless (EGL surfaceless; Mesa llvmpipe on machines without a GPU). Where no OpenGL
+// 4.3 context can be had they fail, unless HC_GL_TESTS=skip says that is expected.
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstddef>
+#include <cstdlib>
+#include <filesystem>
+#include <memory>
+
+#include "heightcast/grid/error.h"
+#include "heightcast/influence/influence.h"
+#include "heightcast/render/gl_renderer.h"
+#include "heightcast/render/gpu_layout.h"
+#include "heightcast/render/image_io.h"
+#include "heightcast/render/renderer.h"
+#include "test_data.h"
+#include "test_grids.h"
+
+namespace {
+
+using namespace hc::render;
+namespace gpu = hc::render::gpu;
+
+struct World {
+    hc::Grid grid;
+    hc::influence::InfluenceLists lists;
+    std::unique_ptr<Scene> scene;
+    std::unique_ptr<GlRenderer> gl;
+    std::string glError;  // why no GL renderer could be made
+    void init() {
+        lists = hc::influence::buildInfluenceLists(grid, {});
+        scene = std::make_unique<Scene>(grid, lists);
+        try {
+            gl = GlRenderer::headless(*scene);
+        } catch (const hc::Error& e) {
+            glError = e.what();
+        }
+    }
+};
+
+bool skipWanted() {
+    const char* v = std::getenv("HC_GL_TESTS");
+    return v && std::string(v) == "skip";
+}
+
+// Ends the test where there is no GL renderer: a failure, or a skip where HC_GL_TESTS=skip.
+#define HC_REQUIRE_GL(w)                                                                                  \
+    if (!(w).gl) {                                                                                        \
+        if (skipWanted()) {                                                                               \
+            GTEST_SKIP() << "no OpenGL 4.3 context (HC_GL_TESTS=skip): " << (w).glError;                  \
+        }                                                                                                 \
+        FAIL() << "no OpenGL 4.3 context: " << (w).glError << " (set HC_GL_TESTS=skip where that is expected)"; \
+    }
+
+World& hef() {  // alpine SRTM, bathtub flood at 2600 m (the bundled demo DEM, as in render_test)
+    static World w = [] {
+        World x;
+        x.grid = hc::test::ingestFile(hc::test::dataFile("hef_srtm.tif"), 0.5, 2600);
+        x.init();
+        return x;
+    }();
+    return w;
+}
+World& lidar() {  // 1 m LiDAR, adaptive cells 1..16 m
+    static World w = [] {
+        World x;
+        x.grid = hc::test::ingestFile(hc::test::dataFile("lidar1m_minnesota_utm15.tif"), 0.25);
+        x.init();
+        return x;
+    }();
+    return w;
+}
+
+// ------------------------------------------------------------------------------------ layouts
+
+TEST(RenderGl, Std430LayoutsAgreeWithTheCppStructs) {
+    World& w = lidar();
+    HC_REQUIRE_GL(w);
+    const GlRenderer& gl = *w.gl;
+    int checked = 0;
+    auto expectAt = [&](const char* program, const std::string& name, long expected, long stride = -1) {
+        const auto l = gl.bufferVariableLayout(program, name);
+        ASSERT_GE(l.offset, 0) << program << ": the driver has no buffer variable " << name;
+        EXPECT_EQ(l.offset, expected) << program << ": offset of " << name;
+        if (stride >= 0) {
+            EXPECT_EQ(l.topLevelArrayStride, stride) << program << ": top-level array stride of " << name;
+        }
+        ++checked;
+    };
+    // GpuFrame and GpuCascade inside FrameBlock, as the shading program (which reads most of them) sees them.
+    const long cas = long(offsetof(gpu::FrameBlock, cascades));
+#define HC_FRAME(m) expectAt("shade", "frame." #m, long(offsetof(gpu::GpuFrame, m)))
+#define HC_FRAME_ARRAY(m) expectAt("shade", "frame." #m "[0]", long(offsetof(gpu::GpuFrame, m)))
+    HC_FRAME(eyeX), HC_FRAME(eyeY), HC_FRAME(finestM), HC_FRAME(domainM), HC_FRAME(eyeZ), HC_FRAME(tanHalfX), HC_FRAME(tanHalfY);
+    HC_FRAME(nearM), HC_FRAME(farM), HC_FRAME(dirX), HC_FRAME(dirY), HC_FRAME(tail);
+    HC_FRAME_ARRAY(forward), HC_FRAME_ARRAY(right), HC_FRAME_ARRAY(up), HC_FRAME_ARRAY(sun);
+    HC_FRAME(width), HC_FRAME(height), HC_FRAME(cascades), HC_FRAME(hasWater), HC_FRAME(cellCount), HC_FRAME(rootLevel);
+    HC_FRAME(minDepthM), HC_FRAME(fogDistM), HC_FRAME(elevationMin), HC_FRAME(zRange), HC_FRAME(dRange), HC_FRAME(pixelAngle);
+    HC_FRAME(colorMode), HC_FRAME(cellOutlines), HC_FRAME(legendRamp), HC_FRAME(legendX0), HC_FRAME(legendY0);
+    HC_FRAME(legendBarW), HC_FRAME(legendBarH), HC_FRAME(legendScale), HC_FRAME(labelHiLen), HC_FRAME(labelLoLen);
+    HC_FRAME_ARRAY(labelHi), HC_FRAME_ARRAY(labelLo), HC_FRAME_ARRAY(elevationRamp), HC_FRAME_ARRAY(depthRamp);
+    HC_FRAME_ARRAY(skyHorizon), HC_FRAME_ARRAY(skyZenith), HC_FRAME_ARRAY(dryColor);
+#define HC_CASCADE(m) expectAt("raycast", "cascades[0]." #m, cas + long(offsetof(gpu::GpuCascade, m)), long(sizeof(gpu::GpuCascade)))
+#define HC_CASCADE_ARRAY(m) expectAt("raycast", "cascades[0]." #m "[0]", cas + long(offsetof(gpu::GpuCascade, m)), long(sizeof(gpu::GpuCascade)))
+    HC_CASCADE(x0Eye), HC_CASCADE(y0Eye), HC_CASCADE(texelF), HC_CASCADE(n), HC_CASCADE(splitNear), HC_CASCADE(splitFar);
+    HC_CASCADE(farWithOverlap), HC_CASCADE(levels), HC_CASCADE(terrainOffset), HC_CASCADE(waterOffset), HC_CASCADE(depthOffset);
+    HC_CASCADE_ARRAY(terrainMip), HC_CASCADE_ARRAY(waterMip), HC_CASCADE_ARRAY(mipSide);
+    // The double members and the visibility offset are read by the approximation.
+    for (auto [name, off] : {std::pair{"x0", offsetof(gpu::GpuCascade, x0)}, {"y0", offsetof(gpu::GpuCascade, y0)},
+                             {"texelM", offsetof(gpu::GpuCascade, texelM)}, {"visibleOffset", offsetof(gpu::GpuCascade, visibleOffset)}})
+        expectAt("approximate", std::string("cascades[0].") + name, cas + long(off), long(sizeof(gpu::GpuCascade)));
+#define HC_CELL(m) expectAt("approximate", "cells[0]." #m, long(offsetof(gpu::GpuCell, m)), long(sizeof(gpu::GpuCell)))
+    HC_CELL(ix), HC_CELL(iy), HC_CELL(level), HC_CELL(listBegin), HC_CELL(a), HC_CELL(r2), HC_CELL(z), HC_CELL(depth);
+#define HC_PIXEL(m) expectAt("shade", "pixels[0]." #m, long(offsetof(gpu::GpuPixel, m)), long(sizeof(gpu::GpuPixel)))
+    HC_PIXEL(t), HC_PIXEL(relX), HC_PIXEL(relY), HC_PIXEL(relZ), HC_PIXEL(nx), HC_PIXEL(ny), HC_PIXEL(nz), HC_PIXEL(depth);
+    HC_PIXEL(cascade), HC_PIXEL(water);
+    // Whole sizes: the frame block, and (through the unsized arrays' strides above) each struct.
+    EXPECT_EQ(gl.bufferBlockSize("shade", "FrameBlock"), long(sizeof(gpu::FrameBlock)));
+    EXPECT_EQ(gl.bufferBlockSize("raycast", "FrameBlock"), long(sizeof(gpu::FrameBlock)));
+    EXPECT_GE(checked, 80);
+}
+
+// ------------------------------------------------------------------------- CPU against GL
+
+struct Comparison {
+    size_t pixels = 0, agree = 0, bothHit = 0, depthOk = 0, nonFinite = 0;
+    double psnr = 0, worstDepthRatio = 0, medianRelDepth = 0;
+    std::string diffPng;
+};
+
+double psnrOf(const Frame& a, const Frame& b) {
+    double se = 0;
+    for (size_t i = 0; i < a.rgb.size(); ++i) se += std::pow(double(a.rgb[i]) - double(b.rgb[i]), 2);
+    const double mse = se / double(a.rgb.size());
+    return mse == 0 ? 99.0 : 10 * std::log10(255.0 * 255.0 / mse);
+}
+
+// Depth tolerance for a hit at distance t [m], derived from float on the GPU (the CPU casts in double):
+// t is a float sum of steps along the ray, good to a few ulps (1.2e-7 relative each); the surface height
+// at the hit carries the float rounding of the approximation and of the bilinear intersection, about
+// 1e-7 of the elevation (hef: 4 mm at 3800 m), which a ray at elevation angle a turns into a depth error
+// of that over sin(a). With 1e-5 * t we allow rays down to about 1/50 rad at the distances these cameras
+// see (100 m .. 30 km), plus 1 cm for the texel-scale rounding near the camera. Steeper-grazing rays
+// (silhouettes) are the outliers the 0.5 % allowance is for.
+double depthTolerance(double t) { return 1e-5 * t + 0.01; }
+
+Comparison compare(const Frame& cpu, const Frame& gl, const std::string& name) {
+    Comparison c;
+    c.pixels = size_t(cpu.width) * size_t(cpu.height);
+    std::vector<double> rel;
+    Frame diff = cpu;
+    for (size_t i = 0; i < c.pixels; ++i) {
+        const bool hc = std::isfinite(cpu.distanceM[i]), hg = std::isfinite(gl.distanceM[i]);
+        for (const auto* v : {&gl.posX, &gl.posY, &gl.posZ, &gl.nX, &gl.nY, &gl.nZ, &gl.waterDepthM, &gl.cascade})
+            if (!std::isfinite((*v)[i])) ++c.nonFinite;
+        if (std::isnan(gl.distanceM[i]) || (std::isinf(gl.distanceM[i]) && gl.distanceM[i] < 0)) ++c.nonFinite;
+        uint8_t* d = &diff.rgb[i * 3];
+        for (int k = 0; k < 3; ++k) d[k] = uint8_t(std::min(255, 8 * std::abs(int(cpu.rgb[i * 3 + size_t(k)]) - int(gl.rgb[i * 3 + size_t(k)]))));
+        if (hc == hg) ++c.agree;
+        else d[0] = 255, d[1] = 0, d[2] = 255;  // hit/miss disagreement: magenta
+        if (hc && hg) {
+            ++c.bothHit;
+            const double t = cpu.distanceM[i], err = std::abs(double(gl.distanceM[i]) - t);
+            rel.push_back(err / t);
+            c.worstDepthRatio = std::max(c.worstDepthRatio, err / depthTolerance(t));
+            if (err <= depthTolerance(t)) ++c.depthOk;
+            else d[0] = 255, d[1] = 255, d[2] = 0;  // depth beyond the tolerance: yellow
+        }
+    }
+    if (!rel.empty()) {
+        std::nth_element(rel.begin(), rel.begin() + std::ptrdiff_t(rel.size() / 2), rel.end());
+        c.medianRelDepth = rel[rel.size() / 2];
+    }
+    c.psnr = psnrOf(cpu, gl);
+    const bool bad = c.agree * 1000 < c.pixels * 995 || c.depthOk * 1000 < c.bothHit * 995 || c.psnr < 35 || c.nonFinite > 0;
+    if (bad) {
+        c.diffPng = (std::filesystem::path(testing::TempDir()) / ("gl_vs_cpu_" + name + ".png")).string();
+        writePng(diff, c.diffPng);
+        writePng(gl, (std::filesystem::path(testing::TempDir()) / ("gl_" + name + ".png")).string());
+        writePng(cpu, (std::filesystem::path(testing::TempDir()) / ("cpu_" + name + ".png")).string());
+    }
+    return c;
+}
+
+void expectSame(World& w, const Camera& cam, const std::string& name, const RenderOptions& o = {}) {
+    Timings tc, tg;
+    const Frame cpu = renderFrame(*w.scene, cam, o, tc);
+    const Frame gl = w.gl->render(cam, o, tg);
+    const Comparison c = compare(cpu, gl, name);
+    const double agree = double(c.agree) / double(c.pixels), depthOk = c.bothHit ? double(c.depthOk) / double(c.bothHit) : 1.0;
+    std::printf("[ %s ] hit/miss agree %.4f%%, depth within tolerance %.4f%% of %zu (median |dt|/t %.2e, worst %.1fx tolerance), PSNR %.2f dB\n",
+                name.c_str(), 100 * agree, 100 * depthOk, c.bothHit, c.medianRelDepth, c.worstDepthRatio, c.psnr);
+    const std::string where = c.diffPng.empty() ? "" : " (diff image: " + c.diffPng + ", magenta = hit/miss, yellow = depth)";
+    EXPECT_GT(c.bothHit, c.pixels / 4) << name << ": the camera should see the terrain" << where;
+    EXPECT_GE(agree, 0.995) << name << ": hit/miss agree on " << c.agree << " of " << c.pixels << where;
+    EXPECT_GE(depthOk, 0.995) << name << ": depth within 1e-5 t + 1 cm on " << c.depthOk << " of " << c.bothHit << where;
+    EXPECT_GE(c.psnr, 35.0) << name << where;
+    EXPECT_EQ(c.nonFinite, 0u) << name << ": NaN or infinite position/normal/depth values" << where;
+    // The same work: the Gaussians evaluated agree exactly (the same visible texels, the same lists).
+    ASSERT_EQ(tc.cascades.size(), tg.cascades.size());
+    for (size_t k = 0; k < tc.cascades.size(); ++k) EXPECT_EQ(tc.cascades[k].gaussians, tg.cascades[k].gaussians) << name << " cascade " << k;
+    const uint64_t hitsGl = uint64_t(std::count_if(gl.distanceM.begin(), gl.distanceM.end(), [](float d) { return std::isfinite(d); }));
+    EXPECT_EQ(tg.hits, hitsGl) << "the hit counter counts the hits read back";
+}
+
+Camera lowOblique(const Scene& s, int w, int h) {
+    Camera c;
+    const double cx = 0.5 * (s.xMin + s.xMax), ey = s.yMin + 0.15 * (s.yMax - s.yMin);
+    const auto& g = s.grid();
+    c.xWorld = g.originWorldX + cx;
+    c.yWorld = g.originWorldY + ey;
+    c.zWorld = s.zMax + 0.02 * (s.xMax - s.xMin);
+    c.yawDeg = 15, c.pitchDeg = -8, c.fovYDeg = 50, c.width = w, c.height = h;
+    return c;
+}
+Camera straightDown(const Scene& s, int w, int h) {
+    Camera c;
+    const auto& g = s.grid();
+    c.xWorld = g.originWorldX + 0.5 * (s.xMin + s.xMax);
+    c.yWorld = g.originWorldY + 0.5 * (s.yMin + s.yMax);
+    c.zWorld = s.zMax + 0.4 * (s.xMax - s.xMin);
+    c.yawDeg = 0, c.pitchDeg = -90, c.fovYDeg = 40, c.width = w, c.height = h;
+    return c;
+}
+
+RenderOptions smallOptions() {
+    RenderOptions o;
+    o.texelsPerSide = 512;  // keeps the CPU reference and llvmpipe quick; the stages are the same
+    return o;
+}
+
+TEST(RenderGl, SameAsCpuOnTheAlpineDemFromFourCameras) {
+    World& w = hef();
+    HC_REQUIRE_GL(w);
+    ASSERT_TRUE(w.scene->hasWater());
+    const Scene& s = *w.scene;
+    expectSame(w, overviewCamera(s, 320, 200), "hef_overview", smallOptions());
+    expectSame(w, lowOblique(s, 320, 200), "hef_oblique_low", smallOptions());
+    expectSame(w, straightDown(s, 240, 240), "hef_straight_down", smallOptions());
+    // Over the deepest water, looking down at it from 1.5 km south and 800 m above: a water picture.
+    const hc::Grid& g = w.grid;
+    const int layer = s.waterLayer();
+    size_t deepest = 0;
+    for (size_t i = 0; i < g.cellCount(); ++i)
+        if (g.values[size_t(layer)][i] > g.values[size_t(layer)][deepest]) deepest = i;
+    double x = 0, y = 0;
+    g.cellCenterLocal(deepest, x, y);
+    const double z = g.values[0][deepest] + g.values[size_t(layer)][deepest];
+    const Camera water = Camera::lookAt({g.originWorldX + x, g.originWorldY + y - 1500, z + 800}, {g.originWorldX + x, g.originWorldY + y, z}, 50, 320, 200);
+    RenderOptions o = smallOptions();
+    o.color = ColorMode::WaterDepth;
+    expectSame(w, water, "hef_water", o);
+    Timings t;
+    const Frame f = w.gl->render(water, o, t);
+    const size_t wet = size_t(std::count_if(f.waterDepthM.begin(), f.waterDepthM.end(), [](float d) { return d > 0; }));
+    EXPECT_GT(wet, f.waterDepthM.size() / 10) << "the water camera sees water";
+}
+
+TEST(RenderGl, SameAsCpuOnLidarWithCellOutlines) {
+    World& w = lidar();
+    HC_REQUIRE_GL(w);
+    const Scene& s = *w.scene;
+    expectSame(w, overviewCamera(s, 320, 200), "lidar_overview", smallOptions());
+    expectSame(w, lowOblique(s, 320, 200), "lidar_oblique_low", smallOptions());
+    RenderOptions o = smallOptions();
+    o.cellOutlines = true;
+    o.cascades = 4;
+    expectSame(w, straightDown(s, 240, 240), "lidar_straight_down_cells", o);
+}
+
+// DESIGN.md section 2: the GPU sees only local and eye-relative values, so a grid 1e7 m away renders
+// the same. Tolerance: the same as CPU against GL (the cascade fit in double may move by an ulp).
+TEST(RenderGl, ShiftedBy1e7MetresLooksTheSame) {
+    World& base = hef();
+    HC_REQUIRE_GL(base);
+    World shifted;
+    shifted.grid = base.grid;
+    shifted.grid.originWorldX += 1e7;
+    shifted.grid.originWorldY += 1e7;
+    shifted.init();
+    HC_REQUIRE_GL(shifted);
+    Camera a = overviewCamera(*base.scene, 240, 160), b = a;
+    b.xWorld += 1e7;
+    b.yWorld += 1e7;
+    Timings t;
+    const Frame fa = base.gl->render(a, smallOptions(), t), fb = shifted.gl->render(b, smallOptions(), t);
+    const Comparison c = compare(fa, fb, "shifted_1e7");
+    EXPECT_GE(c.psnr, 40.0) << c.diffPng;
+    EXPECT_EQ(c.agree, c.pixels) << c.diffPng;
+    EXPECT_EQ(c.depthOk, c.bothHit) << c.diffPng;
+}
+
+// ------------------------------------------------------------------------------ failures
+
+TEST(RenderGl, BadShaderGivesTheDriversLog) {
+    World& w = lidar();
+    HC_REQUIRE_GL(w);
+    try {
+        w.gl->compileForTest("broken.comp", "#version 430\nlayout(local_size_x = 1) in;\nvoid main() { undeclaredThing = 1; }\n");
+        FAIL() << "a shader with an undeclared identifier compiled";
+    } catch (const hc::Error& e) {
+        const std::string m = e.what();
+        EXPECT_NE(m.find("broken.comp"), std::string::npos) << m;
+        EXPECT_NE(m.find("undeclaredThing"), std::string::npos) << "the driver's log names the identifier: " << m;
+    }
+    EXPECT_NO_THROW(w.gl->compileForTest("fine.comp", "#version 430\nlayout(local_size_x = 1) in;\nvoid main() {}\n"));
+}
+
+TEST(RenderGl, BadCameraAndOptionsAreRefused) {
+    World& w = lidar();
+    HC_REQUIRE_GL(w);
+    Timings t;
+    Camera c = overviewCamera(*w.scene, 32, 32);
+    c.fovYDeg = 0;
+    EXPECT_THROW(w.gl->render(c, {}, t), hc::Error);
+    RenderOptions o;
+    o.cascades = 9;
+    EXPECT_THROW(w.gl->render(overviewCamera(*w.scene, 32, 32), o, t), hc::Error);
+}
+
+TEST(RenderGl, BackendNames) {
+    EXPECT_EQ(parseBackend("gl"), Backend::Gl);
+    EXPECT_EQ(parseBackend("cpu"), Backend::Cpu);
+    EXPECT_EQ(parseBackend("auto"), Backend::Auto);
+    EXPECT_STREQ(backendName(Backend::Gl), "gl");
+    EXPECT_THROW(parseBackend("vulkan"), hc::Error);
+}
+
+}  // namespace
