@@ -31,6 +31,9 @@
 #include "heightcast/grid/error.h"
 #include "heightcast/influence/surface.h"
 #include "heightcast/render/image_io.h"
+#if HC_VIEW_GL_BACKEND
+#include "heightcast/render/gl_renderer.h"
+#endif
 #include "heightcast/render/renderer.h"
 
 namespace {
@@ -267,11 +270,69 @@ private:
     std::thread worker_;
 };
 
+#if HC_VIEW_GL_BACKEND
+// The GL compute backend in the window's own context: the image stays on the GPU (renderToTexture) and is
+// drawn from there. Cascade colouring needs the per-pixel cascade index, which only the read-back Frame
+// (render()) carries: with K on, frames take that path and are tinted and uploaded like CPU frames.
+class GlBackend final : public ViewBackend {
+public:
+    explicit GlBackend(std::unique_ptr<hc::render::GlRenderer> r) : r_(std::move(r)), tintTexture_(makeTexture()) {}
+    bool busy() const override { return false; }
+    void submit(const Camera& c, const RenderOptions& o, bool full, bool cascadeTint) override {
+        Shown s;
+        s.camera = c, s.full = full, s.width = c.width, s.height = c.height;
+        if (cascadeTint) {
+            Frame f = r_->render(c, o, s.timings);
+            tintCascades(f);
+            glBindTexture(GL_TEXTURE_2D, tintTexture_);
+            glPixelStorei(GL_UNPACK_ALIGNMENT, 1);
+            glTexImage2D(GL_TEXTURE_2D, 0, GL_RGB8, f.width, f.height, 0, GL_RGB, GL_UNSIGNED_BYTE, f.rgb.data());
+            s.texture = tintTexture_, s.flipY = true;
+            const size_t centre = size_t(f.height / 2) * size_t(f.width) + size_t(f.width / 2);
+            s.centreDistanceM = centre < f.distanceM.size() ? f.distanceM[centre] : INFINITY;
+        } else {
+            s.texture = r_->renderToTexture(c, o, s.timings);
+            s.flipY = false;  // GL's convention: row 0 at the bottom
+            glMemoryBarrier(GL_TEXTURE_FETCH_BARRIER_BIT);
+            glBindTexture(GL_TEXTURE_2D, s.texture);
+            glTexParameteri(GL_TEXTURE_2D, GL_TEXTURE_MIN_FILTER, GL_LINEAR);
+            glTexParameteri(GL_TEXTURE_2D, GL_TEXTURE_MAG_FILTER, GL_LINEAR);
+        }
+        next_ = s;
+    }
+    bool collect(Shown& shown) override {
+        if (!next_) return false;
+        shown = *next_;
+        next_.reset();
+        return true;
+    }
+    std::string name() const override { return "GL"; }
+    std::string device() const override { return r_->deviceName(); }
+    bool cascadeTintSupported() const override { return true; }
+
+private:
+    std::unique_ptr<hc::render::GlRenderer> r_;
+    GLuint tintTexture_;
+    std::optional<Shown> next_;
+};
+#endif
+
 // The one place that knows whether the GL compute backend (render/include/heightcast/render/gl_renderer.h)
-// is built in: until it is, hc-view renders with the CPU backend and says why.
-std::unique_ptr<ViewBackend> makeGlBackend(const hc::render::Scene&, std::string& whyNot) {
-    whyNot = "the GL compute backend is not built into this hc-view yet";
+// is built in (HC_VIEW_GL_BACKEND, set by apps/CMakeLists.txt when hc_render compiles it); without it,
+// hc-view renders with the CPU backend and says why.
+std::unique_ptr<ViewBackend> makeGlBackend(const hc::render::Scene& scene, std::string& whyNot) {
+#if HC_VIEW_GL_BACKEND
+    try {
+        return std::make_unique<GlBackend>(hc::render::GlRenderer::inCurrentContext(scene));
+    } catch (const hc::Error& e) {
+        whyNot = e.what();
+        return nullptr;
+    }
+#else
+    (void)scene;
+    whyNot = "not built into this hc-view";
     return nullptr;
+#endif
 }
 
 // ------------------------------------------------------------------------------------------------ viewer
@@ -548,6 +609,8 @@ private:
         o.cellOutlines = toggles_.cells;
         // Water off: no depth is deep enough to be drawn.
         o.waterMinDepthM = toggles_.water ? baseWaterMinDepthM_ : HUGE_VAL;
+        // The tint would colour the legend too, and the legend's colours no longer hold.
+        if (toggles_.cascadeTint) o.legend = false;
         return o;
     }
     static bool sameView(const Camera& a, const Camera& b) {
@@ -582,8 +645,12 @@ private:
         } else if (!full) {
             c.width = std::max(8, camera_.width / 3), c.height = std::max(8, camera_.height / 3);
         }
-        backend_->submit(c, currentOptions(), full || (c.width == camera_.width && c.height == camera_.height),
-                         toggles_.cascadeTint);
+        RenderOptions o = currentOptions();
+        if (c.width != camera_.width) {  // a moving frame: coarser cascades too (the approximation's cost is per texel)
+            const double scale = double(c.width) / camera_.width;
+            o.texelsPerSide = std::max(std::min(128, o.texelsPerSide), int(o.texelsPerSide * scale) & ~7);
+        }
+        backend_->submit(c, o, full || (c.width == camera_.width && c.height == camera_.height), toggles_.cascadeTint);
         submitted_ = true;
         submittedFull_ = full;
         submittedCamera_ = camera_;
@@ -603,8 +670,13 @@ private:
     void draw() {
         int fw = 0, fh = 0;
         glfwGetFramebufferSize(window_, &fw, &fh);
+        // The GL backend leaves its own state behind: back to the window's framebuffer and plain drawing.
+        glBindFramebuffer(GL_FRAMEBUFFER, 0);
         glViewport(0, 0, fw, fh);
         glDisable(GL_BLEND);
+        glDisable(GL_DEPTH_TEST);
+        glDisable(GL_SCISSOR_TEST);
+        glDisable(GL_CULL_FACE);
         glClearColor(0.08f, 0.08f, 0.1f, 1);
         glClear(GL_COLOR_BUFFER_BIT);
         if (shown_.texture) quad_.draw(shown_.texture, shown_.flipY);
@@ -621,14 +693,14 @@ private:
     void drawHud(int fw, int fh) {
         if (hud_.width != fw || hud_.height != fh) hud_.resize(fw, fh);
         else hud_.clear();
-        const int scale = fw >= 1000 ? 2 : 1;
+        const int scale = fw >= 1200 ? 2 : 1;
         const int lineH = hc::view::kGlyphH * scale, pad = 4 * scale;
         const uint32_t kText = 0xF0F0F0FF, kDim = 0xB8C4D0FF, kWarn = 0xFFC850FF, kBox = 0x000000A0;
         std::vector<std::pair<std::string, uint32_t>> lines;
         if (toggles_.hud) {
             lines.push_back({fmt("hc-view  %s   backend %s (%s)", gridPath_.c_str(), backend_->name().c_str(), backend_->device().c_str()), kText});
             if (!backendNote_.empty()) lines.push_back({backendNote_, kWarn});
-            lines.push_back({"display: " + contextInfo_, kDim});
+            if (backend_->device() != contextInfo_) lines.push_back({"display: " + contextInfo_, kDim});
             const Timings& t = shown_.timings;
             lines.push_back({fmt("%zu fps   frame %dx%d%s   total %.1f ms", frameTimes_.size(), shown_.width, shown_.height,
                                  shown_.full ? "" : " (moving: reduced)", t.totalMs),
@@ -640,7 +712,8 @@ private:
                                  camera_.zWorld, camera_.yawDeg, camera_.pitchDeg, camera_.fovYDeg),
                              kText});
             auto h = heightAboveGround();
-            lines.push_back({(h ? fmt("height above ground %.1f m", *h) : std::string("height above ground: outside the grid")) +
+            lines.push_back({(h ? fmt("height above ground %.1f m", *h)
+                                : fmt("outside the grid, %.1f m above its highest point", camera_.zWorld - scene_.zMax)) +
                                  fmt("   speed %.0f m/s", speed()),
                              kText});
             std::string tint = !toggles_.cascadeTint                    ? "off"
@@ -808,7 +881,7 @@ int main(int argc, char** argv) {
                 glfwDestroyWindow(window);
                 throw hc::Error("--backend gl: " + why);
             }
-            if (!backend) note = "GL backend unavailable: " + why + "; rendering on the CPU";
+            if (!backend) note = "GL backend unavailable (" + why + "): rendering on the CPU";
         }
         if (!backend) backend = std::make_unique<CpuBackend>(*loaded->scene);
         if (!note.empty()) std::fprintf(stderr, "hc-view: %s\n", note.c_str());
