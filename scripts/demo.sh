@@ -3,7 +3,8 @@
 # install dependencies, build, ingest it with a bathtub flood at 2000 m into an adaptive grid, build
 # its influence cache, export the smooth surface (GeoTIFF elevation, EXR water depth, VDB level sets),
 # probe it, render it (an overview and a view up the flooded valley: PNG + EXR layers), and print
-# where everything is and how long each stage took.
+# where everything is and how long each stage took; with a display (and not in CI), open the interactive
+# viewer hc-view on the grid.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 now() { date +%s.%N; }
@@ -38,3 +39,9 @@ echo "stage timings (s):"
 awk -v a="$t0" -v b="$t1" -v c="$t2" -v d="$t3" -v e="$t4" -v f="$t5" -v g="$t6" -v h="$t7" -v i="$t8" 'BEGIN {
   printf "  dependencies  %7.2f\n  build         %7.2f\n  ingest        %7.2f\n  validate      %7.2f\n", b-a, c-b, d-c, e-d
   printf "  influence     %7.2f\n  export        %7.2f\n  probe         %7.2f\n  render (x2)   %7.2f\n", f-e, g-f, h-g, i-h }'
+# With a display (and not in CI), fly over the result: the interactive viewer (H in the window lists the controls).
+if { [ -n "${DISPLAY:-}" ] || [ -n "${WAYLAND_DISPLAY:-}" ]; } && [ -z "${CI:-}" ]; then
+  echo
+  echo "opening the viewer on out/hef.hcg (H: controls, Esc: quit; bookmarks in out/hef.bookmarks.json)"
+  ./build/bin/hc-view out/hef.hcg --look-at 626000,5172000,3200,634000,5184000,2400,60 || echo "hc-view failed (exit $?): the images above are complete"
+fi
