@@ -859,24 +859,26 @@ int main(int argc, char** argv) {
                             "xvfb-run -a, or render images with hc-render)");
 
         GlfwSession glfw;
-        auto loaded = hc::cli::loadScene("hc-view", gridPath, setup);
-
         // A 4.3 core context (what the GL compute backend needs); if there is none, 3.3 core and the CPU backend.
-        GLFWwindow* window = openWindow(setup.width, setup.height, 4, 3, true);
-        bool have43 = window != nullptr;
-        if (!window) window = openWindow(setup.width, setup.height, 3, 3, true);
+        // The window opens hidden and shows once the scene is loaded; --backend gl fails here, before any work.
+        GLFWwindow* window = openWindow(setup.width, setup.height, 4, 3, false);
+        const bool have43 = window != nullptr;
+        const std::string why43 = have43 ? "" : "no OpenGL 4.3 core context (" + glfwMessage + ")";
+        if (!have43 && choice == BackendChoice::Gl) throw hc::Error("--backend gl: " + why43);
+        if (!window) window = openWindow(setup.width, setup.height, 3, 3, false);
         if (!window) throw hc::Error("cannot create an OpenGL 3.3 core window: " + glfwMessage);
         glfwMakeContextCurrent(window);
         glfwSwapInterval(frames > 0 ? 0 : 1);
         const std::string contextInfo = std::string(reinterpret_cast<const char*>(glGetString(GL_RENDERER))) + ", OpenGL " +
                                         reinterpret_cast<const char*>(glGetString(GL_VERSION));
 
+        auto loaded = hc::cli::loadScene("hc-view", gridPath, setup);
         std::unique_ptr<ViewBackend> backend;
         std::string note;
         if (choice != BackendChoice::Cpu) {
             std::string why;
             if (have43) backend = makeGlBackend(*loaded->scene, why);
-            else why = "no OpenGL 4.3 core context (" + glfwMessage + ")";
+            else why = why43;
             if (!backend && choice == BackendChoice::Gl) {
                 glfwDestroyWindow(window);
                 throw hc::Error("--backend gl: " + why);
@@ -885,7 +887,9 @@ int main(int argc, char** argv) {
         }
         if (!backend) backend = std::make_unique<CpuBackend>(*loaded->scene);
         if (!note.empty()) std::fprintf(stderr, "hc-view: %s\n", note.c_str());
+        std::fprintf(stderr, "hc-view: backend %s (%s)\n", backend->name().c_str(), backend->device().c_str());
         int status = 0;
+        glfwShowWindow(window);
         {
             Viewer viewer(window, *loaded, setup, gridPath, std::move(backend), note, contextInfo);
             if (frames > 0) {
