@@ -9,13 +9,15 @@
 #include "heightcast/grid/atomic_file.h"
 #include "heightcast/grid/error.h"
 #include "heightcast/grid/grid_file.h"
+#include "heightcast/grid/parallel.h"
+#include "heightcast/render/gl_renderer.h"
 #include "heightcast/render/image_io.h"
 #include "heightcast/render/renderer.h"
 
 
 int main(int argc, char** argv) {
     return hc::cli::run("hc-render", [&] {
-        std::string gridPath, view, out, exr, timingsPath;
+        std::string gridPath, view, out, exr, timingsPath, backendText = "auto";
         hc::cli::RenderSetup setup("1280x720");
         hc::cli::Parser p("hc-render", "GRID.hcg -o OUT.png [--camera X,Y,Z,YAW,PITCH,FOV | --look-at EX,EY,EZ,TX,TY,TZ[,FOV] | --view overview] [options]",
                           "Ray-casts the smooth surface of a grid (terrain, and water where the grid has water_depth) into a PNG\n"
@@ -28,11 +30,17 @@ int main(int argc, char** argv) {
         setup.addRenderOptions(p);
         p.option("--exr", "OUT.exr", "also write float layers: Z, P.X/Y/Z, N.X/Y/Z, cascade, water_depth", exr);
         p.option("--timings", "OUT.json", "also write the per-stage timings as JSON", timingsPath);
+        p.option("--backend", "B", "gl (OpenGL 4.3 compute shaders; headless, no display needed), cpu, or auto: gl where an\n"
+                 "OpenGL 4.3 context can be had, else cpu with a note (default auto). --threads applies to cpu only", backendText);
         if (!p.parse(argc, argv)) return 0;
         if (out.empty()) throw hc::Error("no output image: give -o OUT.png");
         if (!view.empty() && view != "overview") throw hc::Error("--view " + view + ": the only view is 'overview'");
+        const hc::render::Backend backend = hc::render::parseBackend(backendText);
         // Validates the options and the camera's numbers before any expensive work.
         setup.finish();
+        std::string glUnavailable;
+        if (backend != hc::render::Backend::Cpu) glUnavailable = hc::render::headlessGlUnavailable();
+        if (backend == hc::render::Backend::Gl && !glUnavailable.empty()) throw hc::Error("--backend gl: " + glUnavailable);
         for (const std::string* o : {&out, &exr, &timingsPath})
             if (!o->empty()) {
                 hc::cli::checkWritable(*o, "output");
@@ -44,8 +52,17 @@ int main(int argc, char** argv) {
         const hc::render::Camera camera = hc::cli::initialCamera(setup, scene);
         const hc::render::RenderOptions& options = setup.options;
 
+        // The GL backend renders in a headless context of its own; where none can be had, "auto" falls back.
+        std::unique_ptr<hc::render::GlRenderer> gl;
+        std::string device = "CPU, " + std::to_string(hc::resolveThreads(options.threads)) + " threads";
+        if (backend != hc::render::Backend::Cpu && glUnavailable.empty()) {
+            gl = hc::render::GlRenderer::headless(scene);
+            device = gl->deviceName();
+        } else if (backend == hc::render::Backend::Auto) {
+            std::fprintf(stderr, "hc-render: note: the GL backend is not available (%s): rendering on the CPU\n", glUnavailable.c_str());
+        }
         hc::render::Timings timings;
-        hc::render::Frame frame = hc::render::renderFrame(scene, camera, options, timings);
+        hc::render::Frame frame = gl ? gl->render(camera, options, timings) : hc::render::renderFrame(scene, camera, options, timings);
         hc::render::writePng(frame, out);
         if (!exr.empty()) hc::render::writeFrameExr(frame, exr);
         if (!timingsPath.empty()) {
@@ -55,6 +72,7 @@ int main(int argc, char** argv) {
             tw.commit();
         }
         std::printf("hc-render: %s -> %s%s%s\n", gridPath.c_str(), out.c_str(), exr.empty() ? "" : " + ", exr.c_str());
+        std::printf("  backend      %s (%s)\n", gl ? "gl" : "cpu", device.c_str());
         std::printf("  camera       %.3f, %.3f, %.3f  yaw %.2f  pitch %.2f  fov %.1f  %dx%d\n", camera.xWorld, camera.yWorld, camera.zWorld,
                     camera.yawDeg, camera.pitchDeg, camera.fovYDeg, camera.width, camera.height);
         std::printf("%s", timings.toTable().c_str());

@@ -66,6 +66,7 @@
 #include "heightcast/grid/parallel.h"
 #include "heightcast/grid/progress.h"
 #include "heightcast/influence/influence.h"
+#include "heightcast/render/gl_renderer.h"
 #include "heightcast/render/image_io.h"
 #include "heightcast/render/renderer.h"
 
@@ -421,6 +422,7 @@ struct RunResult {
     CascadeOut cascades[4] = {};  // of the run with the best approximation time
     uint64_t baselineRss = 0, gridRss = 0, peakRss = 0;  // bytes: before generating; after the grid; at the end
     char image[512] = {};         // the PNG written, or empty
+    char device[256] = {};        // what rendered: "CPU" or the GL renderer and version
 };
 
 struct Settings {
@@ -429,6 +431,7 @@ struct Settings {
     hc::render::RenderOptions options;
     std::string imagesDir;
     bool interactive = false;
+    hc::render::Backend backend = hc::render::Backend::Cpu;  // Cpu or Gl (Auto is resolved in main)
 };
 
 // The fixed camera: 1.5 km above the river 10 % of the way downstream, looking along it at pitch -20.
@@ -499,10 +502,21 @@ RunResult runScenario(const Scenario& sc, const Settings& set) {
         r.height = set.height;
         r.repeats = set.repeat;
         hc::render::Frame frame;
+        // The GL backend: a headless context in this child; one unmeasured warm-up frame first, since
+        // drivers (llvmpipe among them) compile shaders at their first dispatch.
+        std::unique_ptr<hc::render::GlRenderer> gl;
+        std::snprintf(r.device, sizeof r.device, "CPU, %u threads", hc::resolveThreads(set.options.threads));
+        if (set.backend == hc::render::Backend::Gl) {
+            say("GL warm-up frame ...");
+            gl = hc::render::GlRenderer::headless(scene);
+            std::snprintf(r.device, sizeof r.device, "%s", gl->deviceName().c_str());
+            hc::render::Timings warm;
+            gl->render(cam, set.options, warm);
+        }
         for (int k = 0; k < set.repeat; ++k) {
             say(fmt("rendering, frame %d of %d ...", k + 1, set.repeat).c_str());
             hc::render::Timings tm;
-            frame = hc::render::renderFrame(scene, cam, set.options, tm);
+            frame = gl ? gl->render(cam, set.options, tm) : hc::render::renderFrame(scene, cam, set.options, tm);
             r.fittingMs = std::min(r.fittingMs, tm.fittingMs);
             r.mipmapMs = std::min(r.mipmapMs, tm.mipmapMs);
             r.raycastMs = std::min(r.raycastMs, tm.raycastMs);
@@ -634,7 +648,7 @@ void writeCsv(const std::vector<const Scenario*>& scs, const std::vector<RunResu
 int main(int argc, char** argv) {
     return hc::cli::run("hc-bench", [&] {
         Settings set;
-        std::string size = "1920x1080", scenarios = "Marchfeld,Petzenkirchen,Wachau,Florence", csv, json;
+        std::string size = "1920x1080", scenarios = "Marchfeld,Petzenkirchen,Wachau,Florence", csv, json, backendText = "cpu";
         hc::cli::Parser p("hc-bench", "[options]",
                           "Benchmarks the CPU renderer on synthetic stand-ins for the technical report's four flood scenes\n"
                           "(Marchfeld 82.9 x 57.1 km, 3-96 m cells, 7.46 M cells; Petzenkirchen 15.4 x 16.0 km, 0.75-96 m, 1.81 M;\n"
@@ -654,12 +668,16 @@ int main(int argc, char** argv) {
         p.option("--threads", "N", "worker threads for generation, lists and rendering (default 0 = all cores)", set.options.threads);
         p.option("--images", "DIR", "also write each scenario's last frame as DIR/SCENARIO.png; DIR is created if missing\n"
                  "      (default: none)", set.imagesDir);
+        p.option("--backend", "B", "cpu or gl: the OpenGL 4.3 compute backend in a headless context, stage times from GPU timer\n"
+                 "      queries, after one unmeasured warm-up frame (default cpu)", backendText);
         p.option("--csv", "OUT.csv", "also write one row per scenario as CSV with a header line (default: none)", csv);
         p.option("--json", "OUT.json", "also write a JSON array, one object per scenario (scenario, cells, approximation_ms,\n"
                  "      raycast_ms, gaussians_per_s, rays_per_s, peak_rss_mb, and more) (default: none)", json);
         if (!p.parse(argc, argv)) return 0;
         if (!(set.scale >= 1)) throw hc::Error("--scale " + fmt("%g", set.scale) + ": must be at least 1");
         if (set.repeat < 1) throw hc::Error("--repeat " + std::to_string(set.repeat) + ": must be at least 1");
+        set.backend = hc::render::parseBackend(backendText);
+        if (set.backend == hc::render::Backend::Auto) throw hc::Error("--backend auto: a benchmark names its backend, cpu or gl");
         if (std::string why = set.options.validate(); !why.empty()) throw hc::Error(why);
         {
             auto x = size.find('x');
@@ -724,11 +742,11 @@ int main(int argc, char** argv) {
         }
 
         // ---- table 2: the renderer, in the report's form ----
-        std::printf("\n2. rendering: %dx%d, %d cascade%s of %d^2 texels, best of %d frames per stage (worst in brackets); camera 1.5 km\n"
+        std::printf("\n2. rendering with the %s backend (%s): %dx%d, %d cascade%s of %d^2 texels, best of %d frames per stage (worst in brackets); camera 1.5 km\n"
                     "above the river 10 %% downstream, looking along it, pitch -20, fov 50; G Gauss/s = kernel evaluations in\n"
                     "the approximation / its time; M rays/s = pixels / ray casting time; peak RSS = the scenario's process\n"
                     "(getrusage) at the end; GTX 1080 = the report's times for the real data\n\n",
-                    set.width, set.height, set.options.cascades, set.options.cascades == 1 ? "" : "s", set.options.texelsPerSide,
+                    hc::render::backendName(set.backend), results.empty() ? "-" : results[0].device, set.width, set.height, set.options.cascades, set.options.cascades == 1 ? "" : "s", set.options.texelsPerSide,
                     set.repeat);
         std::printf("%-14s %13s %10s %7s %19s %19s %8s %7s %8s %8s %11s %10s %8s %11s %11s\n", "scenario", "extents km", "cells m",
                     "cells M", "approximation ms", "ray casting ms", "fit ms", "mip ms", "shade ms", "total ms", "G Gauss/s",

@@ -26,16 +26,16 @@ float expNeg(float x) {
 }
 
 void main() {
-    const GpuCascade c = cascades[uCascade];
+    // Fields are read from the buffer one by one (no local copy of the GpuCascade and its arrays).
     const uint i = gl_GlobalInvocationID.x, j = gl_GlobalInvocationID.y;
-    const uint n = uint(c.n);
+    const uint n = uint(cascades[uCascade].n);
     if (i >= n || j >= n) return;
     const uint t = j * n + i;
     const float noSurface = -kInf;
     float z = noSurface, water = noSurface, depth = 0.0;
-    const bool isVisible = ((visible[c.visibleOffset + (t >> 2)] >> ((t & 3u) * 8u)) & 0xffu) != 0u;
-    // The texel centre in double, exactly as c.x0 + i * s on the CPU.
-    const double x = c.x0 + double(i) * c.texelM, y = c.y0 + double(j) * c.texelM;
+    const bool isVisible = ((visible[cascades[uCascade].visibleOffset + (t >> 2)] >> ((t & 3u) * 8u)) & 0xffu) != 0u;
+    // The texel centre in double, exactly as cascades[uCascade].x0 + i * s on the CPU.
+    const double x = cascades[uCascade].x0 + double(i) * cascades[uCascade].texelM, y = cascades[uCascade].y0 + double(j) * cascades[uCascade].texelM;
     const int k = isVisible ? locateCell(x, y) : -1;
     if (k >= 0) {
         const GpuCell ck = cells[k];
@@ -66,9 +66,9 @@ void main() {
         }
         atomicAdd(counters[uint(uCascade) * uint(kCounterSlots) + (gl_WorkGroupID.x + 7u * gl_WorkGroupID.y) % uint(kCounterSlots)], e - b);
     }
-    heights[c.terrainOffset + t] = z;
+    heights[cascades[uCascade].terrainOffset + t] = z;
     if (frame.hasWater != 0) {
-        heights[c.waterOffset + t] = water;
-        heights[c.depthOffset + t] = depth;
+        heights[cascades[uCascade].waterOffset + t] = water;
+        heights[cascades[uCascade].depthOffset + t] = depth;
     }
 }

@@ -12,19 +12,20 @@ uniform int uWater;  // 0: terrain, 1: water surface
 uniform int uLevel;  // the level written
 
 void main() {
-    const GpuCascade c = cascades[uCascade];
+    // Fields are read from the buffer one by one: copying the whole GpuCascade (with its arrays) into a
+    // local costs llvmpipe a scratch copy per invocation.
     const uint i = gl_GlobalInvocationID.x, j = gl_GlobalInvocationID.y;
-    const uint side = uint(c.mipSide[uLevel]);
+    const uint side = uint(cascades[uCascade].mipSide[uLevel]);
     if (i >= side || j >= side) return;
-    const uint dst = (uWater != 0 ? c.waterMip[uLevel] : c.terrainMip[uLevel]) + j * side + i;
+    const uint dst = (uWater != 0 ? cascades[uCascade].waterMip[uLevel] : cascades[uCascade].terrainMip[uLevel]) + j * side + i;
     float m;
     if (uLevel == 0) {
-        const uint n = uint(c.n);
-        const uint r0 = (uWater != 0 ? c.waterOffset : c.terrainOffset) + j * n + i;
+        const uint n = uint(cascades[uCascade].n);
+        const uint r0 = (uWater != 0 ? cascades[uCascade].waterOffset : cascades[uCascade].terrainOffset) + j * n + i;
         m = max(max(heights[r0], heights[r0 + 1u]), max(heights[r0 + n], heights[r0 + n + 1u]));
     } else {
-        const uint lowSide = uint(c.mipSide[uLevel - 1]);
-        const uint low = uWater != 0 ? c.waterMip[uLevel - 1] : c.terrainMip[uLevel - 1];
+        const uint lowSide = uint(cascades[uCascade].mipSide[uLevel - 1]);
+        const uint low = uWater != 0 ? cascades[uCascade].waterMip[uLevel - 1] : cascades[uCascade].terrainMip[uLevel - 1];
         m = -kInf;
         for (uint b = 0u; b < 2u; ++b)
             for (uint a = 0u; a < 2u; ++a) {

@@ -40,6 +40,15 @@ const char* backendName(Backend b) {
     return "?";
 }
 
+std::string headlessGlUnavailable() {
+    try {
+        gl::HeadlessContext::create();
+        return "";
+    } catch (const Error& e) {
+        return e.what();
+    }
+}
+
 namespace {
 
 using Clock = std::chrono::steady_clock;

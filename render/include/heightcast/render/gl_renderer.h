@@ -21,6 +21,9 @@ enum class Backend { Cpu, Gl, Auto };
 // "cpu" | "gl" | "auto"; throws hc::Error naming the bad value.
 Backend parseBackend(const std::string& name);
 const char* backendName(Backend b);
+// Why no headless OpenGL 4.3 context can be had on this machine, or "" when one can (it makes one and
+// drops it again): lets a tool refuse --backend gl before loading a scene.
+std::string headlessGlUnavailable();
 
 class GlRenderer {
 public:
