@@ -663,7 +663,16 @@ private:
         // Frame rate: frames finished over the last second.
         const auto now = Clock::now();
         frameTimes_.push_back(now);
-        while (!frameTimes_.empty() && now - frameTimes_.front() > std::chrono::seconds(1)) frameTimes_.erase(frameTimes_.begin());
+        while (!frameTimes_.empty() && now - frameTimes_.front() > std::chrono::seconds(2)) frameTimes_.erase(frameTimes_.begin());
+    }
+    // Frames finished per second over the last two seconds while frames keep coming; otherwise what the last
+    // frame's time allows.
+    double framesPerSecond() const {
+        if (frameTimes_.size() >= 3) {
+            const double s = std::chrono::duration<double>(frameTimes_.back() - frameTimes_.front()).count();
+            if (s > 0) return double(frameTimes_.size() - 1) / s;
+        }
+        return shown_.timings.totalMs > 0 ? 1000.0 / shown_.timings.totalMs : 0.0;
     }
 
     // ----------------------------------------------------------------------------------- drawing
@@ -702,7 +711,7 @@ private:
             if (!backendNote_.empty()) lines.push_back({backendNote_, kWarn});
             if (backend_->device() != contextInfo_) lines.push_back({"display: " + contextInfo_, kDim});
             const Timings& t = shown_.timings;
-            lines.push_back({fmt("%zu fps   frame %dx%d%s   total %.1f ms", frameTimes_.size(), shown_.width, shown_.height,
+            lines.push_back({fmt("%.1f fps   frame %dx%d%s   total %.1f ms", framesPerSecond(), shown_.width, shown_.height,
                                  shown_.full ? "" : " (moving: reduced)", t.totalMs),
                              kText});
             lines.push_back({fmt("fitting %.1f  approximation %.1f  mipmaps %.1f  ray casting %.1f  shading %.1f ms", t.fittingMs,
