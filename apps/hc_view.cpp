@@ -418,8 +418,9 @@ public:
             if (backend_->collect(shown_)) frameDone();
             draw();
             glfwSwapBuffers(window_);
-            // Sleep in the event queue when nothing is moving or rendering.
-            if (backend_->busy() || moving() || !shownCurrent()) glfwPollEvents();
+            // Wait in the event queue, never spin: the CPU backend needs the cores. Input wakes it at once;
+            // otherwise ~60 Hz while frames are coming or keys are held, 2 Hz when all is still.
+            if (backend_->busy() || moving() || !shownCurrent()) glfwWaitEventsTimeout(1.0 / 60);
             else glfwWaitEventsTimeout(0.5);
         }
     }
@@ -690,18 +691,18 @@ private:
         glClear(GL_COLOR_BUFFER_BIT);
         if (shown_.texture) quad_.draw(shown_.texture, shown_.flipY);
         if (!toggles_.hud && !toggles_.help) return;
-        drawHud(fw, fh);
-        glBindTexture(GL_TEXTURE_2D, hudTexture_);
-        glPixelStorei(GL_UNPACK_ALIGNMENT, 4);
-        glTexImage2D(GL_TEXTURE_2D, 0, GL_RGBA8, hud_.width, hud_.height, 0, GL_RGBA, GL_UNSIGNED_BYTE, hud_.rgba.data());
+        if (drawHud(fw, fh)) {  // upload only what changed
+            glBindTexture(GL_TEXTURE_2D, hudTexture_);
+            glPixelStorei(GL_UNPACK_ALIGNMENT, 4);
+            glTexImage2D(GL_TEXTURE_2D, 0, GL_RGBA8, hud_.width, hud_.height, 0, GL_RGBA, GL_UNSIGNED_BYTE, hud_.rgba.data());
+        }
         glEnable(GL_BLEND);
         glBlendFunc(GL_SRC_ALPHA, GL_ONE_MINUS_SRC_ALPHA);
         quad_.draw(hudTexture_, true);
         glDisable(GL_BLEND);
     }
-    void drawHud(int fw, int fh) {
-        if (hud_.width != fw || hud_.height != fh) hud_.resize(fw, fh);
-        else hud_.clear();
+    // Rasterises the HUD (and the help) into hud_; false when it would be the same as last time.
+    bool drawHud(int fw, int fh) {
         const int scale = fw >= 1200 ? 2 : 1;
         const int lineH = hc::view::kGlyphH * scale, pad = 4 * scale;
         const uint32_t kText = 0xF0F0F0FF, kDim = 0xB8C4D0FF, kWarn = 0xFFC850FF, kBox = 0x000000A0;
@@ -733,6 +734,12 @@ private:
                              kDim});
             if (Clock::now() < flashUntil_) lines.push_back({flash_, kWarn});
         }
+        std::string key = fmt("%dx%d %d|", fw, fh, toggles_.help ? 1 : 0);
+        for (const auto& l : lines) key += l.first + "\n";
+        if (key == hudKey_) return false;
+        hudKey_ = key;
+        if (hud_.width != fw || hud_.height != fh) hud_.resize(fw, fh);
+        else hud_.clear();
         int widest = 0;
         for (const auto& l : lines) widest = std::max(widest, int(l.first.size()));
         if (!lines.empty()) {
@@ -750,6 +757,7 @@ private:
             hud_.fillRect(x, y, w, h, 0x000000C8);
             hc::view::drawText(hud_, x + 2 * pad, y + 2 * pad, kHelp, kText, scale);
         }
+        return true;
     }
 
     void flash(const std::string& text) {
@@ -794,6 +802,7 @@ private:
     QuadProgram quad_;
     GLuint hudTexture_;
     hc::view::Overlay hud_;
+    std::string hudKey_;  // the text hud_ holds, to skip identical redraws
     Toggles toggles_;
     Camera camera_, home_, submittedCamera_;
     bool submitted_ = false, submittedFull_ = false;

@@ -56,11 +56,13 @@ struct Overlay {
     void clear();
     void fillRect(int x, int y, int w, int h, uint32_t rgba8);  // 0xRRGGBBAA, clipped
 };
-// Glyph cell: 5x7 pixels plus one column and two rows of spacing, times `scale`.
+// Glyph cell: 5x7 pixels plus one column and two rows of spacing (where descenders reach), times `scale`.
 constexpr int kGlyphW = 6, kGlyphH = 9;
 // Draws printable ASCII (others as '?'); returns the x after the text. Newlines start a new line.
 int drawText(Overlay& o, int x, int y, std::string_view text, uint32_t rgba8, int scale);
 // The 7 rows (5 low bits, bit 4 = leftmost pixel) of a printable ASCII character; '?' for others.
 const uint8_t* glyph(char c);
+// Whether the glyph is drawn two rows lower (g p q y: their 7 rows are body and descender).
+bool descends(char c);
 
 }  // namespace hc::view
