@@ -831,14 +831,14 @@ struct GlfwSession {
     ~GlfwSession() { glfwTerminate(); }
 };
 
-GLFWwindow* openWindow(int width, int height, int major, int minor, bool visible) {
+GLFWwindow* openWindow(const std::string& title, int width, int height, int major, int minor, bool visible) {
     glfwDefaultWindowHints();
     glfwWindowHint(GLFW_CONTEXT_VERSION_MAJOR, major);
     glfwWindowHint(GLFW_CONTEXT_VERSION_MINOR, minor);
     glfwWindowHint(GLFW_OPENGL_PROFILE, GLFW_OPENGL_CORE_PROFILE);
     glfwWindowHint(GLFW_OPENGL_FORWARD_COMPAT, GLFW_TRUE);
     glfwWindowHint(GLFW_VISIBLE, visible ? GLFW_TRUE : GLFW_FALSE);
-    return glfwCreateWindow(width, height, "hc-view", nullptr, nullptr);
+    return glfwCreateWindow(width, height, title.c_str(), nullptr, nullptr);
 }
 
 }  // namespace
@@ -877,13 +877,14 @@ int main(int argc, char** argv) {
                             "xvfb-run -a, or render images with hc-render)");
 
         GlfwSession glfw;
+        const std::string title = "hc-view: " + gridPath;
         // A 4.3 core context (what the GL compute backend needs); if there is none, 3.3 core and the CPU backend.
         // The window opens hidden and shows once the scene is loaded; --backend gl fails here, before any work.
-        GLFWwindow* window = openWindow(setup.width, setup.height, 4, 3, false);
+        GLFWwindow* window = openWindow(title, setup.width, setup.height, 4, 3, false);
         const bool have43 = window != nullptr;
         const std::string why43 = have43 ? "" : "no OpenGL 4.3 core context (" + glfwMessage + ")";
         if (!have43 && choice == BackendChoice::Gl) throw hc::Error("--backend gl: " + why43);
-        if (!window) window = openWindow(setup.width, setup.height, 3, 3, false);
+        if (!window) window = openWindow(title, setup.width, setup.height, 3, 3, false);
         if (!window) throw hc::Error("cannot create an OpenGL 3.3 core window: " + glfwMessage);
         glfwMakeContextCurrent(window);
         glfwSwapInterval(frames > 0 ? 0 : 1);
