@@ -29,11 +29,10 @@
 #include "render_setup.h"
 #include "view_support.h"
 #include "heightcast/grid/error.h"
+#include "heightcast/grid/parallel.h"
 #include "heightcast/influence/surface.h"
 #include "heightcast/render/image_io.h"
-#if HC_VIEW_GL_BACKEND
 #include "heightcast/render/gl_renderer.h"
-#endif
 #include "heightcast/render/renderer.h"
 
 namespace {
@@ -43,15 +42,6 @@ using hc::render::Frame;
 using hc::render::RenderOptions;
 using hc::render::Timings;
 using Clock = std::chrono::steady_clock;
-
-enum class BackendChoice { Cpu, Gl, Auto };
-
-BackendChoice parseBackendChoice(const std::string& s) {
-    if (s == "cpu") return BackendChoice::Cpu;
-    if (s == "gl") return BackendChoice::Gl;
-    if (s == "auto") return BackendChoice::Auto;
-    throw hc::Error("--backend " + s + ": use gl, cpu or auto");
-}
 
 // ------------------------------------------------------------------------------------------------ GL
 
@@ -173,7 +163,8 @@ void tintCascades(Frame& f) {
 // The CPU backend on a worker thread, so the window stays responsive while a frame takes 0.5 s.
 class CpuBackend final : public ViewBackend {
 public:
-    explicit CpuBackend(const hc::render::Scene& scene) : scene_(scene), texture_(makeTexture()), worker_([this] { loop(); }) {}
+    CpuBackend(const hc::render::Scene& scene, unsigned threads)
+        : scene_(scene), threads_(threads), texture_(makeTexture()), worker_([this] { loop(); }) {}
     ~CpuBackend() override {
         {
             std::lock_guard<std::mutex> l(m_);
@@ -219,9 +210,7 @@ public:
         done_.wait(l, [&] { return (!job_ && !running_) || !error_.empty(); });
     }
     std::string name() const override { return "CPU"; }
-    std::string device() const override {
-        return "CPU, " + std::to_string(std::max(1u, std::thread::hardware_concurrency())) + " threads";
-    }
+    std::string device() const override { return "CPU, " + std::to_string(hc::resolveThreads(threads_)) + " threads"; }
     bool cascadeTintSupported() const override { return true; }
 
 private:
@@ -260,6 +249,7 @@ private:
         }
     }
     const hc::render::Scene& scene_;
+    unsigned threads_;
     GLuint texture_;
     mutable std::mutex m_;
     std::condition_variable cv_, done_;
@@ -270,7 +260,6 @@ private:
     std::thread worker_;
 };
 
-#if HC_VIEW_GL_BACKEND
 // The GL compute backend in the window's own context: the image stays on the GPU (renderToTexture) and is
 // drawn from there. Cascade colouring needs the per-pixel cascade index, which only the read-back Frame
 // (render()) carries: with K on, frames take that path and are tinted and uploaded like CPU frames.
@@ -315,24 +304,15 @@ private:
     GLuint tintTexture_;
     std::optional<Shown> next_;
 };
-#endif
 
-// The one place that knows whether the GL compute backend (render/include/heightcast/render/gl_renderer.h)
-// is built in (HC_VIEW_GL_BACKEND, set by apps/CMakeLists.txt when hc_render compiles it); without it,
-// hc-view renders with the CPU backend and says why.
+// The GL backend in the window's context, or why not (no 4.3 compute shaders, a driver failure).
 std::unique_ptr<ViewBackend> makeGlBackend(const hc::render::Scene& scene, std::string& whyNot) {
-#if HC_VIEW_GL_BACKEND
     try {
         return std::make_unique<GlBackend>(hc::render::GlRenderer::inCurrentContext(scene));
     } catch (const hc::Error& e) {
         whyNot = e.what();
         return nullptr;
     }
-#else
-    (void)scene;
-    whyNot = "not built into this hc-view";
-    return nullptr;
-#endif
 }
 
 // ------------------------------------------------------------------------------------------------ viewer
@@ -863,7 +843,7 @@ int main(int argc, char** argv) {
         p.option("--screenshot", "OUT.png", "with --frames: write the window's last frame (image and HUD) as a PNG", screenshot);
         if (!p.parse(argc, argv)) return 0;
         setup.finish();
-        const BackendChoice choice = parseBackendChoice(backendName);
+        const hc::render::Backend choice = hc::render::parseBackend(backendName);
         if (frames < 0 || frames > 100000) throw hc::Error("--frames " + std::to_string(frames) + " is outside 0..100000");
         if (!screenshot.empty()) {
             if (frames == 0) throw hc::Error("--screenshot needs --frames N (the number of frames to render first)");
@@ -883,7 +863,7 @@ int main(int argc, char** argv) {
         GLFWwindow* window = openWindow(title, setup.width, setup.height, 4, 3, false);
         const bool have43 = window != nullptr;
         const std::string why43 = have43 ? "" : "no OpenGL 4.3 core context (" + glfwMessage + ")";
-        if (!have43 && choice == BackendChoice::Gl) throw hc::Error("--backend gl: " + why43);
+        if (!have43 && choice == hc::render::Backend::Gl) throw hc::Error("--backend gl: " + why43);
         if (!window) window = openWindow(title, setup.width, setup.height, 3, 3, false);
         if (!window) throw hc::Error("cannot create an OpenGL 3.3 core window: " + glfwMessage);
         glfwMakeContextCurrent(window);
@@ -894,17 +874,17 @@ int main(int argc, char** argv) {
         auto loaded = hc::cli::loadScene("hc-view", gridPath, setup);
         std::unique_ptr<ViewBackend> backend;
         std::string note;
-        if (choice != BackendChoice::Cpu) {
+        if (choice != hc::render::Backend::Cpu) {
             std::string why;
             if (have43) backend = makeGlBackend(*loaded->scene, why);
             else why = why43;
-            if (!backend && choice == BackendChoice::Gl) {
+            if (!backend && choice == hc::render::Backend::Gl) {
                 glfwDestroyWindow(window);
                 throw hc::Error("--backend gl: " + why);
             }
             if (!backend) note = "GL backend unavailable (" + why + "): rendering on the CPU";
         }
-        if (!backend) backend = std::make_unique<CpuBackend>(*loaded->scene);
+        if (!backend) backend = std::make_unique<CpuBackend>(*loaded->scene, setup.options.threads);
         if (!note.empty()) std::fprintf(stderr, "hc-view: %s\n", note.c_str());
         std::fprintf(stderr, "hc-view: backend %s (%s)\n", backend->name().c_str(), backend->device().c_str());
         int status = 0;
