@@ -7,12 +7,25 @@
 // Texels that are invisible, in a hole or outside the domain get -inf ("no surface").
 layout(local_size_x = HC_GROUP_2D, local_size_y = HC_GROUP_2D) in;
 
-layout(std430, binding = HC_BIND_INDICES) readonly buffer IndexBlock { uint indices[]; };
+layout(std430, binding = HC_BIND_INDICES) readonly buffer IndexBlock0 { uint indices0[]; };
+layout(std430, binding = HC_BIND_INDICES_1) readonly buffer IndexBlock1 { uint indices1[]; };
+layout(std430, binding = HC_BIND_INDICES_2) readonly buffer IndexBlock2 { uint indices2[]; };
+layout(std430, binding = HC_BIND_INDICES_3) readonly buffer IndexBlock3 { uint indices3[]; };
 layout(std430, binding = HC_BIND_VISIBLE) readonly buffer VisibleBlock { uint visible[]; };
 layout(std430, binding = HC_BIND_HEIGHTS) buffer HeightBlock { float heights[]; };
 layout(std430, binding = HC_BIND_COUNTERS) buffer CounterBlock { uint counters[]; };
 
 uniform int uCascade;
+
+// Entry e of the influence lists (InfluenceLists::indices()[e]), from the chunk that holds it.
+// Neighbouring texels share a list, so the branch hardly ever diverges.
+uint listEntry(uint e) {
+    const uint chunk = e >> frame.indexChunkShift, at = e & ((1u << frame.indexChunkShift) - 1u);
+    if (chunk == 0u) return indices0[at];
+    if (chunk == 1u) return indices1[at];
+    if (chunk == 2u) return indices2[at];
+    return indices3[at];
+}
 
 // exp(x) for x <= 0, the same branch-free polynomial as expNeg() in approximate.cpp (so both
 // backends round alike; the driver's exp() is allowed 3 ulp and differs between GPUs).
@@ -34,7 +47,7 @@ void main() {
     const float noSurface = -kInf;
     float z = noSurface, water = noSurface, depth = 0.0;
     const bool isVisible = ((visible[cascades[uCascade].visibleOffset + (t >> 2)] >> ((t & 3u) * 8u)) & 0xffu) != 0u;
-    // The texel centre in double, exactly as cascades[uCascade].x0 + i * s on the CPU.
+    // The texel centre in double, exactly as c.x0 + i * s in approximate.cpp.
     const double x = cascades[uCascade].x0 + double(i) * cascades[uCascade].texelM, y = cascades[uCascade].y0 + double(j) * cascades[uCascade].texelM;
     const int k = isVisible ? locateCell(x, y) : -1;
     if (k >= 0) {
@@ -47,7 +60,7 @@ void main() {
         const float fx = float(x - double(kcx2) * halfFinest), fy = float(y - double(kcy2) * halfFinest);
         float num = 0.0, den = 0.0, numD = 0.0;
         for (uint idx = b; idx < e; ++idx) {
-            const GpuCell ci = cells[indices[idx]];
+            const GpuCell ci = cells[listEntry(idx)];
             const float ex = float(int(2u * ci.ix + (1u << ci.level)) - kcx2) * h;
             const float ey = float(int(2u * ci.iy + (1u << ci.level)) - kcy2) * h;
             const float dx = fx - ex, dy = fy - ey;

@@ -8,6 +8,7 @@
 // GL_TIMESTAMP queries between the dispatches.
 #include <algorithm>
 #include <array>
+#include <bit>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -51,6 +52,9 @@ std::string headlessGlUnavailable() {
 
 namespace {
 
+// GlRenderer::limitIndexChunksForTest: the most entries one chunk of the lists may hold.
+uint64_t gIndexChunkLimitForTest = uint64_t{1} << 31;
+
 using Clock = std::chrono::steady_clock;
 double msSince(Clock::time_point t) { return std::chrono::duration<double, std::milli>(Clock::now() - t).count(); }
 
@@ -87,7 +91,9 @@ struct GlRenderer::Impl {
     const Scene& scene;
     std::unique_ptr<gl::HeadlessContext> headless;  // null when rendering into the caller's context
     GLuint approximate = 0, mipmap = 0, raycast = 0, shade = 0;
-    Buffer frameBuf, cellsBuf, keysBuf, indicesBuf, visibleBuf, heightsBuf, pixelsBuf, countersBuf;
+    Buffer frameBuf, cellsBuf, keysBuf, visibleBuf, heightsBuf, pixelsBuf, countersBuf;
+    std::array<Buffer, gpu::kIndexChunks> indexBufs;  // the lists' entries, in chunks of 2^indexChunkShift
+    uint32_t indexChunkShift = 31;
     GLuint colorTex = 0;
     int texWidth = 0, texHeight = 0;
     static constexpr int kStamps = 4 + gpu::kMaxCascades + 1;
@@ -100,6 +106,7 @@ struct GlRenderer::Impl {
         gl::requireGl43("the GL backend");
         device = gl::currentDeviceName();
         glGetInteger64v(GL_MAX_SHADER_STORAGE_BLOCK_SIZE, &maxStorageBlock);
+        if (maxStorageBlock <= 0) maxStorageBlock = GLint64{1} << 24;  // OpenGL 4.3's minimum
         approximate = gl::compileEmbedded("approximate");
         mipmap = gl::compileEmbedded("mipmap");
         raycast = gl::compileEmbedded("raycast");
@@ -112,7 +119,8 @@ struct GlRenderer::Impl {
         if (headless) headless->makeCurrent();
         for (GLuint p : {approximate, mipmap, raycast, shade})
             if (p) glDeleteProgram(p);
-        for (Buffer* b : {&frameBuf, &cellsBuf, &keysBuf, &indicesBuf, &visibleBuf, &heightsBuf, &pixelsBuf, &countersBuf}) b->release();
+        for (Buffer* b : {&frameBuf, &cellsBuf, &keysBuf, &visibleBuf, &heightsBuf, &pixelsBuf, &countersBuf}) b->release();
+        for (Buffer& b : indexBufs) b.release();
         if (colorTex) glDeleteTextures(1, &colorTex);
         glDeleteQueries(kStamps, stamps.data());
     }
@@ -153,15 +161,27 @@ struct GlRenderer::Impl {
         }
         cells[count] = gpu::GpuCell{};
         cells[count].listBegin = uint32_t(offsets[count]);
-        const size_t cellBytes = cells.size() * sizeof(gpu::GpuCell), keyBytes = keys.size() * 4, indexBytes = lists.indices().size_bytes();
+        const size_t cellBytes = cells.size() * sizeof(gpu::GpuCell), keyBytes = keys.size() * 4;
         checkBlock(cellBytes, "the cells");
-        checkBlock(indexBytes, "the influence lists");
         cellsBuf.reserve(cellBytes);
         cellsBuf.upload(cells.data(), cellBytes);
         keysBuf.reserve(keyBytes);
         keysBuf.upload(keys.data(), keyBytes);
-        indicesBuf.reserve(indexBytes);
-        if (indexBytes) indicesBuf.upload(lists.indices().data(), indexBytes);
+        // The entries in chunks of a power of two that one storage buffer can hold.
+        const auto entries = lists.indices();
+        uint64_t chunkEntries = uint64_t{1} << 31;
+        while (chunkEntries > 1 && (chunkEntries * 4 > uint64_t(maxStorageBlock) || chunkEntries > gIndexChunkLimitForTest)) chunkEntries >>= 1;
+        indexChunkShift = uint32_t(std::countr_zero(chunkEntries));
+        const uint64_t chunks = (entries.size() + chunkEntries - 1) / chunkEntries;
+        if (chunks > uint64_t(gpu::kIndexChunks))
+            throw Error("the GL backend needs " + std::to_string(entries.size_bytes() >> 20) + " MiB for the influence lists; this driver allows " +
+                        std::to_string(gpu::kIndexChunks) + " storage buffers of " + std::to_string((chunkEntries * 4) >> 20) + " MiB");
+        for (size_t c = 0; c < size_t(gpu::kIndexChunks); ++c) {
+            const size_t begin = std::min<size_t>(c * chunkEntries, entries.size());
+            const size_t n = std::min<size_t>(entries.size() - begin, chunkEntries);
+            indexBufs[c].reserve(n * 4);  // empty chunks get a small buffer: every binding is valid
+            if (n) indexBufs[c].upload(entries.data() + begin, n * 4);
+        }
         frameBuf.reserve(sizeof(gpu::FrameBlock));
         countersBuf.reserve(sizeof(uint32_t) * gpu::kCounterSlots * (gpu::kMaxCascades + 1));
     }
@@ -207,6 +227,7 @@ struct GlRenderer::Impl {
         f.hasWater = water ? 1 : 0;
         f.cellCount = uint32_t(g.cellCount());
         f.rootLevel = uint32_t(g.rootLevel);
+        f.indexChunkShift = indexChunkShift;
         f.minDepthM = float(options.waterMinDepthM);
         f.fogDistM = float(gpu::kFogExtents * std::hypot(scene.xMax - scene.xMin, scene.yMax - scene.yMin));
         f.elevationMin = float(scene.elevationMin);
@@ -296,7 +317,8 @@ struct GlRenderer::Impl {
         frameBuf.bind(HC_BIND_FRAME);
         cellsBuf.bind(HC_BIND_CELLS);
         keysBuf.bind(HC_BIND_KEYS);
-        indicesBuf.bind(HC_BIND_INDICES);
+        const GLuint indexBindings[gpu::kIndexChunks] = {HC_BIND_INDICES, HC_BIND_INDICES_1, HC_BIND_INDICES_2, HC_BIND_INDICES_3};
+        for (size_t c = 0; c < size_t(gpu::kIndexChunks); ++c) indexBufs[c].bind(indexBindings[c]);
         visibleBuf.bind(HC_BIND_VISIBLE);
         heightsBuf.bind(HC_BIND_HEIGHTS);
         pixelsBuf.bind(HC_BIND_PIXELS);
@@ -450,6 +472,8 @@ unsigned GlRenderer::renderToTexture(const Camera& camera, const RenderOptions& 
 }
 
 std::string GlRenderer::deviceName() const { return impl_->device; }
+
+void GlRenderer::limitIndexChunksForTest(uint64_t entries) { gIndexChunkLimitForTest = entries ? entries : uint64_t{1} << 31; }
 
 void GlRenderer::compileForTest(const std::string& name, const std::string& source) const {
     if (impl_->headless) impl_->headless->makeCurrent();

@@ -8,6 +8,7 @@
 // No GL type appears here: the GL state lives behind the pimpl in render/src/gl/.
 #pragma once
 
+#include <cstdint>
 #include <memory>
 #include <string>
 
@@ -46,6 +47,9 @@ public:
     std::string deviceName() const;
 
     // ---- test hooks (tests/render_gl_test.cpp); they use this renderer's context ----
+    // Splits the influence lists of renderers made after this call into chunks of at most `entries`
+    // entries (0: as large as the driver allows), so that tests exercise the chunked lists on small grids.
+    static void limitIndexChunksForTest(uint64_t entries);
     // Compiles and links `source` as a compute shader named `name` and deletes it again. Throws
     // hc::Error with the name and the driver's info log when it fails.
     void compileForTest(const std::string& name, const std::string& source) const;

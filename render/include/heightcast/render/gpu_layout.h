@@ -23,7 +23,10 @@ using uint = std::uint32_t;
 #define HC_BIND_FRAME 0      // FrameBlock: GpuFrame + GpuCascade[kMaxCascades]
 #define HC_BIND_CELLS 1      // GpuCell[cellCount + 1]
 #define HC_BIND_KEYS 2       // uint[2 * cellCount]: each cell's Morton key (lo, hi), sorted
-#define HC_BIND_INDICES 3    // uint[]: the influence lists' entries (CSR indices)
+#define HC_BIND_INDICES 3    // uint[]: the influence lists' entries (CSR indices), first chunk
+#define HC_BIND_INDICES_1 8  // further chunks of the entries (a driver caps one storage buffer: llvmpipe at
+#define HC_BIND_INDICES_2 9  //   128 MiB, which the lists of a million cells exceed)
+#define HC_BIND_INDICES_3 10
 #define HC_BIND_VISIBLE 4    // uint[]: per cascade n * n bytes (Cascade::visible), packed 4 per uint
 #define HC_BIND_HEIGHTS 5    // float[]: per cascade terrain, water, depth textures and both max mipmaps
 #define HC_BIND_PIXELS 6     // GpuPixel[width * height], row 0 at the top
@@ -37,6 +40,7 @@ const int kMaxCascades = 4;
 const int kMaxMipLevels = 16;   // a 8192^2 cascade has 14 levels
 const int kCounterSlots = 64;   // a counter is spread over slots so that no uint overflows
 const int kMaxLabelChars = 12;  // legend labels ("-10994m")
+const int kIndexChunks = 4;     // storage buffers the influence lists' entries may span
 
 // One grid cell, plus a sentinel after the last so that cells[k + 1].listBegin ends k's list.
 struct GpuCell {
@@ -96,6 +100,7 @@ struct GpuFrame {
     int hasWater;
     uint cellCount;
     uint rootLevel;
+    uint indexChunkShift;  // entry e lies in chunk e >> shift, at e & ((1 << shift) - 1)
     float minDepthM;  // RenderOptions::waterMinDepthM
     float fogDistM;   // fog reaches 1 - 1/e of its half strength at this distance
     float elevationMin;
