@@ -386,6 +386,8 @@ public:
         });
     }
 
+    const Camera& camera() const { return camera_; }
+
     // Interactive: until the window closes or Esc.
     void run() {
         double last = glfwGetTime();
@@ -826,7 +828,7 @@ GLFWwindow* openWindow(const std::string& title, int width, int height, int majo
 int main(int argc, char** argv) {
     return hc::cli::run("hc-view", [&] {
         std::string gridPath, backendName = "auto", screenshot;
-        int frames = 0;
+        int frames = 0, bookmarkSlot = 0;
         hc::cli::RenderSetup setup("1280x720");
         hc::cli::Parser p("hc-view", "GRID.hcg [--camera X,Y,Z,YAW,PITCH,FOV | --look-at EX,EY,EZ,TX,TY,TZ[,FOV]] [--backend gl|cpu|auto] [options]",
                           "Opens a window on the smooth surface of a grid (terrain, and water where the grid has water_depth)\n"
@@ -836,7 +838,8 @@ int main(int argc, char** argv) {
                           "overview. Bookmarks (Shift+1-9 saves, 1-9 loads) live in GRID.bookmarks.json beside the grid.\n"
                           "Needs a display (DISPLAY); without one: xvfb-run -a hc-view GRID.hcg --frames 30 --screenshot OUT.png");
         p.positional("GRID.hcg", "grid file", gridPath);
-        setup.addCameraOptions(p);
+        setup.addCameraOptions(p, "--bookmark");
+        p.option("--bookmark", "N", "first view: bookmark N (1..9) of GRID.bookmarks.json (default: none)", bookmarkSlot);
         p.option("--backend", "gl|cpu|auto", "renderer: the OpenGL 4.3 compute backend, the CPU one, or GL when it works (default auto)", backendName);
         setup.addRenderOptions(p);
         p.option("--frames", "N", "render N frames of a short scripted camera motion ending at the given view, then exit (default 0 = interactive)", frames);
@@ -849,6 +852,16 @@ int main(int argc, char** argv) {
             if (frames == 0) throw hc::Error("--screenshot needs --frames N (the number of frames to render first)");
             hc::cli::checkWritable(screenshot, "screenshot");
             hc::cli::checkNotSame(screenshot, gridPath, "screenshot");
+        }
+        if (p.given("--bookmark")) {  // before any work: the file and the slot must be there
+            if (bookmarkSlot < 1 || bookmarkSlot > 9) throw hc::Error("--bookmark " + std::to_string(bookmarkSlot) + " is outside 1..9");
+            const std::string path = hc::view::bookmarksPath(gridPath);
+            const hc::view::Bookmarks marks = hc::view::readBookmarks(path);
+            if (!marks[bookmarkSlot]) throw hc::Error(path + ": no bookmark " + std::to_string(bookmarkSlot));
+            hc::render::Camera c;
+            c.width = setup.width, c.height = setup.height;
+            hc::view::applyBookmark(*marks[bookmarkSlot], c);
+            setup.camera = c;
         }
         const char* display = std::getenv("DISPLAY");
         const char* wayland = std::getenv("WAYLAND_DISPLAY");
@@ -897,6 +910,9 @@ int main(int argc, char** argv) {
             if (frames > 0) {
                 viewer.runScripted(frames, screenshot);
                 if (!screenshot.empty()) std::printf("hc-view: %s -> %s (%d frames)\n", gridPath.c_str(), screenshot.c_str(), frames);
+                const Camera& c = viewer.camera();
+                std::printf("  camera       %.3f, %.3f, %.3f  yaw %.2f  pitch %.2f  fov %.1f  %dx%d\n", c.xWorld, c.yWorld, c.zWorld,
+                            c.yawDeg, c.pitchDeg, c.fovYDeg, c.width, c.height);
             } else {
                 viewer.run();
             }
