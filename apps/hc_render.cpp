@@ -58,6 +58,10 @@ int main(int argc, char** argv) {
         if (backend != hc::render::Backend::Cpu && glUnavailable.empty()) {
             gl = hc::render::GlRenderer::headless(scene);
             device = gl->deviceName();
+            // auto takes GL wherever a 4.3 context exists, also Mesa's software renderer; say what that costs.
+            if (device.find("llvmpipe") != std::string::npos || device.find("softpipe") != std::string::npos)
+                std::fprintf(stderr, "hc-render: note: OpenGL here is software rendering (%s); --backend cpu is several times faster\n",
+                             device.substr(0, device.find(", OpenGL")).c_str());
         } else if (backend == hc::render::Backend::Auto) {
             std::fprintf(stderr, "hc-render: note: the GL backend is not available (%s): rendering on the CPU\n", glUnavailable.c_str());
         }
