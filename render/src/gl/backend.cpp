@@ -198,11 +198,10 @@ struct GlRenderer::Impl {
 
         // 1. Cascade fitting (CPU).
         auto t = Clock::now();
-        CascadeFit fit = fitCascades(setup.view, options.cascades, options.texelsPerSide);
+        const CascadeFit fit = fitCascades(setup.view, options.cascades, options.texelsPerSide);
         timings.fittingMs = msSince(t);
         timings.viewDirX = fit.dir[0];
         timings.viewDirY = fit.dir[1];
-        if (fit.hull.size() < 3) fit.cascades.clear();  // nothing visible: every ray misses
 
         // The frame's constants and the cascades' places in the heights and visibility buffers.
         gpu::FrameBlock block{};
@@ -223,7 +222,7 @@ struct GlRenderer::Impl {
         const double sunAz = gpu::kSunAzimuthDeg * M_PI / 180, sunAlt = gpu::kSunAltitudeDeg * M_PI / 180;
         copyFloats(f.sun, {std::sin(sunAz) * std::cos(sunAlt), std::cos(sunAz) * std::cos(sunAlt), std::sin(sunAlt)});
         f.width = W, f.height = H;
-        f.cascades = int(fit.cascades.size());
+        f.cascades = fit.hull.size() < 3 ? 0 : int(fit.cascades.size());  // no hull: every ray misses (as renderFrame)
         f.hasWater = water ? 1 : 0;
         f.cellCount = uint32_t(g.cellCount());
         f.rootLevel = uint32_t(g.rootLevel);
