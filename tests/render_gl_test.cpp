@@ -149,7 +149,7 @@ double psnrOf(const Frame& a, const Frame& b) {
 // at the hit carries the float rounding of the approximation and of the bilinear intersection, about
 // 1e-7 of the elevation (hef: 4 mm at 3800 m), which a ray at elevation angle a turns into a depth error
 // of that over sin(a). With 1e-5 * t we allow rays down to about 1/50 rad at the distances these cameras
-// see (100 m .. 30 km), plus 1 cm for the texel-scale rounding near the camera. Steeper-grazing rays
+// see (100 m .. 30 km), plus 1 cm for the texel-scale rounding near the camera. Rays grazing more than that
 // (silhouettes) are the outliers the 0.5 % allowance is for.
 double depthTolerance(double t) { return 1e-5 * t + 0.01; }
 
