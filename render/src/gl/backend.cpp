@@ -107,22 +107,34 @@ struct GlRenderer::Impl {
         device = gl::currentDeviceName();
         glGetInteger64v(GL_MAX_SHADER_STORAGE_BLOCK_SIZE, &maxStorageBlock);
         if (maxStorageBlock <= 0) maxStorageBlock = GLint64{1} << 24;  // OpenGL 4.3's minimum
-        approximate = gl::compileEmbedded("approximate");
-        mipmap = gl::compileEmbedded("mipmap");
-        raycast = gl::compileEmbedded("raycast");
-        shade = gl::compileEmbedded("shade");
         glGenQueries(kStamps, stamps.data());
-        uploadScene();
+        try {
+            approximate = gl::compileEmbedded("approximate");
+            mipmap = gl::compileEmbedded("mipmap");
+            raycast = gl::compileEmbedded("raycast");
+            shade = gl::compileEmbedded("shade");
+            uploadScene();
+        } catch (...) {
+            release();  // a caller's context outlives this failed renderer: leave nothing in it
+            throw;
+        }
     }
 
     ~Impl() {
         if (headless) headless->makeCurrent();
+        release();
+    }
+
+    void release() {
         for (GLuint p : {approximate, mipmap, raycast, shade})
             if (p) glDeleteProgram(p);
+        approximate = mipmap = raycast = shade = 0;
         for (Buffer* b : {&frameBuf, &cellsBuf, &keysBuf, &visibleBuf, &heightsBuf, &pixelsBuf, &countersBuf}) b->release();
         for (Buffer& b : indexBufs) b.release();
         if (colorTex) glDeleteTextures(1, &colorTex);
-        glDeleteQueries(kStamps, stamps.data());
+        colorTex = 0;
+        if (stamps[0]) glDeleteQueries(kStamps, stamps.data());
+        stamps = {};
     }
 
     void checkBlock(size_t bytes, const char* what) const {
