@@ -60,6 +60,12 @@ PatchHit traverse(int k, bool water, vec3 d, float tIn, float tOut, inout bool t
     // The CPU nudges by 1e-9 of the range in double; in float the nudge must exceed a few ulps of t
     // (1.2e-7 relative) and stay far below a texel (t / s is at most a few thousand).
     const float tiny = 1e-6 * (1.0 + abs(tOut));
+    // Heights along the ray carry float rounding of a few ulps of the eye height and of the surface
+    // (about 1e-7 of each). Empty space is skipped only beyond that slack, and a first contact from
+    // below within it is the ray arriving at the surface, not starting under it: otherwise a rounding in
+    // the skip test lets a ray slip under a flat water surface and the solid-surface rule then hides the
+    // water for the rest of the ray. (raycast.cpp has no slack: in double the rounding is 1e-9 of this.)
+    const float slack = 1e-6 * (abs(eyeZ) + abs(mipValue(k, water, top, 0u))) + 1e-3;
     for (int guard = 0; guard < (1 << 16) && t <= tOut; ++guard) {
         const float tp = min(t + tiny, tOut);
         const float pu = u0 + du * tp, pv = v0 + dv * tp;
@@ -81,7 +87,7 @@ PatchHit traverse(int k, bool water, vec3 d, float tIn, float tOut, inout bool t
         const bool leavesParent = forward ? (idx & 1) == 1 : (idx & 1) == 0;
         const float nodeMax = mipValue(k, water, level, uint(iv * side + iu));
         const float zLow = min(eyeZ + d.z * t, eyeZ + d.z * tExit);
-        if (zLow > nodeMax) {  // empty space: skip the node, and look at a coarser level next
+        if (zLow > nodeMax + slack) {  // empty space: skip the node, and look at a coarser level next
             t = tExit + tiny;
             if (leavesParent) level = min(level + 1, top);
             continue;
@@ -103,7 +109,7 @@ PatchHit traverse(int k, bool water, vec3 d, float tIn, float tOut, inout bool t
             const float len = tExit - t;
             float tau = -1.0;
             if (C <= 0.0) {
-                if (!touched) {
+                if (!touched && C < -slack) {
                     res.underground = true;
                     return res;
                 }
