@@ -198,28 +198,9 @@ struct GlRenderer::Impl {
         countersBuf.reserve(sizeof(uint32_t) * gpu::kCounterSlots * (gpu::kMaxCascades + 1));
     }
 
-    // Runs every stage of one frame; leaves the picture in colorTex and the rays in pixelsBuf.
-    CascadeFit runFrame(const Camera& camera, const RenderOptions& options, Timings& timings) {
-        camera.validate();
-        if (std::string why = options.validate(); !why.empty()) throw Error(why);
-        if (headless) headless->makeCurrent();
-        const auto start = Clock::now();
-        timings = Timings{};
+    // The frame's constants (GpuFrame) for the shaders.
+    void fillFrame(gpu::GpuFrame& f, const CascadeFit& fit, const Camera& camera, const RenderOptions& options) const {
         const Grid& g = scene.grid();
-        setup = detail::setUpFrame(scene, camera);
-
-        // 1. Cascade fitting (CPU).
-        auto t = Clock::now();
-        const CascadeFit fit = fitCascades(setup.view, options.cascades, options.texelsPerSide);
-        timings.fittingMs = msSince(t);
-        timings.viewDirX = fit.dir[0];
-        timings.viewDirY = fit.dir[1];
-
-        // The frame's constants and the cascades' places in the heights and visibility buffers.
-        gpu::FrameBlock block{};
-        gpu::GpuFrame& f = block.frame;
-        const int W = camera.width, H = camera.height;
-        const bool water = scene.hasWater();
         f.eyeX = setup.eye[0], f.eyeY = setup.eye[1];
         f.finestM = g.finestCellM;
         f.domainM = g.domainSizeM();
@@ -233,9 +214,9 @@ struct GlRenderer::Impl {
         copyFloats(f.up, setup.basis.up);
         const double sunAz = gpu::kSunAzimuthDeg * M_PI / 180, sunAlt = gpu::kSunAltitudeDeg * M_PI / 180;
         copyFloats(f.sun, {std::sin(sunAz) * std::cos(sunAlt), std::cos(sunAz) * std::cos(sunAlt), std::sin(sunAlt)});
-        f.width = W, f.height = H;
+        f.width = camera.width, f.height = camera.height;
         f.cascades = fit.hull.size() < 3 ? 0 : int(fit.cascades.size());  // no hull: every ray misses (as renderFrame)
-        f.hasWater = water ? 1 : 0;
+        f.hasWater = scene.hasWater() ? 1 : 0;
         f.cellCount = uint32_t(g.cellCount());
         f.rootLevel = uint32_t(g.rootLevel);
         f.indexChunkShift = indexChunkShift;
@@ -244,10 +225,10 @@ struct GlRenderer::Impl {
         f.elevationMin = float(scene.elevationMin);
         f.zRange = float(std::max(scene.elevationMax - scene.elevationMin, 1e-6));
         f.dRange = float(std::max(scene.depthMax, 1e-6));
-        f.pixelAngle = float(2.0 * setup.basis.tanHalfY / H);
+        f.pixelAngle = float(2.0 * setup.basis.tanHalfY / camera.height);
         f.colorMode = options.color == ColorMode::WaterDepth ? 1 : 0;
         f.cellOutlines = options.cellOutlines ? 1 : 0;
-        const detail::LegendLayout legend = detail::legendLayout(scene, options, W, H);
+        const detail::LegendLayout legend = detail::legendLayout(scene, options, camera.width, camera.height);
         if (legend.shown) {
             f.legendRamp = legend.depth ? 1 : 2;
             f.legendX0 = legend.x0, f.legendY0 = legend.y0, f.legendBarW = legend.barW, f.legendBarH = legend.barH;
@@ -267,7 +248,13 @@ struct GlRenderer::Impl {
             f.dryColor[c] = float(gpu::kDryColor[c]);
         }
 
-        size_t heightFloats = 0, visibleWords = 0;
+    }
+
+    // Each cascade's places in the heights and visibility buffers (GpuCascade), and its statistics.
+    // Returns the floats the heights buffer needs; adds the visibility masks' uints to visibleWords.
+    size_t layOutCascades(gpu::FrameBlock& block, const CascadeFit& fit, Timings& timings, size_t& visibleWords) const {
+        const bool water = scene.hasWater();
+        size_t heightFloats = 0;
         for (size_t k = 0; k < fit.cascades.size(); ++k) {
             const Cascade& c = fit.cascades[k];
             gpu::GpuCascade& gc = block.cascades[k];
@@ -304,8 +291,35 @@ struct GlRenderer::Impl {
             gc.visibleOffset = uint32_t(visibleWords);
             visibleWords += (texels + 3) / 4;
         }
+        return heightFloats;
+    }
+
+    // Runs every stage of one frame; leaves the picture in colorTex and the rays in pixelsBuf.
+    CascadeFit runFrame(const Camera& camera, const RenderOptions& options, Timings& timings) {
+        camera.validate();
+        if (std::string why = options.validate(); !why.empty()) throw Error(why);
+        if (headless) headless->makeCurrent();
+        const auto start = Clock::now();
+        timings = Timings{};
+        setup = detail::setUpFrame(scene, camera);
+
+        // 1. Cascade fitting (CPU).
+        auto t = Clock::now();
+        const CascadeFit fit = fitCascades(setup.view, options.cascades, options.texelsPerSide);
+        timings.fittingMs = msSince(t);
+        timings.viewDirX = fit.dir[0];
+        timings.viewDirY = fit.dir[1];
+
+        // The frame's constants and the cascades' places in the heights and visibility buffers.
+        gpu::FrameBlock block{};
+        fillFrame(block.frame, fit, camera, options);
+        size_t visibleWords = 0;
+        const size_t heightFloats = layOutCascades(block, fit, timings, visibleWords);
+        const int W = camera.width, H = camera.height;
+        const bool water = scene.hasWater();
         checkBlock(heightFloats * 4, "the cascade textures");
         heightsBuf.reserve(heightFloats * 4);
+        checkBlock(visibleWords * 4, "the visibility masks");
         visibleBuf.reserve(visibleWords * 4);
         for (size_t k = 0; k < fit.cascades.size(); ++k)
             if (!fit.cascades[k].empty())
