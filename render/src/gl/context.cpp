@@ -1,11 +1,13 @@
 // EGL headless contexts (DESIGN.md section 9: Mesa's surfaceless platform gives llvmpipe OpenGL 4.5
-// core with no display) and checks of the current context.
+// core with no display; a GPU comes through EGL's device platform) and checks of the current context.
 #include "gl/context.h"
 
 #include <EGL/egl.h>
 #include <EGL/eglext.h>
 
 #include <cstdio>
+#include <cstring>
+#include <vector>
 
 #include "gl/gl.h"
 #include "heightcast/grid/error.h"
@@ -19,28 +21,70 @@ std::string eglErrorText() {
     return b;
 }
 
+// EGL displays to try, best first. A GPU exposed as an EGL device (EGL_EXT_platform_device: NVIDIA's driver,
+// Mesa's hardware drivers) comes before Mesa's surfaceless platform, which on a machine with NVIDIA's driver
+// and Mesa both installed gives Mesa's software renderer; Mesa's software device (EGL_MESA_device_software)
+// comes last.
+std::vector<EGLDisplay> candidateDisplays(std::string& tried) {
+    auto getPlatformDisplay = reinterpret_cast<PFNEGLGETPLATFORMDISPLAYEXTPROC>(eglGetProcAddress("eglGetPlatformDisplayEXT"));
+    if (!getPlatformDisplay) throw Error("no headless OpenGL 4.3 context: EGL lacks eglGetPlatformDisplayEXT (EGL_EXT_platform_base)");
+    std::vector<EGLDisplay> hardware, software;
+    auto queryDevices = reinterpret_cast<PFNEGLQUERYDEVICESEXTPROC>(eglGetProcAddress("eglQueryDevicesEXT"));
+    auto queryDeviceString = reinterpret_cast<PFNEGLQUERYDEVICESTRINGEXTPROC>(eglGetProcAddress("eglQueryDeviceStringEXT"));
+    EGLint count = 0;
+    if (queryDevices && queryDeviceString && queryDevices(0, nullptr, &count) && count > 0) {
+        std::vector<EGLDeviceEXT> devices(static_cast<size_t>(count));
+        queryDevices(count, devices.data(), &count);
+        for (EGLint i = 0; i < count; ++i) {
+            const char* extensions = queryDeviceString(devices[static_cast<size_t>(i)], EGL_EXTENSIONS);
+            const bool isSoftware = extensions && std::strstr(extensions, "EGL_MESA_device_software");
+            EGLDisplay d = getPlatformDisplay(EGL_PLATFORM_DEVICE_EXT, devices[static_cast<size_t>(i)], nullptr);
+            if (d != EGL_NO_DISPLAY) (isSoftware ? software : hardware).push_back(d);
+        }
+        tried += std::to_string(count) + " EGL device(s), ";
+    } else {
+        tried += "no EGL devices (EGL_EXT_device_enumeration), ";
+    }
+    std::vector<EGLDisplay> all = hardware;
+    EGLDisplay surfaceless = getPlatformDisplay(EGL_PLATFORM_SURFACELESS_MESA, EGL_DEFAULT_DISPLAY, nullptr);
+    if (surfaceless != EGL_NO_DISPLAY) all.push_back(surfaceless);
+    else tried += "no surfaceless platform, ";
+    all.insert(all.end(), software.begin(), software.end());
+    return all;
+}
+
 }  // namespace
 
 std::unique_ptr<HeadlessContext> HeadlessContext::create() {
-    const std::string why = "no headless OpenGL 4.3 context: ";
-    // eglGetPlatformDisplayEXT comes through eglGetProcAddress: EGL 1.4 headers do not declare it.
-    auto getPlatformDisplay = reinterpret_cast<PFNEGLGETPLATFORMDISPLAYEXTPROC>(eglGetProcAddress("eglGetPlatformDisplayEXT"));
-    if (!getPlatformDisplay) throw Error(why + "EGL lacks eglGetPlatformDisplayEXT (EGL_EXT_platform_base)");
-    EGLDisplay display = getPlatformDisplay(EGL_PLATFORM_SURFACELESS_MESA, EGL_DEFAULT_DISPLAY, nullptr);
-    if (display == EGL_NO_DISPLAY) throw Error(why + "no EGL display for the surfaceless platform (" + eglErrorText() + ")");
-    EGLint major = 0, minor = 0;
-    if (!eglInitialize(display, &major, &minor)) throw Error(why + "eglInitialize failed (" + eglErrorText() + ")");
-    if (!eglBindAPI(EGL_OPENGL_API)) throw Error(why + "EGL cannot bind the desktop OpenGL API (" + eglErrorText() + ")");
-    const EGLint attributes[] = {EGL_CONTEXT_MAJOR_VERSION, 4, EGL_CONTEXT_MINOR_VERSION, 3,
-                                 EGL_CONTEXT_OPENGL_PROFILE_MASK, EGL_CONTEXT_OPENGL_CORE_PROFILE_BIT, EGL_NONE};
-    EGLContext context = eglCreateContext(display, EGL_NO_CONFIG_KHR, EGL_NO_CONTEXT, attributes);
-    if (context == EGL_NO_CONTEXT) throw Error(why + "eglCreateContext for OpenGL 4.3 core failed (" + eglErrorText() + ")");
-    std::unique_ptr<HeadlessContext> c(new HeadlessContext);
-    c->display_ = display;
-    c->context_ = context;
-    c->makeCurrent();
-    requireGl43("the headless context");
-    return c;
+    std::string tried;
+    const std::vector<EGLDisplay> displays = candidateDisplays(tried);
+    std::string failures;
+    for (EGLDisplay display : displays) {
+        EGLint major = 0, minor = 0;
+        if (!eglInitialize(display, &major, &minor)) {
+            failures += "eglInitialize failed (" + eglErrorText() + "); ";
+            continue;
+        }
+        if (!eglBindAPI(EGL_OPENGL_API)) {
+            failures += "no desktop OpenGL API (" + eglErrorText() + "); ";
+            continue;
+        }
+        const EGLint attributes[] = {EGL_CONTEXT_MAJOR_VERSION, 4, EGL_CONTEXT_MINOR_VERSION, 3,
+                                     EGL_CONTEXT_OPENGL_PROFILE_MASK, EGL_CONTEXT_OPENGL_CORE_PROFILE_BIT, EGL_NONE};
+        EGLContext context = eglCreateContext(display, EGL_NO_CONFIG_KHR, EGL_NO_CONTEXT, attributes);
+        if (context == EGL_NO_CONTEXT) {
+            failures += "eglCreateContext for OpenGL 4.3 core failed (" + eglErrorText() + "); ";
+            continue;
+        }
+        std::unique_ptr<HeadlessContext> c(new HeadlessContext);
+        c->display_ = display;
+        c->context_ = context;
+        c->makeCurrent();
+        requireGl43("the headless context");
+        return c;
+    }
+    if (failures.size() >= 2) failures.resize(failures.size() - 2);
+    throw Error("no headless OpenGL 4.3 context: " + tried + (displays.empty() ? "no EGL display" : failures));
 }
 
 HeadlessContext::~HeadlessContext() {

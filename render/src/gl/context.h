@@ -6,7 +6,8 @@
 
 namespace hc::render::gl {
 
-// A headless OpenGL 4.3+ core context (EGL, surfaceless platform: no display, no window).
+// A headless OpenGL 4.3+ core context (EGL: a GPU device first, else Mesa's surfaceless platform; no display,
+// no window).
 class HeadlessContext {
 public:
     // Throws hc::Error saying which step failed when no such context can be had.
