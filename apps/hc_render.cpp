@@ -31,16 +31,21 @@ int main(int argc, char** argv) {
         p.option("--exr", "OUT.exr", "also write float layers: Z, P.X/Y/Z, N.X/Y/Z, cascade, water_depth", exr);
         p.option("--timings", "OUT.json", "also write the per-stage timings as JSON", timingsPath);
         p.option("--backend", "B", "gl (OpenGL 4.3 compute shaders; headless, no display needed), cpu, or auto: gl where an\n"
-                 "OpenGL 4.3 context can be had, else cpu with a note (default auto). --threads applies to cpu only", backendText);
+                 "OpenGL 4.3 context on a GPU can be had, else cpu with a note saying why (no 4.3 context, or only\n"
+                 "software OpenGL such as Mesa's llvmpipe, which is slower than cpu) (default auto). --threads\n"
+                 "applies to cpu only", backendText);
         if (!p.parse(argc, argv)) return 0;
         if (out.empty()) throw hc::Error("no output image: give -o OUT.png");
         if (!view.empty() && view != "overview") throw hc::Error("--view " + view + ": the only view is 'overview'");
         const hc::render::Backend backend = hc::render::parseBackend(backendText);
         // Validates the options and the camera's numbers before any expensive work.
         setup.finish();
-        std::string glUnavailable;
-        if (backend != hc::render::Backend::Cpu) glUnavailable = hc::render::headlessGlUnavailable();
+        std::string glUnavailable, glDevice;
+        if (backend != hc::render::Backend::Cpu) glUnavailable = hc::render::headlessGlUnavailable(&glDevice);
         if (backend == hc::render::Backend::Gl && !glUnavailable.empty()) throw hc::Error("--backend gl: " + glUnavailable);
+        // auto takes GL on a GPU only: software OpenGL (llvmpipe) is several times slower than the CPU backend.
+        const bool softwareGl = glUnavailable.empty() && hc::render::isSoftwareRenderer(glDevice);
+        const bool useGl = backend == hc::render::Backend::Gl || (backend == hc::render::Backend::Auto && glUnavailable.empty() && !softwareGl);
         for (const std::string* o : {&out, &exr, &timingsPath})
             if (!o->empty()) {
                 hc::cli::checkWritable(*o, "output");
@@ -55,13 +60,16 @@ int main(int argc, char** argv) {
         // The GL backend renders in a headless context of its own; where none can be had, "auto" falls back.
         std::unique_ptr<hc::render::GlRenderer> gl;
         std::string device = "CPU, " + std::to_string(hc::resolveThreads(options.threads)) + " threads";
-        if (backend != hc::render::Backend::Cpu && glUnavailable.empty()) {
+        const std::string renderer = glDevice.substr(0, glDevice.find(", OpenGL"));
+        if (useGl) {
             gl = hc::render::GlRenderer::headless(scene);
             device = gl->deviceName();
-            // auto takes GL wherever a 4.3 context exists, also Mesa's software renderer; say what that costs.
-            if (device.find("llvmpipe") != std::string::npos || device.find("softpipe") != std::string::npos)
+            if (softwareGl)
                 std::fprintf(stderr, "hc-render: note: OpenGL here is software rendering (%s); --backend cpu is several times faster\n",
-                             device.substr(0, device.find(", OpenGL")).c_str());
+                             renderer.c_str());
+        } else if (backend == hc::render::Backend::Auto && softwareGl) {
+            std::fprintf(stderr, "hc-render: note: OpenGL here is software rendering (%s): rendering on the CPU, which is faster "
+                                 "(--backend gl forces it)\n", renderer.c_str());
         } else if (backend == hc::render::Backend::Auto) {
             std::fprintf(stderr, "hc-render: note: the GL backend is not available (%s): rendering on the CPU\n", glUnavailable.c_str());
         }

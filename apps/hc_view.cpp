@@ -840,7 +840,8 @@ int main(int argc, char** argv) {
         p.positional("GRID.hcg", "grid file", gridPath);
         setup.addCameraOptions(p, "--bookmark");
         p.option("--bookmark", "N", "first view: bookmark N (1..9) of GRID.bookmarks.json (default: none)", bookmarkSlot);
-        p.option("--backend", "gl|cpu|auto", "renderer: the OpenGL 4.3 compute backend, the CPU one, or GL when it works (default auto)", backendName);
+        p.option("--backend", "gl|cpu|auto", "renderer: the OpenGL 4.3 compute backend, the CPU one, or GL when it runs on a GPU (CPU where\n"
+                 "OpenGL 4.3 is missing or only software rendering such as llvmpipe) (default auto)", backendName);
         setup.addRenderOptions(p);
         p.option("--frames", "N", "render N frames of a short scripted camera motion ending at the given view, then exit (default 0 = interactive)", frames);
         p.option("--screenshot", "OUT.png", "with --frames: write the window's last frame (image and HUD) as a PNG", screenshot);
@@ -887,7 +888,12 @@ int main(int argc, char** argv) {
         auto loaded = hc::cli::loadScene("hc-view", gridPath, setup);
         std::unique_ptr<ViewBackend> backend;
         std::string note;
-        if (choice != hc::render::Backend::Cpu) {
+        // auto takes GL on a GPU only: on software OpenGL (llvmpipe) the CPU backend is several times faster.
+        const bool softwareGl = hc::render::isSoftwareRenderer(contextInfo);
+        if (choice == hc::render::Backend::Auto && have43 && softwareGl) {
+            note = "software OpenGL (" + contextInfo.substr(0, contextInfo.find(", OpenGL")) +
+                   "): rendering on the CPU, which is faster (--backend gl forces it)";
+        } else if (choice != hc::render::Backend::Cpu) {
             std::string why;
             if (have43) backend = makeGlBackend(*loaded->scene, why);
             else why = why43;
@@ -898,7 +904,7 @@ int main(int argc, char** argv) {
             if (!backend) note = "GL backend unavailable (" + why + "): rendering on the CPU";
         }
         if (!backend) backend = std::make_unique<CpuBackend>(*loaded->scene, setup.options.threads);
-        else if (const std::string d = backend->device(); d.find("llvmpipe") != std::string::npos || d.find("softpipe") != std::string::npos)
+        else if (hc::render::isSoftwareRenderer(backend->device()))
             // DESIGN.md section 9: without a GPU the CPU backend is the fast one (here ~0.5 s against ~4 s a frame).
             note = "software OpenGL: --backend cpu is several times faster on this machine";
         if (!note.empty()) std::fprintf(stderr, "hc-view: %s\n", note.c_str());

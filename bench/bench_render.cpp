@@ -81,6 +81,7 @@ using namespace hc::bench;
 constexpr double kTargetGaussiansPerS = 2e9;  // approximation: kernel evaluations per second
 constexpr double kTargetRaycastMs = 250.0;    // ray casting of a 1920 x 1080 frame
 constexpr double kTargetRaysPerS = 1920.0 * 1080.0 / (kTargetRaycastMs / 1e3);  // the same as a rate (other sizes)
+constexpr double kTargetGlFrameMs = 8.0;  // GL backend on a GPU (issue 5): a whole 1920 x 1080 frame
 
 constexpr double kCoarsestM = 96.0;   // every scenario's coarsest cell
 constexpr int kTileLevelsAboveCoarsest = 3;  // generation tiles: 8 x 8 coarsest cells (768 m)
@@ -417,6 +418,7 @@ struct RunResult {
     // Best over the repeats, per stage.
     double fittingMs = 1e300, approximationMs = 1e300, mipmapMs = 1e300, raycastMs = 1e300, shadingMs = 1e300, totalMs = 1e300;
     double worstApproximationMs = 0, worstRaycastMs = 0;
+    double gpuMs = 1e300, readbackMs = 0;  // GL: best GPU span; one read-back of the frame to host memory
     uint64_t gaussians = 0, rays = 0, hits = 0, wetHits = 0;
     int cascadeCount = 0;
     CascadeOut cascades[4] = {};  // of the run with the best approximation time
@@ -507,16 +509,25 @@ RunResult runScenario(const Scenario& sc, const Settings& set) {
         std::unique_ptr<hc::render::GlRenderer> gl;
         std::snprintf(r.device, sizeof r.device, "CPU, %u threads", hc::resolveThreads(set.options.threads));
         if (set.backend == hc::render::Backend::Gl) {
-            say("GL warm-up frame ...");
+            // Warm-up frames, unmeasured, for at least a second: drivers compile shaders at the first dispatch, and an
+            // idle GPU takes a moment to leave its idle clocks (on an H100 the first scene's stages ran 2-3x slower
+            // after a single warm-up frame).
+            say("GL warm-up frames ...");
             gl = hc::render::GlRenderer::headless(scene);
             std::snprintf(r.device, sizeof r.device, "%s", gl->deviceName().c_str());
-            hc::render::Timings warm;
-            gl->render(cam, set.options, warm);
+            const auto warmStart = Clock::now();
+            do {
+                hc::render::Timings warm;
+                gl->renderToTexture(cam, set.options, warm);
+            } while (secondsSince(warmStart) < 1.0);
         }
         for (int k = 0; k < set.repeat; ++k) {
             say(fmt("rendering, frame %d of %d ...", k + 1, set.repeat).c_str());
             hc::render::Timings tm;
-            frame = gl ? gl->render(cam, set.options, tm) : hc::render::renderFrame(scene, cam, set.options, tm);
+            // GL: the measured frames end in the texture, as the viewer draws them; the picture is read back once below.
+            if (gl) gl->renderToTexture(cam, set.options, tm);
+            else frame = hc::render::renderFrame(scene, cam, set.options, tm);
+            r.gpuMs = std::min(r.gpuMs, tm.gpuMs);
             r.fittingMs = std::min(r.fittingMs, tm.fittingMs);
             r.mipmapMs = std::min(r.mipmapMs, tm.mipmapMs);
             r.raycastMs = std::min(r.raycastMs, tm.raycastMs);
@@ -536,6 +547,12 @@ RunResult runScenario(const Scenario& sc, const Settings& set) {
             }
             r.rays = tm.rays;
             r.hits = tm.hits;
+        }
+        if (gl) {
+            say("reading the frame back ...");
+            hc::render::Timings tm;
+            frame = gl->render(cam, set.options, tm);
+            r.readbackMs = tm.readbackMs;
         }
         for (size_t i = 0; i < frame.waterDepthM.size(); ++i) r.wetHits += frame.waterDepthM[i] > 0;
         if (!set.imagesDir.empty()) {
@@ -557,6 +574,7 @@ std::string extentText(const RunResult& r) { return fmt("%.1f x %.1f", r.extentX
 double gaussiansPerS(const RunResult& r) { return double(r.gaussians) / (r.approximationMs / 1e3); }
 double raysPerS(const RunResult& r) { return double(r.rays) / (r.raycastMs / 1e3); }
 bool approximationMet(const RunResult& r) { return gaussiansPerS(r) >= kTargetGaussiansPerS; }
+bool glFrameMet(const RunResult& r) { return r.gpuMs < 1e300 && r.totalMs <= kTargetGlFrameMs; }
 bool raycastMet(const RunResult& r) {
     return (r.width == 1920 && r.height == 1080) ? r.raycastMs <= kTargetRaycastMs : raysPerS(r) >= kTargetRaysPerS;
 }
@@ -603,6 +621,10 @@ void writeJson(const std::vector<const Scenario*>& scs, const std::vector<RunRes
                  "\"worst_raycast_ms\": %.3f, \"gaussians\": %llu, \"rays\": %llu, \"hits\": %llu, \"water_hits\": %llu,\n",
                  r.fittingMs, r.mipmapMs, r.shadingMs, r.totalMs, r.worstApproximationMs, r.worstRaycastMs, (unsigned long long)r.gaussians,
                  (unsigned long long)r.rays, (unsigned long long)r.hits, (unsigned long long)r.wetHits);
+        f << fmt("   \"backend\": \"%s\", \"device\": %s, \"gpu_ms\": %.3f, \"readback_ms\": %.3f", hc::render::backendName(set.backend),
+                 jsonString(r.device).c_str(), r.gpuMs < 1e300 ? r.gpuMs : 0.0, r.readbackMs);
+        if (set.backend == hc::render::Backend::Gl) f << fmt(", \"gl_frame_target\": \"%s\"", glFrameMet(r) ? "met" : "MISSED");
+        f << ",\n";
         f << "   \"cascades\": [";
         for (int c = 0; c < r.cascadeCount; ++c) {
             const CascadeOut& cs = r.cascades[c];
@@ -627,18 +649,19 @@ void writeCsv(const std::vector<const Scenario*>& scs, const std::vector<RunResu
     if (!f) throw hc::Error(path + ": cannot open for writing (--csv)");
     f << "scenario,scale,extent_x_m,extent_y_m,finest_m,coarsest_m,target_cells,cells,wet_cells,threshold_m,generation_s,lists_ms,list_mean,"
          "lists_mb,width,height,cascades,texels,fitting_ms,approximation_ms,mipmap_ms,raycast_ms,shading_ms,total_ms,gaussians,"
-         "gaussians_per_s,rays,rays_per_s,peak_rss_mb,gtx1080_approximation_ms,gtx1080_raycast_ms,approximation_target,raycast_target\n";
+         "gaussians_per_s,rays,rays_per_s,peak_rss_mb,gtx1080_approximation_ms,gtx1080_raycast_ms,approximation_target,raycast_target,"
+         "gpu_ms,readback_ms\n";
     for (size_t k = 0; k < rs.size(); ++k) {
         const Scenario& sc = *scs[k];
         const RunResult& r = rs[k];
         f << fmt("%s,%g,%.0f,%.0f,%g,%g,%.0f,%llu,%llu,%.6g,%.3f,%.3f,%.3f,%.3f,%d,%d,%d,%d,%.3f,%.3f,%.3f,%.3f,%.3f,%.3f,%llu,%.6g,%llu,%.6g,"
-                 "%.1f,%.1f,%.1f,%s,%s\n",
+                 "%.1f,%.1f,%.1f,%s,%s,%.3f,%.3f\n",
                  sc.name, set.scale, r.extentXM, r.extentYM, r.finestM, r.coarsestM, sc.reportCellsM * 1e6 / set.scale,
                  (unsigned long long)r.cells, (unsigned long long)r.wetCells, r.thresholdM, r.generationS, r.listsMs, r.listMean,
                  mb(r.listBytes), r.width, r.height, set.options.cascades, set.options.texelsPerSide, r.fittingMs, r.approximationMs,
                  r.mipmapMs, r.raycastMs, r.shadingMs, r.totalMs, (unsigned long long)r.gaussians, gaussiansPerS(r),
                  (unsigned long long)r.rays, raysPerS(r), mb(r.peakRss), sc.gpuApproxMs, sc.gpuRaycastMs,
-                 approximationMet(r) ? "met" : "MISSED", raycastMet(r) ? "met" : "MISSED");
+                 approximationMet(r) ? "met" : "MISSED", raycastMet(r) ? "met" : "MISSED", r.gpuMs < 1e300 ? r.gpuMs : 0.0, r.readbackMs);
     }
     if (!f.flush()) throw hc::Error(path + ": write failed (--csv)");
 }
@@ -758,6 +781,14 @@ int main(int argc, char** argv) {
                         r.worstApproximationMs, r.raycastMs, r.worstRaycastMs, r.fittingMs, r.mipmapMs, r.shadingMs, r.totalMs,
                         gaussiansPerS(r) / 1e9, raysPerS(r) / 1e6, mb(r.peakRss), chosen[k]->gpuApproxMs, chosen[k]->gpuRaycastMs);
         }
+        if (set.backend == hc::render::Backend::Gl) {
+            std::printf("\nGL frames: total = wall time of a frame ending in the texture, as hc-view draws it (fitting and masks on\n"
+                        "the CPU, uploads, the GPU's stages, waiting for its timers); GPU = its span from the first stage's start to\n"
+                        "shading's end; read back = copying one finished frame to host memory (hc-render's path, not the viewer's)\n");
+            for (size_t k = 0; k < results.size(); ++k)
+                std::printf("  %-14s total %7.2f ms   GPU %7.2f ms   CPU and waiting %7.2f ms   read back %7.2f ms\n", chosen[k]->name,
+                            results[k].totalMs, results[k].gpuMs, results[k].totalMs - results[k].gpuMs, results[k].readbackMs);
+        }
         std::printf("\ncascades (best approximation frame): offsets along the view [m], texel [m], visible texels, Gaussians, ms\n");
         for (size_t k = 0; k < results.size(); ++k) {
             const RunResult& r = results[k];
@@ -772,7 +803,15 @@ int main(int argc, char** argv) {
         }
 
         // ---- targets ----
-        std::printf("\ntargets (2 cores)\n  approximation: >= %.0f G Gaussians/s\n", kTargetGaussiansPerS / 1e9);
+        const bool glRun = set.backend == hc::render::Backend::Gl;
+        std::printf("\ntargets%s\n", glRun ? "" : " (2 cores)");
+        if (glRun) {
+            std::printf("  GL whole frame (issue 5, on a GPU): 1920x1080, 3 x 1024^2 cascades, within %.0f ms%s\n", kTargetGlFrameMs,
+                        set.width == 1920 && set.height == 1080 ? "" : " (this run is another size)");
+            for (size_t k = 0; k < results.size(); ++k)
+                std::printf("    %-14s %8.2f ms   %s\n", chosen[k]->name, results[k].totalMs, glFrameMet(results[k]) ? "met" : "MISSED");
+        }
+        std::printf("  approximation: >= %.0f G Gaussians/s\n", kTargetGaussiansPerS / 1e9);
         for (size_t k = 0; k < results.size(); ++k)
             std::printf("    %-14s %7.3f G Gaussians/s (%5.1f %% of the target), %8.1f ms vs GTX 1080 %5.1f ms   %s\n", chosen[k]->name,
                         gaussiansPerS(results[k]) / 1e9, 100 * gaussiansPerS(results[k]) / kTargetGaussiansPerS,

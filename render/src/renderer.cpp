@@ -367,8 +367,10 @@ std::string Timings::toJson() const {
     std::string j = "{\n";
     std::snprintf(b, sizeof b,
                   "  \"fitting_ms\": %.3f,\n  \"approximation_ms\": %.3f,\n  \"mipmap_ms\": %.3f,\n  \"raycast_ms\": %.3f,\n"
-                  "  \"shading_ms\": %.3f,\n  \"total_ms\": %.3f,\n  \"rays\": %llu,\n  \"hits\": %llu,\n  \"cascades\": [",
-                  fittingMs, approximationMs, mipmapMs, raycastMs, shadingMs, totalMs, (unsigned long long)rays, (unsigned long long)hits);
+                  "  \"shading_ms\": %.3f,\n  \"total_ms\": %.3f,\n  \"gpu_ms\": %.3f,\n  \"readback_ms\": %.3f,\n  \"rays\": %llu,\n"
+                  "  \"hits\": %llu,\n  \"cascades\": [",
+                  fittingMs, approximationMs, mipmapMs, raycastMs, shadingMs, totalMs, gpuMs, readbackMs, (unsigned long long)rays,
+                  (unsigned long long)hits);
     j += b;
     for (size_t k = 0; k < cascades.size(); ++k) {
         const CascadeStats& c = cascades[k];
@@ -397,6 +399,11 @@ std::string Timings::toTable() const {
     std::snprintf(b, sizeof b, "  mipmaps         %9.2f\n  ray casting     %9.2f   %llu rays, %llu hits\n  shading         %9.2f\n  total           %9.2f\n",
                   mipmapMs, raycastMs, (unsigned long long)rays, (unsigned long long)hits, shadingMs, totalMs);
     s += b;
+    if (gpuMs > 0 || readbackMs > 0) {
+        std::snprintf(b, sizeof b, "    GPU span      %9.2f   first stage's start to shading's end\n    read back     %9.2f   the frame to host memory\n",
+                      gpuMs, readbackMs);
+        s += b;
+    }
     return s;
 }
 

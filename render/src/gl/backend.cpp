@@ -20,6 +20,7 @@
 #include "gl/gl.h"
 #include "gl/program.h"
 #include "heightcast/grid/error.h"
+#include "heightcast/grid/parallel.h"
 #include "heightcast/render/gl_renderer.h"
 #include "heightcast/render/gpu_layout.h"
 
@@ -41,13 +42,20 @@ const char* backendName(Backend b) {
     return "?";
 }
 
-std::string headlessGlUnavailable() {
+std::string headlessGlUnavailable(std::string* device) {
     try {
-        gl::HeadlessContext::create();
+        const auto context = gl::HeadlessContext::create();
+        if (device) *device = gl::currentDeviceName();
         return "";
     } catch (const Error& e) {
         return e.what();
     }
+}
+
+bool isSoftwareRenderer(const std::string& device) {
+    for (const char* name : {"llvmpipe", "softpipe", "swrast", "Software Rasterizer"})
+        if (device.find(name) != std::string::npos) return true;
+    return false;
 }
 
 namespace {
@@ -409,6 +417,7 @@ struct GlRenderer::Impl {
         timings.mipmapMs = ms[nc + 1] - ms[nc];
         timings.raycastMs = ms[nc + 2] - ms[nc + 1];
         timings.shadingMs = ms[nc + 3] - ms[nc + 2];
+        timings.gpuMs = ms[size_t(stamp - 1)];
         std::vector<uint32_t> counters(countersBuf.bytes / 4);
         glBindBuffer(GL_SHADER_STORAGE_BUFFER, countersBuf.name);
         glGetBufferSubData(GL_SHADER_STORAGE_BUFFER, 0, GLsizeiptr(countersBuf.bytes), counters.data());
@@ -437,39 +446,51 @@ struct GlRenderer::Impl {
         const auto start = Clock::now();
         const int W = camera.width, H = camera.height;
         const size_t pixels = size_t(W) * size_t(H);
-        std::vector<gpu::GpuPixel> px(pixels);
-        glBindBuffer(GL_SHADER_STORAGE_BUFFER, pixelsBuf.name);
-        glGetBufferSubData(GL_SHADER_STORAGE_BUFFER, 0, GLsizeiptr(pixels * sizeof(gpu::GpuPixel)), px.data());
-        std::vector<uint8_t> rgba(pixels * 4);
-        glBindTexture(GL_TEXTURE_2D, colorTex);
-        glPixelStorei(GL_PACK_ALIGNMENT, 1);
-        glGetTexImage(GL_TEXTURE_2D, 0, GL_RGBA, GL_UNSIGNED_BYTE, rgba.data());
         Frame f;
         f.width = W;
         f.height = H;
         f.originWorldX = scene.grid().originWorldX;
         f.originWorldY = scene.grid().originWorldY;
-        const float inf = std::numeric_limits<float>::infinity();
+        std::vector<uint8_t> rgba(pixels * 4);
+        glBindTexture(GL_TEXTURE_2D, colorTex);
+        glPixelStorei(GL_PACK_ALIGNMENT, 1);
+        glGetTexImage(GL_TEXTURE_2D, 0, GL_RGBA, GL_UNSIGNED_BYTE, rgba.data());
+        // The rays are read through a mapping (no staging copy in host memory) and spread over the frame's
+        // layers on all cores. On an H100 host (BENCHMARKS.md) the read-back is then texture 11-15 ms, allocating
+        // the layers 36-59 ms (zero pages), mapping 19-39 ms, converting 3-4 ms.
+        for (auto* v : {&f.distanceM, &f.posX, &f.posY, &f.posZ, &f.nX, &f.nY, &f.nZ, &f.waterDepthM, &f.cascade}) v->resize(pixels);
         f.rgb.resize(pixels * 3);
-        f.distanceM.assign(pixels, inf);
-        for (auto* v : {&f.posX, &f.posY, &f.posZ, &f.nX, &f.nY, &f.nZ, &f.waterDepthM}) v->assign(pixels, 0.0f);
-        f.cascade.assign(pixels, -1.0f);
-        for (size_t i = 0; i < pixels; ++i) {
-            const gpu::GpuPixel& p = px[i];
-            const size_t row = i / size_t(W), col = i % size_t(W);
-            const uint8_t* src = &rgba[((size_t(H) - 1 - row) * size_t(W) + col) * 4];  // the texture's row 0 is the bottom
-            std::memcpy(&f.rgb[i * 3], src, 3);
-            if (!(p.t < inf)) continue;
-            f.distanceM[i] = p.t;
-            // Camera-relative offsets back to the local frame in double.
-            f.posX[i] = float(setup.eye[0] + double(p.relX));
-            f.posY[i] = float(setup.eye[1] + double(p.relY));
-            f.posZ[i] = float(setup.eye[2] + double(p.relZ));
-            f.nX[i] = p.nx, f.nY[i] = p.ny, f.nZ[i] = p.nz;
-            f.cascade[i] = float(p.cascade);
-            f.waterDepthM[i] = p.depth;
-        }
-        timings.totalMs += msSince(start);
+        glBindBuffer(GL_SHADER_STORAGE_BUFFER, pixelsBuf.name);
+        const auto* px = static_cast<const gpu::GpuPixel*>(
+            glMapBufferRange(GL_SHADER_STORAGE_BUFFER, 0, GLsizeiptr(pixels * sizeof(gpu::GpuPixel)), GL_MAP_READ_BIT));
+        if (!px) throw Error("the GL backend cannot map its rays for reading on " + device);
+        const float inf = std::numeric_limits<float>::infinity();
+        parallelFor(size_t(H), 16, 0, [&](size_t rowBegin, size_t rowEnd, unsigned) {
+            for (size_t row = rowBegin; row < rowEnd; ++row)
+                for (size_t col = 0; col < size_t(W); ++col) {
+                    const size_t i = row * size_t(W) + col;
+                    const gpu::GpuPixel p = px[i];
+                    const uint8_t* src = &rgba[((size_t(H) - 1 - row) * size_t(W) + col) * 4];  // the texture's row 0 is the bottom
+                    std::memcpy(&f.rgb[i * 3], src, 3);
+                    if (!(p.t < inf)) {
+                        f.distanceM[i] = inf;
+                        f.posX[i] = f.posY[i] = f.posZ[i] = f.nX[i] = f.nY[i] = f.nZ[i] = f.waterDepthM[i] = 0.0f;
+                        f.cascade[i] = -1.0f;
+                        continue;
+                    }
+                    f.distanceM[i] = p.t;
+                    // Camera-relative offsets back to the local frame in double.
+                    f.posX[i] = float(setup.eye[0] + double(p.relX));
+                    f.posY[i] = float(setup.eye[1] + double(p.relY));
+                    f.posZ[i] = float(setup.eye[2] + double(p.relZ));
+                    f.nX[i] = p.nx, f.nY[i] = p.ny, f.nZ[i] = p.nz;
+                    f.cascade[i] = float(p.cascade);
+                    f.waterDepthM[i] = p.depth;
+                }
+        });
+        glUnmapBuffer(GL_SHADER_STORAGE_BUFFER);
+        timings.readbackMs = msSince(start);
+        timings.totalMs += timings.readbackMs;
         return f;
     }
 };

@@ -16,15 +16,19 @@
 
 namespace hc::render {
 
-// Which backend renders: the CPU one, the GL one, or GL where a 4.3 context can be had and the CPU
-// otherwise (the default).
+// Which backend renders: the CPU one, the GL one, or (the default) GL where a 4.3 context on a GPU can
+// be had and the CPU otherwise, also where the only OpenGL is a software renderer (Mesa's llvmpipe is
+// 3-40x slower than the CPU backend per stage on the same cores: BENCHMARKS.md).
 enum class Backend { Cpu, Gl, Auto };
 // "cpu" | "gl" | "auto"; throws hc::Error naming the bad value.
 Backend parseBackend(const std::string& name);
 const char* backendName(Backend b);
 // Why no headless OpenGL 4.3 context can be had on this machine, or "" when one can (it makes one and
-// drops it again): lets a tool refuse --backend gl before loading a scene.
-std::string headlessGlUnavailable();
+// drops it again): lets a tool refuse --backend gl before loading a scene. Where one can, *device gets
+// its renderer and version (as GlRenderer::deviceName()).
+std::string headlessGlUnavailable(std::string* device = nullptr);
+// Whether a GL_RENDERER string names a software rasteriser (Mesa's llvmpipe, softpipe, swrast).
+bool isSoftwareRenderer(const std::string& device);
 
 class GlRenderer {
 public:

@@ -54,6 +54,10 @@ struct CascadeStats {
 struct Timings {
     double viewDirX = 0, viewDirY = 1;  // the horizontal direction the cascade offsets are measured along
     double fittingMs = 0, approximationMs = 0, mipmapMs = 0, raycastMs = 0, shadingMs = 0, totalMs = 0;
+    // GL backend only (0 on the CPU): the GPU's span from the first stage's start to shading's end, and the
+    // copy of the finished frame to host memory (render(); a viewer drawing the texture has none). totalMs is
+    // the wall time of the whole call, both included.
+    double gpuMs = 0, readbackMs = 0;
     std::vector<CascadeStats> cascades;
     uint64_t rays = 0, hits = 0;
     std::string toJson() const;
