@@ -3,7 +3,7 @@
 // with the same colours on real DEMs from several cameras, finite outputs, a 1e7 m shifted grid, and
 // shader failures reported with the driver's log.
 //
-// The tests run headless (EGL surfaceless; Mesa llvmpipe on machines without a GPU). Where no OpenGL
+// The tests run headless (EGL: a GPU device where there is one, else Mesa's surfaceless llvmpipe). Where no OpenGL
 // 4.3 context can be had they fail, unless HC_GL_TESTS=skip says that is expected.
 #include <gtest/gtest.h>
 

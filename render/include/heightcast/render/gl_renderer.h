@@ -35,8 +35,8 @@ public:
     // Uses the GL context current on the calling thread (a GLFW window's, say). Throws hc::Error when
     // there is none or it lacks OpenGL 4.3 compute shaders. The scene must outlive the renderer.
     static std::unique_ptr<GlRenderer> inCurrentContext(const Scene& scene);
-    // Creates and owns a headless context (EGL, surfaceless platform: no display needed). Throws
-    // hc::Error saying why when no OpenGL 4.3 core context can be had.
+    // Creates and owns a headless context (EGL: a GPU device, else Mesa's surfaceless platform; no display
+    // needed). Throws hc::Error saying why when no OpenGL 4.3 core context can be had.
     static std::unique_ptr<GlRenderer> headless(const Scene& scene);
     ~GlRenderer();
 
