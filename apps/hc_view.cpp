@@ -387,6 +387,7 @@ public:
     }
 
     const Camera& camera() const { return camera_; }
+    const Timings& lastTimings() const { return shown_.timings; }  // of the frame on screen
 
     // Interactive: until the window closes or Esc.
     void run() {
@@ -919,6 +920,7 @@ int main(int argc, char** argv) {
                 const Camera& c = viewer.camera();
                 std::printf("  camera       %.3f, %.3f, %.3f  yaw %.2f  pitch %.2f  fov %.1f  %dx%d\n", c.xWorld, c.yWorld, c.zWorld,
                             c.yawDeg, c.pitchDeg, c.fovYDeg, c.width, c.height);
+                std::printf("%s", viewer.lastTimings().toTable().c_str());
             } else {
                 viewer.run();
             }

@@ -270,6 +270,40 @@ TEST(RenderGl, SameAsCpuOnTheAlpineDemFromFourCameras) {
     EXPECT_GT(wet, f.waterDepthM.size() / 10) << "the water camera sees water";
 }
 
+// The stage times: every stage took some time, the stages fit in the GPU's span, the span in the whole call,
+// and the read-back is counted in the whole call. (On llvmpipe timer queries stamp at flushes: the backend times it
+// with the clock after glFinish instead; before that, a window's context showed approximation and shading as 0.)
+TEST(RenderGl, StageTimesAreConsistent) {
+    World& w = hef();
+    HC_REQUIRE_GL(w);
+    const Camera cam = overviewCamera(*w.scene, 320, 200);
+    for (bool readBack : {false, true}) {
+        Timings t;
+        if (readBack) w.gl->render(cam, smallOptions(), t);
+        else w.gl->renderToTexture(cam, smallOptions(), t);
+        SCOPED_TRACE(readBack ? "render()" : "renderToTexture()");
+        ASSERT_EQ(t.cascades.size(), size_t(smallOptions().cascades));
+        double cascadeSum = 0;
+        for (const CascadeStats& c : t.cascades) {
+            EXPECT_GT(c.approximationMs, 0.0);
+            cascadeSum += c.approximationMs;
+        }
+        EXPECT_NEAR(cascadeSum, t.approximationMs, 1e-9);
+        EXPECT_GT(t.mipmapMs, 0.0);
+        EXPECT_GT(t.raycastMs, 0.0);
+        EXPECT_GT(t.shadingMs, 0.0);
+        // The stages are consecutive spans of the GPU's one: their sum is the span (timer resolution aside).
+        EXPECT_NEAR(t.approximationMs + t.mipmapMs + t.raycastMs + t.shadingMs, t.gpuMs, 1e-3 + 1e-6 * t.gpuMs);
+        EXPECT_LE(t.fittingMs + t.gpuMs, t.totalMs);
+        if (readBack) {
+            EXPECT_GT(t.readbackMs, 0.0);
+            EXPECT_LE(t.fittingMs + t.gpuMs + t.readbackMs, t.totalMs);
+        } else {
+            EXPECT_EQ(t.readbackMs, 0.0);
+        }
+    }
+}
+
 TEST(RenderGl, SameAsCpuOnLidarWithCellOutlines) {
     World& w = lidar();
     HC_REQUIRE_GL(w);

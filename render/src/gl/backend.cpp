@@ -106,6 +106,11 @@ struct GlRenderer::Impl {
     int texWidth = 0, texHeight = 0;
     static constexpr int kStamps = 4 + gpu::kMaxCascades + 1;
     std::array<GLuint, kStamps> stamps{};
+    // Software OpenGL (llvmpipe) stamps its timer queries when it flushes, not when the dispatches before them
+    // end, which misattributed the stages (in a GLX window: approximation and shading 0 ms). There each stamp
+    // waits for the work before it (glFinish: llvmpipe runs dispatches on the CPU anyway) and reads the clock.
+    bool software = false;
+    std::array<double, kStamps> cpuStamps{};
     GLint64 maxStorageBlock = 0;
     std::string device;
     detail::FrameSetup setup;  // of the last frame, for readback
@@ -113,6 +118,7 @@ struct GlRenderer::Impl {
     Impl(const Scene& s, std::unique_ptr<gl::HeadlessContext> context) : scene(s), headless(std::move(context)) {
         gl::requireGl43("the GL backend");
         device = gl::currentDeviceName();
+        software = isSoftwareRenderer(device);
         glGetInteger64v(GL_MAX_SHADER_STORAGE_BLOCK_SIZE, &maxStorageBlock);
         if (maxStorageBlock <= 0) maxStorageBlock = GLint64{1} << 24;  // OpenGL 4.3's minimum
         glGenQueries(kStamps, stamps.data());
@@ -302,6 +308,16 @@ struct GlRenderer::Impl {
         return heightFloats;
     }
 
+    // Marks the end of the work submitted so far: a GPU timer query, or on software OpenGL the clock after glFinish.
+    void timeStamp(int i, Clock::time_point start) {
+        if (!software) {
+            glQueryCounter(stamps[size_t(i)], GL_TIMESTAMP);
+            return;
+        }
+        glFinish();
+        cpuStamps[size_t(i)] = msSince(start);
+    }
+
     // Runs every stage of one frame; leaves the picture in colorTex and the rays in pixelsBuf.
     CascadeFit runFrame(const Camera& camera, const RenderOptions& options, Timings& timings) {
         camera.validate();
@@ -361,14 +377,14 @@ struct GlRenderer::Impl {
 
         // 2. Approximation, one dispatch per cascade; 3. max mipmaps, one dispatch per level.
         int stamp = 0;
-        glQueryCounter(stamps[size_t(stamp++)], GL_TIMESTAMP);
+        timeStamp(stamp++, start);
         glUseProgram(approximate);
         for (size_t k = 0; k < fit.cascades.size(); ++k) {
             if (!fit.cascades[k].empty()) {
                 glUniform1i(glGetUniformLocation(approximate, "uCascade"), int(k));
                 glDispatchCompute(groups(fit.cascades[k].n), groups(fit.cascades[k].n), 1);
             }
-            glQueryCounter(stamps[size_t(stamp++)], GL_TIMESTAMP);
+            timeStamp(stamp++, start);
         }
         glMemoryBarrier(GL_SHADER_STORAGE_BARRIER_BIT);
         glUseProgram(mipmap);
@@ -387,15 +403,15 @@ struct GlRenderer::Impl {
                 }
             }
         }
-        glQueryCounter(stamps[size_t(stamp++)], GL_TIMESTAMP);
+        timeStamp(stamp++, start);
         // 4. Ray casting; 5. shading.
         glUseProgram(raycast);
         glDispatchCompute(groups(W), groups(H), 1);
         glMemoryBarrier(GL_SHADER_STORAGE_BARRIER_BIT);
-        glQueryCounter(stamps[size_t(stamp++)], GL_TIMESTAMP);
+        timeStamp(stamp++, start);
         glUseProgram(shade);
         glDispatchCompute(groups(W), groups(H), 1);
-        glQueryCounter(stamps[size_t(stamp++)], GL_TIMESTAMP);
+        timeStamp(stamp++, start);
         // The picture is read as a texture (a viewer) or back (render()); the counters and rays back.
         glMemoryBarrier(GL_ALL_BARRIER_BITS);
         glUseProgram(0);
@@ -403,8 +419,12 @@ struct GlRenderer::Impl {
         // Timer results (waiting for the GPU), and the counters.
         std::vector<double> ms(size_t(stamp), 0.0);
         GLuint64 first = 0;
-        glGetQueryObjectui64v(stamps[0], GL_QUERY_RESULT, &first);
+        if (!software) glGetQueryObjectui64v(stamps[0], GL_QUERY_RESULT, &first);
         for (int i = 1; i < stamp; ++i) {
+            if (software) {
+                ms[size_t(i)] = cpuStamps[size_t(i)] - cpuStamps[0];
+                continue;
+            }
             GLuint64 v = 0;
             glGetQueryObjectui64v(stamps[size_t(i)], GL_QUERY_RESULT, &v);
             ms[size_t(i)] = double(v - first) * 1e-6;
