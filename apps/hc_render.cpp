@@ -43,7 +43,7 @@ int main(int argc, char** argv) {
         std::string glUnavailable, glDevice;
         if (backend != hc::render::Backend::Cpu) glUnavailable = hc::render::headlessGlUnavailable(&glDevice);
         if (backend == hc::render::Backend::Gl && !glUnavailable.empty()) throw hc::Error("--backend gl: " + glUnavailable);
-        // auto takes GL on a GPU only: software OpenGL (llvmpipe) is several times slower than the CPU backend.
+        // auto takes GL on a GPU only: software OpenGL (llvmpipe) takes about twice the CPU backend's time.
         const bool softwareGl = glUnavailable.empty() && hc::render::isSoftwareRenderer(glDevice);
         const bool useGl = backend == hc::render::Backend::Gl || (backend == hc::render::Backend::Auto && glUnavailable.empty() && !softwareGl);
         for (const std::string* o : {&out, &exr, &timingsPath})
@@ -65,7 +65,7 @@ int main(int argc, char** argv) {
             gl = hc::render::GlRenderer::headless(scene);
             device = gl->deviceName();
             if (softwareGl)
-                std::fprintf(stderr, "hc-render: note: OpenGL here is software rendering (%s); --backend cpu is several times faster\n",
+                std::fprintf(stderr, "hc-render: note: OpenGL here is software rendering (%s); --backend cpu is about twice as fast\n",
                              renderer.c_str());
         } else if (backend == hc::render::Backend::Auto && softwareGl) {
             std::fprintf(stderr, "hc-render: note: OpenGL here is software rendering (%s): rendering on the CPU, which is faster "

@@ -889,7 +889,7 @@ int main(int argc, char** argv) {
         auto loaded = hc::cli::loadScene("hc-view", gridPath, setup);
         std::unique_ptr<ViewBackend> backend;
         std::string note;
-        // auto takes GL on a GPU only: on software OpenGL (llvmpipe) the CPU backend is several times faster.
+        // auto takes GL on a GPU only: on software OpenGL (llvmpipe) the CPU backend is about twice as fast.
         const bool softwareGl = hc::render::isSoftwareRenderer(contextInfo);
         if (choice == hc::render::Backend::Auto && have43 && softwareGl) {
             note = "software OpenGL (" + contextInfo.substr(0, contextInfo.find(", OpenGL")) +
@@ -906,8 +906,8 @@ int main(int argc, char** argv) {
         }
         if (!backend) backend = std::make_unique<CpuBackend>(*loaded->scene, setup.options.threads);
         else if (hc::render::isSoftwareRenderer(backend->device()))
-            // DESIGN.md section 9: without a GPU the CPU backend is the fast one (here ~0.5 s against ~4 s a frame).
-            note = "software OpenGL: --backend cpu is several times faster on this machine";
+            // DESIGN.md section 9: without a GPU the CPU backend is the fast one (about twice as fast per frame: BENCHMARKS.md).
+            note = "software OpenGL: --backend cpu is about twice as fast on this machine";
         if (!note.empty()) std::fprintf(stderr, "hc-view: %s\n", note.c_str());
         std::fprintf(stderr, "hc-view: backend %s (%s)\n", backend->name().c_str(), backend->device().c_str());
         int status = 0;

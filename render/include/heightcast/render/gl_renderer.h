@@ -17,8 +17,8 @@
 namespace hc::render {
 
 // Which backend renders: the CPU one, the GL one, or (the default) GL where a 4.3 context on a GPU can
-// be had and the CPU otherwise, also where the only OpenGL is a software renderer (Mesa's llvmpipe is
-// 3-40x slower than the CPU backend per stage on the same cores: BENCHMARKS.md).
+// be had and the CPU otherwise, also where the only OpenGL is a software renderer (Mesa's llvmpipe
+// takes about twice the CPU backend's time per frame on the same cores: BENCHMARKS.md).
 enum class Backend { Cpu, Gl, Auto };
 // "cpu" | "gl" | "auto"; throws hc::Error naming the bad value.
 Backend parseBackend(const std::string& name);
