@@ -782,7 +782,7 @@ int main(int argc, char** argv) {
                         gaussiansPerS(r) / 1e9, raysPerS(r) / 1e6, mb(r.peakRss), chosen[k]->gpuApproxMs, chosen[k]->gpuRaycastMs);
         }
         if (set.backend == hc::render::Backend::Gl) {
-            std::printf("\nGL frames: total = wall time of a frame ending in the texture, as hc-view draws it (fitting and masks on\n"
+            std::printf("\nGL frames: total = wall time of a frame ending in the texture, as hc-view draws it (fitting and visible spans on\n"
                         "the CPU, uploads, the GPU's stages, waiting for its timers); GPU = its span from the first stage's start to\n"
                         "shading's end; read back = copying one finished frame to host memory (hc-render's path, not the viewer's)\n");
             for (size_t k = 0; k < results.size(); ++k)

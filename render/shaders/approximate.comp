@@ -11,7 +11,7 @@ layout(std430, binding = HC_BIND_INDICES) readonly buffer IndexBlock0 { uint ind
 layout(std430, binding = HC_BIND_INDICES_1) readonly buffer IndexBlock1 { uint indices1[]; };
 layout(std430, binding = HC_BIND_INDICES_2) readonly buffer IndexBlock2 { uint indices2[]; };
 layout(std430, binding = HC_BIND_INDICES_3) readonly buffer IndexBlock3 { uint indices3[]; };
-layout(std430, binding = HC_BIND_VISIBLE) readonly buffer VisibleBlock { uint visible[]; };
+layout(std430, binding = HC_BIND_VISIBLE) readonly buffer VisibleBlock { int visibleRows[]; };
 layout(std430, binding = HC_BIND_HEIGHTS) buffer HeightBlock { float heights[]; };
 layout(std430, binding = HC_BIND_COUNTERS) buffer CounterBlock { uint counters[]; };
 
@@ -46,7 +46,8 @@ void main() {
     const uint t = j * n + i;
     const float noSurface = -kInf;
     float z = noSurface, water = noSurface, depth = 0.0;
-    const bool isVisible = ((visible[cascades[uCascade].visibleOffset + (t >> 2)] >> ((t & 3u) * 8u)) & 0xffu) != 0u;
+    const uint row = cascades[uCascade].visibleOffset + 2u * j;
+    const bool isVisible = int(i) >= visibleRows[row] && int(i) <= visibleRows[row + 1u];
     // The texel centre in double, exactly as c.x0 + i * s in approximate.cpp.
     const double x = cascades[uCascade].x0 + double(i) * cascades[uCascade].texelM, y = cascades[uCascade].y0 + double(j) * cascades[uCascade].texelM;
     const int k = isVisible ? locateCell(x, y) : -1;

@@ -80,11 +80,11 @@ uint64_t approximate(const Scene& scene, const Cascade& c, CascadeTextures& tex,
     }
     // The visible texels' bounding box, and the cells that meet it.
     int i0 = n, i1 = -1, j0 = n, j1 = -1;
-    for (int j = 0; j < n; ++j)
-        for (int i = 0; i < n; ++i)
-            if (c.visible[size_t(j) * size_t(n) + size_t(i)]) {
-                i0 = std::min(i0, i), i1 = std::max(i1, i), j0 = std::min(j0, j), j1 = std::max(j1, j);
-            }
+    for (int j = 0; j < n; ++j) {
+        const Cascade::RowSpan& r = c.rows[size_t(j)];
+        if (r.last < r.first) continue;
+        i0 = std::min(i0, r.first), i1 = std::max(i1, r.last), j0 = std::min(j0, j), j1 = std::max(j1, j);
+    }
     if (i1 < 0) return 0;
     const double s = c.texelM;
     std::vector<uint32_t> cells;
@@ -131,9 +131,9 @@ uint64_t approximate(const Scene& scene, const Cascade& c, CascadeTextures& tex,
             }
             for (int j = ja; j < jb; ++j) {
                 const float fy = static_cast<float>(c.y0 + j * s - ky);
-                for (int i = ia; i < ib; ++i) {
+                const int ra = std::max(ia, c.rows[size_t(j)].first), rb = std::min(ib, c.rows[size_t(j)].last + 1);
+                for (int i = ra; i < rb; ++i) {
                     const size_t t = size_t(j) * size_t(n) + size_t(i);
-                    if (!c.visible[t]) continue;
                     const float fx = static_cast<float>(c.x0 + i * s - kx);
                     gaussians[worker] += m;
                     float num[kLanes] = {}, den[kLanes] = {}, numD[kLanes] = {};

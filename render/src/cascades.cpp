@@ -167,7 +167,7 @@ CascadeFit fitCascades(const ViewVolume& v, int count, int texelsPerSide) {
             // Corner on the lattice, one texel outside the box so every patch of the box is whole.
             c.x0 = (std::floor(bx0 / c.texelM) - 1) * c.texelM;
             c.y0 = (std::floor(by0 / c.texelM) - 1) * c.texelM;
-            c.visible.assign(size_t(c.n) * size_t(c.n), 0);
+            c.rows.assign(size_t(c.n), Cascade::RowSpan{});
             // Visible texels: the polygon dilated by 1.5 texels (so every patch a ray can reach inside
             // the polygon has four known corners). Row by row, the dilation's x-range is the polygon
             // clipped to the band [y - m, y + m], widened by m.
@@ -181,7 +181,7 @@ CascadeFit fitCascades(const ViewVolume& v, int count, int texelsPerSide) {
                 for (const Vec2& p : band) xl = std::min(xl, p[0]), xr = std::max(xr, p[0]);
                 const int i0 = std::max(0, int(std::floor((xl - m - c.x0) / c.texelM)));
                 const int i1 = std::min(c.n - 1, int(std::ceil((xr + m - c.x0) / c.texelM)));
-                for (int i = i0; i <= i1; ++i) c.visible[size_t(j) * size_t(c.n) + size_t(i)] = 1;
+                c.rows[size_t(j)] = {i0, i1};
             }
         }
         fit.cascades.push_back(std::move(c));

@@ -248,7 +248,7 @@ Frame renderFrame(const Scene& scene, const Camera& camera, const RenderOptions&
         cs.farM = c.farWithOverlap;
         cs.splitFarM = c.splitFar;
         cs.texelM = c.texelM;
-        for (uint8_t v : c.visible) cs.visibleTexels += v;
+        cs.visibleTexels = c.visibleTexels();
         t = Clock::now();
         if (!c.empty()) cs.gaussians = detail::approximate(scene, c, tex[k], options.waterMinDepthM, options.threads);
         cs.approximationMs = msSince(t);

@@ -4,7 +4,7 @@
 // stages, each mirroring a CPU function: approximate.comp (detail::approximate), mipmap.comp
 // (Heightfield::buildMip), raycast.comp (detail::castRay) and shade.comp (renderFrame's shading and
 // drawLegend). The scene (cells, sorted Morton keys, influence lists) is uploaded once; per frame only
-// the FrameBlock (gpu_layout.h) and the cascades' visibility masks go up. GPU stage times come from
+// the FrameBlock (gpu_layout.h) and the cascades' visible row spans go up. GPU stage times come from
 // GL_TIMESTAMP queries between the dispatches.
 #include <algorithm>
 #include <array>
@@ -265,7 +265,7 @@ struct GlRenderer::Impl {
     }
 
     // Each cascade's places in the heights and visibility buffers (GpuCascade), and its statistics.
-    // Returns the floats the heights buffer needs; adds the visibility masks' uints to visibleWords.
+    // Returns the floats the heights buffer needs; adds the visible row spans' ints to visibleWords.
     size_t layOutCascades(gpu::FrameBlock& block, const CascadeFit& fit, Timings& timings, size_t& visibleWords) const {
         const bool water = scene.hasWater();
         size_t heightFloats = 0;
@@ -277,7 +277,7 @@ struct GlRenderer::Impl {
             cs.farM = c.farWithOverlap;
             cs.splitFarM = c.splitFar;
             cs.texelM = c.texelM;
-            for (uint8_t v : c.visible) cs.visibleTexels += v;
+            cs.visibleTexels = c.visibleTexels();
             timings.cascades.push_back(cs);
             gc.splitNear = float(c.splitNear), gc.splitFar = float(c.splitFar), gc.farWithOverlap = float(c.farWithOverlap);
             if (c.empty()) continue;  // n = 0: the shaders skip it
@@ -303,7 +303,7 @@ struct GlRenderer::Impl {
             }
             gc.levels = levels;
             gc.visibleOffset = uint32_t(visibleWords);
-            visibleWords += (texels + 3) / 4;
+            visibleWords += 2 * n;  // a span per row
         }
         return heightFloats;
     }
@@ -343,11 +343,13 @@ struct GlRenderer::Impl {
         const bool water = scene.hasWater();
         checkBlock(heightFloats * 4, "the cascade textures");
         heightsBuf.reserve(heightFloats * 4);
-        checkBlock(visibleWords * 4, "the visibility masks");
+        checkBlock(visibleWords * 4, "the visible row spans");
         visibleBuf.reserve(visibleWords * 4);
+        static_assert(sizeof(Cascade::RowSpan) == 2 * sizeof(int32_t), "approximate.comp reads a row span as two ints");
         for (size_t k = 0; k < fit.cascades.size(); ++k)
             if (!fit.cascades[k].empty())
-                visibleBuf.upload(fit.cascades[k].visible.data(), fit.cascades[k].visible.size(), size_t(block.cascades[k].visibleOffset) * 4);
+                visibleBuf.upload(fit.cascades[k].rows.data(), fit.cascades[k].rows.size() * sizeof(Cascade::RowSpan),
+                                  size_t(block.cascades[k].visibleOffset) * 4);
         frameBuf.upload(&block, sizeof block);
         const size_t pixels = size_t(W) * size_t(H);
         checkBlock(pixels * sizeof(gpu::GpuPixel), "the pixels");

@@ -12,6 +12,7 @@
 // little keeps s, and every texel centre stays on that lattice: sample positions never swim.
 #pragma once
 
+#include <algorithm>
 #include <array>
 #include <cstdint>
 #include <vector>
@@ -38,8 +39,19 @@ struct Cascade {
     double x0 = 0, y0 = 0;               // local position of texel (0, 0)'s centre (a multiple of s)
     int n = 0;                           // texels per side
     std::vector<Vec2> polygon;           // the hull's slab [splitNear, farWithOverlap], local xy
-    std::vector<uint8_t> visible;        // n * n, row-major (j * n + i), 1 = inside the polygon (plus a texel)
+    // The visible texels: inside the polygon dilated by 1.5 texels. The polygon is convex, so they are one
+    // span of each row: row j's are i in [rows[j].first, rows[j].last] (none when last < first).
+    struct RowSpan {
+        int first = 0, last = -1;
+    };
+    std::vector<RowSpan> rows;  // n entries
     bool empty() const { return polygon.size() < 3; }
+    bool visible(int i, int j) const { return i >= rows[size_t(j)].first && i <= rows[size_t(j)].last; }
+    uint64_t visibleTexels() const {
+        uint64_t count = 0;
+        for (const RowSpan& r : rows) count += uint64_t(std::max(0, r.last - r.first + 1));
+        return count;
+    }
 };
 
 struct CascadeFit {
