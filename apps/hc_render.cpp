@@ -19,7 +19,7 @@ int main(int argc, char** argv) {
     return hc::cli::run("hc-render", [&] {
         std::string gridPath, view, out, exr, timingsPath, backendText = "auto";
         hc::cli::RenderSetup setup("1280x720");
-        hc::cli::Parser p("hc-render", "GRID.hcg -o OUT.png [--camera X,Y,Z,YAW,PITCH,FOV | --look-at EX,EY,EZ,TX,TY,TZ[,FOV] | --view overview] [options]",
+        hc::cli::Parser p("hc-render", "GRID.hcg -o OUT.png [--camera X,Y,Z,YAW,PITCH,FOV[,ROLL] | --look-at EX,EY,EZ,TX,TY,TZ[,FOV] | --view overview] [options]",
                           "Ray-casts the smooth surface of a grid (terrain, and water where the grid has water_depth) into a PNG\n"
                           "and optionally EXR layers, and prints per-stage timings. Coordinates in the grid's CRS [m]; angles in\n"
                           "degrees: yaw 0 looks north, 90 east; pitch negative looks down.");
@@ -85,8 +85,12 @@ int main(int argc, char** argv) {
         }
         std::printf("hc-render: %s -> %s%s%s\n", gridPath.c_str(), out.c_str(), exr.empty() ? "" : " + ", exr.c_str());
         std::printf("  backend      %s (%s)\n", gl ? "gl" : "cpu", device.c_str());
-        std::printf("  camera       %.3f, %.3f, %.3f  yaw %.2f  pitch %.2f  fov %.1f  %dx%d\n", camera.xWorld, camera.yWorld, camera.zWorld,
+        std::printf("  camera       %.3f, %.3f, %.3f  yaw %.2f  pitch %.2f  fov %.1f  %dx%d", camera.xWorld, camera.yWorld, camera.zWorld,
                     camera.yawDeg, camera.pitchDeg, camera.fovYDeg, camera.width, camera.height);
+        if (camera.rollDeg != 0) std::printf("  roll %.2f", camera.rollDeg);
+        if (camera.nearM > 0) std::printf("  near %g m", camera.nearM);
+        if (camera.farM > 0) std::printf("  far %g m", camera.farM);
+        std::printf("\n");
         std::printf("%s", timings.toTable().c_str());
         return 0;
     });

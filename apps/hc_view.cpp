@@ -831,7 +831,7 @@ int main(int argc, char** argv) {
         std::string gridPath, backendName = "auto", screenshot;
         int frames = 0, bookmarkSlot = 0;
         hc::cli::RenderSetup setup("1280x720");
-        hc::cli::Parser p("hc-view", "GRID.hcg [--camera X,Y,Z,YAW,PITCH,FOV | --look-at EX,EY,EZ,TX,TY,TZ[,FOV]] [--backend gl|cpu|auto] [options]",
+        hc::cli::Parser p("hc-view", "GRID.hcg [--camera X,Y,Z,YAW,PITCH,FOV[,ROLL] | --look-at EX,EY,EZ,TX,TY,TZ[,FOV]] [--backend gl|cpu|auto] [options]",
                           "Opens a window on the smooth surface of a grid (terrain, and water where the grid has water_depth)\n"
                           "and lets you fly over it (press H in the window for the controls); a HUD shows per-stage timings,\n"
                           "the camera and the height above ground. Coordinates in the grid's CRS [m]; angles in degrees:\n"

@@ -10,8 +10,11 @@
 namespace hc::cli {
 
 void RenderSetup::addCameraOptions(Parser& p, const std::string& alsoExclusive) {
-    p.option("--camera", "X,Y,Z,YAW,PITCH,FOV", "camera position [m], yaw, pitch and vertical field of view [degrees]", cameraText);
+    p.option("--camera", "X,Y,Z,YAW,PITCH,FOV[,ROLL]", "camera position [m], yaw, pitch, vertical field of view and roll (default 0) [degrees]",
+             cameraText);
     p.option("--look-at", "EX,EY,EZ,TX,TY,TZ[,FOV]", "camera at the eye E looking at the target T [m] (FOV default 50 degrees)", lookAt);
+    p.option("--near", "M", "near clipping distance along each ray [m] (default: the far distance / 1e7, at least 1 mm)", nearM);
+    p.option("--far", "M", "far clipping distance along each ray [m] (default: the scene's farthest corner)", farM);
     if (alsoExclusive.empty()) p.exclusive({"--camera", "--look-at"});
     else p.exclusive({"--camera", "--look-at", alsoExclusive});
 }
@@ -48,20 +51,32 @@ void RenderSetup::finish() {
     if (std::string why = params.validate(); !why.empty()) throw Error("--sigma/--truncation: " + why);
     parseSize(size, width, height);
     std::vector<double> cam, look;
-    if (!cameraText.empty()) cam = parseNumberList(cameraText, "--camera", 6, 6);
+    auto num = [](double v) {
+        char b[32];
+        std::snprintf(b, sizeof b, "%g", v);
+        return std::string(b);
+    };
+    if (!(nearM >= 0) || !std::isfinite(nearM)) throw Error("--near " + num(nearM) + ": must be a distance >= 0 m");
+    if (!(farM >= 0) || !std::isfinite(farM)) throw Error("--far " + num(farM) + ": must be a distance >= 0 m");
+    if (farM > 0 && nearM >= farM) throw Error("--far " + num(farM) + " m is not beyond --near " + num(nearM) + " m");
+    if (!cameraText.empty()) cam = parseNumberList(cameraText, "--camera", 6, 7);
     if (!lookAt.empty()) look = parseNumberList(lookAt, "--look-at", 6, 7);
     camera.reset();
     if (!cam.empty()) {
         render::Camera c;
         c.xWorld = cam[0], c.yWorld = cam[1], c.zWorld = cam[2];
         c.yawDeg = cam[3], c.pitchDeg = cam[4], c.fovYDeg = cam[5];
+        if (cam.size() > 6) c.rollDeg = cam[6];
         c.width = width, c.height = height;
         camera = c;
     } else if (!look.empty()) {
         camera = render::Camera::lookAt({look[0], look[1], look[2]}, {look[3], look[4], look[5]}, look.size() > 6 ? look[6] : 50.0,
                                         width, height);
     }
-    if (camera) camera->validate();
+    if (camera) {
+        camera->nearM = nearM, camera->farM = farM;
+        camera->validate();
+    }
 }
 
 std::unique_ptr<LoadedScene> loadScene(const char* program, const std::string& gridPath, const RenderSetup& setup) {
@@ -75,7 +90,10 @@ std::unique_ptr<LoadedScene> loadScene(const char* program, const std::string& g
 }
 
 render::Camera initialCamera(const RenderSetup& setup, const render::Scene& scene) {
-    return setup.camera ? *setup.camera : render::overviewCamera(scene, setup.width, setup.height);
+    if (setup.camera) return *setup.camera;
+    render::Camera c = render::overviewCamera(scene, setup.width, setup.height);
+    c.nearM = setup.nearM, c.farM = setup.farM;
+    return c;
 }
 
 }  // namespace hc::cli

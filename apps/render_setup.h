@@ -19,13 +19,14 @@ struct RenderSetup {
     render::RenderOptions options;
     influence::KernelParams params;
     bool cells = false, noLegend = false;
+    double nearM = 0, farM = 0;                // --near, --far [m]; 0: from the scene
 
     // Set by finish():
     int width = 0, height = 0;                 // from --size [pixels]
     std::optional<render::Camera> camera;      // from --camera or --look-at, validated; empty: the overview
 
     explicit RenderSetup(std::string defaultSize) : size(std::move(defaultSize)) {}
-    // --camera, --look-at (exclusive with each other and with `alsoExclusive`, e.g. "--view").
+    // --camera, --look-at (exclusive with each other and with `alsoExclusive`, e.g. "--view"), --near, --far.
     void addCameraOptions(Parser& p, const std::string& alsoExclusive = "");
     // --size, --cascades, --texels, --threads, --color, --cells, --no-legend, --cache, --sigma, --truncation.
     void addRenderOptions(Parser& p);

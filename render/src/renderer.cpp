@@ -173,14 +173,16 @@ FrameSetup setUpFrame(const Scene& scene, const Camera& camera) {
     s.eye[1] = camera.yWorld - g.originWorldY;
     s.eye[2] = camera.zWorld;
     const double* eye = s.eye;
-    // Near and far from the scene: far reaches the farthest corner of the bounds.
+    // Near and far as the camera gives them, else from the scene: far reaches the farthest corner of the
+    // bounds, near is far / 1e7 (at least 1 mm).
     double far = 0;
     for (double x : {scene.xMin, scene.xMax})
         for (double y : {scene.yMin, scene.yMax})
             for (double z : {scene.zMin, scene.zMax}) far = std::max(far, std::hypot(x - eye[0], y - eye[1], z - eye[2]));
     far = far * 1.01 + 1.0;
-    s.farM = far;
-    s.nearM = std::max(1e-3, far * 1e-7);
+    s.farM = camera.farM > 0 ? camera.farM : far;
+    s.nearM = camera.nearM > 0 ? camera.nearM : std::max(1e-3, s.farM * 1e-7);
+    if (s.nearM >= s.farM) s.farM = s.nearM * (1 + 1e-9);  // a given near beyond the scene: nothing to see
     ViewVolume& view = s.view;
     view.eyeLocal = {eye[0], eye[1], eye[2]};
     view.forward = s.basis.forward;
@@ -188,7 +190,8 @@ FrameSetup setUpFrame(const Scene& scene, const Camera& camera) {
     view.up = s.basis.up;
     view.tanHalfX = s.basis.tanHalfX;
     view.tanHalfY = s.basis.tanHalfY;
-    view.nearM = s.nearM;
+    // The view volume clips along forward: a ray's near point lies at least near / |corner ray| along it.
+    view.nearM = s.nearM / std::sqrt(1.0 + s.basis.tanHalfX * s.basis.tanHalfX + s.basis.tanHalfY * s.basis.tanHalfY);
     view.farM = s.farM;
     view.yawRad = camera.yawDeg * M_PI / 180.0;
     view.boxMin = {scene.xMin, scene.yMin, scene.zMin};

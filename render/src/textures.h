@@ -48,8 +48,8 @@ struct RayContext {
 
 Hit castRay(const RayContext& ctx, const double dir[3]);
 
-// Per-frame set-up both backends share (renderer.cpp): the eye in the local frame, near and far from
-// the scene's bounds, and the view volume cascade fitting takes.
+// Per-frame set-up both backends share (renderer.cpp): the eye in the local frame, near and far along the
+// ray (the camera's, else from the scene's bounds), and the view volume cascade fitting takes.
 struct FrameSetup {
     CameraBasis basis;
     double eye[3];
