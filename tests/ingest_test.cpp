@@ -304,6 +304,78 @@ TEST(Ingest, SouthUpAndRotatedRastersLandWhereTheyBelong) {
     }
 }
 
+// A geotransform rotated by a general angle (30 degrees) holding a tilted plane of world coordinates:
+// ingest resamples it north-up (bilinear, which reproduces a plane), so every valid pixel equals the
+// plane at its own centre (1 mm: float32 of 100-200 m values) where it lies between source pixel centres,
+// pixels well inside the rotated footprint
+// are valid and pixels well outside it are holes. A mirrored or shifted placement fails both.
+TEST(Ingest, RotatedByThirtyDegreesLandsWhereItBelongs) {
+    const double angle = 30 * M_PI / 180, c = 10, x0 = 500000, y0 = 5000000;
+    const int W = 40, H = 30;
+    // Column direction (cos a, sin a) * c, row direction (sin a, -cos a) * c: a north-up raster turned 30 degrees
+    // anticlockwise about its north-west corner.
+    const double gt[6] = {x0, c * std::cos(angle), c * std::sin(angle), y0, c * std::sin(angle), -c * std::cos(angle)};
+    auto plane = [&](double x, double y) { return 150.0 + 0.05 * (x - x0) - 0.03 * (y - y0); };
+    GDALAllRegister();
+    const std::string path = (tempDir() / "rotated30.tif").string();
+    {
+        std::unique_ptr<GDALDataset> ds(GetGDALDriverManager()->GetDriverByName("GTiff")->Create(path.c_str(), W, H, 1, GDT_Float32, nullptr));
+        ds->SetGeoTransform(const_cast<double*>(gt));
+        OGRSpatialReference srs;
+        srs.importFromEPSG(32633);
+        ds->SetSpatialRef(&srs);
+        std::vector<float> v(size_t(W) * H);
+        for (int j = 0; j < H; ++j)
+            for (int i = 0; i < W; ++i) {
+                const double x = gt[0] + (i + 0.5) * gt[1] + (j + 0.5) * gt[2], y = gt[3] + (i + 0.5) * gt[4] + (j + 0.5) * gt[5];
+                v[size_t(j) * W + size_t(i)] = float(plane(x, y));
+            }
+        ASSERT_EQ(ds->GetRasterBand(1)->RasterIO(GF_Write, 0, 0, W, H, v.data(), W, H, GDT_Float32, 0, 0, nullptr), CE_None);
+    }
+    Options o;
+    o.input = path;
+    LoadReport rep;
+    const Raster r = hc::ingest::loadTerrain(o, rep);
+    EXPECT_NE(rep.method.find("rotated geotransform"), std::string::npos) << rep.method;
+    EXPECT_DOUBLE_EQ(r.pixelSizeM, c);
+    // Where a world point falls in the source's pixel grid (column, row as fractions of W and H).
+    const double det = gt[1] * gt[5] - gt[2] * gt[4];
+    size_t valid = 0, inside = 0, outside = 0;
+    double worst = 0, worstRim = 0;
+    for (size_t j = 0; j < r.height; ++j)
+        for (size_t i = 0; i < r.width; ++i) {
+            const double x = r.westWorld + (double(i) + 0.5) * c, y = r.northWorld - (double(j) + 0.5) * c;
+            const double dx = x - gt[0], dy = y - gt[3];
+            const double col = (gt[5] * dx - gt[2] * dy) / det, row = (-gt[4] * dx + gt[1] * dy) / det;
+            const bool wellInside = col > 1.5 && col < W - 1.5 && row > 1.5 && row < H - 1.5;
+            const bool wellOutside = col < -1.5 || col > W + 1.5 || row < -1.5 || row > H + 1.5;
+            const float v = r.at(i, j);
+            if (!std::isnan(v)) {
+                ++valid;
+                const double err = std::abs(double(v) - plane(x, y));
+                if (col >= 0.5 && col <= W - 0.5 && row >= 0.5 && row <= H - 0.5) worst = std::max(worst, err);
+                else worstRim = std::max(worstRim, err);
+            }
+            if (wellInside) {
+                ++inside;
+                EXPECT_FALSE(std::isnan(v)) << "pixel " << i << "," << j << " inside the footprint is a hole";
+            }
+            if (wellOutside) {
+                ++outside;
+                EXPECT_TRUE(std::isnan(v)) << "pixel " << i << "," << j << " outside the footprint has a value";
+            }
+        }
+    EXPECT_GT(inside, 800u);
+    EXPECT_GT(outside, 300u);
+    EXPECT_GT(valid, inside);
+    EXPECT_LE(worst, 1e-3) << "valid pixels off the plane: misplaced";
+    // Within half a source pixel of the footprint's edge the value is the nearest edge pixel's: off the plane
+    // by at most its gradient (0.058 m/m) times half a pixel diagonal (7.1 m), 0.41 m.
+    EXPECT_LE(worstRim, 0.41);
+    Grid g = hc::ingest::ingest(o, rep);
+    checkGuarantee(r, nullptr, g, o.toleranceM);
+}
+
 TEST(Ingest, NearlySquarePixelsAreKeptOthersResampled) {
     // 50 x 50.001 m pixels (0.002 % apart) are square for ingest; 50 x 60 m are resampled to 50 m.
     fs::path d = tempDir();

@@ -469,6 +469,10 @@ Raster loadTerrain(const Options& opt, LoadReport& report) {
         warped->GetGeoTransform(wgt.g);
         SourceBand ws = detail::readFloatBand(*warped, opt.input);
         warped.reset();
+        if (std::none_of(ws.values.begin(), ws.values.end(), [](float v) { return !std::isnan(v); }))
+            throw Error(opt.input + ": projected to " + opt.targetSrs + " on " + std::to_string(ws.width) + " x " + std::to_string(ws.height) +
+                        " pixels of " + fmt(std::abs(wgt.g[1]), 6) + " (CRS units), no pixel centre falls inside the data: " +
+                        "the footprint is too thin for that resolution; give a finer one with --min-cell");
         double unit = out.GetLinearUnits();
         for (double& v : wgt.g) v *= unit;
         if (unit != 1.0) out.SetLinearUnitsAndUpdateParameters(SRS_UL_METER, 1.0);
