@@ -1,8 +1,10 @@
 #version 430
 // render/shaders/raycast.comp: one ray per pixel through the cascades (DESIGN.md section 5 step 4),
-// mirroring render/src/raycast.cpp function by function: traverse() (hierarchical max-mipmap
-// traversal, exact ray/bilinear-patch intersection, the solid-terrain rules), hitIn() (a cascade's
-// slab and texture clip, terrain then water) and castRay() (near to far, blending in the overlaps).
+// mirroring render/src/raycast.cpp: traverse() (hierarchical max-mipmap traversal, exact
+// ray/bilinear-patch intersection, the solid-terrain rules), hitIn() (a cascade's slab and texture
+// clip, terrain then water) and castRay() (near to far, blending in the overlaps). The CPU walks
+// terrain and water in one pass (the same first hits, fewer node visits); here each heightfield is
+// walked on its own, which the GPU's frame budget has not needed to change.
 //
 // Precision: the ray starts at the eye (t = 0 at the camera) and the cascade origins come in eye
 // relative (GpuCascade::x0Eye), so every float here is a distance within the scene, never a

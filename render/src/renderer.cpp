@@ -120,8 +120,10 @@ struct SrgbTables {
     }
 };
 const SrgbTables kSrgb;
-double toLinear(double c) { return kSrgb.toLinear[size_t(std::lround(std::clamp(c, 0.0, 1.0) * 4096.0))]; }
-uint8_t toSrgb8(double c) { return kSrgb.toSrgb[size_t(std::lround(std::clamp(c, 0.0, 1.0) * 4096.0))]; }
+// The nearest table entry (adding 0.5 and truncating rounds a non-negative value as lround does, inline).
+size_t tableIndex(double c) { return size_t(std::clamp(c, 0.0, 1.0) * 4096.0 + 0.5); }
+double toLinear(double c) { return kSrgb.toLinear[tableIndex(c)]; }
+uint8_t toSrgb8(double c) { return kSrgb.toSrgb[tableIndex(c)]; }
 
 void drawText(Frame& f, int x, int y, const std::string& text, int scale) {
     for (char ch : text) {
