@@ -110,6 +110,12 @@ uint64_t approximate(const Scene& scene, const Cascade& c, CascadeTextures& tex,
             const int ia = std::max(i0, int(first(q.x0, c.x0))), ib = std::min(i1 + 1, int(first(q.x1, c.x0)));
             const int ja = std::max(j0, int(first(q.y0, c.y0))), jb = std::min(j1 + 1, int(first(q.y1, c.y0)));
             if (ia >= ib || ja >= jb) continue;
+            // Only a cell with a visible texel centre gathers its list: in the visible texels' bounding box
+            // (the polygon is a slab of a trapezoid) 25-65 % of the cells that hold a texel centre hold no
+            // visible one.
+            bool visible = false;
+            for (int j = ja; j < jb && !visible; ++j) visible = std::max(ia, c.rows[size_t(j)].first) <= std::min(ib - 1, c.rows[size_t(j)].last);
+            if (!visible) continue;
             const auto& kernels = scene.kernels();
             const double kx = kernels[k].cx, ky = kernels[k].cy;
             const double zk = g.values[0][k];
