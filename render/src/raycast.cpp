@@ -84,6 +84,8 @@ PatchHit traverse(const CascadeTextures& tex, bool water, const Cascade& c, cons
     };
     // A ray above the whole cascade never hits it.
     if (std::min(o[2] + d[2] * tIn, o[2] + d[2] * tOut) > maxAt(top, 0)) return res;
+    // Start three levels below the top (the coarsest nodes are nearly always entered; the walk climbs back
+    // when it leaves a parent): 1-2 % faster than starting at the top, no more (BENCHMARKS.md).
     int level = std::max(0, top - 3);
     double t = tIn;
     const double tiny = 1e-9 * (1.0 + std::abs(tOut)) ;
