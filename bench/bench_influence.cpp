@@ -35,6 +35,7 @@
 #include <vector>
 
 #include "bench_common.h"
+#include "svg_plot.h"
 #include "cli.h"
 #include "heightcast/grid/error.h"
 #include "heightcast/grid/morton.h"
@@ -272,7 +273,7 @@ int main(int argc, char** argv) {
         std::string srtm = "../shared/data/N00E010.hgt";
         std::string dems = "data/lidar1m_minnesota_utm15.tif,data/south_glacier_utm7.tif,data/kootenai_1m.asc,data/hef_srtm.tif,"
                            "../shared/data/N00E010.hgt";
-        std::string tolerances = "0.1,0.5,2", sigmas = "0.5,1,1.5", csv;
+        std::string tolerances = "0.1,0.5,2", sigmas = "0.5,1,1.5", csv, plot;
         double maxCellM = 768;
         int repeat = 3, points = 1000000, maxEvalPx = 2000000;
         unsigned threads = 0;
@@ -301,6 +302,8 @@ int main(int argc, char** argv) {
                  "      random sample of min(N, 1000000) valid pixels of larger ones (default 2000000)", maxEvalPx);
         p.option("--threads", "N", "worker threads for building, ingest and the all-threads cases (default 0 = all cores)", threads);
         p.option("--csv", "OUT.csv", "also write every row of every table as CSV, with a 'table' column (default: none)", csv);
+        p.option("--plot", "OUT.svg", "also draw table 3 as an SVG plot: RMS error against the source for each DEM over the\n"
+                 "      tolerances, the grid's and the smooth surface's for each sigma (default: none)", plot);
         p.flag("--quick", "smoke run: one tolerance (0.5 m, or the first of --tolerances), one sigma (1, or the first of\n"
                "      --sigmas), the first two DEMs, 100000 points (unless --points is given)", quick);
         if (!p.parse(argc, argv)) return 0;
@@ -323,6 +326,7 @@ int main(int argc, char** argv) {
             if (!p.given("--points")) points = 100000;
         }
         if (!csv.empty()) hc::cli::checkWritable(csv, "--csv");
+        if (!plot.empty()) hc::cli::checkWritable(plot, "--plot");
         const unsigned allThreads = hc::resolveThreads(threads);
         const KernelParams baseParams;  // sigma 1, R 3.5: the report's
         const bool haveSrtm = fs::is_regular_file(srtm);
@@ -585,6 +589,34 @@ int main(int argc, char** argv) {
         if (!csv.empty()) {
             out.write(csv);
             std::printf("\nrows written to %s\n", csv.c_str());
+        }
+        if (!plot.empty() && !acc.empty()) {
+            // One colour per DEM; the grid's error dotted, the surface's solid for the first sigma, then dashed.
+            hc::bench::LinePlot lp;
+            lp.title = "Speed against accuracy: RMS error against the source raster (table 3)";
+            lp.xLabel = "ingest tolerance [m]";
+            lp.yLabel = "RMS error against every valid source pixel [m]";
+            lp.logX = lp.logY = true;
+            std::vector<std::string> demOrder;
+            for (const AccuracyRow& r : acc)
+                if (std::find(demOrder.begin(), demOrder.end(), r.dem) == demOrder.end()) demOrder.push_back(r.dem);
+            const char* dashes[] = {"", "8,4", "12,3,2,3", "4,2"};
+            for (size_t d = 0; d < demOrder.size(); ++d) {
+                const std::string color = hc::bench::plotColor(d);
+                const std::string name = fs::path(demOrder[d]).stem().string();
+                hc::bench::LineSeries grid{name + ": grid (cells)", color, "1,3", {}};
+                for (const AccuracyRow& r : acc)
+                    if (r.dem == demOrder[d] && r.sigma == sigmaList.front()) grid.points.emplace_back(r.toleranceM, r.gridRms);
+                lp.series.push_back(grid);
+                for (size_t k = 0; k < sigmaList.size(); ++k) {
+                    hc::bench::LineSeries surf{name + ": smooth surface, sigma " + fmt("%g", sigmaList[k]), color, dashes[std::min<size_t>(k, 3)], {}};
+                    for (const AccuracyRow& r : acc)
+                        if (r.dem == demOrder[d] && r.sigma == sigmaList[k]) surf.points.emplace_back(r.toleranceM, r.surfRms);
+                    lp.series.push_back(surf);
+                }
+            }
+            hc::bench::writeSvg(plot, lp.svg());
+            std::printf("plot written to %s\n", plot.c_str());
         }
         return 0;
     });

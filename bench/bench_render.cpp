@@ -59,6 +59,7 @@
 #include <unistd.h>
 
 #include "bench_common.h"
+#include "svg_plot.h"
 #include "cli.h"
 #include "heightcast/grid/error.h"
 #include "heightcast/grid/grid.h"
@@ -671,7 +672,7 @@ void writeCsv(const std::vector<const Scenario*>& scs, const std::vector<RunResu
 int main(int argc, char** argv) {
     return hc::cli::run("hc-bench", [&] {
         Settings set;
-        std::string size = "1920x1080", scenarios = "Marchfeld,Petzenkirchen,Wachau,Florence", csv, json, backendText = "cpu";
+        std::string size = "1920x1080", scenarios = "Marchfeld,Petzenkirchen,Wachau,Florence", csv, json, plot, backendText = "cpu";
         hc::cli::Parser p("hc-bench", "[options]",
                           "Benchmarks the CPU renderer on synthetic stand-ins for the technical report's four flood scenes\n"
                           "(Marchfeld 82.9 x 57.1 km, 3-96 m cells, 7.46 M cells; Petzenkirchen 15.4 x 16.0 km, 0.75-96 m, 1.81 M;\n"
@@ -696,6 +697,8 @@ int main(int argc, char** argv) {
         p.option("--csv", "OUT.csv", "also write one row per scenario as CSV with a header line (default: none)", csv);
         p.option("--json", "OUT.json", "also write a JSON array, one object per scenario (scenario, cells, approximation_ms,\n"
                  "      raycast_ms, gaussians_per_s, rays_per_s, peak_rss_mb, and more) (default: none)", json);
+        p.option("--plot", "OUT.svg", "also draw each scenario's best stage times as stacked bars with the targets, SVG\n"
+                 "      (default: none)", plot);
         if (!p.parse(argc, argv)) return 0;
         if (!(set.scale >= 1)) throw hc::Error("--scale " + fmt("%g", set.scale) + ": must be at least 1");
         if (set.repeat < 1) throw hc::Error("--repeat " + std::to_string(set.repeat) + ": must be at least 1");
@@ -718,8 +721,8 @@ int main(int argc, char** argv) {
             if (!found) throw hc::Error("--scenarios " + name + ": not a scenario (Marchfeld, Petzenkirchen, Wachau or Florence)");
             chosen.push_back(found);
         }
-        for (const std::string* o : {&csv, &json})
-            if (!o->empty()) hc::cli::checkWritable(*o, o == &csv ? "--csv" : "--json");
+        for (const std::string* o : {&csv, &json, &plot})
+            if (!o->empty()) hc::cli::checkWritable(*o, o == &csv ? "--csv" : o == &json ? "--json" : "--plot");
         if (!set.imagesDir.empty()) {
             std::error_code ec;
             fs::create_directories(set.imagesDir, ec);
@@ -837,6 +840,27 @@ int main(int argc, char** argv) {
         if (!json.empty()) {
             writeJson(chosen, results, set, json);
             std::printf("objects written to %s\n", json.c_str());
+        }
+        if (!plot.empty()) {
+            const bool gl = set.backend == hc::render::Backend::Gl;
+            hc::bench::BarPlot bp;
+            bp.title = std::string("hc-bench, ") + (gl ? "GL" : "CPU") + " backend: best stage times of a " + std::to_string(set.width) + "x" +
+                       std::to_string(set.height) + " frame, " + std::to_string(set.options.cascades) + " cascades of " +
+                       std::to_string(set.options.texelsPerSide) + "^2" + (set.scale != 1 ? ", scale " + fmt("%g", set.scale) : "");
+            bp.xLabel = "milliseconds";
+            // Ray casting first, so its bar ends where the ray casting target's line can meet it.
+            bp.segmentNames = {"ray casting", "approximation", "mipmaps", "shading", "fitting"};
+            for (size_t k = 0; k < results.size(); ++k) {
+                const RunResult& r = results[k];
+                if (r.totalMs >= 1e300) continue;  // the scenario failed
+                bp.rows.push_back({chosen[k]->name, {r.raycastMs, r.approximationMs, r.mipmapMs, r.shadingMs, r.fittingMs}});
+            }
+            if (gl) bp.markers.push_back({"whole-frame target " + fmt("%g", kTargetGlFrameMs) + " ms", kTargetGlFrameMs});
+            else if (set.width == 1920 && set.height == 1080) bp.markers.push_back({"ray casting target " + fmt("%g", kTargetRaycastMs) + " ms (first segment)", kTargetRaycastMs});
+            if (!bp.rows.empty()) {
+                hc::bench::writeSvg(plot, bp.svg());
+                std::printf("plot written to %s\n", plot.c_str());
+            }
         }
         return 0;
     });
