@@ -82,8 +82,17 @@ PatchHit traverse(const CascadeTextures& tex, bool water, const Cascade& c, cons
         const float m = hf.mip[size_t(level)][idx];
         return water ? std::max(m, tex.water.mip[size_t(level)][idx]) : m;
     };
-    // A ray above the whole cascade never hits it.
-    if (std::min(o[2] + d[2] * tIn, o[2] + d[2] * tOut) > maxAt(top, 0)) return res;
+    // A ray above the whole cascade never hits it; nor does the part of a ray above the cascade's highest
+    // point, where the walk would only skip nodes: start where a falling ray comes down to that height, stop
+    // where a rising one climbs above it (a hair early and late, for rounding).
+    const double zTop = maxAt(top, 0);
+    if (std::min(o[2] + d[2] * tIn, o[2] + d[2] * tOut) > zTop) return res;
+    if (d[2] != 0) {
+        const double tCross = (zTop - o[2]) / d[2], margin = 1e-9 * (1.0 + std::abs(tCross));
+        if (d[2] < 0) tIn = std::max(tIn, tCross - margin);
+        else tOut = std::min(tOut, tCross + margin);
+        if (!(tIn < tOut)) return res;
+    }
     // Start three levels below the top (the coarsest nodes are nearly always entered; the walk climbs back
     // when it leaves a parent): 1-2 % faster than starting at the top, no more (BENCHMARKS.md).
     int level = std::max(0, top - 3);
