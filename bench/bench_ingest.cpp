@@ -41,6 +41,7 @@
 #include <unistd.h>
 
 #include "bench_common.h"
+#include "svg_plot.h"
 #include "cli.h"
 #include "heightcast/grid/error.h"
 #include "heightcast/grid/grid_file.h"
@@ -265,7 +266,7 @@ struct TempDir {
 
 int main(int argc, char** argv) {
     return hc::cli::run("hc-bench-ingest", [&] {
-        std::string dataDir = "../shared/data", workDir, tolerances = "0.25,1", paths = "mem,stream", csv;
+        std::string dataDir = "../shared/data", workDir, tolerances = "0.25,1", paths = "mem,stream", csv, plot;
         std::optional<double> maxCellM;
         int repeat = 3;
         unsigned threads = 0;
@@ -286,6 +287,8 @@ int main(int argc, char** argv) {
                  "      90 m SRTM pixels is the pixel itself: no cell merges and the tolerance changes nothing)", maxCellM);
         p.option("--threads", "N", "ingest worker threads (default 0 = all cores)", threads);
         p.option("--csv", "OUT.csv", "also write the table's rows as CSV with a header line (default: none)", csv);
+        p.option("--plot", "PREFIX", "also draw the table as two SVG plots, PREFIX_speed.svg (source Mpx/s per row, the\n"
+                 "      10 Mpx/s target) and PREFIX_memory.svg (ingest RSS / raster float32 size, the 3x target) (default: none)", plot);
         if (!p.parse(argc, argv)) return 0;
         if (repeat < 1) throw hc::Error("--repeat " + std::to_string(repeat) + ": must be at least 1");
         std::vector<double> tols;
@@ -299,6 +302,7 @@ int main(int argc, char** argv) {
             pathList.push_back(name == "mem" ? Path::Memory : Path::Stream);
         }
         if (!csv.empty()) hc::cli::checkWritable(csv, "--csv");
+        if (!plot.empty()) hc::cli::checkWritable(plot + "_speed.svg", "--plot");
         const fs::path tile = fs::path(dataDir) / "N00E010.hgt", east = fs::path(dataDir) / "N00E011.hgt.zip";
         for (const fs::path& f : {tile, east})
             if (!fs::is_regular_file(f))
@@ -366,6 +370,25 @@ int main(int argc, char** argv) {
         if (!csv.empty()) {
             writeCsv(rows, csv);
             std::printf("\nrows written to %s\n", csv.c_str());
+        }
+        if (!plot.empty() && !rows.empty()) {
+            hc::bench::BarPlot speed, memory;
+            speed.title = "hc-bench-ingest: source pixels per second of ingest (best of " + std::to_string(repeat) + ")";
+            speed.xLabel = "M source pixels / s";
+            speed.segmentNames = {"Mpx/s"};
+            speed.markers = {{"target " + fmt("%g", kTargetMpxPerS) + " Mpx/s (projected input b)", kTargetMpxPerS}};
+            memory.title = "hc-bench-ingest: ingest memory as a multiple of the raster's float32 size";
+            memory.xLabel = "ingest RSS / (source px x 4 bytes)";
+            memory.segmentNames = {"x raster f32"};
+            memory.markers = {{"target " + fmt("%g", kTargetRasterMultiple) + "x", kTargetRasterMultiple}};
+            for (const Row& r : rows) {
+                const std::string label = std::string(1, r.input->id) + " " + pathName(r.path) + " tol " + fmt("%g", r.toleranceM);
+                speed.rows.push_back({label, {r.mpxPerS()}});
+                memory.rows.push_back({label, {r.rasterMultiple()}});
+            }
+            hc::bench::writeSvg(plot + "_speed.svg", speed.svg());
+            hc::bench::writeSvg(plot + "_memory.svg", memory.svg());
+            std::printf("plots written to %s_speed.svg and %s_memory.svg\n", plot.c_str(), plot.c_str());
         }
         return 0;
     });
