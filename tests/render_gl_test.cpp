@@ -270,6 +270,32 @@ TEST(RenderGl, SameAsCpuOnTheAlpineDemFromFourCameras) {
     EXPECT_GT(wet, f.waterDepthM.size() / 10) << "the water camera sees water";
 }
 
+// Given near and far planes reach the GL backend through the shared frame set-up: the same picture as the CPU's
+// with the same planes, and no GL hit outside them.
+TEST(RenderGl, NearAndFarPlanesAsOnTheCpu) {
+    World& w = hef();
+    HC_REQUIRE_GL(w);
+    Camera c = overviewCamera(*w.scene, 240, 150);
+    Timings t;
+    const Frame all = renderFrame(*w.scene, c, smallOptions(), t);
+    std::vector<float> d;
+    for (float v : all.distanceM)
+        if (std::isfinite(v)) d.push_back(v);
+    ASSERT_GT(d.size(), all.distanceM.size() / 4);
+    std::sort(d.begin(), d.end());
+    c.nearM = d[d.size() / 4], c.farM = d[3 * d.size() / 4];  // the middle half of the hit distances
+    expectSame(w, c, "hef_near_far", smallOptions(), false);  // half the hits are clipped: "some terrain" is the check
+    const Frame gl = w.gl->render(c, smallOptions(), t);
+    size_t hits = 0;
+    for (float v : gl.distanceM)
+        if (std::isfinite(v)) {
+            ++hits;
+            EXPECT_GE(v, c.nearM * (1 - 1e-5));
+            EXPECT_LE(v, c.farM * (1 + 1e-5));
+        }
+    EXPECT_LT(hits, d.size()) << "the planes clipped some of what the unclipped camera saw";
+}
+
 // The stage times: every stage took some time, the stages fit in the GPU's span, the span in the whole call,
 // and the read-back is counted in the whole call. (On llvmpipe timer queries stamp at flushes: the backend times it
 // with the clock after glFinish instead; before that, a window's context showed approximation and shading as 0.)
