@@ -236,7 +236,7 @@ private:
             Result r{job, {}, {}};
             std::string error;
             try {
-                r.frame = hc::render::renderFrame(scene_, job.camera, job.options, r.timings);
+                r.frame = hc::render::renderFrame(scene_, job.camera, job.options, r.timings, &cascades_);
                 if (job.tint) tintCascades(r.frame);
             } catch (const std::exception& e) {
                 error = e.what();
@@ -249,6 +249,7 @@ private:
         }
     }
     const hc::render::Scene& scene_;
+    hc::render::CascadeCache cascades_;  // the worker's last textures: a moving camera evaluates only new texels
     unsigned threads_;
     GLuint texture_;
     mutable std::mutex m_;

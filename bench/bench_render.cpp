@@ -426,6 +426,8 @@ struct RunResult {
     uint64_t baselineRss = 0, gridRss = 0, peakRss = 0;  // bytes: before generating; after the grid; at the end
     char image[512] = {};         // the PNG written, or empty
     char device[256] = {};        // what rendered: "CPU" or the GL renderer and version
+    // --fly-frames (CPU): means over frames 2..N of a camera flying forward, without and with a CascadeCache.
+    double flyApproxFreshMs = 0, flyApproxCachedMs = 0, flyTotalFreshMs = 0, flyTotalCachedMs = 0, flyKept = 0;
 };
 
 struct Settings {
@@ -435,6 +437,8 @@ struct Settings {
     std::string imagesDir;
     bool interactive = false;
     hc::render::Backend backend = hc::render::Backend::Cpu;  // Cpu or Gl (Auto is resolved in main)
+    int flyFrames = 0;      // after the timed frames: a fly-through of this many frames, fresh and incremental (CPU)
+    double flyStepM = 10;   // metres forward per fly-through frame
 };
 
 // The fixed camera: 1.5 km above the river 10 % of the way downstream, looking along it at pitch -20.
@@ -549,6 +553,31 @@ RunResult runScenario(const Scenario& sc, const Settings& set) {
             r.rays = tm.rays;
             r.hits = tm.hits;
         }
+        if (!gl && set.flyFrames > 1) {
+            // The camera flies forward (horizontally, along its yaw) flyStepM a frame: every frame evaluated afresh,
+            // then the same frames through a CascadeCache (incremental cascades). Means over frames 2..N (the
+            // first has nothing to reuse).
+            for (int cached = 0; cached < 2; ++cached) {
+                hc::render::CascadeCache cache;
+                double approx = 0, total = 0;
+                uint64_t kept = 0, visible = 0;
+                for (int k = 0; k < set.flyFrames; ++k) {
+                    say(fmt("fly-through %s, frame %d of %d ...", cached ? "with the cache" : "fresh", k + 1, set.flyFrames).c_str());
+                    hc::render::Camera c = cam;
+                    const double yaw = cam.yawDeg * std::numbers::pi / 180;
+                    c.xWorld += std::sin(yaw) * set.flyStepM * k, c.yWorld += std::cos(yaw) * set.flyStepM * k;
+                    hc::render::Timings tm;
+                    (void)hc::render::renderFrame(scene, c, set.options, tm, cached ? &cache : nullptr);
+                    if (k == 0) continue;
+                    approx += tm.approximationMs, total += tm.totalMs;
+                    for (const auto& cs : tm.cascades) kept += cs.reusedTexels, visible += cs.visibleTexels;
+                }
+                const double frames = set.flyFrames - 1;
+                (cached ? r.flyApproxCachedMs : r.flyApproxFreshMs) = approx / frames;
+                (cached ? r.flyTotalCachedMs : r.flyTotalFreshMs) = total / frames;
+                if (cached) r.flyKept = visible ? double(kept) / double(visible) : 0;
+            }
+        }
         if (gl) {
             say("reading the frame back ...");
             hc::render::Timings tm;
@@ -639,6 +668,10 @@ void writeJson(const std::vector<const Scenario*>& scs, const std::vector<RunRes
                  sc.gpuApproxMs, sc.gpuRaycastMs, mb(r.baselineRss), mb(r.gridRss), approximationMet(r) ? "met" : "MISSED",
                  raycastMet(r) ? "met" : "MISSED");
         if (r.image[0]) f << ", \"image\": " << jsonString(r.image);
+        if (set.flyFrames > 1 && set.backend == hc::render::Backend::Cpu)
+            f << fmt(",\n   \"fly_frames\": %d, \"fly_step_m\": %g, \"fly_approximation_ms_fresh\": %.3f, \"fly_approximation_ms_cached\": %.3f, "
+                     "\"fly_total_ms_fresh\": %.3f, \"fly_total_ms_cached\": %.3f, \"fly_texels_kept\": %.4f",
+                     set.flyFrames, set.flyStepM, r.flyApproxFreshMs, r.flyApproxCachedMs, r.flyTotalFreshMs, r.flyTotalCachedMs, r.flyKept);
         f << "}";
     }
     f << "\n]\n";
@@ -697,6 +730,9 @@ int main(int argc, char** argv) {
         p.option("--csv", "OUT.csv", "also write one row per scenario as CSV with a header line (default: none)", csv);
         p.option("--json", "OUT.json", "also write a JSON array, one object per scenario (scenario, cells, approximation_ms,\n"
                  "      raycast_ms, gaussians_per_s, rays_per_s, peak_rss_mb, and more) (default: none)", json);
+        p.option("--fly-frames", "N", "CPU: after the timed frames, fly the camera forward for N frames, each evaluated afresh and\n"
+                 "      then with incremental cascades (texels kept from the last frame); prints both (default 0: off)", set.flyFrames);
+        p.option("--fly-step", "M", "metres the camera moves forward per fly-through frame (default 10)", set.flyStepM);
         p.option("--plot", "OUT.svg", "also draw each scenario's best stage times as stacked bars with the targets, SVG\n"
                  "      (default: none)", plot);
         if (!p.parse(argc, argv)) return 0;
@@ -704,6 +740,9 @@ int main(int argc, char** argv) {
         if (set.repeat < 1) throw hc::Error("--repeat " + std::to_string(set.repeat) + ": must be at least 1");
         set.backend = hc::render::parseBackend(backendText);
         if (set.backend == hc::render::Backend::Auto) throw hc::Error("--backend auto: a benchmark names its backend, cpu or gl");
+        if (set.flyFrames < 0 || set.flyFrames == 1) throw hc::Error("--fly-frames " + std::to_string(set.flyFrames) + ": 0 (off) or at least 2");
+        if (set.flyFrames > 0 && set.backend != hc::render::Backend::Cpu) throw hc::Error("--fly-frames: the CPU backend's (incremental cascades)");
+        if (!(set.flyStepM >= 0) || !std::isfinite(set.flyStepM)) throw hc::Error("--fly-step " + fmt("%g", set.flyStepM) + ": metres >= 0");
         if (std::string why = set.options.validate(); !why.empty()) throw hc::Error(why);
         {
             auto x = size.find('x');
@@ -803,6 +842,20 @@ int main(int argc, char** argv) {
             std::printf("  %-14s    hits %.1f %% of pixels, water %.1f %%; camera %.0f, %.0f, %.0f yaw %.1f\n", chosen[k]->name,
                         100.0 * double(r.hits) / double(r.rays), 100.0 * double(r.wetHits) / double(r.rays), r.camera[0], r.camera[1],
                         r.camera[2], r.camera[3]);
+        }
+
+        if (set.flyFrames > 1 && set.backend == hc::render::Backend::Cpu) {
+            std::printf("\nincremental cascades: the camera flies forward %g m a frame for %d frames; means over frames 2..%d,\n"
+                        "every frame evaluated afresh against frames through a CascadeCache (texels kept from the last frame)\n\n",
+                        set.flyStepM, set.flyFrames, set.flyFrames);
+            std::printf("%-14s %16s %16s %6s %14s %14s %14s\n", "scenario", "approx ms fresh", "approx ms cache", "x", "frame ms fresh",
+                        "frame ms cache", "texels kept %");
+            for (size_t k = 0; k < results.size(); ++k) {
+                const RunResult& r = results[k];
+                std::printf("%-14s %16.1f %16.1f %6.1f %14.1f %14.1f %14.1f\n", chosen[k]->name, r.flyApproxFreshMs, r.flyApproxCachedMs,
+                            r.flyApproxCachedMs > 0 ? r.flyApproxFreshMs / r.flyApproxCachedMs : 0.0, r.flyTotalFreshMs, r.flyTotalCachedMs,
+                            100 * r.flyKept);
+            }
         }
 
         // ---- targets ----

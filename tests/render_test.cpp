@@ -670,6 +670,75 @@ TEST(Render, BadCameraAndOptionsAreRefused) {
     EXPECT_THROW(renderFrame(*w.scene, c, o, t), hc::Error);
 }
 
+// Incremental cascades (CascadeCache): after a small move the texels copied from the last frame plus the ones
+// evaluated afresh equal a fresh evaluation (1e-4 m: the same sums; a texel's position differs only by the
+// rounding of x0 + i s), most texels are copied, and the pictures agree. After a jump 5 km up, and with another
+// scene (which copies nothing), the pictures still agree with fresh ones.
+TEST(Render, IncrementalCascadesEqualFreshOnes) {
+    World& w = hef();
+    RenderOptions o;
+    o.texelsPerSide = 512;
+    o.legend = false;
+    const Camera a = overviewCamera(*w.scene, 240, 150);
+    Camera b = a;
+    b.xWorld += 23.0, b.yWorld -= 17.0, b.yawDeg += 0.7;  // a viewer's frame-to-frame move
+    // Texels: fresh against copied + evaluated.
+    const detail::FrameSetup sa = detail::setUpFrame(*w.scene, a), sb = detail::setUpFrame(*w.scene, b);
+    const CascadeFit fa = fitCascades(sa.view, 3, 512), fb = fitCascades(sb.view, 3, 512);
+    uint64_t reusedAll = 0, visibleAll = 0, gaussFresh = 0, gaussInc = 0;
+    double worst = 0;
+    for (size_t k = 0; k < fb.cascades.size(); ++k) {
+        const Cascade& cb = fb.cascades[k];
+        const Cascade& ca = fa.cascades[k];
+        ASSERT_EQ(ca.texelM, cb.texelM) << "cascade " << k << ": a small move keeps the texel size";
+        detail::CascadeTextures texA, fresh, inc;
+        detail::approximate(*w.scene, ca, texA, o.waterMinDepthM, 0);
+        gaussFresh += detail::approximate(*w.scene, cb, fresh, o.waterMinDepthM, 0);
+        const detail::TexelReuse reuse{&ca, &texA, int(std::lround((cb.x0 - ca.x0) / cb.texelM)), int(std::lround((cb.y0 - ca.y0) / cb.texelM))};
+        uint64_t reused = 0;
+        gaussInc += detail::approximate(*w.scene, cb, inc, o.waterMinDepthM, 0, &reuse, &reused);
+        reusedAll += reused;
+        visibleAll += cb.visibleTexels();
+        for (size_t t = 0; t < fresh.terrain.h.size(); ++t) {
+            for (auto [x, y] : {std::pair{fresh.terrain.h[t], inc.terrain.h[t]}, {fresh.water.h[t], inc.water.h[t]}, {fresh.depth[t], inc.depth[t]}}) {
+                if (std::isinf(x) || std::isinf(y)) {
+                    ASSERT_EQ(x, y) << "cascade " << k << " texel " << t << ": surface in one, none in the other";
+                    continue;
+                }
+                worst = std::max(worst, double(std::abs(x - y)));
+            }
+        }
+    }
+    EXPECT_LE(worst, 1e-4) << "copied texels differ from fresh ones [m]";
+    EXPECT_GT(double(reusedAll), 0.7 * double(visibleAll)) << reusedAll << " of " << visibleAll << " texels copied";
+    EXPECT_LT(double(gaussInc), 0.5 * double(gaussFresh));
+    std::printf("small move: %llu of %llu visible texels copied, Gaussians %llu -> %llu, worst texel difference %.2e m\n",
+                (unsigned long long)reusedAll, (unsigned long long)visibleAll, (unsigned long long)gaussFresh, (unsigned long long)gaussInc, worst);
+
+    // Whole frames through the cache: the same pictures as without it.
+    CascadeCache cache;
+    auto sameAsFresh = [&](const World& world, const Camera& c, const char* what) {
+        Timings tc, tf;
+        const Frame inc = renderFrame(*world.scene, c, o, tc, &cache), fresh = renderFrame(*world.scene, c, o, tf);
+        size_t same = 0;
+        for (size_t i = 0; i < inc.distanceM.size(); ++i) {
+            const float x = inc.distanceM[i], y = fresh.distanceM[i];
+            same += (std::isinf(x) && std::isinf(y)) || std::abs(x - y) <= 1e-5f * y;
+        }
+        EXPECT_GE(double(same), 0.999 * double(inc.distanceM.size())) << what;
+        EXPECT_GE(psnr(inc, fresh), 50.0) << what;
+        uint64_t reused = 0;
+        for (const CascadeStats& cs : tc.cascades) reused += cs.reusedTexels;
+        return reused;
+    };
+    EXPECT_EQ(sameAsFresh(w, a, "first frame"), 0u);
+    EXPECT_GT(sameAsFresh(w, b, "small move"), 0u);
+    Camera high = b;
+    high.zWorld += 5000;  // other texel sizes
+    sameAsFresh(w, high, "5 km higher");  // a cascade may meet one of the last frame's texel sizes: copying it is right
+    EXPECT_EQ(sameAsFresh(lidar(), above(lidar(), 100, -60), "another scene"), 0u);
+}
+
 // A golden image of the bundled DEM: a small overview compared with tests/golden/hef_overview.png
 // as raw RGB (tests/golden/hef_overview.rgb). Tolerance: PSNR >= 40 dB, since the approximation's
 // float sums and the threads' order may differ by a code-level change of 1 in a few pixels; a failure

@@ -66,7 +66,8 @@ void Heightfield::buildMip() {
     }
 }
 
-uint64_t approximate(const Scene& scene, const Cascade& c, CascadeTextures& tex, double waterMinDepthM, unsigned threads) {
+uint64_t approximate(const Scene& scene, const Cascade& c, CascadeTextures& tex, double waterMinDepthM, unsigned threads,
+                     const TexelReuse* reuse, uint64_t* reused) {
     const Grid& g = scene.grid();
     const auto& lists = scene.lists();
     const int n = c.n;
@@ -78,12 +79,39 @@ uint64_t approximate(const Scene& scene, const Cascade& c, CascadeTextures& tex,
         tex.water.h.assign(size_t(n) * size_t(n), noSurface);
         tex.depth.assign(size_t(n) * size_t(n), 0.0f);
     }
-    // The visible texels' bounding box, and the cells that meet it.
-    int i0 = n, i1 = -1, j0 = n, j1 = -1;
+    // The texels to evaluate, per row at most two spans: the row's visible span less the part copied from the
+    // last frame (visible there too: one span, as both rows' spans are intervals).
+    struct Todo {
+        int a0 = 0, a1 = -1, b0 = 0, b1 = -1;  // inclusive; empty when the end is below the start
+    };
+    std::vector<Todo> todo(static_cast<size_t>(n));
+    uint64_t copied = 0;
     for (int j = 0; j < n; ++j) {
         const Cascade::RowSpan& r = c.rows[size_t(j)];
-        if (r.last < r.first) continue;
-        i0 = std::min(i0, r.first), i1 = std::max(i1, r.last), j0 = std::min(j0, j), j1 = std::max(j1, j);
+        Todo& t = todo[size_t(j)];
+        t.a0 = r.first, t.a1 = r.last;
+        if (!reuse || r.last < r.first) continue;
+        const int jp = j + reuse->dj;
+        if (jp < 0 || jp >= reuse->cascade->n) continue;
+        const Cascade::RowSpan& p = reuse->cascade->rows[size_t(jp)];
+        const int f = std::max(r.first, p.first - reuse->di), l = std::min(r.last, p.last - reuse->di);
+        if (l < f) continue;
+        const size_t from = size_t(jp) * size_t(n) + size_t(f + reuse->di), to = size_t(j) * size_t(n) + size_t(f), count = size_t(l - f + 1);
+        std::copy_n(&reuse->tex->terrain.h[from], count, &tex.terrain.h[to]);
+        if (tex.hasWater) {
+            std::copy_n(&reuse->tex->water.h[from], count, &tex.water.h[to]);
+            std::copy_n(&reuse->tex->depth[from], count, &tex.depth[to]);
+        }
+        copied += count;
+        t = {r.first, f - 1, l + 1, r.last};
+    }
+    if (reused) *reused = copied;
+    // Their bounding box, and the cells that meet it.
+    int i0 = n, i1 = -1, j0 = n, j1 = -1;
+    for (int j = 0; j < n; ++j) {
+        const Todo& t = todo[size_t(j)];
+        for (auto [lo, hi] : {std::pair{t.a0, t.a1}, {t.b0, t.b1}})
+            if (lo <= hi) i0 = std::min(i0, lo), i1 = std::max(i1, hi), j0 = std::min(j0, j), j1 = std::max(j1, j);
     }
     if (i1 < 0) return 0;
     const double s = c.texelM;
@@ -110,12 +138,15 @@ uint64_t approximate(const Scene& scene, const Cascade& c, CascadeTextures& tex,
             const int ia = std::max(i0, int(first(q.x0, c.x0))), ib = std::min(i1 + 1, int(first(q.x1, c.x0)));
             const int ja = std::max(j0, int(first(q.y0, c.y0))), jb = std::min(j1 + 1, int(first(q.y1, c.y0)));
             if (ia >= ib || ja >= jb) continue;
-            // Only a cell with a visible texel centre gathers its list: in the visible texels' bounding box
+            // Only a cell with a texel centre to evaluate gathers its list: in the visible texels' bounding box
             // (the polygon is a slab of a trapezoid) 25-65 % of the cells that hold a texel centre hold no
             // visible one.
-            bool visible = false;
-            for (int j = ja; j < jb && !visible; ++j) visible = std::max(ia, c.rows[size_t(j)].first) <= std::min(ib - 1, c.rows[size_t(j)].last);
-            if (!visible) continue;
+            bool any = false;
+            for (int j = ja; j < jb && !any; ++j) {
+                const Todo& t = todo[size_t(j)];
+                any = std::max(ia, t.a0) <= std::min(ib - 1, t.a1) || std::max(ia, t.b0) <= std::min(ib - 1, t.b1);
+            }
+            if (!any) continue;
             const auto& kernels = scene.kernels();
             const double kx = kernels[k].cx, ky = kernels[k].cy;
             const double zk = g.values[0][k];
@@ -137,39 +168,41 @@ uint64_t approximate(const Scene& scene, const Cascade& c, CascadeTextures& tex,
             }
             for (int j = ja; j < jb; ++j) {
                 const float fy = static_cast<float>(c.y0 + j * s - ky);
-                const int ra = std::max(ia, c.rows[size_t(j)].first), rb = std::min(ib, c.rows[size_t(j)].last + 1);
-                for (int i = ra; i < rb; ++i) {
-                    const size_t t = size_t(j) * size_t(n) + size_t(i);
-                    const float fx = static_cast<float>(c.x0 + i * s - kx);
-                    gaussians[worker] += m;
-                    float num[kLanes] = {}, den[kLanes] = {}, numD[kLanes] = {};
-                    const float* __restrict ex = cand.ex.data();
-                    const float* __restrict ey = cand.ey.data();
-                    const float* __restrict ca = cand.a.data();
-                    const float* __restrict cr2 = cand.r2.data();
-                    const float* __restrict cdz = cand.dz.data();
-                    const float* __restrict cdd = cand.dd.data();
-                    // Branch-free (masks as 0/1 factors) so the compiler vectorises across the 8 lanes.
-                    for (size_t base = 0; base < padded; base += kLanes)
-                        for (int l = 0; l < kLanes; ++l) {
-                            const size_t idx = base + size_t(l);
-                            const float dx = fx - ex[idx], dy = fy - ey[idx];
-                            const float d2 = dx * dx + dy * dy;
-                            const float kernel = expNeg(-d2 * ca[idx]) - tail;
-                            const float w = std::max(kernel, 0.0f) * static_cast<float>(d2 < cr2[idx]);
-                            num[l] += w * cdz[idx];
-                            numD[l] += w * cdd[idx];
-                            den[l] += w;
+                const Todo& span = todo[size_t(j)];
+                for (auto [lo, hi] : {std::pair{span.a0, span.a1}, {span.b0, span.b1}}) {
+                    for (int i = std::max(ia, lo), rb = std::min(ib, hi + 1); i < rb; ++i) {
+                        const size_t t = size_t(j) * size_t(n) + size_t(i);
+                        const float fx = static_cast<float>(c.x0 + i * s - kx);
+                        gaussians[worker] += m;
+                        float num[kLanes] = {}, den[kLanes] = {}, numD[kLanes] = {};
+                        const float* __restrict ex = cand.ex.data();
+                        const float* __restrict ey = cand.ey.data();
+                        const float* __restrict ca = cand.a.data();
+                        const float* __restrict cr2 = cand.r2.data();
+                        const float* __restrict cdz = cand.dz.data();
+                        const float* __restrict cdd = cand.dd.data();
+                        // Branch-free (masks as 0/1 factors) so the compiler vectorises across the 8 lanes.
+                        for (size_t base = 0; base < padded; base += kLanes)
+                            for (int l = 0; l < kLanes; ++l) {
+                                const size_t idx = base + size_t(l);
+                                const float dx = fx - ex[idx], dy = fy - ey[idx];
+                                const float d2 = dx * dx + dy * dy;
+                                const float kernel = expNeg(-d2 * ca[idx]) - tail;
+                                const float w = std::max(kernel, 0.0f) * static_cast<float>(d2 < cr2[idx]);
+                                num[l] += w * cdz[idx];
+                                numD[l] += w * cdd[idx];
+                                den[l] += w;
+                            }
+                        float sn = 0, sd = 0, snD = 0;
+                        for (int l = 0; l < kLanes; ++l) sn += num[l], sd += den[l], snD += numD[l];
+                        // sd >= the cell's own weight at its farthest point (kernel.h): never zero here.
+                        const float z = static_cast<float>(zk + double(sn / sd));
+                        tex.terrain.h[t] = z;
+                        if (depthLayer >= 0) {
+                            const float d = static_cast<float>(dk + double(snD / sd));
+                            tex.depth[t] = d > 0 ? d : 0.0f;
+                            if (d > minDepth) tex.water.h[t] = z + d;
                         }
-                    float sn = 0, sd = 0, snD = 0;
-                    for (int l = 0; l < kLanes; ++l) sn += num[l], sd += den[l], snD += numD[l];
-                    // sd >= the cell's own weight at its farthest point (kernel.h): never zero here.
-                    const float z = static_cast<float>(zk + double(sn / sd));
-                    tex.terrain.h[t] = z;
-                    if (depthLayer >= 0) {
-                        const float d = static_cast<float>(dk + double(snD / sd));
-                        tex.depth[t] = d > 0 ? d : 0.0f;
-                        if (d > minDepth) tex.water.h[t] = z + d;
                     }
                 }
             }

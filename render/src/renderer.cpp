@@ -6,6 +6,7 @@
 #include <cmath>
 #include <cstdio>
 #include <limits>
+#include <optional>
 
 #include "heightcast/grid/error.h"
 #include "heightcast/grid/parallel.h"
@@ -225,7 +226,21 @@ LegendLayout legendLayout(const Scene& scene, const RenderOptions& options, int 
 
 }  // namespace detail
 
-Frame renderFrame(const Scene& scene, const Camera& camera, const RenderOptions& options, Timings& timings) {
+struct CascadeCache::Impl {
+    struct Entry {
+        Cascade cascade;
+        detail::CascadeTextures tex;
+    };
+    const Scene* scene = nullptr;  // what the entries were evaluated for
+    size_t cells = 0;
+    double waterMinDepthM = 0;
+    std::vector<Entry> entries;
+};
+CascadeCache::CascadeCache() : impl_(std::make_unique<Impl>()) {}
+CascadeCache::~CascadeCache() = default;
+void CascadeCache::clear() { impl_->entries.clear(); }
+
+Frame renderFrame(const Scene& scene, const Camera& camera, const RenderOptions& options, Timings& timings, CascadeCache* cache) {
     camera.validate();
     if (std::string why = options.validate(); !why.empty()) throw Error(why);
     const auto start = Clock::now();
@@ -244,10 +259,22 @@ Frame renderFrame(const Scene& scene, const Camera& camera, const RenderOptions&
     timings.viewDirX = fit.dir[0];
     timings.viewDirY = fit.dir[1];
 
-    // 2. Approximation, 3. max mipmaps.
+    // 2. Approximation (copying what the cache holds of the last frame), 3. max mipmaps.
+    CascadeCache::Impl* kept = cache ? cache->impl_.get() : nullptr;
+    if (kept && (kept->scene != &scene || kept->cells != g.cellCount() || kept->waterMinDepthM != options.waterMinDepthM)) kept->entries.clear();
     std::vector<detail::CascadeTextures> tex(fit.cascades.size());
     for (size_t k = 0; k < fit.cascades.size(); ++k) {
         const Cascade& c = fit.cascades[k];
+        // The last frame's cascade of the same texel size and side, if its lattice is this one's (stable fitting).
+        std::optional<detail::TexelReuse> reuse;
+        if (kept)
+            for (const CascadeCache::Impl::Entry& e : kept->entries) {
+                if (e.cascade.n != c.n || e.cascade.texelM != c.texelM || reuse) continue;
+                const double fi = (c.x0 - e.cascade.x0) / c.texelM, fj = (c.y0 - e.cascade.y0) / c.texelM;
+                if (std::abs(fi) > 1e9 || std::abs(fj) > 1e9) continue;
+                const double ri = std::round(fi), rj = std::round(fj);
+                if (std::abs(fi - ri) < 1e-6 && std::abs(fj - rj) < 1e-6) reuse = detail::TexelReuse{&e.cascade, &e.tex, int(ri), int(rj)};
+            }
         CascadeStats cs;
         cs.nearM = c.splitNear;
         cs.farM = c.farWithOverlap;
@@ -255,7 +282,8 @@ Frame renderFrame(const Scene& scene, const Camera& camera, const RenderOptions&
         cs.texelM = c.texelM;
         cs.visibleTexels = c.visibleTexels();
         t = Clock::now();
-        if (!c.empty()) cs.gaussians = detail::approximate(scene, c, tex[k], options.waterMinDepthM, options.threads);
+        if (!c.empty())
+            cs.gaussians = detail::approximate(scene, c, tex[k], options.waterMinDepthM, options.threads, reuse ? &*reuse : nullptr, &cs.reusedTexels);
         cs.approximationMs = msSince(t);
         timings.approximationMs += cs.approximationMs;
         t = Clock::now();
@@ -363,6 +391,12 @@ Frame renderFrame(const Scene& scene, const Camera& camera, const RenderOptions&
     for (uint64_t h : hits) timings.hits += h;
     drawLegend(f, detail::legendLayout(scene, options, W, H));
     timings.shadingMs = msSince(t);
+    if (kept) {  // this frame's textures, for the next
+        kept->scene = &scene, kept->cells = g.cellCount(), kept->waterMinDepthM = options.waterMinDepthM;
+        kept->entries.clear();
+        for (size_t k = 0; k < fit.cascades.size(); ++k)
+            if (!fit.cascades[k].empty()) kept->entries.push_back({fit.cascades[k], std::move(tex[k])});
+    }
     timings.totalMs = msSince(start);
     return f;
 }
@@ -381,9 +415,9 @@ std::string Timings::toJson() const {
         const CascadeStats& c = cascades[k];
         std::snprintf(b, sizeof b,
                       "%s\n    {\"index\": %zu, \"near_m\": %.3f, \"far_m\": %.3f, \"texel_m\": %.6g, \"visible_texels\": %llu, "
-                      "\"gaussians\": %llu, \"approximation_ms\": %.3f}",
-                      k ? "," : "", k, c.nearM, c.farM, c.texelM, (unsigned long long)c.visibleTexels, (unsigned long long)c.gaussians,
-                      c.approximationMs);
+                      "\"reused_texels\": %llu, \"gaussians\": %llu, \"approximation_ms\": %.3f}",
+                      k ? "," : "", k, c.nearM, c.farM, c.texelM, (unsigned long long)c.visibleTexels, (unsigned long long)c.reusedTexels,
+                      (unsigned long long)c.gaussians, c.approximationMs);
         j += b;
     }
     j += "\n  ]\n}\n";
@@ -397,9 +431,14 @@ std::string Timings::toTable() const {
     s += b;
     for (size_t k = 0; k < cascades.size(); ++k) {
         const CascadeStats& c = cascades[k];
-        std::snprintf(b, sizeof b, "    cascade %zu     %9.2f   offsets %.0f..%.0f m, texel %.3g m, %llu visible texels, %llu Gaussians\n", k,
+        std::snprintf(b, sizeof b, "    cascade %zu     %9.2f   offsets %.0f..%.0f m, texel %.3g m, %llu visible texels, %llu Gaussians", k,
                       c.approximationMs, c.nearM, c.farM, c.texelM, (unsigned long long)c.visibleTexels, (unsigned long long)c.gaussians);
         s += b;
+        if (c.reusedTexels) {
+            std::snprintf(b, sizeof b, " (%llu texels kept from the last frame)", (unsigned long long)c.reusedTexels);
+            s += b;
+        }
+        s += "\n";
     }
     std::snprintf(b, sizeof b, "  mipmaps         %9.2f\n  ray casting     %9.2f   %llu rays, %llu hits\n  shading         %9.2f\n  total           %9.2f\n",
                   mipmapMs, raycastMs, (unsigned long long)rays, (unsigned long long)hits, shadingMs, totalMs);

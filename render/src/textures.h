@@ -26,8 +26,18 @@ struct CascadeTextures {
     bool hasWater = false;
 };
 
-// Approximation (approximate.cpp): fills the textures of one cascade; returns Gaussians evaluated.
-uint64_t approximate(const Scene& scene, const Cascade& c, CascadeTextures& tex, double waterMinDepthM, unsigned threads);
+// The last frame's textures of a cascade with the same texel size, side and lattice: this frame's texel (i, j)
+// is that one's (i + di, j + dj).
+struct TexelReuse {
+    const Cascade* cascade;
+    const CascadeTextures* tex;
+    int di, dj;
+};
+
+// Approximation (approximate.cpp): fills the textures of one cascade; returns Gaussians evaluated. With `reuse`,
+// the visible texels that were visible there too are copied (their count in *reused), the others evaluated.
+uint64_t approximate(const Scene& scene, const Cascade& c, CascadeTextures& tex, double waterMinDepthM, unsigned threads,
+                     const TexelReuse* reuse = nullptr, uint64_t* reused = nullptr);
 
 // One ray through the cascades (raycast.cpp).
 struct Hit {

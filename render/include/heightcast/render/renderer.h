@@ -8,6 +8,7 @@
 #pragma once
 
 #include <cstdint>
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -48,6 +49,7 @@ struct CascadeStats {
     double texelM = 0;                  // texel size
     uint64_t visibleTexels = 0;
     uint64_t gaussians = 0;             // kernel evaluations in the approximation
+    uint64_t reusedTexels = 0;          // visible texels copied from the last frame (renderFrame with a CascadeCache)
     double approximationMs = 0;
 };
 
@@ -90,8 +92,28 @@ private:
     std::vector<CellKernel> kernels_;
 };
 
-// Renders one frame. Throws hc::Error for invalid camera or options.
-Frame renderFrame(const Scene& scene, const Camera& camera, const RenderOptions& options, Timings& timings);
+// Cascade textures kept from one frame to the next (DESIGN.md section 6, incremental cascades). Stable fitting
+// keeps a cascade's texel size and lattice while the camera moves a little, so most of a frame's visible texels
+// were visible in the last one: renderFrame() copies those and evaluates only the newly exposed ones. A cascade
+// is reused only with the same scene, texel size, texture side and water threshold; anything else starts afresh.
+// One cache per stream of frames (the viewer's worker); not for two threads at once.
+class CascadeCache {
+public:
+    CascadeCache();
+    ~CascadeCache();
+    CascadeCache(const CascadeCache&) = delete;
+    CascadeCache& operator=(const CascadeCache&) = delete;
+    void clear();  // the next frame evaluates every texel
+    struct Impl;
+
+private:
+    friend Frame renderFrame(const Scene&, const Camera&, const RenderOptions&, Timings&, CascadeCache*);
+    std::unique_ptr<Impl> impl_;
+};
+
+// Renders one frame. Throws hc::Error for invalid camera or options. With a cache, reuses the texels the last
+// frame of that cache evaluated (the same picture, to float rounding) and leaves this frame's there.
+Frame renderFrame(const Scene& scene, const Camera& camera, const RenderOptions& options, Timings& timings, CascadeCache* cache = nullptr);
 
 // A camera that frames the whole grid obliquely, as a person would pick: from the south-south-west,
 // 35 degrees down, far enough back that the grid's extent fills the view.
