@@ -632,8 +632,12 @@ private:
         }
         RenderOptions o = currentOptions();
         if (c.width != camera_.width) {  // a moving frame: coarser cascades too (the approximation's cost is per texel)
+            // A power of two, so that consecutive moving frames share the texture side and the CPU worker's
+            // CascadeCache can keep their texels (it needs the same side and texel size).
             const double scale = double(c.width) / camera_.width;
-            o.texelsPerSide = std::max(std::min(128, o.texelsPerSide), int(o.texelsPerSide * scale) & ~7);
+            int side = std::min(128, o.texelsPerSide);
+            while (side * 2 <= int(o.texelsPerSide * scale)) side *= 2;
+            o.texelsPerSide = side;
         }
         backend_->submit(c, o, full || (c.width == camera_.width && c.height == camera_.height), toggles_.cascadeTint);
         submitted_ = true;
