@@ -868,7 +868,6 @@ int main(int argc, char** argv) {
             hc::render::Camera c;
             c.width = setup.width, c.height = setup.height;
             hc::view::applyBookmark(*marks[bookmarkSlot], c);
-            c.nearM = setup.nearM, c.farM = setup.farM;
             setup.camera = c;
         }
         const char* display = std::getenv("DISPLAY");

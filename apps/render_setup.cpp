@@ -73,10 +73,7 @@ void RenderSetup::finish() {
         camera = render::Camera::lookAt({look[0], look[1], look[2]}, {look[3], look[4], look[5]}, look.size() > 6 ? look[6] : 50.0,
                                         width, height);
     }
-    if (camera) {
-        camera->nearM = nearM, camera->farM = farM;
-        camera->validate();
-    }
+    if (camera) camera->validate();
 }
 
 std::unique_ptr<LoadedScene> loadScene(const char* program, const std::string& gridPath, const RenderSetup& setup) {
@@ -90,9 +87,8 @@ std::unique_ptr<LoadedScene> loadScene(const char* program, const std::string& g
 }
 
 render::Camera initialCamera(const RenderSetup& setup, const render::Scene& scene) {
-    if (setup.camera) return *setup.camera;
-    render::Camera c = render::overviewCamera(scene, setup.width, setup.height);
-    c.nearM = setup.nearM, c.farM = setup.farM;
+    render::Camera c = setup.camera ? *setup.camera : render::overviewCamera(scene, setup.width, setup.height);
+    c.nearM = setup.nearM, c.farM = setup.farM;  // validated by finish()
     return c;
 }
 

@@ -49,7 +49,7 @@ struct LoadedScene {
 // "PROGRAM: NOTE", and prepares the scene. Throws hc::Error.
 std::unique_ptr<LoadedScene> loadScene(const char* program, const std::string& gridPath, const RenderSetup& setup);
 
-// The camera the options gave, or the overview framing the whole grid; of the given size.
+// The camera the options gave, or the overview framing the whole grid; of the given size, with --near/--far.
 render::Camera initialCamera(const RenderSetup& setup, const render::Scene& scene);
 
 }  // namespace hc::cli
