@@ -45,6 +45,22 @@ inline std::string tickLabel(double v) {
     return b;
 }
 
+// About six ticks over [lo, hi] at a round step (1, 2 or 5 times a power of ten).
+inline std::vector<double> linearTicks(double lo, double hi) {
+    const double raw = (hi - lo) / 6, mag = std::pow(10.0, std::floor(std::log10(raw)));
+    const double step = raw / mag < 2 ? 2 * mag : raw / mag < 5 ? 5 * mag : 10 * mag;
+    std::vector<double> t;
+    for (double v = std::ceil(lo / step) * step; v <= hi; v += step) t.push_back(std::abs(v) < 1e-12 * step ? 0.0 : v);
+    return t;
+}
+
+// An SVG document's start: the canvas, a white background and the title above the plot's left edge.
+inline std::string svgStart(double width, double height, double left, const std::string& title) {
+    return "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"" + svgNum(width) + "\" height=\"" + svgNum(height) +
+           "\" font-family=\"sans-serif\" font-size=\"12\">\n<rect width=\"100%\" height=\"100%\" fill=\"white\"/>\n" +
+           "<text x=\"" + svgNum(left) + "\" y=\"28\" font-size=\"15\">" + svgEscape(title) + "</text>\n";
+}
+
 inline void writeSvg(const std::string& path, const std::string& svg) {
     AtomicFileWriter w(path);
     w.write(std::as_bytes(std::span(svg)));
@@ -98,15 +114,11 @@ struct LinePlot {
                 }
                 if (ones.size() >= 3) t = ones;
             } else {
-                const double raw = (hi - lo) / 6, mag = std::pow(10.0, std::floor(std::log10(raw)));
-                const double step = raw / mag < 2 ? 2 * mag : raw / mag < 5 ? 5 * mag : 10 * mag;
-                for (double v = std::ceil(lo / step) * step; v <= hi; v += step) t.push_back(std::abs(v) < 1e-12 * step ? 0.0 : v);
+                t = linearTicks(lo, hi);
             }
             return t;
         };
-        std::string o = "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"" + svgNum(W) + "\" height=\"" + svgNum(H) +
-                        "\" font-family=\"sans-serif\" font-size=\"12\">\n<rect width=\"100%\" height=\"100%\" fill=\"white\"/>\n";
-        o += "<text x=\"" + svgNum(left) + "\" y=\"28\" font-size=\"15\">" + svgEscape(title) + "</text>\n";
+        std::string o = svgStart(W, H, left, title);
         for (double t : ticks(x0, x1, logX)) {
             o += "<line x1=\"" + svgNum(px(t)) + "\" y1=\"" + svgNum(top) + "\" x2=\"" + svgNum(px(t)) + "\" y2=\"" + svgNum(top + ph) +
                  "\" stroke=\"#ddd\"/>\n";
@@ -167,13 +179,9 @@ struct BarPlot {
         if (!(xMax > 0)) throw Error("plot '" + title + "': nothing to draw");
         xMax *= 1.05;
         auto px = [&](double x) { return left + pw * x / xMax; };
-        std::string o = "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"" + svgNum(W) + "\" height=\"" + svgNum(H) +
-                        "\" font-family=\"sans-serif\" font-size=\"12\">\n<rect width=\"100%\" height=\"100%\" fill=\"white\"/>\n";
-        o += "<text x=\"" + svgNum(left) + "\" y=\"28\" font-size=\"15\">" + svgEscape(title) + "</text>\n";
+        std::string o = svgStart(W, H, left, title);
         const double bottom = top + double(rows.size()) * (barH + gap);
-        const double raw = xMax / 6, mag = std::pow(10.0, std::floor(std::log10(raw)));
-        const double step = raw / mag < 2 ? 2 * mag : raw / mag < 5 ? 5 * mag : 10 * mag;
-        for (double t = 0; t <= xMax; t += step) {
+        for (double t : linearTicks(0, xMax)) {
             o += "<line x1=\"" + svgNum(px(t)) + "\" y1=\"" + svgNum(top) + "\" x2=\"" + svgNum(px(t)) + "\" y2=\"" + svgNum(bottom) +
                  "\" stroke=\"#ddd\"/>\n";
             o += "<text x=\"" + svgNum(px(t)) + "\" y=\"" + svgNum(bottom + 16) + "\" text-anchor=\"middle\">" + tickLabel(t) + "</text>\n";
