@@ -14,9 +14,11 @@
 #include <cstdlib>
 #include <filesystem>
 #include <memory>
+#include <random>
 
 #include "heightcast/grid/error.h"
 #include "heightcast/influence/influence.h"
+#include "heightcast/influence/surface.h"
 #include "heightcast/render/gl_renderer.h"
 #include "heightcast/render/gpu_layout.h"
 #include "heightcast/render/image_io.h"
@@ -108,7 +110,7 @@ TEST(RenderGl, Std430LayoutsAgreeWithTheCppStructs) {
     HC_FRAME(colorMode), HC_FRAME(cellOutlines), HC_FRAME(legendRamp), HC_FRAME(legendX0), HC_FRAME(legendY0);
     HC_FRAME(legendBarW), HC_FRAME(legendBarH), HC_FRAME(legendScale), HC_FRAME(labelHiLen), HC_FRAME(labelLoLen);
     HC_FRAME_ARRAY(labelHi), HC_FRAME_ARRAY(labelLo), HC_FRAME_ARRAY(elevationRamp), HC_FRAME_ARRAY(depthRamp);
-    HC_FRAME_ARRAY(skyHorizon), HC_FRAME_ARRAY(skyZenith), HC_FRAME_ARRAY(dryColor);
+    HC_FRAME_ARRAY(skyHorizon), HC_FRAME_ARRAY(skyZenith), HC_FRAME_ARRAY(dryColor), HC_FRAME(zFloor), HC_FRAME_ARRAY(wallColor);
 #define HC_CASCADE(m) expectAt("raycast", "cascades[0]." #m, cas + long(offsetof(gpu::GpuCascade, m)), long(sizeof(gpu::GpuCascade)))
 #define HC_CASCADE_ARRAY(m) expectAt("raycast", "cascades[0]." #m "[0]", cas + long(offsetof(gpu::GpuCascade, m)), long(sizeof(gpu::GpuCascade)))
     HC_CASCADE(x0Eye), HC_CASCADE(y0Eye), HC_CASCADE(texelF), HC_CASCADE(n), HC_CASCADE(splitNear), HC_CASCADE(splitFar);
@@ -122,7 +124,7 @@ TEST(RenderGl, Std430LayoutsAgreeWithTheCppStructs) {
     HC_CELL(ix), HC_CELL(iy), HC_CELL(level), HC_CELL(listBegin), HC_CELL(a), HC_CELL(r2), HC_CELL(z), HC_CELL(depth);
 #define HC_PIXEL(m) expectAt("shade", "pixels[0]." #m, long(offsetof(gpu::GpuPixel, m)), long(sizeof(gpu::GpuPixel)))
     HC_PIXEL(t), HC_PIXEL(relX), HC_PIXEL(relY), HC_PIXEL(relZ), HC_PIXEL(nx), HC_PIXEL(ny), HC_PIXEL(nz), HC_PIXEL(depth);
-    HC_PIXEL(cascade), HC_PIXEL(water);
+    HC_PIXEL(cascade), HC_PIXEL(water), HC_PIXEL(wall);
     // Whole sizes: the frame block, and (through the unsized arrays' strides above) each struct.
     EXPECT_EQ(gl.bufferBlockSize("shade", "FrameBlock"), long(sizeof(gpu::FrameBlock)));
     EXPECT_EQ(gl.bufferBlockSize("raycast", "FrameBlock"), long(sizeof(gpu::FrameBlock)));
@@ -279,11 +281,15 @@ TEST(RenderGl, NearAndFarPlanesAsOnTheCpu) {
     Timings t;
     const Frame all = renderFrame(*w.scene, c, smallOptions(), t);
     std::vector<float> d;
-    for (float v : all.distanceM)
-        if (std::isfinite(v)) d.push_back(v);
+    for (size_t i = 0; i < all.distanceM.size(); ++i)
+        if (std::isfinite(all.distanceM[i]) && all.wall[i] == 0) d.push_back(all.distanceM[i]);
     ASSERT_GT(d.size(), all.distanceM.size() / 4);
     std::sort(d.begin(), d.end());
-    c.nearM = d[d.size() / 4], c.farM = d[3 * d.size() / 4];  // the middle half of the hit distances
+    // The middle half of the surface hits' distances. (Surface hits only, as before the walls of issue 11: with
+    // the walls' hits counted the far plane moves to 36208.246 m, where cascade 0's Gaussians differ between the
+    // backends, CPU 1914100 against GL 1910741: a texel assigned to different cells by the two approximations,
+    // which is not this test's subject.)
+    c.nearM = d[d.size() / 4], c.farM = d[3 * d.size() / 4];
     expectSame(w, c, "hef_near_far", smallOptions(), false);  // half the hits are clipped: "some terrain" is the check
     const Frame gl = w.gl->render(c, smallOptions(), t);
     size_t hits = 0;
@@ -382,6 +388,115 @@ TEST(RenderGl, CameraInsideTheTerrainSeesNothing) {
     const Frame f = w.gl->render(c, smallOptions(), t);
     EXPECT_EQ(t.hits, 0u);
     for (float d : f.distanceM) EXPECT_TRUE(std::isinf(d) && d > 0);
+}
+
+// ------------------------------------------------------------ issue 11: hits that are not on the surface
+
+// GL hits (not walls, not water) more than max(3x the discretisation bound, 1 m) above the exact surface: the
+// floating pixels of a blend between two surfaces. The bound as render_test's bilinearBound(): s^2 / 8 times the
+// largest second differences of the exact surface around the hit, doubled, twice that for a blended pixel with
+// the coarser cascade's texel, plus 5 mm; no claim next to a hole.
+size_t floatingPixels(const World& w, const hc::influence::SurfaceEvaluator& eval, const Frame& f, const Timings& t, double& worst) {
+    size_t floating = 0;
+    for (size_t i = 0; i < f.distanceM.size(); ++i) {
+        if (!std::isfinite(f.distanceM[i]) || f.wall[i] != 0 || f.waterDepthM[i] > 0) continue;
+        const double x = f.posX[i], y = f.posY[i];
+        const auto exact = eval.value(x, y, {});
+        if (!exact) continue;
+        const size_t k = size_t(f.cascade[i]);
+        const double s = k + 1 < t.cascades.size() ? std::max(t.cascades[k].texelM, t.cascades[k + 1].texelM) : t.cascades[k].texelM;
+        double vxx = 0, vyy = 0;
+        bool defined = true;
+        for (auto [ox, oy] : {std::pair{0.0, 0.0}, {0.5, 0.0}, {-0.5, 0.0}, {0.0, 0.5}, {0.0, -0.5}}) {
+            auto v = [&](double dx, double dy) { return eval.value(x + ox * s + dx, y + oy * s + dy, {}); };
+            const auto c = v(0, 0), xp = v(s, 0), xm = v(-s, 0), yp = v(0, s), ym = v(0, -s);
+            if (!c || !xp || !xm || !yp || !ym) {
+                defined = false;
+                break;
+            }
+            vxx = std::max(vxx, std::abs(*xp - 2 * *c + *xm) / (s * s));
+            vyy = std::max(vyy, std::abs(*yp - 2 * *c + *ym) / (s * s));
+        }
+        if (!defined) continue;
+        const double bound = 2 * (2.0 * s * s / 8.0 * (vxx + vyy) + 5e-3);
+        const double above = f.posZ[i] - *exact;
+        if (above > std::max(3 * bound, 1.0)) ++floating, worst = std::max(worst, above);
+    }
+    (void)w;
+    return floating;
+}
+
+// Issue 11 on the GL backend, against the CPU: no floating pixels where cascades overlap (low cameras looking
+// across the alpine DEM's ridges, as in render_test); the same walls where a camera 25 m outside the domain and a
+// camera in a hole look at the edges (hit/miss, depth and colour as expectSame, and the wall flag on 99.5 % of
+// the pixels, the same allowance as hit/miss); and a camera below the terrain evaluates nothing.
+TEST(RenderGl, WallsBlendsAndCameraBelowAsOnTheCpu) {
+    World& w = hef();
+    HC_REQUIRE_GL(w);
+    const hc::influence::SurfaceEvaluator eval(w.grid, w.lists);
+    const Scene& s = *w.scene;
+    std::mt19937_64 rng(11);
+    std::uniform_real_distribution<double> u(0, 1);
+    size_t floating = 0, frames = 0;
+    double worst = 0;
+    RenderOptions o;
+    o.texelsPerSide = 256;
+    while (frames < 8) {
+        const double x = s.xMin + (0.2 + 0.6 * u(rng)) * (s.xMax - s.xMin), y = s.yMin + (0.2 + 0.6 * u(rng)) * (s.yMax - s.yMin);
+        const auto ground = eval.value(x, y, {});
+        if (!ground) continue;
+        Camera c;
+        c.xWorld = w.grid.originWorldX + x, c.yWorld = w.grid.originWorldY + y, c.zWorld = *ground + 30 + 400 * u(rng);
+        c.yawDeg = 360 * u(rng), c.pitchDeg = -2 - 12 * u(rng), c.fovYDeg = 50, c.width = 240, c.height = 160;
+        Timings t;
+        floating += floatingPixels(w, eval, w.gl->render(c, o, t), t, worst);
+        ++frames;
+    }
+    EXPECT_EQ(floating, 0u) << "GL: worst " << worst << " m above the exact surface";
+
+    auto sameWalls = [](World& world, const Camera& c, const std::string& name) {
+        expectSame(world, c, name, smallOptions(), false);
+        Timings tc, tg;
+        const Frame cpu = renderFrame(*world.scene, c, smallOptions(), tc), gl = world.gl->render(c, smallOptions(), tg);
+        size_t same = 0, walls = 0;
+        for (size_t i = 0; i < cpu.wall.size(); ++i) same += cpu.wall[i] == gl.wall[i], walls += gl.wall[i] != 0;
+        EXPECT_GE(double(same), 0.995 * double(cpu.wall.size())) << name << ": the wall flag differs";
+        EXPECT_GT(walls, cpu.wall.size() / 10) << name << ": the camera looks at an edge";
+    };
+    World& l = lidar();
+    HC_REQUIRE_GL(l);
+    const Scene& ls = *l.scene;
+    const double ly = 0.5 * (ls.yMin + ls.yMax);
+    const hc::influence::SurfaceEvaluator leval(l.grid, l.lists);
+    Camera out;
+    out.xWorld = l.grid.originWorldX + ls.xMin - 25, out.yWorld = l.grid.originWorldY + ly;
+    out.zWorld = 0.5 * (ls.elevationMin + leval.value(ls.xMin + 0.5, ly, {}).value());
+    out.yawDeg = 90, out.pitchDeg = 0, out.fovYDeg = 50, out.width = 192, out.height = 128;
+    sameWalls(l, out, "lidar_outside_west_edge");
+
+    World gully;
+    gully.grid = hc::test::ingestFile(hc::test::dataFile("west_bijou_gully_3m.asc"), 0.25);
+    gully.init();
+    HC_REQUIRE_GL(gully);
+    const Scene& gs = *gully.scene;
+    const hc::influence::SurfaceEvaluator geval(gully.grid, gully.lists);
+    const double gy = 0.5 * (gs.yMin + gs.yMax);
+    double xEdge = gs.xMin + 2;
+    while (xEdge < gs.xMax && !gully.grid.locate(xEdge, gy)) xEdge += 0.5;
+    const double top = geval.value(xEdge + 3, gy, {}).value();
+    Camera hole;
+    hole.xWorld = gully.grid.originWorldX + xEdge - 20, hole.yWorld = gully.grid.originWorldY + gy;
+    hole.zWorld = std::max(top - 3, gs.elevationMin + 0.5 * (top - gs.elevationMin));
+    hole.yawDeg = 90, hole.pitchDeg = -5, hole.fovYDeg = 40, hole.width = 192, hole.height = 128;
+    sameWalls(gully, hole, "gully_in_a_hole");
+
+    Camera below = overviewCamera(s, 64, 48);
+    below.xWorld = w.grid.originWorldX + 0.5 * (s.xMin + s.xMax), below.yWorld = w.grid.originWorldY + 0.5 * (s.yMin + s.yMax);
+    below.zWorld = eval.value(0.5 * (s.xMin + s.xMax), 0.5 * (s.yMin + s.yMax), {}).value() - 50;
+    Timings t;
+    const Frame f = w.gl->render(below, smallOptions(), t);
+    EXPECT_EQ(t.hits, 0u);
+    EXPECT_TRUE(t.cascades.empty()) << "GL: a cascade was fitted for a camera inside the terrain";
 }
 
 // DESIGN.md section 2: the GPU sees only local and eye-relative values, so a grid 1e7 m away renders

@@ -96,7 +96,8 @@ struct HitCheck {
 
 // Every hit pixel lies on the exact surface within its cascade's bound (for a blended pixel, the
 // larger of the two cascades' texels and twice the bound: the blend is a convex combination of two
-// points each within their bound, on a ray at a small angle to the surface).
+// points each within their bound, on a ray at a small angle to the surface). Hits on the terrain block's
+// walls (issue 11) are not on the surface: badWalls() checks those.
 HitCheck checkHits(const World& w, const Frame& f, const Timings& t, size_t stride) {
     HitCheck hc;
     const auto water = w.scene->hasWater() ? hc::influence::Layer::byName(w.grid, "water_surface") : hc::influence::Layer{};
@@ -104,6 +105,7 @@ HitCheck checkHits(const World& w, const Frame& f, const Timings& t, size_t stri
         EXPECT_FALSE(std::isnan(f.distanceM[i]));
         if (!std::isfinite(f.distanceM[i])) continue;
         ++hc.hits;
+        if (f.wall[i] != 0) continue;
         const double x = f.posX[i], y = f.posY[i], z = f.posZ[i];
         EXPECT_TRUE(std::isfinite(x) && std::isfinite(y) && std::isfinite(z));
         EXPECT_NEAR(std::hypot(f.nX[i], f.nY[i], f.nZ[i]), 1.0, 1e-5);
@@ -449,7 +451,7 @@ TEST(Render, RollTurnsThePicture) {
     EXPECT_GT(right, 20 * left + 100) << "left " << left << ", right " << right;
 }
 
-// The EXR layers, opened again with OpenEXR: the nine FLOAT channels of the issue, the origin as double
+// The EXR layers, opened again with OpenEXR: the nine FLOAT channels of the issue and wall (issue 11), the origin as double
 // attributes, every value equal to the frame's (bit for bit: FLOAT channels store float32 unchanged).
 TEST(Render, ExrLayersReadBackWithOpenExr) {
     World& w = hef();
@@ -469,7 +471,7 @@ TEST(Render, ExrLayersReadBackWithOpenExr) {
     ASSERT_EQ(dw.max.y - dw.min.y + 1, f.height);
     const std::vector<std::pair<const char*, const std::vector<float>*>> layers = {
         {"Z", &f.distanceM}, {"P.X", &f.posX}, {"P.Y", &f.posY}, {"P.Z", &f.posZ}, {"N.X", &f.nX},
-        {"N.Y", &f.nY}, {"N.Z", &f.nZ}, {"cascade", &f.cascade}, {"water_depth", &f.waterDepthM}};
+        {"N.Y", &f.nY}, {"N.Z", &f.nZ}, {"cascade", &f.cascade}, {"water_depth", &f.waterDepthM}, {"wall", &f.wall}};
     std::set<std::string> names;
     for (auto it = h.channels().begin(); it != h.channels().end(); ++it) {
         names.insert(it.name());
@@ -737,6 +739,264 @@ TEST(Render, IncrementalCascadesEqualFreshOnes) {
     high.zWorld += 5000;  // other texel sizes
     sameAsFresh(w, high, "5 km higher");  // a cascade may meet one of the last frame's texel sizes: copying it is right
     EXPECT_EQ(sameAsFresh(lidar(), above(lidar(), 100, -60), "another scene"), 0u);
+}
+
+// ---- issue 11: ray casting hits that are not on the surface ----
+
+// Is pixel i a hit on a cut face of the terrain block (a hole or domain edge wall, or its bottom)?
+bool wallAt(const Frame& f, size_t i) { return f.wall[i] != 0; }
+
+// Hits far above the exact surface at their x, y: more than 3x the discretisation bound of checkHits (the
+// random-camera test's worst ratio) and more than 1 m. A blend of two hits on different surfaces (a ridge in
+// one cascade, the slope behind it in the next) lands in the air between them, tens of metres up.
+struct Floating {
+    size_t checked = 0, floating = 0;
+    double worstM = 0;
+};
+Floating countFloating(const World& w, const Frame& f, const Timings& t) {
+    Floating r;
+    for (size_t i = 0; i < f.distanceM.size(); ++i) {
+        if (!std::isfinite(f.distanceM[i]) || wallAt(f, i) || f.waterDepthM[i] > 0) continue;
+        const double x = f.posX[i], y = f.posY[i], z = f.posZ[i];
+        const auto exact = w.eval->value(x, y, {});
+        if (!exact) continue;
+        const size_t k = size_t(f.cascade[i]);
+        const double s = k + 1 < t.cascades.size() ? std::max(t.cascades[k].texelM, t.cascades[k + 1].texelM) : t.cascades[k].texelM;
+        const double bound = 2 * bilinearBound(w, {}, x, y, s);
+        ++r.checked;
+        const double above = z - *exact;
+        if (above > std::max(3 * bound, 1.0)) {
+            ++r.floating;
+            r.worstM = std::max(r.worstM, above);
+        }
+    }
+    return r;
+}
+
+// Low cameras over the alpine DEM looking across its ridges, so that silhouettes fall into the cascades'
+// overlaps (issue 11: "2-21 pixels a frame up to 190 m above the terrain").
+std::vector<Camera> ridgeCameras(const World& w) {
+    std::vector<Camera> cams;
+    std::mt19937_64 rng(11);
+    std::uniform_real_distribution<double> u(0, 1);
+    const Scene& s = *w.scene;
+    while (cams.size() < 24) {
+        const double x = s.xMin + (0.2 + 0.6 * u(rng)) * (s.xMax - s.xMin), y = s.yMin + (0.2 + 0.6 * u(rng)) * (s.yMax - s.yMin);
+        const auto ground = exactAt(w, x, y);
+        if (!ground) continue;
+        Camera c;
+        c.xWorld = w.grid.originWorldX + x, c.yWorld = w.grid.originWorldY + y;
+        c.zWorld = *ground + 30 + 400 * u(rng);
+        c.yawDeg = 360 * u(rng), c.pitchDeg = -2 - 12 * u(rng), c.fovYDeg = 50;
+        c.width = 240, c.height = 160;
+        cams.push_back(c);
+    }
+    return cams;
+}
+
+TEST(RenderHits, NoFloatingPixelsWhereCascadesOverlap) {
+    World& w = hef();
+    size_t checked = 0, floating = 0;
+    double worst = 0;
+    for (const Camera& c : ridgeCameras(w)) {
+        RenderOptions o;
+        o.texelsPerSide = 256;
+        o.legend = false;
+        Timings t;
+        const Frame f = renderFrame(*w.scene, c, o, t);
+        const Floating r = countFloating(w, f, t);
+        checked += r.checked, floating += r.floating, worst = std::max(worst, r.worstM);
+    }
+    std::printf("%zu hits checked, %zu floating (worst %.1f m above the exact surface)\n", checked, floating, worst);
+    EXPECT_GT(checked, 200000u);
+    EXPECT_EQ(floating, 0u) << "worst " << worst << " m above the exact surface";
+}
+
+// A wall hit lies where the defined surface ends: on a texel-centre line of its cascade (texel centres are
+// multiples of the texel size s in the local frame: stable fitting), one of the two corner texels one texel
+// outwards along its normal lies outside every cell, and its height lies between the grid's lowest elevation
+// and the surface at that edge (the patch edge is the straight line between the two inner corner texels, each
+// equal to the exact surface within 1 mm: 1 cm allowed, with the float32 position). A bottom-face hit lies at
+// the lowest elevation. Counts the hits that do not, over the wall hits it counts in `walls`.
+size_t badWalls(const World& w, const Frame& f, const Timings& t, size_t& walls) {
+    size_t bad = 0;
+    const double zFloor = w.scene->elevationMin, tol = 0.01;
+    auto outside = [&](double x, double y) {  // within a hair (texel centres on cell edges: rounding)
+        for (auto [dx, dy] : {std::pair{0.0, 0.0}, {1e-6, 0.0}, {-1e-6, 0.0}, {0.0, 1e-6}, {0.0, -1e-6}})
+            if (!w.grid.locate(x + dx, y + dy)) return true;
+        return false;
+    };
+    for (size_t i = 0; i < f.distanceM.size(); ++i) {
+        if (!std::isfinite(f.distanceM[i]) || !wallAt(f, i)) continue;
+        ++walls;
+        const double x = f.posX[i], y = f.posY[i], z = f.posZ[i];
+        if (f.nZ[i] == -1.0f) {  // the bottom face
+            if (std::abs(z - zFloor) > tol && bad++ < 5) ADD_FAILURE() << "bottom hit " << i << " at z " << z << ", not " << zFloor;
+            continue;
+        }
+        const double s = t.cascades[size_t(f.cascade[i])].texelM;
+        const bool alongX = std::abs(f.nX[i]) == 1.0f;
+        if (!(f.nZ[i] == 0.0f && (alongX || std::abs(f.nY[i]) == 1.0f))) {
+            if (bad++ < 5) ADD_FAILURE() << "wall hit " << i << ": normal " << f.nX[i] << "," << f.nY[i] << "," << f.nZ[i] << " is not horizontal along an axis";
+            continue;
+        }
+        const double across = alongX ? x : y, along = alongX ? y : x, n = alongX ? f.nX[i] : f.nY[i];
+        const double line = std::round(across / s) * s, lo = std::floor(along / s) * s, hi = lo + s;
+        auto at = [&](double a, double b) { return alongX ? std::pair{a, b} : std::pair{b, a}; };
+        const auto [ox0, oy0] = at(line + n * s, lo);
+        const auto [ox1, oy1] = at(line + n * s, hi);
+        const auto [ix0, iy0] = at(line, lo);
+        const auto [ix1, iy1] = at(line, hi);
+        const auto z0 = w.eval->value(ix0, iy0, {}), z1 = w.eval->value(ix1, iy1, {});
+        const bool onLine = std::abs(across - line) <= tol;
+        const bool edge = outside(ox0, oy0) || outside(ox1, oy1);
+        const bool height = z0 && z1 && z >= zFloor - tol && z <= std::max(*z0, *z1) + tol;
+        if (!(onLine && edge && height) && bad++ < 5)
+            ADD_FAILURE() << "wall hit " << i << " at " << x << "," << y << "," << z << " (s " << s << ", normal " << n << (alongX ? " x" : " y")
+                          << "): on the texel line " << onLine << ", beside a hole or the domain's edge " << edge << ", between "
+                          << zFloor << " and the edge's top " << height;
+    }
+    return bad;
+}
+
+// Non-wall hits off the exact surface by more than max(3x the bound, 1 m). Next to a hole, where checkHits
+// makes no claim, a surface hit is still on a patch with four defined corners: there the bound is 1 m plus
+// a tenth of the texel (the patch's relief between corners equal to the surface within 1 mm).
+size_t offSurface(const World& w, const Frame& f, const Timings& t, double& worst) {
+    size_t off = 0;
+    for (size_t i = 0; i < f.distanceM.size(); ++i) {
+        if (!std::isfinite(f.distanceM[i]) || wallAt(f, i) || f.waterDepthM[i] > 0) continue;
+        const auto exact = w.eval->value(f.posX[i], f.posY[i], {});
+        if (!exact) continue;
+        const size_t k = size_t(f.cascade[i]);
+        const double s = k + 1 < t.cascades.size() ? std::max(t.cascades[k].texelM, t.cascades[k + 1].texelM) : t.cascades[k].texelM;
+        double bound = 2 * bilinearBound(w, {}, f.posX[i], f.posY[i], s);
+        if (bound > 1e29) bound = 1.0 + 0.1 * s;
+        const double err = std::abs(f.posZ[i] - *exact);
+        if (err > std::max(3 * bound, 1.0)) ++off, worst = std::max(worst, err);
+    }
+    return off;
+}
+
+// Issue 11: a camera 25 m outside the domain's west edge, below the edge's surface, looking east: it sees the
+// domain's edge as a wall (before: the rays' first contact was the side, taken as starting inside the terrain,
+// and the lower half of the picture was sky).
+TEST(RenderHits, CameraOutsideTheDomainSeesTheEdgeWall) {
+    World& w = lidar();
+    const Scene& s = *w.scene;
+    const double y = 0.5 * (s.yMin + s.yMax);
+    const auto edgeTop = exactAt(w, s.xMin + 0.5, y);
+    ASSERT_TRUE(edgeTop);
+    Camera c;
+    c.xWorld = w.grid.originWorldX + s.xMin - 25;
+    c.yWorld = w.grid.originWorldY + y;
+    c.zWorld = 0.5 * (s.elevationMin + *edgeTop);
+    c.yawDeg = 90, c.pitchDeg = 0, c.fovYDeg = 50, c.width = 96, c.height = 64;
+    Timings t;
+    const Frame f = renderWith(w, c, t);
+    size_t walls = 0;
+    EXPECT_EQ(badWalls(w, f, t, walls), 0u);
+    std::printf("camera 25 m west of the domain, %.1f m below the edge's top: %llu hits of %llu rays, %zu on the wall\n",
+                *edgeTop - c.zWorld, (unsigned long long)t.hits, (unsigned long long)t.rays, walls);
+    EXPECT_GT(walls, t.rays / 4) << "the edge wall fills the lower part of the picture";
+    double worst = 0;
+    EXPECT_EQ(offSurface(w, f, t, worst), 0u) << "worst " << worst << " m";
+    EXPECT_EQ(checkHits(w, f, t, 1).bad, 0u);
+    // The EXR's wall channel, read back with OpenEXR: 1 on exactly these hits, 0 elsewhere.
+    const fs::path path = fs::temp_directory_path() / ("hc_render_walls_" + std::to_string(::getpid()) + ".exr");
+    writeFrameExr(f, path.string());
+    Imf::InputFile in(path.c_str());
+    ASSERT_NE(in.header().channels().findChannel("wall"), nullptr) << "no wall channel";
+    const Imath::Box2i dw = in.header().dataWindow();
+    std::vector<float> wall(f.wall.size(), -1.0f);
+    Imf::FrameBuffer fb;
+    fb.insert("wall", Imf::Slice(Imf::FLOAT, reinterpret_cast<char*>(wall.data()) - (dw.min.x + size_t(dw.min.y) * size_t(f.width)) * sizeof(float),
+                                 sizeof(float), sizeof(float) * size_t(f.width)));
+    in.setFrameBuffer(fb);
+    in.readPixels(dw.min.y, dw.max.y);
+    size_t ones = 0, others = 0;
+    for (size_t i = 0; i < wall.size(); ++i) {
+        ones += wall[i] == 1.0f && wallAt(f, i) && std::isfinite(f.distanceM[i]);
+        others += !(wall[i] == 1.0f || wall[i] == 0.0f) || (wall[i] == 1.0f) != wallAt(f, i);
+    }
+    EXPECT_EQ(ones, walls);
+    EXPECT_EQ(others, 0u);
+    fs::remove(path);
+}
+
+// Issue 11: a camera in a hole of the gully (72 % nodata), below the surface of the valid cells beside it,
+// looking at the hole's edge: it sees the edge as a wall (before: sky). And from random cameras over the
+// gully, rays that cross a hole and meet its far side below the surface hit that side's wall, not a point
+// up to kilometres under the surface shaded as if flat: every non-wall hit is on the surface, every wall hit
+// on an edge.
+TEST(RenderHits, HoleEdgesAreWalls) {
+    World w = fromFile("west_bijou_gully_3m.asc", 0.25);
+    const Scene& s = *w.scene;
+    const double y = 0.5 * (s.yMin + s.yMax);
+    double xEdge = s.xMin + 2;
+    while (xEdge < s.xMax && !w.grid.locate(xEdge, y)) xEdge += 0.5;
+    ASSERT_LT(xEdge, s.xMax);
+    ASSERT_FALSE(w.grid.locate(xEdge - 20, y)) << "the camera stands in the hole";
+    const auto top = exactAt(w, xEdge + 3, y);
+    ASSERT_TRUE(top);
+    Camera c;
+    c.xWorld = w.grid.originWorldX + xEdge - 20;
+    c.yWorld = w.grid.originWorldY + y;
+    c.zWorld = std::max(*top - 3, s.elevationMin + 0.5 * (*top - s.elevationMin));
+    c.yawDeg = 90, c.pitchDeg = -5, c.fovYDeg = 40, c.width = 96, c.height = 64;
+    Timings t;
+    Frame f = renderWith(w, c, t);
+    size_t walls = 0;
+    EXPECT_EQ(badWalls(w, f, t, walls), 0u);
+    std::printf("camera in a hole %.1f m below the edge's top: %llu hits of %llu rays, %zu on walls\n", *top - c.zWorld,
+                (unsigned long long)t.hits, (unsigned long long)t.rays, walls);
+    EXPECT_GT(walls, t.rays / 10) << "the hole's edge stands in front of the camera";
+
+    std::mt19937_64 rng(7);
+    size_t off = 0, bad = 0, allWalls = 0, hits = 0;
+    double worst = 0;
+    for (int i = 0; i < 30; ++i) {
+        Camera r = randomCamera(w, rng);
+        r.pitchDeg = -3 - 25 * std::uniform_real_distribution<double>(0, 1)(rng);  // low: across holes
+        f = renderWith(w, r, t);
+        hits += t.hits;
+        off += offSurface(w, f, t, worst);
+        bad += badWalls(w, f, t, allWalls);
+    }
+    std::printf("30 random cameras over the gully: %zu hits, %zu on walls, %zu off the surface (worst %.1f m)\n", hits, allWalls, off, worst);
+    EXPECT_EQ(off, 0u) << "worst " << worst << " m";
+    EXPECT_EQ(bad, 0u);
+    EXPECT_GT(allWalls, 100u);
+}
+
+// Issue 11: a camera below the terrain sees nothing (every ray starts inside the solid block), and the renderer
+// says so before any work: cameraBelowTerrainM is how far under the surface it is (1 mm: the exact evaluator
+// against the renderer's double sum over float kernel constants, 1e-7 relative), and no cascade is fitted or
+// evaluated (before: 3.6 M Gaussians for an all-sky frame). Above the surface, with a near plane, or over a hole
+// it is not below.
+TEST(RenderHits, CameraBelowTheTerrainEvaluatesNothing) {
+    World& w = hef();
+    Camera c = above(w, -50, -10);
+    EXPECT_NEAR(cameraBelowTerrainM(*w.scene, c), 50.0, 1e-3);
+    Timings t;
+    RenderOptions o;
+    o.legend = false;  // every pixel is background
+    Frame f = renderFrame(*w.scene, c, o, t);
+    EXPECT_EQ(t.hits, 0u);
+    EXPECT_TRUE(t.cascades.empty()) << "a cascade was fitted for a camera inside the terrain";
+    EXPECT_EQ(expectMissesAreSky(f), t.rays);
+    EXPECT_NEAR(cameraBelowTerrainM(*w.scene, above(w, 2, -10)), -2.0, 1e-3);
+    c.nearM = 60;  // rays start 60 m out: a cut through the terrain, which the renderer draws
+    EXPECT_EQ(cameraBelowTerrainM(*w.scene, c), 0.0);
+    f = renderWith(w, c, t);
+    EXPECT_EQ(t.cascades.size(), 3u);
+    World gully = fromFile("west_bijou_gully_3m.asc", 0.25);
+    Camera h;
+    h.xWorld = gully.grid.originWorldX + gully.scene->xMin + 2;  // in the hole west of the gully's cells
+    h.yWorld = gully.grid.originWorldY + 0.5 * (gully.scene->yMin + gully.scene->yMax);
+    h.zWorld = gully.scene->elevationMin - 10;
+    ASSERT_FALSE(gully.grid.locate(gully.scene->xMin + 2, 0.5 * (gully.scene->yMin + gully.scene->yMax)));
+    EXPECT_EQ(cameraBelowTerrainM(*gully.scene, h), 0.0);
 }
 
 // A golden image of the bundled DEM: a small overview compared with tests/golden/hef_overview.png

@@ -22,6 +22,8 @@ struct PatchHit {
     bool underground;  // the ray met the surface first from below: it starts inside the terrain
     float t;
     float gx, gy;      // surface slope dz/dx, dz/dy at the hit [m/m]
+    bool wall;         // a cut face of the terrain block (raycast.cpp): its normal in wn
+    vec3 wn;
 };
 
 struct Hit {
@@ -31,6 +33,7 @@ struct Hit {
     float depth;
     bool water;
     int cascade;
+    bool wall;
 };
 
 // What a ray has met so far, over its cascades (raycast.cpp RayState).
@@ -42,10 +45,31 @@ float mipValue(int k, bool water, int level, uint index) {
     return heights[(water ? cascades[k].waterMip[level] : cascades[k].terrainMip[level]) + index];
 }
 
+PatchHit noPatchHit() { return PatchHit(false, false, 0.0, 0.0, 0.0, false, vec3(0.0)); }
+
+// Does patch (iu, iv) of cascade k's heightfield at `base` have four defined corners? (patchDefined())
+bool patchDefined(int k, uint base, int iu, int iv) {
+    const int n = cascades[k].n;
+    if (iu < 0 || iv < 0 || iu >= n - 1 || iv >= n - 1) return false;
+    const uint r0 = base + uint(iv * n + iu);
+    return heights[r0] > -kInf && heights[r0 + 1u] > -kInf && heights[r0 + uint(n)] > -kInf && heights[r0 + uint(n) + 1u] > -kInf;
+}
+
 // traverse() of raycast.cpp: the first point in [tIn, tOut] where the ray from the eye along d meets
-// heightfield `water` of cascade k. Texture coordinates u = (x - x0) / s, v = (y - y0) / s.
+// heightfield `water` of cascade k. Texture coordinates u = (x - x0) / s, v = (y - y0) / s. The terrain is
+// the solid block of raycast.cpp, with its walls and bottom.
 PatchHit traverse(int k, bool water, vec3 d, float tIn, float tOut, inout bool touched) {
-    PatchHit res = PatchHit(false, false, 0.0, 0.0, 0.0);
+    PatchHit res = noPatchHit();
+    const float tStart = tIn;
+    // Under the block's bottom there is nothing to hit but the bottom, where a rising ray comes up through it:
+    // start there; a falling ray ends there (traverse() of raycast.cpp).
+    if (d.z != 0.0) {
+        const float tFloor = (frame.zFloor - frame.eyeZ) / d.z, margin = 1e-6 * (1.0 + abs(tFloor));
+        if (d.z > 0.0) tIn = max(tIn, tFloor - margin);
+        else tOut = min(tOut, tFloor + margin);
+    } else if (frame.eyeZ < frame.zFloor) {
+        return res;
+    }
     if (!(tIn < tOut)) return res;
     const float s = cascades[k].texelF;
     const int n = cascades[k].n;
@@ -110,7 +134,35 @@ PatchHit traverse(int k, bool water, vec3 d, float tIn, float tOut, inout bool t
             const float A = -e * du * dv;
             const float len = tExit - t;
             float tau = -1.0;
-            if (C <= 0.0) {
+            // Under the terrain block's bottom: nothing in this patch but the bottom, if the ray rises through it
+            // (the water lies on top of the block).
+            const bool under = C <= 0.0 && z0 < frame.zFloor;
+            if (under && !water) {
+                const float tauF = d.z > 0.0 ? (frame.zFloor - z0) / d.z : kInf;
+                if (tauF <= len) {
+                    res.hit = res.wall = true;
+                    res.t = t + tauF;
+                    res.wn = vec3(0.0, 0.0, -1.0);
+                    return res;
+                }
+            }
+            if (C <= 0.0 && !under && !water) {
+                if (t > tStart) {
+                    // Through which edge did the ray come in? The one it crossed last.
+                    const float enterU = du > 0.0 ? (float(iu) - u0) * invDu : du < 0.0 ? (float(iu + 1) - u0) * invDu : -kInf;
+                    const float enterV = dv > 0.0 ? (float(iv) - v0) * invDv : dv < 0.0 ? (float(iv + 1) - v0) * invDv : -kInf;
+                    const bool acrossU = enterU >= enterV;
+                    const int fromU = acrossU ? iu - (du > 0.0 ? 1 : -1) : iu, fromV = acrossU ? iv : iv - (dv > 0.0 ? 1 : -1);
+                    if (!patchDefined(k, base, fromU, fromV)) {  // from a hole or outside: the wall on that edge
+                        res.hit = res.wall = true;
+                        res.t = t;
+                        res.wn = acrossU ? vec3(du > 0.0 ? -1.0 : 1.0, 0.0, 0.0) : vec3(0.0, dv > 0.0 ? -1.0 : 1.0, 0.0);
+                        return res;
+                    }
+                }
+            }
+            if (under) {
+            } else if (C <= 0.0) {
                 if (!touched && C < -slack) {
                     res.underground = true;
                     return res;
@@ -131,7 +183,7 @@ PatchHit traverse(int k, bool water, vec3 d, float tIn, float tOut, inout bool t
                     tau = r1 >= 0.0 ? r1 : r2;  // C > 0: the first root is where the ray goes under
                 }
             }
-            touched = true;
+            if (!under) touched = true;
             if (tau >= 0.0 && tau <= len) {
                 const float a = clamp(a0 + du * tau, 0.0, 1.0), b = clamp(b0 + dv * tau, 0.0, 1.0);
                 res.hit = true;
@@ -147,7 +199,7 @@ PatchHit traverse(int k, bool water, vec3 d, float tIn, float tOut, inout bool t
     return res;
 }
 
-Hit noHit() { return Hit(false, 0.0, vec3(0.0), 0.0, false, -1); }
+Hit noHit() { return Hit(false, 0.0, vec3(0.0), 0.0, false, -1, false); }
 
 // hitIn() of raycast.cpp: cascade k's hit between the offsets lo and hi (from the eye, along the
 // horizontal view direction), terrain first, then water in front of it.
@@ -193,12 +245,12 @@ Hit hitIn(int k, vec3 d, float lo, float hi, inout RayState st, inout bool under
         underground = true;
         return h;
     }
-    PatchHit water = PatchHit(false, false, 0.0, 0.0, 0.0);
+    PatchHit water = noPatchHit();
     if (frame.hasWater != 0 && !st.underWater) {
         water = traverse(k, true, d, t0, terrain.hit ? terrain.t : t1, st.touchedWater);
         if (water.underground) {
             st.underWater = true;
-            water = PatchHit(false, false, 0.0, 0.0, 0.0);
+            water = noPatchHit();
         }
     }
     const PatchHit best = water.hit ? water : terrain;
@@ -206,7 +258,8 @@ Hit hitIn(int k, vec3 d, float lo, float hi, inout RayState st, inout bool under
     h.hit = true;
     h.t = best.t;
     h.water = water.hit;
-    h.n = vec3(-best.gx, -best.gy, 1.0) / sqrt(best.gx * best.gx + best.gy * best.gy + 1.0);
+    h.wall = best.wall;
+    h.n = best.wall ? best.wn : vec3(-best.gx, -best.gy, 1.0) / sqrt(best.gx * best.gx + best.gy * best.gy + 1.0);
     h.cascade = k;
     if (h.water) {  // depth at the hit: bilinear from the depth texture
         const float s = cascades[k].texelF;
@@ -229,8 +282,9 @@ Hit castRay(vec3 d) {
         Hit h = hitIn(k, d, lo, cascades[k].farWithOverlap, st, underground);
         if (underground) return noHit();
         if (!h.hit) continue;
-        // In the overlap with the next cascade: blend both hits by a convex combination.
-        if (k + 1 < frame.cascades) {
+        // In the overlap with the next cascade: blend both hits by a convex combination, if they are on the same
+        // surface (castRay(): the same kind, no wall, no farther apart than a texel of the coarser cascade).
+        if (k + 1 < frame.cascades && !h.wall) {
             const float off = (d.x * frame.dirX + d.y * frame.dirY) * h.t;
             const float zoneStart = cascades[k].splitFar, zoneEnd = cascades[k].farWithOverlap;
             if (off > zoneStart && zoneEnd > zoneStart) {
@@ -239,7 +293,7 @@ Hit castRay(vec3 d) {
                 st2.touchedWater = true;
                 bool under2 = false;
                 const Hit h2 = hitIn(k + 1, d, cascades[k + 1].splitNear, cascades[k + 1].farWithOverlap, st2, under2);
-                if (h2.hit && h2.water == h.water) {
+                if (h2.hit && h2.water == h.water && !h2.wall && abs(h2.t - h.t) <= max(cascades[k].texelF, cascades[k + 1].texelF)) {
                     const float w = clamp((off - zoneStart) / (zoneEnd - zoneStart), 0.0, 1.0);
                     h.t = (1.0 - w) * h.t + w * h2.t;
                     h.n = normalize((1.0 - w) * h.n + w * h2.n);
@@ -268,5 +322,6 @@ void main() {
     p.depth = h.depth;
     p.cascade = h.cascade;
     p.water = h.water ? 1 : 0;
+    p.wall = h.hit && h.wall ? 1 : 0;
     pixels[py * uint(frame.width) + px] = p;
 }

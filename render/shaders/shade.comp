@@ -74,14 +74,16 @@ void main() {
         const float light = 0.3 + 0.7 * max(0.0, dot(vec3(p.nx, p.ny, p.nz), sun));
         vec3 base;
         const float posZ = frame.eyeZ + p.relZ;
-        if (p.water != 0)
+        if (p.wall != 0)
+            base = vec3(frame.wallColor[0], frame.wallColor[1], frame.wallColor[2]);
+        else if (p.water != 0)
             base = depthColor(p.depth / frame.dRange);
         else if (frame.colorMode == 1)
             base = vec3(frame.dryColor[0], frame.dryColor[1], frame.dryColor[2]);
         else
             base = elevationColor((posZ - frame.elevationMin) / frame.zRange);
         c = toLinear(base) * light;
-        if (frame.cellOutlines != 0) {
+        if (frame.cellOutlines != 0 && p.wall == 0) {
             // The hit position rounded to float as the CPU's Frame holds it, then located in double.
             const double x = double(float(frame.eyeX + double(p.relX))), y = double(float(frame.eyeY + double(p.relY)));
             const int k = locateCell(x, y);

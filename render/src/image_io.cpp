@@ -60,6 +60,7 @@ void writeFrameExr(const Frame& f, const std::string& path) {
         add("N.Z", f.nZ);
         add("cascade", f.cascade);
         add("water_depth", f.waterDepthM);
+        add("wall", f.wall);
         Imf::OutputFile file(out.temp().c_str(), header);
         file.setFrameBuffer(fb);
         file.writePixels(f.height);

@@ -61,6 +61,30 @@ Scene::Scene(const Grid& grid, const influence::InfluenceLists& lists) : grid_(g
     zMax = surfaceMax;
 }
 
+std::optional<double> Scene::terrainAt(double xLocal, double yLocal) const {
+    const auto k = grid_.locate(xLocal, yLocal);
+    if (!k) return std::nullopt;
+    const double tail = lists_.params().tail(), zk = grid_.values[0][*k];
+    double num = 0, den = 0;
+    for (const uint32_t i : lists_.list(*k)) {
+        const CellKernel& c = kernels_[i];
+        const double d2 = (c.cx - xLocal) * (c.cx - xLocal) + (c.cy - yLocal) * (c.cy - yLocal);
+        if (!(d2 < c.r2)) continue;
+        const double w = std::max(0.0, std::exp(-d2 * c.a) - tail);
+        num += w * (grid_.values[0][i] - zk);
+        den += w;
+    }
+    return zk + num / den;  // den >= the cell's own weight inside it (kernel.h): never zero
+}
+
+double cameraBelowTerrainM(const Scene& scene, const Camera& camera) {
+    if (camera.nearM > 0) return 0;
+    const Grid& g = scene.grid();
+    const double x = camera.xWorld - g.originWorldX, y = camera.yWorld - g.originWorldY;
+    const std::optional<double> z = scene.terrainAt(x, y);
+    return z ? *z - camera.zWorld : 0.0;
+}
+
 Camera overviewCamera(const Scene& s, int width, int height) {
     const Grid& g = s.grid();
     const double cx = 0.5 * (s.xMin + s.xMax), cy = 0.5 * (s.yMin + s.yMax), cz = 0.5 * (s.zMin + s.zMax);
@@ -251,10 +275,10 @@ Frame renderFrame(const Scene& scene, const Camera& camera, const RenderOptions&
     const double* eye = setup.eye;
     const double near = setup.nearM, far = setup.farM;
 
-    // 1. Cascade fitting.
+    // 1. Cascade fitting. A camera inside the terrain sees nothing (raycast.cpp): no cascade to fit or fill.
     auto t = Clock::now();
     const ViewVolume& view = setup.view;
-    const CascadeFit fit = fitCascades(view, options.cascades, options.texelsPerSide);
+    const CascadeFit fit = cameraBelowTerrainM(scene, camera) > 0 ? CascadeFit{} : fitCascades(view, options.cascades, options.texelsPerSide);
     timings.fittingMs = msSince(t);
     timings.viewDirX = fit.dir[0];
     timings.viewDirY = fit.dir[1];
@@ -307,9 +331,10 @@ Frame renderFrame(const Scene& scene, const Camera& camera, const RenderOptions&
     f.distanceM.assign(pixels, inf);
     for (auto* v : {&f.posX, &f.posY, &f.posZ, &f.nX, &f.nY, &f.nZ, &f.waterDepthM}) v->assign(pixels, 0.0f);
     f.cascade.assign(pixels, -1.0f);
+    f.wall.assign(pixels, 0.0f);
     std::vector<uint8_t> isWater(pixels, 0);
     std::vector<std::array<float, 3>> dirs(pixels);
-    detail::RayContext ctx{&fit, &tex, {eye[0], eye[1], eye[2]}, near, far};
+    detail::RayContext ctx{&fit, &tex, {eye[0], eye[1], eye[2]}, near, far, scene.elevationMin};
     t = Clock::now();
     parallelFor(size_t(H), 4, options.threads, [&](size_t b, size_t e, unsigned) {
         for (size_t py = b; py < e; ++py)
@@ -332,6 +357,7 @@ Frame renderFrame(const Scene& scene, const Camera& camera, const RenderOptions&
                 f.nX[i] = float(h.nx), f.nY[i] = float(h.ny), f.nZ[i] = float(h.nz);
                 f.cascade[i] = float(h.cascade);
                 f.waterDepthM[i] = float(h.depth);
+                f.wall[i] = h.wall ? 1.0f : 0.0f;
                 isWater[i] = h.water;
             }
     });
@@ -363,7 +389,10 @@ Frame renderFrame(const Scene& scene, const Camera& camera, const RenderOptions&
                     ++hits[worker];
                     const double light = 0.3 + 0.7 * std::max(0.0, f.nX[i] * sun[0] + f.nY[i] * sun[1] + f.nZ[i] * sun[2]);
                     Rgb base;
-                    if (isWater[i]) {
+                    const bool wall = f.wall[i] != 0;
+                    if (wall) {
+                        base = {gpu::kWallColor[0], gpu::kWallColor[1], gpu::kWallColor[2]};
+                    } else if (isWater[i]) {
                         base = ramp(kDepth, f.waterDepthM[i] / dRange);
                     } else if (options.color == ColorMode::WaterDepth) {
                         base = {gpu::kDryColor[0], gpu::kDryColor[1], gpu::kDryColor[2]};
@@ -371,7 +400,7 @@ Frame renderFrame(const Scene& scene, const Camera& camera, const RenderOptions&
                         base = ramp(kElevation, (f.posZ[i] - scene.elevationMin) / zRange);
                     }
                     c = {toLinear(base.r) * light, toLinear(base.g) * light, toLinear(base.b) * light};
-                    if (options.cellOutlines) {
+                    if (options.cellOutlines && !wall) {
                         if (auto cell = g.locate(f.posX[i], f.posY[i])) {
                             const auto q = g.cellSquare(*cell);
                             const double edge = std::min({f.posX[i] - q.x0, q.x1 - f.posX[i], f.posY[i] - q.y0, q.y1 - f.posY[i]});

@@ -46,6 +46,7 @@ struct Hit {
     double nx = 0, ny = 0, nz = 1;         // unit normal
     double depth = 0;                      // water depth at the hit (water hits), else 0
     bool water = false;
+    bool wall = false;                     // on a cut face of the terrain block (raycast.cpp): a hole's or the domain's edge, the bottom
     int cascade = -1;
 };
 
@@ -54,6 +55,7 @@ struct RayContext {
     const std::vector<CascadeTextures>* tex;
     double eye[3];
     double nearM, farM;
+    double zFloor;                         // the terrain block's bottom: the grid's lowest elevation, local z [m]
 };
 
 Hit castRay(const RayContext& ctx, const double dir[3]);

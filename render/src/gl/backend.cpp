@@ -260,7 +260,9 @@ struct GlRenderer::Impl {
             f.skyHorizon[c] = float(gpu::kSkyHorizon[c]);
             f.skyZenith[c] = float(gpu::kSkyZenith[c]);
             f.dryColor[c] = float(gpu::kDryColor[c]);
+            f.wallColor[c] = float(gpu::kWallColor[c]);
         }
+        f.zFloor = float(scene.elevationMin);
 
     }
 
@@ -327,9 +329,9 @@ struct GlRenderer::Impl {
         timings = Timings{};
         setup = detail::setUpFrame(scene, camera);
 
-        // 1. Cascade fitting (CPU).
+        // 1. Cascade fitting (CPU). A camera inside the terrain sees nothing: no cascade (as renderFrame()).
         auto t = Clock::now();
-        const CascadeFit fit = fitCascades(setup.view, options.cascades, options.texelsPerSide);
+        const CascadeFit fit = cameraBelowTerrainM(scene, camera) > 0 ? CascadeFit{} : fitCascades(setup.view, options.cascades, options.texelsPerSide);
         timings.fittingMs = msSince(t);
         timings.viewDirX = fit.dir[0];
         timings.viewDirY = fit.dir[1];
@@ -480,7 +482,7 @@ struct GlRenderer::Impl {
         // The rays are read through a mapping (no staging copy in host memory) and spread over the frame's
         // layers on all cores. On an H100 host (BENCHMARKS.md) the read-back is then texture 11-15 ms, allocating
         // the layers 36-59 ms (zero pages), mapping 19-39 ms, converting 3-4 ms.
-        for (auto* v : {&f.distanceM, &f.posX, &f.posY, &f.posZ, &f.nX, &f.nY, &f.nZ, &f.waterDepthM, &f.cascade}) v->resize(pixels);
+        for (auto* v : {&f.distanceM, &f.posX, &f.posY, &f.posZ, &f.nX, &f.nY, &f.nZ, &f.waterDepthM, &f.cascade, &f.wall}) v->resize(pixels);
         f.rgb.resize(pixels * 3);
         glBindBuffer(GL_SHADER_STORAGE_BUFFER, pixelsBuf.name);
         const auto* px = static_cast<const gpu::GpuPixel*>(
@@ -496,7 +498,7 @@ struct GlRenderer::Impl {
                     std::memcpy(&f.rgb[i * 3], src, 3);
                     if (!(p.t < inf)) {
                         f.distanceM[i] = inf;
-                        f.posX[i] = f.posY[i] = f.posZ[i] = f.nX[i] = f.nY[i] = f.nZ[i] = f.waterDepthM[i] = 0.0f;
+                        f.posX[i] = f.posY[i] = f.posZ[i] = f.nX[i] = f.nY[i] = f.nZ[i] = f.waterDepthM[i] = f.wall[i] = 0.0f;
                         f.cascade[i] = -1.0f;
                         continue;
                     }
@@ -508,6 +510,7 @@ struct GlRenderer::Impl {
                     f.nX[i] = p.nx, f.nY[i] = p.ny, f.nZ[i] = p.nz;
                     f.cascade[i] = float(p.cascade);
                     f.waterDepthM[i] = p.depth;
+                    f.wall[i] = p.wall ? 1.0f : 0.0f;
                 }
         });
         glUnmapBuffer(GL_SHADER_STORAGE_BUFFER);

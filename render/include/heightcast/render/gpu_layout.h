@@ -124,6 +124,8 @@ struct GpuFrame {
     float skyHorizon[3];
     float skyZenith[3];
     float dryColor[3];
+    float zFloor;     // the terrain block's bottom: the grid's lowest elevation, local z [m] (RayContext::zFloor)
+    float wallColor[3];  // kWallColor, sRGB
 };
 
 // One pixel's ray-cast result, row 0 at the top (Frame's layout).
@@ -138,6 +140,7 @@ struct GpuPixel {
     float depth;      // water depth at a water hit, else 0
     int cascade;      // -1 where the ray misses
     int water;        // 1 for a water hit
+    int wall;         // 1 for a hit on a cut face of the terrain block (Frame::wall)
 };
 
 #ifdef __cplusplus
@@ -147,6 +150,9 @@ inline constexpr double kElevationRamp[5][4] = {
     {0.0, 0.24, 0.47, 0.24}, {0.3, 0.59, 0.67, 0.35}, {0.55, 0.63, 0.51, 0.35}, {0.8, 0.6, 0.6, 0.6}, {1.0, 0.98, 0.98, 0.98}};
 inline constexpr double kDepthRamp[3][4] = {{0.0, 0.6, 0.87, 0.95}, {0.5, 0.16, 0.47, 0.8}, {1.0, 0.04, 0.12, 0.45}};
 inline constexpr double kDryColor[3] = {0.7, 0.7, 0.68};  // terrain under ColorMode::WaterDepth
+// The cut faces of the terrain block (walls at hole and domain edges, the bottom: Frame::wall), in either colour
+// mode: a soil brown darker and redder than every elevation ramp stop, so a wall never reads as terrain.
+inline constexpr double kWallColor[3] = {0.45, 0.27, 0.18};
 inline constexpr double kSkyHorizon[3] = {0.78, 0.84, 0.92};
 inline constexpr double kSkyZenith[3] = {0.43, 0.59, 0.82};
 inline constexpr double kSunAzimuthDeg = 315, kSunAltitudeDeg = 45;

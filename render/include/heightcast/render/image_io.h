@@ -12,7 +12,8 @@ void writePng(const Frame& frame, const std::string& path);
 
 // OpenEXR with FLOAT channels Z (distance along the ray [m], +inf where the ray misses), P.X, P.Y,
 // P.Z (hit position relative to the grid origin [m]), N.X, N.Y, N.Z (unit normal), cascade (-1 on a
-// miss) and water_depth [m]; the origin as double header attributes heightcast.originX/originY.
+// miss), water_depth [m] and wall (1 on hits on the terrain block's cut faces: hole and domain edge walls
+// and the bottom, 0 elsewhere: Frame::wall); the origin as double header attributes heightcast.originX/originY.
 void writeFrameExr(const Frame& frame, const std::string& path);
 
 }  // namespace hc::render

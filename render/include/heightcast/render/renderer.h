@@ -9,6 +9,7 @@
 
 #include <cstdint>
 #include <memory>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -40,6 +41,11 @@ struct Frame {
     std::vector<float> nX, nY, nZ;      // unit surface normal (z up)
     std::vector<float> cascade;         // index of the cascade that gave the hit (blend: the nearer), -1 miss
     std::vector<float> waterDepthM;     // water depth at the hit [m], 0 where dry or missed
+    // 1 where the hit is on a cut face of the terrain block, else 0. The terrain is drawn as a solid block: the
+    // smooth surface on top, vertical walls where the surface ends (the edges of holes and of the domain) down
+    // to the grid's lowest elevation, and a flat bottom there. Wall normals are horizontal, the bottom's points
+    // down; walls are coloured kWallColor (gpu_layout.h).
+    std::vector<float> wall;
     double originWorldX = 0, originWorldY = 0;
 };
 
@@ -84,6 +90,9 @@ public:
     // Local bounding box of the cells and the value range (terrain and water surface) [m].
     double xMin, yMin, xMax, yMax, zMin, zMax;
     double elevationMin, elevationMax, depthMax;
+    // The smooth terrain's height at a local point [m] (the RBF sum of DESIGN.md section 4 over the list of
+    // the cell containing it, as the approximation evaluates it, in double), or nullopt outside every cell.
+    std::optional<double> terrainAt(double xLocal, double yLocal) const;
 
 private:
     const Grid& grid_;
@@ -111,7 +120,15 @@ private:
     std::unique_ptr<Impl> impl_;
 };
 
-// Renders one frame. Throws hc::Error for invalid camera or options. With a cache, reuses the texels the last
+// How far the camera is under the smooth terrain surface [m]: > 0 when it stands over a cell and below the
+// surface there (inside the solid terrain, where every ray starts inside it and sees nothing), else <= 0;
+// 0 over a hole or outside the domain. With a near plane given (Camera::nearM > 0) rays start there, not at
+// the camera: then 0 as well.
+double cameraBelowTerrainM(const Scene& scene, const Camera& camera);
+
+// Renders one frame. A camera below the terrain (cameraBelowTerrainM > 0) sees nothing: the frame is all sky
+// (every ray misses), and no cascade is fitted or evaluated (Timings::cascades is empty).
+// Throws hc::Error for invalid camera or options. With a cache, reuses the texels the last
 // frame of that cache evaluated (the same picture, to float rounding) and leaves this frame's there.
 Frame renderFrame(const Scene& scene, const Camera& camera, const RenderOptions& options, Timings& timings, CascadeCache* cache = nullptr);
 
