@@ -22,13 +22,17 @@ int main(int argc, char** argv) {
         hc::cli::Parser p("hc-render", "GRID.hcg -o OUT.png [--camera X,Y,Z,YAW,PITCH,FOV[,ROLL] | --look-at EX,EY,EZ,TX,TY,TZ[,FOV] | --view overview] [options]",
                           "Ray-casts the smooth surface of a grid (terrain, and water where the grid has water_depth) into a PNG\n"
                           "and optionally EXR layers, and prints per-stage timings. Coordinates in the grid's CRS [m]; angles in\n"
-                          "degrees: yaw 0 looks north, 90 east; pitch negative looks down.");
+                          "degrees: yaw 0 looks north, 90 east; pitch negative looks down. The terrain is drawn as a solid block:\n"
+                          "where its surface ends (holes, the domain's edge) a brown wall goes down to the lowest elevation.\n"
+                          "A camera below the terrain surface is refused (every ray would start inside it and see nothing), unless\n"
+                          "--near starts the rays farther out.");
         p.positional("GRID.hcg", "grid file", gridPath);
         p.option("-o", "OUT.png", "colour image, 8-bit sRGB PNG (required)", out);
         setup.addCameraOptions(p, "--view");
         p.option("--view", "overview", "a camera framing the whole grid obliquely from the south-south-west (the default)", view);
         setup.addRenderOptions(p);
-        p.option("--exr", "OUT.exr", "also write float layers: Z, P.X/Y/Z, N.X/Y/Z, cascade, water_depth", exr);
+        p.option("--exr", "OUT.exr", "also write float layers: Z, P.X/Y/Z, N.X/Y/Z, cascade, water_depth, wall (1 on hits on\n"
+                 "the walls drawn at hole and domain edges, 0 elsewhere)", exr);
         p.option("--timings", "OUT.json", "also write the per-stage timings as JSON", timingsPath);
         p.option("--backend", "B", "gl (OpenGL 4.3 compute shaders; headless, no display needed), cpu, or auto: gl where an\n"
                  "OpenGL 4.3 context on a GPU can be had, else cpu with a note saying why (no 4.3 context, or only\n"
@@ -63,8 +67,8 @@ int main(int argc, char** argv) {
             char b[400];
             std::snprintf(b, sizeof b,
                           "the camera at %.3f, %.3f, %.3f is %.2f m below the terrain surface (%.2f m there): every ray would "
-                          "start inside the terrain and see nothing; raise the camera, or give --near M to start the rays that "
-                          "far out (a cut through the terrain)",
+                          "start inside the terrain and see nothing; raise the camera above the surface, or give --near M to start "
+                          "the rays beyond the terrain in front of it",
                           camera.xWorld, camera.yWorld, camera.zWorld, below, *scene.terrainAt(x, y));
             throw hc::Error(b);
         }
@@ -103,6 +107,12 @@ int main(int argc, char** argv) {
         if (camera.nearM > 0) std::printf("  near %g m", camera.nearM);
         if (camera.farM > 0) std::printf("  far %g m", camera.farM);
         std::printf("\n");
+        // Hits on the terrain block's cut faces (hole and domain edges, its bottom): said, as they are not surface.
+        size_t walls = 0;
+        for (float w : frame.wall) walls += w != 0;
+        if (walls)
+            std::printf("  walls        %zu of %llu hits on the walls at hole and domain edges (EXR channel wall)\n", walls,
+                        (unsigned long long)timings.hits);
         std::printf("%s", timings.toTable().c_str());
         return 0;
     });
