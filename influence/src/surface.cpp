@@ -14,15 +14,17 @@ namespace hc::influence {
 
 Layer Layer::byName(const Grid& grid, const std::string& name) {
     Layer l;
+    std::string have;
+    for (const auto& g : grid.layers) have += (have.empty() ? "" : ", ") + g.name;
     if (name == "water_surface" || name == "water_depth") {
-        if (grid.findLayer("water_depth") < 0) throw Error("layer " + name + " needs a water_depth layer, and the grid has none");
+        if (grid.findLayer("water_depth") < 0)
+            throw Error("no layer '" + name + "': the grid has no water (it has: " + have +
+                        "; hc-ingest --water, --water-surface or --water-level adds it)");
         l.kind = name == "water_surface" ? WaterSurface : WaterDepth;
         return l;
     }
     int i = grid.findLayer(name);
     if (i < 0) {
-        std::string have;
-        for (const auto& g : grid.layers) have += (have.empty() ? "" : ", ") + g.name;
         if (grid.findLayer("water_depth") >= 0) have += ", water_surface";
         throw Error("no layer '" + name + "' in the grid (it has: " + have + ")");
     }
