@@ -29,7 +29,8 @@ int main(int argc, char** argv) {
         p.option("-o", "OUT", "output file; the format follows the extension .tif/.tiff, .exr or .vdb (required)", out);
         p.option("--bbox", "XMIN,YMIN,XMAX,YMAX", "area in the grid's CRS, metres (default: the grid's extent)", bbox);
         p.option("--layer", "L", "elevation, water_depth, water_surface or another layer (default elevation; .vdb always\n"
-                 "      writes terrain and, with water, the water surface)", layerName);
+                 "      writes terrain and, with water, the water surface). Water as hc-probe gives it: the wet cells'\n"
+                 "      level where water is drawn, depth = level - elevation there and 0 on dry land [m]", layerName);
         p.option("--cache", "C.hci", "influence cache (default: the grid's path with .hci; built if missing or stale)", cachePath);
         p.option("--sigma", "S", "kernel width in cell sizes (default 1.0)", params.sigma);
         p.option("--truncation", "R", "kernel cut-off in sigmas (default 3.5)", params.truncation);

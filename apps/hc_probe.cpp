@@ -57,7 +57,10 @@ int main(int argc, char** argv) {
         hc::cli::Parser p("hc-probe", "GRID.hcg [--cache C.hci] [--layer L] (--points IN.csv | --xy X,Y) [-o OUT.csv]",
                           "Evaluates the exact smooth surface (double precision) at points given in the grid's CRS [m].\n"
                           "Prints or writes x,y,value with full precision; the value is empty where the surface is\n"
-                          "undefined (holes, outside the grid, or dry land for water_surface).");
+                          "undefined (holes, outside the grid, or dry land for water_surface).\n"
+                          "Water (DESIGN.md section 12): water_surface is the level of the wet cells alone (a level flood\n"
+                          "stays level), drawn where wet cells hold >= 1/2 of the kernel weight and the level is above the\n"
+                          "terrain; water_depth is that level - elevation there and 0 on dry land, in metres.");
         p.positional("GRID.hcg", "grid file", gridPath);
         p.option("--cache", "C.hci", "influence cache (default: the grid's path with .hci; built if missing or stale)", cachePath);
         p.option("--layer", "L", "elevation, water_depth, water_surface or another layer of the grid (default elevation)", layerName);

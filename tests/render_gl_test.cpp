@@ -15,6 +15,7 @@
 #include <filesystem>
 #include <memory>
 #include <random>
+#include <tuple>
 
 #include "heightcast/grid/error.h"
 #include "heightcast/influence/influence.h"
@@ -581,6 +582,81 @@ TEST(RenderGl, BackendNames) {
     EXPECT_EQ(parseBackend("auto"), Backend::Auto);
     EXPECT_STREQ(backendName(Backend::Gl), "gl");
     EXPECT_THROW(parseBackend("vulkan"), hc::Error);
+}
+
+// ---------------------------------------------------------------------------------------------------------
+// The water level field (DESIGN.md section 12; issue 11, "The water surface is not level"): approximate.comp
+// draws water as approximate.cpp does, from the wet cells' level. On a bathtub flood the GL picture agrees
+// with the CPU's (expectSame), draws water at the same pixels, and its water hits lie on the level.
+
+World& lidarFlood() {  // the 1 m LiDAR tile flooded at 397 m (its range is 379.7 - 410.8 m: shores everywhere)
+    static World w = [] {
+        World x;
+        x.grid = hc::test::ingestFile(hc::test::dataFile("lidar1m_minnesota_utm15.tif"), 0.25, 397);
+        x.init();
+        return x;
+    }();
+    return w;
+}
+
+// How far a GL water hit at distance t [m] may lie from the level: 1 mm as on the CPU, plus the GPU's float
+// hit position (relative to the eye: a few ulps of t, 1.2e-7 relative each, as in depthTolerance).
+double levelTolerance(double t) { return 1e-3 + 5e-7 * t; }
+
+// Water pixels of the GL frame against the CPU frame of the same camera: the same pixels are water (up to
+// 0.5 %, expectSame's allowance for hit/miss), and the GL water hits lie on the level within levelTolerance
+// except rays that enter the water from its side at an edge, below the level (at most 0.1 % of the water
+// pixels: RenderWater in render_test.cpp).
+void expectLevelWater(World& w, const Camera& cam, double level, const std::string& name) {
+    RenderOptions o = smallOptions();
+    o.color = ColorMode::WaterDepth;
+    expectSame(w, cam, name, o);
+    Timings tc, tg;
+    const Frame cpu = renderFrame(*w.scene, cam, o, tc);
+    const Frame gl = w.gl->render(cam, o, tg);
+    size_t water = 0, bothWater = 0, onLevel = 0, above = 0;
+    for (size_t i = 0; i < gl.waterDepthM.size(); ++i) {
+        const bool wc = cpu.waterDepthM[i] > 0, wg = gl.waterDepthM[i] > 0;
+        water += wc || wg;
+        bothWater += wc && wg;
+        if (!wg) continue;
+        const double err = double(gl.posZ[i]) - level;
+        const double tol = levelTolerance(gl.distanceM[i]);
+        onLevel += std::abs(err) <= tol;
+        above += err > tol;
+    }
+    const size_t glWater = size_t(std::count_if(gl.waterDepthM.begin(), gl.waterDepthM.end(), [](float d) { return d > 0; }));
+    std::printf("[ %s ] %zu water pixels, %zu water in both, GL water on the level %zu of %zu\n", name.c_str(), water, bothWater, onLevel,
+                glWater);
+    EXPECT_GT(water, gl.waterDepthM.size() / 20) << name << ": the camera sees the flood";
+    EXPECT_GE(double(bothWater), 0.995 * double(water)) << name;
+    EXPECT_GE(double(onLevel), 0.999 * double(glWater)) << name;
+    EXPECT_EQ(above, 0u) << name << ": water above the level";
+}
+
+TEST(RenderGlWater, BathtubFloodAsOnTheCpuAndOnItsLevel) {
+    for (auto [world, level, name] : {std::tuple{&hef(), 2600.0, "hef"}, std::tuple{&lidarFlood(), 397.0, "lidar"}}) {
+        World& w = *world;
+        HC_REQUIRE_GL(w);
+        ASSERT_TRUE(w.scene->hasWater());
+        const Scene& s = *w.scene;
+        expectLevelWater(w, overviewCamera(s, 240, 150), level, std::string(name) + "_flood_overview");
+        expectLevelWater(w, lowOblique(s, 240, 150), level, std::string(name) + "_flood_oblique_low");
+        // Along a shore: from above the first wet cell whose neighbour to the east is dry, looking east.
+        const hc::Grid& g = w.grid;
+        const auto& depth = g.values[size_t(s.waterLayer())];
+        for (size_t i = 0; i < g.cellCount(); ++i) {
+            double x, y;
+            g.cellCenterLocal(i, x, y);
+            const auto east = g.locate(x + g.cellSizeM(i), y);
+            if (!(depth[i] > 0) || !east || depth[*east] > 0 || x < 0.3 * (s.xMax - s.xMin)) continue;
+            const double d = 0.1 * (s.xMax - s.xMin);
+            const Camera shore = Camera::lookAt({g.originWorldX + x - d, g.originWorldY + y - 0.3 * d, level + 0.4 * d},
+                                                {g.originWorldX + x, g.originWorldY + y, level}, 50, 240, 150);
+            expectLevelWater(w, shore, level, std::string(name) + "_flood_shore");
+            break;
+        }
+    }
 }
 
 }  // namespace

@@ -1031,4 +1031,161 @@ TEST(Render, GoldenImage) {
     EXPECT_GE(p, 40.0) << "see render_golden_actual.png and render_golden_diff.png";
 }
 
+// ---------------------------------------------------------------------------------------------------------
+// The water level field (DESIGN.md section 12; issue 11, "The water surface is not level"). The old renderer
+// drew water as smoothed terrain + smoothed depth, which rose up to 40 m above a bathtub flood's level near
+// shores. Now the water heightfield holds the wet cells' level: a bathtub flood at L renders flat at L.
+
+World& lidarFlood() {  // the 1 m LiDAR tile flooded at 397 m (its range is 379.7 - 410.8 m: shores everywhere)
+    static World w = fromFile("lidar1m_minnesota_utm15.tif", 0.25, 397);
+    return w;
+}
+
+// P.Z and water_depth of a frame, written with writeFrameExr and read back through OpenEXR (what a user's
+// compositing tool sees).
+void readBackWater(const Frame& f, std::vector<float>& posZ, std::vector<float>& depth) {
+    const fs::path path = fs::temp_directory_path() / ("hc_render_water_" + std::to_string(::getpid()) + ".exr");
+    writeFrameExr(f, path.string());
+    Imf::InputFile in(path.c_str());
+    const Imath::Box2i dw = in.header().dataWindow();
+    ASSERT_EQ(dw.max.x - dw.min.x + 1, f.width);
+    ASSERT_EQ(dw.max.y - dw.min.y + 1, f.height);
+    posZ.assign(size_t(f.width) * size_t(f.height), NAN);
+    depth.assign(posZ.size(), NAN);
+    Imf::FrameBuffer fb;
+    const size_t shift = (size_t(dw.min.x) + size_t(dw.min.y) * size_t(f.width)) * sizeof(float);
+    fb.insert("P.Z", Imf::Slice(Imf::FLOAT, reinterpret_cast<char*>(posZ.data()) - shift, sizeof(float), sizeof(float) * size_t(f.width)));
+    fb.insert("water_depth", Imf::Slice(Imf::FLOAT, reinterpret_cast<char*>(depth.data()) - shift, sizeof(float), sizeof(float) * size_t(f.width)));
+    in.setFrameBuffer(fb);
+    in.readPixels(dw.min.y, dw.max.y);
+    fs::remove(path);
+}
+
+// Cameras on a flood: the overview, and oblique views of random wet cells from random directions (their
+// shores are where the old surface rose), at distances of 10 to 60 of the grid's finest... coarsest cells.
+std::vector<Camera> floodCameras(const World& w, double distM, unsigned seed) {
+    std::vector<Camera> cams{overviewCamera(*w.scene, 200, 130)};
+    const Grid& g = w.grid;
+    const int layer = w.scene->waterLayer();
+    std::vector<size_t> wet;
+    for (size_t i = 0; i < g.cellCount(); ++i)
+        if (g.values[size_t(layer)][i] > 0) wet.push_back(i);
+    std::mt19937_64 rng(seed);
+    std::uniform_real_distribution<double> u(0, 1);
+    for (int c = 0; c < 6; ++c) {
+        const size_t i = wet[size_t(u(rng) * double(wet.size())) % wet.size()];
+        double x, y;
+        g.cellCenterLocal(i, x, y);
+        const double z = double(g.values[0][i]) + g.values[size_t(layer)][i];
+        const double az = u(rng) * 2 * M_PI, d = distM * (0.5 + u(rng)), up = d * (0.15 + 0.5 * u(rng));
+        cams.push_back(Camera::lookAt({g.originWorldX + x + d * std::cos(az), g.originWorldY + y + d * std::sin(az), z + up},
+                                      {g.originWorldX + x, g.originWorldY + y, z}, 50, 200, 130));
+    }
+    return cams;
+}
+
+// Every water hit of the CPU renderer lies on the flood level, in the EXR's world position layer: within 1 mm,
+// float rounding (the level at texels, 2.4e-4 m at 2600 m; flat bilinear patches between them met in double;
+// P.Z stored as float; a blend in a cascade overlap mixes two hits on the same plane, so it stays on it), far
+// inside the issue's 5 cm. One exception, counted: at the edge of the drawn water a ray can pass below the
+// level beside it (where the terrain is below the level but the wet cells do not dominate) and enter a water
+// patch from the side; the ray caster then hits where it entered (raycast.cpp: the water's side), below the
+// level. Such a hit must lie below the level, within 1.5 texels of a point where the exact evaluator draws no
+// water, and be rare (measured: 29 of 123 k water pixels, 9 of them more than 5 cm below).
+TEST(RenderWater, BathtubFloodRendersAtItsLevelWithin5cm) {
+    struct Case {
+        const char* name;
+        World* w;
+        double level, distM;
+    };
+    for (const Case& c : {Case{"hef at 2600 m", &hef(), 2600, 3000}, Case{"lidar at 397 m", &lidarFlood(), 397, 120}}) {
+        SCOPED_TRACE(c.name);
+        ASSERT_TRUE(c.w->scene->hasWater());
+        const auto surface = hc::influence::Layer::byName(c.w->grid, "water_surface");
+        size_t water = 0, pixels = 0, side = 0, sideOver5cm = 0;
+        double worst = 0, worstAll = 0;
+        for (const Camera& cam : floodCameras(*c.w, c.distM, 31)) {
+            Timings t;
+            RenderOptions o;
+            o.texelsPerSide = 512;
+            const Frame f = renderFrame(*c.w->scene, cam, o, t);
+            std::vector<float> posZ, depth;
+            readBackWater(f, posZ, depth);
+            pixels += posZ.size();
+            for (size_t i = 0; i < posZ.size(); ++i) {
+                if (!(depth[i] > 0)) continue;
+                ++water;
+                const double err = double(posZ[i]) - c.level;
+                worstAll = std::max(worstAll, std::abs(err));
+                if (std::abs(err) <= 1e-3) {
+                    worst = std::max(worst, std::abs(err));
+                    continue;
+                }
+                // The side of the water at its edge?
+                const size_t k = size_t(f.cascade[i]);
+                double s = t.cascades[k].texelM;
+                if (k + 1 < t.cascades.size()) s = std::max(s, t.cascades[k + 1].texelM);
+                bool edge = false;
+                for (int dy = -1; dy <= 1; ++dy)
+                    for (int dx = -1; dx <= 1; ++dx)
+                        edge = edge || !c.w->eval->value(f.posX[i] + 1.5 * s * dx, f.posY[i] + 1.5 * s * dy, surface);
+                EXPECT_TRUE(err < 0 && edge) << "a water hit " << err << " m off the level at " << f.posX[i] << "," << f.posY[i]
+                                             << " (texel " << s << " m)";
+                ++side;
+                sideOver5cm += err < -0.05;
+            }
+        }
+        std::printf("%s: %zu water pixels of %zu, worst |P.Z - level| %.2e m; %zu on the water's side at its edge (%zu > 5 cm); worst of all %.2f m\n",
+                    c.name, water, pixels, worst, side, sideOver5cm, worstAll);
+        EXPECT_GT(water, pixels / 10) << "the cameras see the flood";
+        EXPECT_LE(worst, 1e-3);
+        EXPECT_LE(side * 1000, water);
+    }
+}
+
+// The texels agree with the exact level field (influence/surface.h) wherever both draw water, and draw it at
+// the same texels: those where the exact depth exceeds the 1 cm drawn minimum by 1 mm (the texels' error bound,
+// TexelsEqualTheExactSurfaceWithin1mm) and whose wet share is not within float rounding of 1/2 (there the two
+// may decide differently: counted, at most 0.1 % of the wet texels).
+TEST(RenderWater, TexelsDrawTheExactLevelField) {
+    World& w = lidarFlood();
+    const Camera c = overviewCamera(*w.scene, 320, 200);
+    const detail::FrameSetup setup = detail::setUpFrame(*w.scene, c);
+    const CascadeFit fit = fitCascades(setup.view, 3, 256);
+    const auto surface = hc::influence::Layer::byName(w.grid, "water_surface");
+    const auto depth = hc::influence::Layer::byName(w.grid, "water_depth");
+    size_t wet = 0, differ = 0;
+    double worst = 0;
+    for (const Cascade& k : fit.cascades) {
+        detail::CascadeTextures tex;
+        detail::approximate(*w.scene, k, tex, 0.01, 0);
+        for (int j = 0; j < k.n; ++j)
+            for (int i = k.rows[size_t(j)].first; i <= k.rows[size_t(j)].last; ++i) {
+                const double x = k.x0 + i * k.texelM, y = k.y0 + j * k.texelM;
+                const size_t t = size_t(j) * size_t(k.n) + size_t(i);
+                const auto s = w.eval->value(x, y, surface);
+                const auto d = w.eval->value(x, y, depth);
+                const bool texWater = std::isfinite(tex.water.h[t]);
+                if (!d) {
+                    EXPECT_FALSE(texWater) << "water in a hole";
+                    continue;
+                }
+                if (*d > 0.011) {
+                    ++wet;
+                    if (!texWater) {
+                        ++differ;
+                        continue;
+                    }
+                    worst = std::max(worst, std::abs(double(tex.water.h[t]) - *s));
+                } else if (*d < 0.009 && texWater) {
+                    ++differ;
+                }
+            }
+    }
+    std::printf("%zu wet texels, %zu drawn differently, worst level error %.2e m\n", wet, differ, worst);
+    EXPECT_GT(wet, 10000u);
+    EXPECT_LE(differ * 1000, wet);
+    EXPECT_LE(worst, 1e-3);
+}
+
 }  // namespace

@@ -4,6 +4,7 @@
 #include <bit>
 #include <cmath>
 #include <cstdint>
+#include <limits>
 
 #include "heightcast/grid/parallel.h"
 
@@ -13,15 +14,17 @@ namespace hc::influence {
 
 Layer Layer::byName(const Grid& grid, const std::string& name) {
     Layer l;
-    if (name == "water_surface") {
-        if (grid.findLayer("water_depth") < 0) throw Error("layer water_surface needs a water_depth layer, and the grid has none");
-        l.kind = WaterSurface;
+    std::string have;
+    for (const auto& g : grid.layers) have += (have.empty() ? "" : ", ") + g.name;
+    if (name == "water_surface" || name == "water_depth") {
+        if (grid.findLayer("water_depth") < 0)
+            throw Error("no layer '" + name + "': the grid has no water (it has: " + have +
+                        "; hc-ingest --water, --water-surface or --water-level adds it)");
+        l.kind = name == "water_surface" ? WaterSurface : WaterDepth;
         return l;
     }
     int i = grid.findLayer(name);
     if (i < 0) {
-        std::string have;
-        for (const auto& g : grid.layers) have += (have.empty() ? "" : ", ") + g.name;
         if (grid.findLayer("water_depth") >= 0) have += ", water_surface";
         throw Error("no layer '" + name + "' in the grid (it has: " + have + ")");
     }
@@ -46,16 +49,18 @@ SurfaceEvaluator::SurfaceEvaluator(const Grid& grid, const InfluenceLists& lists
     depthLayer_ = grid.findLayer("water_depth");
 }
 
-// The sums run over values relative to the containing cell's own value v_k:
+// The sums run over values relative to a base, the containing cell's own value v_k:
 //   v(p) = v_k + sum_i w_i (v_i - v_k) / sum_i w_i
 // Equal to the plain weighted mean in exact arithmetic, but a constant field comes out exactly
-// constant, and centimetre relief at 8000 m keeps its digits (no large products to cancel).
-void SurfaceEvaluator::sums(size_t k, double x, double y, size_t l, double& num, double& den, double* dnum, double* dden) const {
+// constant, and centimetre relief at 8000 m keeps its digits (no large products to cancel). The water
+// level's base is a wet cell's level (levelBase), so a constant level stays exactly constant too.
+void SurfaceEvaluator::sums(size_t k, double x, double y, size_t l, const float* depth, double base, double& num, double& den,
+                            double* dnum, double* dden) const {
     const float* v = grid_.values[l].data();
-    const double base = v[k];
     num = den = 0;
     double gnx = 0, gny = 0, gdx = 0, gdy = 0;
     for (uint32_t i : lists_.list(k)) {
+        if (depth && !(depth[i] > 0)) continue;  // the level field takes wet cells only
         const Kernel& q = k_[i];
         const double dx = x - q.cx, dy = y - q.cy;
         const double d2 = dx * dx + dy * dy;
@@ -63,7 +68,7 @@ void SurfaceEvaluator::sums(size_t k, double x, double y, size_t l, double& num,
         const double e = std::exp(-d2 * q.a);
         const double w = e - tail_;
         if (w <= 0) continue;
-        const double rel = v[i] - base;
+        const double rel = (depth ? double(v[i]) + double(depth[i]) : double(v[i])) - base;
         num += w * rel;
         den += w;
         if (dnum) {
@@ -83,24 +88,46 @@ void SurfaceEvaluator::sums(size_t k, double x, double y, size_t l, double& num,
     }
 }
 
+double SurfaceEvaluator::levelBase(size_t k) const {
+    const float* z = grid_.values[0].data();
+    const float* d = grid_.values[static_cast<size_t>(depthLayer_)].data();
+    if (d[k] > 0) return double(z[k]) + double(d[k]);
+    for (uint32_t i : lists_.list(k))
+        if (d[i] > 0) return double(z[i]) + double(d[i]);
+    return std::numeric_limits<double>::quiet_NaN();
+}
+
 std::optional<ValueGradient> SurfaceEvaluator::evaluate(double x, double y, const Layer& layer, bool gradient) const {
     const std::optional<uint32_t> k = grid_.locate(x, y);
     if (!k) return std::nullopt;
-    auto one = [&](size_t l) {
-        double num, den, dn[2], dd[2];
-        sums(*k, x, y, l, num, den, gradient ? dn : nullptr, gradient ? dd : nullptr);
-        ValueGradient r{static_cast<double>(grid_.values[l][*k]) + num / den, 0, 0};
-        if (gradient) {  // quotient rule (the base value is a constant)
+    // The weighted mean of `l` (or, with `depth`, of the wet cells' level) from `base`, and the sum of
+    // the weights it took.
+    auto one = [&](size_t l, const float* depth, double base, double& den) {
+        double num, dn[2], dd[2];
+        sums(*k, x, y, l, depth, base, num, den, gradient ? dn : nullptr, gradient ? dd : nullptr);
+        ValueGradient r{base + num / den, 0, 0};
+        if (gradient) {  // quotient rule (the base is a constant)
             r.dx = (dn[0] * den - num * dd[0]) / (den * den);
             r.dy = (dn[1] * den - num * dd[1]) / (den * den);
         }
         return r;
     };
-    if (layer.kind == Layer::Cells) return one(layer.index);
-    ValueGradient depth = one(static_cast<size_t>(depthLayer_));
-    if (!(depth.value > 0)) return std::nullopt;  // dry: no water surface here
-    ValueGradient z = one(0);
-    return ValueGradient{z.value + depth.value, z.dx + depth.dx, z.dy + depth.dy};
+    double denAll, denWet = 0;
+    if (layer.kind == Layer::Cells) return one(layer.index, nullptr, grid_.values[layer.index][*k], denAll);
+    // Water (DESIGN.md section 12, surface.h): the level field of the wet cells, drawn where they hold at
+    // least kWetShareMin of the weight and the level lies above the smooth terrain.
+    const ValueGradient z = one(0, nullptr, grid_.values[0][*k], denAll);
+    const double base = levelBase(*k);
+    std::optional<ValueGradient> level;
+    if (!std::isnan(base)) {
+        const float* depth = grid_.values[static_cast<size_t>(depthLayer_)].data();
+        const ValueGradient l = one(0, depth, base, denWet);
+        // denWet > 0 before the division counts: with no wet weight at p the quotient is 0 / 0.
+        if (denWet > 0 && denWet >= kWetShareMin * denAll && l.value > z.value) level = l;
+    }
+    if (layer.kind == Layer::WaterSurface) return level;
+    if (!level) return ValueGradient{0, 0, 0};  // dry land: no water, depth 0
+    return ValueGradient{level->value - z.value, level->dx - z.dx, level->dy - z.dy};
 }
 
 std::optional<double> SurfaceEvaluator::value(double x, double y, const Layer& layer) const {
@@ -138,7 +165,7 @@ constexpr size_t kLanes = 4;  // doubles per AVX2 register
 // One cell's influence list gathered once, relative to the cell's centre and values, for every point
 // of a batch that falls in that cell (structure of arrays, padded to kLanes with zero weights).
 struct Gathered {
-    std::vector<double> ex, ey, a, r2, rel0, rel1;
+    std::vector<double> ex, ey, a, r2, rel0, rel1, wet;  // rel1, wet: the level relative to its base, 1 for a wet cell
     size_t padded = 0;
 };
 
@@ -160,10 +187,10 @@ std::vector<std::optional<double>> SurfaceEvaluator::values(std::span<const std:
     std::sort(order.begin(), order.end());
 
     // The same sums as sums() (relative to the cell's own values), without gradients, vectorised across
-    // list entries. Layer 0 and the depth for the water surface; otherwise just the layer asked for.
-    const bool surface = layer.kind == Layer::WaterSurface;
-    const float* v0 = grid_.values[surface ? 0 : layer.index].data();
-    const float* v1 = surface ? grid_.values[static_cast<size_t>(depthLayer_)].data() : nullptr;
+    // list entries: the layer asked for; for water, the elevation and the wet cells' level (surface.h).
+    const bool water = layer.kind != Layer::Cells;
+    const float* v0 = grid_.values[water ? 0 : layer.index].data();
+    const float* depth = water ? grid_.values[static_cast<size_t>(depthLayer_)].data() : nullptr;
     std::vector<Gathered> scratch(workers);
     parallelFor(order.size(), 4096, threads, [&](size_t b, size_t e, unsigned worker) {
         Gathered& g = scratch[worker];
@@ -173,10 +200,11 @@ std::vector<std::optional<double>> SurfaceEvaluator::values(std::span<const std:
             size_t runEnd = j + 1;
             while (runEnd < e && order[runEnd].first == k) ++runEnd;
             const Kernel& kk = k_[k];
-            const double base0 = v0[k], base1 = v1 ? v1[k] : 0.0;
+            const double base0 = v0[k], base1 = water ? levelBase(k) : 0.0;
+            const bool anyWet = water && !std::isnan(base1);
             const auto list = lists_.list(k);
             g.padded = (list.size() + kLanes - 1) / kLanes * kLanes;
-            for (auto* a : {&g.ex, &g.ey, &g.a, &g.rel0, &g.rel1}) a->assign(g.padded, 0.0);
+            for (auto* a : {&g.ex, &g.ey, &g.a, &g.rel0, &g.rel1, &g.wet}) a->assign(g.padded, 0.0);
             g.r2.assign(g.padded, -1.0);  // padding: d2 < -1 never holds
             for (size_t idx = 0; idx < list.size(); ++idx) {
                 const uint32_t i = list[idx];
@@ -185,18 +213,22 @@ std::vector<std::optional<double>> SurfaceEvaluator::values(std::span<const std:
                 g.a[idx] = k_[i].a;
                 g.r2[idx] = k_[i].r2;
                 g.rel0[idx] = v0[i] - base0;
-                if (v1) g.rel1[idx] = v1[i] - base1;
+                if (anyWet && depth[i] > 0) {
+                    g.wet[idx] = 1.0;
+                    g.rel1[idx] = double(v0[i]) + double(depth[i]) - base1;
+                }
             }
             for (; j < runEnd; ++j) {
                 const uint32_t p = order[j].second;
                 const double px = pts[p][0] - kk.cx, py = pts[p][1] - kk.cy;
-                double num0[kLanes] = {}, num1[kLanes] = {}, den[kLanes] = {};
+                double num0[kLanes] = {}, num1[kLanes] = {}, den[kLanes] = {}, denWet[kLanes] = {};
                 const double* __restrict ex = g.ex.data();
                 const double* __restrict ey = g.ey.data();
                 const double* __restrict ca = g.a.data();
                 const double* __restrict cr2 = g.r2.data();
                 const double* __restrict r0 = g.rel0.data();
                 const double* __restrict r1 = g.rel1.data();
+                const double* __restrict wet = g.wet.data();
                 for (size_t base = 0; base < g.padded; base += kLanes)
                     for (size_t l = 0; l < kLanes; ++l) {
                         const size_t idx = base + l;
@@ -207,18 +239,23 @@ std::vector<std::optional<double>> SurfaceEvaluator::values(std::span<const std:
                         const double w = std::max(expNonPositive(-d2 * ca[idx]) - tail_, 0.0) *
                                          static_cast<double>(d2 < cr2[idx]);
                         num0[l] += w * r0[idx];
-                        num1[l] += w * r1[idx];
+                        num1[l] += w * r1[idx];  // r1 is 0 for dry cells
                         den[l] += w;
+                        denWet[l] += w * wet[idx];
                     }
-                double n0 = 0, n1 = 0, d = 0;
-                for (size_t l = 0; l < kLanes; ++l) n0 += num0[l], n1 += num1[l], d += den[l];
+                double n0 = 0, n1 = 0, d = 0, dw = 0;
+                for (size_t l = 0; l < kLanes; ++l) n0 += num0[l], n1 += num1[l], d += den[l], dw += denWet[l];
                 // d >= the cell's own weight at its farthest point (kernel.h): never zero here.
-                if (!surface) {
-                    out[p] = base0 + n0 / d;
-                } else {
-                    const double depth = base1 + n1 / d;
-                    if (depth > 0) out[p] = base0 + n0 / d + depth;
+                const double z = base0 + n0 / d;
+                if (!water) {
+                    out[p] = z;
+                    continue;
                 }
+                // The water rule of surface.h, as in evaluate().
+                const double level = base1 + n1 / dw;
+                const bool drawn = dw > 0 && dw >= kWetShareMin * d && level > z;
+                if (layer.kind == Layer::WaterDepth) out[p] = drawn ? level - z : 0.0;
+                else if (drawn) out[p] = level;
             }
         }
     });
@@ -227,20 +264,28 @@ std::vector<std::optional<double>> SurfaceEvaluator::values(std::span<const std:
 
 std::optional<double> SurfaceEvaluator::valueBruteForce(double x, double y, const Layer& layer) const {
     if (!grid_.locate(x, y)) return std::nullopt;
-    auto one = [&](size_t l) {
-        double num = 0, den = 0;
+    // Plain weighted means over every cell (no base): `wetLevel` takes z + d of the wet cells only.
+    const float* depth = depthLayer_ >= 0 ? grid_.values[static_cast<size_t>(depthLayer_)].data() : nullptr;
+    auto one = [&](size_t l, bool wetLevel, double& den) {
+        double num = 0;
+        den = 0;
         for (size_t i = 0; i < grid_.cellCount(); ++i) {
+            if (wetLevel && !(depth[i] > 0)) continue;
             const double dx = x - k_[i].cx, dy = y - k_[i].cy;
             const double w = std::max(0.0, std::exp(-(dx * dx + dy * dy) * k_[i].a) - tail_);
-            num += w * grid_.values[l][i];
+            num += w * (double(grid_.values[l][i]) + (wetLevel ? double(depth[i]) : 0.0));
             den += w;
         }
         return num / den;
     };
-    if (layer.kind == Layer::Cells) return one(layer.index);
-    double depth = one(static_cast<size_t>(depthLayer_));
-    if (!(depth > 0)) return std::nullopt;
-    return one(0) + depth;
+    double denAll, denWet;
+    if (layer.kind == Layer::Cells) return one(layer.index, false, denAll);
+    const double z = one(0, false, denAll);
+    const double level = one(0, true, denWet);
+    const bool drawn = denWet > 0 && denWet >= kWetShareMin * denAll && level > z;
+    if (layer.kind == Layer::WaterDepth) return drawn ? level - z : 0.0;
+    if (!drawn) return std::nullopt;
+    return level;
 }
 
 }  // namespace hc::influence

@@ -59,7 +59,18 @@ void main() {
         const double halfFinest = 0.5 * frame.finestM;
         const float h = float(halfFinest);
         const float fx = float(x - double(kcx2) * halfFinest), fy = float(y - double(kcy2) * halfFinest);
-        float num = 0.0, den = 0.0, numD = 0.0;
+        // The water level field (DESIGN.md section 12, influence/surface.h) from the wet cells only (depth > 0),
+        // relative to a wet cell's level: k's own if k is wet, else the first wet cell of its list (levelBase()).
+        bool anyWet = frame.hasWater != 0 && ck.depth > 0.0;
+        float levelBase = ck.z + ck.depth;
+        for (uint idx = b; idx < e && frame.hasWater != 0 && !anyWet; ++idx) {
+            const GpuCell ci = cells[listEntry(idx)];
+            if (ci.depth > 0.0) {
+                anyWet = true;
+                levelBase = ci.z + ci.depth;
+            }
+        }
+        float num = 0.0, den = 0.0, numL = 0.0, denW = 0.0;
         for (uint idx = b; idx < e; ++idx) {
             const GpuCell ci = cells[listEntry(idx)];
             const float ex = float(int(2u * ci.ix + (1u << ci.level)) - kcx2) * h;
@@ -68,15 +79,23 @@ void main() {
             const float d2 = dx * dx + dy * dy;
             const float w = d2 < ci.r2 ? max(expNeg(-d2 * ci.a) - frame.tail, 0.0) : 0.0;
             num += w * (ci.z - ck.z);
-            numD += w * (ci.depth - ck.depth);
             den += w;
+            if (ci.depth > 0.0) {
+                numL += w * ((ci.z + ci.depth) - levelBase);
+                denW += w;
+            }
         }
         // den >= the cell's own weight at its farthest point (kernel.h): never zero here.
-        z = float(double(ck.z) + double(num / den));
-        if (frame.hasWater != 0) {
-            const float d = float(double(ck.depth) + double(numD / den));
-            depth = max(d, 0.0);
-            if (d > frame.minDepthM) water = z + d;
+        const double zd = double(ck.z) + double(num / den);
+        z = float(zd);
+        // Water where the wet cells hold at least half the weight (kWetShareMin) and their level is above the
+        // terrain: the depth texture holds level - terrain, the water heightfield the level where that depth
+        // exceeds the minimum drawn (approximate.cpp).
+        if (anyWet && denW > 0.0 && denW >= 0.5 * den) {
+            const double level = double(levelBase) + double(numL / denW);
+            const float d = float(level - zd);
+            if (d > 0.0) depth = d;
+            if (d > frame.minDepthM) water = float(level);
         }
         atomicAdd(counters[uint(uCascade) * uint(kCounterSlots) + (gl_WorkGroupID.x + 7u * gl_WorkGroupID.y) % uint(kCounterSlots)], e - b);
     }

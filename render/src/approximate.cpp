@@ -11,12 +11,14 @@
 #include <limits>
 
 #include "heightcast/grid/parallel.h"
+#include "heightcast/influence/surface.h"
 #include "textures.h"
 
 namespace hc::render::detail {
 namespace {
 
 constexpr int kLanes = 8;  // candidates per vector step (AVX2: 8 floats)
+static_assert(influence::kWetShareMin == 0.5, "render/shaders/approximate.comp writes the wet share rule as denW >= 0.5 * den");
 
 // exp(x) for x <= 0 in float: 2^(x log2 e) split into an integer power (exponent bits) and 2^f,
 // f in [-0.5, 0.5], by its Taylor polynomial to degree 6 (relative error < 2e-7, float's epsilon).
@@ -32,7 +34,8 @@ inline float expNeg(float x) {
 }
 
 struct Candidates {
-    std::vector<float> ex, ey, a, r2, dz, dd;  // relative to the cell's centre / value; padded to kLanes
+    std::vector<float> ex, ey, a, r2, dz;  // relative to the cell's centre / value; padded to kLanes
+    std::vector<float> dl, wet;            // water: level z + d relative to the level base (0 if dry), 1 if wet
     size_t count = 0;                          // real entries (before padding)
 };
 
@@ -150,11 +153,19 @@ uint64_t approximate(const Scene& scene, const Cascade& c, CascadeTextures& tex,
             const auto& kernels = scene.kernels();
             const double kx = kernels[k].cx, ky = kernels[k].cy;
             const double zk = g.values[0][k];
-            const double dk = depthLayer >= 0 ? g.values[size_t(depthLayer)][k] : 0.0;
             const float* depthValues = depthLayer >= 0 ? g.values[size_t(depthLayer)].data() : nullptr;
             const auto list = lists.list(k);
+            // The water level field (DESIGN.md section 12, influence/surface.h) is taken relative to a wet cell's
+            // level, k's own if k is wet, as the exact evaluator's levelBase() does: a constant level stays exact.
+            double lk = std::numeric_limits<double>::quiet_NaN();
+            if (depthValues) {
+                if (depthValues[k] > 0) lk = zk + double(depthValues[k]);
+                for (size_t idx = 0; idx < list.size() && std::isnan(lk); ++idx)
+                    if (depthValues[list[idx]] > 0) lk = double(g.values[0][list[idx]]) + double(depthValues[list[idx]]);
+            }
+            const bool anyWet = !std::isnan(lk);
             const size_t m = list.size(), padded = (m + kLanes - 1) / kLanes * kLanes;
-            for (auto* v : {&cand.ex, &cand.ey, &cand.a, &cand.dz, &cand.dd}) v->assign(padded, 0.0f);
+            for (auto* v : {&cand.ex, &cand.ey, &cand.a, &cand.dz, &cand.dl, &cand.wet}) v->assign(padded, 0.0f);
             cand.r2.assign(padded, -1.0f);  // padding never counts: d2 < -1 is false
             for (size_t idx = 0; idx < m; ++idx) {
                 const uint32_t i = list[idx];
@@ -164,7 +175,10 @@ uint64_t approximate(const Scene& scene, const Cascade& c, CascadeTextures& tex,
                 cand.a[idx] = ck.a;
                 cand.r2[idx] = ck.r2;
                 cand.dz[idx] = static_cast<float>(g.values[0][i] - zk);
-                if (depthValues) cand.dd[idx] = static_cast<float>(depthValues[i] - dk);
+                if (anyWet && depthValues[i] > 0) {
+                    cand.wet[idx] = 1.0f;
+                    cand.dl[idx] = static_cast<float>(double(g.values[0][i]) + double(depthValues[i]) - lk);
+                }
             }
             for (int j = ja; j < jb; ++j) {
                 const float fy = static_cast<float>(c.y0 + j * s - ky);
@@ -174,13 +188,14 @@ uint64_t approximate(const Scene& scene, const Cascade& c, CascadeTextures& tex,
                         const size_t t = size_t(j) * size_t(n) + size_t(i);
                         const float fx = static_cast<float>(c.x0 + i * s - kx);
                         gaussians[worker] += m;
-                        float num[kLanes] = {}, den[kLanes] = {}, numD[kLanes] = {};
+                        float num[kLanes] = {}, den[kLanes] = {}, numL[kLanes] = {}, denW[kLanes] = {};
                         const float* __restrict ex = cand.ex.data();
                         const float* __restrict ey = cand.ey.data();
                         const float* __restrict ca = cand.a.data();
                         const float* __restrict cr2 = cand.r2.data();
                         const float* __restrict cdz = cand.dz.data();
-                        const float* __restrict cdd = cand.dd.data();
+                        const float* __restrict cdl = cand.dl.data();
+                        const float* __restrict cwet = cand.wet.data();
                         // Branch-free (masks as 0/1 factors) so the compiler vectorises across the 8 lanes.
                         for (size_t base = 0; base < padded; base += kLanes)
                             for (int l = 0; l < kLanes; ++l) {
@@ -190,18 +205,23 @@ uint64_t approximate(const Scene& scene, const Cascade& c, CascadeTextures& tex,
                                 const float kernel = expNeg(-d2 * ca[idx]) - tail;
                                 const float w = std::max(kernel, 0.0f) * static_cast<float>(d2 < cr2[idx]);
                                 num[l] += w * cdz[idx];
-                                numD[l] += w * cdd[idx];
+                                numL[l] += w * cdl[idx];  // cdl is 0 for dry cells
+                                denW[l] += w * cwet[idx];
                                 den[l] += w;
                             }
-                        float sn = 0, sd = 0, snD = 0;
-                        for (int l = 0; l < kLanes; ++l) sn += num[l], sd += den[l], snD += numD[l];
+                        float sn = 0, sd = 0, snL = 0, sdW = 0;
+                        for (int l = 0; l < kLanes; ++l) sn += num[l], sd += den[l], snL += numL[l], sdW += denW[l];
                         // sd >= the cell's own weight at its farthest point (kernel.h): never zero here.
-                        const float z = static_cast<float>(zk + double(sn / sd));
-                        tex.terrain.h[t] = z;
-                        if (depthLayer >= 0) {
-                            const float d = static_cast<float>(dk + double(snD / sd));
-                            tex.depth[t] = d > 0 ? d : 0.0f;
-                            if (d > minDepth) tex.water.h[t] = z + d;
+                        const double z = zk + double(sn / sd);
+                        tex.terrain.h[t] = static_cast<float>(z);
+                        // Water where the wet cells hold at least kWetShareMin of the weight and their level is above
+                        // the terrain (surface.h); the depth texture holds level - terrain there (0 elsewhere), the
+                        // water heightfield the level itself where that depth exceeds the minimum drawn.
+                        if (anyWet && sdW > 0 && double(sdW) >= influence::kWetShareMin * double(sd)) {
+                            const double level = lk + double(snL / sdW);
+                            const float d = static_cast<float>(level - z);
+                            if (d > 0) tex.depth[t] = d;
+                            if (d > minDepth) tex.water.h[t] = static_cast<float>(level);
                         }
                     }
                 }

@@ -19,16 +19,31 @@
 
 namespace hc::influence {
 
-// What to evaluate. Elevation and water depth are grid layers; the water surface is
-// elevation + depth where the smooth depth is positive (undefined where dry).
+// What to evaluate. Elevation and any other grid layer are smoothed cell values (section 4). With a
+// water_depth layer, water is the water level field of DESIGN.md section 12, built from wet cells only
+// (wet: depth > 0), normalised over the wet weights:
+//
+//   level(p) = sum_{wet i} w_i(p) (z_i + d_i) / sum_{wet i} w_i(p)
+//
+// so a flood whose cells all lie at one level L is exactly L wherever it is drawn (dry neighbours bring
+// no terrain into it). Water is drawn at p when both
+//   - wet cells dominate the weights: sum_{wet i} w_i(p) >= 1/2 sum_i w_i(p) (kWetShareMin), and
+//   - the level lies above the smooth terrain z(p) (section 4's elevation).
+// WaterSurface is level(p) there and undefined elsewhere; WaterDepth is level(p) - z(p) there and 0 on
+// dry land (undefined only in holes and outside the grid, like the elevation).
 struct Layer {
-    enum Kind { Cells, WaterSurface } kind = Cells;
+    enum Kind { Cells, WaterSurface, WaterDepth } kind = Cells;
     size_t index = 0;  // grid layer, for Cells
 
-    // "elevation", "water_depth", any other layer name, or "water_surface". Throws hc::Error naming
-    // the layers the grid has when it has no such layer.
+    // "elevation", any other layer name, or "water_surface" / "water_depth" (the water level field
+    // above; a grid without a water_depth layer has neither). Throws hc::Error naming the layers the grid
+    // has when it has no such layer.
     static Layer byName(const Grid& grid, const std::string& name);
 };
+
+// The wet weight share from which water is drawn (DESIGN.md section 12): at least half the weight at a
+// point comes from wet cells. Every evaluator (exact, batch, CPU and GL approximation) uses it.
+constexpr double kWetShareMin = 0.5;
 
 struct ValueGradient {
     double value;  // [layer units]
@@ -53,8 +68,12 @@ public:
     const Grid& grid() const { return grid_; }
 
 private:
-    // Weighted sums for grid layer `l` at p over cell k's list; also the gradient sums if asked.
-    void sums(size_t k, double x, double y, size_t l, double& num, double& den, double* dnum, double* dden) const;
+    // Weighted sums at p over cell k's list of v_i - base: v the grid layer `l`; or, with `depth`, the
+    // water level z_i + d_i of the wet cells only (d_i > 0). Also the gradient sums if asked.
+    void sums(size_t k, double x, double y, size_t l, const float* depth, double base, double& num, double& den, double* dnum,
+              double* dden) const;
+    // The level of cell k if it is wet, else of the first wet cell of its list; NaN if none is wet.
+    double levelBase(size_t k) const;
     std::optional<ValueGradient> evaluate(double x, double y, const Layer& layer, bool gradient) const;
 
     const Grid& grid_;
