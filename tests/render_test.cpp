@@ -1087,11 +1087,10 @@ std::vector<Camera> floodCameras(const World& w, double distM, unsigned seed) {
 // Every water hit of the CPU renderer lies on the flood level, in the EXR's world position layer: within 1 mm,
 // float rounding (the level at texels, 2.4e-4 m at 2600 m; flat bilinear patches between them met in double;
 // P.Z stored as float; a blend in a cascade overlap mixes two hits on the same plane, so it stays on it), far
-// inside the 5 cm. One exception, counted: at the edge of the drawn water a ray can pass below the
-// level beside it (where the terrain is below the level but the wet cells do not dominate) and enter a water
-// patch from the side; the ray caster then hits where it entered (raycast.cpp: the water's side), below the
-// level. Such a hit must lie below the level, within 1.5 texels of a point where the exact evaluator draws no
-// water, and be rare (measured: 29 of 123 k water pixels, 9 of them more than 5 cm below).
+// inside the 5 cm, with no exception. Regression: at the edge of the drawn water a ray could pass below
+// the level beside it (where the terrain is below the level but the wet cells do not dominate) and enter a water
+// patch from the side; the ray caster hit where it entered, below the level (29 of 123 k water pixels, up to
+// 20.9 m below on hef). Now such a ray is under the water and goes on to the ground (raycast.cpp).
 TEST(RenderWater, BathtubFloodRendersAtItsLevelWithin5cm) {
     struct Case {
         const char* name;
@@ -1101,9 +1100,8 @@ TEST(RenderWater, BathtubFloodRendersAtItsLevelWithin5cm) {
     for (const Case& c : {Case{"hef at 2600 m", &hef(), 2600, 3000}, Case{"lidar at 397 m", &lidarFlood(), 397, 120}}) {
         SCOPED_TRACE(c.name);
         ASSERT_TRUE(c.w->scene->hasWater());
-        const auto surface = hc::influence::Layer::byName(c.w->grid, "water_surface");
-        size_t water = 0, pixels = 0, side = 0, sideOver5cm = 0;
-        double worst = 0, worstAll = 0;
+        size_t water = 0, pixels = 0, off = 0;
+        double worst = 0;
         for (const Camera& cam : floodCameras(*c.w, c.distM, 31)) {
             Timings t;
             RenderOptions o;
@@ -1116,30 +1114,14 @@ TEST(RenderWater, BathtubFloodRendersAtItsLevelWithin5cm) {
                 if (!(depth[i] > 0)) continue;
                 ++water;
                 const double err = double(posZ[i]) - c.level;
-                worstAll = std::max(worstAll, std::abs(err));
-                if (std::abs(err) <= 1e-3) {
-                    worst = std::max(worst, std::abs(err));
-                    continue;
-                }
-                // The side of the water at its edge?
-                const size_t k = size_t(f.cascade[i]);
-                double s = t.cascades[k].texelM;
-                if (k + 1 < t.cascades.size()) s = std::max(s, t.cascades[k + 1].texelM);
-                bool edge = false;
-                for (int dy = -1; dy <= 1; ++dy)
-                    for (int dx = -1; dx <= 1; ++dx)
-                        edge = edge || !c.w->eval->value(f.posX[i] + 1.5 * s * dx, f.posY[i] + 1.5 * s * dy, surface);
-                EXPECT_TRUE(err < 0 && edge) << "a water hit " << err << " m off the level at " << f.posX[i] << "," << f.posY[i]
-                                             << " (texel " << s << " m)";
-                ++side;
-                sideOver5cm += err < -0.05;
+                worst = std::max(worst, std::abs(err));
+                if (std::abs(err) > 1e-3 && off++ < 5)
+                    ADD_FAILURE() << "a water hit " << err << " m off the level at " << f.posX[i] << "," << f.posY[i];
             }
         }
-        std::printf("%s: %zu water pixels of %zu, worst |P.Z - level| %.2e m; %zu on the water's side at its edge (%zu > 5 cm); worst of all %.2f m\n",
-                    c.name, water, pixels, worst, side, sideOver5cm, worstAll);
+        std::printf("%s: %zu water pixels of %zu, worst |P.Z - level| %.2e m, %zu beyond 1 mm\n", c.name, water, pixels, worst, off);
         EXPECT_GT(water, pixels / 10) << "the cameras see the flood";
-        EXPECT_LE(worst, 1e-3);
-        EXPECT_LE(side * 1000, water);
+        EXPECT_EQ(off, 0u);
     }
 }
 

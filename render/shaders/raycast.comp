@@ -146,13 +146,17 @@ PatchHit traverse(int k, bool water, vec3 d, float tIn, float tOut, inout bool t
                     return res;
                 }
             }
-            if (C <= 0.0 && !under && !water) {
+            if (C <= 0.0 && !under) {
                 if (t > tStart) {
                     // Through which edge did the ray come in? The one it crossed last.
                     const float enterU = du > 0.0 ? (float(iu) - u0) * invDu : du < 0.0 ? (float(iu + 1) - u0) * invDu : -kInf;
                     const float enterV = dv > 0.0 ? (float(iv) - v0) * invDv : dv < 0.0 ? (float(iv + 1) - v0) * invDv : -kInf;
                     const bool acrossU = enterU >= enterV;
                     const int fromU = acrossU ? iu - (du > 0.0 ? 1 : -1) : iu, fromV = acrossU ? iv : iv - (dv > 0.0 ? 1 : -1);
+                    if (!patchDefined(k, base, fromU, fromV) && water) {  // under the water through its edge (traverse())
+                        res.underground = true;
+                        return res;
+                    }
                     if (!patchDefined(k, base, fromU, fromV)) {  // from a hole or outside: the wall on that edge
                         res.hit = res.wall = true;
                         res.t = t;

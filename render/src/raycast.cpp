@@ -93,7 +93,8 @@ bool patchDefined(const Heightfield& hf, int iu, int iv) {
 // - otherwise it has gone under the surface where two discretisations meet (a cascade's seam), and hits
 //   where it entered.
 // Under the block's bottom it goes on, and hits the bottom where it rises through it under a defined patch.
-// The water surface has no walls: under it at its first contact, a ray does not draw it (a camera in a lake).
+// The water surface has no walls: under it at its first contact (a camera in a lake), or come in under it
+// through its edge, a ray does not draw it and goes on to the ground.
 PatchHit traverse(const CascadeTextures& tex, bool water, const Cascade& c, const double o[3], const double d[3], double tIn, double tOut,
                   double zFloor, bool& touchedTerrain, bool& touchedWater) {
     PatchHit res;
@@ -134,6 +135,17 @@ PatchHit traverse(const CascadeTextures& tex, bool water, const Cascade& c, cons
     }
     // Start three levels below the top (the coarsest nodes are nearly always entered; the walk climbs back
     // when it leaves a parent): 1-2 % faster than starting at the top, no more (BENCHMARKS.md).
+    // The patch a ray came from into patch (iu, iv): across the edge it crossed last.
+    struct From {
+        bool acrossU;
+        int u, v;
+    };
+    auto cameFrom = [&](int iu, int iv) {
+        const double enterU = du > 0 ? (iu - u0) * invDu : du < 0 ? (iu + 1 - u0) * invDu : -HUGE_VAL;
+        const double enterV = dv > 0 ? (iv - v0) * invDv : dv < 0 ? (iv + 1 - v0) * invDv : -HUGE_VAL;
+        const bool acrossU = enterU >= enterV;
+        return From{acrossU, acrossU ? iu - (du > 0 ? 1 : -1) : iu, acrossU ? iv : iv - (dv > 0 ? 1 : -1)};
+    };
     int level = std::max(0, top - 3);
     double t = tIn;
     const double tiny = 1e-9 * (1.0 + std::abs(tOut)) ;
@@ -188,11 +200,7 @@ PatchHit traverse(const CascadeTextures& tex, bool water, const Cascade& c, cons
                 continue;
             }
             if (t > tStart) {
-                // Through which edge did the ray come in? The one it crossed last.
-                const double enterU = du > 0 ? (iu - u0) * invDu : du < 0 ? (iu + 1 - u0) * invDu : -HUGE_VAL;
-                const double enterV = dv > 0 ? (iv - v0) * invDv : dv < 0 ? (iv + 1 - v0) * invDv : -HUGE_VAL;
-                const bool acrossU = enterU >= enterV;
-                const int fromU = acrossU ? iu - (du > 0 ? 1 : -1) : iu, fromV = acrossU ? iv : iv - (dv > 0 ? 1 : -1);
+                const auto [acrossU, fromU, fromV] = cameFrom(iu, iv);
                 if (!patchDefined(hf, fromU, fromV)) {  // from a hole or outside: the wall on that edge
                     res.hit = res.wall = true;
                     res.t = t;
@@ -209,7 +217,14 @@ PatchHit traverse(const CascadeTextures& tex, bool water, const Cascade& c, cons
         Contact cw = Contact::None;
         if (water) {
             cw = patchContact(tex.water, iu, iv, u0, v0, du, dv, o, d, t, len, s, tauW, gxW, gyW, touchedWater);
-            if (cw == Contact::Below && !touchedWater) {  // under the water surface: it is not drawn for this ray
+            // Under the water surface at its first contact (a camera in a lake), or come in under it through its
+            // edge (from a patch without water, where the level lies above a dry shore): the ray is under the
+            // water, which is not drawn for it; it goes on to the ground. (Hitting the edge would draw water below
+            // its level: up to 21 m on the hef flood before this rule.)
+            if (cw == Contact::Below && (!touchedWater || (t > tStart && [&] {
+                                             const From f = cameFrom(iu, iv);
+                                             return !patchDefined(tex.water, f.u, f.v);
+                                         }()))) {
                 res.waterUnderground = true;
                 water = false;
                 cw = Contact::None;
