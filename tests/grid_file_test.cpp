@@ -353,4 +353,18 @@ TEST_F(GridFile, HugeCellCountsBehindValidChecksumsAreRefused) {
     EXPECT_NE(small.find("CELLS section holds 0 bytes, expected 8 for each of 7 cells"), std::string::npos) << small;
 }
 
+// Issue 11, found by fuzz_hcg with the count checks reverted (after 134 k executions): 2^62 + 208 cells
+// declared for the 208 present, so that 8x and 4x the count wrap around to the real section sizes; the
+// reader then asked for 2^62 cells (std::length_error). The file is the input as the reader saw it
+// (fuzz_input.h's CRC fix-up applied); it is also a seed of fuzz/corpus/hcg/, so fuzz runs replay it.
+TEST_F(GridFile, FuzzFindingCellCountWrappingToTheSectionSizes) {
+    const std::string file = std::string(HC_GOLDEN_DIR) + "/hostile/fuzz_hcg_cells_wrap.hcg";
+    try {
+        hc::readGrid(file);
+        FAIL() << "accepted";
+    } catch (const hc::Error& e) {
+        EXPECT_EQ(std::string(e.what()).rfind(file + ": at byte offset 24: header declares 4611686018427388112 cells", 0), 0u) << e.what();
+    }
+}
+
 }  // namespace

@@ -484,4 +484,23 @@ TEST_F(CacheFile, ListsRunningPastTheEntryCountAreRefused) {
     }
 }
 
+// Issue 11, found by fuzz_hci with the fix reverted (within its first 20 executions, once files were read
+// into exact-size heap blocks so that AddressSanitizer saw the overrun): OFFSETS[21] = 16712333 with 2307
+// entries, a list running past the end of INDICES. The file is the input as the reader saw it (CRCs fixed
+// up), for the grid it was built from (also copied beside it); it is also a seed of fuzz/corpus/hci/.
+TEST_F(CacheFile, FuzzFindingListPastTheEntryCount) {
+    const std::string dir = std::string(HC_GOLDEN_DIR) + "/hostile/";
+    const Grid g = hc::readGrid(dir + "buscot_20x20.hcg");
+    KernelParams params;
+    params.sigma = 1.5;  // the parameters the file declares
+    params.truncation = 2.5;
+    try {
+        hc::influence::readInfluenceCache(dir + "fuzz_hci_list_past_end.hci", g, params);
+        FAIL() << "accepted";
+    } catch (const hc::Error& e) {
+        EXPECT_NE(std::string(e.what()).find(": at byte offset 360: OFFSETS exceed the entry count 2307 at cell 20"), std::string::npos)
+            << e.what();
+    }
+}
+
 }  // namespace
