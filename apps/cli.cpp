@@ -5,6 +5,7 @@
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
+#include <fstream>
 #include <new>
 #include <sstream>
 
@@ -143,6 +144,50 @@ std::vector<double> parseNumberList(const std::string& text, const std::string& 
         throw Error(what + " " + text + ": expected " + std::to_string(minCount) +
                     (maxCount > minCount ? " or " + std::to_string(maxCount) : "") + " comma-separated numbers");
     return v;
+}
+
+std::vector<std::array<double, 2>> parsePointsCsv(std::string_view text, const std::string& name) {
+    if (text.empty()) throw Error(name + ": empty file (expected a header line x,y)");
+    // A hostile line may be megabytes long: quote only its start in a message.
+    auto quoted = [](std::string_view line) {
+        constexpr size_t kMaxQuoted = 80;
+        return "'" + std::string(line.substr(0, kMaxQuoted)) + (line.size() > kMaxQuoted ? "...'" : "'");
+    };
+    std::vector<std::array<double, 2>> pts;
+    size_t lineNo = 0, start = 0;
+    while (start < text.size()) {  // lines end at '\n'; a last line may lack one
+        const size_t nl = text.find('\n', start);
+        std::string_view line = text.substr(start, nl == std::string_view::npos ? std::string_view::npos : nl - start);
+        start = nl == std::string_view::npos ? text.size() : nl + 1;
+        ++lineNo;
+        if (!line.empty() && line.back() == '\r') line.remove_suffix(1);
+        if (lineNo == 1) {
+            if (line.substr(0, 3) != "x,y") throw Error(name + ": line 1: header must start with x,y (got " + quoted(line) + ")");
+            continue;
+        }
+        if (line.empty()) continue;
+        std::array<double, 2> p{};
+        const char* b = line.data();
+        const char* e = b + line.size();
+        auto r1 = std::from_chars(b, e, p[0]);
+        bool ok = r1.ec == std::errc() && r1.ptr < e && *r1.ptr == ',';
+        if (ok) {
+            auto r2 = std::from_chars(r1.ptr + 1, e, p[1]);
+            ok = r2.ec == std::errc() && (r2.ptr == e || *r2.ptr == ',');
+        }
+        if (!ok || !std::isfinite(p[0]) || !std::isfinite(p[1]))
+            throw Error(name + ": line " + std::to_string(lineNo) + ": expected two numbers x,y, got " + quoted(line));
+        pts.push_back(p);
+    }
+    return pts;
+}
+
+std::vector<std::array<double, 2>> readPointsCsv(const std::string& path) {
+    std::ifstream in(path, std::ios::binary);
+    if (!in) throw Error(path + ": cannot open for reading");
+    std::ostringstream text;
+    text << in.rdbuf();
+    return parsePointsCsv(text.str(), path);
 }
 
 int run(const char* program, const std::function<int()>& body) {

@@ -2,9 +2,11 @@
 // shared by every heightcast tool so they parse, validate and explain themselves the same way.
 #pragma once
 
+#include <array>
 #include <functional>
 #include <optional>
 #include <string>
+#include <string_view>
 #include <vector>
 
 namespace hc::cli {
@@ -54,6 +56,12 @@ private:
 double parseNumber(const std::string& text, const std::string& what);
 // Parses "A,B,C..." into minCount..maxCount finite doubles; throws hc::Error naming `what`.
 std::vector<double> parseNumberList(const std::string& text, const std::string& what, size_t minCount, size_t maxCount);
+
+// Probe points: CSV text whose first line starts with x,y, then one "x,y[,more columns]" line per point
+// (finite numbers; blank lines skipped; CRLF accepted). Errors are "NAME: line N: problem". Throws hc::Error.
+std::vector<std::array<double, 2>> parsePointsCsv(std::string_view text, const std::string& name);
+// Reads the file `path` and parses it with parsePointsCsv. Throws hc::Error.
+std::vector<std::array<double, 2>> readPointsCsv(const std::string& path);
 
 // Runs a tool's body: hc::Error and other failures become "PROGRAM: error: MESSAGE" on stderr and
 // exit status 1. Returns the process exit status.

@@ -1,7 +1,5 @@
 // hc-probe: the exact smooth surface at given points.
-#include <charconv>
 #include <cstdio>
-#include <fstream>
 #include <string>
 #include <vector>
 
@@ -10,44 +8,6 @@
 #include "heightcast/grid/error.h"
 #include "heightcast/grid/grid_file.h"
 #include "heightcast/influence/surface.h"
-
-namespace {
-
-struct Point {
-    double x, y;
-};
-
-// Reads "x,y" lines after a header whose first two columns are x and y.
-std::vector<Point> readPoints(const std::string& path) {
-    std::ifstream in(path);
-    if (!in) throw hc::Error(path + ": cannot open for reading");
-    std::string line;
-    if (!std::getline(in, line)) throw hc::Error(path + ": empty file (expected a header line x,y)");
-    if (!line.empty() && line.back() == '\r') line.pop_back();
-    if (line.rfind("x,y", 0) != 0) throw hc::Error(path + ": line 1: header must start with x,y (got '" + line + "')");
-    std::vector<Point> pts;
-    size_t lineNo = 1;
-    while (std::getline(in, line)) {
-        ++lineNo;
-        if (!line.empty() && line.back() == '\r') line.pop_back();
-        if (line.empty()) continue;
-        Point p{};
-        const char* b = line.data();
-        const char* e = b + line.size();
-        auto r1 = std::from_chars(b, e, p.x);
-        bool ok = r1.ec == std::errc() && r1.ptr < e && *r1.ptr == ',';
-        if (ok) {
-            auto r2 = std::from_chars(r1.ptr + 1, e, p.y);
-            ok = r2.ec == std::errc() && (r2.ptr == e || *r2.ptr == ',');
-        }
-        if (!ok || !std::isfinite(p.x) || !std::isfinite(p.y))
-            throw hc::Error(path + ": line " + std::to_string(lineNo) + ": expected two numbers x,y, got '" + line + "'");
-        pts.push_back(p);
-    }
-    return pts;
-}
-
-}  // namespace
 
 int main(int argc, char** argv) {
     return hc::cli::run("hc-probe", [&] {
@@ -79,12 +39,12 @@ int main(int argc, char** argv) {
             hc::cli::checkNotSame(out, gridPath, "output CSV");
             if (!pointsPath.empty()) hc::cli::checkNotSame(out, pointsPath, "output CSV");
         }
-        std::vector<Point> pts;
+        std::vector<std::array<double, 2>> pts;
         if (!xy.empty()) {
             const auto v = hc::cli::parseNumberList(xy, "--xy", 2, 2);
             pts.push_back({v[0], v[1]});
         } else {
-            pts = readPoints(pointsPath);
+            pts = hc::cli::readPointsCsv(pointsPath);
         }
 
         hc::Grid grid = hc::readGrid(gridPath);
@@ -96,12 +56,12 @@ int main(int argc, char** argv) {
         hc::influence::SurfaceEvaluator eval(grid, lists);
 
         std::vector<std::array<double, 2>> local(pts.size());
-        for (size_t i = 0; i < pts.size(); ++i) local[i] = {pts[i].x - grid.originWorldX, pts[i].y - grid.originWorldY};
+        for (size_t i = 0; i < pts.size(); ++i) local[i] = {pts[i][0] - grid.originWorldX, pts[i][1] - grid.originWorldY};
         const std::vector<std::optional<double>> values = eval.values(local, layer, threads);
         std::string text = "x,y,value\n";
         char buf[96];
         for (size_t i = 0; i < pts.size(); ++i) {
-            std::snprintf(buf, sizeof buf, "%.17g,%.17g,", pts[i].x, pts[i].y);
+            std::snprintf(buf, sizeof buf, "%.17g,%.17g,", pts[i][0], pts[i][1]);
             text += buf;
             if (values[i]) {
                 std::snprintf(buf, sizeof buf, "%.17g", *values[i]);

@@ -49,7 +49,10 @@ struct Value {
     double number = 0;
     std::string string;
     std::vector<Value> items;
-    std::vector<std::pair<std::string, Value>> members;
+    // An object's keys and values, in file order. Two vectors, not one of pairs: a pair holding the still
+    // incomplete Value does not compile with clang and libstdc++ 12 (the fuzz build, fuzz/).
+    std::vector<std::string> keys;
+    std::vector<Value> values;
 };
 
 class JsonReader {
@@ -110,7 +113,8 @@ private:
                 skip();
                 std::string key = str();
                 expect(':');
-                v.members.emplace_back(std::move(key), value(depth + 1));
+                v.values.push_back(value(depth + 1));
+                v.keys.push_back(std::move(key));
             } while (eat(','));
             expect('}');
         } else if (c == '[') {
@@ -147,8 +151,8 @@ private:
 };
 
 const Value* member(const Value& o, const std::string& key) {
-    for (const auto& [k, v] : o.members)
-        if (k == key) return &v;
+    for (size_t m = 0; m < o.keys.size(); ++m)
+        if (o.keys[m] == key) return &o.values[m];
     return nullptr;
 }
 

@@ -10,6 +10,7 @@
 #include "heightcast/grid/checksum.h"
 #include "heightcast/grid/error.h"
 #include "heightcast/grid/grid_file.h"
+#include "hostile_files.h"
 
 namespace {
 
@@ -326,6 +327,44 @@ TEST_F(GridFile, StreamedWriteRefusesBadStreams) {
         EXPECT_THROW(w.append(std::span(g.codes).first(3), values(0, 3)), hc::Error);
     }
     EXPECT_TRUE(fs::is_empty(dir_)) << "a failed streamed write left a file behind";
+}
+
+// Issue 11: a declared cell count the file cannot hold, behind valid checksums, is refused with the file's
+// name and the count's byte offset. 2^62 cells with empty CELLS and LAYER sections passed the old size
+// checks (2^62 * 8 and 2^62 * 4 wrap to 0) and escaped as std::length_error ("vector::_M_default_append").
+TEST_F(GridFile, HugeCellCountsBehindValidChecksumsAreRefused) {
+    hc::writeGrid(tinyGrid(), path("t.hcg"));
+    auto message = [&](uint64_t count) {
+        hc::hostile::gridWithEmptySections(path("t.hcg"), path("huge.hcg"), count);
+        try {
+            hc::readGrid(path("huge.hcg"));
+        } catch (const hc::Error& e) {
+            return std::string(e.what());
+        }  // any other exception fails the test
+        return std::string("accepted");
+    };
+    for (uint64_t count : {uint64_t{1} << 62, uint64_t{1} << 61, uint64_t{1} << 63, ~uint64_t{0}, uint64_t{1} << 40}) {
+        const std::string m = message(count);
+        EXPECT_EQ(m.rfind(path("huge.hcg") + ": at byte offset 24: header declares " + std::to_string(count) + " cells", 0), 0u)
+            << count << ": " << m;
+    }
+    // A count the file could hold gets to the section sizes, which must then disagree with it.
+    const std::string small = message(7);
+    EXPECT_NE(small.find("CELLS section holds 0 bytes, expected 8 for each of 7 cells"), std::string::npos) << small;
+}
+
+// Issue 11, found by fuzz_hcg with the count checks reverted (after 134 k executions): 2^62 + 208 cells
+// declared for the 208 present, so that 8x and 4x the count wrap around to the real section sizes; the
+// reader then asked for 2^62 cells (std::length_error). The file is the input as the reader saw it
+// (fuzz_input.h's CRC fix-up applied); it is also a seed of fuzz/corpus/hcg/, so fuzz runs replay it.
+TEST_F(GridFile, FuzzFindingCellCountWrappingToTheSectionSizes) {
+    const std::string file = std::string(HC_GOLDEN_DIR) + "/hostile/fuzz_hcg_cells_wrap.hcg";
+    try {
+        hc::readGrid(file);
+        FAIL() << "accepted";
+    } catch (const hc::Error& e) {
+        EXPECT_EQ(std::string(e.what()).rfind(file + ": at byte offset 24: header declares 4611686018427388112 cells", 0), 0u) << e.what();
+    }
 }
 
 }  // namespace

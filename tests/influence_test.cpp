@@ -18,6 +18,7 @@
 #include "heightcast/influence/surface.h"
 #include "heightcast/ingest/build.h"
 #include "heightcast/ingest/ingest.h"
+#include "hostile_files.h"
 #include "test_data.h"
 #include "test_grids.h"
 
@@ -575,6 +576,69 @@ TEST_F(CacheFile, StaleAndForeignCachesAreRefusedAndRebuilt) {
     EXPECT_NE(note.find("using"), std::string::npos) << note;
     hc::influence::loadOrBuildCache(g, wide, path("none.hci"), 0, false, note);
     EXPECT_NE(note.find("no influence cache"), std::string::npos) << note;
+}
+
+// Issue 11: declared counts behind valid checksums. 2^62 entries with an empty INDICES section passed the
+// old size check (2^62 * 4 wraps to 0) and hc-probe walked the lists past the end of the file; now the
+// count is refused at its byte offset. Same for a cell count the file cannot hold.
+TEST_F(CacheFile, HugeCountsBehindValidChecksumsAreRefused) {
+    Grid g = tinyGrid();
+    hc::influence::writeInfluenceCache(hc::influence::buildInfluenceLists(g, KernelParams{}), path("t.hci"));
+    auto message = [&] {
+        try {
+            hc::influence::readInfluenceCache(path("huge.hci"), g, KernelParams{});
+        } catch (const hc::Error& e) {
+            return std::string(e.what());
+        }
+        return std::string("accepted");
+    };
+    for (uint64_t count : {uint64_t{1} << 62, uint64_t{1} << 63, ~uint64_t{0}, uint64_t{1} << 40}) {
+        hc::hostile::cacheWithEntryCount(path("t.hci"), path("huge.hci"), count);
+        const std::string m = message();
+        EXPECT_EQ(m.rfind(path("huge.hci") + ": at byte offset 32: header declares " + std::to_string(count) + " entries", 0), 0u)
+            << count << ": " << m;
+    }
+    for (uint64_t count : {uint64_t{1} << 61, ~uint64_t{0}}) {
+        auto c = hc::hostile::readContainer(path("t.hci"), hc::hostile::kCacheFormat);
+        hc::hostile::store<uint64_t>(c.header, hc::hostile::kCacheCellCountAt, count);
+        hc::hostile::writeContainer(c, path("huge.hci"), hc::hostile::kCacheFormat);
+        const std::string m = message();
+        EXPECT_EQ(m.rfind(path("huge.hci") + ": at byte offset 24: header declares " + std::to_string(count) + " cells", 0), 0u)
+            << count << ": " << m;
+    }
+}
+
+// Issue 11: OFFSETS that end at the entry count but overshoot it before (0, m + 100, ...) made the old
+// reader read 100 indices past the end of INDICES before it noticed the decrease.
+TEST_F(CacheFile, ListsRunningPastTheEntryCountAreRefused) {
+    Grid g = tinyGrid();
+    hc::influence::writeInfluenceCache(hc::influence::buildInfluenceLists(g, KernelParams{}), path("t.hci"));
+    hc::hostile::cacheWithListPastTheEnd(path("t.hci"), path("past.hci"), 100);
+    try {
+        hc::influence::readInfluenceCache(path("past.hci"), g, KernelParams{});
+        FAIL() << "a list past the entry count was accepted";
+    } catch (const hc::Error& e) {
+        EXPECT_NE(std::string(e.what()).find("OFFSETS exceed the entry count"), std::string::npos) << e.what();
+    }
+}
+
+// Issue 11, found by fuzz_hci with the fix reverted (within its first 20 executions, once files were read
+// into exact-size heap blocks so that AddressSanitizer saw the overrun): OFFSETS[21] = 16712333 with 2307
+// entries, a list running past the end of INDICES. The file is the input as the reader saw it (CRCs fixed
+// up), for the grid it was built from (also copied beside it); it is also a seed of fuzz/corpus/hci/.
+TEST_F(CacheFile, FuzzFindingListPastTheEntryCount) {
+    const std::string dir = std::string(HC_GOLDEN_DIR) + "/hostile/";
+    const Grid g = hc::readGrid(dir + "buscot_20x20.hcg");
+    KernelParams params;
+    params.sigma = 1.5;  // the parameters the file declares
+    params.truncation = 2.5;
+    try {
+        hc::influence::readInfluenceCache(dir + "fuzz_hci_list_past_end.hci", g, params);
+        FAIL() << "accepted";
+    } catch (const hc::Error& e) {
+        EXPECT_NE(std::string(e.what()).find(": at byte offset 360: OFFSETS exceed the entry count 2307 at cell 20"), std::string::npos)
+            << e.what();
+    }
 }
 
 }  // namespace

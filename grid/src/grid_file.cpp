@@ -135,6 +135,12 @@ Grid parseGrid(const SectionedFileReader& file) {
     if (g.rootLevel > kMaxRootLevel) fail(off::rootLevel, "root level " + std::to_string(g.rootLevel) + " exceeds " + std::to_string(kMaxRootLevel));
     if (g.minLevel > g.maxLevel || g.maxLevel > g.rootLevel) fail(off::minLevel, "level range is inconsistent with the root level");
     if (layerCount < 1) fail(off::layerCount, "no layers (elevation is required)");
+    // Every cell takes 8 bytes of CELLS and 4 of each LAYER: a count the file cannot hold is refused here,
+    // before any size is computed from it (issue 11: 2^62 cells times 8 wrapped to 0 and passed the checks).
+    const uint64_t fileBytes = file.mapping()->bytes().size();
+    if (cellCount > fileBytes / (8 + 4 * uint64_t{layerCount}))
+        fail(off::cellCount, "header declares " + std::to_string(cellCount) + " cells of " + std::to_string(8 + 4 * layerCount) +
+                                 " bytes each, more than the " + std::to_string(fileBytes) + "-byte file holds");
 
     const FileSection* meta = nullptr;
     const FileSection* cells = nullptr;
@@ -148,13 +154,16 @@ Grid parseGrid(const SectionedFileReader& file) {
             meta = &e;
         } else if (e.kind == kCells) {
             if (cells) fail(at, "two CELLS sections");
-            if (e.bytes != cellCount * 8)
-                fail(at + 16, "CELLS section holds " + std::to_string(e.bytes) + " bytes, expected " + std::to_string(cellCount * 8) +
-                                  " for " + std::to_string(cellCount) + " cells");
+            // Divide, never multiply a declared count: no product can wrap around.
+            if (e.bytes % 8 != 0 || e.bytes / 8 != cellCount)
+                fail(at + 16, "CELLS section holds " + std::to_string(e.bytes) + " bytes, expected 8 for each of " +
+                                  std::to_string(cellCount) + " cells");
             cells = &e;
         } else if (e.kind == kLayer) {
             if (e.index >= layerCount || layerSec[e.index]) fail(at + 4, "LAYER section index " + std::to_string(e.index) + " is out of range or repeated");
-            if (e.bytes != cellCount * 4) fail(at + 16, "LAYER section holds " + std::to_string(e.bytes) + " bytes, expected " + std::to_string(cellCount * 4));
+            if (e.bytes % 4 != 0 || e.bytes / 4 != cellCount)
+                fail(at + 16, "LAYER section holds " + std::to_string(e.bytes) + " bytes, expected 4 for each of " +
+                                  std::to_string(cellCount) + " cells");
             layerSec[e.index] = &e;
         }
     }

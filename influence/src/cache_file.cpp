@@ -71,6 +71,15 @@ InfluenceLists readInfluenceCache(const std::string& path, const Grid& grid, con
     stored.sigma = bytes::load<double>(h + off::sigma);
     stored.truncation = bytes::load<double>(h + off::truncation);
     const uint64_t structure = bytes::load<uint64_t>(h + off::structureHash), content = bytes::load<uint64_t>(h + off::contentHash);
+    // Declared counts against the bytes present, before any size is computed from them (issue 11: 2^62
+    // entries times 4 wrapped to 0, passed the section size check, and the list walk read past the file).
+    const uint64_t fileBytes = file.mapping()->bytes().size();
+    if (n >= fileBytes / 8)
+        file.fail(off::cellCount, "header declares " + std::to_string(n) + " cells, more than the " + std::to_string(fileBytes) +
+                                      "-byte file holds (8 bytes of OFFSETS each)");
+    if (m > fileBytes / 4)
+        file.fail(off::entryCount, "header declares " + std::to_string(m) + " entries, more than the " + std::to_string(fileBytes) +
+                                       "-byte file holds (4 bytes of INDICES each)");
 
     // Whose cache is it? Say exactly what differs.
     if (structure != grid.structureHash() || n != grid.cellCount())
@@ -89,6 +98,7 @@ InfluenceLists readInfluenceCache(const std::string& path, const Grid& grid, con
         if (s.kind == kIndices) idx = &s;
     }
     if (!offs || !idx) file.failFile("lacks its OFFSETS or INDICES section");
+    // n and m are bounded by the file size above: these products cannot wrap.
     if (offs->bytes != (n + 1) * 8) file.fail(offs->offset, "OFFSETS holds " + std::to_string(offs->bytes) + " bytes, expected " + std::to_string((n + 1) * 8));
     if (idx->bytes != m * 4) file.fail(idx->offset, "INDICES holds " + std::to_string(idx->bytes) + " bytes, expected " + std::to_string(m * 4));
     // 64-byte aligned in a page-aligned mapping: the spans are properly aligned for u64 and u32.
@@ -97,6 +107,9 @@ InfluenceLists readInfluenceCache(const std::string& path, const Grid& grid, con
     if (o[0] != 0 || o[n] != m) file.fail(offs->offset, "OFFSETS do not start at 0 and end at the entry count");
     for (uint64_t k = 0; k < n; ++k) {
         if (o[k + 1] < o[k]) file.fail(offs->offset + 8 * (k + 1), "OFFSETS decrease at cell " + std::to_string(k));
+        // o[n] == m alone does not bound the lists before it (0, 100, 5 with m = 5 would read 95 indices past the end).
+        if (o[k + 1] > m)
+            file.fail(offs->offset + 8 * (k + 1), "OFFSETS exceed the entry count " + std::to_string(m) + " at cell " + std::to_string(k));
         bool self = false;
         for (uint64_t e = o[k]; e < o[k + 1]; ++e) {
             if (ix[e] >= n) file.fail(idx->offset + 4 * e, "index " + std::to_string(ix[e]) + " is not a cell");

@@ -45,7 +45,7 @@ struct FileSection {
     uint32_t crc = 0;
 };
 
-// A read-only memory mapping of a whole file.
+// A read-only memory mapping of a whole file (fuzz builds: an exact-size heap copy, see HC_FUZZ_HEAP_FILES).
 class MappedFile {
 public:
     explicit MappedFile(const std::string& path);  // throws hc::Error

@@ -1,0 +1,75 @@
+// fuzz/fuzz_input.h: what every file-format fuzz target shares.
+//
+// Crafted files with VALID checksums are the threat (issue 11): a reader that trusts a count because its
+// CRC matches is the bug. A fuzzer that mutates bytes almost never keeps the CRCs right, so it would only
+// ever test the CRC check. fixContainer() therefore rewrites, before parsing, what the container derives
+// from the rest: the declared file size, every section's CRC (where its placement is in the file), the
+// section table's CRC and the header CRC. The CRC and size checks themselves are covered by the unit tests
+// (every flipped byte, every truncation); the fuzzer explores everything behind them.
+#pragma once
+
+#include <sys/mman.h>
+#include <unistd.h>
+
+#include <cstddef>
+#include <cstdint>
+#include <cstdlib>
+#include <cstring>
+#include <span>
+#include <string>
+#include <vector>
+
+#include "heightcast/grid/checksum.h"
+#include "heightcast/grid/sectioned_file.h"
+
+namespace hc::fuzz {
+
+template <class T>
+T load(const std::vector<std::byte>& b, size_t at) {
+    T v;
+    std::memcpy(&v, b.data() + at, sizeof v);
+    return v;
+}
+template <class T>
+void store(std::vector<std::byte>& b, size_t at, T v) {
+    std::memcpy(b.data() + at, &v, sizeof v);
+}
+
+// Offsets of the container's header (grid/sectioned_file.h).
+inline void fixContainer(std::vector<std::byte>& b) {
+    if (b.size() < kFileHeaderBytes) return;
+    const uint64_t size = b.size();
+    store<uint64_t>(b, 16, size);
+    const uint32_t count = load<uint32_t>(b, 60);
+    const uint64_t tableEnd = kFileHeaderBytes + uint64_t{count} * kFileSectionEntryBytes;
+    if (count <= 4096 && tableEnd <= size) {
+        for (uint32_t s = 0; s < count; ++s) {
+            const size_t at = kFileHeaderBytes + size_t{s} * kFileSectionEntryBytes;
+            const uint64_t offset = load<uint64_t>(b, at + 8), bytes = load<uint64_t>(b, at + 16);
+            if (offset <= size && bytes <= size - offset)
+                store<uint32_t>(b, at + 24, crc32(std::span<const std::byte>(b.data() + offset, bytes)));
+        }
+        store<uint32_t>(b, 120, crc32(std::span<const std::byte>(b.data() + kFileHeaderBytes, tableEnd - kFileHeaderBytes)));
+    }
+    store<uint32_t>(b, 124, crc32(std::span<const std::byte>(b.data(), 124)));
+}
+
+// The readers take a path and map the file: an in-memory file (memfd) gives them one without touching a
+// disk, reached through /proc/self/fd. One per process; rewritten for every input.
+class MemoryFile {
+public:
+    MemoryFile() : fd_(::memfd_create("hc_fuzz", 0)), path_("/proc/self/fd/" + std::to_string(fd_)) {
+        if (fd_ < 0) std::abort();
+    }
+    const std::string& write(std::span<const std::byte> bytes) {
+        if (::ftruncate(fd_, 0) != 0 || ::pwrite(fd_, bytes.data(), bytes.size(), 0) != static_cast<ssize_t>(bytes.size()))
+            std::abort();
+        return path_;
+    }
+
+private:
+    int fd_;
+    std::string path_;
+};
+
+}  // namespace hc::fuzz
