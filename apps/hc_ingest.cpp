@@ -101,8 +101,17 @@ int main(int argc, char** argv) {
         hc::cli::checkNotSame(out, o.input, "output grid");
 
         hc::ingest::LoadReport report;
-        hc::ingest::BuildSummary summary = hc::ingest::ingestToFile(o, out, report);
-        for (const auto& w : report.warnings) std::fprintf(stderr, "hc-ingest: warning: %s\n", w.c_str());
+        auto printWarnings = [&] {
+            for (const auto& w : report.warnings) std::fprintf(stderr, "hc-ingest: warning: %s\n", w.c_str());
+        };
+        hc::ingest::BuildSummary summary;
+        try {
+            summary = hc::ingest::ingestToFile(o, out, report);
+        } catch (...) {
+            printWarnings();  // what was guessed before the failure (degrees, units) often explains it
+            throw;
+        }
+        printWarnings();
         if (!quiet) printSummary(summary, report, out);
         return 0;
     });

@@ -78,7 +78,18 @@ DatasetPtr openRaster(const std::string& path, const std::string& role) {
     if (onDisk && std::filesystem::is_directory(path, ec)) throw Error(path + ": is a directory, not a raster (" + role + ")");
     CPLErrorReset();
     auto* ds = GDALDataset::Open(path.c_str(), GDAL_OF_RASTER | GDAL_OF_READONLY | GDAL_OF_VERBOSE_ERROR);
-    if (!ds) throw Error(path + ": cannot read as a raster (" + role + "): " + lastGdalError());
+    if (!ds) {
+        std::string why = lastGdalError();
+        // DRIVER:"file":name naming no subdataset of an existing file: GDAL says "no such file"; list what there is.
+        if (std::string file = onDisk ? "" : subdatasetFile(path); !file.empty()) {
+            if (DatasetPtr container{GDALDataset::Open(file.c_str(), GDAL_OF_RASTER | GDAL_OF_READONLY)}) {
+                size_t count = 0;
+                std::string list = listSubdatasets(*container, count);
+                if (count > 0) why = file + " holds no such subdataset; its " + std::to_string(count) + " are: " + list;
+            }
+        }
+        throw Error(path + ": cannot read as a raster (" + role + "): " + why);
+    }
     DatasetPtr owned(ds);
     if (ds->GetRasterCount() < 1) {
         size_t count = 0;

@@ -556,6 +556,45 @@ Raster warpToTarget(SourceBand&& src, const GeoTransform& gtIn, const OGRSpatial
         if (pieces[0].c1 == 0) pieces.erase(pieces.begin());
     }
     const std::string targetText = opt.targetSrs;
+    // Source coordinates -> target CRS, exact (PROJ): for the output extent and the source check.
+    OGRSpatialReference from = srs, to = target;
+    from.SetAxisMappingStrategy(OAMS_TRADITIONAL_GIS_ORDER);
+    to.SetAxisMappingStrategy(OAMS_TRADITIONAL_GIS_ORDER);
+    std::shared_ptr<OGRCoordinateTransformation> ct(OGRCreateCoordinateTransformation(&from, &to),
+                                                    [](OGRCoordinateTransformation* t) { OGRCoordinateTransformation::DestroyCT(t); });
+    if (!ct) throw Error("--t_srs " + targetText + ": cannot transform from " + report.sourceCrsName + ": " + detail::lastGdalError());
+    // The output extent: GDAL's suggestion shrinks to what its edge samples reach, and loses every
+    // row beyond a failing edge (a global grid's poles at +-90.5 cut it to +-81 degrees). So: the
+    // bounding box of the pixel corners and centres that do transform, on every k-th row and column
+    // and the outermost ones.
+    double ext[4] = {HUGE_VAL, HUGE_VAL, -HUGE_VAL, -HUGE_VAL};
+    {
+        const size_t k = std::max<size_t>(1, std::max(src.width, src.height) / 512);
+        std::vector<double> xs, ys;
+        auto take = [&](double half) {  // half = 0: corners; 0.5: centres
+            const size_t n = src.width + 1, m = src.height + 1;
+            for (size_t j = 0; j < m; ++j) {
+                const bool rowAll = j % k == 0 || j + 2 >= m;
+                for (size_t i = 0; i < n; ++i) {
+                    if (!(rowAll || i % k == 0 || i + 2 >= n)) continue;
+                    const double c = std::min(double(i) + half, double(src.width)), r = std::min(double(j) + half, double(src.height));
+                    xs.push_back(gtIn.g[0] + c * gtIn.g[1] + r * gtIn.g[2]);
+                    ys.push_back(gtIn.g[3] + c * gtIn.g[4] + r * gtIn.g[5]);
+                }
+            }
+        };
+        take(0.0);
+        take(0.5);
+        std::vector<int> ok(xs.size());
+        CPLErrorReset();
+        ct->Transform(static_cast<int>(xs.size()), xs.data(), ys.data(), nullptr, ok.data());
+        for (size_t i = 0; i < xs.size(); ++i)
+            if (ok[i] && std::isfinite(xs[i]) && std::isfinite(ys[i]))
+                ext[0] = std::min(ext[0], xs[i]), ext[1] = std::min(ext[1], ys[i]), ext[2] = std::max(ext[2], xs[i]),
+                ext[3] = std::max(ext[3], ys[i]);
+        if (!(ext[0] < ext[2] && ext[1] < ext[3]))
+            throw Error(opt.input + ": no part of it has a position in " + targetText + " (PROJ: " + detail::lastGdalError() + ")");
+    }
     std::vector<DatasetPtr> mems;
     std::vector<GDALDataset*> inputs;
     double cell = HUGE_VAL;
@@ -564,9 +603,9 @@ Raster warpToTarget(SourceBand&& src, const GeoTransform& gtIn, const OGRSpatial
         inputs.push_back(mems.back().get());
         if (opt.minCellM) continue;
         // GDAL's suggested output, made square with the smaller side (the finest over the pieces).
-        char** to = CSLSetNameValue(nullptr, "DST_SRS", targetText.c_str());
-        void* tr = GDALCreateGenImgProjTransformer2(GDALDataset::ToHandle(mems.back().get()), nullptr, to);
-        CSLDestroy(to);
+        char** dst = CSLSetNameValue(nullptr, "DST_SRS", targetText.c_str());
+        void* tr = GDALCreateGenImgProjTransformer2(GDALDataset::ToHandle(mems.back().get()), nullptr, dst);
+        CSLDestroy(dst);
         if (!tr) throw Error("--t_srs " + targetText + ": cannot transform from " + report.sourceCrsName + ": " + detail::lastGdalError());
         double sg[6];
         int pw = 0, ph = 0;
@@ -576,9 +615,13 @@ Raster warpToTarget(SourceBand&& src, const GeoTransform& gtIn, const OGRSpatial
         cell = std::min({cell, std::abs(sg[1]), std::abs(sg[5])});
     }
     if (opt.minCellM) cell = *opt.minCellM / target.GetLinearUnits();
+    // Half a pixel more on every side: source pixel centres on the extent's edge (a pole, the
+    // antimeridian) then fall inside the output rather than on its closing edge.
+    ext[0] -= cell / 2, ext[1] -= cell / 2, ext[2] += cell / 2, ext[3] += cell / 2;
     std::vector<std::string> args{"-t_srs", targetText, "-r", "bilinear", "-et", "0", "-of", "MEM", "-ot", "Float32",
                                   "-srcnodata", "nan", "-dstnodata", "nan", "-wo", "NUM_THREADS=ALL_CPUS",
-                                  "-tr", fmt(cell, 17), fmt(cell, 17)};
+                                  "-tr", fmt(cell, 17), fmt(cell, 17),
+                                  "-te", fmt(ext[0], 17), fmt(ext[1], 17), fmt(ext[2], 17), fmt(ext[3], 17)};
     DatasetPtr warped = detail::warp(inputs, args, opt.input + ": projecting to " + targetText);
     mems.clear();
     OGRSpatialReference out = *warped->GetSpatialRef();
@@ -601,12 +644,6 @@ Raster warpToTarget(SourceBand&& src, const GeoTransform& gtIn, const OGRSpatial
     Raster r = fromSourceAffine(std::move(ws), wgt, std::abs(wgt.g[1]), detail::toWkt(out), keep, report, nullptr);
     if (trace) {
         // Where each source pixel centre lands: PROJ, exact, from the source's own coordinates.
-        OGRSpatialReference from = srs, to = target;
-        from.SetAxisMappingStrategy(OAMS_TRADITIONAL_GIS_ORDER);
-        to.SetAxisMappingStrategy(OAMS_TRADITIONAL_GIS_ORDER);
-        std::shared_ptr<OGRCoordinateTransformation> ct(OGRCreateCoordinateTransformation(&from, &to),
-                                                        [](OGRCoordinateTransformation* t) { OGRCoordinateTransformation::DestroyCT(t); });
-        if (!ct) throw Error("--t_srs " + targetText + ": cannot transform from " + report.sourceCrsName + ": " + detail::lastGdalError());
         trace->band = std::move(src);
         trace->rowToWorld = [ct, gt = gtIn, unit](size_t row, std::vector<double>& x, std::vector<double>& y, std::vector<int>& ok) {
             const double rc = static_cast<double>(row) + 0.5;
