@@ -3,6 +3,7 @@
 #include <cctype>
 #include <filesystem>
 #include <mutex>
+#include <sstream>
 
 #include <cpl_error.h>
 
@@ -100,6 +101,18 @@ DatasetPtr openRaster(const std::string& path, const std::string& role) {
     }
     if (ds->GetRasterXSize() < 1 || ds->GetRasterYSize() < 1) throw Error(path + ": raster has no pixels (" + role + ")");
     return owned;
+}
+
+std::string fmt(double v, int precision) {
+    std::ostringstream s;
+    s.precision(precision);
+    s << v;
+    return s.str();
+}
+
+std::string lower(std::string s) {
+    for (char& c : s) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+    return s;
 }
 
 std::string crsName(const OGRSpatialReference* srs) {

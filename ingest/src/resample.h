@@ -8,6 +8,8 @@
 #include "heightcast/ingest/ingest.h"
 #include "heightcast/ingest/raster.h"
 
+class GDALDataset;
+
 namespace hc::ingest::detail {
 
 // A raster as read from the file, before any geometry change: row-major, NaN = nodata.
@@ -38,6 +40,11 @@ using TargetToSource = std::function<bool(double x, double y, double& col, doubl
 // nearest pixel puts it. The map is evaluated exactly every `lattice` pixels and bilinearly in
 // between; the lattice is refined (halved) until that interpolation is within maxErrorPx of the
 // exact map at every lattice-cell centre. Returns the lattice step used.
+// Reads the band (or decodes Terrain-RGB) into floats with every kind of nodata as NaN; warns about
+// what the file leaves unsaid (read_source.cpp). zCrs: metres per elevation unit that the CRS declares
+// (a compound CRS's vertical part), used when the band declares no unit of its own.
+SourceBand readSource(GDALDataset& ds, const Options& opt, LoadReport& report, double zCrs, const std::string& zCrsUnit);
+
 // loadTerrain (ingest.h), keeping the source in `trace` (when given) if the working raster is not the
 // source itself; trace->band stays empty otherwise.
 Raster loadTerrainTraced(const Options& opt, LoadReport& report, SourceTrace* trace);
