@@ -365,7 +365,9 @@ Raster warpToTarget(SourceBand&& src, const GeoTransform& gtIn, const OGRSpatial
     if (srs.IsGeographic() && !gtIn.rotated() && dx > 0 && srs.GetPrimeMeridian() == 0 &&
         std::abs(srs.GetAngularUnits() - M_PI / 180) < 1e-12) {
         GeoTransform gt = gtIn;
-        gt.g[0] -= 360.0 * std::floor((gt.g[0] + 180.0) / 360.0);  // west edge into [-180, 180)
+        // West edge into [-180, 180) give or take half a pixel: a grid whose first pixel centre is at -180
+        // (west edge -180.5) stays where it is.
+        gt.g[0] -= 360.0 * std::floor((gt.g[0] + dx / 2 + 180.0) / 360.0);
         const double width = static_cast<double>(src.width);
         // Columns with centres at 180 or beyond go east; those at west + 360 or beyond repeat column 0.
         const auto firstEast = static_cast<size_t>(std::clamp(std::ceil((180.0 - gt.g[0]) / dx - 0.5), 0.0, width));
@@ -587,7 +589,12 @@ Raster detail::loadTerrainTraced(const Options& opt, LoadReport& report, SourceT
     }
 
     if (!hasSrs) {
-        if (hasGt && !localFrame) report.warnings.push_back("no CRS: coordinates taken as metres in a local frame (name the CRS with --s_srs)");
+        if (hasGt && !localFrame) {
+            // Degrees by their range, but neither fine nor global enough to say so with confidence.
+            const bool couldBeDegrees = looksLikeDegrees(gt, src.width, src.height, true);
+            report.warnings.push_back(std::string("no CRS: coordinates taken as metres in a local frame (name the CRS with --s_srs") +
+                                      (couldBeDegrees ? "; they would fit degrees too: if they are, --s_srs EPSG:4326)" : ")"));
+        }
         report.gridCrsName = "";
         return fromSourceAffine(std::move(src), gt, std::min(std::abs(gt.g[1]), std::abs(gt.g[5])), "", opt, report, trace);
     }
