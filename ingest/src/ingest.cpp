@@ -6,6 +6,7 @@
 
 #include "heightcast/grid/error.h"
 #include "heightcast/ingest/build.h"
+#include "heightcast/grid/parallel.h"
 #include "resample.h"
 
 namespace hc::ingest {
@@ -63,35 +64,47 @@ Prepared prepare(const Options& opt, LoadReport& report) {
 // figure a user means by "the grid differs from my survey by at most ...", and the count of source
 // pixels that reached no cell (lost at a projection's edge, a split, a hole's resampled edge).
 void checkAgainstSource(const detail::SourceTrace& trace, const Raster& working, const std::vector<float>& cellZ,
-                        LoadReport& report) {
+                        unsigned threads, LoadReport& report) {
     const detail::SourceBand& src = trace.band;
+    struct Acc {
+        uint64_t checked = 0, missed = 0;
+        double maxDev = 0, sumSq = 0;
+        std::vector<double> x, y;
+        std::vector<int> ok;
+    };
+    std::vector<Acc> acc(trace.rowToWorldThreadSafe ? resolveThreads(threads) : 1);
+    parallelFor(src.height, 16, trace.rowToWorldThreadSafe ? threads : 1, [&](size_t begin, size_t end, unsigned worker) {
+        Acc& a = acc[worker];
+        a.x.resize(src.width), a.y.resize(src.width), a.ok.resize(src.width);
+        for (size_t row = begin; row < end; ++row) {
+            trace.rowToWorld(row, a.x, a.y, a.ok);
+            for (size_t c = 0; c < src.width; ++c) {
+                const size_t i = row * src.width + c;
+                if (std::isnan(src.values[i])) continue;
+                const double col = std::floor((a.x[c] - working.westWorld) / working.pixelSizeM);
+                const double r = std::floor((working.northWorld - a.y[c]) / working.pixelSizeM);
+                const bool inside = a.ok[c] && col >= 0 && r >= 0 && col < double(working.width) && r < double(working.height);
+                const float z = inside ? cellZ[static_cast<size_t>(r) * working.width + static_cast<size_t>(col)] : NAN;
+                if (std::isnan(z)) {
+                    ++a.missed;
+                    continue;
+                }
+                const double d = src.exact(i) - z;
+                a.maxDev = std::max(a.maxDev, std::abs(d));
+                a.sumSq += d * d;
+                ++a.checked;
+            }
+        }
+    });
     LoadReport::SourceCheck& out = report.sourceCheck;
     out = {};
     out.done = true;
-    std::vector<double> x(src.width), y(src.width);
-    std::vector<int> ok(src.width);
     double sumSq = 0;
-    for (size_t row = 0; row < src.height; ++row) {
-        trace.rowToWorld(row, x, y, ok);
-        for (size_t c = 0; c < src.width; ++c) {
-            const size_t i = row * src.width + c;
-            if (std::isnan(src.values[i])) continue;
-            const double col = std::floor((x[c] - working.westWorld) / working.pixelSizeM);
-            const double r = std::floor((working.northWorld - y[c]) / working.pixelSizeM);
-            if (!ok[c] || !(col >= 0 && r >= 0 && col < double(working.width) && r < double(working.height))) {
-                ++out.missed;
-                continue;
-            }
-            const float z = cellZ[static_cast<size_t>(r) * working.width + static_cast<size_t>(col)];
-            if (std::isnan(z)) {
-                ++out.missed;
-                continue;
-            }
-            const double d = src.exact(i) - z;
-            out.maxDevM = std::max(out.maxDevM, std::abs(d));
-            sumSq += d * d;
-            ++out.checked;
-        }
+    for (const Acc& a : acc) {
+        out.checked += a.checked;
+        out.missed += a.missed;
+        out.maxDevM = std::max(out.maxDevM, a.maxDev);
+        sumSq += a.sumSq;
     }
     out.rmsDevM = out.checked ? std::sqrt(sumSq / double(out.checked)) : 0.0;
     const uint64_t valid = out.checked + out.missed;
@@ -120,7 +133,7 @@ Grid ingest(const Options& opt, LoadReport& report) {
     auto start = std::chrono::steady_clock::now();
     Prepared p = prepare(opt, report);
     Grid g = buildGrid(p.terrain, p.hasWater ? &p.water : nullptr, p.build);
-    if (p.build.cellElevations) checkAgainstSource(p.trace, p.terrain, p.cellElevations, report);
+    if (p.build.cellElevations) checkAgainstSource(p.trace, p.terrain, p.cellElevations, opt.threads, report);
     noteStorage(g.stats, p.terrain, report);
     g.stats.sourcePath = opt.input;
     g.stats.sourceCrsName = report.sourceCrsName;
@@ -136,7 +149,7 @@ BuildSummary ingestToFile(const Options& opt, const std::string& path, LoadRepor
     extra.sourceCrsName = report.sourceCrsName;
     extra.seconds = secondsSince(start);
     BuildSummary b = buildGridFile(p.terrain, p.hasWater ? &p.water : nullptr, p.build, path, extra);
-    if (p.build.cellElevations) checkAgainstSource(p.trace, p.terrain, p.cellElevations, report);
+    if (p.build.cellElevations) checkAgainstSource(p.trace, p.terrain, p.cellElevations, opt.threads, report);
     noteStorage(b.shape.stats, p.terrain, report);
     return b;
 }

@@ -393,18 +393,19 @@ Raster warpToTarget(SourceBand&& src, const GeoTransform& gtIn, const OGRSpatial
     if (!ct) throw Error("--t_srs " + targetText + ": cannot transform from " + report.sourceCrsName + ": " + detail::lastGdalError());
     // The output extent: GDAL's suggestion shrinks to what its edge samples reach, and loses every
     // row beyond a failing edge (a global grid's poles at +-90.5 cut it to +-81 degrees). So: the
-    // bounding box of the pixel corners and centres that do transform, on every k-th row and column
-    // and the outermost ones.
+    // bounding box of the pixel corners and centres that do transform: all along the outline, and on a
+    // lattice of every k-th one inside (at most about 1024 x 1024 points; whatever an extreme between
+    // lattice points leaves out is counted by the source check as lost).
     double ext[4] = {HUGE_VAL, HUGE_VAL, -HUGE_VAL, -HUGE_VAL};
     {
-        const size_t k = std::max<size_t>(1, std::max(src.width, src.height) / 512);
+        const size_t k = std::max<size_t>(1, std::max(src.width, src.height) / 1024);
         std::vector<double> xs, ys;
-        auto take = [&](double half) {  // half = 0: corners; 0.5: centres
+        auto take = [&](double half) {  // half = 0: corners; 0.5: centres (the last ones clamped to the edge)
             const size_t n = src.width + 1, m = src.height + 1;
             for (size_t j = 0; j < m; ++j) {
-                const bool rowAll = j % k == 0 || j + 2 >= m;
+                const bool edgeRow = j == 0 || j + 2 >= m;
                 for (size_t i = 0; i < n; ++i) {
-                    if (!(rowAll || i % k == 0 || i + 2 >= n)) continue;
+                    if (!(edgeRow || i == 0 || i + 2 >= n || (i % k == 0 && j % k == 0))) continue;
                     const double c = std::min(double(i) + half, double(src.width)), r = std::min(double(j) + half, double(src.height));
                     xs.push_back(gtIn.g[0] + c * gtIn.g[1] + r * gtIn.g[2]);
                     ys.push_back(gtIn.g[3] + c * gtIn.g[4] + r * gtIn.g[5]);
@@ -473,6 +474,7 @@ Raster warpToTarget(SourceBand&& src, const GeoTransform& gtIn, const OGRSpatial
     if (trace) {
         // Where each source pixel centre lands: PROJ, exact, from the source's own coordinates.
         trace->band = std::move(src);
+        trace->rowToWorldThreadSafe = false;
         trace->rowToWorld = [ct, gt = gtIn, unit](size_t row, std::vector<double>& x, std::vector<double>& y, std::vector<int>& ok) {
             const double rc = static_cast<double>(row) + 0.5;
             for (size_t c = 0; c < x.size(); ++c) {

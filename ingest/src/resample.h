@@ -29,6 +29,7 @@ struct SourceTrace {
     // the position does not exist (outside the projection's domain). The caller sizes the vectors to
     // the source's width.
     std::function<void(size_t row, std::vector<double>& x, std::vector<double>& y, std::vector<int>& ok)> rowToWorld;
+    bool rowToWorldThreadSafe = true;  // false for PROJ's transformations: then called from one thread
 };
 
 // Maps a target world position (x, y) [m] to fractional source pixel coordinates (col, row), where

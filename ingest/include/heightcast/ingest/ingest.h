@@ -29,7 +29,7 @@ namespace hc::ingest {
 enum class WaterSource { None, Depth, Surface, Level };
 
 struct Options {
-    std::string input;                  // raster path (anything GDAL opens, /vsizip/ included)
+    std::string input;                  // raster path (anything GDAL opens, /vsizip/ and NETCDF:"f.nc":var included)
     int band = 1;                       // 1-based
     bool bandGiven = false;             // --band was given: a 3-band 8-bit image is then read as asked
     std::optional<double> nodata;       // extra nodata value (beside the band's own and NaN)
