@@ -463,6 +463,16 @@ Raster warpToTarget(SourceBand&& src, const GeoTransform& gtIn, const OGRSpatial
         throw Error(opt.input + ": projected to " + targetText + " on " + std::to_string(ws.width) + " x " + std::to_string(ws.height) +
                     " pixels of " + fmt(std::abs(wgt.g[1]), 6) + " (CRS units), no pixel centre falls inside the data: " +
                     "the footprint is too thin for that resolution; give a finer one with --min-cell");
+    if (pieces.size() == 2) {
+        // Split at 180, the two halves must meet in the target map; in one whose own edge is at 180
+        // (EPSG:3857, say) they land at its opposite edges, a world apart, with nothing between.
+        const size_t valid = static_cast<size_t>(std::count_if(ws.values.begin(), ws.values.end(), [](float v) { return !std::isnan(v); }));
+        if (double(valid) < 0.1 * double(ws.values.size()))
+            throw Error(opt.input + ": crosses 180 degrees of longitude, which is an edge of " + targetText + ": its two halves would lie at " +
+                        "the map's opposite edges (" + fmt(100.0 * double(valid) / double(ws.values.size()), 3) + " % of a " +
+                        std::to_string(ws.width) + " px wide raster); choose a --t_srs whose central meridian is near the data (e.g. " +
+                        "EPSG:3832, PDC Mercator, or '+proj=laea +lon_0=180 +lat_0=...') or leave --t_srs out for its UTM zone");
+    }
     const double unit = out.GetLinearUnits();
     for (double& v : wgt.g) v *= unit;
     if (unit != 1.0) out.SetLinearUnitsAndUpdateParameters(SRS_UL_METER, 1.0);

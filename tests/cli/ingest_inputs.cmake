@@ -16,6 +16,15 @@ hc_cli_test(ingest_inputs.across_antimeridian 0 [[grid CRS +WGS 84 / UTM zone 1N
   --no-match [[error]]
   -- ${INGEST} across.tif -o across.hcg)
 
+# The same 178..182 E raster with --t_srs: into PDC Mercator (EPSG:3832, centred on 150 W) the halves split at 180
+# meet again and no pixel is lost; into EPSG:3857, whose own edge is at 180, they would lie a world apart at the
+# map's two edges: refused, with the hint.
+hc_cli_test(ingest_inputs.across_antimeridian_t_srs nonzero [[error: across\.tif: crosses 180 degrees of longitude, which is an edge of EPSG:3857.*EPSG:3832]]
+  --setup [[gdal_translate -q -a_srs EPSG:4326 -a_ullr 178 46 182 44 "$HC_DATA_DIR/hef_srtm.tif" across.tif]]
+  --absent out.hcg
+  --check [["$HC_INGEST" across.tif -o ok.hcg --t_srs EPSG:3832 > ok.txt 2>&1 && grep -E 'split at 180 degrees' ok.txt && grep -E 'lost +0 valid' ok.txt]]
+  -- ${INGEST} across.tif -o out.hcg --t_srs EPSG:3857)
+
 # A global 1-degree grid without CRS, its longitudes running 20..380 (etopo1_1deg's columns rolled by 200, as a
 # COARDS NetCDF has them), written as ESRI ASCII without .prj.
 set(GLOBAL_NO_CRS [[gdal_translate -q -srcwin 200 0 160 181 -a_ullr 19.5 90.5 179.5 -90.5 "$HC_DATA_DIR/etopo1_1deg.tif" pa.tif && gdal_translate -q -srcwin 0 0 200 181 -a_ullr 179.5 90.5 379.5 -90.5 "$HC_DATA_DIR/etopo1_1deg.tif" pb.tif && gdalbuildvrt -q g.vrt pa.tif pb.tif && gdal_translate -q -of AAIGrid g.vrt global.asc && rm -f global.prj pa.tif pb.tif g.vrt global.asc.aux.xml]])
