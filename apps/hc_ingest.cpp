@@ -69,8 +69,9 @@ int main(int argc, char** argv) {
         p.option("--tolerance", "M", "max |pixel - cell value| in every layer, metres (default 0.25)", o.toleranceM);
         p.option("--min-cell", "M", "finest cell size, metres (default: the source pixel size after projection)", o.minCellM);
         p.option("--max-cell", "M", "coarsest cell size, metres, rounded down to finest * 2^k (default: largest <= 96 m)", o.maxCellM);
-        p.option("--t_srs", "CRS", "project into this CRS (EPSG:xxxx, WKT, PROJ string) with GDAL, bilinear (default: a projected\n"
-                 "      input keeps its CRS; a geographic one goes to the UTM zone of its centre via GeographicLib)", o.targetSrs);
+        p.option("--t_srs", "CRS", "project into this CRS (EPSG:xxxx, WKT, PROJ string) with GDAL, bilinear, exact transformer; a\n"
+                 "      geographic input across 180 degrees is split there (default: a projected input keeps its CRS; a geographic\n"
+                 "      one goes to the UTM zone of its centre via GeographicLib, longitudes 0..360 accepted)", o.targetSrs);
         p.option("--s_srs", "CRS", "CRS of the input, overriding or supplying its own (e.g. EPSG:27700 for an .asc without .prj);\n"
                  "      'local' takes the coordinates as metres in a local frame (no CRS; without --s_srs, coordinates that look like\n"
                  "      degrees are taken as WGS 84, with a warning)", o.sourceSrs);

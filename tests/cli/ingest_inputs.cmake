@@ -124,3 +124,11 @@ hc_cli_test(ingest_inputs.quiet_prints_only_warnings 0 [[^hc-ingest: warning: no
 # The help says what --water-level connects through (issue 11, smaller: the 4-neighbour flood was undocumented).
 hc_cli_test(ingest_inputs.help_names_4_connected_flood 0 [[4-connected: pixels touching only at a corner do not connect]]
   -- ${INGEST} --help)
+
+# Issue 11, smaller: "vertical units of a feet CRS are not mentioned". With a compound CRS whose vertical part is
+# in US survey feet (EPSG:2227+6360, NAVD88 height (ftUS)) the elevations are converted, and said so; the hint
+# for CRSs that name no vertical unit does not appear then.
+hc_cli_test(ingest_inputs.compound_crs_feet_elevations 0 [[warning: elevations are in 'US survey foot': converted to metres \(x0\.3048006096\)]]
+  --setup [[gdal_translate -q -a_srs "EPSG:2227+6360" "$HC_DATA_DIR/kootenai_1m.asc" cft.tif]]
+  --no-match [[often in the same unit|error]]
+  -- ${INGEST} cft.tif -o out.hcg --quiet)
