@@ -129,7 +129,8 @@ SourceBand readSource(GDALDataset& ds, const Options& opt, LoadReport& report, d
             for (size_t i = 0; i < n; ++i) {
                 double v = exactInFloat ? static_cast<double>(dst[i]) : buf[i];
                 bool isNodata = std::isnan(v) || (hasNodata && (v == nodata || static_cast<float>(v) == static_cast<float>(nodata))) ||
-                                (opt.nodata && (v == *opt.nodata || static_cast<float>(v) == static_cast<float>(*opt.nodata)));
+                                // --nodata: in float32 for float32 data (as the user reads it), exactly otherwise
+                                (opt.nodata && (v == *opt.nodata || (exactInFloat && static_cast<float>(v) == static_cast<float>(*opt.nodata))));
                 if (!isNodata && std::isinf(v)) {
                     ++infPixels;
                     isNodata = true;
