@@ -50,7 +50,6 @@ Prepared prepare(const Options& opt, LoadReport& report) {
                     fmtM(w) + " x " + fmtM(h) + " m, with " + std::to_string(report.sourceValidPixels) + " valid pixels)" +
                     (opt.minCellM ? ": choose a --min-cell well below the raster's size" : ""));
     }
-    if (!p.trace.band.values.empty()) p.build.cellElevations = &p.cellElevations;
     p.hasWater = opt.water != WaterSource::None;
     if (p.hasWater) p.water = loadWater(opt, p.terrain, report);
     p.build.toleranceM = opt.toleranceM;
@@ -132,6 +131,7 @@ double secondsSince(std::chrono::steady_clock::time_point t) {
 Grid ingest(const Options& opt, LoadReport& report) {
     auto start = std::chrono::steady_clock::now();
     Prepared p = prepare(opt, report);
+    if (!p.trace.band.values.empty()) p.build.cellElevations = &p.cellElevations;  // here: p has its final address
     Grid g = buildGrid(p.terrain, p.hasWater ? &p.water : nullptr, p.build);
     if (p.build.cellElevations) checkAgainstSource(p.trace, p.terrain, p.cellElevations, opt.threads, report);
     noteStorage(g.stats, p.terrain, report);
@@ -144,6 +144,7 @@ Grid ingest(const Options& opt, LoadReport& report) {
 BuildSummary ingestToFile(const Options& opt, const std::string& path, LoadReport& report) {
     auto start = std::chrono::steady_clock::now();
     Prepared p = prepare(opt, report);
+    if (!p.trace.band.values.empty()) p.build.cellElevations = &p.cellElevations;  // here: p has its final address
     IngestStats extra;
     extra.sourcePath = opt.input;
     extra.sourceCrsName = report.sourceCrsName;

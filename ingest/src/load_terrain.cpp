@@ -348,7 +348,8 @@ void validateOptions(const Options& o) {
 namespace {
 
 // --t_srs with GDAL's warper and the exact transformer (-et 0): GDAL's default approximates the map
-// linearly to within 0.125 source pixel, which made errors of tens of metres on a 4 x 2 degree grid.
+// linearly to within 0.125 source pixel: 10.9 m of elevation error on hef_srtm spread over 4 x 2
+// degrees (test Issue11.TargetSrsUsesTheExactTransformer; 0.12 mm exact), up to 55 m in issue 11.
 // A geographic source is first moved to start in -180..180; if it then runs past 180, it is split
 // there and its east part shifted by -360 (both parts warped into the one output): PROJ's inverse
 // gives longitudes in -180..180 only, so without the split every pixel past 180 would be lost.
