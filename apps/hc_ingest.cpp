@@ -11,6 +11,8 @@
 
 namespace {
 
+constexpr int kBandNotGiven = -1000000;  // --band's value before parsing: tells "not given" from any number a user types
+
 void printSummary(const hc::ingest::BuildSummary& b, const hc::ingest::LoadReport& r, const std::string& out) {
     const hc::Grid& g = b.shape;
     const hc::IngestStats& s = g.stats;
@@ -29,8 +31,22 @@ void printSummary(const hc::ingest::BuildSummary& b, const hc::ingest::LoadRepor
         std::printf("    level %zu  %10.4g m  %10llu cells  %6.2f %%\n", l, g.levelSizeM(int(l)),
                     (unsigned long long)b.cellsPerLevel[l], b.cellCount ? 100.0 * double(b.cellsPerLevel[l]) / double(b.cellCount) : 0.0);
     if (g.layerCount() > 1) std::printf("  water        %llu wet cells of %llu\n", (unsigned long long)b.wetCells, (unsigned long long)b.cellCount);
-    std::printf("  deviation    max %.4g m, RMS %.4g m (tolerance %.4g m, every valid pixel checked)\n", s.maxDevM, s.rmsDevM,
-                s.toleranceM);
+    // Which pixels the deviation is measured on, said plainly: the working raster is the source
+    // itself only when nothing was projected or resampled.
+    const auto& c = r.sourceCheck;
+    if (!c.done) {
+        std::printf("  deviation    max %.4g m, RMS %.4g m (tolerance %.4g m; every valid source pixel checked%s)\n", s.maxDevM,
+                    s.rmsDevM, s.toleranceM, r.sourcePrecisionDouble ? ", in the source's own precision" : "");
+    } else {
+        std::printf("  deviation    max %.4g m, RMS %.4g m against the %llu valid pixels of the resampled working raster (tolerance %.4g m)\n",
+                    s.maxDevM, s.rmsDevM, (unsigned long long)s.validPixels, s.toleranceM);
+        std::printf("  vs source    max %.4g m, RMS %.4g m against the %llu valid source pixels (at each pixel centre)%s\n", c.maxDevM,
+                    c.rmsDevM, (unsigned long long)c.checked,
+                    r.sourcePrecisionDouble ? ", in the source's own precision" : "");
+        std::printf("  lost         %llu valid source pixels reached no cell (%.3g %%)\n", (unsigned long long)c.missed,
+                    c.checked + c.missed ? 100.0 * double(c.missed) / double(c.checked + c.missed) : 0.0);
+    }
+    if (r.infPixels) std::printf("  infinite     %llu pixels of +-inf taken as nodata\n", (unsigned long long)r.infPixels);
     std::printf("  time         %.3f s (read, project, build, write)\n", s.seconds);
     std::printf("  memory       peak %.1f MB resident (the grid streams to disk: %zu bytes per cell there)\n",
                 double(hc::peakRssBytes()) / 1e6, size_t(8 + 4 * g.layerCount()));
@@ -53,20 +69,28 @@ int main(int argc, char** argv) {
         p.option("--tolerance", "M", "max |pixel - cell value| in every layer, metres (default 0.25)", o.toleranceM);
         p.option("--min-cell", "M", "finest cell size, metres (default: the source pixel size after projection)", o.minCellM);
         p.option("--max-cell", "M", "coarsest cell size, metres, rounded down to finest * 2^k (default: largest <= 96 m)", o.maxCellM);
-        p.option("--t_srs", "CRS", "project into this CRS (EPSG:xxxx, WKT, PROJ string) with GDAL, bilinear (default: a projected\n"
-                 "      input keeps its CRS; a geographic one goes to the UTM zone of its centre via GeographicLib)", o.targetSrs);
-        p.option("--s_srs", "CRS", "CRS of the input, overriding or supplying its own (e.g. EPSG:27700 for an .asc without .prj)", o.sourceSrs);
-        p.option("--band", "N", "band to read, 1-based (default 1)", o.band);
-        p.option("--nodata", "V", "a further nodata value (the band's own nodata and NaN always count)", nodata);
+        p.option("--t_srs", "CRS", "project into this CRS (EPSG:xxxx, WKT, PROJ string) with GDAL, bilinear, exact transformer; a\n"
+                 "      geographic input across 180 degrees is split there (default: a projected input keeps its CRS; a geographic\n"
+                 "      one goes to the UTM zone of its centre via GeographicLib, longitudes 0..360 accepted)", o.targetSrs);
+        p.option("--s_srs", "CRS", "CRS of the input, overriding or supplying its own (e.g. EPSG:27700 for an .asc without .prj);\n"
+                 "      'local' takes the coordinates as metres in a local frame (no CRS; without --s_srs, coordinates that look like\n"
+                 "      degrees are taken as WGS 84, with a warning)", o.sourceSrs);
+        o.band = kBandNotGiven;
+        p.option("--band", "N", "band to read, 1-based (default 1; a 3-band 8-bit image is refused without it or --terrain-rgb)", o.band);
+        p.option("--nodata", "V", "a further nodata value (the band's own nodata, NaN and +-inf always count; a warning names\n"
+                 "      classic sentinels such as -9999 that the file holds without declaring them)", nodata);
         p.option("--z-scale", "F", "multiply elevations by F after unit conversion (default 1)", o.zScale);
         p.flag("--terrain-rgb", "decode Terrain-RGB bands 1-3: h = -10000 + 0.1 * (R * 65536 + G * 256 + B) metres", o.terrainRgb);
         p.option("--water", "RASTER", "water depth raster, metres (resampled onto the terrain; nodata and <= 0 are dry)", water);
         p.option("--water-surface", "RASTER", "water surface elevation raster, metres (depth = surface - terrain; <= 0 is dry)", waterSurface);
-        p.option("--water-level", "L", "bathtub flood: depth = L - z, metres, where below L and connected to the domain boundary", waterLevel);
+        p.option("--water-level", "L", "bathtub flood: depth = L - z, metres, where below L and connected to the domain boundary\n"
+                 "      (raster edge or nodata) through pixels below L, 4-connected: pixels touching only at a corner do not connect", waterLevel);
         p.option("--threads", "N", "worker threads (default 0 = all cores)", o.threads);
-        p.flag("--quiet", "no progress output", quiet);
+        p.flag("--quiet", "print only warnings and failures (no progress, no summary)", quiet);
         p.exclusive({"--water", "--water-surface", "--water-level"});
         if (!p.parse(argc, argv)) return 0;
+        o.bandGiven = o.band != kBandNotGiven;
+        if (!o.bandGiven) o.band = 1;
         if (out.empty()) throw hc::Error("no output file: give -o OUT.hcg");
         o.nodata = nodata;
         if (!water.empty()) o.water = hc::ingest::WaterSource::Depth, o.waterPath = water;
@@ -78,9 +102,18 @@ int main(int argc, char** argv) {
         hc::cli::checkNotSame(out, o.input, "output grid");
 
         hc::ingest::LoadReport report;
-        hc::ingest::BuildSummary summary = hc::ingest::ingestToFile(o, out, report);
-        for (const auto& w : report.warnings) std::fprintf(stderr, "hc-ingest: warning: %s\n", w.c_str());
-        printSummary(summary, report, out);
+        auto printWarnings = [&] {
+            for (const auto& w : report.warnings) std::fprintf(stderr, "hc-ingest: warning: %s\n", w.c_str());
+        };
+        hc::ingest::BuildSummary summary;
+        try {
+            summary = hc::ingest::ingestToFile(o, out, report);
+        } catch (...) {
+            printWarnings();  // what was guessed before the failure (degrees, units) often explains it
+            throw;
+        }
+        printWarnings();
+        if (!quiet) printSummary(summary, report, out);
         return 0;
     });
 }

@@ -63,6 +63,12 @@ private:
         float z = t_.values[idx];
         if (std::isnan(z)) return false;
         n.mean[0] = n.lo[0] = n.hi[0] = z;
+        if (!t_.roundingM.empty() && t_.roundingM[idx] != 0) {
+            // The source's own value lies between lo and hi (float32 neighbours of it), so merges
+            // checked against lo and hi keep the tolerance against the source, not only its rounding.
+            const double exact = static_cast<double>(z) + t_.roundingM[idx];
+            (exact > z ? n.hi[0] : n.lo[0]) = std::nextafter(z, exact > z ? HUGE_VALF : -HUGE_VALF);
+        }
         if (w_) {
             float d = w_->values[idx];
             n.mean[1] = n.lo[1] = n.hi[1] = d;
@@ -287,7 +293,9 @@ void Builder::measure(const Batch& b, size_t begin, size_t end, Stats& a) const 
             const size_t row = t_.height - 1 - iy;
             for (size_t ix = ix0; ix < ix0 + span; ++ix) {
                 const size_t idx = row * t_.width + ix;
-                const double dz = static_cast<double>(t_.values[idx]) - z;
+                const double exact = static_cast<double>(t_.values[idx]) + (t_.roundingM.empty() ? 0.0 : t_.roundingM[idx]);
+                const double dz = exact - z;
+                if (opt_.cellElevations) (*opt_.cellElevations)[idx] = b.values[0][i];
                 a.sumSq += dz * dz;
                 a.maxDev = std::max(a.maxDev, std::abs(dz));
                 if (w_) a.maxDev = std::max(a.maxDev, std::abs(static_cast<double>(w_->values[idx]) - b.values[1][i]));
@@ -307,6 +315,8 @@ Grid shapeFor(const Raster& terrain, const Raster* waterDepth, const BuildOption
         throw Error("raster is empty or inconsistent");
     if (!(options.toleranceM >= 0) || !std::isfinite(options.toleranceM)) throw Error("tolerance must be a finite number >= 0");
     if (!(terrain.pixelSizeM > 0)) throw Error("pixel size must be positive");
+    if (!terrain.roundingM.empty() && terrain.roundingM.size() != terrain.values.size())
+        throw Error("terrain rounding does not match the terrain raster");
     if (waterDepth && (waterDepth->width != terrain.width || waterDepth->height != terrain.height ||
                        waterDepth->values.size() != terrain.values.size()))
         throw Error("water depth raster does not match the terrain raster's geometry");
@@ -379,6 +389,7 @@ Grid buildGrid(const Raster& terrain, const Raster* waterDepth, const BuildOptio
     int rootLevel = 0, maxLevel = 0;
     Grid g = shapeFor(terrain, waterDepth, options, rootLevel, maxLevel);
     GridSink sink(g);
+    if (options.cellElevations) options.cellElevations->assign(terrain.values.size(), std::numeric_limits<float>::quiet_NaN());
     Stats st = Builder(terrain, waterDepth, options, rootLevel, maxLevel).run(sink);
     if (g.cellCount() == 0) throw Error("the raster holds no valid pixel (all nodata): nothing to build");
     fillStats(st, g.stats);
@@ -393,6 +404,7 @@ BuildSummary buildGridFile(const Raster& terrain, const Raster* waterDepth, cons
     BuildSummary out;
     out.shape = shapeFor(terrain, waterDepth, options, rootLevel, maxLevel);
     FileSink sink(path, out.shape);
+    if (options.cellElevations) options.cellElevations->assign(terrain.values.size(), std::numeric_limits<float>::quiet_NaN());
     Stats st = Builder(terrain, waterDepth, options, rootLevel, maxLevel).run(sink);
     IngestStats stats = extraStats;
     stats.sourceWidth = out.shape.stats.sourceWidth;

@@ -1,7 +1,9 @@
 #include "gdal_util.h"
 
+#include <cctype>
 #include <filesystem>
 #include <mutex>
+#include <sstream>
 
 #include <cpl_error.h>
 
@@ -22,20 +24,95 @@ std::string lastGdalError() {
     return (msg && *msg) ? std::string(msg) : std::string("no detail from GDAL");
 }
 
+namespace {
+
+// GDAL's subdataset syntax, DRIVER:"file":name or DRIVER:file:name (NETCDF:"a.nc":elevation,
+// HDF5:..., GTIFF_DIR:2:a.tif): returns the file part, or "" when `path` is not of that form. A
+// one-letter prefix is a Windows drive, not a driver.
+std::string subdatasetFile(const std::string& path) {
+    size_t colon = path.find(':');
+    if (colon == std::string::npos || colon < 2) return "";
+    for (size_t i = 0; i < colon; ++i)
+        if (!std::isalnum(static_cast<unsigned char>(path[i])) && path[i] != '_') return "";
+    std::string rest = path.substr(colon + 1);
+    if (!rest.empty() && rest[0] == '"') {
+        size_t end = rest.find('"', 1);
+        return end == std::string::npos ? "" : rest.substr(1, end - 1);
+    }
+    // Unquoted: the first ':'-separated part that is a file (GTIFF_DIR:2:a.tif -> a.tif), else the last.
+    std::string part;
+    for (size_t start = 0;; start += part.size() + 1) {
+        size_t end = rest.find(':', start);
+        part = rest.substr(start, end == std::string::npos ? std::string::npos : end - start);
+        std::error_code ec;
+        if (end == std::string::npos || std::filesystem::exists(part, ec)) return part;
+    }
+}
+
+// "NETCDF:"f.nc":elevation (desc), ..." for the error of a container without a band of its own.
+std::string listSubdatasets(GDALDataset& ds, size_t& count) {
+    std::string out;
+    count = 0;
+    char** md = ds.GetMetadata("SUBDATASETS");
+    for (int i = 1;; ++i) {
+        const char* name = CSLFetchNameValue(md, ("SUBDATASET_" + std::to_string(i) + "_NAME").c_str());
+        if (!name) break;
+        const char* desc = CSLFetchNameValue(md, ("SUBDATASET_" + std::to_string(i) + "_DESC").c_str());
+        if (++count <= 12) out += std::string(count > 1 ? ", " : "") + "'" + name + "'" + (desc ? std::string(" (") + desc + ")" : "");
+    }
+    if (count > 12) out += ", ... (" + std::to_string(count - 12) + " more)";
+    return out;
+}
+
+}  // namespace
+
 DatasetPtr openRaster(const std::string& path, const std::string& role) {
     ensureGdal();
-    if (path.rfind("/vsi", 0) != 0) {  // GDAL virtual paths (/vsizip/...) are not on disk
-        std::error_code ec;
-        if (!std::filesystem::exists(path, ec)) throw Error(path + ": no such file (" + role + ")");
-        if (std::filesystem::is_directory(path, ec)) throw Error(path + ": is a directory, not a raster (" + role + ")");
+    std::error_code ec;
+    const bool onDisk = std::filesystem::exists(path, ec);
+    if (path.rfind("/vsi", 0) != 0 && !onDisk) {  // GDAL virtual paths (/vsizip/...) are not on disk
+        std::string file = subdatasetFile(path);
+        if (file.empty()) throw Error(path + ": no such file (" + role + ")");
+        if (file.rfind("/vsi", 0) != 0 && !std::filesystem::exists(file, ec))
+            throw Error(path + ": no such file " + file + " (" + role + ")");
     }
+    if (onDisk && std::filesystem::is_directory(path, ec)) throw Error(path + ": is a directory, not a raster (" + role + ")");
     CPLErrorReset();
     auto* ds = GDALDataset::Open(path.c_str(), GDAL_OF_RASTER | GDAL_OF_READONLY | GDAL_OF_VERBOSE_ERROR);
-    if (!ds) throw Error(path + ": cannot read as a raster (" + role + "): " + lastGdalError());
+    if (!ds) {
+        std::string why = lastGdalError();
+        // DRIVER:"file":name naming no subdataset of an existing file: GDAL says "no such file"; list what there is.
+        if (std::string file = onDisk ? "" : subdatasetFile(path); !file.empty()) {
+            if (DatasetPtr container{GDALDataset::Open(file.c_str(), GDAL_OF_RASTER | GDAL_OF_READONLY)}) {
+                size_t count = 0;
+                std::string list = listSubdatasets(*container, count);
+                if (count > 0) why = file + " holds no such subdataset; its " + std::to_string(count) + " are: " + list;
+            }
+        }
+        throw Error(path + ": cannot read as a raster (" + role + "): " + why);
+    }
     DatasetPtr owned(ds);
-    if (ds->GetRasterCount() < 1) throw Error(path + ": has no raster band (" + role + ")");
+    if (ds->GetRasterCount() < 1) {
+        size_t count = 0;
+        std::string list = listSubdatasets(*ds, count);
+        if (count == 0) throw Error(path + ": has no raster band (" + role + ")");
+        throw Error(path + ": has no raster band of its own but " + std::to_string(count) + " variables (subdatasets) (" + role +
+                    "); give one of them as the input, quoted for the shell: " + list);
+    }
     if (ds->GetRasterXSize() < 1 || ds->GetRasterYSize() < 1) throw Error(path + ": raster has no pixels (" + role + ")");
     return owned;
+}
+
+std::string fmt(double v, int precision) {
+    std::ostringstream s;
+    s.precision(precision);
+    s << v;
+    return s.str();
+}
+
+std::string lower(std::string s) {
+    for (char& c : s) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+    return s;
 }
 
 std::string crsName(const OGRSpatialReference* srs) {

@@ -6,6 +6,8 @@
 
 #include "heightcast/grid/error.h"
 #include "heightcast/ingest/build.h"
+#include "heightcast/grid/parallel.h"
+#include "resample.h"
 
 namespace hc::ingest {
 
@@ -33,12 +35,21 @@ struct Prepared {
     Raster terrain, water;
     bool hasWater = false;
     BuildOptions build;
+    detail::SourceTrace trace;     // the source, when the working raster is not the source itself
+    std::vector<float> cellElevations;  // filled by the build when trace holds a source
 };
 
 Prepared prepare(const Options& opt, LoadReport& report) {
     Prepared p;
-    p.terrain = loadTerrain(opt, report);
-    if (p.terrain.validCount() == 0) throw Error(opt.input + ": every pixel is nodata: nothing to ingest");
+    p.terrain = detail::loadTerrainTraced(opt, report, &p.trace);
+    if (p.terrain.validCount() == 0) {
+        if (report.sourceValidPixels == 0) throw Error(opt.input + ": every pixel is nodata: nothing to ingest");
+        const double w = double(p.terrain.width) * p.terrain.pixelSizeM, h = double(p.terrain.height) * p.terrain.pixelSizeM;
+        throw Error(opt.input + ": none of the " + std::to_string(p.terrain.width) + " x " + std::to_string(p.terrain.height) +
+                    " working pixels of " + fmtM(p.terrain.pixelSizeM) + " m has its centre on valid data (the raster covers about " +
+                    fmtM(w) + " x " + fmtM(h) + " m, with " + std::to_string(report.sourceValidPixels) + " valid pixels)" +
+                    (opt.minCellM ? ": choose a --min-cell well below the raster's size" : ""));
+    }
     p.hasWater = opt.water != WaterSource::None;
     if (p.hasWater) p.water = loadWater(opt, p.terrain, report);
     p.build.toleranceM = opt.toleranceM;
@@ -46,6 +57,69 @@ Prepared prepare(const Options& opt, LoadReport& report) {
     p.build.threads = opt.threads;
     p.build.progress = opt.progress;
     return p;
+}
+
+// Every valid source pixel against the cell covering its centre (LoadReport::sourceCheck): the
+// figure a user means by "the grid differs from my survey by at most ...", and the count of source
+// pixels that reached no cell (lost at a projection's edge, a split, a hole's resampled edge).
+void checkAgainstSource(const detail::SourceTrace& trace, const Raster& working, const std::vector<float>& cellZ,
+                        unsigned threads, LoadReport& report) {
+    const detail::SourceBand& src = trace.band;
+    struct Acc {
+        uint64_t checked = 0, missed = 0;
+        double maxDev = 0, sumSq = 0;
+        std::vector<double> x, y;
+        std::vector<int> ok;
+    };
+    std::vector<Acc> acc(trace.rowToWorldThreadSafe ? resolveThreads(threads) : 1);
+    parallelFor(src.height, 16, trace.rowToWorldThreadSafe ? threads : 1, [&](size_t begin, size_t end, unsigned worker) {
+        Acc& a = acc[worker];
+        a.x.resize(src.width), a.y.resize(src.width), a.ok.resize(src.width);
+        for (size_t row = begin; row < end; ++row) {
+            trace.rowToWorld(row, a.x, a.y, a.ok);
+            for (size_t c = 0; c < src.width; ++c) {
+                const size_t i = row * src.width + c;
+                if (std::isnan(src.values[i])) continue;
+                const double col = std::floor((a.x[c] - working.westWorld) / working.pixelSizeM);
+                const double r = std::floor((working.northWorld - a.y[c]) / working.pixelSizeM);
+                const bool inside = a.ok[c] && col >= 0 && r >= 0 && col < double(working.width) && r < double(working.height);
+                const float z = inside ? cellZ[static_cast<size_t>(r) * working.width + static_cast<size_t>(col)] : NAN;
+                if (std::isnan(z)) {
+                    ++a.missed;
+                    continue;
+                }
+                const double d = src.exact(i) - z;
+                a.maxDev = std::max(a.maxDev, std::abs(d));
+                a.sumSq += d * d;
+                ++a.checked;
+            }
+        }
+    });
+    LoadReport::SourceCheck& out = report.sourceCheck;
+    out = {};
+    out.done = true;
+    double sumSq = 0;
+    for (const Acc& a : acc) {
+        out.checked += a.checked;
+        out.missed += a.missed;
+        out.maxDevM = std::max(out.maxDevM, a.maxDev);
+        sumSq += a.sumSq;
+    }
+    out.rmsDevM = out.checked ? std::sqrt(sumSq / double(out.checked)) : 0.0;
+    const uint64_t valid = out.checked + out.missed;
+    // Resampling loses a few pixels at the edges of holes and of the raster; more is lost data.
+    if (valid > 0 && double(out.missed) > 0.005 * double(valid))
+        report.warnings.push_back(std::to_string(out.missed) + " of " + std::to_string(valid) + " valid source pixels (" +
+                                  fmtM(100.0 * double(out.missed) / double(valid)) +
+                                  " %) reached no cell: their centre falls outside the grid or on a hole of the working raster");
+}
+
+// The build's own figure, said plainly when float32 storage cannot hold the tolerance.
+void noteStorage(const IngestStats& s, const Raster& terrain, LoadReport& report) {
+    if (s.maxDevM > s.toleranceM && !terrain.roundingM.empty())
+        report.warnings.push_back("cells differ from the source's own (" + std::string("Float64 or integer") + ") values by up to " +
+                                  fmtM(s.maxDevM) + " m, more than --tolerance " + fmtM(s.toleranceM) +
+                                  " m: the grid stores float32, which cannot hold these values closer");
 }
 
 double secondsSince(std::chrono::steady_clock::time_point t) {
@@ -57,7 +131,10 @@ double secondsSince(std::chrono::steady_clock::time_point t) {
 Grid ingest(const Options& opt, LoadReport& report) {
     auto start = std::chrono::steady_clock::now();
     Prepared p = prepare(opt, report);
+    if (!p.trace.band.values.empty()) p.build.cellElevations = &p.cellElevations;  // here: p has its final address
     Grid g = buildGrid(p.terrain, p.hasWater ? &p.water : nullptr, p.build);
+    if (p.build.cellElevations) checkAgainstSource(p.trace, p.terrain, p.cellElevations, opt.threads, report);
+    noteStorage(g.stats, p.terrain, report);
     g.stats.sourcePath = opt.input;
     g.stats.sourceCrsName = report.sourceCrsName;
     g.stats.seconds = secondsSince(start);
@@ -67,11 +144,15 @@ Grid ingest(const Options& opt, LoadReport& report) {
 BuildSummary ingestToFile(const Options& opt, const std::string& path, LoadReport& report) {
     auto start = std::chrono::steady_clock::now();
     Prepared p = prepare(opt, report);
+    if (!p.trace.band.values.empty()) p.build.cellElevations = &p.cellElevations;  // here: p has its final address
     IngestStats extra;
     extra.sourcePath = opt.input;
     extra.sourceCrsName = report.sourceCrsName;
     extra.seconds = secondsSince(start);
-    return buildGridFile(p.terrain, p.hasWater ? &p.water : nullptr, p.build, path, extra);
+    BuildSummary b = buildGridFile(p.terrain, p.hasWater ? &p.water : nullptr, p.build, path, extra);
+    if (p.build.cellElevations) checkAgainstSource(p.trace, p.terrain, p.cellElevations, opt.threads, report);
+    noteStorage(b.shape.stats, p.terrain, report);
+    return b;
 }
 
 }  // namespace hc::ingest

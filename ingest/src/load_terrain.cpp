@@ -8,6 +8,7 @@
 
 #include <unistd.h>
 
+#include <GeographicLib/Math.hpp>
 #include <GeographicLib/TransverseMercator.hpp>
 #include <GeographicLib/UTMUPS.hpp>
 #include <gdal_alg.h>
@@ -29,121 +30,9 @@ namespace {
 constexpr double kSquareTolerance = 1e-3;  // pixels within 0.1 % of square are taken as square
 constexpr float kNaN = std::numeric_limits<float>::quiet_NaN();
 
-std::string fmt(double v, int precision = 6) {
-    std::ostringstream s;
-    s.precision(precision);
-    s << v;
-    return s.str();
-}
-
-std::string lower(std::string s) {
-    for (char& c : s) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
-    return s;
-}
-
-// Metres per unit of the band's elevation values, from its unit type; 1 when unknown or metres.
-double verticalUnitScale(GDALRasterBand* band, std::string& unitName) {
-    unitName = band->GetUnitType() ? band->GetUnitType() : "";
-    std::string u = lower(unitName);
-    if (u.find("us") != std::string::npos && (u.find("ft") != std::string::npos || u.find("foot") != std::string::npos || u.find("feet") != std::string::npos))
-        return 1200.0 / 3937.0;
-    if (u == "ft" || u == "foot" || u == "feet" || u.find("international foot") != std::string::npos) return 0.3048;
-    return 1.0;
-}
-
-// Reads the band (or decodes Terrain-RGB) into floats with every kind of nodata as NaN.
-SourceBand readSource(GDALDataset& ds, const Options& opt, LoadReport& report) {
-    SourceBand out;
-    out.width = static_cast<size_t>(ds.GetRasterXSize());
-    out.height = static_cast<size_t>(ds.GetRasterYSize());
-    const int bandCount = ds.GetRasterCount();
-    if (opt.terrainRgb && bandCount < 3)
-        throw Error(opt.input + ": --terrain-rgb needs 3 bands (R, G, B), the raster has " + std::to_string(bandCount));
-    if (!opt.terrainRgb && opt.band > bandCount)
-        throw Error(opt.input + ": --band " + std::to_string(opt.band) + " is out of range: the raster has " +
-                    std::to_string(bandCount) + " band" + (bandCount == 1 ? "" : "s"));
-    GDALRasterBand* band = ds.GetRasterBand(opt.terrainRgb ? 1 : opt.band);
-    if (opt.terrainRgb)
-        for (int b = 1; b <= 3; ++b)
-            if (ds.GetRasterBand(b)->GetRasterDataType() != GDT_Byte)
-                throw Error(opt.input + ": --terrain-rgb needs 8-bit bands; band " + std::to_string(b) + " is " +
-                            GDALGetDataTypeName(ds.GetRasterBand(b)->GetRasterDataType()));
-
-    report.sourceDescription = std::to_string(out.width) + " x " + std::to_string(out.height) + " px, " +
-                               GDALGetDataTypeName(band->GetRasterDataType()) + ", " + std::to_string(bandCount) +
-                               " band" + (bandCount == 1 ? "" : "s") + ", " + ds.GetDriver()->GetDescription();
-    int hasNodata = 0;
-    double nodata = band->GetNoDataValue(&hasNodata);  // used only when the band declares one
-    int maskFlags = band->GetMaskFlags();
-    bool useMask = !(maskFlags & GMF_ALL_VALID) && !(maskFlags & GMF_NODATA) && (maskFlags & (GMF_PER_DATASET | GMF_ALPHA));
-    std::string unitName;
-    double zUnit = opt.terrainRgb ? 1.0 : verticalUnitScale(band, unitName);
-    if (zUnit != 1.0) report.warnings.push_back("elevations are in '" + unitName + "': converted to metres (x" + fmt(zUnit, 10) + ")");
-    const double zScale = zUnit * opt.zScale;
-
-    out.values.assign(out.width * out.height, kNaN);
-    const GDALDataType sampleType = band->GetRasterDataType();
-    const bool exactInFloat = sampleType == GDT_Byte || sampleType == GDT_UInt16 || sampleType == GDT_Int16 || sampleType == GDT_Float32;
-    const size_t strip = std::max<size_t>(1, (size_t{1} << 20) / (out.width * 8 + 1));  // ~1 MB buffers
-    std::vector<double> buf;
-    std::vector<uint8_t> rgb, mask;
-    Progress progress("reading " + opt.input, out.height, opt.progress);
-    for (size_t r0 = 0; r0 < out.height; r0 += strip) {
-        const size_t rows = std::min(strip, out.height - r0);
-        const size_t n = rows * out.width;
-        auto rasterIO = [&](GDALRasterBand* b, void* dst, GDALDataType type) {
-            CPLErrorReset();
-            if (b->RasterIO(GF_Read, 0, static_cast<int>(r0), static_cast<int>(out.width), static_cast<int>(rows), dst,
-                            static_cast<int>(out.width), static_cast<int>(rows), type, 0, 0, nullptr) != CE_None)
-                throw Error(opt.input + ": cannot read rows " + std::to_string(r0) + ".." + std::to_string(r0 + rows - 1) +
-                            " (truncated or corrupt file?): " + detail::lastGdalError());
-        };
-        float* dst = out.values.data() + r0 * out.width;
-        if (opt.terrainRgb) {
-            rgb.resize(3 * n);
-            for (int b = 0; b < 3; ++b) rasterIO(ds.GetRasterBand(b + 1), rgb.data() + static_cast<size_t>(b) * n, GDT_Byte);
-            for (size_t i = 0; i < n; ++i) {
-                double h = -10000.0 + 0.1 * (rgb[i] * 65536.0 + rgb[n + i] * 256.0 + rgb[2 * n + i]);
-                dst[i] = static_cast<float>(h * zScale);
-            }
-        } else if (exactInFloat) {
-            // Read straight into place: float32 holds every value of these types exactly.
-            rasterIO(band, dst, GDT_Float32);
-            for (size_t i = 0; i < n; ++i) {
-                double v = dst[i];
-                bool isNodata = std::isnan(v) || (hasNodata && static_cast<float>(v) == static_cast<float>(nodata)) ||
-                                (opt.nodata && static_cast<float>(v) == static_cast<float>(*opt.nodata)) || std::isinf(v);
-                dst[i] = isNodata ? kNaN : static_cast<float>(v * zScale);
-                if (!isNodata && !std::isfinite(dst[i]))
-                    throw Error(opt.input + ": elevation " + fmt(v) + " x " + fmt(zScale) + " is beyond the float32 range");
-            }
-        } else {
-            buf.resize(n);
-            rasterIO(band, buf.data(), GDT_Float64);
-            for (size_t i = 0; i < n; ++i) {
-                double v = buf[i];
-                bool isNodata = std::isnan(v) || (hasNodata && (v == nodata || static_cast<float>(v) == static_cast<float>(nodata))) ||
-                                (opt.nodata && v == *opt.nodata) || std::isinf(v);
-                dst[i] = isNodata ? kNaN : static_cast<float>(v * zScale);
-                if (!isNodata && !std::isfinite(dst[i]))
-                    throw Error(opt.input + ": elevation " + fmt(v) + " x " + fmt(zScale) + " is beyond the float32 range");
-            }
-        }
-        if (useMask) {
-            mask.resize(n);
-            rasterIO(band->GetMaskBand(), mask.data(), GDT_Byte);
-            for (size_t i = 0; i < n; ++i)
-                if (mask[i] == 0) dst[i] = kNaN;
-        }
-        // Drop GDAL's cached blocks of the rows just read: otherwise its block cache holds a second
-        // copy of the whole file at the peak of the read.
-        for (int b = 1; b <= bandCount; ++b) ds.GetRasterBand(b)->FlushCache(false);
-        if (useMask) band->GetMaskBand()->FlushCache(false);
-        progress.advance(rows);
-    }
-    progress.finish();
-    return out;
-}
+using detail::fmt;
+using detail::lower;
+using detail::readSource;
 
 // Geotransform of the source in metres (or in degrees for geographic sources).
 struct GeoTransform {
@@ -164,8 +53,9 @@ void checkWorkingSize(double width, double height, double pixelM, const Options&
                     " GB with its grid, more than this machine's " + fmt(ram / 1e9, 3) + " GB");
 }
 
+// `trace`, when given, receives the source and its pixel-to-world map if the source is resampled.
 Raster fromSourceAffine(SourceBand&& src, const GeoTransform& gt, double pixelM, const std::string& wkt,
-                        const Options& opt, LoadReport& report) {
+                        const Options& opt, LoadReport& report, detail::SourceTrace* trace) {
     Raster r;
     r.crsWkt = wkt;
     const double* g = gt.g;
@@ -182,17 +72,25 @@ Raster fromSourceAffine(SourceBand&& src, const GeoTransform& gt, double pixelM,
         if (std::abs(g[1]) != std::abs(g[5])) {
             double shift = std::abs(std::abs(g[5]) - std::abs(g[1])) * static_cast<double>(src.height);
             report.warnings.push_back("pixels of " + fmt(std::abs(g[1])) + " x " + fmt(std::abs(g[5])) +
-                                      " m taken as square " + fmt(r.pixelSizeM) + " m (the south edge moves by " + fmt(shift, 3) + " m)");
+                                      " m are within 0.1 % of square: snapped (not resampled) to " + fmt(r.pixelSizeM) +
+                                      " m squares, which moves the south edge by " + fmt(shift, 3) + " m");
         }
         if (flipX || flipY) {
             report.method += std::string(report.method.empty() ? "" : "; ") + (flipY ? "south-up rows flipped north-up" : "") +
                              (flipX && flipY ? ", " : "") + (flipX ? "east-to-west columns flipped" : "");
-            r.values.resize(src.values.size());
-            for (size_t row = 0; row < src.height; ++row)
-                for (size_t col = 0; col < src.width; ++col)
-                    r.values[row * src.width + col] = src.at(flipX ? src.width - 1 - col : col, flipY ? src.height - 1 - row : row);
+            auto flipped = [&](const std::vector<float>& v) {
+                std::vector<float> out(v.size());
+                for (size_t row = 0; row < src.height; ++row)
+                    for (size_t col = 0; col < src.width; ++col)
+                        out[row * src.width + col] =
+                            v[(flipY ? src.height - 1 - row : row) * src.width + (flipX ? src.width - 1 - col : col)];
+                return out;
+            };
+            r.values = flipped(src.values);
+            if (!src.residual.empty()) r.roundingM = flipped(src.residual);
         } else {
-                r.values = std::move(src.values);
+            r.values = std::move(src.values);
+            r.roundingM = std::move(src.residual);
         }
         if (report.method.empty()) report.method = "kept as is";
         return r;
@@ -224,13 +122,29 @@ Raster fromSourceAffine(SourceBand&& src, const GeoTransform& gt, double pixelM,
         row = inv[3] + x * inv[4] + y * inv[5];
         return true;
     }, r, 16, 1e-9, opt.threads);  // affine: the lattice interpolation is exact (the check confirms it)
+    if (trace) {
+        trace->band = std::move(source);
+        trace->rowToWorld = [g = gt](size_t row, std::vector<double>& x, std::vector<double>& y, std::vector<int>& ok) {
+            const double rc = static_cast<double>(row) + 0.5;
+            for (size_t c = 0; c < x.size(); ++c) {
+                const double cc = static_cast<double>(c) + 0.5;
+                x[c] = g.g[0] + cc * g.g[1] + rc * g.g[2];
+                y[c] = g.g[3] + cc * g.g[4] + rc * g.g[5];
+                ok[c] = 1;
+            }
+        };
+    }
     return r;
 }
 
 // Geographic -> UTM zone of the raster centre, on the source's own ellipsoid (GeographicLib's
 // Krueger series: accurate to 5 nm within 3900 km of the central meridian).
+// Longitudes may run 0..360 or anywhere past 180: every longitude below is taken on the circle,
+// relative to the raster's centre, so 234..238 E is the same as 126..122 W, and a raster across the
+// antimeridian stays whole (its UTM zone sits across 180).
 Raster projectToUtm(SourceBand&& src, const GeoTransform& gt, const OGRSpatialReference& geo, const Options& opt,
-                    LoadReport& report) {
+                    LoadReport& report, detail::SourceTrace* trace) {
+    using GeographicLib::Math;
     const double* g = gt.g;
     const double degPerUnit = geo.GetAngularUnits() * 180.0 / M_PI;
     const double pm = geo.GetPrimeMeridian();  // degrees east of Greenwich
@@ -238,9 +152,11 @@ Raster projectToUtm(SourceBand&& src, const GeoTransform& gt, const OGRSpatialRe
         lon = (g[0] + col * g[1] + row * g[2]) * degPerUnit + pm;
         lat = (g[3] + col * g[4] + row * g[5]) * degPerUnit;
     };
-    // The outline, sampled along every edge.
-    double lonMin = HUGE_VAL, lonMax = -HUGE_VAL, latMin = HUGE_VAL, latMax = -HUGE_VAL;
+    // The outline, sampled along every edge; longitudes as offsets from the centre's.
     const double cw = static_cast<double>(src.width), ch = static_cast<double>(src.height);
+    double lonC, latC;
+    lonLat(cw / 2, ch / 2, lonC, latC);
+    double lonMin = HUGE_VAL, lonMax = -HUGE_VAL, latMin = HUGE_VAL, latMax = -HUGE_VAL;
     std::vector<std::pair<double, double>> outline;
     for (int k = 0; k <= 64; ++k) {
         double t = k / 64.0;
@@ -254,15 +170,14 @@ Raster projectToUtm(SourceBand&& src, const GeoTransform& gt, const OGRSpatialRe
             latMax = std::max(latMax, lat);
         }
     }
-    double lonC, latC;
-    lonLat(cw / 2, ch / 2, lonC, latC);
     auto hint = std::string("; choose a projection with --t_srs (for example a Lambert azimuthal equal-area CRS centred on the data)");
-    if (latMin < -80.0 || latMax > 84.0 || lonMin < -180.0 || lonMax > 180.0)
+    if (latMin < -80.0 || latMax > 84.0 || lonMax - lonMin >= 180.0)
         throw Error(opt.input + ": spans longitude " + fmt(lonMin) + ".." + fmt(lonMax) + " and latitude " + fmt(latMin) + ".." +
-                    fmt(latMax) + " degrees: no UTM zone holds it (UTM covers 80S..84N)" + hint);
-    int zone = GeographicLib::UTMUPS::StandardZone(latC, lonC);
+                    fmt(latMax) + " degrees: no UTM zone holds it (UTM covers 80S..84N, and a zone at most a few degrees either side of its meridian)" + hint);
+    int zone = GeographicLib::UTMUPS::StandardZone(latC, Math::AngNormalize(lonC));
     const double lon0 = 6.0 * zone - 183.0;
-    const double maxOff = std::max(std::abs(lonMin - lon0), std::abs(lonMax - lon0));
+    double maxOff = 0;
+    for (auto [lon, lat] : outline) maxOff = std::max(maxOff, std::abs(Math::AngDiff(lon0, lon)));
     if (maxOff > 12.0)
         throw Error(opt.input + ": spans longitude " + fmt(lonMin) + ".." + fmt(lonMax) + " degrees, up to " + fmt(maxOff, 3) +
                     " degrees from the central meridian of UTM zone " + std::to_string(zone) +
@@ -324,27 +239,48 @@ Raster projectToUtm(SourceBand&& src, const GeoTransform& gt, const OGRSpatialRe
     int lattice = resample(src, [&](double x, double y, double& col, double& row) {
         double lat, lon;
         tm.Reverse(lon0, x - fe, y - fn, lat, lon);
+        lon = lonC + Math::AngDiff(lonC, lon);  // back into the source's own longitude range
         double gx = (lon - pm) / degPerUnit, gy = lat / degPerUnit;
         col = inv[0] + gx * inv[1] + gy * inv[2];
         row = inv[3] + gx * inv[4] + gy * inv[5];
         return std::isfinite(col) && std::isfinite(row);
     }, r, 16, 1e-5, opt.threads);
     report.method += ", map exact every " + std::to_string(lattice) + " px";
+    if (std::abs(lonC - Math::AngNormalize(lonC)) > 1e-9)
+        report.method += "; longitudes " + fmt(lonMin) + ".." + fmt(lonMax) + " read as " + fmt(Math::AngNormalize(lonMin)) + ".." +
+                         fmt(Math::AngNormalize(lonMin) + (lonMax - lonMin));
+    if (trace) {
+        trace->band = std::move(src);
+        // Outlives this function: everything by value.
+        trace->rowToWorld = [gt, degPerUnit, pm, tm, lon0, fe, fn](size_t row, std::vector<double>& x, std::vector<double>& y,
+                                                                   std::vector<int>& ok) {
+            const double* t = gt.g;
+            const double rc = static_cast<double>(row) + 0.5;
+            for (size_t c = 0; c < x.size(); ++c) {
+                const double cc = static_cast<double>(c) + 0.5;
+                double lon = (t[0] + cc * t[1] + rc * t[2]) * degPerUnit + pm, lat = (t[3] + cc * t[4] + rc * t[5]) * degPerUnit;
+                tm.Forward(lon0, lat, lon, x[c], y[c]);
+                x[c] += fe;
+                y[c] += fn;
+                ok[c] = std::isfinite(x[c]) && std::isfinite(y[c]);
+            }
+        };
+    }
     return r;
 }
 
-// Wraps a source band in a GDAL MEM dataset (for GDALWarp).
-DatasetPtr memDataset(const SourceBand& src, const GeoTransform& gt, const OGRSpatialReference* srs) {
+// Wraps columns [c0, c1) of a source band in a GDAL MEM dataset (for GDALWarp); gt is that piece's.
+DatasetPtr memDataset(const SourceBand& src, size_t c0, size_t c1, const GeoTransform& gt, const OGRSpatialReference* srs) {
     GDALDriver* mem = GetGDALDriverManager()->GetDriverByName("MEM");
-    DatasetPtr ds(mem->Create("", static_cast<int>(src.width), static_cast<int>(src.height), 1, GDT_Float32, nullptr));
+    const int w = static_cast<int>(c1 - c0), h = static_cast<int>(src.height);
+    DatasetPtr ds(mem->Create("", w, h, 1, GDT_Float32, nullptr));
     if (!ds) throw Error("cannot create an in-memory raster: " + detail::lastGdalError());
     ds->SetGeoTransform(const_cast<double*>(gt.g));
     if (srs) ds->SetSpatialRef(srs);
     GDALRasterBand* b = ds->GetRasterBand(1);
     b->SetNoDataValue(std::numeric_limits<double>::quiet_NaN());
-    if (b->RasterIO(GF_Write, 0, 0, static_cast<int>(src.width), static_cast<int>(src.height),
-                    const_cast<float*>(src.values.data()), static_cast<int>(src.width), static_cast<int>(src.height),
-                    GDT_Float32, 0, 0, nullptr) != CE_None)
+    if (b->RasterIO(GF_Write, 0, 0, w, h, const_cast<float*>(src.values.data() + c0), w, h, GDT_Float32, sizeof(float),
+                    static_cast<GSpacing>(src.width * sizeof(float)), nullptr) != CE_None)
         throw Error("cannot fill an in-memory raster: " + detail::lastGdalError());
     return ds;
 }
@@ -353,20 +289,25 @@ DatasetPtr memDataset(const SourceBand& src, const GeoTransform& gt, const OGRSp
 
 namespace detail {
 
-// GDALWarp of `src` into a MEM dataset with the given arguments (GDAL's own option syntax).
-DatasetPtr warp(GDALDataset& src, const std::vector<std::string>& args, const std::string& what) {
+// GDALWarp of `sources` (mosaicked) into a MEM dataset with the given arguments (GDAL's own option syntax).
+DatasetPtr warp(const std::vector<GDALDataset*>& sources, const std::vector<std::string>& args, const std::string& what) {
     std::vector<char*> argv;
     for (const auto& a : args) argv.push_back(const_cast<char*>(a.c_str()));
     argv.push_back(nullptr);
     GDALWarpAppOptions* options = GDALWarpAppOptionsNew(argv.data(), nullptr);
     if (!options) throw Error(what + ": invalid warp options: " + lastGdalError());
-    GDALDatasetH in = GDALDataset::ToHandle(&src);
+    std::vector<GDALDatasetH> in;
+    for (GDALDataset* d : sources) in.push_back(GDALDataset::ToHandle(d));
     int usageError = 0;
     CPLErrorReset();
-    GDALDatasetH out = GDALWarp("", nullptr, 1, &in, options, &usageError);
+    GDALDatasetH out = GDALWarp("", nullptr, static_cast<int>(in.size()), in.data(), options, &usageError);
     GDALWarpAppOptionsFree(options);
     if (!out || usageError) throw Error(what + ": " + lastGdalError());
     return DatasetPtr(GDALDataset::FromHandle(out));
+}
+
+DatasetPtr warp(GDALDataset& src, const std::vector<std::string>& args, const std::string& what) {
+    return warp(std::vector<GDALDataset*>{&src}, args, what);
 }
 
 // Reads band 1 of a (warped, float) dataset into a SourceBand (NaN nodata kept).
@@ -404,18 +345,213 @@ void validateOptions(const Options& o) {
     if (o.water == WaterSource::Level && !std::isfinite(o.waterLevelM)) bad("--water-level must be a finite elevation in metres");
 }
 
-Raster loadTerrain(const Options& opt, LoadReport& report) {
+namespace {
+
+// --t_srs with GDAL's warper and the exact transformer (-et 0): GDAL's default approximates the map
+// linearly to within 0.125 source pixel: 10.9 m of elevation error on hef_srtm spread over 4 x 2
+// degrees (test Issue11.TargetSrsUsesTheExactTransformer; 0.12 mm exact), up to 55 m in issue 11.
+// A geographic source is first moved to start in -180..180; if it then runs past 180, it is split
+// there and its east part shifted by -360 (both parts warped into the one output): PROJ's inverse
+// gives longitudes in -180..180 only, so without the split every pixel past 180 would be lost.
+// Columns that repeat the first ones (a global grid's closing column at west + 360) are left out.
+Raster warpToTarget(SourceBand&& src, const GeoTransform& gtIn, const OGRSpatialReference& srs, const OGRSpatialReference& target,
+                    const Options& opt, LoadReport& report, detail::SourceTrace* trace) {
+    struct Piece {
+        size_t c0, c1;
+        GeoTransform gt;
+    };
+    std::vector<Piece> pieces{{0, src.width, gtIn}};
+    std::string note;
+    const double dx = gtIn.g[1];
+    if (srs.IsGeographic() && !gtIn.rotated() && dx > 0 && srs.GetPrimeMeridian() == 0 &&
+        std::abs(srs.GetAngularUnits() - M_PI / 180) < 1e-12) {
+        GeoTransform gt = gtIn;
+        // West edge into [-180, 180) give or take half a pixel: a grid whose first pixel centre is at -180
+        // (west edge -180.5) stays where it is.
+        gt.g[0] -= 360.0 * std::floor((gt.g[0] + dx / 2 + 180.0) / 360.0);
+        const double width = static_cast<double>(src.width);
+        // Columns with centres at 180 or beyond go east; those at west + 360 or beyond repeat column 0.
+        const auto firstEast = static_cast<size_t>(std::clamp(std::ceil((180.0 - gt.g[0]) / dx - 0.5), 0.0, width));
+        const auto end = static_cast<size_t>(std::clamp(std::ceil(360.0 / dx - 1e-6), 0.0, width));
+        pieces = {{0, firstEast, gt}};
+        if (firstEast < end) {
+            GeoTransform east = gt;
+            east.g[0] = gt.g[0] + static_cast<double>(firstEast) * dx - 360.0;
+            pieces.push_back({firstEast, end, east});
+            note = "; split at 180 degrees (east part shifted by -360)";
+        }
+        if (gt.g[0] != gtIn.g[0]) note += "; longitudes moved by " + fmt(gt.g[0] - gtIn.g[0]) + " degrees";
+        if (end < src.width) note += "; " + std::to_string(src.width - end) + " closing column(s) repeating the first left out";
+        if (pieces[0].c1 == 0) pieces.erase(pieces.begin());
+    }
+    const std::string targetText = opt.targetSrs;
+    // Source coordinates -> target CRS, exact (PROJ): for the output extent and the source check.
+    OGRSpatialReference from = srs, to = target;
+    from.SetAxisMappingStrategy(OAMS_TRADITIONAL_GIS_ORDER);
+    to.SetAxisMappingStrategy(OAMS_TRADITIONAL_GIS_ORDER);
+    std::shared_ptr<OGRCoordinateTransformation> ct(OGRCreateCoordinateTransformation(&from, &to),
+                                                    [](OGRCoordinateTransformation* t) { OGRCoordinateTransformation::DestroyCT(t); });
+    if (!ct) throw Error("--t_srs " + targetText + ": cannot transform from " + report.sourceCrsName + ": " + detail::lastGdalError());
+    // The output extent: GDAL's suggestion shrinks to what its edge samples reach, and loses every
+    // row beyond a failing edge (a global grid's poles at +-90.5 cut it to +-81 degrees). So: the
+    // bounding box of the pixel corners and centres that do transform: all along the outline, and on a
+    // lattice of every k-th one inside (at most about 1024 x 1024 points; whatever an extreme between
+    // lattice points leaves out is counted by the source check as lost).
+    double ext[4] = {HUGE_VAL, HUGE_VAL, -HUGE_VAL, -HUGE_VAL};
+    {
+        const size_t k = std::max<size_t>(1, std::max(src.width, src.height) / 1024);
+        std::vector<double> xs, ys;
+        auto take = [&](double half) {  // half = 0: corners; 0.5: centres (the last ones clamped to the edge)
+            const size_t n = src.width + 1, m = src.height + 1;
+            for (size_t j = 0; j < m; ++j) {
+                const bool edgeRow = j == 0 || j + 2 >= m;
+                for (size_t i = 0; i < n; ++i) {
+                    if (!(edgeRow || i == 0 || i + 2 >= n || (i % k == 0 && j % k == 0))) continue;
+                    const double c = std::min(double(i) + half, double(src.width)), r = std::min(double(j) + half, double(src.height));
+                    xs.push_back(gtIn.g[0] + c * gtIn.g[1] + r * gtIn.g[2]);
+                    ys.push_back(gtIn.g[3] + c * gtIn.g[4] + r * gtIn.g[5]);
+                }
+            }
+        };
+        take(0.0);
+        take(0.5);
+        std::vector<int> ok(xs.size());
+        CPLErrorReset();
+        ct->Transform(static_cast<int>(xs.size()), xs.data(), ys.data(), nullptr, ok.data());
+        for (size_t i = 0; i < xs.size(); ++i)
+            if (ok[i] && std::isfinite(xs[i]) && std::isfinite(ys[i]))
+                ext[0] = std::min(ext[0], xs[i]), ext[1] = std::min(ext[1], ys[i]), ext[2] = std::max(ext[2], xs[i]),
+                ext[3] = std::max(ext[3], ys[i]);
+        if (!(ext[0] < ext[2] && ext[1] < ext[3]))
+            throw Error(opt.input + ": no part of it has a position in " + targetText + " (PROJ: " + detail::lastGdalError() + ")");
+    }
+    std::vector<DatasetPtr> mems;
+    std::vector<GDALDataset*> inputs;
+    double cell = HUGE_VAL;
+    for (const Piece& pc : pieces) {
+        mems.push_back(memDataset(src, pc.c0, pc.c1, pc.gt, &srs));
+        inputs.push_back(mems.back().get());
+        if (opt.minCellM) continue;
+        // GDAL's suggested output, made square with the smaller side (the finest over the pieces).
+        char** dst = CSLSetNameValue(nullptr, "DST_SRS", targetText.c_str());
+        void* tr = GDALCreateGenImgProjTransformer2(GDALDataset::ToHandle(mems.back().get()), nullptr, dst);
+        CSLDestroy(dst);
+        if (!tr) throw Error("--t_srs " + targetText + ": cannot transform from " + report.sourceCrsName + ": " + detail::lastGdalError());
+        double sg[6];
+        int pw = 0, ph = 0;
+        CPLErr e = GDALSuggestedWarpOutput(GDALDataset::ToHandle(mems.back().get()), GDALGenImgProjTransform, tr, sg, &pw, &ph);
+        GDALDestroyGenImgProjTransformer(tr);
+        if (e != CE_None) throw Error("--t_srs " + targetText + ": cannot project " + opt.input + ": " + detail::lastGdalError());
+        cell = std::min({cell, std::abs(sg[1]), std::abs(sg[5])});
+    }
+    if (opt.minCellM) cell = *opt.minCellM / target.GetLinearUnits();
+    // Half a pixel more on every side: source pixel centres on the extent's edge (a pole, the
+    // antimeridian) then fall inside the output rather than on its closing edge.
+    ext[0] -= cell / 2, ext[1] -= cell / 2, ext[2] += cell / 2, ext[3] += cell / 2;
+    std::vector<std::string> args{"-t_srs", targetText, "-r", "bilinear", "-et", "0", "-of", "MEM", "-ot", "Float32",
+                                  "-srcnodata", "nan", "-dstnodata", "nan", "-wo", "NUM_THREADS=ALL_CPUS",
+                                  "-tr", fmt(cell, 17), fmt(cell, 17),
+                                  "-te", fmt(ext[0], 17), fmt(ext[1], 17), fmt(ext[2], 17), fmt(ext[3], 17)};
+    DatasetPtr warped = detail::warp(inputs, args, opt.input + ": projecting to " + targetText);
+    mems.clear();
+    OGRSpatialReference out = *warped->GetSpatialRef();
+    out.SetAxisMappingStrategy(OAMS_TRADITIONAL_GIS_ORDER);
+    GeoTransform wgt;
+    warped->GetGeoTransform(wgt.g);
+    SourceBand ws = detail::readFloatBand(*warped, opt.input);
+    warped.reset();
+    if (std::none_of(ws.values.begin(), ws.values.end(), [](float v) { return !std::isnan(v); }))
+        throw Error(opt.input + ": projected to " + targetText + " on " + std::to_string(ws.width) + " x " + std::to_string(ws.height) +
+                    " pixels of " + fmt(std::abs(wgt.g[1]), 6) + " (CRS units), no pixel centre falls inside the data: " +
+                    "the footprint is too thin for that resolution; give a finer one with --min-cell");
+    if (pieces.size() == 2) {
+        // Split at 180, the two halves must meet in the target map; in one whose own edge is at 180
+        // (EPSG:3857, say) they land at its opposite edges, a world apart, with nothing between.
+        const size_t valid = static_cast<size_t>(std::count_if(ws.values.begin(), ws.values.end(), [](float v) { return !std::isnan(v); }));
+        if (double(valid) < 0.1 * double(ws.values.size()))
+            throw Error(opt.input + ": crosses 180 degrees of longitude, which is an edge of " + targetText + ": its two halves would lie at " +
+                        "the map's opposite edges (" + fmt(100.0 * double(valid) / double(ws.values.size()), 3) + " % of a " +
+                        std::to_string(ws.width) + " px wide raster); choose a --t_srs whose central meridian is near the data (e.g. " +
+                        "EPSG:3832, PDC Mercator, or '+proj=laea +lon_0=180 +lat_0=...') or leave --t_srs out for its UTM zone");
+    }
+    const double unit = out.GetLinearUnits();
+    for (double& v : wgt.g) v *= unit;
+    if (unit != 1.0) out.SetLinearUnitsAndUpdateParameters(SRS_UL_METER, 1.0);
+    report.gridCrsName = detail::crsName(&out);
+    report.method = "warped to " + report.gridCrsName + " by GDAL (bilinear, exact transformer)" + note;
+    Options keep = opt;
+    keep.minCellM.reset();  // -tr already applied it
+    Raster r = fromSourceAffine(std::move(ws), wgt, std::abs(wgt.g[1]), detail::toWkt(out), keep, report, nullptr);
+    if (trace) {
+        // Where each source pixel centre lands: PROJ, exact, from the source's own coordinates.
+        trace->band = std::move(src);
+        trace->rowToWorldThreadSafe = false;
+        trace->rowToWorld = [ct, gt = gtIn, unit](size_t row, std::vector<double>& x, std::vector<double>& y, std::vector<int>& ok) {
+            const double rc = static_cast<double>(row) + 0.5;
+            for (size_t c = 0; c < x.size(); ++c) {
+                const double cc = static_cast<double>(c) + 0.5;
+                x[c] = gt.g[0] + cc * gt.g[1] + rc * gt.g[2];
+                y[c] = gt.g[3] + cc * gt.g[4] + rc * gt.g[5];
+            }
+            CPLErrorReset();
+            ct->Transform(static_cast<int>(x.size()), x.data(), y.data(), nullptr, ok.data());
+            for (size_t c = 0; c < x.size(); ++c) {
+                ok[c] = ok[c] && std::isfinite(x[c]) && std::isfinite(y[c]);
+                x[c] *= unit;
+                y[c] *= unit;
+            }
+        };
+    }
+    return r;
+}
+
+// Whether a raster without CRS has degrees for coordinates: NetCDF's CF units say so, or the extent
+// fits the globe and either the pixels are finer than 0.01 (1 km in degrees, 1 cm in metres) or it
+// covers the whole globe (a 360 x 180 m local terrain of 1 m pixels is far less likely than a
+// global grid of 1 degree pixels).
+bool looksLikeDegrees(const GeoTransform& gt, size_t width, size_t height, bool unitsSayDegrees) {
+    if (gt.rotated()) return false;
+    const double* g = gt.g;
+    const double px = std::abs(g[1]), py = std::abs(g[5]);
+    const double x0 = std::min(g[0], g[0] + g[1] * double(width)), x1 = std::max(g[0], g[0] + g[1] * double(width));
+    const double y0 = std::min(g[3], g[3] + g[5] * double(height)), y1 = std::max(g[3], g[3] + g[5] * double(height));
+    if (x0 < -180.0 - px || x1 > 540.0 + px || y0 < -90.0 - py || y1 > 90.0 + py) return false;
+    if (unitsSayDegrees) return true;
+    return std::max(px, py) < 0.01 || (x1 - x0 >= 350.0 && y1 - y0 >= 170.0);
+}
+
+// CF conventions (NetCDF): a coordinate variable with units "degrees_east" (GDAL shows it as
+// metadata "lon#units=degrees_east").
+bool metadataSaysDegrees(GDALDataset& ds) {
+    for (char** md = ds.GetMetadata(); md && *md; ++md) {
+        std::string item = lower(*md);
+        size_t eq = item.find('=');
+        if (eq == std::string::npos || item.rfind("#units", eq) == std::string::npos) continue;
+        std::string v = item.substr(eq + 1);
+        if (v.rfind("degrees_east", 0) == 0 || v.rfind("degree_east", 0) == 0 || v.rfind("degrees_e", 0) == 0) return true;
+    }
+    return false;
+}
+
+}  // namespace
+
+Raster loadTerrain(const Options& opt, LoadReport& report) { return detail::loadTerrainTraced(opt, report, nullptr); }
+
+Raster detail::loadTerrainTraced(const Options& opt, LoadReport& report, SourceTrace* trace) {
     validateOptions(opt);
     DatasetPtr ds = detail::openRaster(opt.input, "terrain raster");
     report.sourceWidth = static_cast<size_t>(ds->GetRasterXSize());
     report.sourceHeight = static_cast<size_t>(ds->GetRasterYSize());
 
+    const bool localFrame = lower(opt.sourceSrs) == "local";
     OGRSpatialReference srs;
     srs.SetAxisMappingStrategy(OAMS_TRADITIONAL_GIS_ORDER);
     bool hasSrs = false;
-    if (!opt.sourceSrs.empty()) {
+    if (localFrame) {
+        report.warnings.push_back("--s_srs local: coordinates taken as metres in a local frame, the file's own CRS (if any) ignored");
+    } else if (!opt.sourceSrs.empty()) {
         if (srs.SetFromUserInput(opt.sourceSrs.c_str()) != OGRERR_NONE)
-            throw Error("--s_srs " + opt.sourceSrs + ": not a CRS that GDAL/PROJ knows");
+            throw Error("--s_srs " + opt.sourceSrs + ": not a CRS that GDAL/PROJ knows (or 'local' for metres in a local frame)");
         hasSrs = true;
     } else if (const OGRSpatialReference* own = ds->GetSpatialRef(); own && !own->IsEmpty()) {
         srs = *own;
@@ -428,13 +564,32 @@ Raster loadTerrain(const Options& opt, LoadReport& report) {
     bool hasGt = ds->GetGeoTransform(gt.g) == CE_None;
     if (hasGt && (gt.g[1] == 0 || gt.g[5] == 0) && !gt.rotated())
         throw Error(opt.input + ": geotransform has a zero pixel size");
-    SourceBand src = readSource(*ds, opt, report);
+    // Elevation units a compound CRS declares (its vertical part), for bands that declare none.
+    double zCrs = 1.0;
+    std::string zCrsUnit;
+    if (hasSrs && srs.IsCompound()) {
+        const char* name = nullptr;
+        double u = srs.GetTargetLinearUnits("VERT_CS", &name);
+        if (u > 0 && std::abs(u - 1.0) > 1e-12) zCrs = u, zCrsUnit = name ? name : "?";
+    }
+    const bool unitsSayDegrees = metadataSaysDegrees(*ds);
+    SourceBand src = readSource(*ds, opt, report, zCrs, zCrsUnit);
     ds.reset();  // releases GDAL's cached blocks of the file before the working raster is made
     if (!hasGt) {
         // No georeferencing: pixel (c, r) -> (c, -r) metres; the file itself can't say more.
         gt = GeoTransform{};
         gt.g[3] = static_cast<double>(src.height);
         report.warnings.push_back("no georeferencing: pixels taken as 1 m squares in a local frame (assign one with gdal_translate -a_ullr / -a_srs)");
+    }
+    if (!hasSrs && !localFrame && hasGt && looksLikeDegrees(gt, src.width, src.height, unitsSayDegrees)) {
+        srs.SetWellKnownGeogCS("WGS84");
+        hasSrs = true;
+        report.sourceCrsName = "none; taken as WGS 84";
+        const double* g = gt.g;
+        report.warnings.push_back("no CRS, and the coordinates look like degrees (" +
+                                  std::string(unitsSayDegrees ? "the file's units say degrees_east, " : "") + "x " + fmt(g[0]) + ".." +
+                                  fmt(g[0] + g[1] * double(src.width)) + ", y " + fmt(g[3] + g[5] * double(src.height)) + ".." + fmt(g[3]) +
+                                  "): taken as geographic WGS 84; name the CRS with --s_srs, or take them as metres with --s_srs local");
     }
 
     if (!opt.targetSrs.empty()) {
@@ -443,74 +598,50 @@ Raster loadTerrain(const Options& opt, LoadReport& report) {
             throw Error("--t_srs " + opt.targetSrs + ": not a CRS that GDAL/PROJ knows");
         if (!target.IsProjected()) throw Error("--t_srs " + opt.targetSrs + ": not a projected CRS (the grid needs metres)");
         if (!hasSrs) throw Error(opt.input + ": has no CRS to project from; name it with --s_srs");
-        DatasetPtr mem = memDataset(src, gt, &srs);
-        src = {};
-        std::vector<std::string> args{"-t_srs", opt.targetSrs, "-r", "bilinear", "-of", "MEM", "-ot", "Float32",
-                                      "-srcnodata", "nan", "-dstnodata", "nan", "-wo", "NUM_THREADS=ALL_CPUS"};
-        if (opt.minCellM) {
-            args.insert(args.end(), {"-tr", fmt(*opt.minCellM, 17), fmt(*opt.minCellM, 17)});
-        } else {
-            // GDAL's suggested output, made square with the smaller side.
-            void* tr = GDALCreateGenImgProjTransformer2(GDALDataset::ToHandle(mem.get()), nullptr,
-                                                        CSLSetNameValue(nullptr, "DST_SRS", opt.targetSrs.c_str()));
-            if (!tr) throw Error("--t_srs " + opt.targetSrs + ": cannot transform from " + report.sourceCrsName + ": " + detail::lastGdalError());
-            double sg[6];
-            int pw = 0, ph = 0;
-            CPLErr e = GDALSuggestedWarpOutput(GDALDataset::ToHandle(mem.get()), GDALGenImgProjTransform, tr, sg, &pw, &ph);
-            GDALDestroyGenImgProjTransformer(tr);
-            if (e != CE_None) throw Error("--t_srs " + opt.targetSrs + ": cannot project " + opt.input + ": " + detail::lastGdalError());
-            double c = std::min(std::abs(sg[1]), std::abs(sg[5]));
-            args.insert(args.end(), {"-tr", fmt(c, 17), fmt(c, 17)});
-        }
-        DatasetPtr warped = detail::warp(*mem, args, opt.input + ": projecting to " + opt.targetSrs);
-        mem.reset();
-        OGRSpatialReference out = *warped->GetSpatialRef();
-        GeoTransform wgt;
-        warped->GetGeoTransform(wgt.g);
-        SourceBand ws = detail::readFloatBand(*warped, opt.input);
-        warped.reset();
-        if (std::none_of(ws.values.begin(), ws.values.end(), [](float v) { return !std::isnan(v); }))
-            throw Error(opt.input + ": projected to " + opt.targetSrs + " on " + std::to_string(ws.width) + " x " + std::to_string(ws.height) +
-                        " pixels of " + fmt(std::abs(wgt.g[1]), 6) + " (CRS units), no pixel centre falls inside the data: " +
-                        "the footprint is too thin for that resolution; give a finer one with --min-cell");
-        double unit = out.GetLinearUnits();
-        for (double& v : wgt.g) v *= unit;
-        if (unit != 1.0) out.SetLinearUnitsAndUpdateParameters(SRS_UL_METER, 1.0);
-        report.gridCrsName = detail::crsName(&out);
-        report.method = "warped to " + report.gridCrsName + " by GDAL (bilinear)";
-        Options keep = opt;
-        keep.minCellM.reset();  // -tr already applied it
-        return fromSourceAffine(std::move(ws), wgt, std::abs(wgt.g[1]), detail::toWkt(out), keep, report);
+        return warpToTarget(std::move(src), gt, srs, target, opt, report, trace);
     }
 
     if (!hasSrs) {
-        const double* g = gt.g;
-        if (hasGt && std::abs(g[1]) < 0.01 && std::abs(g[0]) <= 360 && std::abs(g[3]) <= 90)
-            report.warnings.push_back("no CRS, and the coordinates look like degrees: taken as metres all the same; "
-                                      "if they are degrees, say so with --s_srs EPSG:4326");
-        else if (hasGt)
-            report.warnings.push_back("no CRS: coordinates taken as metres in a local frame (name the CRS with --s_srs)");
+        if (hasGt && !localFrame) {
+            // Degrees by their range, but neither fine nor global enough to say so with confidence.
+            const bool couldBeDegrees = looksLikeDegrees(gt, src.width, src.height, true);
+            report.warnings.push_back(std::string("no CRS: coordinates taken as metres in a local frame (name the CRS with --s_srs") +
+                                      (couldBeDegrees ? "; they would fit degrees too: if they are, --s_srs EPSG:4326)" : ")"));
+        }
         report.gridCrsName = "";
-        return fromSourceAffine(std::move(src), gt, std::min(std::abs(gt.g[1]), std::abs(gt.g[5])), "", opt, report);
+        return fromSourceAffine(std::move(src), gt, std::min(std::abs(gt.g[1]), std::abs(gt.g[5])), "", opt, report, trace);
     }
     if (srs.IsGeographic()) {
         if (gt.rotated()) throw Error(opt.input + ": rotated geotransform on a geographic CRS is not supported; warp it with gdalwarp first");
-        return projectToUtm(std::move(src), gt, srs, opt, report);
+        return projectToUtm(std::move(src), gt, srs, opt, report, trace);
     }
-    if (!srs.IsProjected())
-        throw Error(opt.input + ": CRS '" + report.sourceCrsName + "' is neither projected nor geographic (geocentric or vertical?)");
-    const char* unitName = nullptr;
-    double unit = srs.GetLinearUnits(&unitName);
+    if (!srs.IsProjected()) {
+        const std::string name = "'" + report.sourceCrsName + "'";
+        const std::string way = ": name the real CRS with --s_srs (e.g. --s_srs EPSG:25832), or take the coordinates as metres in "
+                                "a local frame with --s_srs local";
+        if (srs.IsLocal())
+            throw Error(opt.input + ": CRS " + name + " is a local (engineering) CRS, tied to no place on Earth (often the sign of "
+                        "incomplete GeoTIFF GeoKeys)" + way);
+        if (srs.IsGeocentric()) throw Error(opt.input + ": CRS " + name + " is geocentric (x, y, z from the Earth's centre), not a map CRS" + way);
+        if (srs.IsVertical()) throw Error(opt.input + ": CRS " + name + " is only a vertical CRS (heights, no horizontal position)" + way);
+        throw Error(opt.input + ": CRS " + name + " is neither projected nor geographic" + way);
+    }
+    const char* unitNamePtr = nullptr;
+    const double unit = srs.GetLinearUnits(&unitNamePtr);
+    const std::string unitName = unitNamePtr ? unitNamePtr : "?";  // copied: the update below changes it
     if (unit != 1.0) {
         for (double& v : gt.g) v *= unit;
         srs.SetLinearUnitsAndUpdateParameters(SRS_UL_METER, 1.0);
-        report.warnings.push_back(std::string("horizontal units are ") + (unitName ? unitName : "?") +
-                                  ": converted to metres (x" + fmt(unit, 10) + ")");
+        report.warnings.push_back("horizontal units are " + unitName + ": converted to metres (x" + fmt(unit, 10) + ")");
+        if (zCrs == 1.0 && !opt.terrainRgb && opt.zScale == 1.0 && report.warnings.end() ==
+            std::find_if(report.warnings.begin(), report.warnings.end(), [](const std::string& w) { return w.rfind("elevations are in", 0) == 0; }))
+            report.warnings.push_back("elevations taken as metres (neither the band nor the CRS names their unit); in a CRS in " + unitName +
+                                      " they are often in the same unit: if so, add --z-scale " + fmt(unit, 10));
     }
     report.gridCrsName = detail::crsName(&srs);
     double pixel = std::min(std::abs(gt.g[1]), std::abs(gt.g[5]));
     if (gt.rotated()) pixel = std::min(std::hypot(gt.g[1], gt.g[4]), std::hypot(gt.g[2], gt.g[5]));
-    return fromSourceAffine(std::move(src), gt, pixel, detail::toWkt(srs), opt, report);
+    return fromSourceAffine(std::move(src), gt, pixel, detail::toWkt(srs), opt, report, trace);
 }
 
 }  // namespace hc::ingest

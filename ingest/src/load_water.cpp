@@ -77,7 +77,7 @@ Raster loadWater(const Options& opt, const Raster& terrain, LoadReport& report) 
         std::snprintf(b, sizeof b, "%.17g", v);
         return std::string(b);
     };
-    std::vector<std::string> args{"-of", "MEM", "-ot", "Float32", "-r", "bilinear", "-dstnodata", "nan",
+    std::vector<std::string> args{"-of", "MEM", "-ot", "Float32", "-r", "bilinear", "-et", "0", "-dstnodata", "nan",
                                   "-te", num(west), num(south), num(east), num(north),
                                   "-ts", std::to_string(terrain.width), std::to_string(terrain.height)};
     if (waterHasCrs && !terrain.crsWkt.empty()) args.insert(args.end(), {"-t_srs", terrain.crsWkt});

@@ -9,7 +9,10 @@
 //   - for water, all four are wet or all four are dry (depth 0): merges never blur a wet/dry edge.
 // Merging by the mean keeps volumes: a cell holds exactly the water its pixels held.
 // Guarantee (checked pixel by pixel, reported in Grid::stats): every valid pixel differs from the
-// stored value of the cell covering it by at most toleranceM, in every layer.
+// stored value of the cell covering it by at most toleranceM, in every layer. Where the terrain carries
+// roundingM (a source finer than float32), elevations are checked, and merged, against the source's
+// own values; a level-0 cell can then differ from its pixel by float32's rounding (reported, maybe
+// above toleranceM: the grid stores float32).
 #pragma once
 
 #include <functional>
@@ -28,6 +31,9 @@ struct BuildOptions {
     int maxLevel = 0;          // coarsest cell = pixelSizeM * 2^maxLevel
     unsigned threads = 0;      // 0 = all cores
     bool progress = false;     // terminal progress on stderr
+    // Optional, not owned: resized to the terrain's width * height and filled with the elevation of the
+    // cell covering each pixel (NaN where none), for checks against the source after the build.
+    std::vector<float>* cellElevations = nullptr;
 };
 
 // Receives the cells of a build in Morton order, in batches.

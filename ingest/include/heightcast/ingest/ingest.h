@@ -5,12 +5,15 @@
 //                 into a metric, north-up, square-pixel working raster:
 //                   projected CRS, square pixels      kept as is (foot units scaled to metres)
 //                   geographic CRS                    UTM zone of the raster centre (GeographicLib)
-//                   --t_srs                           that CRS, warped by GDAL (bilinear)
-//                   no CRS                            local metres, with a warning
+//                   --t_srs                           that CRS, warped by GDAL (bilinear, exact transformer)
+//                   no CRS                            local metres, with a warning; degrees (by the
+//                                                     extent, or NetCDF units) are taken as WGS 84
+//                   longitudes 0..360 / past 180      normalised; split at the antimeridian for --t_srs
 //                   non-square, rotated, south-up     resampled / flipped north-up, never mis-placed
 //   loadWater     a water depth or water surface raster warped onto the terrain's working raster, or
 //                 a bathtub level flood-filled from the domain boundary
 //   buildGrid     the error-bounded quadtree (build.h)
+//   (check)       every valid source pixel against the cell covering its centre (LoadReport::sourceCheck)
 #pragma once
 
 #include <optional>
@@ -26,12 +29,14 @@ namespace hc::ingest {
 enum class WaterSource { None, Depth, Surface, Level };
 
 struct Options {
-    std::string input;                  // raster path (anything GDAL opens, /vsizip/ included)
+    std::string input;                  // raster path (anything GDAL opens, /vsizip/ and NETCDF:"f.nc":var included)
     int band = 1;                       // 1-based
+    bool bandGiven = false;             // --band was given: a 3-band 8-bit image is then read as asked
     std::optional<double> nodata;       // extra nodata value (beside the band's own and NaN)
     bool terrainRgb = false;            // decode h = -10000 + 0.1 * (R * 65536 + G * 256 + B) from bands 1-3
     double zScale = 1.0;                // multiply elevations (e.g. 0.3048 for feet); applied after units
-    std::string sourceSrs;              // --s_srs: CRS to assume for the input (overrides its own)
+    std::string sourceSrs;              // --s_srs: CRS to assume for the input (overrides its own);
+                                        // "local" = metres in a local frame, no CRS (no degree guess)
     std::string targetSrs;              // --t_srs: project into this CRS (GDAL/PROJ) instead of UTM
     double toleranceM = 0.25;           // max |pixel - cell| [m], >= 0
     std::optional<double> minCellM;     // finest cell [m]; default: source pixel size after projection
@@ -51,6 +56,19 @@ struct LoadReport {
     std::string method;                 // how it got there ("kept as is", "projected to UTM 32N (GeographicLib), bilinear")
     size_t sourceWidth = 0, sourceHeight = 0;
     std::vector<std::string> warnings;  // things the user should know (no CRS, assumed units, ...)
+    uint64_t sourceValidPixels = 0;     // valid pixels of the source as read (before any resampling)
+    uint64_t infPixels = 0;             // +-inf pixels taken as nodata (counted in no other figure)
+    bool sourcePrecisionDouble = false; // the source holds more than float32 (Float64, Int32, ...): the
+                                        // build checks the tolerance against its own values
+    // Every valid source pixel against the cell covering its centre, after the build. Done only when the
+    // working raster is not the source itself (projected, warped, resampled by --min-cell or shape);
+    // otherwise the build's own pixel-by-pixel check is the check against the source.
+    struct SourceCheck {
+        bool done = false;
+        uint64_t checked = 0;           // valid source pixels whose centre fell on a cell
+        uint64_t missed = 0;            // valid source pixels whose centre reached no cell (lost data)
+        double maxDevM = 0, rmsDevM = 0;  // |source pixel - covering cell value| over `checked`
+    } sourceCheck;
 };
 
 // Checks options that need no file (ranges, combinations). Throws hc::Error.

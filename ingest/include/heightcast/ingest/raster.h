@@ -20,6 +20,9 @@ struct Raster {
     double pixelSizeM = 1;   // pixel side [m]
     std::string crsWkt;      // "" = local metres, no CRS
     std::vector<float> values;  // width * height, row-major, NaN = nodata
+    // Empty, or (width * height) the source value minus values[i] [m]: what float32 lost of a source that
+    // holds more precision (Float64, Int32). The build checks its tolerance against values + roundingM.
+    std::vector<float> roundingM;
 
     float at(size_t col, size_t row) const { return values[row * width + col]; }
     float& at(size_t col, size_t row) { return values[row * width + col]; }

@@ -1,0 +1,185 @@
+// readSource: one band of a raster file -> floats, every kind of nodata as NaN (loadTerrain's first step).
+// Also where the file's silent conventions are caught: +-inf pixels, undeclared nodata sentinels (-9999,
+// -32768, ...), RGB images read as elevations, elevation units, and what float32 loses of a Float64 source.
+#include <algorithm>
+#include <cmath>
+#include <limits>
+
+#include "gdal_util.h"
+#include "heightcast/grid/error.h"
+#include "heightcast/grid/progress.h"
+#include "resample.h"
+
+namespace hc::ingest::detail {
+
+namespace {
+
+constexpr float kNaN = std::numeric_limits<float>::quiet_NaN();
+
+// Metres per unit of the band's elevation values, from its unit type; 1 when unknown or metres.
+double verticalUnitScale(GDALRasterBand* band, std::string& unitName) {
+    unitName = band->GetUnitType() ? band->GetUnitType() : "";
+    std::string u = lower(unitName);
+    if (u.find("us") != std::string::npos && (u.find("ft") != std::string::npos || u.find("foot") != std::string::npos || u.find("feet") != std::string::npos))
+        return 1200.0 / 3937.0;
+    if (u == "ft" || u == "foot" || u == "feet" || u.find("international foot") != std::string::npos) return 0.3048;
+    return 1.0;
+}
+
+// Values that files use for "no data" without always saying so. `impossible`: no elevation on Earth
+// (warned at any count); -9999 m is a possible ocean depth, warned from 0.1 % of the pixels on.
+struct Sentinel {
+    double value;
+    bool impossible;
+};
+constexpr Sentinel kSentinels[] = {{-9999, false}, {-99999, true}, {-32768, true}, {-32767, true},
+                                   {-3.4028234663852886e38, true}, {-3.4e38, true}, {9.969209968386869e36, true}};
+constexpr size_t kSentinelCount = sizeof kSentinels / sizeof kSentinels[0];
+
+// Index into kSentinels of a value (compared in float32 too: an .asc's -3.4e38 and a Float32 file's
+// -FLT_MAX), or kSentinelCount.
+size_t sentinelIndex(double v) {
+    if (v > -9999 && v < 1e36) return kSentinelCount;  // the common case, in one comparison
+    for (size_t k = 0; k < kSentinelCount; ++k)
+        if (v == kSentinels[k].value || static_cast<float>(v) == static_cast<float>(kSentinels[k].value)) return k;
+    return kSentinelCount;
+}
+
+}  // namespace
+
+SourceBand readSource(GDALDataset& ds, const Options& opt, LoadReport& report, double zCrs, const std::string& zCrsUnit) {
+    SourceBand out;
+    out.width = static_cast<size_t>(ds.GetRasterXSize());
+    out.height = static_cast<size_t>(ds.GetRasterYSize());
+    const int bandCount = ds.GetRasterCount();
+    if (opt.terrainRgb && bandCount < 3)
+        throw Error(opt.input + ": --terrain-rgb needs 3 bands (R, G, B), the raster has " + std::to_string(bandCount));
+    if (!opt.terrainRgb && opt.band > bandCount)
+        throw Error(opt.input + ": --band " + std::to_string(opt.band) + " is out of range: the raster has " +
+                    std::to_string(bandCount) + " band" + (bandCount == 1 ? "" : "s"));
+    GDALRasterBand* band = ds.GetRasterBand(opt.terrainRgb ? 1 : opt.band);
+    auto isByte = [&](int b) { return ds.GetRasterBand(b)->GetRasterDataType() == GDT_Byte; };
+    if (!opt.terrainRgb && !opt.bandGiven && bandCount >= 3 && isByte(1) && isByte(2) && isByte(3))
+        throw Error(opt.input + ": has " + std::to_string(bandCount) + " 8-bit bands, an RGB" + (bandCount > 3 ? "A" : "") +
+                    " image: read as elevations, band 1 would make a terrain of 0..255 m steps; if it is a Terrain-RGB tile "
+                    "(Mapbox, MapTiler) add --terrain-rgb, or name the band that holds elevations with --band N");
+    if (opt.terrainRgb)
+        for (int b = 1; b <= 3; ++b)
+            if (ds.GetRasterBand(b)->GetRasterDataType() != GDT_Byte)
+                throw Error(opt.input + ": --terrain-rgb needs 8-bit bands; band " + std::to_string(b) + " is " +
+                            GDALGetDataTypeName(ds.GetRasterBand(b)->GetRasterDataType()));
+
+    report.sourceDescription = std::to_string(out.width) + " x " + std::to_string(out.height) + " px, " +
+                               GDALGetDataTypeName(band->GetRasterDataType()) + ", " + std::to_string(bandCount) +
+                               " band" + (bandCount == 1 ? "" : "s") + ", " + ds.GetDriver()->GetDescription();
+    int hasNodata = 0;
+    double nodata = band->GetNoDataValue(&hasNodata);  // used only when the band declares one
+    int maskFlags = band->GetMaskFlags();
+    bool useMask = !(maskFlags & GMF_ALL_VALID) && !(maskFlags & GMF_NODATA) && (maskFlags & (GMF_PER_DATASET | GMF_ALPHA));
+    std::string unitName;
+    double zUnit = opt.terrainRgb ? 1.0 : verticalUnitScale(band, unitName);
+    if (zUnit != 1.0) report.warnings.push_back("elevations are in '" + unitName + "': converted to metres (x" + fmt(zUnit, 10) + ")");
+    if (!opt.terrainRgb && unitName.empty() && zCrs != 1.0) {
+        zUnit = zCrs;
+        report.warnings.push_back("the band declares no unit; the CRS's vertical unit is " + zCrsUnit +
+                                  ": elevations converted to metres (x" + fmt(zCrs, 10) + "; if they are metres after all, add --z-scale " +
+                                  fmt(1.0 / zCrs, 10) + ")");
+    }
+    const double zScale = zUnit * opt.zScale;
+
+    out.values.assign(out.width * out.height, kNaN);
+    const GDALDataType sampleType = band->GetRasterDataType();
+    const bool exactInFloat = sampleType == GDT_Byte || sampleType == GDT_UInt16 || sampleType == GDT_Int16 || sampleType == GDT_Float32;
+    const size_t strip = std::max<size_t>(1, (size_t{1} << 20) / (out.width * 8 + 1));  // ~1 MB buffers
+    std::vector<double> buf;
+    std::vector<uint8_t> rgb, mask;
+    uint64_t infPixels = 0;
+    uint64_t sentinelCounts[kSentinelCount] = {};
+    double maxOther = -HUGE_VAL;  // highest valid elevation that is no sentinel [m]
+    report.sourcePrecisionDouble = !opt.terrainRgb && !exactInFloat;
+    report.sourceValidPixels = 0;
+    Progress progress("reading " + opt.input, out.height, opt.progress);
+    for (size_t r0 = 0; r0 < out.height; r0 += strip) {
+        const size_t rows = std::min(strip, out.height - r0);
+        const size_t n = rows * out.width;
+        auto rasterIO = [&](GDALRasterBand* b, void* dst, GDALDataType type) {
+            CPLErrorReset();
+            if (b->RasterIO(GF_Read, 0, static_cast<int>(r0), static_cast<int>(out.width), static_cast<int>(rows), dst,
+                            static_cast<int>(out.width), static_cast<int>(rows), type, 0, 0, nullptr) != CE_None)
+                throw Error(opt.input + ": cannot read rows " + std::to_string(r0) + ".." + std::to_string(r0 + rows - 1) +
+                            " (truncated or corrupt file?): " + detail::lastGdalError());
+        };
+        float* dst = out.values.data() + r0 * out.width;
+        if (opt.terrainRgb) {
+            rgb.resize(3 * n);
+            for (int b = 0; b < 3; ++b) rasterIO(ds.GetRasterBand(b + 1), rgb.data() + static_cast<size_t>(b) * n, GDT_Byte);
+            for (size_t i = 0; i < n; ++i) {
+                double h = -10000.0 + 0.1 * (rgb[i] * 65536.0 + rgb[n + i] * 256.0 + rgb[2 * n + i]);
+                dst[i] = static_cast<float>(h * zScale);
+            }
+        } else {
+            // Exact types are read straight into place (float32 holds all their values); the others
+            // through doubles, keeping what float32 loses in `residual`.
+            if (exactInFloat) {
+                rasterIO(band, dst, GDT_Float32);
+            } else {
+                buf.resize(n);
+                rasterIO(band, buf.data(), GDT_Float64);
+            }
+            for (size_t i = 0; i < n; ++i) {
+                double v = exactInFloat ? static_cast<double>(dst[i]) : buf[i];
+                bool isNodata = std::isnan(v) || (hasNodata && (v == nodata || static_cast<float>(v) == static_cast<float>(nodata))) ||
+                                // --nodata: in float32 for float32 data (as the user reads it), exactly otherwise
+                                (opt.nodata && (v == *opt.nodata || (exactInFloat && static_cast<float>(v) == static_cast<float>(*opt.nodata))));
+                if (!isNodata && std::isinf(v)) {
+                    ++infPixels;
+                    isNodata = true;
+                }
+                if (isNodata) {
+                    dst[i] = kNaN;
+                    continue;
+                }
+                const double exact = v * zScale;
+                dst[i] = static_cast<float>(exact);
+                if (!std::isfinite(dst[i]))
+                    throw Error(opt.input + ": elevation " + fmt(v) + " x " + fmt(zScale) + " is beyond the float32 range");
+                if (size_t k = sentinelIndex(v); k < kSentinelCount) ++sentinelCounts[k];
+                else maxOther = std::max(maxOther, exact);
+                const float lost = static_cast<float>(exact - static_cast<double>(dst[i]));
+                if (lost != 0.0f) {
+                    if (out.residual.empty()) out.residual.assign(out.values.size(), 0.0f);
+                    out.residual[r0 * out.width + i] = lost;
+                }
+            }
+        }
+        if (useMask) {
+            mask.resize(n);
+            rasterIO(band->GetMaskBand(), mask.data(), GDT_Byte);
+            for (size_t i = 0; i < n; ++i)
+                if (mask[i] == 0) dst[i] = kNaN;
+        }
+        for (size_t i = 0; i < n; ++i) report.sourceValidPixels += !std::isnan(dst[i]);
+        // Drop GDAL's cached blocks of the rows just read: otherwise its block cache holds a second
+        // copy of the whole file at the peak of the read.
+        for (int b = 1; b <= bandCount; ++b) ds.GetRasterBand(b)->FlushCache(false);
+        if (useMask) band->GetMaskBand()->FlushCache(false);
+        progress.advance(rows);
+    }
+    progress.finish();
+    report.infPixels = infPixels;
+    if (infPixels > 0)
+        report.warnings.push_back(std::to_string(infPixels) + " pixels hold +-inf: taken as nodata (holes)");
+    for (size_t k = 0; k < kSentinelCount; ++k) {
+        const uint64_t count = sentinelCounts[k];
+        const double share = report.sourceValidPixels ? double(count) / double(report.sourceValidPixels) : 0.0;
+        if (count == 0 || (!kSentinels[k].impossible && share < 1e-3)) continue;
+        const double z = kSentinels[k].value * zScale;
+        std::string cliff = std::isfinite(maxOther) ? " (cliffs of up to " + fmt(std::abs(maxOther - z) / 1000.0, 3) + " km)" : "";
+        report.warnings.push_back(std::to_string(count) + " pixels (" + fmt(100.0 * share, 3) + " % of the valid ones) hold " +
+                                  fmt(kSentinels[k].value, 9) + ", a classic nodata sentinel, but the file declares no such nodata value: " +
+                                  "they are taken as elevations" + cliff + "; if they are nodata, add --nodata " + fmt(kSentinels[k].value, 9));
+    }
+    return out;
+}
+
+}  // namespace hc::ingest::detail
