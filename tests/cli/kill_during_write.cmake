@@ -5,8 +5,8 @@ add_executable(hc_vdb_check vdb_check.cpp)
 target_link_libraries(hc_vdb_check PRIVATE OpenVDB::openvdb)
 hc_target_defaults(hc_vdb_check)
 
-foreach(writer ingest influence info_csv render export_tif export_exr export_vdb)
+foreach(writer ingest influence info_csv probe_csv render export_tif export_exr export_vdb)
   add_test(NAME cli.kill.${writer} COMMAND ${HC_BASH} ${CMAKE_CURRENT_SOURCE_DIR}/kill_during_write.sh ${writer})
   set_tests_properties(cli.kill.${writer} PROPERTIES LABELS cli TIMEOUT 600
-    ENVIRONMENT "HC_INGEST=${INGEST};HC_INFO=${INFO};HC_INFLUENCE=${INFLUENCE};HC_RENDER=${RENDER};HC_EXPORT=${EXPORT};HC_FILE_CHECK=$<TARGET_FILE:hc_vdb_check>;HC_DATA_DIR=${HC_DATA_DIR};HC_CLI_WORK=${HC_CLI_WORK};LC_ALL=C")
+    ENVIRONMENT "HC_INGEST=${INGEST};HC_INFO=${INFO};HC_INFLUENCE=${INFLUENCE};HC_PROBE=${PROBE};HC_RENDER=${RENDER};HC_EXPORT=${EXPORT};HC_FILE_CHECK=$<TARGET_FILE:hc_vdb_check>;HC_DATA_DIR=${HC_DATA_DIR};HC_CLI_WORK=${HC_CLI_WORK};LC_ALL=C")
 endforeach()

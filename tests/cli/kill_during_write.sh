@@ -13,7 +13,7 @@
 # Timing decides only where the kills land, never the verdict: a kill before, during or after the write must
 # pass the same checks, so a loaded machine cannot fail it. The summary counts where the kills landed (a
 # temporary left = mid-write), so a run whose kills all missed the writes says so.
-# Environment: HC_INGEST HC_INFO HC_INFLUENCE HC_RENDER HC_EXPORT HC_FILE_CHECK HC_DATA_DIR HC_CLI_WORK.
+# Environment: HC_INGEST HC_INFO HC_INFLUENCE HC_PROBE HC_RENDER HC_EXPORT HC_FILE_CHECK HC_DATA_DIR HC_CLI_WORK.
 set -uo pipefail
 case_name=${1:?usage: kill_during_write.sh CASE}
 NKILL=${HC_KILL_COUNT:-8}
@@ -25,6 +25,8 @@ fail() { echo "kill_during_write $case_name: FAIL: $*" >&2; exit 1; }
 
 # Inputs a case reads (made in ref/ before the reference run, copied into kill/): a grid and its cache.
 make_grid() { "$HC_INGEST" "$src" -o "$1/g.hcg" --quiet >/dev/null && "$HC_INFLUENCE" "$1/g.hcg" --quiet >/dev/null; }
+# hc-probe's points: every cell centre of the grid (hc-info's CSV starts x,y as --points wants).
+make_points() { "$HC_INFO" "$1/g.hcg" --cells-csv "$1/pts.csv" >/dev/null; }
 
 # The cases: inputs, command (run in its directory), outputs.
 inputs=(g.hcg g.hci)
@@ -32,6 +34,7 @@ case $case_name in
   ingest)     inputs=(); cmd=("$HC_INGEST" "$src" -o g.hcg --quiet); outputs=(g.hcg) ;;
   influence)  inputs=(g.hcg); cmd=("$HC_INFLUENCE" g.hcg -o g.hci --quiet); outputs=(g.hci) ;;
   info_csv)   cmd=("$HC_INFO" g.hcg --cells-csv cells.csv); outputs=(cells.csv) ;;
+  probe_csv)  inputs=(g.hcg g.hci pts.csv); cmd=("$HC_PROBE" g.hcg --cache g.hci --points pts.csv -o p.csv); outputs=(p.csv) ;;
   render)     cmd=("$HC_RENDER" g.hcg --cache g.hci -o o.png --exr o.exr --timings t.json --size 480x270)
               outputs=(o.png o.exr t.json) ;;
   export_tif) cmd=("$HC_EXPORT" g.hcg --cache g.hci --resolution 30 --quiet -o e.tif); outputs=(e.tif) ;;
@@ -55,12 +58,13 @@ check() {
   esac
 }
 
-for t in "$HC_INGEST" "$HC_INFO" "$HC_INFLUENCE" "$HC_RENDER" "$HC_EXPORT" "$HC_FILE_CHECK"; do
+for t in "$HC_INGEST" "$HC_INFO" "$HC_INFLUENCE" "$HC_PROBE" "$HC_RENDER" "$HC_EXPORT" "$HC_FILE_CHECK"; do
   [ -x "$t" ] || fail "$t is not an executable"
 done
 cd "$work" || exit 1
 if [ ${#inputs[@]} -gt 0 ]; then
   make_grid ref || fail "could not make the input grid"
+  [[ " ${inputs[*]} " == *" pts.csv "* ]] && { make_points ref || fail "could not make the points"; }
   for f in "${inputs[@]}"; do cp "ref/$f" kill/ || exit 1; done
 fi
 
