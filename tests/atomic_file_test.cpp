@@ -6,10 +6,10 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <cctype>
 #include <cstddef>
 #include <filesystem>
 #include <fstream>
-#include <regex>
 #include <span>
 #include <string>
 #include <vector>
@@ -34,15 +34,22 @@ std::vector<std::string> names(const fs::path& dir) {
     return out;
 }
 
+// TARGET.tmp.XXXXXX with six letters or digits. (No std::regex: GCC 12 warns inside it under ASan at -O1.)
+bool isTemporaryOf(const std::string& name, const std::string& target) {
+    const std::string prefix = target + ".tmp.";
+    if (name.size() != prefix.size() + 6 || name.compare(0, prefix.size(), prefix) != 0) return false;
+    return std::all_of(name.begin() + static_cast<std::ptrdiff_t>(prefix.size()), name.end(),
+                       [](char c) { return std::isalnum(static_cast<unsigned char>(c)) != 0; });
+}
+
 void writeText(const fs::path& p, const std::string& text) { std::ofstream(p) << text; }
 
 TEST(AtomicFile, TemporaryNamesNeverEndInTheTargetsExtension) {
     fs::path d = freshDir("names");
-    const std::regex tempName(R"(out\.png\.tmp\.[A-Za-z0-9]{6})");
     hc::AtomicPath p((d / "out.png").string());
-    EXPECT_TRUE(std::regex_match(fs::path(p.temp()).filename().string(), tempName)) << p.temp();
+    EXPECT_TRUE(isTemporaryOf(fs::path(p.temp()).filename().string(), "out.png")) << p.temp();
     hc::AtomicFileWriter w((d / "out.png").string());
-    for (const std::string& n : names(d)) EXPECT_TRUE(std::regex_match(n, tempName)) << n;
+    for (const std::string& n : names(d)) EXPECT_TRUE(isTemporaryOf(n, "out.png")) << n;
     EXPECT_EQ(names(d).size(), 2u);
 }
 

@@ -5,7 +5,7 @@
 #   2. runs it again in kill/ NKILL times, SIGKILLed after delays spread over 0.05 T .. 1.25 T, and NTEMP times
 #      as soon as one of its temporaries (OUTPUT.tmp.XXXXXX) appears, i.e. in the middle of a write; after each:
 #      - the run ended by the kill (137) or had finished (0): nothing else (no error, no sanitizer abort);
-#      - each output's real name is absent or a complete, valid file (check_OUTPUT below);
+#      - each output's real name is absent or a complete, valid file (check() below);
 #      - every other new file is a temporary named OUTPUT.tmp.XXXXXX: never an output's name or extension,
 #        so neither a later run nor a glob (*.png) takes it for output;
 #   3. runs it once more to completion: every output valid, and no temporary left (a writer removes the
@@ -44,9 +44,9 @@ case $case_name in
 esac
 
 # check FILE: is kill/FILE complete and valid? Outputs that are the same bytes on every run (checked in step 1)
-# must equal the reference; the .hcg (it records its build time) is validated whole by hc-info; the timings JSON
-# must have the reference's keys and structure (its numbers are times); a VDB (a fresh UUID per file) must
-# hold the reference's grids with the same active voxels.
+# must equal the reference; the .hcg (a few bytes of its statistics differ between runs) is validated whole by
+# hc-info; the timings JSON must have the reference's keys and structure (its numbers are times); a VDB (a fresh
+# UUID per file) must hold the reference's grids with the same active voxels.
 check() {
   local f=$1
   case $f in
