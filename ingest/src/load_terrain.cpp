@@ -451,8 +451,10 @@ Raster loadTerrain(const Options& opt, LoadReport& report) {
             args.insert(args.end(), {"-tr", fmt(*opt.minCellM, 17), fmt(*opt.minCellM, 17)});
         } else {
             // GDAL's suggested output, made square with the smaller side.
-            void* tr = GDALCreateGenImgProjTransformer2(GDALDataset::ToHandle(mem.get()), nullptr,
-                                                        CSLSetNameValue(nullptr, "DST_SRS", opt.targetSrs.c_str()));
+            // The option list is ours to free (issue 11: LeakSanitizer found it leaked, Ingest.TargetSrsWarpsWithGdal).
+            char** trOptions = CSLSetNameValue(nullptr, "DST_SRS", opt.targetSrs.c_str());
+            void* tr = GDALCreateGenImgProjTransformer2(GDALDataset::ToHandle(mem.get()), nullptr, trOptions);
+            CSLDestroy(trOptions);
             if (!tr) throw Error("--t_srs " + opt.targetSrs + ": cannot transform from " + report.sourceCrsName + ": " + detail::lastGdalError());
             double sg[6];
             int pw = 0, ph = 0;
