@@ -11,9 +11,10 @@ foreach(writer ingest influence info_csv probe_csv render export_tif export_exr 
     ENVIRONMENT "HC_INGEST=${INGEST};HC_INFO=${INFO};HC_INFLUENCE=${INFLUENCE};HC_PROBE=${PROBE};HC_RENDER=${RENDER};HC_EXPORT=${EXPORT};HC_FILE_CHECK=$<TARGET_FILE:hc_vdb_check>;HC_DATA_DIR=${HC_DATA_DIR};HC_CLI_WORK=${HC_CLI_WORK};LC_ALL=C")
 endforeach()
 
-# The sanitizer build (scripts/test_sanitized.sh): hc-view's tests open a GL window under Xvfb, and LeakSanitizer
-# crashes inside Mesa's llvmpipe there (DESIGN.md section 9), so they run without it; every other CLI test keeps
-# leak detection. Set here because this file is included last, after every cli.view.* test exists.
+# The sanitizer build (scripts/test_sanitized.sh): hc-view's tests open a GL window under Xvfb, where
+# LeakSanitizer fails them on allocations inside Mesa and the X libraries (unsymbolised frames of the run-time
+# loaded driver, none in our code; DESIGN.md section 9 saw it crash in llvmpipe too), so they run without it;
+# every other CLI test keeps leak detection. Set here because this file is included last, after every cli.view.* test exists.
 get_property(hc_cli_tests DIRECTORY PROPERTY TESTS)
 foreach(t IN LISTS hc_cli_tests)
   if(t MATCHES "^cli\\.view\\.")
