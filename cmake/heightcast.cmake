@@ -1,3 +1,13 @@
+# HC_SANITIZE: ASan + UBSan on everything built here (libraries, apps, tests), so a finding anywhere stops the
+# run; -fno-sanitize-recover makes UB fatal instead of a line in a log nobody reads.
+if(HC_SANITIZE)
+  if(NOT CMAKE_CXX_COMPILER_ID MATCHES "GNU|Clang")
+    message(FATAL_ERROR "HC_SANITIZE needs GCC or Clang")
+  endif()
+  add_compile_options(-fsanitize=address,undefined -fno-sanitize-recover=undefined -fno-omit-frame-pointer)
+  add_link_options(-fsanitize=address,undefined -fno-sanitize-recover=undefined)
+endif()
+
 # One function gives every heightcast target the same flags, so no folder drifts.
 function(hc_target_defaults target)
   target_compile_features(${target} PUBLIC cxx_std_20)

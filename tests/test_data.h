@@ -1,4 +1,5 @@
-// Where the tests find real rasters: data/ in the repository, then ../shared/data beside it.
+// Where the tests find real rasters: data/ in the repository, then the files unpacked from its zips into the
+// build tree (build/data: N00E010.hgt), then ../shared/data beside the repository.
 #pragma once
 
 #include <filesystem>
@@ -8,7 +9,7 @@ namespace hc::test {
 
 // Path of a raster, or "" if neither directory holds it.
 inline std::string dataFile(const std::string& name) {
-    for (const char* dir : {HC_DATA_DIR, HC_SHARED_DATA_DIR}) {
+    for (const char* dir : {HC_DATA_DIR, HC_BUILD_DATA_DIR, HC_SHARED_DATA_DIR}) {
         std::filesystem::path p = std::filesystem::path(dir) / name;
         if (std::filesystem::exists(p)) return p.string();
     }
@@ -17,7 +18,7 @@ inline std::string dataFile(const std::string& name) {
 
 }  // namespace hc::test
 
-// Skips the test (saying why) when a raster is absent, e.g. N00E010.hgt on a fresh clone.
+// Skips the test (saying why) when a raster is absent, e.g. baltoro_srtm.tif on a fresh clone without ../shared.
 #define HC_REQUIRE_DATA(var, name)                                                              \
     const std::string var = ::hc::test::dataFile(name);                                         \
-    if (var.empty()) GTEST_SKIP() << name << " is in neither data/ nor ../shared/data; skipped"
+    if (var.empty()) GTEST_SKIP() << name << " is in none of data/, build/data, ../shared/data; skipped"

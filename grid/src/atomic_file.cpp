@@ -7,6 +7,7 @@
 #include <vector>
 
 #include <fcntl.h>
+#include <sys/file.h>
 #include <sys/stat.h>
 #include <unistd.h>
 
@@ -14,15 +15,43 @@
 
 namespace hc {
 
-AtomicFileWriter::AtomicFileWriter(std::string path) : path_(std::move(path)) {
+namespace {
+
+// Every temporary is TARGET.tmp.XXXXXX: never the target's name nor its extension, so neither a later run nor a
+// glob such as *.png takes it for output. Its writer holds an exclusive flock on it for as long as it lives; the
+// kernel drops the lock when the process dies, SIGKILL included. So a temporary of the same target that nobody
+// locks was left by a killed run and is removed here, before we make ours: killed runs do not pile up half-written
+// files (issue 11, kill -9 during writes). Two live runs writing the same target keep each other's temporaries.
+int createLockedTemporary(const std::string& target, std::string& tempPath) {
+    namespace fs = std::filesystem;
+    const fs::path t(target);
+    const fs::path dir = t.parent_path().empty() ? fs::path(".") : t.parent_path();
+    const std::string prefix = t.filename().string() + ".tmp.";
+    std::error_code ec;
+    for (fs::directory_iterator it(dir, ec), end; !ec && it != end; it.increment(ec)) {
+        const std::string name = it->path().filename().string();
+        if (name.size() != prefix.size() + 6 || name.compare(0, prefix.size(), prefix) != 0) continue;
+        int fd = ::open(it->path().c_str(), O_RDONLY | O_CLOEXEC | O_NOFOLLOW);
+        if (fd < 0) continue;
+        if (::flock(fd, LOCK_EX | LOCK_NB) == 0) ::unlink(it->path().c_str());
+        ::close(fd);
+    }
     // mkstemp in the target's directory: rename() is atomic only within one file system.
-    std::string pattern = path_ + ".tmp.XXXXXX";
+    std::string pattern = target + ".tmp.XXXXXX";
     std::vector<char> buf(pattern.begin(), pattern.end());
     buf.push_back('\0');
-    fd_ = mkstemp(buf.data());
-    if (fd_ < 0) throw Error(path_ + ": cannot create a file there: " + std::strerror(errno));
-    tempPath_ = buf.data();
-    fchmod(fd_, 0644);
+    int fd = mkstemp(buf.data());
+    if (fd < 0) throw Error(target + ": cannot create a file there: " + std::strerror(errno));
+    ::flock(fd, LOCK_EX | LOCK_NB);  // cannot fail: the file is new and ours
+    ::fchmod(fd, 0644);
+    tempPath = buf.data();
+    return fd;
+}
+
+}  // namespace
+
+AtomicFileWriter::AtomicFileWriter(std::string path) : path_(std::move(path)) {
+    fd_ = createLockedTemporary(path_, tempPath_);
 }
 
 AtomicFileWriter::~AtomicFileWriter() {
@@ -72,21 +101,13 @@ void AtomicFileWriter::commit() {
 }
 
 AtomicPath::AtomicPath(std::string path) : path_(std::move(path)) {
-    std::filesystem::path p(path_);
-    const std::string ext = p.extension().string();
-    std::string pattern = (p.parent_path() / (p.stem().string() + ".tmp.XXXXXX" + ext)).string();
-    if (p.parent_path().empty()) pattern = p.stem().string() + ".tmp.XXXXXX" + ext;
-    std::vector<char> buf(pattern.begin(), pattern.end());
-    buf.push_back('\0');
-    int fd = mkstemps(buf.data(), static_cast<int>(ext.size()));
-    if (fd < 0) throw Error(path_ + ": cannot create a file there: " + std::strerror(errno));
-    ::close(fd);
-    temp_ = buf.data();
-    std::remove(temp_.c_str());  // libraries create it themselves; the unique name is reserved by us
+    // The library opens temp_ by name and truncates it: the same file, so lockFd_'s lock stays on it.
+    lockFd_ = createLockedTemporary(path_, temp_);
 }
 
 AtomicPath::~AtomicPath() {
     if (!committed_) std::remove(temp_.c_str());
+    if (lockFd_ >= 0) ::close(lockFd_);
 }
 
 void AtomicPath::commit() {

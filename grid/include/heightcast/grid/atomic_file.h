@@ -2,7 +2,8 @@
 //
 // Bytes go to a temporary file beside the target; commit() flushes, fsyncs and renames it over
 // the target. If the writer is destroyed without commit() (an exception, a failed check), the
-// temporary file is removed: no half-written file ever exists under the real name.
+// temporary file is removed: no half-written file ever exists under the real name. A temporary is named
+// TARGET.tmp.XXXXXX; one left by a killed run (kill -9) is removed by the next write of the same target.
 #pragma once
 
 #include <cstddef>
@@ -37,8 +38,8 @@ private:
 };
 
 // For libraries that insist on writing a file by name (GDAL, OpenEXR, OpenVDB): a unique temporary
-// path beside the target, with the target's extension, renamed over the target by commit() and
-// removed by the destructor otherwise.
+// path beside the target (TARGET.tmp.XXXXXX, created empty: the library must truncate it, not replace it), renamed
+// over the target by commit() and removed by the destructor otherwise.
 class AtomicPath {
 public:
     explicit AtomicPath(std::string path);  // throws hc::Error if the directory is not writable
@@ -51,6 +52,7 @@ public:
 
 private:
     std::string path_, temp_;
+    int lockFd_ = -1;  // holds the temporary's flock (see atomic_file.cpp)
     bool committed_ = false;
 };
 
