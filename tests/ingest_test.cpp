@@ -780,6 +780,63 @@ TEST(Issue11, SourceCheckMatchesAnIndependentOne) {
     EXPECT_LE(g.stats.maxDevM, o.toleranceM);
 }
 
+// The check against the source for geographic input (GeographicLib's projection, interpolated along rows between
+// exactly projected columns: load_terrain.cpp) against an independent one: every valid pixel centre of the SRTM
+// tile projected by PROJ into the grid's CRS, located in the grid, compared with its cell. The two projections
+// agree to nanometres, so the same cells are found: counts equal, maximum equal (Int16 source, exact values).
+TEST(Issue11, SourceCheckOfGeographicInputMatchesProj) {
+    HC_REQUIRE_DATA(path, "hef_srtm.tif");
+    Options o;
+    o.input = path;
+    o.toleranceM = 1;
+    LoadReport rep;
+    Grid g = hc::ingest::ingest(o, rep);
+    ASSERT_TRUE(rep.sourceCheck.done);
+    std::unique_ptr<GDALDataset> ds(GDALDataset::Open(path.c_str(), GDAL_OF_RASTER | GDAL_OF_READONLY));
+    const int w = ds->GetRasterXSize(), h = ds->GetRasterYSize();
+    std::vector<double> v(size_t(w) * size_t(h));
+    ASSERT_EQ(ds->GetRasterBand(1)->RasterIO(GF_Read, 0, 0, w, h, v.data(), w, h, GDT_Float64, 0, 0, nullptr), CE_None);
+    int hasNodata = 0;
+    const double nodata = ds->GetRasterBand(1)->GetNoDataValue(&hasNodata);
+    double gt[6];
+    ds->GetGeoTransform(gt);
+    OGRSpatialReference src, dst;
+    src.SetWellKnownGeogCS("WGS84");
+    src.SetAxisMappingStrategy(OAMS_TRADITIONAL_GIS_ORDER);
+    ASSERT_EQ(dst.importFromWkt(g.crsWkt.c_str()), OGRERR_NONE);
+    dst.SetAxisMappingStrategy(OAMS_TRADITIONAL_GIS_ORDER);
+    std::unique_ptr<OGRCoordinateTransformation> ct(OGRCreateCoordinateTransformation(&src, &dst));
+    ASSERT_TRUE(ct);
+    double maxDev = 0;
+    uint64_t found = 0, missed = 0;
+    std::vector<double> xs(static_cast<size_t>(w)), ys(static_cast<size_t>(w));
+    for (int row = 0; row < h; ++row) {
+        for (int col = 0; col < w; ++col) {
+            xs[size_t(col)] = gt[0] + (col + 0.5) * gt[1] + (row + 0.5) * gt[2];
+            ys[size_t(col)] = gt[3] + (col + 0.5) * gt[4] + (row + 0.5) * gt[5];
+        }
+        ASSERT_TRUE(ct->Transform(w, xs.data(), ys.data()));
+        for (int col = 0; col < w; ++col) {
+            const double z = v[size_t(row) * size_t(w) + size_t(col)];
+            if (hasNodata && z == nodata) continue;
+            auto cell = g.locate(xs[size_t(col)] - g.originWorldX, ys[size_t(col)] - g.originWorldY);
+            if (!cell) {
+                ++missed;
+                continue;
+            }
+            ++found;
+            maxDev = std::max(maxDev, std::abs(z - double(g.values[0][*cell])));
+        }
+    }
+    std::printf("hef_srtm: %llu checked, %llu missed, max %.4f m (PROJ) vs %llu, %llu, %.4f m (ingest)\n", (unsigned long long)found,
+                (unsigned long long)missed, maxDev, (unsigned long long)rep.sourceCheck.checked, (unsigned long long)rep.sourceCheck.missed,
+                rep.sourceCheck.maxDevM);
+    EXPECT_EQ(rep.sourceCheck.checked, found);
+    EXPECT_EQ(rep.sourceCheck.missed, missed);
+    EXPECT_EQ(rep.sourceCheck.maxDevM, maxDev);
+    EXPECT_GT(found, 100000u);
+}
+
 // Issue 11, "--t_srs on global grids drops about half of the data": etopo1_1deg (-180.5..180.5 with CRS) to
 // World Equidistant Cylindrical. Every valid source pixel centre, projected by PROJ, must fall on a cell.
 TEST(Issue11, GlobalGridKeepsEveryPixelUnderTargetSrs) {
