@@ -9,6 +9,15 @@ hc_cli_test(ingest_inputs.longitudes_0_360 0 [[grid CRS +WGS 84 / UTM zone 10N]]
   --check [["$HC_INGEST" --quiet e180.tif -o e180.hcg && "$HC_INFO" e360.hcg --cells-csv a.csv > /dev/null && "$HC_INFO" e180.hcg --cells-csv b.csv > /dev/null && cmp a.csv b.csv]]
   -- ${INGEST} e360.tif -o e360.hcg)
 
+# Issue 11, "Longitudes in 0..360", for water too: a water-surface raster at 234..238 E (a level of 2600 m over
+# hef's pixels there) floods the same cells as the same raster at -126..-122 (GDAL's warp onto the terrain takes
+# longitudes on the circle); compared cell for cell through hc-info's CSV, water_depth column included.
+set(WATER360 [[gdal_translate -q -ot Float32 -scale 0 5000 2600 2600 e360.tif w360.tif && gdal_translate -q -ot Float32 -scale 0 5000 2600 2600 e180.tif w180.tif]])
+hc_cli_test(ingest_inputs.water_longitudes_0_360 0 [[water +[1-9][0-9]* wet cells]]
+  --setup "${LON360} && ${WATER360}" --no-match [[error|warning]]
+  --check [["$HC_INGEST" --quiet e360.tif --water-surface w180.tif -o b.hcg && "$HC_INFO" a.hcg --cells-csv a.csv > /dev/null && "$HC_INFO" b.hcg --cells-csv b.csv > /dev/null && head -1 a.csv | grep -q water_depth && cmp a.csv b.csv]]
+  -- ${INGEST} e360.tif --water-surface w360.tif -o a.hcg)
+
 # Issue 11, "a grid that crosses the antimeridian is handled": 178..182 E goes whole into UTM zone 1N (whose
 # meridian is 177 W), with no source pixel lost beyond the few a resampled edge may drop (here at most 9).
 hc_cli_test(ingest_inputs.across_antimeridian 0 [[grid CRS +WGS 84 / UTM zone 1N.*lost +[0-9] valid source pixels]]
