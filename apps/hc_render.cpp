@@ -62,14 +62,12 @@ int main(int argc, char** argv) {
         const hc::render::RenderOptions& options = setup.options;
         // Inside the terrain every ray starts in the solid block and sees nothing: say so, before any evaluation.
         if (const double below = hc::render::cameraBelowTerrainM(scene, camera); below > 0) {
-            const hc::Grid& g = scene.grid();
-            const double x = camera.xWorld - g.originWorldX, y = camera.yWorld - g.originWorldY;
             char b[400];
             std::snprintf(b, sizeof b,
                           "the camera at %.3f, %.3f, %.3f is %.2f m below the terrain surface (%.2f m there): every ray would "
                           "start inside the terrain and see nothing; raise the camera above the surface, or give --near M to start "
                           "the rays beyond the terrain in front of it",
-                          camera.xWorld, camera.yWorld, camera.zWorld, below, *scene.terrainAt(x, y));
+                          camera.xWorld, camera.yWorld, camera.zWorld, below, camera.zWorld + below);
             throw hc::Error(b);
         }
 

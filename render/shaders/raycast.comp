@@ -153,11 +153,12 @@ PatchHit traverse(int k, bool water, vec3 d, float tIn, float tOut, inout bool t
                     const float enterV = dv > 0.0 ? (float(iv) - v0) * invDv : dv < 0.0 ? (float(iv + 1) - v0) * invDv : -kInf;
                     const bool acrossU = enterU >= enterV;
                     const int fromU = acrossU ? iu - (du > 0.0 ? 1 : -1) : iu, fromV = acrossU ? iv : iv - (dv > 0.0 ? 1 : -1);
-                    if (!patchDefined(k, base, fromU, fromV) && water) {  // under the water through its edge (traverse())
-                        res.underground = true;
-                        return res;
-                    }
-                    if (!patchDefined(k, base, fromU, fromV)) {  // from a hole or outside: the wall on that edge
+                    if (!patchDefined(k, base, fromU, fromV)) {
+                        if (water) {  // under the water through its edge: not drawn for this ray (traverse())
+                            res.underground = true;
+                            return res;
+                        }
+                        // From a hole or outside: the wall on that edge.
                         res.hit = res.wall = true;
                         res.t = t;
                         res.wn = acrossU ? vec3(du > 0.0 ? -1.0 : 1.0, 0.0, 0.0) : vec3(0.0, dv > 0.0 ? -1.0 : 1.0, 0.0);

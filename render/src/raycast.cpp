@@ -133,8 +133,6 @@ PatchHit traverse(const CascadeTextures& tex, bool water, const Cascade& c, cons
     } else if (o[2] < zFloor) {
         return res;
     }
-    // Start three levels below the top (the coarsest nodes are nearly always entered; the walk climbs back
-    // when it leaves a parent): 1-2 % faster than starting at the top, no more (BENCHMARKS.md).
     // The patch a ray came from into patch (iu, iv): across the edge it crossed last.
     struct From {
         bool acrossU;
@@ -146,6 +144,8 @@ PatchHit traverse(const CascadeTextures& tex, bool water, const Cascade& c, cons
         const bool acrossU = enterU >= enterV;
         return From{acrossU, acrossU ? iu - (du > 0 ? 1 : -1) : iu, acrossU ? iv : iv - (dv > 0 ? 1 : -1)};
     };
+    // Start three levels below the top (the coarsest nodes are nearly always entered; the walk climbs back
+    // when it leaves a parent): 1-2 % faster than starting at the top, no more (BENCHMARKS.md).
     int level = std::max(0, top - 3);
     double t = tIn;
     const double tiny = 1e-9 * (1.0 + std::abs(tOut)) ;
@@ -200,19 +200,19 @@ PatchHit traverse(const CascadeTextures& tex, bool water, const Cascade& c, cons
                 continue;
             }
             if (t > tStart) {
-                const auto [acrossU, fromU, fromV] = cameFrom(iu, iv);
-                if (!patchDefined(hf, fromU, fromV)) {  // from a hole or outside: the wall on that edge
+                const From from = cameFrom(iu, iv);
+                if (!patchDefined(hf, from.u, from.v)) {  // from a hole or outside: the wall on that edge
                     res.hit = res.wall = true;
                     res.t = t;
-                    (acrossU ? res.nx : res.ny) = (acrossU ? du : dv) > 0 ? -1 : 1;
+                    (from.acrossU ? res.nx : res.ny) = (from.acrossU ? du : dv) > 0 ? -1 : 1;
                     return res;
                 }
             }
-            if (ct == Contact::Below && !touchedTerrain) {
+            if (!touchedTerrain) {
                 res.terrainUnderground = true;
                 return res;
             }
-            if (ct == Contact::Below) ct = Contact::Hit;  // a seam: the hit is where the ray went under (tau = 0)
+            ct = Contact::Hit;  // a seam: the hit is where the ray went under (tau = 0)
         }
         Contact cw = Contact::None;
         if (water) {
@@ -221,15 +221,17 @@ PatchHit traverse(const CascadeTextures& tex, bool water, const Cascade& c, cons
             // edge (from a patch without water, where the level lies above a dry shore): the ray is under the
             // water, which is not drawn for it; it goes on to the ground. (Hitting the edge would draw water below
             // its level: up to 21 m on the hef flood before this rule.)
-            if (cw == Contact::Below && (!touchedWater || (t > tStart && [&] {
-                                             const From f = cameFrom(iu, iv);
-                                             return !patchDefined(tex.water, f.u, f.v);
-                                         }()))) {
-                res.waterUnderground = true;
-                water = false;
-                cw = Contact::None;
+            if (cw == Contact::Below) {
+                const From from = cameFrom(iu, iv);
+                const bool throughEdge = t > tStart && !patchDefined(tex.water, from.u, from.v);
+                if (!touchedWater || throughEdge) {
+                    res.waterUnderground = true;
+                    water = false;
+                    cw = Contact::None;
+                } else {
+                    cw = Contact::Hit;  // a seam, as for the terrain
+                }
             }
-            if (cw == Contact::Below) cw = Contact::Hit;
         }
         if (cw == Contact::Hit && (ct != Contact::Hit || tauW <= tauT)) {
             res.hit = res.water = true;
