@@ -22,11 +22,11 @@ using DatasetPtr = std::unique_ptr<GDALDataset, DatasetCloser>;
 // Opens a raster read-only; throws hc::Error naming `path` (and `role`, e.g. "water raster").
 DatasetPtr openRaster(const std::string& path, const std::string& role);
 
-// Short name of a CRS ("WGS 84 / UTM zone 32N"), or "" for none.
 // A number for messages ("0.3048006096" at precision 10), and a lower-case copy of a string.
 std::string fmt(double v, int precision = 6);
 std::string lower(std::string s);
 
+// Short name of a CRS ("WGS 84 / UTM zone 32N"), or "" for none.
 std::string crsName(const OGRSpatialReference* srs);
 std::string toWkt(const OGRSpatialReference& srs);
 

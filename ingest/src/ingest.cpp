@@ -117,9 +117,21 @@ void checkAgainstSource(const detail::SourceTrace& trace, const Raster& working,
 // The build's own figure, said plainly when float32 storage cannot hold the tolerance.
 void noteStorage(const IngestStats& s, const Raster& terrain, LoadReport& report) {
     if (s.maxDevM > s.toleranceM && !terrain.roundingM.empty())
-        report.warnings.push_back("cells differ from the source's own (" + std::string("Float64 or integer") + ") values by up to " +
+        report.warnings.push_back("cells differ from the source's own (Float64 or integer) values by up to " +
                                   fmtM(s.maxDevM) + " m, more than --tolerance " + fmtM(s.toleranceM) +
                                   " m: the grid stores float32, which cannot hold these values closer");
+}
+
+// Where the working raster is not the source itself, the build records the cell elevation over each pixel,
+// for the check against the source after it (p must not move between this and afterBuild).
+void traceBuild(Prepared& p) {
+    if (!p.trace.band.values.empty()) p.build.cellElevations = &p.cellElevations;
+}
+
+// What is checked once the grid is built: the source pixels against their cells, the tolerance in float32.
+void afterBuild(const Prepared& p, const IngestStats& stats, const Options& opt, LoadReport& report) {
+    if (p.build.cellElevations) checkAgainstSource(p.trace, p.terrain, p.cellElevations, opt.threads, report);
+    noteStorage(stats, p.terrain, report);
 }
 
 double secondsSince(std::chrono::steady_clock::time_point t) {
@@ -131,10 +143,9 @@ double secondsSince(std::chrono::steady_clock::time_point t) {
 Grid ingest(const Options& opt, LoadReport& report) {
     auto start = std::chrono::steady_clock::now();
     Prepared p = prepare(opt, report);
-    if (!p.trace.band.values.empty()) p.build.cellElevations = &p.cellElevations;  // here: p has its final address
+    traceBuild(p);
     Grid g = buildGrid(p.terrain, p.hasWater ? &p.water : nullptr, p.build);
-    if (p.build.cellElevations) checkAgainstSource(p.trace, p.terrain, p.cellElevations, opt.threads, report);
-    noteStorage(g.stats, p.terrain, report);
+    afterBuild(p, g.stats, opt, report);
     g.stats.sourcePath = opt.input;
     g.stats.sourceCrsName = report.sourceCrsName;
     g.stats.seconds = secondsSince(start);
@@ -144,14 +155,13 @@ Grid ingest(const Options& opt, LoadReport& report) {
 BuildSummary ingestToFile(const Options& opt, const std::string& path, LoadReport& report) {
     auto start = std::chrono::steady_clock::now();
     Prepared p = prepare(opt, report);
-    if (!p.trace.band.values.empty()) p.build.cellElevations = &p.cellElevations;  // here: p has its final address
+    traceBuild(p);
     IngestStats extra;
     extra.sourcePath = opt.input;
     extra.sourceCrsName = report.sourceCrsName;
     extra.seconds = secondsSince(start);
     BuildSummary b = buildGridFile(p.terrain, p.hasWater ? &p.water : nullptr, p.build, path, extra);
-    if (p.build.cellElevations) checkAgainstSource(p.trace, p.terrain, p.cellElevations, opt.threads, report);
-    noteStorage(b.shape.stats, p.terrain, report);
+    afterBuild(p, b.shape.stats, opt, report);
     return b;
 }
 

@@ -38,6 +38,11 @@ using detail::readSource;
 struct GeoTransform {
     double g[6] = {0, 1, 0, 0, 0, -1};
     bool rotated() const { return g[2] != 0 || g[4] != 0; }
+    // The position (x, y) [source CRS units] of fractional pixel coordinates (col, row).
+    void apply(double col, double row, double& x, double& y) const {
+        x = g[0] + col * g[1] + row * g[2];
+        y = g[3] + col * g[4] + row * g[5];
+    }
     // Source pixel coordinates of world (x, y), via the inverse affine map.
     bool invert(double inv[6]) const { return GDALInvGeoTransform(const_cast<double*>(g), inv) != 0; }
 };
@@ -101,10 +106,7 @@ Raster fromSourceAffine(SourceBand&& src, const GeoTransform& gt, double pixelM,
     double xs[4], ys[4];
     double cw = static_cast<double>(src.width), ch = static_cast<double>(src.height);
     const double corners[4][2] = {{0, 0}, {cw, 0}, {0, ch}, {cw, ch}};
-    for (int k = 0; k < 4; ++k) {
-        xs[k] = g[0] + corners[k][0] * g[1] + corners[k][1] * g[2];
-        ys[k] = g[3] + corners[k][0] * g[4] + corners[k][1] * g[5];
-    }
+    for (int k = 0; k < 4; ++k) gt.apply(corners[k][0], corners[k][1], xs[k], ys[k]);
     double xmin = *std::min_element(xs, xs + 4), xmax = *std::max_element(xs, xs + 4);
     double ymin = *std::min_element(ys, ys + 4), ymax = *std::max_element(ys, ys + 4);
     r.pixelSizeM = opt.minCellM ? *opt.minCellM : pixelM;
@@ -124,12 +126,9 @@ Raster fromSourceAffine(SourceBand&& src, const GeoTransform& gt, double pixelM,
     }, r, 16, 1e-9, opt.threads);  // affine: the lattice interpolation is exact (the check confirms it)
     if (trace) {
         trace->band = std::move(source);
-        trace->rowToWorld = [g = gt](size_t row, std::vector<double>& x, std::vector<double>& y, std::vector<int>& ok) {
-            const double rc = static_cast<double>(row) + 0.5;
+        trace->rowToWorld = [gt](size_t row, std::vector<double>& x, std::vector<double>& y, std::vector<int>& ok) {
             for (size_t c = 0; c < x.size(); ++c) {
-                const double cc = static_cast<double>(c) + 0.5;
-                x[c] = g.g[0] + cc * g.g[1] + rc * g.g[2];
-                y[c] = g.g[3] + cc * g.g[4] + rc * g.g[5];
+                gt.apply(static_cast<double>(c) + 0.5, static_cast<double>(row) + 0.5, x[c], y[c]);
                 ok[c] = 1;
             }
         };
@@ -145,12 +144,12 @@ Raster fromSourceAffine(SourceBand&& src, const GeoTransform& gt, double pixelM,
 Raster projectToUtm(SourceBand&& src, const GeoTransform& gt, const OGRSpatialReference& geo, const Options& opt,
                     LoadReport& report, detail::SourceTrace* trace) {
     using GeographicLib::Math;
-    const double* g = gt.g;
     const double degPerUnit = geo.GetAngularUnits() * 180.0 / M_PI;
     const double pm = geo.GetPrimeMeridian();  // degrees east of Greenwich
     auto lonLat = [&](double col, double row, double& lon, double& lat) {
-        lon = (g[0] + col * g[1] + row * g[2]) * degPerUnit + pm;
-        lat = (g[3] + col * g[4] + row * g[5]) * degPerUnit;
+        gt.apply(col, row, lon, lat);
+        lon = lon * degPerUnit + pm;
+        lat *= degPerUnit;
     };
     // The outline, sampled along every edge; longitudes as offsets from the centre's.
     const double cw = static_cast<double>(src.width), ch = static_cast<double>(src.height);
@@ -259,12 +258,11 @@ Raster projectToUtm(SourceBand&& src, const GeoTransform& gt, const OGRSpatialRe
         // else that span is projected exactly, column by column.
         trace->rowToWorld = [gt, degPerUnit, pm, tm, lon0, fe, fn](size_t row, std::vector<double>& x, std::vector<double>& y,
                                                                    std::vector<int>& ok) {
-            const double* t = gt.g;
             const double rc = static_cast<double>(row) + 0.5;
             auto exact = [&](size_t c, double& ox, double& oy) {
-                const double cc = static_cast<double>(c) + 0.5;
-                const double lon = (t[0] + cc * t[1] + rc * t[2]) * degPerUnit + pm, lat = (t[3] + cc * t[4] + rc * t[5]) * degPerUnit;
-                tm.Forward(lon0, lat, lon, ox, oy);
+                double lon, lat;
+                gt.apply(static_cast<double>(c) + 0.5, rc, lon, lat);
+                tm.Forward(lon0, lat * degPerUnit, lon * degPerUnit + pm, ox, oy);
                 ox += fe;
                 oy += fn;
                 return std::isfinite(ox) && std::isfinite(oy);
@@ -435,8 +433,10 @@ Raster warpToTarget(SourceBand&& src, const GeoTransform& gtIn, const OGRSpatial
                 for (size_t i = 0; i < n; ++i) {
                     if (!(edgeRow || i == 0 || i + 2 >= n || (i % k == 0 && j % k == 0))) continue;
                     const double c = std::min(double(i) + half, double(src.width)), r = std::min(double(j) + half, double(src.height));
-                    xs.push_back(gtIn.g[0] + c * gtIn.g[1] + r * gtIn.g[2]);
-                    ys.push_back(gtIn.g[3] + c * gtIn.g[4] + r * gtIn.g[5]);
+                    double x, y;
+                    gtIn.apply(c, r, x, y);
+                    xs.push_back(x);
+                    ys.push_back(y);
                 }
             }
         };
@@ -514,12 +514,7 @@ Raster warpToTarget(SourceBand&& src, const GeoTransform& gtIn, const OGRSpatial
         trace->band = std::move(src);
         trace->rowToWorldThreadSafe = false;
         trace->rowToWorld = [ct, gt = gtIn, unit](size_t row, std::vector<double>& x, std::vector<double>& y, std::vector<int>& ok) {
-            const double rc = static_cast<double>(row) + 0.5;
-            for (size_t c = 0; c < x.size(); ++c) {
-                const double cc = static_cast<double>(c) + 0.5;
-                x[c] = gt.g[0] + cc * gt.g[1] + rc * gt.g[2];
-                y[c] = gt.g[3] + cc * gt.g[4] + rc * gt.g[5];
-            }
+            for (size_t c = 0; c < x.size(); ++c) gt.apply(static_cast<double>(c) + 0.5, static_cast<double>(row) + 0.5, x[c], y[c]);
             CPLErrorReset();
             ct->Transform(static_cast<int>(x.size()), x.data(), y.data(), nullptr, ok.data());
             for (size_t c = 0; c < x.size(); ++c) {

@@ -36,11 +36,6 @@ struct SourceTrace {
 // pixel (c, r) covers [c, c+1) x [r, r+1). Returns false where the position has no source.
 using TargetToSource = std::function<bool(double x, double y, double& col, double& row)>;
 
-// Fills target.values (target geometry already set) by bilinear interpolation of `source`; next to
-// nodata, bilinear weights renormalised over the valid neighbours, with the hole's edge where the
-// nearest pixel puts it. The map is evaluated exactly every `lattice` pixels and bilinearly in
-// between; the lattice is refined (halved) until that interpolation is within maxErrorPx of the
-// exact map at every lattice-cell centre. Returns the lattice step used.
 // Reads the band (or decodes Terrain-RGB) into floats with every kind of nodata as NaN; warns about
 // what the file leaves unsaid (read_source.cpp). zCrs: metres per elevation unit that the CRS declares
 // (a compound CRS's vertical part), used when the band declares no unit of its own.
@@ -50,6 +45,11 @@ SourceBand readSource(GDALDataset& ds, const Options& opt, LoadReport& report, d
 // source itself; trace->band stays empty otherwise.
 Raster loadTerrainTraced(const Options& opt, LoadReport& report, SourceTrace* trace);
 
+// Fills target.values (target geometry already set) by bilinear interpolation of `source`; next to
+// nodata, bilinear weights renormalised over the valid neighbours, with the hole's edge where the
+// nearest pixel puts it. The map is evaluated exactly every `lattice` pixels and bilinearly in
+// between; the lattice is refined (halved) until that interpolation is within maxErrorPx of the
+// exact map at every lattice-cell centre. Returns the lattice step used.
 int resample(const SourceBand& source, const TargetToSource& map, Raster& target, int lattice, double maxErrorPx,
              unsigned threads);
 
