@@ -30,16 +30,16 @@ struct RawSection {
 inline bool splitContainer(const uint8_t* data, size_t size, std::vector<std::byte>& header, std::vector<RawSection>& sections) {
     if (size < kFileHeaderBytes) return false;
     const std::vector<std::byte> b(reinterpret_cast<const std::byte*>(data), reinterpret_cast<const std::byte*>(data) + size);
-    const uint32_t count = load<uint32_t>(b, 60);
+    const uint32_t count = bytes::load<uint32_t>(b.data() + 60);
     if (count > 64 || kFileHeaderBytes + uint64_t{count} * kFileSectionEntryBytes > size) return false;
     header.assign(b.begin(), b.begin() + kFileHeaderBytes);
     sections.clear();
     for (uint32_t s = 0; s < count; ++s) {
         const size_t at = kFileHeaderBytes + size_t{s} * kFileSectionEntryBytes;
-        const uint64_t offset = load<uint64_t>(b, at + 8), bytes = load<uint64_t>(b, at + 16);
-        if (offset > size || bytes > size - offset) return false;
-        sections.push_back({load<uint32_t>(b, at), load<uint32_t>(b, at + 4),
-                            {b.begin() + static_cast<long>(offset), b.begin() + static_cast<long>(offset + bytes)}});
+        const uint64_t offset = bytes::load<uint64_t>(b.data() + at + 8), length = bytes::load<uint64_t>(b.data() + at + 16);
+        if (offset > size || length > size - offset) return false;
+        sections.push_back({bytes::load<uint32_t>(b.data() + at), bytes::load<uint32_t>(b.data() + at + 4),
+                            {b.begin() + static_cast<long>(offset), b.begin() + static_cast<long>(offset + length)}});
     }
     return true;
 }
@@ -48,16 +48,16 @@ inline bool splitContainer(const uint8_t* data, size_t size, std::vector<std::by
 inline std::vector<std::byte> joinContainer(std::vector<std::byte> header, const std::vector<RawSection>& sections) {
     const size_t tableEnd = kFileHeaderBytes + sections.size() * kFileSectionEntryBytes;
     header.resize(tableEnd, std::byte{0});
-    store<uint32_t>(header, 60, static_cast<uint32_t>(sections.size()));
+    bytes::store<uint32_t>(header, 60, static_cast<uint32_t>(sections.size()));
     std::vector<std::byte> out = header;
     for (size_t s = 0; s < sections.size(); ++s) {
         out.resize((out.size() + kFileSectionAlign - 1) / kFileSectionAlign * kFileSectionAlign, std::byte{0});
         const size_t at = kFileHeaderBytes + s * kFileSectionEntryBytes;
-        store<uint32_t>(out, at, sections[s].kind);
-        store<uint32_t>(out, at + 4, sections[s].index);
-        store<uint64_t>(out, at + 8, out.size());
-        store<uint64_t>(out, at + 16, sections[s].bytes.size());
-        store<uint32_t>(out, at + 28, 0);
+        bytes::store<uint32_t>(out, at, sections[s].kind);
+        bytes::store<uint32_t>(out, at + 4, sections[s].index);
+        bytes::store<uint64_t>(out, at + 8, out.size());
+        bytes::store<uint64_t>(out, at + 16, sections[s].bytes.size());
+        bytes::store<uint32_t>(out, at + 28, 0);
         out.insert(out.end(), sections[s].bytes.begin(), sections[s].bytes.end());
     }
     return out;
@@ -76,17 +76,17 @@ inline size_t mutateContainer(uint8_t* data, size_t size, size_t maxSize, unsign
     std::vector<RawSection> sections;
     if (rng() % 2 == 0 || !splitContainer(data, size, header, sections)) return LLVMFuzzerMutate(data, size, maxSize);
     auto setWord = [&](std::vector<std::byte>& b, size_t at, bool wide) {
-        if (wide) store<uint64_t>(b, at, interesting(rng, load<uint64_t>(b, at), size));
-        else store<uint32_t>(b, at, static_cast<uint32_t>(interesting(rng, load<uint32_t>(b, at), size)));
+        if (wide) bytes::store<uint64_t>(b, at, interesting(rng, bytes::load<uint64_t>(b.data() + at), size));
+        else bytes::store<uint32_t>(b, at, static_cast<uint32_t>(interesting(rng, bytes::load<uint32_t>(b.data() + at), size)));
     };
     RawSection* sec = sections.empty() ? nullptr : &sections[rng() % sections.size()];
     switch (rng() % 9) {
         case 8:  // a header count and the last word of a section (where a cache's OFFSETS end) set together
             if (sec && sec->bytes.size() >= 8) {
                 const size_t at = 24 + (rng() % 12) * 8;
-                const uint64_t v = interesting(rng, load<uint64_t>(header, at), size);
-                store<uint64_t>(header, at == 56 ? 64 : at, v);
-                store<uint64_t>(sec->bytes, sec->bytes.size() - 8, v);
+                const uint64_t v = interesting(rng, bytes::load<uint64_t>(header.data() + at), size);
+                bytes::store<uint64_t>(header, at == 56 ? 64 : at, v);
+                bytes::store<uint64_t>(sec->bytes, sec->bytes.size() - 8, v);
             }
             break;
         case 0:

@@ -25,9 +25,9 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
     hc::fuzz::fixContainer(bytes);
     hc::influence::KernelParams params;
     if (bytes.size() >= hc::kFileHeaderBytes) {
-        params.kernelId = hc::fuzz::load<uint32_t>(bytes, 56);
-        params.sigma = hc::fuzz::load<double>(bytes, 64);
-        params.truncation = hc::fuzz::load<double>(bytes, 72);
+        params.kernelId = hc::bytes::load<uint32_t>(bytes.data() + 56);
+        params.sigma = hc::bytes::load<double>(bytes.data() + 64);
+        params.truncation = hc::bytes::load<double>(bytes.data() + 72);
     }
     try {
         const hc::influence::InfluenceLists lists = hc::influence::readInfluenceCache(file.write(bytes), g, params);

@@ -19,39 +19,29 @@
 #include <string>
 #include <vector>
 
+#include "heightcast/grid/bytes.h"
 #include "heightcast/grid/checksum.h"
 #include "heightcast/grid/sectioned_file.h"
 
 namespace hc::fuzz {
 
-template <class T>
-T load(const std::vector<std::byte>& b, size_t at) {
-    T v;
-    std::memcpy(&v, b.data() + at, sizeof v);
-    return v;
-}
-template <class T>
-void store(std::vector<std::byte>& b, size_t at, T v) {
-    std::memcpy(b.data() + at, &v, sizeof v);
-}
-
 // Offsets of the container's header (grid/sectioned_file.h).
 inline void fixContainer(std::vector<std::byte>& b) {
     if (b.size() < kFileHeaderBytes) return;
     const uint64_t size = b.size();
-    store<uint64_t>(b, 16, size);
-    const uint32_t count = load<uint32_t>(b, 60);
+    bytes::store<uint64_t>(b, 16, size);
+    const uint32_t count = bytes::load<uint32_t>(b.data() + 60);
     const uint64_t tableEnd = kFileHeaderBytes + uint64_t{count} * kFileSectionEntryBytes;
     if (count <= 4096 && tableEnd <= size) {
         for (uint32_t s = 0; s < count; ++s) {
             const size_t at = kFileHeaderBytes + size_t{s} * kFileSectionEntryBytes;
-            const uint64_t offset = load<uint64_t>(b, at + 8), bytes = load<uint64_t>(b, at + 16);
-            if (offset <= size && bytes <= size - offset)
-                store<uint32_t>(b, at + 24, crc32(std::span<const std::byte>(b.data() + offset, bytes)));
+            const uint64_t offset = bytes::load<uint64_t>(b.data() + at + 8), length = bytes::load<uint64_t>(b.data() + at + 16);
+            if (offset <= size && length <= size - offset)
+                bytes::store<uint32_t>(b, at + 24, crc32(std::span<const std::byte>(b.data() + offset, length)));
         }
-        store<uint32_t>(b, 120, crc32(std::span<const std::byte>(b.data() + kFileHeaderBytes, tableEnd - kFileHeaderBytes)));
+        bytes::store<uint32_t>(b, 120, crc32(std::span<const std::byte>(b.data() + kFileHeaderBytes, tableEnd - kFileHeaderBytes)));
     }
-    store<uint32_t>(b, 124, crc32(std::span<const std::byte>(b.data(), 124)));
+    bytes::store<uint32_t>(b, 124, crc32(std::span<const std::byte>(b.data(), 124)));
 }
 
 // The readers take a path and map the file: an in-memory file (memfd) gives them one without touching a

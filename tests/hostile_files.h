@@ -9,6 +9,7 @@
 #include <string>
 #include <vector>
 
+#include "heightcast/grid/bytes.h"
 #include "heightcast/grid/sectioned_file.h"
 
 namespace hc::hostile {
@@ -49,23 +50,12 @@ inline void writeContainer(const Container& c, const std::string& path, const Fi
     w.commit(c.header);
 }
 
-template <class T>
-T load(const std::vector<std::byte>& b, size_t at) {
-    T v;
-    std::memcpy(&v, b.data() + at, sizeof v);
-    return v;
-}
-template <class T>
-void store(std::vector<std::byte>& b, size_t at, T v) {
-    std::memcpy(b.data() + at, &v, sizeof v);
-}
-
 // A grid declaring `cellCount` cells whose CELLS and LAYER sections are empty. With 2^62 cells the old size
 // checks computed 2^62 * 8 and 2^62 * 4, both 0 modulo 2^64, accepted the empty sections, and the reader
 // then tried to allocate 2^62 cells (std::length_error "vector::_M_default_append", no file name).
 inline void gridWithEmptySections(const std::string& in, const std::string& out, uint64_t cellCount) {
     Container c = readContainer(in, kGridFormat);
-    store<uint64_t>(c.header, kGridCellCountAt, cellCount);
+    bytes::store<uint64_t>(c.header, kGridCellCountAt, cellCount);
     for (Section& s : c.sections)
         if (s.kind == kGridCells || s.kind == kGridLayer) s.bytes.clear();
     writeContainer(c, out, kGridFormat);
@@ -76,10 +66,10 @@ inline void gridWithEmptySections(const std::string& in, const std::string& out,
 // INDICES, and walking the last cell's list read past the end of the file.
 inline void cacheWithEntryCount(const std::string& in, const std::string& out, uint64_t entryCount) {
     Container c = readContainer(in, kCacheFormat);
-    store<uint64_t>(c.header, kCacheEntryCountAt, entryCount);
+    bytes::store<uint64_t>(c.header, kCacheEntryCountAt, entryCount);
     for (Section& s : c.sections) {
         if (s.kind == kCacheIndices) s.bytes.clear();
-        if (s.kind == kCacheOffsets) store<uint64_t>(s.bytes, s.bytes.size() - 8, entryCount);
+        if (s.kind == kCacheOffsets) bytes::store<uint64_t>(s.bytes, s.bytes.size() - 8, entryCount);
     }
     writeContainer(c, out, kCacheFormat);
 }
@@ -89,9 +79,9 @@ inline void cacheWithEntryCount(const std::string& in, const std::string& out, u
 // `beyond` indices past the end of INDICES before noticing the decrease.
 inline void cacheWithListPastTheEnd(const std::string& in, const std::string& out, uint64_t beyond) {
     Container c = readContainer(in, kCacheFormat);
-    const uint64_t m = load<uint64_t>(c.header, kCacheEntryCountAt);
+    const uint64_t m = bytes::load<uint64_t>(c.header.data() + kCacheEntryCountAt);
     for (Section& s : c.sections)
-        if (s.kind == kCacheOffsets) store<uint64_t>(s.bytes, 8, m + beyond);
+        if (s.kind == kCacheOffsets) bytes::store<uint64_t>(s.bytes, 8, m + beyond);
     writeContainer(c, out, kCacheFormat);
 }
 

@@ -600,7 +600,7 @@ TEST_F(CacheFile, HugeCountsBehindValidChecksumsAreRefused) {
     }
     for (uint64_t count : {uint64_t{1} << 61, ~uint64_t{0}}) {
         auto c = hc::hostile::readContainer(path("t.hci"), hc::hostile::kCacheFormat);
-        hc::hostile::store<uint64_t>(c.header, hc::hostile::kCacheCellCountAt, count);
+        hc::bytes::store<uint64_t>(c.header, hc::hostile::kCacheCellCountAt, count);
         hc::hostile::writeContainer(c, path("huge.hci"), hc::hostile::kCacheFormat);
         const std::string m = message();
         EXPECT_EQ(m.rfind(path("huge.hci") + ": at byte offset 24: header declares " + std::to_string(count) + " cells", 0), 0u)

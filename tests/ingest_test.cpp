@@ -742,6 +742,28 @@ TEST(Issue11, InfinitePixelsAreCounted) {
     EXPECT_TRUE(hasWarning(rep, "10 pixels hold +-inf")) << (rep.warnings.empty() ? "" : rep.warnings[0]);
 }
 
+// Band 1 of a raster as GDAL reads it, in doubles, with its geotransform and nodata: the independent side of
+// the checks against the source below.
+struct Band64 {
+    int w = 0, h = 0;
+    std::vector<double> v;
+    double gt[6] = {};
+    int hasNodata = 0;
+    double nodata = 0;
+};
+Band64 readBand64(const std::string& path) {
+    Band64 b;
+    std::unique_ptr<GDALDataset> ds(GDALDataset::Open(path.c_str(), GDAL_OF_RASTER | GDAL_OF_READONLY));
+    if (!ds) throw hc::Error(path + ": cannot open");
+    b.w = ds->GetRasterXSize(), b.h = ds->GetRasterYSize();
+    b.v.resize(size_t(b.w) * size_t(b.h));
+    if (ds->GetRasterBand(1)->RasterIO(GF_Read, 0, 0, b.w, b.h, b.v.data(), b.w, b.h, GDT_Float64, 0, 0, nullptr) != CE_None)
+        throw hc::Error(path + ": cannot read band 1");
+    b.nodata = ds->GetRasterBand(1)->GetNoDataValue(&b.hasNodata);
+    ds->GetGeoTransform(b.gt);
+    return b;
+}
+
 // Issue 11, "--min-cell coarser than the source": the summary's check against the source (LoadReport::sourceCheck)
 // must equal an independent one: every valid lidar1m pixel centre located in the grid, |pixel - cell| maximised.
 // (The working-raster figure alone said 0 m here while the survey differs by 1.43 m.)
@@ -753,12 +775,10 @@ TEST(Issue11, SourceCheckMatchesAnIndependentOne) {
     LoadReport rep;
     Grid g = hc::ingest::ingest(o, rep);
     ASSERT_TRUE(rep.sourceCheck.done);
-    std::unique_ptr<GDALDataset> ds(GDALDataset::Open(path.c_str(), GDAL_OF_RASTER | GDAL_OF_READONLY));
-    const int w = ds->GetRasterXSize(), h = ds->GetRasterYSize();
-    std::vector<double> v(size_t(w) * size_t(h));
-    ASSERT_EQ(ds->GetRasterBand(1)->RasterIO(GF_Read, 0, 0, w, h, v.data(), w, h, GDT_Float64, 0, 0, nullptr), CE_None);
-    double gt[6];
-    ds->GetGeoTransform(gt);
+    const Band64 b = readBand64(path);
+    const int w = b.w, h = b.h;
+    const std::vector<double>& v = b.v;
+    const double* gt = b.gt;
     double maxDev = 0;
     size_t found = 0, missed = 0;
     for (int row = 0; row < h; ++row)
@@ -792,14 +812,10 @@ TEST(Issue11, SourceCheckOfGeographicInputMatchesProj) {
     LoadReport rep;
     Grid g = hc::ingest::ingest(o, rep);
     ASSERT_TRUE(rep.sourceCheck.done);
-    std::unique_ptr<GDALDataset> ds(GDALDataset::Open(path.c_str(), GDAL_OF_RASTER | GDAL_OF_READONLY));
-    const int w = ds->GetRasterXSize(), h = ds->GetRasterYSize();
-    std::vector<double> v(size_t(w) * size_t(h));
-    ASSERT_EQ(ds->GetRasterBand(1)->RasterIO(GF_Read, 0, 0, w, h, v.data(), w, h, GDT_Float64, 0, 0, nullptr), CE_None);
-    int hasNodata = 0;
-    const double nodata = ds->GetRasterBand(1)->GetNoDataValue(&hasNodata);
-    double gt[6];
-    ds->GetGeoTransform(gt);
+    const Band64 b = readBand64(path);
+    const int w = b.w, h = b.h;
+    const std::vector<double>& v = b.v;
+    const double* gt = b.gt;
     OGRSpatialReference src, dst;
     src.SetWellKnownGeogCS("WGS84");
     src.SetAxisMappingStrategy(OAMS_TRADITIONAL_GIS_ORDER);
@@ -818,7 +834,7 @@ TEST(Issue11, SourceCheckOfGeographicInputMatchesProj) {
         ASSERT_TRUE(ct->Transform(w, xs.data(), ys.data()));
         for (int col = 0; col < w; ++col) {
             const double z = v[size_t(row) * size_t(w) + size_t(col)];
-            if (hasNodata && z == nodata) continue;
+            if (b.hasNodata && z == b.nodata) continue;
             auto cell = g.locate(xs[size_t(col)] - g.originWorldX, ys[size_t(col)] - g.originWorldY);
             if (!cell) {
                 ++missed;
