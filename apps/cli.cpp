@@ -9,7 +9,7 @@
 #include <new>
 #include <sstream>
 
-#include "heightcast/grid/error.h"
+#include "heightcast/core/error.h"
 
 namespace hc::cli {
 

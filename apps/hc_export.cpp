@@ -7,7 +7,7 @@
 
 #include "cli.h"
 #include "heightcast/export/export.h"
-#include "heightcast/grid/error.h"
+#include "heightcast/core/error.h"
 #include "heightcast/grid/grid_file.h"
 
 int main(int argc, char** argv) {

@@ -3,9 +3,9 @@
 #include <cstdio>
 
 #include "cli.h"
-#include "heightcast/grid/error.h"
+#include "heightcast/core/error.h"
 #include "heightcast/grid/grid_file.h"
-#include "heightcast/grid/progress.h"
+#include "heightcast/core/progress.h"
 #include "heightcast/influence/influence.h"
 
 int main(int argc, char** argv) {

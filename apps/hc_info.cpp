@@ -5,8 +5,8 @@
 #include <string>
 
 #include "cli.h"
-#include "heightcast/grid/atomic_file.h"
-#include "heightcast/grid/error.h"
+#include "heightcast/core/atomic_file.h"
+#include "heightcast/core/error.h"
 #include "heightcast/grid/grid_file.h"
 
 namespace {

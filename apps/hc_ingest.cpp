@@ -4,9 +4,9 @@
 #include <filesystem>
 
 #include "cli.h"
-#include "heightcast/grid/error.h"
+#include "heightcast/core/error.h"
 #include "heightcast/grid/grid_file.h"
-#include "heightcast/grid/progress.h"
+#include "heightcast/core/progress.h"
 #include "heightcast/ingest/ingest.h"
 
 namespace {

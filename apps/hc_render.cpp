@@ -4,13 +4,14 @@
 #include <cstdio>
 #include <vector>
 
+#include "backend_choice.h"
 #include "cli.h"
 #include "render_setup.h"
-#include "heightcast/grid/atomic_file.h"
-#include "heightcast/grid/error.h"
+#include "heightcast/core/atomic_file.h"
+#include "heightcast/core/error.h"
 #include "heightcast/grid/grid_file.h"
-#include "heightcast/grid/parallel.h"
-#include "heightcast/render/gl_renderer.h"
+#include "heightcast/core/parallel.h"
+#include "heightcast/render/gl/gl_renderer.h"
 #include "heightcast/render/image_io.h"
 #include "heightcast/render/renderer.h"
 
@@ -41,15 +42,11 @@ int main(int argc, char** argv) {
         if (!p.parse(argc, argv)) return 0;
         if (out.empty()) throw hc::Error("no output image: give -o OUT.png");
         if (!view.empty() && view != "overview") throw hc::Error("--view " + view + ": the only view is 'overview'");
-        const hc::render::Backend backend = hc::render::parseBackend(backendText);
+        const hc::cli::Backend backend = hc::cli::parseBackend(backendText);
         // Validates the options and the camera's numbers before any expensive work.
         setup.finish();
-        std::string glUnavailable, glDevice;
-        if (backend != hc::render::Backend::Cpu) glUnavailable = hc::render::headlessGlUnavailable(&glDevice);
-        if (backend == hc::render::Backend::Gl && !glUnavailable.empty()) throw hc::Error("--backend gl: " + glUnavailable);
-        // auto takes GL on a GPU only: software OpenGL (llvmpipe) takes about twice the CPU backend's time.
-        const bool softwareGl = glUnavailable.empty() && hc::render::isSoftwareRenderer(glDevice);
-        const bool useGl = backend == hc::render::Backend::Gl || (backend == hc::render::Backend::Auto && glUnavailable.empty() && !softwareGl);
+        const hc::cli::GlOnHand glOnHand = backend == hc::cli::Backend::Cpu ? hc::cli::GlOnHand{} : hc::cli::probeHeadlessGl();
+        const hc::cli::BackendDecision decision = hc::cli::decideBackend(backend, glOnHand);
         for (const std::string* o : {&out, &exr, &timingsPath})
             if (!o->empty()) {
                 hc::cli::checkWritable(*o, "output");
@@ -71,24 +68,17 @@ int main(int argc, char** argv) {
             throw hc::Error(b);
         }
 
-        // The GL backend renders in a headless context of its own; where none can be had, "auto" falls back.
-        std::unique_ptr<hc::render::GlRenderer> gl;
+        if (!decision.note.empty()) std::fprintf(stderr, "hc-render: note: %s\n", decision.note.c_str());
         std::string device = "CPU, " + std::to_string(hc::resolveThreads(options.threads)) + " threads";
-        const std::string renderer = glDevice.substr(0, glDevice.find(", OpenGL"));
-        if (useGl) {
-            gl = hc::render::GlRenderer::headless(scene);
-            device = gl->deviceName();
-            if (softwareGl)
-                std::fprintf(stderr, "hc-render: note: OpenGL here is software rendering (%s); --backend cpu is about twice as fast\n",
-                             renderer.c_str());
-        } else if (backend == hc::render::Backend::Auto && softwareGl) {
-            std::fprintf(stderr, "hc-render: note: OpenGL here is software rendering (%s): rendering on the CPU, which is faster "
-                                 "(--backend gl forces it)\n", renderer.c_str());
-        } else if (backend == hc::render::Backend::Auto) {
-            std::fprintf(stderr, "hc-render: note: the GL backend is not available (%s): rendering on the CPU\n", glUnavailable.c_str());
-        }
         hc::render::Timings timings;
-        hc::render::Frame frame = gl ? gl->render(camera, options, timings) : hc::render::renderFrame(scene, camera, options, timings);
+        hc::render::Frame frame;
+        if (decision.useGl) {  // in a headless context of its own
+            auto gl = hc::render::GlRenderer::headless(scene);
+            device = gl->deviceName();
+            frame = gl->render(camera, options, timings);
+        } else {
+            frame = hc::render::renderFrame(scene, camera, options, timings);
+        }
         hc::render::writePng(frame, out);
         if (!exr.empty()) hc::render::writeFrameExr(frame, exr);
         if (!timingsPath.empty()) {
@@ -98,7 +88,7 @@ int main(int argc, char** argv) {
             tw.commit();
         }
         std::printf("hc-render: %s -> %s%s%s\n", gridPath.c_str(), out.c_str(), exr.empty() ? "" : " + ", exr.c_str());
-        std::printf("  backend      %s (%s)\n", gl ? "gl" : "cpu", device.c_str());
+        std::printf("  backend      %s (%s)\n", decision.useGl ? "gl" : "cpu", device.c_str());
         std::printf("  camera       %.3f, %.3f, %.3f  yaw %.2f  pitch %.2f  fov %.1f  %dx%d", camera.xWorld, camera.yWorld, camera.zWorld,
                     camera.yawDeg, camera.pitchDeg, camera.fovYDeg, camera.width, camera.height);
         if (camera.rollDeg != 0) std::printf("  roll %.2f", camera.rollDeg);

@@ -25,14 +25,15 @@
 #define GLFW_INCLUDE_NONE
 #include <GLFW/glfw3.h>
 
+#include "backend_choice.h"
 #include "cli.h"
 #include "render_setup.h"
 #include "view_support.h"
-#include "heightcast/grid/error.h"
-#include "heightcast/grid/parallel.h"
+#include "heightcast/core/error.h"
+#include "heightcast/core/parallel.h"
 #include "heightcast/influence/surface.h"
 #include "heightcast/render/image_io.h"
-#include "heightcast/render/gl_renderer.h"
+#include "heightcast/render/gl/gl_renderer.h"
 #include "heightcast/render/renderer.h"
 
 namespace {
@@ -853,7 +854,7 @@ int main(int argc, char** argv) {
         p.option("--screenshot", "OUT.png", "with --frames: write the window's last frame (image and HUD) as a PNG", screenshot);
         if (!p.parse(argc, argv)) return 0;
         setup.finish();
-        const hc::render::Backend choice = hc::render::parseBackend(backendName);
+        const hc::cli::Backend choice = hc::cli::parseBackend(backendName);
         if (frames < 0 || frames > 100000) throw hc::Error("--frames " + std::to_string(frames) + " is outside 0..100000");
         if (!screenshot.empty()) {
             if (frames == 0) throw hc::Error("--screenshot needs --frames N (the number of frames to render first)");
@@ -883,7 +884,7 @@ int main(int argc, char** argv) {
         GLFWwindow* window = openWindow(title, setup.width, setup.height, 4, 3, false);
         const bool have43 = window != nullptr;
         const std::string why43 = have43 ? "" : "no OpenGL 4.3 core context (" + glfwMessage + ")";
-        if (!have43 && choice == hc::render::Backend::Gl) throw hc::Error("--backend gl: " + why43);
+        if (!have43 && choice == hc::cli::Backend::Gl) throw hc::Error("--backend gl: " + why43);
         if (!window) window = openWindow(title, setup.width, setup.height, 3, 3, false);
         if (!window) throw hc::Error("cannot create an OpenGL 3.3 core window: " + glfwMessage);
         glfwMakeContextCurrent(window);
@@ -896,14 +897,14 @@ int main(int argc, char** argv) {
         std::string note;
         // auto takes GL on a GPU only: on software OpenGL (llvmpipe) the CPU backend is about twice as fast.
         const bool softwareGl = hc::render::isSoftwareRenderer(contextInfo);
-        if (choice == hc::render::Backend::Auto && have43 && softwareGl) {
+        if (choice == hc::cli::Backend::Auto && have43 && softwareGl) {
             note = "software OpenGL (" + contextInfo.substr(0, contextInfo.find(", OpenGL")) +
                    "): rendering on the CPU, which is faster (--backend gl forces it)";
-        } else if (choice != hc::render::Backend::Cpu) {
+        } else if (choice != hc::cli::Backend::Cpu) {
             std::string why;
             if (have43) backend = makeGlBackend(*loaded->scene, why);
             else why = why43;
-            if (!backend && choice == hc::render::Backend::Gl) {
+            if (!backend && choice == hc::cli::Backend::Gl) {
                 glfwDestroyWindow(window);
                 throw hc::Error("--backend gl: " + why);
             }

@@ -4,7 +4,7 @@
 #include <cstdio>
 #include <vector>
 
-#include "heightcast/grid/error.h"
+#include "heightcast/core/error.h"
 #include "heightcast/grid/grid_file.h"
 
 namespace hc::cli {

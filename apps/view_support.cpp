@@ -9,8 +9,8 @@
 #include <span>
 #include <sstream>
 
-#include "heightcast/grid/atomic_file.h"
-#include "heightcast/grid/error.h"
+#include "heightcast/core/atomic_file.h"
+#include "heightcast/core/error.h"
 
 namespace hc::view {
 

@@ -16,7 +16,7 @@
 #include <type_traits>
 #include <vector>
 
-#include "heightcast/grid/error.h"
+#include "heightcast/core/error.h"
 
 namespace hc::bench {
 

@@ -43,9 +43,9 @@
 #include "bench_common.h"
 #include "svg_plot.h"
 #include "cli.h"
-#include "heightcast/grid/error.h"
+#include "heightcast/core/error.h"
 #include "heightcast/grid/grid_file.h"
-#include "heightcast/grid/progress.h"
+#include "heightcast/core/progress.h"
 #include "heightcast/ingest/ingest.h"
 
 namespace fs = std::filesystem;

@@ -60,14 +60,15 @@
 
 #include "bench_common.h"
 #include "svg_plot.h"
+#include "backend_choice.h"
 #include "cli.h"
-#include "heightcast/grid/error.h"
+#include "heightcast/core/error.h"
 #include "heightcast/grid/grid.h"
 #include "heightcast/grid/morton.h"
-#include "heightcast/grid/parallel.h"
-#include "heightcast/grid/progress.h"
+#include "heightcast/core/parallel.h"
+#include "heightcast/core/progress.h"
 #include "heightcast/influence/influence.h"
-#include "heightcast/render/gl_renderer.h"
+#include "heightcast/render/gl/gl_renderer.h"
 #include "heightcast/render/image_io.h"
 #include "heightcast/render/renderer.h"
 
@@ -436,7 +437,7 @@ struct Settings {
     hc::render::RenderOptions options;
     std::string imagesDir;
     bool interactive = false;
-    hc::render::Backend backend = hc::render::Backend::Cpu;  // Cpu or Gl (Auto is resolved in main)
+    hc::cli::Backend backend = hc::cli::Backend::Cpu;  // Cpu or Gl (Auto is resolved in main)
     int flyFrames = 0;      // after the timed frames: a fly-through of this many frames, fresh and incremental (CPU)
     double flyStepM = 10;   // metres forward per fly-through frame
 };
@@ -513,7 +514,7 @@ RunResult runScenario(const Scenario& sc, const Settings& set) {
         // drivers (llvmpipe among them) compile shaders at their first dispatch.
         std::unique_ptr<hc::render::GlRenderer> gl;
         std::snprintf(r.device, sizeof r.device, "CPU, %u threads", hc::resolveThreads(set.options.threads));
-        if (set.backend == hc::render::Backend::Gl) {
+        if (set.backend == hc::cli::Backend::Gl) {
             // Warm-up frames, unmeasured, for at least a second: drivers compile shaders at the first dispatch, and an
             // idle GPU takes a moment to leave its idle clocks (on an H100 the first scene's stages ran 2-3x slower
             // after a single warm-up frame).
@@ -651,9 +652,9 @@ void writeJson(const std::vector<const Scenario*>& scs, const std::vector<RunRes
                  "\"worst_raycast_ms\": %.3f, \"gaussians\": %llu, \"rays\": %llu, \"hits\": %llu, \"water_hits\": %llu,\n",
                  r.fittingMs, r.mipmapMs, r.shadingMs, r.totalMs, r.worstApproximationMs, r.worstRaycastMs, (unsigned long long)r.gaussians,
                  (unsigned long long)r.rays, (unsigned long long)r.hits, (unsigned long long)r.wetHits);
-        f << fmt("   \"backend\": \"%s\", \"device\": %s, \"gpu_ms\": %.3f, \"readback_ms\": %.3f", hc::render::backendName(set.backend),
+        f << fmt("   \"backend\": \"%s\", \"device\": %s, \"gpu_ms\": %.3f, \"readback_ms\": %.3f", hc::cli::backendName(set.backend),
                  jsonString(r.device).c_str(), r.gpuMs < 1e300 ? r.gpuMs : 0.0, r.readbackMs);
-        if (set.backend == hc::render::Backend::Gl) f << fmt(", \"gl_frame_target\": \"%s\"", glFrameMet(r) ? "met" : "MISSED");
+        if (set.backend == hc::cli::Backend::Gl) f << fmt(", \"gl_frame_target\": \"%s\"", glFrameMet(r) ? "met" : "MISSED");
         f << ",\n";
         f << "   \"cascades\": [";
         for (int c = 0; c < r.cascadeCount; ++c) {
@@ -668,7 +669,7 @@ void writeJson(const std::vector<const Scenario*>& scs, const std::vector<RunRes
                  sc.gpuApproxMs, sc.gpuRaycastMs, mb(r.baselineRss), mb(r.gridRss), approximationMet(r) ? "met" : "MISSED",
                  raycastMet(r) ? "met" : "MISSED");
         if (r.image[0]) f << ", \"image\": " << jsonString(r.image);
-        if (set.flyFrames > 1 && set.backend == hc::render::Backend::Cpu)
+        if (set.flyFrames > 1 && set.backend == hc::cli::Backend::Cpu)
             f << fmt(",\n   \"fly_frames\": %d, \"fly_step_m\": %g, \"fly_approximation_ms_fresh\": %.3f, \"fly_approximation_ms_cached\": %.3f, "
                      "\"fly_total_ms_fresh\": %.3f, \"fly_total_ms_cached\": %.3f, \"fly_texels_kept\": %.4f",
                      set.flyFrames, set.flyStepM, r.flyApproxFreshMs, r.flyApproxCachedMs, r.flyTotalFreshMs, r.flyTotalCachedMs, r.flyKept);
@@ -738,10 +739,10 @@ int main(int argc, char** argv) {
         if (!p.parse(argc, argv)) return 0;
         if (!(set.scale >= 1)) throw hc::Error("--scale " + fmt("%g", set.scale) + ": must be at least 1");
         if (set.repeat < 1) throw hc::Error("--repeat " + std::to_string(set.repeat) + ": must be at least 1");
-        set.backend = hc::render::parseBackend(backendText);
-        if (set.backend == hc::render::Backend::Auto) throw hc::Error("--backend auto: a benchmark names its backend, cpu or gl");
+        set.backend = hc::cli::parseBackend(backendText);
+        if (set.backend == hc::cli::Backend::Auto) throw hc::Error("--backend auto: a benchmark names its backend, cpu or gl");
         if (set.flyFrames < 0 || set.flyFrames == 1) throw hc::Error("--fly-frames " + std::to_string(set.flyFrames) + ": 0 (off) or at least 2");
-        if (set.flyFrames > 0 && set.backend != hc::render::Backend::Cpu) throw hc::Error("--fly-frames: the CPU backend's (incremental cascades)");
+        if (set.flyFrames > 0 && set.backend != hc::cli::Backend::Cpu) throw hc::Error("--fly-frames: the CPU backend's (incremental cascades)");
         if (!(set.flyStepM >= 0) || !std::isfinite(set.flyStepM)) throw hc::Error("--fly-step " + fmt("%g", set.flyStepM) + ": metres >= 0");
         if (std::string why = set.options.validate(); !why.empty()) throw hc::Error(why);
         {
@@ -811,7 +812,7 @@ int main(int argc, char** argv) {
                     "above the river 10 %% downstream, looking along it, pitch -20, fov 50; G Gauss/s = kernel evaluations in\n"
                     "the approximation / its time; M rays/s = pixels / ray casting time; peak RSS = the scenario's process\n"
                     "(getrusage) at the end; GTX 1080 = the report's times for the real data\n\n",
-                    hc::render::backendName(set.backend), results.empty() ? "-" : results[0].device, set.width, set.height, set.options.cascades, set.options.cascades == 1 ? "" : "s", set.options.texelsPerSide,
+                    hc::cli::backendName(set.backend), results.empty() ? "-" : results[0].device, set.width, set.height, set.options.cascades, set.options.cascades == 1 ? "" : "s", set.options.texelsPerSide,
                     set.repeat);
         std::printf("%-14s %13s %10s %7s %19s %19s %8s %7s %8s %8s %11s %10s %8s %11s %11s\n", "scenario", "extents km", "cells m",
                     "cells M", "approximation ms", "ray casting ms", "fit ms", "mip ms", "shade ms", "total ms", "G Gauss/s",
@@ -823,7 +824,7 @@ int main(int argc, char** argv) {
                         r.worstApproximationMs, r.raycastMs, r.worstRaycastMs, r.fittingMs, r.mipmapMs, r.shadingMs, r.totalMs,
                         gaussiansPerS(r) / 1e9, raysPerS(r) / 1e6, mb(r.peakRss), chosen[k]->gpuApproxMs, chosen[k]->gpuRaycastMs);
         }
-        if (set.backend == hc::render::Backend::Gl) {
+        if (set.backend == hc::cli::Backend::Gl) {
             std::printf("\nGL frames: total = wall time of a frame ending in the texture, as hc-view draws it (fitting and visible spans on\n"
                         "the CPU, uploads, the GPU's stages, waiting for its timers); GPU = its span from the first stage's start to\n"
                         "shading's end; read back = copying one finished frame to host memory (hc-render's path, not the viewer's)\n");
@@ -844,7 +845,7 @@ int main(int argc, char** argv) {
                         r.camera[2], r.camera[3]);
         }
 
-        if (set.flyFrames > 1 && set.backend == hc::render::Backend::Cpu) {
+        if (set.flyFrames > 1 && set.backend == hc::cli::Backend::Cpu) {
             std::printf("\nincremental cascades: the camera flies forward %g m a frame for %d frames; means over frames 2..%d,\n"
                         "every frame evaluated afresh against frames through a CascadeCache (texels kept from the last frame)\n\n",
                         set.flyStepM, set.flyFrames, set.flyFrames);
@@ -859,7 +860,7 @@ int main(int argc, char** argv) {
         }
 
         // ---- targets ----
-        const bool glRun = set.backend == hc::render::Backend::Gl;
+        const bool glRun = set.backend == hc::cli::Backend::Gl;
         std::printf("\ntargets%s\n", glRun ? "" : " (2 cores)");
         if (glRun) {
             std::printf("  GL whole frame (issue 5, on a GPU): 1920x1080, 3 x 1024^2 cascades, within %.0f ms%s\n", kTargetGlFrameMs,
@@ -895,7 +896,7 @@ int main(int argc, char** argv) {
             std::printf("objects written to %s\n", json.c_str());
         }
         if (!plot.empty()) {
-            const bool gl = set.backend == hc::render::Backend::Gl;
+            const bool gl = set.backend == hc::cli::Backend::Gl;
             hc::bench::BarPlot bp;
             bp.title = std::string("hc-bench, ") + (gl ? "GL" : "CPU") + " backend: best stage times of a " + std::to_string(set.width) + "x" +
                        std::to_string(set.height) + " frame, " + std::to_string(set.options.cascades) + " cascades of " +

@@ -10,8 +10,8 @@
 #include <string>
 #include <vector>
 
-#include "heightcast/grid/atomic_file.h"
-#include "heightcast/grid/error.h"
+#include "heightcast/core/atomic_file.h"
+#include "heightcast/core/error.h"
 
 namespace hc::bench {
 

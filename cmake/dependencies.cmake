@@ -1,22 +1,51 @@
-# Every third-party dependency, found once, with the version we need (all from Debian packages).
-# Which folder may use which is a rule of the layout (CONTRIBUTING.md): GDAL and GeographicLib in
-# ingest/ and export/, OpenEXR and OpenVDB in export/ only; tests may read files back with any.
+# Every third-party dependency of heightcast, found here and nowhere else, each with the oldest version we build
+# against (all from Debian 12 / Ubuntu 22.04+ packages: scripts/deps.sh installs them). Which folder may use which
+# is a rule of the layout (CONTRIBUTING.md); a folder links its dependencies PRIVATE, so none leaks upward:
+#   core/      Threads
+#   grid/      GLM (header-only; no GLM type in grid's public headers)
+#   ingest/    GDAL (and its PROJ), GeographicLib
+#   influence/ -
+#   export/    GDAL, OpenEXR, OpenVDB (HC_WITH_VDB)
+#   render/    GLM, OpenEXR, libpng, fmt; render/gl/: OpenGL + EGL, glslangValidator (HC_WITH_GL)
+#   apps/      fmt, nlohmann-json; hc-view: GLFW + OpenGL (HC_WITH_GL)
+#   tests/     GoogleTest, and any library above to read files back; bench/: fmt, nlohmann-json
 find_package(Threads REQUIRED)
 find_package(GDAL 3.0 REQUIRED)
-find_library(GEOGRAPHICLIB_LIBRARY GeographicLib REQUIRED)
-find_path(GEOGRAPHICLIB_INCLUDE_DIR GeographicLib/TransverseMercator.hpp REQUIRED)
 find_package(OpenEXR 3 CONFIG REQUIRED)
-# OpenVDB ships a find module, not a config file (Debian: libopenvdb-dev).
-list(APPEND CMAKE_MODULE_PATH /usr/lib/x86_64-linux-gnu/cmake/OpenVDB /usr/lib/cmake/OpenVDB /usr/local/lib/cmake/OpenVDB)
-find_package(OpenVDB 9 REQUIRED)
+find_package(PNG 1.6 REQUIRED)
+find_package(glm 0.9.9 CONFIG REQUIRED)
+find_package(nlohmann_json 3.10 CONFIG REQUIRED)
+find_package(fmt 8 CONFIG REQUIRED)
+
+# GeographicLib's Debian package ships a find module without a version or a target: find it by hand, check
+# the version its Config.h declares, and give it a target like the others.
+find_library(GEOGRAPHICLIB_LIBRARY GeographicLib REQUIRED)
+find_path(GEOGRAPHICLIB_INCLUDE_DIR GeographicLib/Config.h REQUIRED)
+file(STRINGS ${GEOGRAPHICLIB_INCLUDE_DIR}/GeographicLib/Config.h hc_geographiclib_version
+     REGEX "#define GEOGRAPHICLIB_VERSION_STRING")
+string(REGEX MATCH "[0-9]+\\.[0-9]+(\\.[0-9]+)?" hc_geographiclib_version "${hc_geographiclib_version}")
+if(hc_geographiclib_version VERSION_LESS 1.49)
+  message(FATAL_ERROR "GeographicLib ${hc_geographiclib_version} found; heightcast needs 1.49 or newer")
+endif()
+add_library(hc::GeographicLib INTERFACE IMPORTED)
+set_target_properties(hc::GeographicLib PROPERTIES INTERFACE_LINK_LIBRARIES ${GEOGRAPHICLIB_LIBRARY}
+                      INTERFACE_INCLUDE_DIRECTORIES ${GEOGRAPHICLIB_INCLUDE_DIR})
+
+if(HC_WITH_VDB)
+  # OpenVDB ships a find module, not a config file (Debian: libopenvdb-dev).
+  list(APPEND CMAKE_MODULE_PATH /usr/lib/x86_64-linux-gnu/cmake/OpenVDB /usr/lib/cmake/OpenVDB /usr/local/lib/cmake/OpenVDB)
+  find_package(OpenVDB 9 REQUIRED)
+endif()
+
+if(HC_WITH_GL)
+  # render/gl/: libglvnd's OpenGL and EGL (headless through the EGL surfaceless platform; libOpenGL exports the core
+  # functions, so no loader), and glslangValidator to check the compute shaders at build time (Debian: libegl-dev
+  # libgl-dev glslang-tools; Mesa's libgl1-mesa-dri provides llvmpipe where there is no GPU). hc-view: GLFW (X11).
+  find_package(OpenGL REQUIRED COMPONENTS OpenGL EGL)
+  find_program(HC_GLSLANG_VALIDATOR glslangValidator REQUIRED)
+  find_package(glfw3 3.3 REQUIRED)
+endif()
+
 if(HC_BUILD_TESTS)
   find_package(GTest 1.10 REQUIRED)
 endif()
-# hc-view's window (GLFW, X11) and OpenGL through glvnd: libOpenGL exports the core functions, so no loader.
-find_package(glfw3 3.3 REQUIRED)
-find_package(OpenGL REQUIRED COMPONENTS OpenGL)
-# render/'s GL backend: libglvnd's OpenGL and EGL (headless through the EGL surfaceless platform), and
-# glslangValidator to check the compute shaders at build time (Debian: libegl-dev libgl-dev
-# glslang-tools; Mesa's libgl1-mesa-dri provides llvmpipe where there is no GPU).
-find_package(OpenGL REQUIRED COMPONENTS OpenGL EGL)
-find_program(HC_GLSLANG_VALIDATOR glslangValidator REQUIRED)

@@ -3,7 +3,7 @@
 // a round trip through bookmarksToJson unchanged.
 #include <string_view>
 
-#include "heightcast/grid/error.h"
+#include "heightcast/core/error.h"
 #include "view_support.h"
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {

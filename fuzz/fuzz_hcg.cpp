@@ -3,7 +3,7 @@
 #include <optional>
 
 #include "container_mutator.h"
-#include "heightcast/grid/error.h"
+#include "heightcast/core/error.h"
 #include "heightcast/grid/grid_file.h"
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {

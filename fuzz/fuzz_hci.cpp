@@ -6,7 +6,7 @@
 #include <array>
 
 #include "container_mutator.h"
-#include "heightcast/grid/error.h"
+#include "heightcast/core/error.h"
 #include "heightcast/grid/grid_file.h"
 #include "heightcast/influence/influence.h"
 #include "heightcast/influence/surface.h"

@@ -4,7 +4,7 @@
 #include <string_view>
 
 #include "cli.h"
-#include "heightcast/grid/error.h"
+#include "heightcast/core/error.h"
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
     try {

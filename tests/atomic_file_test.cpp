@@ -14,7 +14,7 @@
 #include <string>
 #include <vector>
 
-#include "heightcast/grid/atomic_file.h"
+#include "heightcast/core/atomic_file.h"
 
 namespace fs = std::filesystem;
 

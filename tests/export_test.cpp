@@ -14,10 +14,12 @@
 #include <ImfStringAttribute.h>
 #include <gdal_priv.h>
 #include <ogr_spatialref.h>
+#if HC_WITH_VDB
 #include <openvdb/openvdb.h>
+#endif
 
 #include "heightcast/export/export.h"
-#include "heightcast/grid/error.h"
+#include "heightcast/core/error.h"
 #include "heightcast/ingest/ingest.h"
 #include "test_data.h"
 
@@ -160,7 +162,9 @@ TEST(Export, ExrReadsBackThroughOpenExr) {
     EXPECT_GT(wet, 100u);
 }
 
+#if HC_WITH_VDB
 TEST(Export, VdbLevelSetsCrossZeroOnTheSurface) {
+    EXPECT_TRUE(hc::exporting::vdbAvailable());
     SampledRaster terrain = sample("elevation", 100, true);
     SampledRaster water = sample("water_surface", 100, true);
     ASSERT_GT(water.definedCount(), 100u);
@@ -204,6 +208,22 @@ TEST(Export, VdbLevelSetsCrossZeroOnTheSurface) {
         EXPECT_GT(checked, 50u);
     }
 }
+#else
+// A build without OpenVDB (-DHC_WITH_VDB=OFF) refuses .vdb, naming the file and the option, and writes nothing.
+TEST(Export, VdbBuiltOutIsRefused) {
+    EXPECT_FALSE(hc::exporting::vdbAvailable());
+    SampledRaster terrain = sample("elevation", 100, true);
+    const std::string path = (dir() / "s.vdb").string();
+    try {
+        hc::exporting::writeVdb(terrain, nullptr, path);
+        FAIL() << "writeVdb wrote in a build without OpenVDB";
+    } catch (const hc::Error& e) {
+        EXPECT_NE(std::string(e.what()).find("s.vdb"), std::string::npos) << e.what();
+        EXPECT_NE(std::string(e.what()).find("HC_WITH_VDB"), std::string::npos) << e.what();
+    }
+    EXPECT_FALSE(std::filesystem::exists(path));
+}
+#endif
 
 TEST(Export, FailedWritesLeaveNothing) {
     SampledRaster r = sample("elevation", 500);

@@ -9,8 +9,8 @@
 #include <string>
 #include <vector>
 
-#include "heightcast/grid/bytes.h"
-#include "heightcast/grid/sectioned_file.h"
+#include "heightcast/core/bytes.h"
+#include "heightcast/core/sectioned_file.h"
 
 namespace hc::hostile {
 

@@ -11,8 +11,8 @@
 #include <fstream>
 #include <random>
 
-#include "heightcast/grid/checksum.h"
-#include "heightcast/grid/error.h"
+#include "heightcast/core/checksum.h"
+#include "heightcast/core/error.h"
 #include "heightcast/grid/grid_file.h"
 #include "heightcast/influence/influence.h"
 #include "heightcast/influence/surface.h"

@@ -14,7 +14,7 @@
 #include <gdal_utils.h>
 #include <ogr_spatialref.h>
 
-#include "heightcast/grid/error.h"
+#include "heightcast/core/error.h"
 #include "heightcast/grid/grid_file.h"
 #include "heightcast/ingest/build.h"
 #include "heightcast/ingest/ingest.h"

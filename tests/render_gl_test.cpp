@@ -17,10 +17,10 @@
 #include <random>
 #include <tuple>
 
-#include "heightcast/grid/error.h"
+#include "heightcast/core/error.h"
 #include "heightcast/influence/influence.h"
 #include "heightcast/influence/surface.h"
-#include "heightcast/render/gl_renderer.h"
+#include "heightcast/render/gl/gl_renderer.h"
 #include "heightcast/render/gpu_layout.h"
 #include "heightcast/render/image_io.h"
 #include "heightcast/render/renderer.h"
@@ -574,14 +574,6 @@ TEST(RenderGl, BadCameraAndOptionsAreRefused) {
     RenderOptions o;
     o.cascades = 9;
     EXPECT_THROW(w.gl->render(overviewCamera(*w.scene, 32, 32), o, t), hc::Error);
-}
-
-TEST(RenderGl, BackendNames) {
-    EXPECT_EQ(parseBackend("gl"), Backend::Gl);
-    EXPECT_EQ(parseBackend("cpu"), Backend::Cpu);
-    EXPECT_EQ(parseBackend("auto"), Backend::Auto);
-    EXPECT_STREQ(backendName(Backend::Gl), "gl");
-    EXPECT_THROW(parseBackend("vulkan"), hc::Error);
 }
 
 // ---------------------------------------------------------------------------------------------------------

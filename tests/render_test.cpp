@@ -16,7 +16,7 @@
 #include <ImfHeader.h>
 #include <ImfInputFile.h>
 
-#include "heightcast/grid/error.h"
+#include "heightcast/core/error.h"
 #include "heightcast/influence/surface.h"
 #include "heightcast/ingest/build.h"
 #include "heightcast/ingest/ingest.h"

@@ -6,7 +6,7 @@
 #include <filesystem>
 #include <fstream>
 
-#include "heightcast/grid/error.h"
+#include "heightcast/core/error.h"
 #include "view_support.h"
 
 using namespace hc::view;

@@ -8,8 +8,8 @@
 #include <ImfStringAttribute.h>
 
 #include "heightcast/export/export.h"
-#include "heightcast/grid/atomic_file.h"
-#include "heightcast/grid/error.h"
+#include "heightcast/core/atomic_file.h"
+#include "heightcast/core/error.h"
 
 namespace hc::exporting {
 

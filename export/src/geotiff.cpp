@@ -6,8 +6,8 @@
 #include <ogr_spatialref.h>
 
 #include "heightcast/export/export.h"
-#include "heightcast/grid/atomic_file.h"
-#include "heightcast/grid/error.h"
+#include "heightcast/core/atomic_file.h"
+#include "heightcast/core/error.h"
 
 namespace hc::exporting {
 

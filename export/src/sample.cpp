@@ -2,9 +2,9 @@
 #include <limits>
 
 #include "heightcast/export/export.h"
-#include "heightcast/grid/error.h"
-#include "heightcast/grid/parallel.h"
-#include "heightcast/grid/progress.h"
+#include "heightcast/core/error.h"
+#include "heightcast/core/parallel.h"
+#include "heightcast/core/progress.h"
 
 namespace hc::exporting {
 

@@ -3,10 +3,13 @@
 #include <openvdb/openvdb.h>
 
 #include "heightcast/export/export.h"
-#include "heightcast/grid/atomic_file.h"
-#include "heightcast/grid/error.h"
+#include "heightcast/core/atomic_file.h"
+#include "heightcast/core/error.h"
 
 namespace hc::exporting {
+
+bool vdbAvailable() { return true; }
+
 namespace {
 
 constexpr int kHalfWidthVoxels = 3;

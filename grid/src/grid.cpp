@@ -5,7 +5,7 @@
 #include <cmath>
 #include <sstream>
 
-#include "heightcast/grid/checksum.h"
+#include "heightcast/core/checksum.h"
 
 namespace hc {
 

@@ -8,10 +8,10 @@
 #include <sstream>
 #include <vector>
 
-#include "heightcast/grid/sectioned_file.h"
-#include "heightcast/grid/checksum.h"
-#include "heightcast/grid/bytes.h"
-#include "heightcast/grid/error.h"
+#include "heightcast/core/sectioned_file.h"
+#include "heightcast/core/checksum.h"
+#include "heightcast/core/bytes.h"
+#include "heightcast/core/error.h"
 
 namespace hc {
 namespace {

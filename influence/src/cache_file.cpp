@@ -17,9 +17,9 @@
 #include <cstring>
 #include <filesystem>
 
-#include "heightcast/grid/bytes.h"
-#include "heightcast/grid/error.h"
-#include "heightcast/grid/sectioned_file.h"
+#include "heightcast/core/bytes.h"
+#include "heightcast/core/error.h"
+#include "heightcast/core/sectioned_file.h"
 #include "heightcast/influence/influence.h"
 
 namespace hc::influence {

@@ -8,10 +8,10 @@
 #include <cmath>
 #include <limits>
 
-#include "heightcast/grid/error.h"
-#include "heightcast/grid/parallel.h"
-#include "heightcast/grid/progress.h"
-#include "heightcast/grid/sectioned_file.h"
+#include "heightcast/core/error.h"
+#include "heightcast/core/parallel.h"
+#include "heightcast/core/progress.h"
+#include "heightcast/core/sectioned_file.h"
 
 namespace hc::influence {
 

@@ -6,9 +6,9 @@
 #include <cstdint>
 #include <limits>
 
-#include "heightcast/grid/parallel.h"
+#include "heightcast/core/parallel.h"
 
-#include "heightcast/grid/error.h"
+#include "heightcast/core/error.h"
 
 namespace hc::influence {
 

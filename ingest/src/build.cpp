@@ -17,9 +17,9 @@
 
 #include "heightcast/grid/grid_file.h"
 
-#include "heightcast/grid/error.h"
-#include "heightcast/grid/parallel.h"
-#include "heightcast/grid/progress.h"
+#include "heightcast/core/error.h"
+#include "heightcast/core/parallel.h"
+#include "heightcast/core/progress.h"
 
 namespace hc::ingest {
 namespace {

@@ -7,7 +7,7 @@
 
 #include <cpl_error.h>
 
-#include "heightcast/grid/error.h"
+#include "heightcast/core/error.h"
 
 namespace hc::ingest::detail {
 

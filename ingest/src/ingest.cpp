@@ -4,9 +4,9 @@
 #include <cmath>
 #include <cstdio>
 
-#include "heightcast/grid/error.h"
+#include "heightcast/core/error.h"
 #include "heightcast/ingest/build.h"
-#include "heightcast/grid/parallel.h"
+#include "heightcast/core/parallel.h"
 #include "resample.h"
 
 namespace hc::ingest {

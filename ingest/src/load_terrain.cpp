@@ -15,8 +15,8 @@
 #include <gdal_utils.h>
 
 #include "gdal_util.h"
-#include "heightcast/grid/error.h"
-#include "heightcast/grid/progress.h"
+#include "heightcast/core/error.h"
+#include "heightcast/core/progress.h"
 #include "heightcast/ingest/ingest.h"
 #include "resample.h"
 

@@ -4,8 +4,8 @@
 #include <limits>
 
 #include "gdal_util.h"
-#include "heightcast/grid/error.h"
-#include "heightcast/grid/progress.h"
+#include "heightcast/core/error.h"
+#include "heightcast/core/progress.h"
 #include "heightcast/ingest/ingest.h"
 #include "resample.h"
 

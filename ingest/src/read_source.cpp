@@ -6,8 +6,8 @@
 #include <limits>
 
 #include "gdal_util.h"
-#include "heightcast/grid/error.h"
-#include "heightcast/grid/progress.h"
+#include "heightcast/core/error.h"
+#include "heightcast/core/progress.h"
 #include "resample.h"
 
 namespace hc::ingest::detail {

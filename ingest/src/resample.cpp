@@ -4,7 +4,7 @@
 #include <cmath>
 #include <limits>
 
-#include "heightcast/grid/parallel.h"
+#include "heightcast/core/parallel.h"
 
 namespace hc::ingest::detail {
 namespace {

@@ -10,7 +10,7 @@
 #include <cstring>
 #include <limits>
 
-#include "heightcast/grid/parallel.h"
+#include "heightcast/core/parallel.h"
 #include "heightcast/influence/surface.h"
 #include "textures.h"
 
@@ -18,7 +18,7 @@ namespace hc::render::detail {
 namespace {
 
 constexpr int kLanes = 8;  // candidates per vector step (AVX2: 8 floats)
-static_assert(influence::kWetShareMin == 0.5, "render/shaders/approximate.comp writes the wet share rule as denW >= 0.5 * den");
+static_assert(influence::kWetShareMin == 0.5, "render/gl/shaders/approximate.comp writes the wet share rule as denW >= 0.5 * den");
 
 // exp(x) for x <= 0 in float: 2^(x log2 e) split into an integer power (exponent bits) and 2^f,
 // f in [-0.5, 0.5], by its Taylor polynomial to degree 6 (relative error < 2e-7, float's epsilon).

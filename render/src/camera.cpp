@@ -1,6 +1,6 @@
 #include <cmath>
 
-#include "heightcast/grid/error.h"
+#include "heightcast/core/error.h"
 #include "heightcast/render/camera.h"
 
 namespace hc::render {

@@ -8,8 +8,8 @@
 #include <limits>
 #include <optional>
 
-#include "heightcast/grid/error.h"
-#include "heightcast/grid/parallel.h"
+#include "heightcast/core/error.h"
+#include "heightcast/core/parallel.h"
 #include "heightcast/render/gpu_layout.h"
 #include "textures.h"
 

@@ -9,7 +9,7 @@
 #      - every other new file is a temporary named OUTPUT.tmp.XXXXXX: never an output's name or extension,
 #        so neither a later run nor a glob (*.png) takes it for output;
 #   3. runs it once more to completion: every output valid, and no temporary left (a writer removes the
-#      temporaries that killed runs left for its target: grid/src/atomic_file.cpp).
+#      temporaries that killed runs left for its target: core/src/atomic_file.cpp).
 # Timing decides only where the kills land, never the verdict: a kill before, during or after the write must
 # pass the same checks, so a loaded machine cannot fail it. The summary counts where the kills landed (a
 # temporary left = mid-write), so a run whose kills all missed the writes says so.
@@ -58,7 +58,8 @@ check() {
   esac
 }
 
-for t in "$HC_INGEST" "$HC_INFO" "$HC_INFLUENCE" "$HC_PROBE" "$HC_RENDER" "$HC_EXPORT" "$HC_FILE_CHECK"; do
+# HC_FILE_CHECK (hc_vdb_check) is empty in a build without OpenVDB, where export_vdb is not run.
+for t in "$HC_INGEST" "$HC_INFO" "$HC_INFLUENCE" "$HC_PROBE" "$HC_RENDER" "$HC_EXPORT" ${HC_FILE_CHECK:+"$HC_FILE_CHECK"}; do
   [ -x "$t" ] || fail "$t is not an executable"
 done
 cd "$work" || exit 1

@@ -20,7 +20,7 @@
 #include <string>
 #include <vector>
 
-#include "heightcast/grid/checksum.h"
+#include "heightcast/core/checksum.h"
 #include "heightcast/grid/morton.h"
 
 namespace hc {

@@ -4,7 +4,7 @@
 // Written in the common subset of C++ and GLSL 4.30: scalar members (float, int, uint, double) and
 // fixed-size scalar arrays only, so the std430 layout the shaders see equals the C layout (std430
 // aligns scalars and scalar arrays to their own size, structs to their largest member; no vec3
-// padding traps). The build prepends this file to every render/shaders/*.comp (after #version);
+// padding traps). The build prepends this file to every render/gl/shaders/*.comp (after #version);
 // tests/render_gl_test.cpp compares the driver's offsets, strides and sizes with offsetof/sizeof.
 //
 // Frames: "local" is metres from the grid origin (as everywhere in render/); "eye-relative" is local

@@ -1,0 +1,59 @@
+// heightcast/core/atomic_file.h: write a file so that it appears whole or not at all.
+//
+// Bytes go to a temporary file beside the target; commit() flushes, fsyncs and renames it over
+// the target. If the writer is destroyed without commit() (an exception, a failed check), the
+// temporary file is removed: no half-written file ever exists under the real name. A temporary is named
+// TARGET.tmp.XXXXXX; one left by a killed run (kill -9) is removed by the next write of the same target.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <span>
+#include <string>
+
+namespace hc {
+
+class AtomicFileWriter {
+public:
+    explicit AtomicFileWriter(std::string path);  // throws hc::Error if the temporary cannot be created
+    ~AtomicFileWriter();
+    AtomicFileWriter(const AtomicFileWriter&) = delete;
+    AtomicFileWriter& operator=(const AtomicFileWriter&) = delete;
+
+    void write(std::span<const std::byte> bytes);          // at position(), which then advances
+    void writeAt(uint64_t offset, std::span<const std::byte> bytes);  // anywhere; position() unchanged
+    void writeZeros(size_t count);
+    uint64_t position() const { return position_; }
+    void commit();  // throws hc::Error on any I/O failure; the target is then untouched
+
+    const std::string& path() const { return path_; }
+
+private:
+    void fail(const std::string& what);
+    std::string path_;
+    std::string tempPath_;
+    int fd_ = -1;
+    uint64_t position_ = 0;
+    bool committed_ = false;
+};
+
+// For libraries that insist on writing a file by name (GDAL, OpenEXR, OpenVDB): a unique temporary
+// path beside the target (TARGET.tmp.XXXXXX, created empty: the library must truncate it, not replace it), renamed
+// over the target by commit() and removed by the destructor otherwise.
+class AtomicPath {
+public:
+    explicit AtomicPath(std::string path);  // throws hc::Error if the directory is not writable
+    ~AtomicPath();
+    AtomicPath(const AtomicPath&) = delete;
+    AtomicPath& operator=(const AtomicPath&) = delete;
+    const std::string& temp() const { return temp_; }
+    const std::string& path() const { return path_; }
+    void commit();  // throws hc::Error; the temporary must have been written and closed
+
+private:
+    std::string path_, temp_;
+    int lockFd_ = -1;  // holds the temporary's flock (see atomic_file.cpp)
+    bool committed_ = false;
+};
+
+}  // namespace hc

@@ -1,0 +1,34 @@
+// heightcast/core/checksum.h: CRC-32 for integrity, a 64-bit hash for identity.
+//
+// CRC-32 (IEEE 802.3 polynomial, as zlib and PNG) guards every section of our files: it catches
+// every burst error of up to 32 bits, so every single flipped byte is detected.
+// Hash64 identifies content (cache keys); it is fast and well mixed but not cryptographic.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <span>
+
+namespace hc {
+
+// CRC-32 of `bytes`, continuing from `crc` (pass 0 to start).
+uint32_t crc32(std::span<const std::byte> bytes, uint32_t crc = 0);
+
+// Streaming 64-bit hash: the same bytes give the same value however they are split into update()s.
+class Hash64 {
+public:
+    explicit Hash64(uint64_t seed = 0x6863677269640001ull) : state_(seed) {}
+    void update(std::span<const std::byte> bytes);
+    template <typename T>
+    void updateValue(const T& v) { update(std::as_bytes(std::span<const T>(&v, 1))); }
+    uint64_t digest() const;
+
+private:
+    void mixWord(uint64_t w);
+    uint64_t state_;
+    uint64_t length_ = 0;
+    uint64_t pending_ = 0;  // up to 7 bytes not yet mixed
+    int pendingBytes_ = 0;
+};
+
+}  // namespace hc

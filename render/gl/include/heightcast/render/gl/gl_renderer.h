@@ -1,0 +1,74 @@
+// heightcast/render/gl/gl_renderer.h: the OpenGL 4.3 compute backend (DESIGN.md sections 5 and 9).
+//
+// The same stages as the CPU backend (renderer.h): cascade fitting (on the CPU, shared code), then
+// approximation into the cascade textures (visible texels only), max mipmaps, ray casting with exact
+// ray/bilinear-patch intersection and cascade blending, and shading, as compute shaders. It fills the
+// same Frame and Timings as renderFrame(); GPU stage times come from GL timer queries.
+//
+// No GL type appears here: the GL state lives behind the pimpl in render/gl/src/. A build without OpenGL
+// (-DHC_WITH_GL=OFF) has this API too, from src/unavailable.cpp: headlessGlUnavailable() says the backend was
+// built out, and making a renderer throws hc::Error saying so; no GL, EGL or GLFW library is linked.
+#pragma once
+
+#include <cstdint>
+#include <memory>
+#include <string>
+
+#include "heightcast/render/renderer.h"
+
+namespace hc::render {
+
+// Why no headless OpenGL 4.3 context can be had on this machine, or "" when one can (it makes one and
+// drops it again): lets a tool refuse --backend gl before loading a scene. Where one can, *device gets
+// its renderer and version (as GlRenderer::deviceName()).
+std::string headlessGlUnavailable(std::string* device = nullptr);
+// Whether this build has the GL backend (CMake option HC_WITH_GL).
+bool glBackendBuilt();
+// Whether a GL_RENDERER string names a software rasteriser (Mesa's llvmpipe, softpipe, swrast).
+bool isSoftwareRenderer(const std::string& device);
+
+class GlRenderer {
+public:
+    // Uses the GL context current on the calling thread (a GLFW window's, say). Throws hc::Error when
+    // there is none or it lacks OpenGL 4.3 compute shaders. The scene must outlive the renderer.
+    static std::unique_ptr<GlRenderer> inCurrentContext(const Scene& scene);
+    // Creates and owns a headless context (EGL: a GPU device, else Mesa's surfaceless platform; no display
+    // needed). Throws hc::Error saying why when no OpenGL 4.3 core context can be had.
+    static std::unique_ptr<GlRenderer> headless(const Scene& scene);
+    ~GlRenderer();
+
+    // One frame, read back into `frame` (the same content and layout as renderFrame()).
+    // Throws hc::Error for bad camera/options, shader or driver failures (with the driver's log).
+    Frame render(const Camera& camera, const RenderOptions& options, Timings& timings);
+    // One frame left on the GPU: returns the name of an RGBA8 texture of camera.width x camera.height
+    // (row 0 at the bottom, GL's convention) holding the shaded image, for a viewer to draw. Valid until
+    // the next call.
+    unsigned renderToTexture(const Camera& camera, const RenderOptions& options, Timings& timings);
+    // "llvmpipe (LLVM 15.0.6, 256 bits), OpenGL 4.5 (Core Profile) Mesa 22.3.6", say.
+    std::string deviceName() const;
+
+    // ---- test hooks (tests/render_gl_test.cpp); they use this renderer's context ----
+    // Splits the influence lists of renderers made after this call into chunks of at most `entries`
+    // entries (0: as large as the driver allows), so that tests exercise the chunked lists on small grids.
+    static void limitIndexChunksForTest(uint64_t entries);
+    // Compiles and links `source` as a compute shader named `name` and deletes it again. Throws
+    // hc::Error with the name and the driver's info log when it fails.
+    void compileForTest(const std::string& name, const std::string& source) const;
+    // The driver's layout of a buffer variable ("cells[0].level") in embedded program `program`
+    // ("approximate", "mipmap", "raycast", "shade"): GL_OFFSET and GL_TOP_LEVEL_ARRAY_STRIDE, -1
+    // where the program has no such variable.
+    struct VariableLayout {
+        long offset = -1, topLevelArrayStride = -1;
+    };
+    VariableLayout bufferVariableLayout(const std::string& program, const std::string& variable) const;
+    // GL_BUFFER_DATA_SIZE of a shader storage block ("FrameBlock"), -1 where absent.
+    long bufferBlockSize(const std::string& program, const std::string& block) const;
+
+    struct Impl;
+
+private:
+    explicit GlRenderer(std::unique_ptr<Impl> impl);
+    std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace hc::render

@@ -1,0 +1,107 @@
+#version 430
+// render/gl/shaders/approximate.comp: the approximation pass of one cascade (DESIGN.md section 5 step
+// 2), mirroring detail::approximate() in render/src/approximate.cpp. One invocation per texel: a
+// visible texel's cell is found by binary search of the sorted Morton keys (Grid::locate), and the
+// Gaussian RBF sum over that cell's influence list is taken relative to the cell's centre and value,
+// as the CPU does, so float keeps its precision however far the texel lies from the grid origin.
+// Texels that are invisible, in a hole or outside the domain get -inf ("no surface").
+layout(local_size_x = HC_GROUP_2D, local_size_y = HC_GROUP_2D) in;
+
+layout(std430, binding = HC_BIND_INDICES) readonly buffer IndexBlock0 { uint indices0[]; };
+layout(std430, binding = HC_BIND_INDICES_1) readonly buffer IndexBlock1 { uint indices1[]; };
+layout(std430, binding = HC_BIND_INDICES_2) readonly buffer IndexBlock2 { uint indices2[]; };
+layout(std430, binding = HC_BIND_INDICES_3) readonly buffer IndexBlock3 { uint indices3[]; };
+layout(std430, binding = HC_BIND_VISIBLE) readonly buffer VisibleBlock { int visibleRows[]; };
+layout(std430, binding = HC_BIND_HEIGHTS) buffer HeightBlock { float heights[]; };
+layout(std430, binding = HC_BIND_COUNTERS) buffer CounterBlock { uint counters[]; };
+
+uniform int uCascade;
+
+// Entry e of the influence lists (InfluenceLists::indices()[e]), from the chunk that holds it.
+// Neighbouring texels share a list, so the branch hardly ever diverges.
+uint listEntry(uint e) {
+    const uint chunk = e >> frame.indexChunkShift, at = e & ((1u << frame.indexChunkShift) - 1u);
+    if (chunk == 0u) return indices0[at];
+    if (chunk == 1u) return indices1[at];
+    if (chunk == 2u) return indices2[at];
+    return indices3[at];
+}
+
+// exp(x) for x <= 0, the same branch-free polynomial as expNeg() in approximate.cpp (so both
+// backends round alike; the driver's exp() is allowed 3 ulp and differs between GPUs).
+float expNeg(float x) {
+    x = max(x, -87.0);
+    const float y = x * 1.44269504088896341;
+    const float n = floor(y + 0.5);
+    const float f = y - n;
+    const float p = 1.0 + f * (0.693147181 + f * (0.240226507 + f * (0.0555041087 + f * (0.00961812911 + f * (0.00133335581 + f * 0.000154035304)))));
+    return p * intBitsToFloat((int(n) + 127) << 23);
+}
+
+void main() {
+    // Fields are read from the buffer one by one (no local copy of the GpuCascade and its arrays).
+    const uint i = gl_GlobalInvocationID.x, j = gl_GlobalInvocationID.y;
+    const uint n = uint(cascades[uCascade].n);
+    if (i >= n || j >= n) return;
+    const uint t = j * n + i;
+    const float noSurface = -kInf;
+    float z = noSurface, water = noSurface, depth = 0.0;
+    const uint row = cascades[uCascade].visibleOffset + 2u * j;
+    const bool isVisible = int(i) >= visibleRows[row] && int(i) <= visibleRows[row + 1u];
+    // The texel centre in double, exactly as c.x0 + i * s in approximate.cpp.
+    const double x = cascades[uCascade].x0 + double(i) * cascades[uCascade].texelM, y = cascades[uCascade].y0 + double(j) * cascades[uCascade].texelM;
+    const int k = isVisible ? locateCell(x, y) : -1;
+    if (k >= 0) {
+        const GpuCell ck = cells[k];
+        const uint b = ck.listBegin, e = cells[k + 1].listBegin;
+        // Centres in half finest units: integers, so the offsets between cells are exact.
+        const int kcx2 = int(2u * ck.ix + (1u << ck.level)), kcy2 = int(2u * ck.iy + (1u << ck.level));
+        const double halfFinest = 0.5 * frame.finestM;
+        const float h = float(halfFinest);
+        const float fx = float(x - double(kcx2) * halfFinest), fy = float(y - double(kcy2) * halfFinest);
+        // The water level field (DESIGN.md section 12, influence/surface.h) from the wet cells only (depth > 0),
+        // relative to a wet cell's level: k's own if k is wet, else the first wet cell of its list (levelBase()).
+        bool anyWet = frame.hasWater != 0 && ck.depth > 0.0;
+        float levelBase = ck.z + ck.depth;
+        for (uint idx = b; idx < e && frame.hasWater != 0 && !anyWet; ++idx) {
+            const GpuCell ci = cells[listEntry(idx)];
+            if (ci.depth > 0.0) {
+                anyWet = true;
+                levelBase = ci.z + ci.depth;
+            }
+        }
+        float num = 0.0, den = 0.0, numL = 0.0, denW = 0.0;
+        for (uint idx = b; idx < e; ++idx) {
+            const GpuCell ci = cells[listEntry(idx)];
+            const float ex = float(int(2u * ci.ix + (1u << ci.level)) - kcx2) * h;
+            const float ey = float(int(2u * ci.iy + (1u << ci.level)) - kcy2) * h;
+            const float dx = fx - ex, dy = fy - ey;
+            const float d2 = dx * dx + dy * dy;
+            const float w = d2 < ci.r2 ? max(expNeg(-d2 * ci.a) - frame.tail, 0.0) : 0.0;
+            num += w * (ci.z - ck.z);
+            den += w;
+            if (ci.depth > 0.0) {
+                numL += w * ((ci.z + ci.depth) - levelBase);
+                denW += w;
+            }
+        }
+        // den >= the cell's own weight at its farthest point (kernel.h): never zero here.
+        const double zd = double(ck.z) + double(num / den);
+        z = float(zd);
+        // Water where the wet cells hold at least half the weight (kWetShareMin) and their level is above the
+        // terrain: the depth texture holds level - terrain, the water heightfield the level where that depth
+        // exceeds the minimum drawn (approximate.cpp).
+        if (anyWet && denW > 0.0 && denW >= 0.5 * den) {
+            const double level = double(levelBase) + double(numL / denW);
+            const float d = float(level - zd);
+            if (d > 0.0) depth = d;
+            if (d > frame.minDepthM) water = float(level);
+        }
+        atomicAdd(counters[uint(uCascade) * uint(kCounterSlots) + (gl_WorkGroupID.x + 7u * gl_WorkGroupID.y) % uint(kCounterSlots)], e - b);
+    }
+    heights[cascades[uCascade].terrainOffset + t] = z;
+    if (frame.hasWater != 0) {
+        heights[cascades[uCascade].waterOffset + t] = water;
+        heights[cascades[uCascade].depthOffset + t] = depth;
+    }
+}

@@ -1,0 +1,565 @@
+// The OpenGL 4.3 compute backend (DESIGN.md sections 5 and 9): GlRenderer.
+//
+// Per frame: cascade fitting on the CPU (fitCascades, shared with renderFrame()), then four compute
+// stages, each mirroring a CPU function: approximate.comp (detail::approximate), mipmap.comp
+// (Heightfield::buildMip), raycast.comp (detail::castRay) and shade.comp (renderFrame's shading and
+// drawLegend). The scene (cells, sorted Morton keys, influence lists) is uploaded once; per frame only
+// the FrameBlock (gpu_layout.h) and the cascades' visible row spans go up. GPU stage times come from
+// GL_TIMESTAMP queries between the dispatches.
+#include <algorithm>
+#include <array>
+#include <bit>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <limits>
+
+#include "textures.h"
+#include "context.h"
+#include "gl.h"
+#include "program.h"
+#include "heightcast/core/error.h"
+#include "heightcast/core/parallel.h"
+#include "heightcast/render/gl/gl_renderer.h"
+#include "heightcast/render/gpu_layout.h"
+
+namespace hc::render {
+
+bool glBackendBuilt() { return true; }
+
+std::string headlessGlUnavailable(std::string* device) {
+    try {
+        const auto context = gl::HeadlessContext::create();
+        if (device) *device = gl::currentDeviceName();
+        return "";
+    } catch (const Error& e) {
+        return e.what();
+    }
+}
+
+bool isSoftwareRenderer(const std::string& device) {
+    for (const char* name : {"llvmpipe", "softpipe", "swrast", "Software Rasterizer"})
+        if (device.find(name) != std::string::npos) return true;
+    return false;
+}
+
+namespace {
+
+// GlRenderer::limitIndexChunksForTest: the most entries one chunk of the lists may hold.
+uint64_t gIndexChunkLimitForTest = uint64_t{1} << 31;
+
+using Clock = std::chrono::steady_clock;
+double msSince(Clock::time_point t) { return std::chrono::duration<double, std::milli>(Clock::now() - t).count(); }
+
+// A buffer that grows (never shrinks) to the size a frame needs.
+struct Buffer {
+    GLuint name = 0;
+    size_t bytes = 0;
+    void reserve(size_t need) {
+        if (name && bytes >= need) return;
+        if (!name) glGenBuffers(1, &name);
+        glBindBuffer(GL_SHADER_STORAGE_BUFFER, name);
+        glBufferData(GL_SHADER_STORAGE_BUFFER, GLsizeiptr(std::max<size_t>(need, 16)), nullptr, GL_DYNAMIC_DRAW);
+        bytes = std::max<size_t>(need, 16);
+    }
+    void upload(const void* data, size_t size, size_t offset = 0) const {
+        glBindBuffer(GL_SHADER_STORAGE_BUFFER, name);
+        glBufferSubData(GL_SHADER_STORAGE_BUFFER, GLintptr(offset), GLsizeiptr(size), data);
+    }
+    void bind(GLuint binding) const { glBindBufferBase(GL_SHADER_STORAGE_BUFFER, binding, name); }
+    void release() {
+        if (name) glDeleteBuffers(1, &name);
+        name = 0;
+        bytes = 0;
+    }
+};
+
+void copyFloats(float* dst, const std::array<double, 3>& v) {
+    for (size_t i = 0; i < 3; ++i) dst[i] = float(v[i]);
+}
+
+}  // namespace
+
+struct GlRenderer::Impl {
+    const Scene& scene;
+    std::unique_ptr<gl::HeadlessContext> headless;  // null when rendering into the caller's context
+    GLuint approximate = 0, mipmap = 0, raycast = 0, shade = 0;
+    Buffer frameBuf, cellsBuf, keysBuf, visibleBuf, heightsBuf, pixelsBuf, countersBuf;
+    std::array<Buffer, gpu::kIndexChunks> indexBufs;  // the lists' entries, in chunks of 2^indexChunkShift
+    uint32_t indexChunkShift = 31;
+    GLuint colorTex = 0;
+    int texWidth = 0, texHeight = 0;
+    static constexpr int kStamps = 4 + gpu::kMaxCascades + 1;
+    std::array<GLuint, kStamps> stamps{};
+    // Software OpenGL (llvmpipe) stamps its timer queries when it flushes, not when the dispatches before them
+    // end, which misattributed the stages (in a GLX window: approximation and shading 0 ms). There each stamp
+    // waits for the work before it (glFinish: llvmpipe runs dispatches on the CPU anyway) and reads the clock.
+    bool software = false;
+    std::array<double, kStamps> cpuStamps{};
+    GLint64 maxStorageBlock = 0;
+    std::string device;
+    detail::FrameSetup setup;  // of the last frame, for readback
+
+    Impl(const Scene& s, std::unique_ptr<gl::HeadlessContext> context) : scene(s), headless(std::move(context)) {
+        gl::requireGl43("the GL backend");
+        device = gl::currentDeviceName();
+        software = isSoftwareRenderer(device);
+        glGetInteger64v(GL_MAX_SHADER_STORAGE_BLOCK_SIZE, &maxStorageBlock);
+        if (maxStorageBlock <= 0) maxStorageBlock = GLint64{1} << 24;  // OpenGL 4.3's minimum
+        glGenQueries(kStamps, stamps.data());
+        try {
+            approximate = gl::compileEmbedded("approximate");
+            mipmap = gl::compileEmbedded("mipmap");
+            raycast = gl::compileEmbedded("raycast");
+            shade = gl::compileEmbedded("shade");
+            uploadScene();
+        } catch (...) {
+            release();  // a caller's context outlives this failed renderer: leave nothing in it
+            throw;
+        }
+    }
+
+    ~Impl() {
+        if (headless) headless->makeCurrent();
+        release();
+    }
+
+    void release() {
+        for (GLuint p : {approximate, mipmap, raycast, shade})
+            if (p) glDeleteProgram(p);
+        approximate = mipmap = raycast = shade = 0;
+        for (Buffer* b : {&frameBuf, &cellsBuf, &keysBuf, &visibleBuf, &heightsBuf, &pixelsBuf, &countersBuf}) b->release();
+        for (Buffer& b : indexBufs) b.release();
+        if (colorTex) glDeleteTextures(1, &colorTex);
+        colorTex = 0;
+        if (stamps[0]) glDeleteQueries(kStamps, stamps.data());
+        stamps = {};
+    }
+
+    void checkBlock(size_t bytes, const char* what) const {
+        if (maxStorageBlock > 0 && bytes > size_t(maxStorageBlock))
+            throw Error(std::string("the GL backend needs ") + std::to_string(bytes >> 20) + " MiB for " + what +
+                        " in one storage buffer; this driver allows " + std::to_string(maxStorageBlock >> 20) + " MiB" +
+                        (std::strcmp(what, "the cascade textures") == 0 ? " (use fewer --texels or --cascades)" : ""));
+    }
+
+    // Cells (plus a sentinel), their sorted Morton keys and the influence lists: once per renderer.
+    void uploadScene() {
+        const Grid& g = scene.grid();
+        const auto& lists = scene.lists();
+        const size_t count = g.cellCount();
+        if (lists.entryCount() >= (uint64_t{1} << 32) || count >= (uint64_t{1} << 31))
+            throw Error("the GL backend addresses influence lists with 32-bit indices: this grid has " + std::to_string(lists.entryCount()) +
+                        " entries");
+        std::vector<gpu::GpuCell> cells(count + 1);
+        std::vector<uint32_t> keys(2 * count);
+        const int water = scene.waterLayer();
+        const auto offsets = lists.offsets();
+        for (size_t k = 0; k < count; ++k) {
+            gpu::GpuCell& c = cells[k];
+            const uint64_t code = g.codes[k];
+            c.ix = Grid::keyX(code);
+            c.iy = Grid::keyY(code);
+            c.level = uint32_t(codeLevel(code));
+            c.listBegin = uint32_t(offsets[k]);
+            c.a = scene.kernels()[k].a;
+            c.r2 = scene.kernels()[k].r2;
+            c.z = g.values[0][k];
+            c.depth = water >= 0 ? g.values[size_t(water)][k] : 0.0f;
+            const uint64_t key = codeKey(code);
+            keys[2 * k] = uint32_t(key);
+            keys[2 * k + 1] = uint32_t(key >> 32);
+        }
+        cells[count] = gpu::GpuCell{};
+        cells[count].listBegin = uint32_t(offsets[count]);
+        const size_t cellBytes = cells.size() * sizeof(gpu::GpuCell), keyBytes = keys.size() * 4;
+        checkBlock(cellBytes, "the cells");
+        cellsBuf.reserve(cellBytes);
+        cellsBuf.upload(cells.data(), cellBytes);
+        keysBuf.reserve(keyBytes);
+        keysBuf.upload(keys.data(), keyBytes);
+        // The entries in chunks of a power of two that one storage buffer can hold.
+        const auto entries = lists.indices();
+        uint64_t chunkEntries = uint64_t{1} << 31;
+        while (chunkEntries > 1 && (chunkEntries * 4 > uint64_t(maxStorageBlock) || chunkEntries > gIndexChunkLimitForTest)) chunkEntries >>= 1;
+        indexChunkShift = uint32_t(std::countr_zero(chunkEntries));
+        const uint64_t chunks = (entries.size() + chunkEntries - 1) / chunkEntries;
+        if (chunks > uint64_t(gpu::kIndexChunks))
+            throw Error("the GL backend needs " + std::to_string(entries.size_bytes() >> 20) + " MiB for the influence lists; this driver allows " +
+                        std::to_string(gpu::kIndexChunks) + " storage buffers of " + std::to_string((chunkEntries * 4) >> 20) + " MiB");
+        for (size_t c = 0; c < size_t(gpu::kIndexChunks); ++c) {
+            const size_t begin = std::min<size_t>(c * chunkEntries, entries.size());
+            const size_t n = std::min<size_t>(entries.size() - begin, chunkEntries);
+            indexBufs[c].reserve(n * 4);  // empty chunks get a small buffer: every binding is valid
+            if (n) indexBufs[c].upload(entries.data() + begin, n * 4);
+        }
+        frameBuf.reserve(sizeof(gpu::FrameBlock));
+        countersBuf.reserve(sizeof(uint32_t) * gpu::kCounterSlots * (gpu::kMaxCascades + 1));
+    }
+
+    // The frame's constants (GpuFrame) for the shaders.
+    void fillFrame(gpu::GpuFrame& f, const CascadeFit& fit, const Camera& camera, const RenderOptions& options) const {
+        const Grid& g = scene.grid();
+        f.eyeX = setup.eye[0], f.eyeY = setup.eye[1];
+        f.finestM = g.finestCellM;
+        f.domainM = g.domainSizeM();
+        f.eyeZ = float(setup.eye[2]);
+        f.tanHalfX = float(setup.basis.tanHalfX), f.tanHalfY = float(setup.basis.tanHalfY);
+        f.nearM = float(setup.nearM), f.farM = float(setup.farM);
+        f.dirX = float(fit.dir[0]), f.dirY = float(fit.dir[1]);
+        f.tail = float(scene.lists().params().tail());
+        copyFloats(f.forward, setup.basis.forward);
+        copyFloats(f.right, setup.basis.right);
+        copyFloats(f.up, setup.basis.up);
+        const double sunAz = gpu::kSunAzimuthDeg * M_PI / 180, sunAlt = gpu::kSunAltitudeDeg * M_PI / 180;
+        copyFloats(f.sun, {std::sin(sunAz) * std::cos(sunAlt), std::cos(sunAz) * std::cos(sunAlt), std::sin(sunAlt)});
+        f.width = camera.width, f.height = camera.height;
+        f.cascades = fit.hull.size() < 3 ? 0 : int(fit.cascades.size());  // no hull: every ray misses (as renderFrame)
+        f.hasWater = scene.hasWater() ? 1 : 0;
+        f.cellCount = uint32_t(g.cellCount());
+        f.rootLevel = uint32_t(g.rootLevel);
+        f.indexChunkShift = indexChunkShift;
+        f.minDepthM = float(options.waterMinDepthM);
+        f.fogDistM = float(gpu::kFogExtents * std::hypot(scene.xMax - scene.xMin, scene.yMax - scene.yMin));
+        f.elevationMin = float(scene.elevationMin);
+        f.zRange = float(std::max(scene.elevationMax - scene.elevationMin, 1e-6));
+        f.dRange = float(std::max(scene.depthMax, 1e-6));
+        f.pixelAngle = float(2.0 * setup.basis.tanHalfY / camera.height);
+        f.colorMode = options.color == ColorMode::WaterDepth ? 1 : 0;
+        f.cellOutlines = options.cellOutlines ? 1 : 0;
+        const detail::LegendLayout legend = detail::legendLayout(scene, options, camera.width, camera.height);
+        if (legend.shown) {
+            f.legendRamp = legend.depth ? 1 : 2;
+            f.legendX0 = legend.x0, f.legendY0 = legend.y0, f.legendBarW = legend.barW, f.legendBarH = legend.barH;
+            f.legendScale = legend.scale;
+            f.labelHiLen = int(std::min<size_t>(legend.hi.size(), gpu::kMaxLabelChars));
+            f.labelLoLen = int(std::min<size_t>(legend.lo.size(), gpu::kMaxLabelChars));
+            for (int i = 0; i < f.labelHiLen; ++i) f.labelHi[i] = gpu::glyphBits(legend.hi[size_t(i)]);
+            for (int i = 0; i < f.labelLoLen; ++i) f.labelLo[i] = gpu::glyphBits(legend.lo[size_t(i)]);
+        }
+        for (int i = 0; i < 5; ++i)
+            for (int c = 0; c < 4; ++c) f.elevationRamp[4 * i + c] = float(gpu::kElevationRamp[i][c]);
+        for (int i = 0; i < 3; ++i)
+            for (int c = 0; c < 4; ++c) f.depthRamp[4 * i + c] = float(gpu::kDepthRamp[i][c]);
+        for (int c = 0; c < 3; ++c) {
+            f.skyHorizon[c] = float(gpu::kSkyHorizon[c]);
+            f.skyZenith[c] = float(gpu::kSkyZenith[c]);
+            f.dryColor[c] = float(gpu::kDryColor[c]);
+            f.wallColor[c] = float(gpu::kWallColor[c]);
+        }
+        f.zFloor = float(scene.elevationMin);
+
+    }
+
+    // Each cascade's places in the heights and visibility buffers (GpuCascade), and its statistics.
+    // Returns the floats the heights buffer needs; adds the visible row spans' ints to visibleWords.
+    size_t layOutCascades(gpu::FrameBlock& block, const CascadeFit& fit, Timings& timings, size_t& visibleWords) const {
+        const bool water = scene.hasWater();
+        size_t heightFloats = 0;
+        for (size_t k = 0; k < fit.cascades.size(); ++k) {
+            const Cascade& c = fit.cascades[k];
+            gpu::GpuCascade& gc = block.cascades[k];
+            CascadeStats cs;
+            cs.nearM = c.splitNear;
+            cs.farM = c.farWithOverlap;
+            cs.splitFarM = c.splitFar;
+            cs.texelM = c.texelM;
+            cs.visibleTexels = c.visibleTexels();
+            timings.cascades.push_back(cs);
+            gc.splitNear = float(c.splitNear), gc.splitFar = float(c.splitFar), gc.farWithOverlap = float(c.farWithOverlap);
+            if (c.empty()) continue;  // n = 0: the shaders skip it
+            const size_t n = size_t(c.n), texels = n * n;
+            gc.x0 = c.x0, gc.y0 = c.y0, gc.texelM = c.texelM;
+            gc.x0Eye = float(c.x0 - setup.eye[0]), gc.y0Eye = float(c.y0 - setup.eye[1]);
+            gc.texelF = float(c.texelM);
+            gc.n = c.n;
+            gc.terrainOffset = uint32_t(heightFloats), heightFloats += texels;
+            if (water) {
+                gc.waterOffset = uint32_t(heightFloats), heightFloats += texels;
+                gc.depthOffset = uint32_t(heightFloats), heightFloats += texels;
+            }
+            int side = c.n - 1, levels = 0;
+            for (;;) {
+                if (levels >= gpu::kMaxMipLevels) throw Error("the GL backend's max mipmap has more than 16 levels");
+                gc.mipSide[levels] = side;
+                gc.terrainMip[levels] = uint32_t(heightFloats), heightFloats += size_t(side) * size_t(side);
+                if (water) gc.waterMip[levels] = uint32_t(heightFloats), heightFloats += size_t(side) * size_t(side);
+                ++levels;
+                if (side <= 1) break;
+                side = (side + 1) / 2;
+            }
+            gc.levels = levels;
+            gc.visibleOffset = uint32_t(visibleWords);
+            visibleWords += 2 * n;  // a span per row
+        }
+        return heightFloats;
+    }
+
+    // Marks the end of the work submitted so far: a GPU timer query, or on software OpenGL the clock after glFinish.
+    void timeStamp(int i, Clock::time_point start) {
+        if (!software) {
+            glQueryCounter(stamps[size_t(i)], GL_TIMESTAMP);
+            return;
+        }
+        glFinish();
+        cpuStamps[size_t(i)] = msSince(start);
+    }
+
+    // Runs every stage of one frame; leaves the picture in colorTex and the rays in pixelsBuf.
+    CascadeFit runFrame(const Camera& camera, const RenderOptions& options, Timings& timings) {
+        camera.validate();
+        if (std::string why = options.validate(); !why.empty()) throw Error(why);
+        if (headless) headless->makeCurrent();
+        const auto start = Clock::now();
+        timings = Timings{};
+        setup = detail::setUpFrame(scene, camera);
+
+        // 1. Cascade fitting (CPU). A camera inside the terrain sees nothing: no cascade (as renderFrame()).
+        auto t = Clock::now();
+        const CascadeFit fit = cameraBelowTerrainM(scene, camera) > 0 ? CascadeFit{} : fitCascades(setup.view, options.cascades, options.texelsPerSide);
+        timings.fittingMs = msSince(t);
+        timings.viewDirX = fit.dir[0];
+        timings.viewDirY = fit.dir[1];
+
+        // The frame's constants and the cascades' places in the heights and visibility buffers.
+        gpu::FrameBlock block{};
+        fillFrame(block.frame, fit, camera, options);
+        size_t visibleWords = 0;
+        const size_t heightFloats = layOutCascades(block, fit, timings, visibleWords);
+        const int W = camera.width, H = camera.height;
+        const bool water = scene.hasWater();
+        checkBlock(heightFloats * 4, "the cascade textures");
+        heightsBuf.reserve(heightFloats * 4);
+        checkBlock(visibleWords * 4, "the visible row spans");
+        visibleBuf.reserve(visibleWords * 4);
+        static_assert(sizeof(Cascade::RowSpan) == 2 * sizeof(int32_t), "approximate.comp reads a row span as two ints");
+        for (size_t k = 0; k < fit.cascades.size(); ++k)
+            if (!fit.cascades[k].empty())
+                visibleBuf.upload(fit.cascades[k].rows.data(), fit.cascades[k].rows.size() * sizeof(Cascade::RowSpan),
+                                  size_t(block.cascades[k].visibleOffset) * 4);
+        frameBuf.upload(&block, sizeof block);
+        const size_t pixels = size_t(W) * size_t(H);
+        checkBlock(pixels * sizeof(gpu::GpuPixel), "the pixels");
+        pixelsBuf.reserve(pixels * sizeof(gpu::GpuPixel));
+        std::vector<uint32_t> zeros(countersBuf.bytes / 4, 0);
+        countersBuf.upload(zeros.data(), countersBuf.bytes);
+        if (!colorTex || texWidth != W || texHeight != H) {
+            if (colorTex) glDeleteTextures(1, &colorTex);
+            glGenTextures(1, &colorTex);
+            glBindTexture(GL_TEXTURE_2D, colorTex);
+            glTexStorage2D(GL_TEXTURE_2D, 1, GL_RGBA8, W, H);
+            glTexParameteri(GL_TEXTURE_2D, GL_TEXTURE_MIN_FILTER, GL_LINEAR);
+            glTexParameteri(GL_TEXTURE_2D, GL_TEXTURE_MAG_FILTER, GL_LINEAR);
+            texWidth = W, texHeight = H;
+        }
+        frameBuf.bind(HC_BIND_FRAME);
+        cellsBuf.bind(HC_BIND_CELLS);
+        keysBuf.bind(HC_BIND_KEYS);
+        const GLuint indexBindings[gpu::kIndexChunks] = {HC_BIND_INDICES, HC_BIND_INDICES_1, HC_BIND_INDICES_2, HC_BIND_INDICES_3};
+        for (size_t c = 0; c < size_t(gpu::kIndexChunks); ++c) indexBufs[c].bind(indexBindings[c]);
+        visibleBuf.bind(HC_BIND_VISIBLE);
+        heightsBuf.bind(HC_BIND_HEIGHTS);
+        pixelsBuf.bind(HC_BIND_PIXELS);
+        countersBuf.bind(HC_BIND_COUNTERS);
+        glBindImageTexture(HC_IMAGE_COLOR, colorTex, 0, GL_FALSE, 0, GL_WRITE_ONLY, GL_RGBA8);
+        auto groups = [](int size) { return GLuint((size + HC_GROUP_2D - 1) / HC_GROUP_2D); };
+
+        // 2. Approximation, one dispatch per cascade; 3. max mipmaps, one dispatch per level.
+        int stamp = 0;
+        timeStamp(stamp++, start);
+        glUseProgram(approximate);
+        for (size_t k = 0; k < fit.cascades.size(); ++k) {
+            if (!fit.cascades[k].empty()) {
+                glUniform1i(glGetUniformLocation(approximate, "uCascade"), int(k));
+                glDispatchCompute(groups(fit.cascades[k].n), groups(fit.cascades[k].n), 1);
+            }
+            timeStamp(stamp++, start);
+        }
+        glMemoryBarrier(GL_SHADER_STORAGE_BARRIER_BIT);
+        glUseProgram(mipmap);
+        const GLint uCascade = glGetUniformLocation(mipmap, "uCascade"), uWater = glGetUniformLocation(mipmap, "uWater"),
+                    uLevel = glGetUniformLocation(mipmap, "uLevel");
+        for (size_t k = 0; k < fit.cascades.size(); ++k) {
+            if (fit.cascades[k].empty()) continue;
+            glUniform1i(uCascade, int(k));
+            for (int w = 0; w < (water ? 2 : 1); ++w) {
+                glUniform1i(uWater, w);
+                for (int level = 0; level < block.cascades[k].levels; ++level) {
+                    glUniform1i(uLevel, level);
+                    const int side = block.cascades[k].mipSide[level];
+                    glDispatchCompute(groups(side), groups(side), 1);
+                    glMemoryBarrier(GL_SHADER_STORAGE_BARRIER_BIT);
+                }
+            }
+        }
+        timeStamp(stamp++, start);
+        // 4. Ray casting; 5. shading.
+        glUseProgram(raycast);
+        glDispatchCompute(groups(W), groups(H), 1);
+        glMemoryBarrier(GL_SHADER_STORAGE_BARRIER_BIT);
+        timeStamp(stamp++, start);
+        glUseProgram(shade);
+        glDispatchCompute(groups(W), groups(H), 1);
+        timeStamp(stamp++, start);
+        // The picture is read as a texture (a viewer) or back (render()); the counters and rays back.
+        glMemoryBarrier(GL_ALL_BARRIER_BITS);
+        glUseProgram(0);
+
+        // Timer results (waiting for the GPU), and the counters.
+        std::vector<double> ms(size_t(stamp), 0.0);
+        GLuint64 first = 0;
+        if (!software) glGetQueryObjectui64v(stamps[0], GL_QUERY_RESULT, &first);
+        for (int i = 1; i < stamp; ++i) {
+            if (software) {
+                ms[size_t(i)] = cpuStamps[size_t(i)] - cpuStamps[0];
+                continue;
+            }
+            GLuint64 v = 0;
+            glGetQueryObjectui64v(stamps[size_t(i)], GL_QUERY_RESULT, &v);
+            ms[size_t(i)] = double(v - first) * 1e-6;
+        }
+        const size_t nc = fit.cascades.size();
+        for (size_t k = 0; k < nc; ++k) {
+            timings.cascades[k].approximationMs = ms[k + 1] - ms[k];
+            timings.approximationMs += timings.cascades[k].approximationMs;
+        }
+        timings.mipmapMs = ms[nc + 1] - ms[nc];
+        timings.raycastMs = ms[nc + 2] - ms[nc + 1];
+        timings.shadingMs = ms[nc + 3] - ms[nc + 2];
+        timings.gpuMs = ms[size_t(stamp - 1)];
+        std::vector<uint32_t> counters(countersBuf.bytes / 4);
+        glBindBuffer(GL_SHADER_STORAGE_BUFFER, countersBuf.name);
+        glGetBufferSubData(GL_SHADER_STORAGE_BUFFER, 0, GLsizeiptr(countersBuf.bytes), counters.data());
+        for (size_t k = 0; k < nc; ++k)
+            for (int s = 0; s < gpu::kCounterSlots; ++s) timings.cascades[k].gaussians += counters[k * gpu::kCounterSlots + size_t(s)];
+        for (int s = 0; s < gpu::kCounterSlots; ++s) timings.hits += counters[size_t(gpu::kMaxCascades * gpu::kCounterSlots + s)];
+        timings.rays = pixels;
+        if (const GLenum e = glGetError(); e != GL_NO_ERROR) {
+            char b[64];
+            std::snprintf(b, sizeof b, "OpenGL error 0x%04x", unsigned(e));
+            throw Error(std::string("the GL backend failed: ") + b + " on " + device);
+        }
+        timings.totalMs = msSince(start);
+        return fit;
+    }
+
+    GLuint program(const std::string& name) const {
+        if (name == "approximate") return approximate;
+        if (name == "mipmap") return mipmap;
+        if (name == "raycast") return raycast;
+        if (name == "shade") return shade;
+        throw Error("no GL program " + name);
+    }
+
+    Frame readBack(const Camera& camera, Timings& timings) {
+        const auto start = Clock::now();
+        const int W = camera.width, H = camera.height;
+        const size_t pixels = size_t(W) * size_t(H);
+        Frame f;
+        f.width = W;
+        f.height = H;
+        f.originWorldX = scene.grid().originWorldX;
+        f.originWorldY = scene.grid().originWorldY;
+        std::vector<uint8_t> rgba(pixels * 4);
+        glBindTexture(GL_TEXTURE_2D, colorTex);
+        glPixelStorei(GL_PACK_ALIGNMENT, 1);
+        glGetTexImage(GL_TEXTURE_2D, 0, GL_RGBA, GL_UNSIGNED_BYTE, rgba.data());
+        // The rays are read through a mapping (no staging copy in host memory) and spread over the frame's
+        // layers on all cores. On an H100 host (BENCHMARKS.md) the read-back is then texture 11-15 ms, allocating
+        // the layers 36-59 ms (zero pages), mapping 19-39 ms, converting 3-4 ms.
+        for (auto* v : {&f.distanceM, &f.posX, &f.posY, &f.posZ, &f.nX, &f.nY, &f.nZ, &f.waterDepthM, &f.cascade, &f.wall}) v->resize(pixels);
+        f.rgb.resize(pixels * 3);
+        glBindBuffer(GL_SHADER_STORAGE_BUFFER, pixelsBuf.name);
+        const auto* px = static_cast<const gpu::GpuPixel*>(
+            glMapBufferRange(GL_SHADER_STORAGE_BUFFER, 0, GLsizeiptr(pixels * sizeof(gpu::GpuPixel)), GL_MAP_READ_BIT));
+        if (!px) throw Error("the GL backend cannot map its rays for reading on " + device);
+        const float inf = std::numeric_limits<float>::infinity();
+        parallelFor(size_t(H), 16, 0, [&](size_t rowBegin, size_t rowEnd, unsigned) {
+            for (size_t row = rowBegin; row < rowEnd; ++row)
+                for (size_t col = 0; col < size_t(W); ++col) {
+                    const size_t i = row * size_t(W) + col;
+                    const gpu::GpuPixel p = px[i];
+                    const uint8_t* src = &rgba[((size_t(H) - 1 - row) * size_t(W) + col) * 4];  // the texture's row 0 is the bottom
+                    std::memcpy(&f.rgb[i * 3], src, 3);
+                    if (!(p.t < inf)) {
+                        f.distanceM[i] = inf;
+                        f.posX[i] = f.posY[i] = f.posZ[i] = f.nX[i] = f.nY[i] = f.nZ[i] = f.waterDepthM[i] = f.wall[i] = 0.0f;
+                        f.cascade[i] = -1.0f;
+                        continue;
+                    }
+                    f.distanceM[i] = p.t;
+                    // Camera-relative offsets back to the local frame in double.
+                    f.posX[i] = float(setup.eye[0] + double(p.relX));
+                    f.posY[i] = float(setup.eye[1] + double(p.relY));
+                    f.posZ[i] = float(setup.eye[2] + double(p.relZ));
+                    f.nX[i] = p.nx, f.nY[i] = p.ny, f.nZ[i] = p.nz;
+                    f.cascade[i] = float(p.cascade);
+                    f.waterDepthM[i] = p.depth;
+                    f.wall[i] = p.wall ? 1.0f : 0.0f;
+                }
+        });
+        glUnmapBuffer(GL_SHADER_STORAGE_BUFFER);
+        timings.readbackMs = msSince(start);
+        timings.totalMs += timings.readbackMs;
+        return f;
+    }
+};
+
+GlRenderer::GlRenderer(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {}
+GlRenderer::~GlRenderer() = default;
+
+std::unique_ptr<GlRenderer> GlRenderer::inCurrentContext(const Scene& scene) {
+    return std::unique_ptr<GlRenderer>(new GlRenderer(std::make_unique<Impl>(scene, nullptr)));
+}
+
+std::unique_ptr<GlRenderer> GlRenderer::headless(const Scene& scene) {
+    auto context = gl::HeadlessContext::create();
+    return std::unique_ptr<GlRenderer>(new GlRenderer(std::make_unique<Impl>(scene, std::move(context))));
+}
+
+Frame GlRenderer::render(const Camera& camera, const RenderOptions& options, Timings& timings) {
+    impl_->runFrame(camera, options, timings);
+    return impl_->readBack(camera, timings);
+}
+
+unsigned GlRenderer::renderToTexture(const Camera& camera, const RenderOptions& options, Timings& timings) {
+    impl_->runFrame(camera, options, timings);
+    return impl_->colorTex;
+}
+
+std::string GlRenderer::deviceName() const { return impl_->device; }
+
+void GlRenderer::limitIndexChunksForTest(uint64_t entries) { gIndexChunkLimitForTest = entries ? entries : uint64_t{1} << 31; }
+
+void GlRenderer::compileForTest(const std::string& name, const std::string& source) const {
+    if (impl_->headless) impl_->headless->makeCurrent();
+    glDeleteProgram(gl::compileCompute(name, source));
+}
+
+GlRenderer::VariableLayout GlRenderer::bufferVariableLayout(const std::string& program, const std::string& variable) const {
+    if (impl_->headless) impl_->headless->makeCurrent();
+    const GLuint p = impl_->program(program);
+    VariableLayout out;
+    const GLuint index = glGetProgramResourceIndex(p, GL_BUFFER_VARIABLE, variable.c_str());
+    if (index == GL_INVALID_INDEX) return out;
+    const GLenum props[2] = {GL_OFFSET, GL_TOP_LEVEL_ARRAY_STRIDE};
+    GLint values[2] = {-1, -1};
+    glGetProgramResourceiv(p, GL_BUFFER_VARIABLE, index, 2, props, 2, nullptr, values);
+    out.offset = values[0];
+    out.topLevelArrayStride = values[1];
+    return out;
+}
+
+long GlRenderer::bufferBlockSize(const std::string& program, const std::string& block) const {
+    if (impl_->headless) impl_->headless->makeCurrent();
+    const GLuint p = impl_->program(program);
+    const GLuint index = glGetProgramResourceIndex(p, GL_SHADER_STORAGE_BLOCK, block.c_str());
+    if (index == GL_INVALID_INDEX) return -1;
+    const GLenum prop = GL_BUFFER_DATA_SIZE;
+    GLint value = -1;
+    glGetProgramResourceiv(p, GL_SHADER_STORAGE_BLOCK, index, 1, &prop, 1, nullptr, &value);
+    return value;
+}
+
+}  // namespace hc::render

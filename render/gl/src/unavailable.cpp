@@ -1,0 +1,34 @@
+// The GL backend's API in a build without OpenGL (-DHC_WITH_GL=OFF): every way to get a renderer says the
+// backend was built out, so `--backend gl` fails with that reason and `auto` renders on the CPU. Links no GL.
+#include "heightcast/core/error.h"
+#include "heightcast/render/gl/gl_renderer.h"
+
+namespace hc::render {
+namespace {
+const char* const kBuiltOut = "this heightcast was built without the OpenGL backend (-DHC_WITH_GL=OFF; rebuild with "
+                              "-DHC_WITH_GL=ON, Debian packages libegl-dev libgl-dev glslang-tools libglfw3-dev)";
+}
+
+bool glBackendBuilt() { return false; }
+std::string headlessGlUnavailable(std::string*) { return kBuiltOut; }
+bool isSoftwareRenderer(const std::string& device) {
+    for (const char* name : {"llvmpipe", "softpipe", "swrast", "Software Rasterizer"})
+        if (device.find(name) != std::string::npos) return true;
+    return false;
+}
+
+struct GlRenderer::Impl {};
+GlRenderer::GlRenderer(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {}
+GlRenderer::~GlRenderer() = default;
+std::unique_ptr<GlRenderer> GlRenderer::inCurrentContext(const Scene&) { throw Error(kBuiltOut); }
+std::unique_ptr<GlRenderer> GlRenderer::headless(const Scene&) { throw Error(kBuiltOut); }
+// No renderer can exist, so the members below are never reached.
+Frame GlRenderer::render(const Camera&, const RenderOptions&, Timings&) { throw Error(kBuiltOut); }
+unsigned GlRenderer::renderToTexture(const Camera&, const RenderOptions&, Timings&) { throw Error(kBuiltOut); }
+std::string GlRenderer::deviceName() const { return ""; }
+void GlRenderer::limitIndexChunksForTest(uint64_t) {}
+void GlRenderer::compileForTest(const std::string&, const std::string&) const { throw Error(kBuiltOut); }
+GlRenderer::VariableLayout GlRenderer::bufferVariableLayout(const std::string&, const std::string&) const { return {}; }
+long GlRenderer::bufferBlockSize(const std::string&, const std::string&) const { return -1; }
+
+}  // namespace hc::render
