@@ -45,6 +45,7 @@ int main(int argc, char** argv) {
             throw hc::Error(out + ": unknown output format '" + ext + "' (use .tif, .exr or .vdb)");
         if (ext == ".vdb" && p.given("--layer") && layerName != "elevation")
             throw hc::Error("--layer: a .vdb always holds the terrain and, with water, the water surface");
+        if (ext == ".vdb") hc::exporting::checkVdbAvailable(out);
         if (std::string why = params.validate(); !why.empty()) throw hc::Error("--sigma/--truncation: " + why);
         std::optional<hc::exporting::BoxWorld> box;
         if (!bbox.empty()) {

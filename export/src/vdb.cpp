@@ -9,6 +9,7 @@
 namespace hc::exporting {
 
 bool vdbAvailable() { return true; }
+void checkVdbAvailable(const std::string&) {}
 
 namespace {
 

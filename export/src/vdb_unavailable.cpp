@@ -6,9 +6,11 @@ namespace hc::exporting {
 
 bool vdbAvailable() { return false; }
 
-void writeVdb(const SampledRaster&, const SampledRaster*, const std::string& path) {
+void checkVdbAvailable(const std::string& path) {
     throw Error(path + ": this heightcast was built without OpenVDB (-DHC_WITH_VDB=OFF); rebuild with -DHC_WITH_VDB=ON "
                        "(Debian: libopenvdb-dev) to write .vdb, or export .tif or .exr");
 }
+
+void writeVdb(const SampledRaster&, const SampledRaster*, const std::string& path) { checkVdbAvailable(path); }
 
 }  // namespace hc::exporting

@@ -59,9 +59,11 @@ void writeExr(const SampledRaster& raster, const std::string& path);
 // the cosine of the slope. Index space is the grid's local frame (x east, y north, z up; index
 // (i, j, k) at ((i + 0.5) v, (j + 0.5) v, k v) relative to the raster's south-west corner);
 // metadata: heightcast.originX/Y (world position of that corner, double), heightcast.crsWkt.
-// Throws hc::Error naming `path` in a build without OpenVDB (-DHC_WITH_VDB=OFF): see vdbAvailable().
+// Throws hc::Error naming `path` in a build without OpenVDB (-DHC_WITH_VDB=OFF), as checkVdbAvailable().
 void writeVdb(const SampledRaster& terrain, const SampledRaster* water, const std::string& path);
 // Whether this build writes .vdb (CMake option HC_WITH_VDB).
 bool vdbAvailable();
+// Throws hc::Error naming `path` and how to get .vdb when this build has no OpenVDB; lets a tool refuse before any work.
+void checkVdbAvailable(const std::string& path);
 
 }  // namespace hc::exporting
