@@ -48,4 +48,8 @@ endif()
 
 if(HC_BUILD_TESTS)
   find_package(GTest 1.10 REQUIRED)
+  # The CLI tests' driver (tests/cli/expect.sh), and Xvfb for hc-view's window tests (optional: without it they are
+  # left out with a warning).
+  find_program(HC_BASH bash REQUIRED)
+  find_program(HC_XVFB_RUN xvfb-run)
 endif()
