@@ -7,8 +7,8 @@
 // Each scenario then runs in its own forked child (so getrusage's peak RSS is that scenario's alone, and
 // its memory is returned before the next): generate the grid, build the influence lists (sigma 1, R 3.5;
 // timed), and render --repeat frames (default 3) at 1920 x 1080 with three 1024^2 cascades from the scene's
-// fixed oblique camera over the flood (hc::scenes::floodCamera). Stage times are the best over the repeats; Gaussians/s = the cascades' kernel
-// evaluations / approximation time; rays/s = pixels / ray casting time.
+// fixed oblique camera over the flood (hc::scenes::floodCamera). Stage times are the best over the repeats;
+// Gaussians/s = the cascades' kernel evaluations / approximation time; rays/s = pixels / ray casting time.
 // Targets on this 2-core machine: approximation >= 2 G Gaussians/s; ray casting of 1920 x 1080 within 250 ms
 // (>= 8.29 M rays/s at other sizes).
 // Why a program and not a test: the figures depend on the machine; tests never time anything.
