@@ -1,13 +1,13 @@
 // hc-export: the smooth surface sampled on a regular raster -> GeoTIFF, OpenEXR or OpenVDB.
 #include <algorithm>
 #include <cctype>
-#include <chrono>
 #include <cstdio>
 #include <filesystem>
 
 #include "cli.h"
 #include "heightcast/export/export.h"
 #include "heightcast/core/error.h"
+#include "heightcast/core/timer.h"
 #include "heightcast/grid/grid_file.h"
 
 int main(int argc, char** argv) {
@@ -55,7 +55,7 @@ int main(int argc, char** argv) {
         hc::cli::checkWritable(out, "export");
         hc::cli::checkNotSame(out, gridPath, "export");
 
-        auto t0 = std::chrono::steady_clock::now();
+        const hc::Stopwatch clock;
         hc::Grid grid = hc::readGrid(gridPath);
         hc::exporting::planRaster(grid, resolution, box);  // refuse a bad request before any real work
         const auto layer = hc::influence::Layer::byName(grid, ext == ".vdb" ? "elevation" : layerName);
@@ -82,7 +82,7 @@ int main(int argc, char** argv) {
         } else {
             hc::exporting::writeGeoTiff(raster, out);
         }
-        double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+        const double seconds = clock.seconds();
         std::printf("hc-export: %s -> %s\n", gridPath.c_str(), out.c_str());
         std::printf("  raster       %zu x %zu px of %g m, west %.3f north %.3f\n", raster.width, raster.height, raster.pixelSizeM,
                     raster.westWorld, raster.northWorld);

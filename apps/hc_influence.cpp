@@ -1,11 +1,11 @@
 // hc-influence: grid -> influencing-cell lists (.hci cache).
-#include <chrono>
 #include <cstdio>
 
 #include "cli.h"
 #include "heightcast/core/error.h"
 #include "heightcast/grid/grid_file.h"
 #include "heightcast/core/progress.h"
+#include "heightcast/core/timer.h"
 #include "heightcast/influence/influence.h"
 
 int main(int argc, char** argv) {
@@ -31,12 +31,11 @@ int main(int argc, char** argv) {
         hc::cli::checkNotSame(out, gridPath, "influence cache");
 
         hc::Grid grid = hc::readGrid(gridPath);
-        auto t0 = std::chrono::steady_clock::now();
+        hc::Stopwatch clock;
         hc::influence::InfluenceLists lists = hc::influence::buildInfluenceLists(grid, params, threads, !quiet);
-        double buildS = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-        auto t1 = std::chrono::steady_clock::now();
+        const double buildS = clock.lap();
         hc::influence::writeInfluenceCache(lists, out);
-        double writeS = std::chrono::duration<double>(std::chrono::steady_clock::now() - t1).count();
+        const double writeS = clock.seconds();
 
         auto s = lists.stats();
         std::printf("hc-influence: %s -> %s\n", gridPath.c_str(), out.c_str());

@@ -2,12 +2,12 @@
 
 #include <algorithm>
 #include <cmath>
-#include <cstdio>
 #include <filesystem>
 #include <fstream>
-#include <map>
 #include <span>
 #include <sstream>
+
+#include <nlohmann/json.hpp>
 
 #include "heightcast/core/atomic_file.h"
 #include "heightcast/core/error.h"
@@ -22,162 +22,90 @@ std::string bookmarksPath(const std::string& gridPath) {
     return p.string() + ".bookmarks.json";
 }
 
-std::string bookmarksToJson(const Bookmarks& b) {
-    std::string s = "{\n  \"format\": \"heightcast-bookmarks\",\n  \"version\": 1,\n  \"bookmarks\": [";
-    bool first = true;
-    char line[512];
-    for (int slot = 1; slot <= 9; ++slot) {
-        if (!b[slot]) continue;
-        const Bookmark& m = *b[slot];
-        // %.17g: doubles round-trip exactly.
-        std::snprintf(line, sizeof line,
-                      "%s\n    {\"slot\": %d, \"x\": %.17g, \"y\": %.17g, \"z\": %.17g, \"yaw\": %.17g, \"pitch\": %.17g, \"fov\": %.17g}",
-                      first ? "" : ",", slot, m.x, m.y, m.z, m.yawDeg, m.pitchDeg, m.fovYDeg);
-        s += line;
-        first = false;
-    }
-    s += first ? "]\n}\n" : "\n  ]\n}\n";
-    return s;
-}
-
 namespace {
 
-// A minimal strict JSON reader: enough for the bookmarks file (objects, arrays, strings without
-// escapes beyond \" \\ \/, numbers, true/false/null), with byte offsets in its errors.
-struct Value {
-    enum Kind { Null, Bool, Number, String, Array, Object } kind = Null;
-    double number = 0;
-    std::string string;
-    std::vector<Value> items;
-    // An object's keys and values, in file order. Two vectors, not one of pairs: a pair holding the still
-    // incomplete Value does not compile with clang and libstdc++ 12 (the fuzz build, fuzz/).
-    std::vector<std::string> keys;
-    std::vector<Value> values;
-};
+using Json = nlohmann::ordered_json;  // keys in the order written
 
-class JsonReader {
-public:
-    explicit JsonReader(std::string_view t) : t_(t) {}
-    Value document() {
-        Value v = value(0);
-        skip();
-        if (i_ != t_.size()) fail("unexpected text after the JSON value");
-        return v;
-    }
+// The deepest nesting a bookmarks file has is 2 (document, list, bookmark); anything past 8 is not one.
+constexpr int kMaxDepth = 8;
 
-private:
-    [[noreturn]] void fail(const std::string& what) const { throw Error("at byte " + std::to_string(i_) + ": " + what); }
-    void skip() {
-        while (i_ < t_.size() && (t_[i_] == ' ' || t_[i_] == '\n' || t_[i_] == '\r' || t_[i_] == '\t')) ++i_;
-    }
-    bool eat(char c) {
-        skip();
-        if (i_ < t_.size() && t_[i_] == c) return ++i_, true;
-        return false;
-    }
-    void expect(char c) {
-        if (!eat(c)) fail(std::string("expected '") + c + "'");
-    }
-    bool word(std::string_view w) {
-        if (t_.substr(i_, w.size()) == w) return i_ += w.size(), true;
-        return false;
-    }
-    std::string str() {
-        expect('"');
-        std::string s;
-        while (i_ < t_.size() && t_[i_] != '"') {
-            char c = t_[i_++];
-            if (static_cast<unsigned char>(c) < 0x20) fail("control character in a string");
-            if (c == '\\') {
-                if (i_ >= t_.size()) break;
-                c = t_[i_++];
-                if (c != '"' && c != '\\' && c != '/') fail("unsupported escape in a string");
-            }
-            s += c;
-        }
-        if (i_ >= t_.size()) fail("unterminated string");
-        ++i_;
-        return s;
-    }
-    Value value(int depth) {
-        if (depth > 8) fail("nested too deeply");
-        skip();
-        if (i_ >= t_.size()) fail("unexpected end of the file");
-        Value v;
-        const char c = t_[i_];
-        if (c == '{') {
-            ++i_;
-            v.kind = Value::Object;
-            if (eat('}')) return v;
-            do {
-                skip();
-                std::string key = str();
-                expect(':');
-                v.values.push_back(value(depth + 1));
-                v.keys.push_back(std::move(key));
-            } while (eat(','));
-            expect('}');
-        } else if (c == '[') {
-            ++i_;
-            v.kind = Value::Array;
-            if (eat(']')) return v;
-            do v.items.push_back(value(depth + 1));
-            while (eat(','));
-            expect(']');
-        } else if (c == '"') {
-            v.kind = Value::String;
-            v.string = str();
-        } else if (word("true") || word("false")) {
-            v.kind = Value::Bool;
-        } else if (word("null")) {
-            v.kind = Value::Null;
-        } else {
-            const size_t start = i_;
-            while (i_ < t_.size() && std::string_view("+-0123456789.eE").find(t_[i_]) != std::string_view::npos) ++i_;
-            if (i_ == start) fail("expected a JSON value");
-            const std::string num(t_.substr(start, i_ - start));
-            char* end = nullptr;
-            v.kind = Value::Number;
-            v.number = std::strtod(num.c_str(), &end);
-            if (end != num.c_str() + num.size()) {
-                i_ = start;
-                fail("malformed number '" + num + "'");
-            }
-        }
-        return v;
-    }
-    std::string_view t_;
-    size_t i_ = 0;
-};
+// nlohmann's message without its "[json.exception.parse_error.101] " prefix.
+std::string withoutPrefix(const char* what) {
+    const std::string s = what;
+    const size_t end = s.find("] ");
+    return s.rfind("[json.exception.", 0) == 0 && end != std::string::npos ? s.substr(end + 2) : s;
+}
 
-const Value* member(const Value& o, const std::string& key) {
-    for (size_t m = 0; m < o.keys.size(); ++m)
-        if (o.keys[m] == key) return &o.values[m];
-    return nullptr;
+// "at byte B: what went wrong (line L, column C)" from nlohmann's "parse error at line L, column C: what went wrong".
+std::string syntaxError(const Json::parse_error& e) {
+    std::string detail = withoutPrefix(e.what()), where;
+    constexpr std::string_view kLead = "parse error at ";
+    if (const size_t colon = detail.find(": "); detail.rfind(kLead, 0) == 0 && colon != std::string::npos) {
+        where = " (" + detail.substr(kLead.size(), colon - kLead.size()) + ")";
+        detail = detail.substr(colon + 2);
+    }
+    // A complete value followed by more text: said as plainly as the rest.
+    if (detail.ends_with("; expected end of input")) detail = "unexpected text after the JSON value";
+    return "at byte " + std::to_string(e.byte) + ": " + detail + where;
+}
+
+// Strict parsing: no comments, nesting past kMaxDepth refused, syntax errors with their byte offset (hc::Error).
+Json parseDocument(std::string_view text) {
+    const Json::parser_callback_t depthCheck = [](int depth, Json::parse_event_t, Json&) {
+        if (depth > kMaxDepth) throw Error("nested too deeply (more than " + std::to_string(kMaxDepth) + " levels)");
+        return true;
+    };
+    try {
+        return Json::parse(text, depthCheck);
+    } catch (const Json::parse_error& e) {
+        throw Error(syntaxError(e));
+    } catch (const Json::out_of_range& e) {  // a number beyond double's range, such as 1e999
+        throw Error("a number is not finite (" + withoutPrefix(e.what()) + ")");
+    }
+}
+
+const Json* member(const Json& o, const char* key) {
+    const auto it = o.find(key);
+    return it == o.end() ? nullptr : &*it;
 }
 
 }  // namespace
 
+std::string bookmarksToJson(const Bookmarks& b) {
+    Json doc;
+    doc["format"] = "heightcast-bookmarks";
+    doc["version"] = 1;
+    doc["bookmarks"] = Json::array();
+    for (int slot = 1; slot <= 9; ++slot) {
+        if (!b[slot]) continue;
+        const Bookmark& m = *b[slot];
+        // nlohmann writes doubles with the shortest digits that read back to the same value: an exact round trip.
+        doc["bookmarks"].push_back(
+            {{"slot", slot}, {"x", m.x}, {"y", m.y}, {"z", m.z}, {"yaw", m.yawDeg}, {"pitch", m.pitchDeg}, {"fov", m.fovYDeg}});
+    }
+    return doc.dump(2) + "\n";
+}
+
 Bookmarks bookmarksFromJson(std::string_view text) {
-    const Value doc = JsonReader(text).document();
-    if (doc.kind != Value::Object) throw Error("the top level is not a JSON object");
-    const Value* format = member(doc, "format");
-    if (!format || format->kind != Value::String || format->string != "heightcast-bookmarks")
+    const Json doc = parseDocument(text);
+    if (!doc.is_object()) throw Error("the top level is not a JSON object");
+    const Json* format = member(doc, "format");
+    if (!format || !format->is_string() || format->get<std::string>() != "heightcast-bookmarks")
         throw Error("\"format\" is not \"heightcast-bookmarks\"");
-    const Value* version = member(doc, "version");
-    if (!version || version->kind != Value::Number || version->number != 1) throw Error("\"version\" is not 1");
-    const Value* list = member(doc, "bookmarks");
-    if (!list || list->kind != Value::Array) throw Error("\"bookmarks\" is missing or not an array");
+    const Json* version = member(doc, "version");
+    if (!version || !version->is_number() || version->get<double>() != 1) throw Error("\"version\" is not 1");
+    const Json* list = member(doc, "bookmarks");
+    if (!list || !list->is_array()) throw Error("\"bookmarks\" is missing or not an array");
     Bookmarks out;
-    for (size_t i = 0; i < list->items.size(); ++i) {
-        const Value& e = list->items[i];
+    for (size_t i = 0; i < list->size(); ++i) {
+        const Json& e = (*list)[i];
         const std::string where = "bookmark " + std::to_string(i + 1);
-        if (e.kind != Value::Object) throw Error(where + ": not an object");
+        if (!e.is_object()) throw Error(where + ": not an object");
         auto num = [&](const char* key) {
-            const Value* v = member(e, key);
-            if (!v || v->kind != Value::Number || !std::isfinite(v->number))
+            const Json* v = member(e, key);
+            if (!v || !v->is_number() || !std::isfinite(v->get<double>()))
                 throw Error(where + ": \"" + key + "\" is missing or not a finite number");
-            return v->number;
+            return v->get<double>();
         };
         const double slot = num("slot");
         if (slot != std::floor(slot) || slot < 1 || slot > 9) throw Error(where + ": slot " + std::to_string(slot) + " is outside 1..9");

@@ -25,10 +25,11 @@ using Bookmarks = std::array<std::optional<Bookmark>, 10>;
 // GRID.hcg -> GRID.bookmarks.json (beside the grid); any other name gets .bookmarks.json appended.
 std::string bookmarksPath(const std::string& gridPath);
 // {"format": "heightcast-bookmarks", "version": 1, "bookmarks": [{"slot": 1, "x": ..., "y": ..., "z": ...,
-//  "yaw": ..., "pitch": ..., "fov": ...}, ...]}
+//  "yaw": ..., "pitch": ..., "fov": ...}, ...]}, indented by 2; doubles in the fewest digits that read back exactly.
 std::string bookmarksToJson(const Bookmarks& b);
-// Strict: throws hc::Error saying what is wrong (syntax with the byte offset, a missing or non-finite field,
-// a slot outside 1..9 or given twice, fov outside (0, 179], pitch outside [-90, 90]).
+// Strict (read with nlohmann-json, no comments): throws hc::Error saying what is wrong (syntax with the byte
+// offset, nesting deeper than 8, a missing or non-finite field, a slot outside 1..9 or given twice, fov outside
+// (0, 179], pitch outside [-90, 90]). Of a key given twice in one object, the last counts.
 Bookmarks bookmarksFromJson(std::string_view text);
 // A missing file gives no bookmarks; a broken one throws hc::Error naming the file.
 Bookmarks readBookmarks(const std::string& path);

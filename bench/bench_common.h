@@ -1,14 +1,13 @@
-// bench/bench_common.h: what every benchmark program shares: formatting, the machine's load, and
-// running one measurement in a forked child so that its peak RSS (getrusage) is its own.
+// bench/bench_common.h: what every benchmark program shares: the machine's load, a list option, and
+// running one measurement in a forked child so that its peak RSS (getrusage) is its own. Benchmarks format
+// with fmt::format and time with hc::Stopwatch.
 #pragma once
 
 #include <sys/wait.h>
 #include <unistd.h>
 
 #include <cerrno>
-#include <chrono>
 #include <csignal>
-#include <cstdarg>
 #include <cstdio>
 #include <cstring>
 #include <functional>
@@ -16,21 +15,11 @@
 #include <type_traits>
 #include <vector>
 
+#include <fmt/format.h>
+
 #include "heightcast/core/error.h"
 
 namespace hc::bench {
-
-using Clock = std::chrono::steady_clock;
-inline double secondsSince(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
-
-__attribute__((format(printf, 1, 2))) inline std::string fmt(const char* format, ...) {
-    char buf[1024];
-    va_list args;
-    va_start(args, format);
-    std::vsnprintf(buf, sizeof buf, format, args);
-    va_end(args);
-    return buf;
-}
 
 // The 1-minute load average: the machine may be shared, and a busy core shows up in every time here.
 inline std::string loadAverage() {
@@ -39,7 +28,7 @@ inline std::string loadAverage() {
         if (std::fscanf(f, "%lf", &one) != 1) one = -1;
         std::fclose(f);
     }
-    return one < 0 ? "unknown" : fmt("%.2f", one);
+    return one < 0 ? "unknown" : fmt::format("{:.2f}", one);
 }
 
 // "a,b,c" -> {"a", "b", "c"}; an empty entry is an error naming `what`.

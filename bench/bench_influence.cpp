@@ -19,9 +19,7 @@
 //                 where the grid is exact (it blurs) and remove some where the grid steps: this shows which.
 // Why a program and not a test: the figures depend on the machine; tests never time anything.
 #include <algorithm>
-#include <chrono>
 #include <cmath>
-#include <cstdarg>
 #include <cstdint>
 #include <cstdio>
 #include <filesystem>
@@ -40,6 +38,7 @@
 #include "heightcast/core/error.h"
 #include "heightcast/grid/morton.h"
 #include "heightcast/core/parallel.h"
+#include "heightcast/core/timer.h"
 #include "heightcast/influence/influence.h"
 #include "heightcast/influence/surface.h"
 #include "heightcast/ingest/build.h"
@@ -70,7 +69,7 @@ std::vector<double> numberList(const std::string& text, const std::string& what,
     std::vector<double> out;
     for (const std::string& t : splitList(text, what)) {
         out.push_back(hc::cli::parseNumber(t, what));
-        if (!(out.back() >= above)) throw hc::Error(what + " " + t + ": must be at least " + fmt("%g", above));
+        if (!(out.back() >= above)) throw hc::Error(what + " " + t + ": must be at least " + fmt::format("{:g}", above));
     }
     return out;
 }
@@ -85,7 +84,7 @@ std::string levelRange(const Grid& g) {
             hi = static_cast<int>(l);
         }
     if (lo < 0) return "empty";
-    return fmt("%.4g..%.4g", g.levelSizeM(lo), g.levelSizeM(hi));
+    return fmt::format("{:.4g}..{:.4g}", g.levelSizeM(lo), g.levelSizeM(hi));
 }
 
 // One CSV for every table: a fixed set of columns, each row filling the ones that apply.
@@ -174,7 +173,7 @@ struct Point {
 double evaluatePoints(const SurfaceEvaluator& ev, const std::vector<Point>& pts, unsigned threads, Accum& out) {
     const hc::influence::Layer elevation{};
     std::vector<Accum> parts(hc::resolveThreads(threads));
-    auto t0 = Clock::now();
+    const hc::Stopwatch clock;
     hc::parallelFor(pts.size(), 4096, threads, [&](size_t b, size_t e, unsigned w) {
         Accum& a = parts[w];
         for (size_t i = b; i < e; ++i) {
@@ -186,7 +185,7 @@ double evaluatePoints(const SurfaceEvaluator& ev, const std::vector<Point>& pts,
             }
         }
     });
-    const double s = secondsSince(t0);
+    const double s = clock.seconds();
     out = reduce(parts);
     return s;
 }
@@ -198,7 +197,7 @@ double evaluatePixels(const SurfaceEvaluator& ev, const hc::ingest::Raster& rast
     const Grid& g = ev.grid();
     const hc::influence::Layer elevation{};
     std::vector<Accum> parts(hc::resolveThreads(threads));
-    auto t0 = Clock::now();
+    const hc::Stopwatch clock;
     hc::parallelFor(pixels.size(), 4096, threads, [&](size_t b, size_t e, unsigned w) {
         Accum& a = parts[w];
         for (size_t i = b; i < e; ++i) {
@@ -223,7 +222,7 @@ double evaluatePixels(const SurfaceEvaluator& ev, const hc::ingest::Raster& rast
             }
         }
     });
-    const double s = secondsSince(t0);
+    const double s = clock.seconds();
     out = reduce(parts);
     return s;
 }
@@ -245,9 +244,9 @@ InfluenceLists timeBuild(const Grid& g, const KernelParams& params, unsigned thr
     bestS = 1e300;
     for (int k = 0; k < repeat; ++k) {
         lists = InfluenceLists();  // free the previous run's lists first: each run allocates from scratch
-        auto t0 = Clock::now();
+        const hc::Stopwatch clock;
         lists = hc::influence::buildInfluenceLists(g, params, threads, false);
-        bestS = std::min(bestS, secondsSince(t0));
+        bestS = std::min(bestS, clock.seconds());
     }
     return lists;
 }
@@ -310,13 +309,13 @@ int main(int argc, char** argv) {
         if (repeat < 1) throw hc::Error("--repeat " + std::to_string(repeat) + ": must be at least 1");
         if (points < 1) throw hc::Error("--points " + std::to_string(points) + ": must be at least 1");
         if (maxEvalPx < 1) throw hc::Error("--max-eval-px " + std::to_string(maxEvalPx) + ": must be at least 1");
-        if (!(maxCellM > 0)) throw hc::Error("--max-cell " + fmt("%g", maxCellM) + ": must be a positive size in metres");
+        if (!(maxCellM > 0)) throw hc::Error("--max-cell " + fmt::format("{:g}", maxCellM) + ": must be a positive size in metres");
         std::vector<double> tols = numberList(tolerances, "--tolerances", 0.0);
         std::vector<double> sigmaList = numberList(sigmas, "--sigmas", 1e-9);
         for (double s : sigmaList) {
             KernelParams k;
             k.sigma = s;
-            if (std::string why = k.validate(); !why.empty()) throw hc::Error("--sigmas " + fmt("%g", s) + ": " + why);
+            if (std::string why = k.validate(); !why.empty()) throw hc::Error("--sigmas " + fmt::format("{:g}", s) + ": " + why);
         }
         std::vector<std::string> demList = splitList(dems, "--dems");
         if (quick) {
@@ -358,7 +357,7 @@ int main(int argc, char** argv) {
             return hc::ingest::buildGrid(syntheticRaster(), nullptr, b);
         }();
         for (size_t i = 0; i < srtmGrids.size(); ++i)
-            buildRows.push_back({.name = fmt("N00E010 tol %g", kBuildTolerances[i]), .source = srtm, .toleranceM = kBuildTolerances[i],
+            buildRows.push_back({.name = fmt::format("N00E010 tol {:g}", kBuildTolerances[i]), .source = srtm, .toleranceM = kBuildTolerances[i],
                                  .grid = &srtmGrids[i], .buildS = 1e300, .stats = {}});
         buildRows.push_back({.name = "ratio-128 synthetic", .source = "synthetic 2048x2048 px of 0.75 m", .toleranceM = kSynthToleranceM,
                              .grid = &synth, .buildS = 1e300, .stats = {}});
@@ -374,7 +373,7 @@ int main(int argc, char** argv) {
                     "max cell %g m (its coarsest level: %s); levels = smallest..largest cell present [m]; M cells/s = cells / best\n"
                     "build time; entries = list length per cell (mean / p99 / max); MB = lists' offsets + indices\n\n",
                     baseParams.sigma, baseParams.truncation, allThreads, repeat, maxCellM,
-                    srtmGrids.empty() ? "n/a" : fmt("%.4g m", srtmGrids[0].levelSizeM(srtmGrids[0].maxLevel)).c_str());
+                    srtmGrids.empty() ? "n/a" : fmt::format("{:.4g} m", srtmGrids[0].levelSizeM(srtmGrids[0].maxLevel)).c_str());
         std::printf("%-20s %9s %13s %9s %9s %8s %6s %6s %8s %8s\n", "grid", "cells", "levels m", "build ms", "M cells/s",
                     "mean", "p99", "max", "MB", "target");
         for (const BuildRow& r : buildRows) {
@@ -383,21 +382,21 @@ int main(int argc, char** argv) {
                         levelRange(*r.grid).c_str(), r.buildS * 1e3, r.mCellsPerS(), r.stats.meanLength,
                         (unsigned long long)r.stats.p99Length, (unsigned long long)r.stats.maxLength,
                         static_cast<double>(r.stats.bytes) / 1e6, met ? "met" : "MISSED");
-            out.add({{"table", "build"}, {"grid", r.name}, {"source", r.source}, {"tolerance_m", fmt("%g", r.toleranceM)},
-                     {"sigma", fmt("%g", baseParams.sigma)}, {"truncation", fmt("%g", baseParams.truncation)},
-                     {"max_cell_m", fmt("%g", r.grid->levelSizeM(r.grid->maxLevel))}, {"threads", fmt("%u", allThreads)},
-                     {"cells", fmt("%zu", r.grid->cellCount())}, {"min_cell_m", fmt("%g", r.grid->finestCellM)},
+            out.add({{"table", "build"}, {"grid", r.name}, {"source", r.source}, {"tolerance_m", fmt::format("{:g}", r.toleranceM)},
+                     {"sigma", fmt::format("{:g}", baseParams.sigma)}, {"truncation", fmt::format("{:g}", baseParams.truncation)},
+                     {"max_cell_m", fmt::format("{:g}", r.grid->levelSizeM(r.grid->maxLevel))}, {"threads", fmt::format("{}", allThreads)},
+                     {"cells", fmt::format("{}", r.grid->cellCount())}, {"min_cell_m", fmt::format("{:g}", r.grid->finestCellM)},
                      {"coarsest_cell_m", levelRange(*r.grid).substr(levelRange(*r.grid).find("..") + 2)},
-                     {"build_ms", fmt("%.3f", r.buildS * 1e3)}, {"m_cells_per_s", fmt("%.4f", r.mCellsPerS())},
-                     {"entries_mean", fmt("%.3f", r.stats.meanLength)}, {"entries_p99", fmt("%llu", (unsigned long long)r.stats.p99Length)},
-                     {"entries_max", fmt("%llu", (unsigned long long)r.stats.maxLength)},
-                     {"lists_mb", fmt("%.3f", static_cast<double>(r.stats.bytes) / 1e6)}, {"target", met ? "met" : "MISSED"}});
+                     {"build_ms", fmt::format("{:.3f}", r.buildS * 1e3)}, {"m_cells_per_s", fmt::format("{:.4f}", r.mCellsPerS())},
+                     {"entries_mean", fmt::format("{:.3f}", r.stats.meanLength)}, {"entries_p99", fmt::format("{}", r.stats.p99Length)},
+                     {"entries_max", fmt::format("{}", r.stats.maxLength)},
+                     {"lists_mb", fmt::format("{:.3f}", static_cast<double>(r.stats.bytes) / 1e6)}, {"target", met ? "met" : "MISSED"}});
         }
         {
             const auto per = synth.cellsPerLevel();
             std::string counts;
-            for (size_t l = 0; l < per.size(); ++l) counts += fmt("%s%.4g m: %llu", l ? ", " : "", synth.levelSizeM(static_cast<int>(l)),
-                                                                  (unsigned long long)per[l]);
+            for (size_t l = 0; l < per.size(); ++l)
+                counts += fmt::format("{}{:.4g} m: {}", l ? ", " : "", synth.levelSizeM(static_cast<int>(l)), per[l]);
             std::printf("ratio-128 synthetic, cells per size: %s\n", counts.c_str());
         }
         std::printf("target: >= %.0f M cells/s on 2 cores (all cores here)\n", kTargetBuildMCellsPerS);
@@ -441,9 +440,9 @@ int main(int argc, char** argv) {
                             best = std::min(best, evaluatePoints(ev, set, t, a));
                             continue;
                         }
-                        const auto t0 = std::chrono::steady_clock::now();
+                        const hc::Stopwatch clock;
                         const auto vals = ev.values(asArrays, hc::influence::Layer{}, t);
-                        best = std::min(best, std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
+                        best = std::min(best, clock.seconds());
                         a = Accum{};
                         for (const auto& v : vals) a.defined += v.has_value();
                     }
@@ -454,11 +453,11 @@ int main(int argc, char** argv) {
                     const char* target = counts ? (rate >= kTargetEvalMPointsPerS ? "met" : "MISSED") : "-";
                     std::printf("%-20s %-7s %7u %9zu %7.3f %9.1f %9.2f %8s\n", r.name.c_str(), order, t, set.size(), fraction,
                                 best * 1e3, rate, target);
-                    out.add({{"table", "evaluate"}, {"grid", r.name}, {"source", r.source}, {"tolerance_m", fmt("%g", r.toleranceM)},
-                             {"order", order}, {"sigma", fmt("%g", baseParams.sigma)}, {"truncation", fmt("%g", baseParams.truncation)},
-                             {"threads", fmt("%u", t)}, {"cells", fmt("%zu", g.cellCount())}, {"points", fmt("%zu", set.size())},
-                             {"defined_fraction", fmt("%.5f", fraction)}, {"eval_ms", fmt("%.3f", best * 1e3)},
-                             {"m_points_per_s", fmt("%.4f", rate)}, {"target", counts ? target : ""}});
+                    out.add({{"table", "evaluate"}, {"grid", r.name}, {"source", r.source}, {"tolerance_m", fmt::format("{:g}", r.toleranceM)},
+                             {"order", order}, {"sigma", fmt::format("{:g}", baseParams.sigma)}, {"truncation", fmt::format("{:g}", baseParams.truncation)},
+                             {"threads", fmt::format("{}", t)}, {"cells", fmt::format("{}", g.cellCount())}, {"points", fmt::format("{}", set.size())},
+                             {"defined_fraction", fmt::format("{:.5f}", fraction)}, {"eval_ms", fmt::format("{:.3f}", best * 1e3)},
+                             {"m_points_per_s", fmt::format("{:.4f}", rate)}, {"target", counts ? target : ""}});
                 }
             }
         }
@@ -501,8 +500,8 @@ int main(int argc, char** argv) {
                     hc::ingest::LoadReport gridReport;
                     const Grid g = hc::ingest::ingest(o, gridReport);
                     if (g.stats.sourceWidth != raster.width || g.stats.sourceHeight != raster.height || g.stats.validPixels != valid)
-                        throw hc::Error(dem + ": the grid's working raster (" + fmt("%llu x %llu", (unsigned long long)g.stats.sourceWidth,
-                                                                                    (unsigned long long)g.stats.sourceHeight) +
+                        throw hc::Error(dem + ": the grid's working raster (" +
+                                        fmt::format("{} x {}", g.stats.sourceWidth, g.stats.sourceHeight) +
                                         ") is not the one loadTerrain gave: the comparison would be meaningless");
                     for (double sigma : sigmaList) {
                         KernelParams params;
@@ -522,9 +521,9 @@ int main(int argc, char** argv) {
                         r.gridRms = g.stats.rmsDevM;
                         r.gridMax = g.stats.maxDevM;
                         r.sampled = sampled;
-                        auto t0 = Clock::now();
+                        const hc::Stopwatch clock;
                         const InfluenceLists lists = hc::influence::buildInfluenceLists(g, params, threads, false);
-                        r.buildS = secondsSince(t0);
+                        r.buildS = clock.seconds();
                         r.entriesMean = lists.stats().meanLength;
                         SurfaceEvaluator ev(g, lists);
                         Accum a;
@@ -537,12 +536,13 @@ int main(int argc, char** argv) {
                         r.checkRms = std::sqrt(a.gridSumSq / n);
                         r.checkMax = a.gridMaxAbs;
                         if (a.undefined)
-                            warnings.push_back(fmt("%s tol %g sigma %g: the surface is undefined at %llu valid pixel centres", name.c_str(), tol,
-                                                   sigma, (unsigned long long)a.undefined));
+                            warnings.push_back(fmt::format("{} tol {:g} sigma {:g}: the surface is undefined at {} valid pixel centres",
+                                                           name, tol, sigma, a.undefined));
                         // Our own pixel-by-pixel grid error must match the ingest's (same pixels, same cells).
                         if (!sampled && (std::abs(r.checkMax - r.gridMax) > 1e-4 || std::abs(r.checkRms - r.gridRms) > 1e-4))
-                            warnings.push_back(fmt("%s tol %g: grid error measured here (RMS %.5f, max %.5f) differs from Grid::stats "
-                                                   "(RMS %.5f, max %.5f)", name.c_str(), tol, r.checkRms, r.checkMax, r.gridRms, r.gridMax));
+                            warnings.push_back(fmt::format("{} tol {:g}: grid error measured here (RMS {:.5f}, max {:.5f}) differs from "
+                                                           "Grid::stats (RMS {:.5f}, max {:.5f})",
+                                                           name, tol, r.checkRms, r.checkMax, r.gridRms, r.gridMax));
                         acc.push_back(r);
                     }
                 }
@@ -562,19 +562,19 @@ int main(int argc, char** argv) {
         for (const AccuracyRow& r : acc) {
             const double rate = static_cast<double>(r.evaluated) / r.evalS / 1e6;
             std::printf("%-28s %9s %6.3g %5.3g %5.3g %6.4g %8llu %6.3f %7.4f %7.4f %7.4f %7.4f %7.1f %8.1f %8.1f %7.2f%s\n",
-                        r.dem.c_str(), fmt("%zux%zu", r.width, r.height).c_str(), r.pixelM, r.toleranceM, r.sigma, r.maxCellM,
+                        r.dem.c_str(), fmt::format("{}x{}", r.width, r.height).c_str(), r.pixelM, r.toleranceM, r.sigma, r.maxCellM,
                         (unsigned long long)r.cells, static_cast<double>(r.cells) / static_cast<double>(r.validPx), r.gridRms, r.gridMax,
                         r.surfRms, r.surfMax, r.entriesMean, r.buildS * 1e3, r.evalS * 1e3, rate, r.sampled ? " (sample)" : "");
-            out.add({{"table", "accuracy"}, {"grid", r.dem}, {"source", r.path}, {"tolerance_m", fmt("%g", r.toleranceM)},
-                     {"sigma", fmt("%g", r.sigma)}, {"truncation", fmt("%g", baseParams.truncation)}, {"max_cell_m", fmt("%g", r.maxCellM)},
-                     {"threads", fmt("%u", allThreads)}, {"working_px", fmt("%zux%zu", r.width, r.height)}, {"pixel_m", fmt("%.6g", r.pixelM)},
-                     {"valid_px", fmt("%llu", (unsigned long long)r.validPx)}, {"cells", fmt("%llu", (unsigned long long)r.cells)},
-                     {"cells_per_valid_px", fmt("%.5f", static_cast<double>(r.cells) / static_cast<double>(r.validPx))},
-                     {"min_cell_m", fmt("%.6g", r.pixelM)}, {"coarsest_cell_m", r.levels.substr(r.levels.find("..") + 2)},
-                     {"build_ms", fmt("%.3f", r.buildS * 1e3)}, {"entries_mean", fmt("%.3f", r.entriesMean)},
-                     {"points", fmt("%llu", (unsigned long long)r.evaluated)}, {"eval_ms", fmt("%.3f", r.evalS * 1e3)},
-                     {"m_points_per_s", fmt("%.4f", rate)}, {"grid_rms_m", fmt("%.6g", r.gridRms)}, {"grid_max_m", fmt("%.6g", r.gridMax)},
-                     {"surface_rms_m", fmt("%.6g", r.surfRms)}, {"surface_max_m", fmt("%.6g", r.surfMax)},
+            out.add({{"table", "accuracy"}, {"grid", r.dem}, {"source", r.path}, {"tolerance_m", fmt::format("{:g}", r.toleranceM)},
+                     {"sigma", fmt::format("{:g}", r.sigma)}, {"truncation", fmt::format("{:g}", baseParams.truncation)}, {"max_cell_m", fmt::format("{:g}", r.maxCellM)},
+                     {"threads", fmt::format("{}", allThreads)}, {"working_px", fmt::format("{}x{}", r.width, r.height)}, {"pixel_m", fmt::format("{:.6g}", r.pixelM)},
+                     {"valid_px", fmt::format("{}", r.validPx)}, {"cells", fmt::format("{}", r.cells)},
+                     {"cells_per_valid_px", fmt::format("{:.5f}", static_cast<double>(r.cells) / static_cast<double>(r.validPx))},
+                     {"min_cell_m", fmt::format("{:.6g}", r.pixelM)}, {"coarsest_cell_m", r.levels.substr(r.levels.find("..") + 2)},
+                     {"build_ms", fmt::format("{:.3f}", r.buildS * 1e3)}, {"entries_mean", fmt::format("{:.3f}", r.entriesMean)},
+                     {"points", fmt::format("{}", r.evaluated)}, {"eval_ms", fmt::format("{:.3f}", r.evalS * 1e3)},
+                     {"m_points_per_s", fmt::format("{:.4f}", rate)}, {"grid_rms_m", fmt::format("{:.6g}", r.gridRms)}, {"grid_max_m", fmt::format("{:.6g}", r.gridMax)},
+                     {"surface_rms_m", fmt::format("{:.6g}", r.surfRms)}, {"surface_max_m", fmt::format("{:.6g}", r.surfMax)},
                      {"sampled", r.sampled ? "1" : "0"}});
         }
         bool anySampled = false;
@@ -609,7 +609,7 @@ int main(int argc, char** argv) {
                     if (r.dem == demOrder[d] && r.sigma == sigmaList.front()) grid.points.emplace_back(r.toleranceM, r.gridRms);
                 lp.series.push_back(grid);
                 for (size_t k = 0; k < sigmaList.size(); ++k) {
-                    hc::bench::LineSeries surf{name + ": smooth surface, sigma " + fmt("%g", sigmaList[k]), color, dashes[std::min<size_t>(k, 3)], {}};
+                    hc::bench::LineSeries surf{name + ": smooth surface, sigma " + fmt::format("{:g}", sigmaList[k]), color, dashes[std::min<size_t>(k, 3)], {}};
                     for (const AccuracyRow& r : acc)
                         if (r.dem == demOrder[d] && r.sigma == sigmaList[k]) surf.points.emplace_back(r.toleranceM, r.surfRms);
                     lp.series.push_back(surf);

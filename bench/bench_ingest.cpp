@@ -20,7 +20,6 @@
 // at start-up instead.)
 #include <algorithm>
 #include <cerrno>
-#include <chrono>
 #include <cstdint>
 #include <cstdio>
 #include <cstdlib>
@@ -46,6 +45,7 @@
 #include "heightcast/core/error.h"
 #include "heightcast/grid/grid_file.h"
 #include "heightcast/core/progress.h"
+#include "heightcast/core/timer.h"
 #include "heightcast/ingest/ingest.h"
 
 namespace fs = std::filesystem;
@@ -156,23 +156,21 @@ RunResult runCase(const std::string& input, Path path, double toleranceM, std::o
         o.threads = threads;
         o.progress = false;
         hc::ingest::LoadReport report;
-        using Clock = std::chrono::steady_clock;
         const hc::IngestStats* stats = nullptr;
         hc::Grid g;
         hc::ingest::BuildSummary summary;
-        auto t0 = Clock::now();
+        hc::Stopwatch clock;
         if (path == Path::Memory) {
             g = hc::ingest::ingest(o, report);
-            auto t1 = Clock::now();
+            r.ingestS = clock.lap();
             r.peakRss = hc::peakRssBytes();  // before writing: the ingest's own peak
             hc::writeGrid(g, gridPath);
-            r.ingestS = std::chrono::duration<double>(t1 - t0).count();
-            r.writeS = std::chrono::duration<double>(Clock::now() - t1).count();
+            r.writeS = clock.seconds();
             r.cells = g.cellCount();
             stats = &g.stats;
         } else {
             summary = hc::ingest::ingestToFile(o, gridPath, report);
-            r.ingestS = std::chrono::duration<double>(Clock::now() - t0).count();
+            r.ingestS = clock.seconds();
             r.peakRss = hc::peakRssBytes();
             r.cells = summary.cellCount;
             stats = &summary.shape.stats;
@@ -210,12 +208,12 @@ void printTable(const std::vector<Row>& rows) {
                 "source px", "working px", "cells", "ingest ms", "write ms", "total ms", "source Mpx/s", "peak RSS MB",
                 "ingest RSS MB", "x raster f32", "max dev m", "RMS m");
     for (const Row& r : rows) {
-        char write[16] = "incl.";  // stream: the write happens inside ingest
-        if (r.path == Path::Memory) std::snprintf(write, sizeof write, "%.1f", r.writeS * 1e3);
+        // stream: the write happens inside ingest
+        const std::string write = r.path == Path::Memory ? fmt::format("{:.1f}", r.writeS * 1e3) : "incl.";
         std::printf("%-5c %-6s %5.3g %11s %11s %9llu %9.1f %8s %8.1f %12.2f %11.1f %13.1f %12.2f %9.4f %7.4f\n", r.input->id,
                     pathName(r.path), r.toleranceM, dims(r.last.sourceWidth, r.last.sourceHeight).c_str(),
                     dims(r.last.workingWidth, r.last.workingHeight).c_str(), (unsigned long long)r.last.cells,
-                    r.ingestS * 1e3, write, r.totalS * 1e3, r.mpxPerS(), mb(r.peakRss), mb(r.ingestRss), r.rasterMultiple(),
+                    r.ingestS * 1e3, write.c_str(), r.totalS * 1e3, r.mpxPerS(), mb(r.peakRss), mb(r.ingestRss), r.rasterMultiple(),
                     r.last.maxDevM, r.last.rmsDevM);
     }
 }
@@ -238,17 +236,13 @@ void writeCsv(const std::vector<Row>& rows, const std::string& path) {
     f << "input,file,path,tolerance_m,source_width,source_height,working_width,working_height,cells,ingest_ms,write_ms,"
          "total_ms,source_mpx_per_s,peak_rss_mb,ingest_rss_mb,x_raster_f32,max_dev_m,rms_m,speed_target,memory_target\n";
     for (const Row& r : rows) {
-        char line[512];
-        char write[32] = "";  // empty for stream: the write happens inside ingest
-        if (r.path == Path::Memory) std::snprintf(write, sizeof write, "%.3f", r.writeS * 1e3);
-        std::snprintf(line, sizeof line, "%c,%s,%s,%g,%llu,%llu,%llu,%llu,%llu,%.3f,%s,%.3f,%.4f,%.2f,%.2f,%.4f,%.6g,%.6g,%s,%s\n",
-                      r.input->id, r.input->file.c_str(), pathName(r.path), r.toleranceM, (unsigned long long)r.last.sourceWidth,
-                      (unsigned long long)r.last.sourceHeight, (unsigned long long)r.last.workingWidth,
-                      (unsigned long long)r.last.workingHeight, (unsigned long long)r.last.cells, r.ingestS * 1e3,
-                      write, r.totalS * 1e3, r.mpxPerS(), mb(r.peakRss), mb(r.ingestRss), r.rasterMultiple(),
-                      r.last.maxDevM, r.last.rmsDevM, r.input->projected ? (r.meetsSpeed() ? "met" : "MISSED") : "n/a",
-                      r.meetsMemory() ? "met" : "MISSED");
-        f << line;
+        // write_ms is empty for stream: the write happens inside ingest
+        const std::string write = r.path == Path::Memory ? fmt::format("{:.3f}", r.writeS * 1e3) : "";
+        f << fmt::format("{},{},{},{:g},{},{},{},{},{},{:.3f},{},{:.3f},{:.4f},{:.2f},{:.2f},{:.4f},{:.6g},{:.6g},{},{}\n", r.input->id,
+                         r.input->file, pathName(r.path), r.toleranceM, r.last.sourceWidth, r.last.sourceHeight, r.last.workingWidth,
+                         r.last.workingHeight, r.last.cells, r.ingestS * 1e3, write, r.totalS * 1e3, r.mpxPerS(), mb(r.peakRss),
+                         mb(r.ingestRss), r.rasterMultiple(), r.last.maxDevM, r.last.rmsDevM,
+                         r.input->projected ? (r.meetsSpeed() ? "met" : "MISSED") : "n/a", r.meetsMemory() ? "met" : "MISSED");
     }
     if (!f.flush()) throw hc::Error(path + ": write failed (--csv)");
 }
@@ -336,8 +330,7 @@ int main(int argc, char** argv) {
             for (double tol : tols)
                 for (Path path : pathList) {
                     Row row{&in, path, tol, {}};
-                    char gridName[64];
-                    std::snprintf(gridName, sizeof gridName, "%c-%s-tol%g.hcg", in.id, pathName(path), tol);
+                    const std::string gridName = fmt::format("{}-{}-tol{:g}.hcg", in.id, pathName(path), tol);
                     for (int k = 0; k < repeat; ++k) {
                         if (interactive)
                             std::fprintf(stderr, "\r%c %s tolerance %g m: run %d of %d ", in.id, pathName(path), tol, k + 1, repeat);
@@ -358,13 +351,12 @@ int main(int argc, char** argv) {
 
         std::printf("\ninputs\n");
         for (const Input& in : inputs) std::printf("  %c  %s\n", in.id, in.what.c_str());
-        char maxCell[32] = "default";
-        if (maxCellM) std::snprintf(maxCell, sizeof maxCell, "%g m", *maxCellM);
+        const std::string maxCell = maxCellM ? fmt::format("{:g} m", *maxCellM) : "default";
         std::printf("\nbest of %d run%s, ingest threads %s, max cell %s; paths: mem = ingest() then writeGrid(), stream =\n"
                     "ingestToFile() (hc-ingest; its ingest ms includes writing); peak = max RSS of the run's process when ingest\n"
                     "returned; ingest RSS = peak - RSS before ingest (after GDALAllRegister and a first CRS look-up); x raster f32 = ingest RSS / (source\n"
                     "px x 4 B); total = best of ingest + write; source Mpx/s = source px / best ingest time; MB = 10^6 bytes\n\n",
-                    repeat, repeat == 1 ? "" : "s", threads ? std::to_string(threads).c_str() : "all cores", maxCell);
+                    repeat, repeat == 1 ? "" : "s", threads ? std::to_string(threads).c_str() : "all cores", maxCell.c_str());
         printTable(rows);
         printTargets(rows);
         if (!csv.empty()) {
@@ -376,13 +368,13 @@ int main(int argc, char** argv) {
             speed.title = "hc-bench-ingest: source pixels per second of ingest (best of " + std::to_string(repeat) + ")";
             speed.xLabel = "M source pixels / s";
             speed.segmentNames = {"Mpx/s"};
-            speed.markers = {{"target " + fmt("%g", kTargetMpxPerS) + " Mpx/s (projected input b)", kTargetMpxPerS}};
+            speed.markers = {{"target " + fmt::format("{:g}", kTargetMpxPerS) + " Mpx/s (projected input b)", kTargetMpxPerS}};
             memory.title = "hc-bench-ingest: ingest memory as a multiple of the raster's float32 size";
             memory.xLabel = "ingest RSS / (source px x 4 bytes)";
             memory.segmentNames = {"x raster f32"};
-            memory.markers = {{"target " + fmt("%g", kTargetRasterMultiple) + "x", kTargetRasterMultiple}};
+            memory.markers = {{"target " + fmt::format("{:g}", kTargetRasterMultiple) + "x", kTargetRasterMultiple}};
             for (const Row& r : rows) {
-                const std::string label = std::string(1, r.input->id) + " " + pathName(r.path) + " tol " + fmt("%g", r.toleranceM);
+                const std::string label = std::string(1, r.input->id) + " " + pathName(r.path) + " tol " + fmt::format("{:g}", r.toleranceM);
                 speed.rows.push_back({label, {r.mpxPerS()}});
                 memory.rows.push_back({label, {r.rasterMultiple()}});
             }

@@ -5,10 +5,11 @@
 
 #include <algorithm>
 #include <cmath>
-#include <cstdio>
 #include <span>
 #include <string>
 #include <vector>
+
+#include <fmt/format.h>
 
 #include "heightcast/core/atomic_file.h"
 #include "heightcast/core/error.h"
@@ -32,18 +33,10 @@ inline std::string svgEscape(const std::string& s) {
     return out;
 }
 
-inline std::string svgNum(double v) {
-    char b[32];
-    std::snprintf(b, sizeof b, "%.2f", v);
-    return b;
-}
+inline std::string svgNum(double v) { return fmt::format("{:.2f}", v); }
 
 // A tick label: 3 significant digits, no trailing zeros.
-inline std::string tickLabel(double v) {
-    char b[32];
-    std::snprintf(b, sizeof b, "%.3g", v);
-    return b;
-}
+inline std::string tickLabel(double v) { return fmt::format("{:.3g}", v); }
 
 // About six ticks over [lo, hi] at a round step (1, 2 or 5 times a power of ten).
 inline std::vector<double> linearTicks(double lo, double hi) {

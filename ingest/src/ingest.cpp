@@ -1,12 +1,12 @@
 #include "heightcast/ingest/ingest.h"
 
-#include <chrono>
 #include <cmath>
 #include <cstdio>
 
 #include "heightcast/core/error.h"
 #include "heightcast/ingest/build.h"
 #include "heightcast/core/parallel.h"
+#include "heightcast/core/timer.h"
 #include "resample.h"
 
 namespace hc::ingest {
@@ -134,32 +134,28 @@ void afterBuild(const Prepared& p, const IngestStats& stats, const Options& opt,
     noteStorage(stats, p.terrain, report);
 }
 
-double secondsSince(std::chrono::steady_clock::time_point t) {
-    return std::chrono::duration<double>(std::chrono::steady_clock::now() - t).count();
-}
-
 }  // namespace
 
 Grid ingest(const Options& opt, LoadReport& report) {
-    auto start = std::chrono::steady_clock::now();
+    const Stopwatch clock;
     Prepared p = prepare(opt, report);
     traceBuild(p);
     Grid g = buildGrid(p.terrain, p.hasWater ? &p.water : nullptr, p.build);
     afterBuild(p, g.stats, opt, report);
     g.stats.sourcePath = opt.input;
     g.stats.sourceCrsName = report.sourceCrsName;
-    g.stats.seconds = secondsSince(start);
+    g.stats.seconds = clock.seconds();
     return g;
 }
 
 BuildSummary ingestToFile(const Options& opt, const std::string& path, LoadReport& report) {
-    auto start = std::chrono::steady_clock::now();
+    const Stopwatch clock;
     Prepared p = prepare(opt, report);
     traceBuild(p);
     IngestStats extra;
     extra.sourcePath = opt.input;
     extra.sourceCrsName = report.sourceCrsName;
-    extra.seconds = secondsSince(start);
+    extra.seconds = clock.seconds();
     BuildSummary b = buildGridFile(p.terrain, p.hasWater ? &p.water : nullptr, p.build, path, extra);
     afterBuild(p, b.shape.stats, opt, report);
     return b;

@@ -2,11 +2,14 @@
 
 #include <algorithm>
 #include <array>
+#include <charconv>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <limits>
 #include <optional>
+
+#include <nlohmann/json.hpp>
 
 #include "heightcast/core/error.h"
 #include "heightcast/core/parallel.h"
@@ -430,27 +433,45 @@ Frame renderFrame(const Scene& scene, const Camera& camera, const RenderOptions&
     return f;
 }
 
+namespace {
+// A JSON number with the precision the figure has: `digits` decimals (fixed) or significant digits (general).
+double rounded(double v, std::chars_format style, int digits) {
+    char text[64];
+    const auto printed = std::to_chars(text, text + sizeof text, v, style, digits);
+    double back = v;
+    if (printed.ec == std::errc{}) std::from_chars(text, printed.ptr, back);
+    return back;
+}
+// Milliseconds to the microsecond, metres to the millimetre.
+double threeDecimals(double v) { return rounded(v, std::chars_format::fixed, 3); }
+}  // namespace
+
 std::string Timings::toJson() const {
-    char b[512];
-    std::string j = "{\n";
-    std::snprintf(b, sizeof b,
-                  "  \"fitting_ms\": %.3f,\n  \"approximation_ms\": %.3f,\n  \"mipmap_ms\": %.3f,\n  \"raycast_ms\": %.3f,\n"
-                  "  \"shading_ms\": %.3f,\n  \"total_ms\": %.3f,\n  \"gpu_ms\": %.3f,\n  \"readback_ms\": %.3f,\n  \"rays\": %llu,\n"
-                  "  \"hits\": %llu,\n  \"cascades\": [",
-                  fittingMs, approximationMs, mipmapMs, raycastMs, shadingMs, totalMs, gpuMs, readbackMs, (unsigned long long)rays,
-                  (unsigned long long)hits);
-    j += b;
+    using Json = nlohmann::ordered_json;  // keys in the order written
+    Json j;
+    j["fitting_ms"] = threeDecimals(fittingMs);
+    j["approximation_ms"] = threeDecimals(approximationMs);
+    j["mipmap_ms"] = threeDecimals(mipmapMs);
+    j["raycast_ms"] = threeDecimals(raycastMs);
+    j["shading_ms"] = threeDecimals(shadingMs);
+    j["total_ms"] = threeDecimals(totalMs);
+    j["gpu_ms"] = threeDecimals(gpuMs);
+    j["readback_ms"] = threeDecimals(readbackMs);
+    j["rays"] = rays;
+    j["hits"] = hits;
+    j["cascades"] = Json::array();
     for (size_t k = 0; k < cascades.size(); ++k) {
         const CascadeStats& c = cascades[k];
-        std::snprintf(b, sizeof b,
-                      "%s\n    {\"index\": %zu, \"near_m\": %.3f, \"far_m\": %.3f, \"texel_m\": %.6g, \"visible_texels\": %llu, "
-                      "\"reused_texels\": %llu, \"gaussians\": %llu, \"approximation_ms\": %.3f}",
-                      k ? "," : "", k, c.nearM, c.farM, c.texelM, (unsigned long long)c.visibleTexels, (unsigned long long)c.reusedTexels,
-                      (unsigned long long)c.gaussians, c.approximationMs);
-        j += b;
+        j["cascades"].push_back({{"index", k},
+                                 {"near_m", threeDecimals(c.nearM)},
+                                 {"far_m", threeDecimals(c.farM)},
+                                 {"texel_m", rounded(c.texelM, std::chars_format::general, 6)},
+                                 {"visible_texels", c.visibleTexels},
+                                 {"reused_texels", c.reusedTexels},
+                                 {"gaussians", c.gaussians},
+                                 {"approximation_ms", threeDecimals(c.approximationMs)}});
     }
-    j += "\n  ]\n}\n";
-    return j;
+    return j.dump(2) + "\n";
 }
 
 std::string Timings::toTable() const {

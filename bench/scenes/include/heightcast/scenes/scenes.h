@@ -1,0 +1,120 @@
+// heightcast/scenes/scenes.h: synthetic stand-ins for the technical report's four flood scenes, generated
+// deterministically (fixed seeds, no input files): hc-bench renders them, tests reuse them.
+//
+// The report (its performance table) renders four real flood simulations on a GTX 1080:
+//   Marchfeld      82.9 x 57.1 km, cells 3 - 96 m,    7.46 M cells: approximation 15.1 ms, ray casting 5.1 ms
+//   Petzenkirchen  15.4 x 16.0 km, cells 0.75 - 96 m, 1.81 M cells:                20.8 ms,              4.3 ms
+//   Wachau         24.1 x 16.5 km, cells 3 - 96 m,    1.95 M cells:                 5.3 ms,              4.3 ms
+//   Florence       44.6 x 28.2 km, cells 3 - 96 m,    4.53 M cells:                 1.5 ms,              2.8 ms
+// We do not have those data sets; each Scenario here has the same extents, cell sizes and cell counts:
+//   terrain   a smooth landscape: large-scale relief (a few sinusoids of 6-30 km wavelength) rising from a
+//             meandering river valley (a flat floodplain with a gentle downstream slope and low undulations,
+//             smooth valley sides, a parabolic channel), with smaller hills (plane waves of 150-900 m) on the
+//             uplands; hundreds of metres of relief in Wachau and Florence, tens in Marchfeld.
+//   water     layer water_depth: a flood level a few metres above the floodplain; depth = level - terrain where
+//             positive, 0 where dry. The channel is always wet; the floodplain's undulations make the flood's
+//             edge irregular.
+//   grid      a quadtree built top-down in Morton order (Grid::appendCell): a node of the domain is split while
+//             it is larger than the finest size and (it is coarser than 96 m, or it straddles a wet/dry edge
+//             or a channel bank, or the terrain or the water depth varies over it by more than a threshold T,
+//             measured at its 3 x 3 corner / edge / centre points). A leaf's values are terrain and depth at its
+//             centre. T is calibrated per scenario by bisection, counting the cells of a fixed sample of 1/8 of
+//             the 768 m tiles (all tiles of a small domain); one count over every tile then measures the sample's
+//             bias (the river crosses few sample tiles) and the bisection repeats with it (at most 3 rounds), so
+//             the cell count lands within a few % of the report's count divided by `scale`. If even T = infinity
+//             gives too many cells (the forced wet-edge and bank cells alone exceed the target: a large scale),
+//             the finest size doubles until it fits (Generated::finestRaised).
+//   camera    a fixed oblique view a user would pick over the flood: 1.5 km above the river, 10 % of the way
+//             downstream, looking 4.1 km along it (where the centre ray meets the valley floor) at pitch -20
+//             degrees, 50 degree vertical field of view.
+// Local coordinates: metres from the domain's south-west corner, x east (downstream), y north.
+#pragma once
+
+#include <cstdint>
+#include <span>
+#include <string_view>
+#include <vector>
+
+#include "heightcast/grid/grid.h"
+#include "heightcast/render/camera.h"
+
+namespace hc::scenes {
+
+constexpr double kCoarsestM = 96.0;  // every scenario's coarsest cell [m]
+
+// Everything that shapes one synthetic landscape. Lengths in metres, heights in metres above sea level.
+struct Landscape {
+    double z0;                  // floodplain floor at the upstream (west) edge
+    double riverSlope;          // floor drop per metre downstream (+x)
+    double riverYFraction;      // mean centreline, as a fraction of the extent in y
+    double meanderAmp[2], meanderLen[2];
+    double floorHalfWidth;      // flat floodplain each side of the centreline
+    double sideWidth;           // valley sides, from the floodplain up to the uplands
+    double channelHalfWidth, channelDepth;
+    double floodHeight;         // water level above the floodplain floor
+    double microAmp;            // floodplain undulations (max amplitude)
+    double reliefAmp;           // uplands above the floor (mean); large-scale waves add +-50 %
+    double hillAmp;             // small-scale hills on the uplands (max amplitude)
+    uint64_t seed;
+};
+
+struct Scenario {
+    const char* name;
+    double extentXKm, extentYKm, finestM;
+    double reportCellsM;        // the report's cell count, millions
+    double gpuApproxMs, gpuRaycastMs;  // the report's GTX 1080 times
+    double originX, originY;    // world position of the south-west corner (UTM-like, to exercise the camera maths)
+    Landscape land;
+};
+
+// The four scenes, in the report's order: Marchfeld, Petzenkirchen, Wachau, Florence.
+std::span<const Scenario> scenarios();
+// The scenario of that name, or nullptr.
+const Scenario* findScenario(std::string_view name);
+// The domain's extent [m]: the scenario's, rounded to whole coarsest cells.
+double extentXM(const Scenario& sc);
+double extentYM(const Scenario& sc);
+
+// The terrain and water of one scenario as smooth functions of the local position [m].
+class Terrain {
+public:
+    explicit Terrain(const Scenario& sc);
+
+    struct Sample {
+        float z, depth;   // terrain [m]; water depth [m], 0 where dry
+        float bank;       // distance to the nearest channel bank [m] (centreline distance - half width)
+    };
+    Sample at(double xLocal, double yLocal) const;
+    // Centreline y of the river at x [m], and its slope dy/dx.
+    void centreline(double xLocal, double& yLocal, double& dydx) const;
+    double floorAt(double xLocal) const { return l_.z0 - l_.riverSlope * xLocal; }
+    double waterLevelAt(double xLocal) const { return floorAt(xLocal) + l_.floodHeight; }
+
+private:
+    struct Wave {  // amp * sin(kx x + ky y + phase)
+        double kx, ky, phase, amp;
+    };
+    static double sum(const std::vector<Wave>& waves, double x, double y);
+    Landscape l_;
+    double extentY_;
+    double meanderPhase_[2] = {};
+    std::vector<Wave> large_, hills_, micro_;
+};
+
+struct Generated {
+    Grid grid;                 // layers elevation and water_depth; origin at the scenario's south-west corner
+    double thresholdM = 0;     // the calibrated T
+    double calibrationS = 0, buildS = 0;  // wall time finding T, and building the grid
+    uint64_t sampleTiles = 0, tiles = 0;
+    bool finestRaised = false; // the finest size was doubled (see the top of this file)
+};
+
+// The scenario's grid with about reportCellsM * 1e6 / scale cells (scale >= 1), on `threads` workers
+// (0 = all cores).
+Generated generate(const Scenario& sc, double scale, unsigned threads);
+
+// The fixed oblique camera over the scenario's flood (see the top of this file), for an image of
+// width x height pixels; `g` is the scenario's generated grid (its origin places the camera in the world).
+render::Camera floodCamera(const Scenario& sc, const Grid& g, int width, int height);
+
+}  // namespace hc::scenes

@@ -1,0 +1,137 @@
+// The benchmark's synthetic flood scenes (bench/scenes, heightcast/scenes/scenes.h): a small generated scene has
+// what hc-bench relies on: about the asked-for cell count in a valid grid, each cell carrying the landscape's
+// terrain and water depth at its centre, water along the river and none on the uplands, and a camera above the
+// terrain whose centre ray comes down on the flooded valley inside the grid.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <string>
+
+#include "heightcast/render/camera.h"
+#include "heightcast/scenes/scenes.h"
+
+using namespace hc::scenes;
+
+namespace {
+
+// Petzenkirchen at 1/32 of its cells (about 57 k): the finest size is raised, the threshold still calibrated.
+constexpr double kScale = 32;
+// The calibration stops within 3 % of the target on a count over every tile (or three rounds of bisection).
+constexpr double kCellCountTolerance = 0.05;
+// A cell's values are the landscape's floats at its centre; the centre computed another way may differ in the
+// last bits of a coordinate of ~10 km, which moves a height by far less than this [m].
+constexpr double kValueToleranceM = 1e-3;
+
+const Scenario& petzenkirchen() {
+    const Scenario* sc = findScenario("Petzenkirchen");
+    EXPECT_NE(sc, nullptr);
+    return *sc;
+}
+
+const Generated& generated() {
+    static const Generated gen = generate(petzenkirchen(), kScale, 0);
+    return gen;
+}
+
+}  // namespace
+
+TEST(Scenes, TheReportsFourInOrder) {
+    const auto all = scenarios();
+    ASSERT_EQ(all.size(), 4u);
+    const char* names[] = {"Marchfeld", "Petzenkirchen", "Wachau", "Florence"};
+    for (size_t k = 0; k < 4; ++k) {
+        EXPECT_EQ(std::string(all[k].name), names[k]);
+        EXPECT_EQ(findScenario(names[k]), &all[k]);
+    }
+    EXPECT_EQ(findScenario("Danube"), nullptr);
+    // Extents are whole coarsest cells and within half a cell of the report's.
+    for (const Scenario& sc : all) {
+        EXPECT_EQ(std::fmod(extentXM(sc), kCoarsestM), 0.0) << sc.name;
+        EXPECT_LE(std::abs(extentXM(sc) - sc.extentXKm * 1000), kCoarsestM / 2) << sc.name;
+        EXPECT_LE(std::abs(extentYM(sc) - sc.extentYKm * 1000), kCoarsestM / 2) << sc.name;
+    }
+}
+
+TEST(Scenes, GeneratedGridHasTheAskedForCellCount) {
+    const Scenario& sc = petzenkirchen();
+    const Generated& gen = generated();
+    const hc::Grid& g = gen.grid;
+    EXPECT_EQ(g.validate(), "");
+    ASSERT_EQ(g.layerCount(), 2u);
+    EXPECT_EQ(g.findLayer("water_depth"), 1);
+    const double target = sc.reportCellsM * 1e6 / kScale;
+    EXPECT_NEAR(double(g.cellCount()) / target, 1.0, kCellCountTolerance) << g.cellCount() << " cells for " << target;
+    EXPECT_EQ(g.levelSizeM(g.maxLevel), kCoarsestM);
+    EXPECT_GE(g.finestCellM, sc.finestM);
+    EXPECT_EQ(g.finestCellM > sc.finestM, gen.finestRaised);
+    EXPECT_GT(gen.thresholdM, 0);
+    EXPECT_GT(gen.tiles, gen.sampleTiles);  // a large domain: the calibration counts a sample of its tiles
+    // The grid covers the extent: the corners' cells exist, beyond it none does.
+    EXPECT_TRUE(g.locate(1, 1).has_value());
+    EXPECT_TRUE(g.locate(extentXM(sc) - 1, extentYM(sc) - 1).has_value());
+    EXPECT_FALSE(g.locate(extentXM(sc) + 1, 1).has_value());
+}
+
+TEST(Scenes, CellsCarryTheLandscapeAtTheirCentres) {
+    const Scenario& sc = petzenkirchen();
+    const hc::Grid& g = generated().grid;
+    const Terrain terrain(sc);
+    size_t wet = 0;
+    for (size_t i = 0; i < g.cellCount(); ++i) {
+        wet += g.values[1][i] > 0;
+        if (i % 97) continue;  // a spread sample: every cell would cost as much as the generation
+        double x, y;
+        g.cellCenterLocal(i, x, y);
+        const Terrain::Sample s = terrain.at(x, y);
+        EXPECT_NEAR(g.values[0][i], s.z, kValueToleranceM) << "cell " << i;
+        EXPECT_NEAR(g.values[1][i], s.depth, kValueToleranceM) << "cell " << i;
+    }
+    // A flood, not a lake: some cells wet, most dry.
+    EXPECT_GT(wet, g.cellCount() / 20);
+    EXPECT_LT(wet, g.cellCount() / 2);
+}
+
+TEST(Scenes, WaterAlongTheRiverNoneOnTheUplands) {
+    const Scenario& sc = petzenkirchen();
+    const hc::Grid& g = generated().grid;
+    const Terrain terrain(sc);
+    for (int k = 1; k < 20; ++k) {
+        const double x = extentXM(sc) * k / 20;
+        double yRiver, dydx;
+        terrain.centreline(x, yRiver, dydx);
+        // The channel is always wet: the cell over the centreline holds water.
+        const auto river = g.locate(x, yRiver);
+        ASSERT_TRUE(river.has_value()) << "x " << x;
+        EXPECT_GT(g.values[1][*river], 0.0f) << "river at x " << x;
+        // 500 m from the domain's south and north edges lie the uplands, far above the flood.
+        for (double y : {500.0, extentYM(sc) - 500}) {
+            const auto upland = g.locate(x, y);
+            ASSERT_TRUE(upland.has_value()) << "x " << x << " y " << y;
+            EXPECT_EQ(g.values[1][*upland], 0.0f) << "upland at x " << x << " y " << y;
+            EXPECT_GT(g.values[0][*upland], terrain.waterLevelAt(x)) << "upland at x " << x << " y " << y;
+        }
+    }
+}
+
+TEST(Scenes, CameraAboveTheTerrainLooksDownOnTheFlood) {
+    const Scenario& sc = petzenkirchen();
+    const hc::Grid& g = generated().grid;
+    const Terrain terrain(sc);
+    const hc::render::Camera cam = floodCamera(sc, g, 160, 90);
+    EXPECT_EQ(cam.width, 160);
+    EXPECT_EQ(cam.height, 90);
+    const double xLocal = cam.xWorld - g.originWorldX, yLocal = cam.yWorld - g.originWorldY;
+    ASSERT_TRUE(g.locate(xLocal, yLocal).has_value()) << "camera outside the grid";
+    EXPECT_GE(cam.zWorld - terrain.at(xLocal, yLocal).z, 1500.0);  // 1.5 km above the water, which is above the ground
+    // The centre ray descends, downstream (+x), and meets the water level of the camera's x inside the grid,
+    // over the flooded valley: within the floodplain's reach of the river.
+    const hc::render::CameraBasis b = hc::render::basisOf(cam);
+    ASSERT_LT(b.forward[2], 0.0);
+    EXPECT_GT(b.forward[0], 0.0);
+    const double t = (cam.zWorld - terrain.waterLevelAt(xLocal)) / -b.forward[2];
+    const double hitX = xLocal + t * b.forward[0], hitY = yLocal + t * b.forward[1];
+    ASSERT_TRUE(g.locate(hitX, hitY).has_value()) << "the centre ray leaves the grid at " << hitX << ", " << hitY;
+    double yRiver, dydx;
+    terrain.centreline(hitX, yRiver, dydx);
+    EXPECT_LT(std::abs(hitY - yRiver), sc.land.floorHalfWidth + sc.land.sideWidth) << "the centre ray misses the valley";
+}
