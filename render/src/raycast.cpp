@@ -168,6 +168,81 @@ From cameFrom(const TexelRay& ray, int iu, int iv) {
     return From{acrossU, acrossU ? iu - (du > 0 ? 1 : -1) : iu, acrossU ? iv : iv - (dv > 0 ? 1 : -1)};
 }
 
+// One ray's walk through one cascade (traverse()): what every patch it reaches needs.
+struct PatchWalk {
+    const CascadeTextures& tex;
+    const TexelRay& ray;
+    double tStart;  // where the walk began: a contact from below there is the ray's first in this cascade
+    double zFloor;  // the terrain block's bottom
+    bool water;     // the water surface is drawn for this ray (until it is found under it)
+    RayState& st;
+    PatchHit res;
+
+    // Patch (iu, iv) over `segment`, intersected with both surfaces under the block's rules (traverse()): true
+    // when that ends the walk, the result in res; false when the ray goes on past the patch.
+    bool endsAt(int iu, int iv, const RaySpan& segment) {
+        PatchContact ct = patchContact(tex.terrain, iu, iv, ray, segment);
+        st.touchedTerrain = st.touchedTerrain || ct.enteredAbove;
+        if (ct.kind == Contact::Below) {
+            const double z0 = ray.zAt(segment.t);
+            if (z0 < zFloor) {  // under the block: its bottom, if the ray rises through it over this patch
+                const double tauF = ray.dz > 0 ? (zFloor - z0) / ray.dz : HUGE_VAL;
+                if (tauF <= segment.len) {
+                    res.hit = res.wall = true;
+                    res.t = segment.t + tauF, res.nz = -1;
+                    return true;
+                }
+                return false;  // nothing of the block in this patch; the water lies on top of it
+            }
+            if (segment.t > tStart) {
+                const From from = cameFrom(ray, iu, iv);
+                if (!patchDefined(tex.terrain, from.u, from.v)) {  // from a hole or outside: the wall on that edge
+                    res.hit = res.wall = true;
+                    res.t = segment.t;
+                    (from.acrossU ? res.nx : res.ny) = (from.acrossU ? ray.du : ray.dv) > 0 ? -1 : 1;
+                    return true;
+                }
+            }
+            if (!st.touchedTerrain) {
+                res.terrainUnderground = true;
+                return true;
+            }
+            ct.kind = Contact::Hit;  // a seam: the hit is where the ray went under (tau = 0)
+        }
+        PatchContact cw;
+        if (water) {
+            cw = patchContact(tex.water, iu, iv, ray, segment);
+            st.touchedWater = st.touchedWater || cw.enteredAbove;
+            // Under the water surface at its first contact (a camera in a lake), or come in under it through its
+            // edge (from a patch without water, where the level lies above a dry shore): the ray is under the
+            // water, which is not drawn for it; it goes on to the ground. (Hitting the edge would draw water below
+            // its level: up to 21 m on the hef flood before this rule.)
+            if (cw.kind == Contact::Below) {
+                const From from = cameFrom(ray, iu, iv);
+                const bool throughEdge = segment.t > tStart && !patchDefined(tex.water, from.u, from.v);
+                if (!st.touchedWater || throughEdge) {
+                    res.waterUnderground = true;
+                    water = false;
+                    cw.kind = Contact::None;
+                } else {
+                    cw.kind = Contact::Hit;  // a seam, as for the terrain
+                }
+            }
+        }
+        if (cw.kind == Contact::Hit && (ct.kind != Contact::Hit || cw.tau <= ct.tau)) {
+            res.hit = res.water = true;
+            res.t = segment.t + cw.tau, res.gx = cw.gx, res.gy = cw.gy;
+            return true;
+        }
+        if (ct.kind == Contact::Hit) {
+            res.hit = true;
+            res.t = segment.t + ct.tau, res.gx = ct.gx, res.gy = ct.gy;
+            return true;
+        }
+        return false;
+    }
+};
+
 // The first point in [tIn, tOut] where the ray meets the terrain or (when `water`) the water surface of
 // cascade `c`, in one walk over both: a node is skipped when the ray passes above the larger of the two
 // maxima, and each patch reached is intersected with both surfaces, the earlier hit winning (water on a
@@ -187,21 +262,19 @@ From cameFrom(const TexelRay& ray, int iu, int iv) {
 // through its edge, a ray does not draw it and goes on to the ground.
 PatchHit traverse(const CascadeTextures& tex, const Cascade& c, const glm::dvec3& o, const glm::dvec3& d, double tIn, double tOut, double zFloor,
                   RayState& st) {
-    PatchHit res;
     const Heightfield& hf = tex.terrain;
-    if (hf.mip.empty() || !(tIn < tOut)) return res;
-    const double tStart = tIn;
-    bool water = tex.hasWater && !st.underWater && !tex.water.mip.empty();
+    if (hf.mip.empty() || !(tIn < tOut)) return PatchHit{};
     const TexelRay ray = texelRay(c, o, d);
+    PatchWalk walk{tex, ray, tIn, zFloor, tex.hasWater && !st.underWater && !tex.water.mip.empty(), st, PatchHit{}};
     const double u0 = ray.u0, v0 = ray.v0, du = ray.du, dv = ray.dv;
     const double invDu = du != 0 ? 1.0 / du : 0.0, invDv = dv != 0 ? 1.0 / dv : 0.0;
     const int top = int(hf.mip.size()) - 1;
     const int patches = hf.n - 1;
     auto maxAt = [&](int level, size_t idx) {
         const float m = hf.mip[size_t(level)][idx];
-        return water ? std::max(m, tex.water.mip[size_t(level)][idx]) : m;
+        return walk.water ? std::max(m, tex.water.mip[size_t(level)][idx]) : m;
     };
-    if (!clipToHeights(ray, maxAt(top, 0), zFloor, tIn, tOut)) return res;
+    if (!clipToHeights(ray, maxAt(top, 0), zFloor, tIn, tOut)) return PatchHit{};
     // Start three levels below the top (the coarsest nodes are nearly always entered; the walk climbs back
     // when it leaves a parent): 1-2 % faster than starting at the top, no more (BENCHMARKS.md).
     int level = std::max(0, top - 3);
@@ -241,71 +314,11 @@ PatchHit traverse(const CascadeTextures& tex, const Cascade& c, const glm::dvec3
             continue;
         }
         // A patch: exact intersection with its bilinear surfaces.
-        const RaySpan segment{t, tExit - t};
-        PatchContact ct = patchContact(hf, iu, iv, ray, segment);
-        st.touchedTerrain = st.touchedTerrain || ct.enteredAbove;
-        if (ct.kind == Contact::Below) {
-            const double z0 = ray.zAt(t);
-            if (z0 < zFloor) {  // under the block: its bottom, if the ray rises through it over this patch
-                const double tauF = ray.dz > 0 ? (zFloor - z0) / ray.dz : HUGE_VAL;
-                if (tauF <= segment.len) {
-                    res.hit = res.wall = true;
-                    res.t = t + tauF, res.nz = -1;
-                    return res;
-                }
-                t = tExit + tiny;  // nothing of the block in this patch; the water lies on top of it
-                if (leavesParent) level = std::min(level + 1, top);
-                continue;
-            }
-            if (t > tStart) {
-                const From from = cameFrom(ray, iu, iv);
-                if (!patchDefined(hf, from.u, from.v)) {  // from a hole or outside: the wall on that edge
-                    res.hit = res.wall = true;
-                    res.t = t;
-                    (from.acrossU ? res.nx : res.ny) = (from.acrossU ? du : dv) > 0 ? -1 : 1;
-                    return res;
-                }
-            }
-            if (!st.touchedTerrain) {
-                res.terrainUnderground = true;
-                return res;
-            }
-            ct.kind = Contact::Hit;  // a seam: the hit is where the ray went under (tau = 0)
-        }
-        PatchContact cw;
-        if (water) {
-            cw = patchContact(tex.water, iu, iv, ray, segment);
-            st.touchedWater = st.touchedWater || cw.enteredAbove;
-            // Under the water surface at its first contact (a camera in a lake), or come in under it through its
-            // edge (from a patch without water, where the level lies above a dry shore): the ray is under the
-            // water, which is not drawn for it; it goes on to the ground. (Hitting the edge would draw water below
-            // its level: up to 21 m on the hef flood before this rule.)
-            if (cw.kind == Contact::Below) {
-                const From from = cameFrom(ray, iu, iv);
-                const bool throughEdge = t > tStart && !patchDefined(tex.water, from.u, from.v);
-                if (!st.touchedWater || throughEdge) {
-                    res.waterUnderground = true;
-                    water = false;
-                    cw.kind = Contact::None;
-                } else {
-                    cw.kind = Contact::Hit;  // a seam, as for the terrain
-                }
-            }
-        }
-        if (cw.kind == Contact::Hit && (ct.kind != Contact::Hit || cw.tau <= ct.tau)) {
-            res.hit = res.water = true;
-            res.t = t + cw.tau, res.gx = cw.gx, res.gy = cw.gy;
-            return res;
-        }
-        if (ct.kind == Contact::Hit) {
-            res.hit = true;
-            res.t = t + ct.tau, res.gx = ct.gx, res.gy = ct.gy;
-            return res;
-        }
+        if (walk.endsAt(iu, iv, RaySpan{t, tExit - t})) return walk.res;
         t = tExit + tiny;
         if (leavesParent) level = std::min(level + 1, top);
     }
-    return res;
+    return walk.res;
 }
 
 // The ray parameter interval in which dot(xy - eye, dir) lies in [lo, hi].
