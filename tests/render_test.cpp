@@ -113,8 +113,6 @@ HitCheck checkHits(const World& w, const Frame& f, const Timings& t, size_t stri
         EXPECT_GE(k, 0);
         double s = t.cascades[size_t(k)].texelM;
         double factor = 1;
-        const double off = (x - 0) * t.viewDirX + (y - 0) * t.viewDirY;  // offsets compared as differences below
-        (void)off;
         if (size_t(k) + 1 < t.cascades.size() && t.cascades[size_t(k) + 1].texelM > s) {
             s = std::max(s, t.cascades[size_t(k) + 1].texelM);
             factor = 2;
@@ -172,8 +170,9 @@ size_t expectMissesAreSky(const Frame& f) {
 }
 
 TEST(Render, ApproximationEqualsTheExactSurfaceAtTexels) {
-    // Texel values are read back through a straight-down camera's EXR-free path: render a frame and
-    // compare hits is indirect, so compare the approximation directly: a 1-cascade fit over the grid.
+    // One cascade over the LiDAR grid, seen straight down from 1000 m: every ray hits, and every hit lies on the
+    // exact surface within the bilinear interpolation bound of the texels around it (checkHits). The texels
+    // themselves are compared with the exact surface in TexelsEqualTheExactSurfaceWithin1mm.
     World& w = lidar();
     Camera c;
     c.xWorld = w.grid.originWorldX + 200;
@@ -188,9 +187,6 @@ TEST(Render, ApproximationEqualsTheExactSurfaceAtTexels) {
     o.texelsPerSide = 512;
     Timings t;
     Frame f = renderFrame(*w.scene, c, o, t);
-    // Straight down, every hit's height is the bilinear interpolation of four texels; at pixel centres
-    // that fall close to a texel centre the interpolation is that texel: check the hit heights against
-    // the exact surface with the interpolation bound (below), and here that all 256 x 256 rays hit.
     EXPECT_EQ(t.hits, t.rays) << "straight down over the middle of a complete LiDAR grid every ray hits";
     HitCheck h = checkHits(w, f, t, 1);
     EXPECT_GT(h.checked, 60000u);
@@ -646,6 +642,34 @@ TEST(RenderExtremes, HolesNextToTheCamera) {
     EXPECT_EQ(checkHits(w, f, t, 1).bad, 0u);
 }
 
+// Stage 1 of both backends (detail::fitFrame): the cascades fitCascades gives for the frame's view volume, with the
+// view direction in Timings; for a camera below the terrain none at all.
+TEST(Render, FitFrameFitsTheViewVolumeOrNothingBelowTheTerrain) {
+    World& w = hef();
+    RenderOptions o;
+    o.texelsPerSide = 256;
+    const Camera c = overviewCamera(*w.scene, 320, 200);
+    const detail::FrameSetup setup = detail::setUpFrame(*w.scene, c);
+    Timings t;
+    const CascadeFit fit = detail::fitFrame(*w.scene, c, setup, o, t);
+    const CascadeFit want = fitCascades(setup.view, o.cascades, o.texelsPerSide);
+    ASSERT_EQ(fit.cascades.size(), 3u);
+    ASSERT_EQ(fit.cascades.size(), want.cascades.size());
+    for (size_t k = 0; k < fit.cascades.size(); ++k) {
+        EXPECT_EQ(fit.cascades[k].texelM, want.cascades[k].texelM) << "cascade " << k;
+        EXPECT_EQ(fit.cascades[k].x0, want.cascades[k].x0) << "cascade " << k;
+        EXPECT_EQ(fit.cascades[k].y0, want.cascades[k].y0) << "cascade " << k;
+    }
+    EXPECT_EQ(t.viewDirX, fit.dir.x);
+    EXPECT_EQ(t.viewDirY, fit.dir.y);
+    EXPECT_NEAR(std::hypot(t.viewDirX, t.viewDirY), 1.0, 1e-12);
+    const Camera below = above(w, -50, -10);
+    Timings tb;
+    const CascadeFit none = detail::fitFrame(*w.scene, below, detail::setUpFrame(*w.scene, below), o, tb);
+    EXPECT_TRUE(none.cascades.empty());
+    EXPECT_LT(none.hull.size(), 3u);
+}
+
 TEST(Render, BadCameraAndOptionsAreRefused) {
     World& w = lidar();
     Timings t;
@@ -1062,7 +1086,7 @@ void readBackWater(const Frame& f, std::vector<float>& posZ, std::vector<float>&
 }
 
 // Cameras on a flood: the overview, and oblique views of random wet cells from random directions (their
-// shores are where the old surface rose), at distances of 10 to 60 of the grid's finest... coarsest cells.
+// shores are where the old surface rose), from 0.5 to 1.5 distM away horizontally and 15-65 % of that above.
 std::vector<Camera> floodCameras(const World& w, double distM, unsigned seed) {
     std::vector<Camera> cams{overviewCamera(*w.scene, 200, 130)};
     const Grid& g = w.grid;

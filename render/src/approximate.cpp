@@ -39,6 +39,78 @@ struct Candidates {
     size_t count = 0;                          // real entries (before padding)
 };
 
+// The texels to evaluate, per row at most two spans: the row's visible span less the part copied from the
+// last frame (visible there too: one span, as both rows' spans are intervals).
+struct Todo {
+    int a0 = 0, a1 = -1, b0 = 0, b1 = -1;  // inclusive; empty when the end is below the start
+};
+
+// Copies into tex the visible texels of c that were visible in `reuse` (if any; their count added to `copied`),
+// and returns the spans left to evaluate.
+std::vector<Todo> copyReusedTexels(const Cascade& c, const TexelReuse* reuse, CascadeTextures& tex, uint64_t& copied) {
+    const int n = c.n;
+    std::vector<Todo> todo(static_cast<size_t>(n));
+    for (int j = 0; j < n; ++j) {
+        const Cascade::RowSpan& r = c.rows[size_t(j)];
+        Todo& t = todo[size_t(j)];
+        t.a0 = r.first, t.a1 = r.last;
+        if (!reuse || r.last < r.first) continue;
+        const int jp = j + reuse->dj;
+        if (jp < 0 || jp >= reuse->cascade->n) continue;
+        const Cascade::RowSpan& p = reuse->cascade->rows[size_t(jp)];
+        const int f = std::max(r.first, p.first - reuse->di), l = std::min(r.last, p.last - reuse->di);
+        if (l < f) continue;
+        const size_t from = size_t(jp) * size_t(n) + size_t(f + reuse->di), to = size_t(j) * size_t(n) + size_t(f), count = size_t(l - f + 1);
+        std::copy_n(&reuse->tex->terrain.h[from], count, &tex.terrain.h[to]);
+        if (tex.hasWater) {
+            std::copy_n(&reuse->tex->water.h[from], count, &tex.water.h[to]);
+            std::copy_n(&reuse->tex->depth[from], count, &tex.depth[to]);
+        }
+        copied += count;
+        t = {r.first, f - 1, l + 1, r.last};
+    }
+    return todo;
+}
+
+// Gathers the influence list of cell k into cand, relative to k's centre and value. Returns the water level
+// base lk: the level of a wet cell, k's own if k is wet (NaN when no cell of the list is wet).
+double gatherCandidates(const Scene& scene, uint32_t k, Candidates& cand) {
+    const Grid& g = scene.grid();
+    const auto& kernels = scene.kernels();
+    const double kx = kernels[k].cx, ky = kernels[k].cy;
+    const double zk = g.values[0][k];
+    const int depthLayer = scene.waterLayer();
+    const float* depthValues = depthLayer >= 0 ? g.values[size_t(depthLayer)].data() : nullptr;
+    const auto list = scene.lists().list(k);
+    // The water level field (DESIGN.md section 12, influence/surface.h) is taken relative to a wet cell's
+    // level, k's own if k is wet, as the exact evaluator's levelBase() does: a constant level stays exact.
+    double lk = std::numeric_limits<double>::quiet_NaN();
+    if (depthValues) {
+        if (depthValues[k] > 0) lk = zk + double(depthValues[k]);
+        for (size_t idx = 0; idx < list.size() && std::isnan(lk); ++idx)
+            if (depthValues[list[idx]] > 0) lk = double(g.values[0][list[idx]]) + double(depthValues[list[idx]]);
+    }
+    const bool anyWet = !std::isnan(lk);
+    const size_t m = list.size(), padded = (m + kLanes - 1) / kLanes * kLanes;
+    for (auto* v : {&cand.ex, &cand.ey, &cand.a, &cand.dz, &cand.dl, &cand.wet}) v->assign(padded, 0.0f);
+    cand.r2.assign(padded, -1.0f);  // padding never counts: d2 < -1 is false
+    cand.count = m;
+    for (size_t idx = 0; idx < m; ++idx) {
+        const uint32_t i = list[idx];
+        const auto& ck = kernels[i];
+        cand.ex[idx] = static_cast<float>(ck.cx - kx);
+        cand.ey[idx] = static_cast<float>(ck.cy - ky);
+        cand.a[idx] = ck.a;
+        cand.r2[idx] = ck.r2;
+        cand.dz[idx] = static_cast<float>(g.values[0][i] - zk);
+        if (anyWet && depthValues[i] > 0) {
+            cand.wet[idx] = 1.0f;
+            cand.dl[idx] = static_cast<float>(double(g.values[0][i]) + double(depthValues[i]) - lk);
+        }
+    }
+    return lk;
+}
+
 }  // namespace
 
 void Heightfield::buildMip() {
@@ -82,33 +154,10 @@ uint64_t approximate(const Scene& scene, const Cascade& c, CascadeTextures& tex,
         tex.water.h.assign(size_t(n) * size_t(n), noSurface);
         tex.depth.assign(size_t(n) * size_t(n), 0.0f);
     }
-    // The texels to evaluate, per row at most two spans: the row's visible span less the part copied from the
-    // last frame (visible there too: one span, as both rows' spans are intervals).
-    struct Todo {
-        int a0 = 0, a1 = -1, b0 = 0, b1 = -1;  // inclusive; empty when the end is below the start
-    };
-    std::vector<Todo> todo(static_cast<size_t>(n));
     uint64_t copied = 0;
-    for (int j = 0; j < n; ++j) {
-        const Cascade::RowSpan& r = c.rows[size_t(j)];
-        Todo& t = todo[size_t(j)];
-        t.a0 = r.first, t.a1 = r.last;
-        if (!reuse || r.last < r.first) continue;
-        const int jp = j + reuse->dj;
-        if (jp < 0 || jp >= reuse->cascade->n) continue;
-        const Cascade::RowSpan& p = reuse->cascade->rows[size_t(jp)];
-        const int f = std::max(r.first, p.first - reuse->di), l = std::min(r.last, p.last - reuse->di);
-        if (l < f) continue;
-        const size_t from = size_t(jp) * size_t(n) + size_t(f + reuse->di), to = size_t(j) * size_t(n) + size_t(f), count = size_t(l - f + 1);
-        std::copy_n(&reuse->tex->terrain.h[from], count, &tex.terrain.h[to]);
-        if (tex.hasWater) {
-            std::copy_n(&reuse->tex->water.h[from], count, &tex.water.h[to]);
-            std::copy_n(&reuse->tex->depth[from], count, &tex.depth[to]);
-        }
-        copied += count;
-        t = {r.first, f - 1, l + 1, r.last};
-    }
+    const std::vector<Todo> todo = copyReusedTexels(c, reuse, tex, copied);
     if (reused) *reused = copied;
+
     // Their bounding box, and the cells that meet it.
     int i0 = n, i1 = -1, j0 = n, j1 = -1;
     for (int j = 0; j < n; ++j) {
@@ -122,7 +171,6 @@ uint64_t approximate(const Scene& scene, const Cascade& c, CascadeTextures& tex,
     g.cellsInBox(c.x0 + i0 * s, c.y0 + j0 * s, c.x0 + i1 * s, c.y0 + j1 * s, cells);
 
     const float tail = static_cast<float>(lists.params().tail());
-    const int depthLayer = scene.waterLayer();
     const float minDepth = static_cast<float>(waterMinDepthM);
     std::vector<uint64_t> gaussians(resolveThreads(threads), 0);
     std::vector<Candidates> scratch(gaussians.size());
@@ -150,36 +198,11 @@ uint64_t approximate(const Scene& scene, const Cascade& c, CascadeTextures& tex,
                 any = std::max(ia, t.a0) <= std::min(ib - 1, t.a1) || std::max(ia, t.b0) <= std::min(ib - 1, t.b1);
             }
             if (!any) continue;
-            const auto& kernels = scene.kernels();
-            const double kx = kernels[k].cx, ky = kernels[k].cy;
-            const double zk = g.values[0][k];
-            const float* depthValues = depthLayer >= 0 ? g.values[size_t(depthLayer)].data() : nullptr;
-            const auto list = lists.list(k);
-            // The water level field (DESIGN.md section 12, influence/surface.h) is taken relative to a wet cell's
-            // level, k's own if k is wet, as the exact evaluator's levelBase() does: a constant level stays exact.
-            double lk = std::numeric_limits<double>::quiet_NaN();
-            if (depthValues) {
-                if (depthValues[k] > 0) lk = zk + double(depthValues[k]);
-                for (size_t idx = 0; idx < list.size() && std::isnan(lk); ++idx)
-                    if (depthValues[list[idx]] > 0) lk = double(g.values[0][list[idx]]) + double(depthValues[list[idx]]);
-            }
+            const double lk = gatherCandidates(scene, k, cand);
             const bool anyWet = !std::isnan(lk);
-            const size_t m = list.size(), padded = (m + kLanes - 1) / kLanes * kLanes;
-            for (auto* v : {&cand.ex, &cand.ey, &cand.a, &cand.dz, &cand.dl, &cand.wet}) v->assign(padded, 0.0f);
-            cand.r2.assign(padded, -1.0f);  // padding never counts: d2 < -1 is false
-            for (size_t idx = 0; idx < m; ++idx) {
-                const uint32_t i = list[idx];
-                const auto& ck = kernels[i];
-                cand.ex[idx] = static_cast<float>(ck.cx - kx);
-                cand.ey[idx] = static_cast<float>(ck.cy - ky);
-                cand.a[idx] = ck.a;
-                cand.r2[idx] = ck.r2;
-                cand.dz[idx] = static_cast<float>(g.values[0][i] - zk);
-                if (anyWet && depthValues[i] > 0) {
-                    cand.wet[idx] = 1.0f;
-                    cand.dl[idx] = static_cast<float>(double(g.values[0][i]) + double(depthValues[i]) - lk);
-                }
-            }
+            const size_t m = cand.count, padded = cand.ex.size();
+            const double kx = scene.kernels()[k].cx, ky = scene.kernels()[k].cy;
+            const double zk = g.values[0][k];
             for (int j = ja; j < jb; ++j) {
                 const float fy = static_cast<float>(c.y0 + j * s - ky);
                 const Todo& span = todo[size_t(j)];

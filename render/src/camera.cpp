@@ -1,4 +1,7 @@
+// render/src/camera.cpp: the camera's checks, look-at and orthonormal basis.
 #include <cmath>
+
+#include <glm/geometric.hpp>
 
 #include "heightcast/core/error.h"
 #include "heightcast/render/camera.h"
@@ -26,16 +29,16 @@ void Camera::validate() const {
         throw Error("image size " + std::to_string(width) + " x " + std::to_string(height) + " is outside 1..16384 per side");
 }
 
-Camera Camera::lookAt(const std::array<double, 3>& eye, const std::array<double, 3>& target, double fovYDeg, int width, int height) {
-    const double dx = target[0] - eye[0], dy = target[1] - eye[1], dz = target[2] - eye[2];
-    const double horizontal = std::hypot(dx, dy);
-    if (horizontal == 0 && dz == 0) throw Error("--look-at: the eye and the target are the same point");
+Camera Camera::lookAt(const glm::dvec3& eye, const glm::dvec3& target, double fovYDeg, int width, int height) {
+    const glm::dvec3 d = target - eye;
+    const double horizontal = std::hypot(d.x, d.y);
+    if (horizontal == 0 && d.z == 0) throw Error("--look-at: the eye and the target are the same point");
     Camera c;
-    c.xWorld = eye[0];
-    c.yWorld = eye[1];
-    c.zWorld = eye[2];
-    c.yawDeg = horizontal > 0 ? std::atan2(dx, dy) / kDeg : 0.0;  // straight up or down: face north
-    c.pitchDeg = std::atan2(dz, horizontal) / kDeg;
+    c.xWorld = eye.x;
+    c.yWorld = eye.y;
+    c.zWorld = eye.z;
+    c.yawDeg = horizontal > 0 ? std::atan2(d.x, d.y) / kDeg : 0.0;  // straight up or down: face north
+    c.pitchDeg = std::atan2(d.z, horizontal) / kDeg;
     c.fovYDeg = fovYDeg;
     c.width = width;
     c.height = height;
@@ -47,14 +50,11 @@ CameraBasis basisOf(const Camera& c) {
     CameraBasis b;
     b.forward = {std::sin(yaw) * std::cos(pitch), std::cos(yaw) * std::cos(pitch), std::sin(pitch)};
     // Right stays horizontal (defined by the yaw even looking straight down or up), then roll.
-    std::array<double, 3> r{std::cos(yaw), -std::sin(yaw), 0.0};
-    std::array<double, 3> u{r[1] * b.forward[2] - r[2] * b.forward[1], r[2] * b.forward[0] - r[0] * b.forward[2],
-                            r[0] * b.forward[1] - r[1] * b.forward[0]};
+    const glm::dvec3 r{std::cos(yaw), -std::sin(yaw), 0.0};
+    const glm::dvec3 u = glm::cross(r, b.forward);
     const double cr = std::cos(roll), sr = std::sin(roll);
-    for (int k = 0; k < 3; ++k) {
-        b.right[k] = cr * r[k] - sr * u[k];
-        b.up[k] = sr * r[k] + cr * u[k];
-    }
+    b.right = cr * r - sr * u;
+    b.up = sr * r + cr * u;
     b.tanHalfY = std::tan(0.5 * c.fovYDeg * kDeg);
     b.tanHalfX = b.tanHalfY * double(c.width) / double(c.height);
     return b;

@@ -10,6 +10,10 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <optional>
+
+#include <glm/geometric.hpp>
+#include <glm/vec2.hpp>
 
 #include "textures.h"
 
@@ -27,32 +31,80 @@ struct PatchHit {
     double gx = 0, gy = 0;  // surface slope dz/dx, dz/dy at the hit [m/m]
 };
 
-// Where the ray first meets the bilinear patch (iu, iv) of `hf` within tau in [0, len] from t. Below: the ray
-// enters the patch at or under its surface (tau = 0).
-enum class Contact { None, Below, Hit };
-Contact patchContact(const Heightfield& hf, int iu, int iv, double u0, double v0, double du, double dv, const double o[3], const double d[3],
-                     double t, double len, double s, double& tau, double& gx, double& gy, bool& touched) {
+// What a ray has met so far, over its cascades: each surface's first contact decides whether the ray
+// started above it. Under the water surface (a camera in a lake) the water is not drawn at all.
+struct RayState {
+    bool touchedTerrain = false, touchedWater = false, underWater = false;
+};
+
+// A ray in one cascade's texture coordinates u = (x - x0) / s, v = (y - y0) / s: at parameter t [m along the
+// ray] it is at (u0 + du t, v0 + dv t), height z0 + dz t [m, local].
+struct TexelRay {
+    double u0, v0, du, dv;
+    double z0, dz;
+    double texelM;  // s
+    double zAt(double t) const { return z0 + dz * t; }
+};
+
+TexelRay texelRay(const Cascade& c, const glm::dvec3& o, const glm::dvec3& d) {
+    const double s = c.texelM;
+    return {(o.x - c.x0) / s, (o.y - c.y0) / s, d.x / s, d.y / s, o.z, d.z, s};
+}
+
+// The part of a ray over one patch: parameters [t, t + len].
+struct RaySpan {
+    double t, len;
+};
+
+// Patch (iu, iv) of a heightfield, spanning texels iu..iu+1 by iv..iv+1, with its corner heights [m].
+struct PatchCorners {
+    int iu, iv;
+    double h00, h10, h01, h11;  // h10 at texel (iu + 1, iv), h01 at (iu, iv + 1)
+};
+
+// The corners of patch (iu, iv) of `hf` if it has a surface (four defined corners); outside the texture it has none.
+std::optional<PatchCorners> cornersOf(const Heightfield& hf, int iu, int iv) {
+    if (iu < 0 || iv < 0 || iu >= hf.n - 1 || iv >= hf.n - 1) return std::nullopt;
     const size_t n = size_t(hf.n);
     const float* r0 = &hf.h[size_t(iv) * n + size_t(iu)];
-    const double h00 = r0[0], h10 = r0[1], h01 = r0[n], h11 = r0[n + 1];
-    if (!(std::isfinite(h00) && std::isfinite(h10) && std::isfinite(h01) && std::isfinite(h11))) return Contact::None;
-    const double a0 = u0 + du * t - iu, b0 = v0 + dv * t - iv, z0 = o[2] + d[2] * t;
+    const PatchCorners p{iu, iv, r0[0], r0[1], r0[n], r0[n + 1]};
+    if (!(std::isfinite(p.h00) && std::isfinite(p.h10) && std::isfinite(p.h01) && std::isfinite(p.h11))) return std::nullopt;
+    return p;
+}
+bool patchDefined(const Heightfield& hf, int iu, int iv) { return cornersOf(hf, iu, iv).has_value(); }
+
+// Where a ray first meets a bilinear patch within its span. Below: the ray enters the patch at or under the
+// surface (tau = 0).
+enum class Contact { None, Below, Hit };
+struct PatchContact {
+    Contact kind = Contact::None;
+    double tau = -1;            // from span.t (Hit, Below)
+    double gx = 0, gy = 0;      // surface slope dz/dx, dz/dy there [m/m]
+    bool enteredAbove = false;  // the ray entered the patch above its surface (RayState's `touched`)
+};
+
+PatchContact patchContact(const PatchCorners& p, const TexelRay& ray, const RaySpan& span) {
+    PatchContact out;
+    const double h00 = p.h00, h10 = p.h10, h01 = p.h01, h11 = p.h11;
+    const double du = ray.du, dv = ray.dv;
+    const double a0 = ray.u0 + du * span.t - p.iu, b0 = ray.v0 + dv * span.t - p.iv, z0 = ray.zAt(span.t);
     const double e = h00 - h10 - h01 + h11;
     // f(tau) = z(tau) - bilinear(tau), tau from t: C + B tau + A tau^2.
     const double C = z0 - (h00 + (h10 - h00) * a0 + (h01 - h00) * b0 + e * a0 * b0);
-    const double B = d[2] - (h10 - h00) * du - (h01 - h00) * dv - e * (a0 * dv + b0 * du);
+    const double B = ray.dz - (h10 - h00) * du - (h01 - h00) * dv - e * (a0 * dv + b0 * du);
     const double A = -e * du * dv;
     auto slope = [&](double at) {
         const double a = std::clamp(a0 + du * at, 0.0, 1.0), b = std::clamp(b0 + dv * at, 0.0, 1.0);
-        gx = ((h10 - h00) + e * b) / s;
-        gy = ((h01 - h00) + e * a) / s;
+        out.gx = ((h10 - h00) + e * b) / ray.texelM;
+        out.gy = ((h01 - h00) + e * a) / ray.texelM;
     };
-    tau = -1;
     if (C <= 0) {  // at or under the surface where the ray enters the patch: the caller's rules decide
-        tau = 0;
+        out.kind = Contact::Below;
+        out.tau = 0;
         slope(0);
-        return Contact::Below;
+        return out;
     }
+    double tau = -1;
     if (std::abs(A) < 1e-12 * (std::abs(B) + 1e-300)) {
         if (B < 0) tau = -C / B;
     } else {
@@ -64,19 +116,132 @@ Contact patchContact(const Heightfield& hf, int iu, int iv, double u0, double v0
             tau = r1 >= 0 ? r1 : r2;  // C > 0: the first root is where the ray goes under
         }
     }
-    touched = true;
-    if (!(tau >= 0 && tau <= len)) return Contact::None;
+    out.enteredAbove = true;
+    out.tau = tau;
+    if (!(tau >= 0 && tau <= span.len)) return out;
+    out.kind = Contact::Hit;
     slope(tau);
-    return Contact::Hit;
+    return out;
 }
 
-// Does patch (iu, iv) of `hf` have a surface (four defined corners)? Outside the texture it has none.
-bool patchDefined(const Heightfield& hf, int iu, int iv) {
-    if (iu < 0 || iv < 0 || iu >= hf.n - 1 || iv >= hf.n - 1) return false;
-    const size_t n = size_t(hf.n);
-    const float* r0 = &hf.h[size_t(iv) * n + size_t(iu)];
-    return std::isfinite(r0[0]) && std::isfinite(r0[1]) && std::isfinite(r0[n]) && std::isfinite(r0[n + 1]);
+// patchContact with patch (iu, iv) of `hf`: none where the patch has no surface.
+PatchContact patchContact(const Heightfield& hf, int iu, int iv, const TexelRay& ray, const RaySpan& span) {
+    const std::optional<PatchCorners> p = cornersOf(hf, iu, iv);
+    return p ? patchContact(*p, ray, span) : PatchContact{};
 }
+
+// Narrows [tIn, tOut] to where the ray can meet the block of a cascade whose highest point is zTop; false when
+// nothing is left. A ray above the whole cascade never hits it; nor does the part of a ray above the cascade's
+// highest point, where the walk would only skip nodes: start where a falling ray comes down to that height,
+// stop where a rising one climbs above it (a hair early and late, for rounding).
+bool clipToHeights(const TexelRay& ray, double zTop, double zFloor, double& tIn, double& tOut) {
+    if (std::min(ray.zAt(tIn), ray.zAt(tOut)) > zTop) return false;
+    if (ray.dz != 0) {
+        const double tCross = (zTop - ray.z0) / ray.dz, margin = 1e-9 * (1.0 + std::abs(tCross));
+        if (ray.dz < 0) tIn = std::max(tIn, tCross - margin);
+        else tOut = std::min(tOut, tCross + margin);
+        if (!(tIn < tOut)) return false;
+    }
+    // Likewise under the block's bottom there is nothing to hit but the bottom, where a rising ray comes up
+    // through it: start there; a falling ray ends there. (Without this a ray under the block walked every
+    // patch at the finest level: 6.3 s for a 480 x 300 frame from a camera under a domain edge.)
+    if (ray.dz != 0) {
+        const double tFloor = (zFloor - ray.z0) / ray.dz, margin = 1e-9 * (1.0 + std::abs(tFloor));
+        if (ray.dz > 0) tIn = std::max(tIn, tFloor - margin);
+        else tOut = std::min(tOut, tFloor + margin);
+        return tIn < tOut;
+    }
+    return !(ray.z0 < zFloor);
+}
+
+// The patch a ray came from into patch (iu, iv): across the edge it crossed last.
+struct From {
+    bool acrossU;
+    int u, v;
+};
+From cameFrom(const TexelRay& ray, int iu, int iv) {
+    const double u0 = ray.u0, v0 = ray.v0, du = ray.du, dv = ray.dv;
+    const double invDu = du != 0 ? 1.0 / du : 0.0, invDv = dv != 0 ? 1.0 / dv : 0.0;
+    const double enterU = du > 0 ? (iu - u0) * invDu : du < 0 ? (iu + 1 - u0) * invDu : -HUGE_VAL;
+    const double enterV = dv > 0 ? (iv - v0) * invDv : dv < 0 ? (iv + 1 - v0) * invDv : -HUGE_VAL;
+    const bool acrossU = enterU >= enterV;
+    return From{acrossU, acrossU ? iu - (du > 0 ? 1 : -1) : iu, acrossU ? iv : iv - (dv > 0 ? 1 : -1)};
+}
+
+// One ray's walk through one cascade (traverse()): what every patch it reaches needs.
+struct PatchWalk {
+    const CascadeTextures& tex;
+    const TexelRay& ray;
+    double tStart;  // where the walk began: a contact from below there is the ray's first in this cascade
+    double zFloor;  // the terrain block's bottom
+    bool water;     // the water surface is drawn for this ray (until it is found under it)
+    RayState& st;
+    PatchHit res;
+
+    // Patch (iu, iv) over `segment`, intersected with both surfaces under the block's rules (traverse()): true
+    // when that ends the walk, the result in res; false when the ray goes on past the patch.
+    bool endsAt(int iu, int iv, const RaySpan& segment) {
+        PatchContact ct = patchContact(tex.terrain, iu, iv, ray, segment);
+        st.touchedTerrain = st.touchedTerrain || ct.enteredAbove;
+        if (ct.kind == Contact::Below) {
+            const double z0 = ray.zAt(segment.t);
+            if (z0 < zFloor) {  // under the block: its bottom, if the ray rises through it over this patch
+                const double tauF = ray.dz > 0 ? (zFloor - z0) / ray.dz : HUGE_VAL;
+                if (tauF <= segment.len) {
+                    res.hit = res.wall = true;
+                    res.t = segment.t + tauF, res.nz = -1;
+                    return true;
+                }
+                return false;  // nothing of the block in this patch; the water lies on top of it
+            }
+            if (segment.t > tStart) {
+                const From from = cameFrom(ray, iu, iv);
+                if (!patchDefined(tex.terrain, from.u, from.v)) {  // from a hole or outside: the wall on that edge
+                    res.hit = res.wall = true;
+                    res.t = segment.t;
+                    (from.acrossU ? res.nx : res.ny) = (from.acrossU ? ray.du : ray.dv) > 0 ? -1 : 1;
+                    return true;
+                }
+            }
+            if (!st.touchedTerrain) {
+                res.terrainUnderground = true;
+                return true;
+            }
+            ct.kind = Contact::Hit;  // a seam: the hit is where the ray went under (tau = 0)
+        }
+        PatchContact cw;
+        if (water) {
+            cw = patchContact(tex.water, iu, iv, ray, segment);
+            st.touchedWater = st.touchedWater || cw.enteredAbove;
+            // Under the water surface at its first contact (a camera in a lake), or come in under it through its
+            // edge (from a patch without water, where the level lies above a dry shore): the ray is under the
+            // water, which is not drawn for it; it goes on to the ground. (Hitting the edge would draw water below
+            // its level: up to 21 m on the hef flood before this rule.)
+            if (cw.kind == Contact::Below) {
+                const From from = cameFrom(ray, iu, iv);
+                const bool throughEdge = segment.t > tStart && !patchDefined(tex.water, from.u, from.v);
+                if (!st.touchedWater || throughEdge) {
+                    res.waterUnderground = true;
+                    water = false;
+                    cw.kind = Contact::None;
+                } else {
+                    cw.kind = Contact::Hit;  // a seam, as for the terrain
+                }
+            }
+        }
+        if (cw.kind == Contact::Hit && (ct.kind != Contact::Hit || cw.tau <= ct.tau)) {
+            res.hit = res.water = true;
+            res.t = segment.t + cw.tau, res.gx = cw.gx, res.gy = cw.gy;
+            return true;
+        }
+        if (ct.kind == Contact::Hit) {
+            res.hit = true;
+            res.t = segment.t + ct.tau, res.gx = ct.gx, res.gy = ct.gy;
+            return true;
+        }
+        return false;
+    }
+};
 
 // The first point in [tIn, tOut] where the ray meets the terrain or (when `water`) the water surface of
 // cascade `c`, in one walk over both: a node is skipped when the ray passes above the larger of the two
@@ -95,55 +260,21 @@ bool patchDefined(const Heightfield& hf, int iu, int iv) {
 // Under the block's bottom it goes on, and hits the bottom where it rises through it under a defined patch.
 // The water surface has no walls: under it at its first contact (a camera in a lake), or come in under it
 // through its edge, a ray does not draw it and goes on to the ground.
-PatchHit traverse(const CascadeTextures& tex, bool water, const Cascade& c, const double o[3], const double d[3], double tIn, double tOut,
-                  double zFloor, bool& touchedTerrain, bool& touchedWater) {
-    PatchHit res;
+PatchHit traverse(const CascadeTextures& tex, const Cascade& c, const glm::dvec3& o, const glm::dvec3& d, double tIn, double tOut, double zFloor,
+                  RayState& st) {
     const Heightfield& hf = tex.terrain;
-    if (hf.mip.empty() || !(tIn < tOut)) return res;
-    const double tStart = tIn;
-    water = water && !tex.water.mip.empty();
-    const double s = c.texelM;
-    const double u0 = (o[0] - c.x0) / s, v0 = (o[1] - c.y0) / s, du = d[0] / s, dv = d[1] / s;
+    if (hf.mip.empty() || !(tIn < tOut)) return PatchHit{};
+    const TexelRay ray = texelRay(c, o, d);
+    PatchWalk walk{tex, ray, tIn, zFloor, tex.hasWater && !st.underWater && !tex.water.mip.empty(), st, PatchHit{}};
+    const double u0 = ray.u0, v0 = ray.v0, du = ray.du, dv = ray.dv;
     const double invDu = du != 0 ? 1.0 / du : 0.0, invDv = dv != 0 ? 1.0 / dv : 0.0;
     const int top = int(hf.mip.size()) - 1;
     const int patches = hf.n - 1;
     auto maxAt = [&](int level, size_t idx) {
         const float m = hf.mip[size_t(level)][idx];
-        return water ? std::max(m, tex.water.mip[size_t(level)][idx]) : m;
+        return walk.water ? std::max(m, tex.water.mip[size_t(level)][idx]) : m;
     };
-    // A ray above the whole cascade never hits it; nor does the part of a ray above the cascade's highest
-    // point, where the walk would only skip nodes: start where a falling ray comes down to that height, stop
-    // where a rising one climbs above it (a hair early and late, for rounding).
-    const double zTop = maxAt(top, 0);
-    if (std::min(o[2] + d[2] * tIn, o[2] + d[2] * tOut) > zTop) return res;
-    if (d[2] != 0) {
-        const double tCross = (zTop - o[2]) / d[2], margin = 1e-9 * (1.0 + std::abs(tCross));
-        if (d[2] < 0) tIn = std::max(tIn, tCross - margin);
-        else tOut = std::min(tOut, tCross + margin);
-        if (!(tIn < tOut)) return res;
-    }
-    // Likewise under the block's bottom there is nothing to hit but the bottom, where a rising ray comes up
-    // through it: start there; a falling ray ends there. (Without this a ray under the block walked every
-    // patch at the finest level: 6.3 s for a 480 x 300 frame from a camera under a domain edge.)
-    if (d[2] != 0) {
-        const double tFloor = (zFloor - o[2]) / d[2], margin = 1e-9 * (1.0 + std::abs(tFloor));
-        if (d[2] > 0) tIn = std::max(tIn, tFloor - margin);
-        else tOut = std::min(tOut, tFloor + margin);
-        if (!(tIn < tOut)) return res;
-    } else if (o[2] < zFloor) {
-        return res;
-    }
-    // The patch a ray came from into patch (iu, iv): across the edge it crossed last.
-    struct From {
-        bool acrossU;
-        int u, v;
-    };
-    auto cameFrom = [&](int iu, int iv) {
-        const double enterU = du > 0 ? (iu - u0) * invDu : du < 0 ? (iu + 1 - u0) * invDu : -HUGE_VAL;
-        const double enterV = dv > 0 ? (iv - v0) * invDv : dv < 0 ? (iv + 1 - v0) * invDv : -HUGE_VAL;
-        const bool acrossU = enterU >= enterV;
-        return From{acrossU, acrossU ? iu - (du > 0 ? 1 : -1) : iu, acrossU ? iv : iv - (dv > 0 ? 1 : -1)};
-    };
+    if (!clipToHeights(ray, maxAt(top, 0), zFloor, tIn, tOut)) return PatchHit{};
     // Start three levels below the top (the coarsest nodes are nearly always entered; the walk climbs back
     // when it leaves a parent): 1-2 % faster than starting at the top, no more (BENCHMARKS.md).
     int level = std::max(0, top - 3);
@@ -172,7 +303,7 @@ PatchHit traverse(const CascadeTextures& tex, bool water, const Cascade& c, cons
         const bool forward = exitU ? du > 0 : dv > 0;
         const bool leavesParent = forward ? (idx & 1) == 1 : (idx & 1) == 0;
         const float nodeMax = maxAt(level, size_t(iv) * size_t(side) + size_t(iu));
-        const double zLow = std::min(o[2] + d[2] * t, o[2] + d[2] * tExit);
+        const double zLow = std::min(ray.zAt(t), ray.zAt(tExit));
         if (zLow > nodeMax) {  // empty space: skip the node, and look at a coarser level next
             t = tExit + tiny;
             if (leavesParent) level = std::min(level + 1, top);
@@ -183,76 +314,18 @@ PatchHit traverse(const CascadeTextures& tex, bool water, const Cascade& c, cons
             continue;
         }
         // A patch: exact intersection with its bilinear surfaces.
-        const double len = tExit - t;
-        double tauT = -1, tauW = -1, gxT = 0, gyT = 0, gxW = 0, gyW = 0;
-        Contact ct = patchContact(hf, iu, iv, u0, v0, du, dv, o, d, t, len, s, tauT, gxT, gyT, touchedTerrain);
-        if (ct == Contact::Below) {
-            const double z0 = o[2] + d[2] * t;
-            if (z0 < zFloor) {  // under the block: its bottom, if the ray rises through it over this patch
-                const double tauF = d[2] > 0 ? (zFloor - z0) / d[2] : HUGE_VAL;
-                if (tauF <= len) {
-                    res.hit = res.wall = true;
-                    res.t = t + tauF, res.nz = -1;
-                    return res;
-                }
-                t = tExit + tiny;  // nothing of the block in this patch; the water lies on top of it
-                if (leavesParent) level = std::min(level + 1, top);
-                continue;
-            }
-            if (t > tStart) {
-                const From from = cameFrom(iu, iv);
-                if (!patchDefined(hf, from.u, from.v)) {  // from a hole or outside: the wall on that edge
-                    res.hit = res.wall = true;
-                    res.t = t;
-                    (from.acrossU ? res.nx : res.ny) = (from.acrossU ? du : dv) > 0 ? -1 : 1;
-                    return res;
-                }
-            }
-            if (!touchedTerrain) {
-                res.terrainUnderground = true;
-                return res;
-            }
-            ct = Contact::Hit;  // a seam: the hit is where the ray went under (tau = 0)
-        }
-        Contact cw = Contact::None;
-        if (water) {
-            cw = patchContact(tex.water, iu, iv, u0, v0, du, dv, o, d, t, len, s, tauW, gxW, gyW, touchedWater);
-            // Under the water surface at its first contact (a camera in a lake), or come in under it through its
-            // edge (from a patch without water, where the level lies above a dry shore): the ray is under the
-            // water, which is not drawn for it; it goes on to the ground. (Hitting the edge would draw water below
-            // its level: up to 21 m on the hef flood before this rule.)
-            if (cw == Contact::Below) {
-                const From from = cameFrom(iu, iv);
-                const bool throughEdge = t > tStart && !patchDefined(tex.water, from.u, from.v);
-                if (!touchedWater || throughEdge) {
-                    res.waterUnderground = true;
-                    water = false;
-                    cw = Contact::None;
-                } else {
-                    cw = Contact::Hit;  // a seam, as for the terrain
-                }
-            }
-        }
-        if (cw == Contact::Hit && (ct != Contact::Hit || tauW <= tauT)) {
-            res.hit = res.water = true;
-            res.t = t + tauW, res.gx = gxW, res.gy = gyW;
-            return res;
-        }
-        if (ct == Contact::Hit) {
-            res.hit = true;
-            res.t = t + tauT, res.gx = gxT, res.gy = gyT;
-            return res;
-        }
+        if (walk.endsAt(iu, iv, RaySpan{t, tExit - t})) return walk.res;
         t = tExit + tiny;
         if (leavesParent) level = std::min(level + 1, top);
     }
-    return res;
+    return walk.res;
 }
 
 // The ray parameter interval in which dot(xy - eye, dir) lies in [lo, hi].
-void offsetInterval(const double o[3], const double d[3], const Vec2& dir, double eyeOffset, double lo, double hi, double& t0, double& t1) {
-    const double rate = d[0] * dir[0] + d[1] * dir[1];
-    const double at0 = o[0] * dir[0] + o[1] * dir[1] - eyeOffset;  // offset at t = 0
+void offsetInterval(const glm::dvec3& o, const glm::dvec3& d, const glm::dvec2& dir, double eyeOffset, double lo, double hi, double& t0,
+                    double& t1) {
+    const double rate = glm::dot(glm::dvec2(d), dir);
+    const double at0 = glm::dot(glm::dvec2(o), dir) - eyeOffset;  // offset at t = 0
     if (std::abs(rate) < 1e-15) {
         if (at0 >= lo && at0 <= hi) return;  // the whole ray
         t0 = 1, t1 = 0;
@@ -264,18 +337,12 @@ void offsetInterval(const double o[3], const double d[3], const Vec2& dir, doubl
     t1 = std::min(t1, b);
 }
 
-// What a ray has met so far, over its cascades: each surface's first contact decides whether the ray
-// started above it. Under the water surface (a camera in a lake) the water is not drawn at all.
-struct RayState {
-    bool touchedTerrain = false, touchedWater = false, underWater = false;
-};
-
-Hit hitIn(const RayContext& ctx, size_t k, const double o[3], const double d[3], double lo, double hi, RayState& st, bool& underground) {
+Hit hitIn(const RayContext& ctx, size_t k, const glm::dvec3& o, const glm::dvec3& d, double lo, double hi, RayState& st, bool& underground) {
     Hit h;
     const Cascade& c = ctx.fit->cascades[k];
     const CascadeTextures& tex = (*ctx.tex)[k];
     if (c.empty()) return h;
-    const double eyeOffset = o[0] * ctx.fit->dir[0] + o[1] * ctx.fit->dir[1];
+    const double eyeOffset = glm::dot(glm::dvec2(o), ctx.fit->dir);
     double t0 = ctx.nearM, t1 = ctx.farM;
     offsetInterval(o, d, ctx.fit->dir, eyeOffset, lo, hi, t0, t1);
     // Clip to the texture's patch domain.
@@ -292,7 +359,7 @@ Hit hitIn(const RayContext& ctx, size_t k, const double o[3], const double d[3],
         t1 = std::min(t1, b);
     }
     if (!(t0 < t1)) return h;
-    const PatchHit best = traverse(tex, tex.hasWater && !st.underWater, c, o, d, t0, t1, ctx.zFloor, st.touchedTerrain, st.touchedWater);
+    const PatchHit best = traverse(tex, c, o, d, t0, t1, ctx.zFloor, st);
     if (best.terrainUnderground) {
         underground = true;
         return h;
@@ -324,13 +391,13 @@ Hit hitIn(const RayContext& ctx, size_t k, const double o[3], const double d[3],
 
 }  // namespace
 
-Hit castRay(const RayContext& ctx, const double dir[3]) {
+Hit castRay(const RayContext& ctx, const glm::dvec3& dir) {
     const auto& cs = ctx.fit->cascades;
     RayState st;
     bool underground = false;
     for (size_t k = 0; k < cs.size(); ++k) {
         const double lo = k == 0 ? -HUGE_VAL : cs[k].splitNear;
-        Hit h = hitIn(ctx, k, ctx.eye, dir, lo, cs[k].farWithOverlap, st, underground);
+        Hit h = hitIn(ctx, k, ctx.eyeLocal, dir, lo, cs[k].farWithOverlap, st, underground);
         if (underground) return Hit{};
         if (!h.hit) continue;
         // In the overlap with the next cascade: blend both hits by a convex combination, if they are on the same
@@ -340,13 +407,14 @@ Hit castRay(const RayContext& ctx, const double dir[3]) {
         // apart along the ray than a texel of the coarser cascade, so that the chord between them stays within
         // the discretisation bound of the surface. Otherwise the nearer cascade's (finer) hit stands.
         if (k + 1 < cs.size() && !h.wall) {
-            const double off = (ctx.eye[0] + dir[0] * h.t - ctx.eye[0]) * ctx.fit->dir[0] + (ctx.eye[1] + dir[1] * h.t - ctx.eye[1]) * ctx.fit->dir[1];
+            const glm::dvec2 eye{ctx.eyeLocal};
+            const double off = glm::dot(eye + glm::dvec2(dir) * h.t - eye, ctx.fit->dir);
             const double zoneStart = cs[k].splitFar, zoneEnd = cs[k].farWithOverlap;
             if (off > zoneStart && zoneEnd > zoneStart) {
                 RayState st2 = st;
                 st2.touchedTerrain = st2.touchedWater = true;
                 bool under2 = false;
-                Hit h2 = hitIn(ctx, k + 1, ctx.eye, dir, cs[k + 1].splitNear, cs[k + 1].farWithOverlap, st2, under2);
+                Hit h2 = hitIn(ctx, k + 1, ctx.eyeLocal, dir, cs[k + 1].splitNear, cs[k + 1].farWithOverlap, st2, under2);
                 if (h2.hit && h2.water == h.water && !h2.wall && std::abs(h2.t - h.t) <= std::max(cs[k].texelM, cs[k + 1].texelM)) {
                     const double w = std::clamp((off - zoneStart) / (zoneEnd - zoneStart), 0.0, 1.0);
                     h.t = (1 - w) * h.t + w * h2.t;

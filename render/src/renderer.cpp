@@ -1,27 +1,25 @@
+// render/src/renderer.cpp: the Scene, the per-frame set-up both backends share, and the CPU renderer's frame
+// as a list of stages (fitting, approximation and mipmaps, ray casting, shading).
 #include "heightcast/render/renderer.h"
 
 #include <algorithm>
 #include <array>
 #include <charconv>
-#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <limits>
 #include <optional>
 
+#include <glm/geometric.hpp>
 #include <nlohmann/json.hpp>
 
 #include "heightcast/core/error.h"
 #include "heightcast/core/parallel.h"
+#include "heightcast/core/timer.h"
 #include "heightcast/render/gpu_layout.h"
 #include "textures.h"
 
 namespace hc::render {
-
-using Clock = std::chrono::steady_clock;
-namespace {
-double msSince(Clock::time_point t) { return std::chrono::duration<double, std::milli>(Clock::now() - t).count(); }
-}  // namespace
 
 std::string RenderOptions::validate() const {
     if (cascades < 1 || cascades > 4) return "--cascades " + std::to_string(cascades) + " is outside 1..4";
@@ -199,22 +197,20 @@ FrameSetup setUpFrame(const Scene& scene, const Camera& camera) {
     const Grid& g = scene.grid();
     FrameSetup s;
     s.basis = basisOf(camera);
-    s.eye[0] = camera.xWorld - g.originWorldX;
-    s.eye[1] = camera.yWorld - g.originWorldY;
-    s.eye[2] = camera.zWorld;
-    const double* eye = s.eye;
+    s.eyeLocal = {camera.xWorld - g.originWorldX, camera.yWorld - g.originWorldY, camera.zWorld};
+    const glm::dvec3& eye = s.eyeLocal;
     // Near and far as the camera gives them, else from the scene: far reaches the farthest corner of the
     // bounds, near is far / 1e7 (at least 1 mm).
     double far = 0;
     for (double x : {scene.xMin, scene.xMax})
         for (double y : {scene.yMin, scene.yMax})
-            for (double z : {scene.zMin, scene.zMax}) far = std::max(far, std::hypot(x - eye[0], y - eye[1], z - eye[2]));
+            for (double z : {scene.zMin, scene.zMax}) far = std::max(far, std::hypot(x - eye.x, y - eye.y, z - eye.z));
     far = far * 1.01 + 1.0;
     s.farM = camera.farM > 0 ? camera.farM : far;
     s.nearM = camera.nearM > 0 ? camera.nearM : std::max(1e-3, s.farM * 1e-7);
     if (s.nearM >= s.farM) s.farM = s.nearM * (1 + 1e-9);  // a given near beyond the scene: nothing to see
     ViewVolume& view = s.view;
-    view.eyeLocal = {eye[0], eye[1], eye[2]};
+    view.eyeLocal = eye;
     view.forward = s.basis.forward;
     view.right = s.basis.right;
     view.up = s.basis.up;
@@ -228,6 +224,16 @@ FrameSetup setUpFrame(const Scene& scene, const Camera& camera) {
     view.boxMax = {scene.xMax, scene.yMax, scene.zMax};
     view.finestCellM = g.finestCellM;
     return s;
+}
+
+CascadeFit fitFrame(const Scene& scene, const Camera& camera, const FrameSetup& setup, const RenderOptions& options, Timings& timings) {
+    const Stopwatch clock;
+    // A camera inside the terrain sees nothing (raycast.cpp): no cascade to fit or fill.
+    const CascadeFit fit = cameraBelowTerrainM(scene, camera) > 0 ? CascadeFit{} : fitCascades(setup.view, options.cascades, options.texelsPerSide);
+    timings.fittingMs = clock.milliseconds();
+    timings.viewDirX = fit.dir.x;
+    timings.viewDirY = fit.dir.y;
+    return fit;
 }
 
 LegendLayout legendLayout(const Scene& scene, const RenderOptions& options, int width, int height) {
@@ -267,109 +273,111 @@ CascadeCache::CascadeCache() : impl_(std::make_unique<Impl>()) {}
 CascadeCache::~CascadeCache() = default;
 void CascadeCache::clear() { impl_->entries.clear(); }
 
-Frame renderFrame(const Scene& scene, const Camera& camera, const RenderOptions& options, Timings& timings, CascadeCache* cache) {
-    camera.validate();
-    if (std::string why = options.validate(); !why.empty()) throw Error(why);
-    const auto start = Clock::now();
-    timings = Timings{};
-    const Grid& g = scene.grid();
-    const detail::FrameSetup setup = detail::setUpFrame(scene, camera);
-    const CameraBasis& basis = setup.basis;
-    const double* eye = setup.eye;
-    const double near = setup.nearM, far = setup.farM;
+namespace {
 
-    // 1. Cascade fitting. A camera inside the terrain sees nothing (raycast.cpp): no cascade to fit or fill.
-    auto t = Clock::now();
-    const ViewVolume& view = setup.view;
-    const CascadeFit fit = cameraBelowTerrainM(scene, camera) > 0 ? CascadeFit{} : fitCascades(view, options.cascades, options.texelsPerSide);
-    timings.fittingMs = msSince(t);
-    timings.viewDirX = fit.dir[0];
-    timings.viewDirY = fit.dir[1];
+// The cache's entries, emptied when they were evaluated for another scene or water threshold.
+CascadeCache::Impl* keptFor(CascadeCache::Impl& kept, const Scene& scene, const RenderOptions& options) {
+    if (kept.scene != &scene || kept.cells != scene.grid().cellCount() || kept.waterMinDepthM != options.waterMinDepthM) kept.entries.clear();
+    return &kept;
+}
 
-    // 2. Approximation (copying what the cache holds of the last frame), 3. max mipmaps.
-    CascadeCache::Impl* kept = cache ? cache->impl_.get() : nullptr;
-    if (kept && (kept->scene != &scene || kept->cells != g.cellCount() || kept->waterMinDepthM != options.waterMinDepthM)) kept->entries.clear();
+// The last frame's cascade of the same texel size and side as c, if its lattice is c's (stable fitting).
+std::optional<detail::TexelReuse> reusableCascade(const CascadeCache::Impl& kept, const Cascade& c) {
+    for (const CascadeCache::Impl::Entry& e : kept.entries) {
+        if (e.cascade.n != c.n || e.cascade.texelM != c.texelM) continue;
+        const double fi = (c.x0 - e.cascade.x0) / c.texelM, fj = (c.y0 - e.cascade.y0) / c.texelM;
+        if (std::abs(fi) > 1e9 || std::abs(fj) > 1e9) continue;
+        const double ri = std::round(fi), rj = std::round(fj);
+        if (std::abs(fi - ri) < 1e-6 && std::abs(fj - rj) < 1e-6) return detail::TexelReuse{&e.cascade, &e.tex, int(ri), int(rj)};
+    }
+    return std::nullopt;
+}
+
+// Stages 2 and 3: each cascade's textures (copying what `kept` holds of the last frame) and max mipmaps, with
+// their statistics in timings.cascades.
+std::vector<detail::CascadeTextures> approximateCascades(const Scene& scene, const CascadeFit& fit, const RenderOptions& options,
+                                                         const CascadeCache::Impl* kept, Timings& timings) {
     std::vector<detail::CascadeTextures> tex(fit.cascades.size());
     for (size_t k = 0; k < fit.cascades.size(); ++k) {
         const Cascade& c = fit.cascades[k];
-        // The last frame's cascade of the same texel size and side, if its lattice is this one's (stable fitting).
-        std::optional<detail::TexelReuse> reuse;
-        if (kept)
-            for (const CascadeCache::Impl::Entry& e : kept->entries) {
-                if (e.cascade.n != c.n || e.cascade.texelM != c.texelM || reuse) continue;
-                const double fi = (c.x0 - e.cascade.x0) / c.texelM, fj = (c.y0 - e.cascade.y0) / c.texelM;
-                if (std::abs(fi) > 1e9 || std::abs(fj) > 1e9) continue;
-                const double ri = std::round(fi), rj = std::round(fj);
-                if (std::abs(fi - ri) < 1e-6 && std::abs(fj - rj) < 1e-6) reuse = detail::TexelReuse{&e.cascade, &e.tex, int(ri), int(rj)};
-            }
+        const std::optional<detail::TexelReuse> reuse = kept ? reusableCascade(*kept, c) : std::nullopt;
         CascadeStats cs;
         cs.nearM = c.splitNear;
         cs.farM = c.farWithOverlap;
         cs.splitFarM = c.splitFar;
         cs.texelM = c.texelM;
         cs.visibleTexels = c.visibleTexels();
-        t = Clock::now();
+        Stopwatch clock;
         if (!c.empty())
             cs.gaussians = detail::approximate(scene, c, tex[k], options.waterMinDepthM, options.threads, reuse ? &*reuse : nullptr, &cs.reusedTexels);
-        cs.approximationMs = msSince(t);
+        cs.approximationMs = clock.milliseconds();
         timings.approximationMs += cs.approximationMs;
-        t = Clock::now();
+        clock.restart();
         if (!c.empty()) {
             tex[k].terrain.buildMip();
             if (tex[k].hasWater) tex[k].water.buildMip();
         }
-        timings.mipmapMs += msSince(t);
+        timings.mipmapMs += clock.milliseconds();
         timings.cascades.push_back(cs);
     }
+    return tex;
+}
 
-    // 4. Ray casting, one ray per pixel.
-    const int W = camera.width, H = camera.height;
-    Frame f;
-    f.width = W;
-    f.height = H;
-    f.originWorldX = g.originWorldX;
-    f.originWorldY = g.originWorldY;
+// What shading needs of each pixel's ray beyond the Frame's layers: its unit direction (the sky's colour) and
+// whether it hit water.
+struct PixelRays {
+    std::vector<std::array<float, 3>> dirs;
+    std::vector<uint8_t> isWater;
+};
+
+// Stage 4: one ray per pixel through the cascades; fills the frame's ray layers (every pixel a miss to start).
+PixelRays castRays(const Scene& scene, const detail::FrameSetup& setup, const CascadeFit& fit, const std::vector<detail::CascadeTextures>& tex,
+                   const RenderOptions& options, Frame& f, Timings& timings) {
+    const int W = f.width, H = f.height;
     const size_t pixels = size_t(W) * size_t(H);
-    const float inf = std::numeric_limits<float>::infinity();
-    f.distanceM.assign(pixels, inf);
+    f.distanceM.assign(pixels, std::numeric_limits<float>::infinity());
     for (auto* v : {&f.posX, &f.posY, &f.posZ, &f.nX, &f.nY, &f.nZ, &f.waterDepthM}) v->assign(pixels, 0.0f);
     f.cascade.assign(pixels, -1.0f);
     f.wall.assign(pixels, 0.0f);
-    std::vector<uint8_t> isWater(pixels, 0);
-    std::vector<std::array<float, 3>> dirs(pixels);
-    detail::RayContext ctx{&fit, &tex, {eye[0], eye[1], eye[2]}, near, far, scene.elevationMin};
-    t = Clock::now();
+    PixelRays rays{std::vector<std::array<float, 3>>(pixels), std::vector<uint8_t>(pixels, 0)};
+    const CameraBasis& basis = setup.basis;
+    const glm::dvec3& eye = setup.eyeLocal;
+    const detail::RayContext ctx{&fit, &tex, eye, setup.nearM, setup.farM, scene.elevationMin};
+    const Stopwatch clock;
     parallelFor(size_t(H), 4, options.threads, [&](size_t b, size_t e, unsigned) {
         for (size_t py = b; py < e; ++py)
             for (int px = 0; px < W; ++px) {
                 const double sx = (2.0 * (px + 0.5) / W - 1.0) * basis.tanHalfX;
                 const double sy = (1.0 - 2.0 * (double(py) + 0.5) / H) * basis.tanHalfY;
-                double d[3];
-                for (int a = 0; a < 3; ++a) d[a] = basis.forward[size_t(a)] + sx * basis.right[size_t(a)] + sy * basis.up[size_t(a)];
-                const double len = std::sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
-                for (double& v : d) v /= len;
+                glm::dvec3 d = basis.forward + sx * basis.right + sy * basis.up;
+                d /= glm::length(d);  // each component divided, exact to half an ulp (normalize multiplies by a rounded 1 / length)
                 const size_t i = py * size_t(W) + size_t(px);
-                dirs[i] = {float(d[0]), float(d[1]), float(d[2])};
+                rays.dirs[i] = {float(d.x), float(d.y), float(d.z)};
                 if (fit.hull.size() < 3) continue;
                 const detail::Hit h = detail::castRay(ctx, d);
                 if (!h.hit) continue;
                 f.distanceM[i] = float(h.t);
-                f.posX[i] = float(eye[0] + d[0] * h.t);
-                f.posY[i] = float(eye[1] + d[1] * h.t);
-                f.posZ[i] = float(eye[2] + d[2] * h.t);
+                f.posX[i] = float(eye.x + d.x * h.t);
+                f.posY[i] = float(eye.y + d.y * h.t);
+                f.posZ[i] = float(eye.z + d.z * h.t);
                 f.nX[i] = float(h.nx), f.nY[i] = float(h.ny), f.nZ[i] = float(h.nz);
                 f.cascade[i] = float(h.cascade);
                 f.waterDepthM[i] = float(h.depth);
                 f.wall[i] = h.wall ? 1.0f : 0.0f;
-                isWater[i] = h.water;
+                rays.isWater[i] = h.water;
             }
     });
-    timings.raycastMs = msSince(t);
+    timings.raycastMs = clock.milliseconds();
     timings.rays = pixels;
+    return rays;
+}
 
-    // 5. Shading: hillshade light, elevation or depth colours, distance fog, sky, outlines, legend.
-    t = Clock::now();
-    f.rgb.assign(pixels * 3, 0);
+// Stage 5: hillshade light, elevation or depth colours, distance fog, sky, outlines, legend into f.rgb.
+void shadePixels(const Scene& scene, const RenderOptions& options, const CameraBasis& basis, const PixelRays& rays, Frame& f, Timings& timings) {
+    const Stopwatch clock;
+    const Grid& g = scene.grid();
+    const int W = f.width, H = f.height;
+    f.rgb.assign(size_t(W) * size_t(H) * 3, 0);
     const double sunAz = gpu::kSunAzimuthDeg * M_PI / 180, sunAlt = gpu::kSunAltitudeDeg * M_PI / 180;
     const double sun[3] = {std::sin(sunAz) * std::cos(sunAlt), std::cos(sunAz) * std::cos(sunAlt), std::sin(sunAlt)};
     const double fogDist = gpu::kFogExtents * std::hypot(scene.xMax - scene.xMin, scene.yMax - scene.yMin);
@@ -383,7 +391,7 @@ Frame renderFrame(const Scene& scene, const Camera& camera, const RenderOptions&
         for (size_t py = b; py < e; ++py)
             for (int px = 0; px < W; ++px) {
                 const size_t i = py * size_t(W) + size_t(px);
-                const auto& d = dirs[i];
+                const auto& d = rays.dirs[i];
                 const double up = std::clamp(double(d[2]), 0.0, 1.0);
                 const Rgb sky{skyHorizon.r + up * (skyZenith.r - skyHorizon.r), skyHorizon.g + up * (skyZenith.g - skyHorizon.g),
                               skyHorizon.b + up * (skyZenith.b - skyHorizon.b)};
@@ -395,7 +403,7 @@ Frame renderFrame(const Scene& scene, const Camera& camera, const RenderOptions&
                     const bool wall = f.wall[i] != 0;
                     if (wall) {
                         base = {gpu::kWallColor[0], gpu::kWallColor[1], gpu::kWallColor[2]};
-                    } else if (isWater[i]) {
+                    } else if (rays.isWater[i]) {
                         base = ramp(kDepth, f.waterDepthM[i] / dRange);
                     } else if (options.color == ColorMode::WaterDepth) {
                         base = {gpu::kDryColor[0], gpu::kDryColor[1], gpu::kDryColor[2]};
@@ -422,14 +430,38 @@ Frame renderFrame(const Scene& scene, const Camera& camera, const RenderOptions&
     });
     for (uint64_t h : hits) timings.hits += h;
     drawLegend(f, detail::legendLayout(scene, options, W, H));
-    timings.shadingMs = msSince(t);
-    if (kept) {  // this frame's textures, for the next
-        kept->scene = &scene, kept->cells = g.cellCount(), kept->waterMinDepthM = options.waterMinDepthM;
-        kept->entries.clear();
-        for (size_t k = 0; k < fit.cascades.size(); ++k)
-            if (!fit.cascades[k].empty()) kept->entries.push_back({fit.cascades[k], std::move(tex[k])});
-    }
-    timings.totalMs = msSince(start);
+    timings.shadingMs = clock.milliseconds();
+}
+
+// This frame's textures into the cache, for the next.
+void keepCascades(CascadeCache::Impl& kept, const Scene& scene, const RenderOptions& options, const CascadeFit& fit,
+                  std::vector<detail::CascadeTextures>& tex) {
+    kept.scene = &scene, kept.cells = scene.grid().cellCount(), kept.waterMinDepthM = options.waterMinDepthM;
+    kept.entries.clear();
+    for (size_t k = 0; k < fit.cascades.size(); ++k)
+        if (!fit.cascades[k].empty()) kept.entries.push_back({fit.cascades[k], std::move(tex[k])});
+}
+
+}  // namespace
+
+Frame renderFrame(const Scene& scene, const Camera& camera, const RenderOptions& options, Timings& timings, CascadeCache* cache) {
+    camera.validate();
+    if (std::string why = options.validate(); !why.empty()) throw Error(why);
+    const Stopwatch total;
+    timings = Timings{};
+    const detail::FrameSetup setup = detail::setUpFrame(scene, camera);
+    const CascadeFit fit = detail::fitFrame(scene, camera, setup, options, timings);
+    CascadeCache::Impl* kept = cache ? keptFor(*cache->impl_, scene, options) : nullptr;
+    std::vector<detail::CascadeTextures> tex = approximateCascades(scene, fit, options, kept, timings);
+    Frame f;
+    f.width = camera.width;
+    f.height = camera.height;
+    f.originWorldX = scene.grid().originWorldX;
+    f.originWorldY = scene.grid().originWorldY;
+    const PixelRays rays = castRays(scene, setup, fit, tex, options, f, timings);
+    shadePixels(scene, options, setup.basis, rays, f, timings);
+    if (kept) keepCascades(*kept, scene, options, fit, tex);
+    timings.totalMs = total.milliseconds();
     return f;
 }
 

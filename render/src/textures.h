@@ -1,8 +1,11 @@
-// Per-cascade textures shared by the CPU stages (private to render/).
+// render/src/textures.h: per-cascade textures and the per-frame set-up shared by the CPU stages and the GL
+// backend (private to render/).
 #pragma once
 
 #include <string>
 #include <vector>
+
+#include <glm/vec3.hpp>
 
 #include "heightcast/render/camera.h"
 #include "heightcast/render/cascades.h"
@@ -53,22 +56,26 @@ struct Hit {
 struct RayContext {
     const CascadeFit* fit;
     const std::vector<CascadeTextures>* tex;
-    double eye[3];
+    glm::dvec3 eyeLocal;                   // where every ray starts [m, local]
     double nearM, farM;
     double zFloor;                         // the terrain block's bottom: the grid's lowest elevation, local z [m]
 };
 
-Hit castRay(const RayContext& ctx, const double dir[3]);
+// dir: unit direction of the ray.
+Hit castRay(const RayContext& ctx, const glm::dvec3& dir);
 
 // Per-frame set-up both backends share (renderer.cpp): the eye in the local frame, near and far along the
 // ray (the camera's, else from the scene's bounds), and the view volume cascade fitting takes.
 struct FrameSetup {
     CameraBasis basis;
-    double eye[3];
+    glm::dvec3 eyeLocal;                   // the camera, local [m]
     double nearM, farM;
     ViewVolume view;
 };
 FrameSetup setUpFrame(const Scene& scene, const Camera& camera);
+// The frame's cascades (stage 1 of both backends), with Timings' fittingMs and view direction. A camera below
+// the terrain (cameraBelowTerrainM > 0) sees nothing: no cascade is fitted (an empty fit).
+CascadeFit fitFrame(const Scene& scene, const Camera& camera, const FrameSetup& setup, const RenderOptions& options, Timings& timings);
 
 // Where the legend goes and what it says (drawn by renderFrame() and by shade.comp).
 struct LegendLayout {

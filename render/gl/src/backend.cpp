@@ -9,7 +9,6 @@
 #include <algorithm>
 #include <array>
 #include <bit>
-#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <cstring>
@@ -21,6 +20,7 @@
 #include "program.h"
 #include "heightcast/core/error.h"
 #include "heightcast/core/parallel.h"
+#include "heightcast/core/timer.h"
 #include "heightcast/render/gl/gl_renderer.h"
 #include "heightcast/render/gpu_layout.h"
 
@@ -49,9 +49,6 @@ namespace {
 // GlRenderer::limitIndexChunksForTest: the most entries one chunk of the lists may hold.
 uint64_t gIndexChunkLimitForTest = uint64_t{1} << 31;
 
-using Clock = std::chrono::steady_clock;
-double msSince(Clock::time_point t) { return std::chrono::duration<double, std::milli>(Clock::now() - t).count(); }
-
 // A buffer that grows (never shrinks) to the size a frame needs.
 struct Buffer {
     GLuint name = 0;
@@ -75,8 +72,8 @@ struct Buffer {
     }
 };
 
-void copyFloats(float* dst, const std::array<double, 3>& v) {
-    for (size_t i = 0; i < 3; ++i) dst[i] = float(v[i]);
+void copyFloats(float* dst, const glm::dvec3& v) {
+    for (int i = 0; i < 3; ++i) dst[i] = float(v[i]);
 }
 
 }  // namespace
@@ -201,13 +198,13 @@ struct GlRenderer::Impl {
     // The frame's constants (GpuFrame) for the shaders.
     void fillFrame(gpu::GpuFrame& f, const CascadeFit& fit, const Camera& camera, const RenderOptions& options) const {
         const Grid& g = scene.grid();
-        f.eyeX = setup.eye[0], f.eyeY = setup.eye[1];
+        f.eyeX = setup.eyeLocal.x, f.eyeY = setup.eyeLocal.y;
         f.finestM = g.finestCellM;
         f.domainM = g.domainSizeM();
-        f.eyeZ = float(setup.eye[2]);
+        f.eyeZ = float(setup.eyeLocal.z);
         f.tanHalfX = float(setup.basis.tanHalfX), f.tanHalfY = float(setup.basis.tanHalfY);
         f.nearM = float(setup.nearM), f.farM = float(setup.farM);
-        f.dirX = float(fit.dir[0]), f.dirY = float(fit.dir[1]);
+        f.dirX = float(fit.dir.x), f.dirY = float(fit.dir.y);
         f.tail = float(scene.lists().params().tail());
         copyFloats(f.forward, setup.basis.forward);
         copyFloats(f.right, setup.basis.right);
@@ -271,7 +268,7 @@ struct GlRenderer::Impl {
             if (c.empty()) continue;  // n = 0: the shaders skip it
             const size_t n = size_t(c.n), texels = n * n;
             gc.x0 = c.x0, gc.y0 = c.y0, gc.texelM = c.texelM;
-            gc.x0Eye = float(c.x0 - setup.eye[0]), gc.y0Eye = float(c.y0 - setup.eye[1]);
+            gc.x0Eye = float(c.x0 - setup.eyeLocal.x), gc.y0Eye = float(c.y0 - setup.eyeLocal.y);
             gc.texelF = float(c.texelM);
             gc.n = c.n;
             gc.terrainOffset = uint32_t(heightFloats), heightFloats += texels;
@@ -296,39 +293,24 @@ struct GlRenderer::Impl {
         return heightFloats;
     }
 
-    // Marks the end of the work submitted so far: a GPU timer query, or on software OpenGL the clock after glFinish.
-    void timeStamp(int i, Clock::time_point start) {
+    // Marks the end of the work submitted so far: a GPU timer query, or on software OpenGL the frame's clock
+    // after glFinish.
+    void timeStamp(int i, const Stopwatch& frameClock) {
         if (!software) {
             glQueryCounter(stamps[size_t(i)], GL_TIMESTAMP);
             return;
         }
         glFinish();
-        cpuStamps[size_t(i)] = msSince(start);
+        cpuStamps[size_t(i)] = frameClock.milliseconds();
     }
 
-    // Runs every stage of one frame; leaves the picture in colorTex and the rays in pixelsBuf.
-    CascadeFit runFrame(const Camera& camera, const RenderOptions& options, Timings& timings) {
-        camera.validate();
-        if (std::string why = options.validate(); !why.empty()) throw Error(why);
-        if (headless) headless->makeCurrent();
-        const auto start = Clock::now();
-        timings = Timings{};
-        setup = detail::setUpFrame(scene, camera);
-
-        // 1. Cascade fitting (CPU). A camera inside the terrain sees nothing: no cascade (as renderFrame()).
-        auto t = Clock::now();
-        const CascadeFit fit = cameraBelowTerrainM(scene, camera) > 0 ? CascadeFit{} : fitCascades(setup.view, options.cascades, options.texelsPerSide);
-        timings.fittingMs = msSince(t);
-        timings.viewDirX = fit.dir[0];
-        timings.viewDirY = fit.dir[1];
-
-        // The frame's constants and the cascades' places in the heights and visibility buffers.
-        gpu::FrameBlock block{};
+    // The frame's constants, the cascades' places in the heights and visibility buffers and their row spans,
+    // into the buffers (grown as needed); the counters zeroed; the colour texture at the frame's size.
+    void uploadFrame(gpu::FrameBlock& block, const CascadeFit& fit, const Camera& camera, const RenderOptions& options, Timings& timings) {
         fillFrame(block.frame, fit, camera, options);
         size_t visibleWords = 0;
         const size_t heightFloats = layOutCascades(block, fit, timings, visibleWords);
         const int W = camera.width, H = camera.height;
-        const bool water = scene.hasWater();
         checkBlock(heightFloats * 4, "the cascade textures");
         heightsBuf.reserve(heightFloats * 4);
         checkBlock(visibleWords * 4, "the visible row spans");
@@ -353,6 +335,10 @@ struct GlRenderer::Impl {
             glTexParameteri(GL_TEXTURE_2D, GL_TEXTURE_MAG_FILTER, GL_LINEAR);
             texWidth = W, texHeight = H;
         }
+    }
+
+    // Every buffer and the colour image at the binding points the shaders declare (gpu_layout.h).
+    void bindFrame() const {
         frameBuf.bind(HC_BIND_FRAME);
         cellsBuf.bind(HC_BIND_CELLS);
         keysBuf.bind(HC_BIND_KEYS);
@@ -363,27 +349,33 @@ struct GlRenderer::Impl {
         pixelsBuf.bind(HC_BIND_PIXELS);
         countersBuf.bind(HC_BIND_COUNTERS);
         glBindImageTexture(HC_IMAGE_COLOR, colorTex, 0, GL_FALSE, 0, GL_WRITE_ONLY, GL_RGBA8);
-        auto groups = [](int size) { return GLuint((size + HC_GROUP_2D - 1) / HC_GROUP_2D); };
+    }
 
-        // 2. Approximation, one dispatch per cascade; 3. max mipmaps, one dispatch per level.
-        int stamp = 0;
-        timeStamp(stamp++, start);
+    // Work groups covering `size` invocations along one axis.
+    static GLuint groups(int size) { return GLuint((size + HC_GROUP_2D - 1) / HC_GROUP_2D); }
+
+    // Stage 2: the approximation, one dispatch per cascade, each followed by a time stamp.
+    void dispatchApproximation(const CascadeFit& fit, const Stopwatch& frameClock, int& stamp) {
         glUseProgram(approximate);
         for (size_t k = 0; k < fit.cascades.size(); ++k) {
             if (!fit.cascades[k].empty()) {
                 glUniform1i(glGetUniformLocation(approximate, "uCascade"), int(k));
                 glDispatchCompute(groups(fit.cascades[k].n), groups(fit.cascades[k].n), 1);
             }
-            timeStamp(stamp++, start);
+            timeStamp(stamp++, frameClock);
         }
         glMemoryBarrier(GL_SHADER_STORAGE_BARRIER_BIT);
+    }
+
+    // Stage 3: the max mipmaps, one dispatch per level of each cascade's terrain (and water).
+    void dispatchMipmaps(const CascadeFit& fit, const gpu::FrameBlock& block) {
         glUseProgram(mipmap);
         const GLint uCascade = glGetUniformLocation(mipmap, "uCascade"), uWater = glGetUniformLocation(mipmap, "uWater"),
                     uLevel = glGetUniformLocation(mipmap, "uLevel");
         for (size_t k = 0; k < fit.cascades.size(); ++k) {
             if (fit.cascades[k].empty()) continue;
             glUniform1i(uCascade, int(k));
-            for (int w = 0; w < (water ? 2 : 1); ++w) {
+            for (int w = 0; w < (scene.hasWater() ? 2 : 1); ++w) {
                 glUniform1i(uWater, w);
                 for (int level = 0; level < block.cascades[k].levels; ++level) {
                     glUniform1i(uLevel, level);
@@ -393,24 +385,21 @@ struct GlRenderer::Impl {
                 }
             }
         }
-        timeStamp(stamp++, start);
-        // 4. Ray casting; 5. shading.
-        glUseProgram(raycast);
-        glDispatchCompute(groups(W), groups(H), 1);
-        glMemoryBarrier(GL_SHADER_STORAGE_BARRIER_BIT);
-        timeStamp(stamp++, start);
-        glUseProgram(shade);
-        glDispatchCompute(groups(W), groups(H), 1);
-        timeStamp(stamp++, start);
-        // The picture is read as a texture (a viewer) or back (render()); the counters and rays back.
-        glMemoryBarrier(GL_ALL_BARRIER_BITS);
-        glUseProgram(0);
+    }
 
-        // Timer results (waiting for the GPU), and the counters.
-        std::vector<double> ms(size_t(stamp), 0.0);
+    // Stages 4 and 5: one invocation per pixel each.
+    void dispatchPerPixel(GLuint program, const Camera& camera) const {
+        glUseProgram(program);
+        glDispatchCompute(groups(camera.width), groups(camera.height), 1);
+    }
+
+    // The stage times from the time stamps (waiting for the GPU): stamp 0 before the approximation, one after each
+    // cascade's, then after the mipmaps, the ray casting and the shading.
+    void readStageTimes(int stampCount, size_t cascadeCount, Timings& timings) {
+        std::vector<double> ms(size_t(stampCount), 0.0);
         GLuint64 first = 0;
         if (!software) glGetQueryObjectui64v(stamps[0], GL_QUERY_RESULT, &first);
-        for (int i = 1; i < stamp; ++i) {
+        for (int i = 1; i < stampCount; ++i) {
             if (software) {
                 ms[size_t(i)] = cpuStamps[size_t(i)] - cpuStamps[0];
                 continue;
@@ -419,7 +408,7 @@ struct GlRenderer::Impl {
             glGetQueryObjectui64v(stamps[size_t(i)], GL_QUERY_RESULT, &v);
             ms[size_t(i)] = double(v - first) * 1e-6;
         }
-        const size_t nc = fit.cascades.size();
+        const size_t nc = cascadeCount;
         for (size_t k = 0; k < nc; ++k) {
             timings.cascades[k].approximationMs = ms[k + 1] - ms[k];
             timings.approximationMs += timings.cascades[k].approximationMs;
@@ -427,20 +416,57 @@ struct GlRenderer::Impl {
         timings.mipmapMs = ms[nc + 1] - ms[nc];
         timings.raycastMs = ms[nc + 2] - ms[nc + 1];
         timings.shadingMs = ms[nc + 3] - ms[nc + 2];
-        timings.gpuMs = ms[size_t(stamp - 1)];
+        timings.gpuMs = ms[size_t(stampCount - 1)];
+    }
+
+    // The shaders' counters: Gaussians per cascade, then hits.
+    void readCounters(size_t cascadeCount, Timings& timings) const {
         std::vector<uint32_t> counters(countersBuf.bytes / 4);
         glBindBuffer(GL_SHADER_STORAGE_BUFFER, countersBuf.name);
         glGetBufferSubData(GL_SHADER_STORAGE_BUFFER, 0, GLsizeiptr(countersBuf.bytes), counters.data());
-        for (size_t k = 0; k < nc; ++k)
+        for (size_t k = 0; k < cascadeCount; ++k)
             for (int s = 0; s < gpu::kCounterSlots; ++s) timings.cascades[k].gaussians += counters[k * gpu::kCounterSlots + size_t(s)];
         for (int s = 0; s < gpu::kCounterSlots; ++s) timings.hits += counters[size_t(gpu::kMaxCascades * gpu::kCounterSlots + s)];
-        timings.rays = pixels;
+    }
+
+    void throwOnGlError() const {
         if (const GLenum e = glGetError(); e != GL_NO_ERROR) {
             char b[64];
             std::snprintf(b, sizeof b, "OpenGL error 0x%04x", unsigned(e));
             throw Error(std::string("the GL backend failed: ") + b + " on " + device);
         }
-        timings.totalMs = msSince(start);
+    }
+
+    // Runs every stage of one frame; leaves the picture in colorTex and the rays in pixelsBuf.
+    CascadeFit runFrame(const Camera& camera, const RenderOptions& options, Timings& timings) {
+        camera.validate();
+        if (std::string why = options.validate(); !why.empty()) throw Error(why);
+        if (headless) headless->makeCurrent();
+        const Stopwatch frameClock;
+        timings = Timings{};
+        setup = detail::setUpFrame(scene, camera);
+        const CascadeFit fit = detail::fitFrame(scene, camera, setup, options, timings);  // stage 1, on the CPU
+        gpu::FrameBlock block{};
+        uploadFrame(block, fit, camera, options, timings);
+        bindFrame();
+        int stamp = 0;
+        timeStamp(stamp++, frameClock);
+        dispatchApproximation(fit, frameClock, stamp);
+        dispatchMipmaps(fit, block);
+        timeStamp(stamp++, frameClock);
+        dispatchPerPixel(raycast, camera);
+        glMemoryBarrier(GL_SHADER_STORAGE_BARRIER_BIT);
+        timeStamp(stamp++, frameClock);
+        dispatchPerPixel(shade, camera);
+        timeStamp(stamp++, frameClock);
+        // The picture is read as a texture (a viewer) or back (render()); the counters and rays back.
+        glMemoryBarrier(GL_ALL_BARRIER_BITS);
+        glUseProgram(0);
+        readStageTimes(stamp, fit.cascades.size(), timings);
+        readCounters(fit.cascades.size(), timings);
+        timings.rays = size_t(camera.width) * size_t(camera.height);
+        throwOnGlError();
+        timings.totalMs = frameClock.milliseconds();
         return fit;
     }
 
@@ -453,7 +479,7 @@ struct GlRenderer::Impl {
     }
 
     Frame readBack(const Camera& camera, Timings& timings) {
-        const auto start = Clock::now();
+        const Stopwatch clock;
         const int W = camera.width, H = camera.height;
         const size_t pixels = size_t(W) * size_t(H);
         Frame f;
@@ -490,9 +516,9 @@ struct GlRenderer::Impl {
                     }
                     f.distanceM[i] = p.t;
                     // Camera-relative offsets back to the local frame in double.
-                    f.posX[i] = float(setup.eye[0] + double(p.relX));
-                    f.posY[i] = float(setup.eye[1] + double(p.relY));
-                    f.posZ[i] = float(setup.eye[2] + double(p.relZ));
+                    f.posX[i] = float(setup.eyeLocal.x + double(p.relX));
+                    f.posY[i] = float(setup.eyeLocal.y + double(p.relY));
+                    f.posZ[i] = float(setup.eyeLocal.z + double(p.relZ));
                     f.nX[i] = p.nx, f.nY[i] = p.ny, f.nZ[i] = p.nz;
                     f.cascade[i] = float(p.cascade);
                     f.waterDepthM[i] = p.depth;
@@ -500,7 +526,7 @@ struct GlRenderer::Impl {
                 }
         });
         glUnmapBuffer(GL_SHADER_STORAGE_BUFFER);
-        timings.readbackMs = msSince(start);
+        timings.readbackMs = clock.milliseconds();
         timings.totalMs += timings.readbackMs;
         return f;
     }

@@ -10,8 +10,9 @@
 // far / 1e7 (at least 1 mm) and far reaches the farthest corner of the scene's bounds.
 #pragma once
 
-#include <array>
 #include <string>
+
+#include <glm/vec3.hpp>
 
 namespace hc::render {
 
@@ -26,12 +27,13 @@ struct Camera {
     // negative near or far, far not beyond near).
     void validate() const;
     // Camera at `eye` looking at `target` (world, metres); throws if they coincide.
-    static Camera lookAt(const std::array<double, 3>& eye, const std::array<double, 3>& target, double fovYDeg, int width, int height);
+    static Camera lookAt(const glm::dvec3& eye, const glm::dvec3& target, double fovYDeg, int width, int height);
 };
 
-// The camera's orthonormal basis in the world frame (x east, y north, z up).
+// The camera's orthonormal basis in the world frame (x east, y north, z up): unit vectors, double (GLM, the
+// vocabulary the shaders share).
 struct CameraBasis {
-    std::array<double, 3> forward, right, up;
+    glm::dvec3 forward, right, up;
     double tanHalfY, tanHalfX;  // image plane half extents at unit distance
 };
 CameraBasis basisOf(const Camera& c);

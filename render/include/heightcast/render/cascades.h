@@ -13,22 +13,21 @@
 #pragma once
 
 #include <algorithm>
-#include <array>
 #include <cstdint>
 #include <vector>
 
+#include <glm/vec2.hpp>
+#include <glm/vec3.hpp>
+
 namespace hc::render {
 
-using Vec2 = std::array<double, 2>;
-using Vec3 = std::array<double, 3>;
-
 struct ViewVolume {
-    Vec3 eyeLocal;                  // camera position relative to the grid origin [m]
-    Vec3 forward, right, up;        // camera basis
+    glm::dvec3 eyeLocal;            // camera position relative to the grid origin [m]
+    glm::dvec3 forward, right, up;  // camera basis (CameraBasis)
     double tanHalfX, tanHalfY;
     double nearM, farM;             // clip distances along forward
     double yawRad;                  // d = (sin yaw, cos yaw)
-    Vec3 boxMin, boxMax;            // scene bounds, local [m]
+    glm::dvec3 boxMin, boxMax;      // scene bounds, local [m]
     double finestCellM;
 };
 
@@ -38,7 +37,7 @@ struct Cascade {
     double texelM = 0;                   // s
     double x0 = 0, y0 = 0;               // local position of texel (0, 0)'s centre (a multiple of s)
     int n = 0;                           // texels per side
-    std::vector<Vec2> polygon;           // the hull's slab [splitNear, farWithOverlap], local xy
+    std::vector<glm::dvec2> polygon;           // the hull's slab [splitNear, farWithOverlap], local xy
     // The visible texels: inside the polygon dilated by 1.5 texels. The polygon is convex, so they are one
     // span of each row: row j's are i in [rows[j].first, rows[j].last] (none when last < first).
     struct RowSpan {
@@ -55,8 +54,8 @@ struct Cascade {
 };
 
 struct CascadeFit {
-    Vec2 dir{0, 1};                 // horizontal view direction
-    std::vector<Vec2> hull;         // potentially visible area (local xy), counter-clockwise
+    glm::dvec2 dir{0, 1};           // horizontal view direction
+    std::vector<glm::dvec2> hull;   // potentially visible area (local xy), counter-clockwise
     double nearOffset = 0, farOffset = 0;  // [n, f] along dir, from the eye
     std::vector<Cascade> cascades;  // near to far
 };
@@ -66,6 +65,6 @@ CascadeFit fitCascades(const ViewVolume& view, int count, int texelsPerSide);
 
 // Exposed for tests: the ladder texel size for an extent, and the convex hull.
 double ladderTexelSize(double extentM, int texelsPerSide, double finestCellM);
-std::vector<Vec2> convexHull(std::vector<Vec2> points);
+std::vector<glm::dvec2> convexHull(std::vector<glm::dvec2> points);
 
 }  // namespace hc::render
