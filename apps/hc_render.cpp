@@ -85,8 +85,8 @@ struct Rendered {
 };
 
 // On the backend `decision` chose (GL in a headless context of its own), after printing its note.
-Rendered render(const hc::cli::BackendDecision& decision, const hc::render::Scene& scene, const hc::render::Camera& camera,
-                const hc::render::RenderOptions& options) {
+Rendered renderImage(const hc::cli::BackendDecision& decision, const hc::render::Scene& scene, const hc::render::Camera& camera,
+                     const hc::render::RenderOptions& options) {
     if (!decision.note.empty()) std::fprintf(stderr, "hc-render: note: %s\n", decision.note.c_str());
     Rendered r;
     if (decision.useGl) {
@@ -140,7 +140,7 @@ int main(int argc, char** argv) {
         auto loaded = hc::cli::loadScene("hc-render", a.gridPath, a.setup);
         const hc::render::Camera camera = hc::cli::initialCamera(a.setup, *loaded->scene);
         refuseCameraBelowTerrain(*loaded->scene, camera);
-        const Rendered rendered = render(decision, *loaded->scene, camera, a.setup.options);
+        const Rendered rendered = renderImage(decision, *loaded->scene, camera, a.setup.options);
         writeOutputs(a, rendered);
         printSummary(a, decision, camera, rendered);
         return 0;

@@ -11,7 +11,9 @@
 #include "heightcast/render/image_io.h"
 
 namespace hc::view {
+namespace {
 
+// Every key and mouse control (input.cpp), shown with H.
 const char* const kHelp =
     "hc-view controls\n"
     "\n"
@@ -31,6 +33,8 @@ const char* const kHelp =
     "U                  HUD on/off\n"
     "H                  this help\n"
     "Esc                quit";
+
+}  // namespace
 
 void Hud::flash(const std::string& text) {
     flash_ = text;

@@ -19,9 +19,6 @@ struct Toggles {
     bool water = true, cells = false, cascadeTint = false, help = false, hud = true;
 };
 
-// The help's text: every key and mouse control.
-extern const char* const kHelp;
-
 // What the HUD reports; filled by the viewer for each draw.
 struct HudStatus {
     std::string gridPath, backendName, backendDevice;
