@@ -52,67 +52,80 @@ void printSummary(const hc::ingest::BuildSummary& b, const hc::ingest::LoadRepor
                 double(hc::peakRssBytes()) / 1e6, size_t(8 + 4 * g.layerCount()));
 }
 
+// The options into `o`, validated before any work; false after --help.
+bool parseOptions(int argc, char** argv, hc::ingest::Options& o, std::string& out, bool& quiet) {
+    std::string water, waterSurface;
+    std::optional<double> waterLevel, nodata;
+    hc::cli::Parser p("hc-ingest", "INPUT -o OUT.hcg [options]",
+                      "Converts a raster DEM (any format GDAL reads, any CRS) into an adaptive quadtree grid file.\n"
+                      "Four cells merge into one while their mean stays within --tolerance of every pixel they\n"
+                      "cover (in every layer); the achieved max and RMS deviation is measured and reported.");
+    p.positional("INPUT", "terrain raster: GeoTIFF, SRTM .hgt / .hgt.zip, ESRI ASCII, NetCDF, PNG, ... (GDAL)", o.input);
+    p.option("-o", "OUT.hcg", "output grid file (required; written atomically)", out);
+    p.option("--tolerance", "M", "max |pixel - cell value| in every layer, metres (default 0.25)", o.toleranceM);
+    p.option("--min-cell", "M", "finest cell size, metres (default: the source pixel size after projection)", o.minCellM);
+    p.option("--max-cell", "M", "coarsest cell size, metres, rounded down to finest * 2^k (default: largest <= 96 m)", o.maxCellM);
+    p.option("--t_srs", "CRS", "project into this CRS (EPSG:xxxx, WKT, PROJ string) with GDAL, bilinear, exact transformer; a\n"
+             "      geographic input across 180 degrees is split there (default: a projected input keeps its CRS; a geographic\n"
+             "      one goes to the UTM zone of its centre via GeographicLib, longitudes 0..360 accepted)", o.targetSrs);
+    p.option("--s_srs", "CRS", "CRS of the input, overriding or supplying its own (e.g. EPSG:27700 for an .asc without .prj);\n"
+             "      'local' takes the coordinates as metres in a local frame (no CRS; without --s_srs, coordinates that look like\n"
+             "      degrees are taken as WGS 84, with a warning)", o.sourceSrs);
+    o.band = kBandNotGiven;
+    p.option("--band", "N", "band to read, 1-based (default 1; a 3-band 8-bit image is refused without it or --terrain-rgb)", o.band);
+    p.option("--nodata", "V", "a further nodata value (the band's own nodata, NaN and +-inf always count; a warning names\n"
+             "      classic sentinels such as -9999 that the file holds without declaring them)", nodata);
+    p.option("--z-scale", "F", "multiply elevations by F after unit conversion (default 1)", o.zScale);
+    p.flag("--terrain-rgb", "decode Terrain-RGB bands 1-3: h = -10000 + 0.1 * (R * 65536 + G * 256 + B) metres", o.terrainRgb);
+    p.option("--water", "RASTER", "water depth raster, metres (resampled onto the terrain; nodata and <= 0 are dry)", water);
+    p.option("--water-surface", "RASTER", "water surface elevation raster, metres (depth = surface - terrain; <= 0 is dry)", waterSurface);
+    p.option("--water-level", "L", "bathtub flood: depth = L - z, metres, where below L and connected to the domain boundary\n"
+             "      (raster edge or nodata) through pixels below L, 4-connected: pixels touching only at a corner do not connect", waterLevel);
+    p.option("--threads", "N", "worker threads (default 0 = all cores)", o.threads);
+    p.flag("--quiet", "print only warnings and failures (no progress, no summary)", quiet);
+    p.exclusive({"--water", "--water-surface", "--water-level"});
+    if (!p.parse(argc, argv)) return false;
+    o.bandGiven = o.band != kBandNotGiven;
+    if (!o.bandGiven) o.band = 1;
+    if (out.empty()) throw hc::Error("no output file: give -o OUT.hcg");
+    o.nodata = nodata;
+    if (!water.empty()) o.water = hc::ingest::WaterSource::Depth, o.waterPath = water;
+    if (!waterSurface.empty()) o.water = hc::ingest::WaterSource::Surface, o.waterPath = waterSurface;
+    if (waterLevel) o.water = hc::ingest::WaterSource::Level, o.waterLevelM = *waterLevel;
+    o.progress = !quiet;
+    hc::ingest::validateOptions(o);
+    hc::cli::checkWritable(out, "output grid");
+    hc::cli::checkNotSame(out, o.input, "output grid");
+    return true;
+}
+
+// Builds the grid into `out`; the reader's warnings go to stderr also when the build fails (what was guessed
+// before the failure, degrees or units, often explains it).
+hc::ingest::BuildSummary buildGrid(const hc::ingest::Options& o, const std::string& out, hc::ingest::LoadReport& report) {
+    auto printWarnings = [&] {
+        for (const auto& w : report.warnings) std::fprintf(stderr, "hc-ingest: warning: %s\n", w.c_str());
+    };
+    hc::ingest::BuildSummary summary;
+    try {
+        summary = hc::ingest::ingestToFile(o, out, report);
+    } catch (...) {
+        printWarnings();
+        throw;
+    }
+    printWarnings();
+    return summary;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
     return hc::cli::run("hc-ingest", [&] {
         hc::ingest::Options o;
-        std::string out, water, waterSurface;
-        std::optional<double> waterLevel, nodata;
+        std::string out;
         bool quiet = false;
-        hc::cli::Parser p("hc-ingest", "INPUT -o OUT.hcg [options]",
-                          "Converts a raster DEM (any format GDAL reads, any CRS) into an adaptive quadtree grid file.\n"
-                          "Four cells merge into one while their mean stays within --tolerance of every pixel they\n"
-                          "cover (in every layer); the achieved max and RMS deviation is measured and reported.");
-        p.positional("INPUT", "terrain raster: GeoTIFF, SRTM .hgt / .hgt.zip, ESRI ASCII, NetCDF, PNG, ... (GDAL)", o.input);
-        p.option("-o", "OUT.hcg", "output grid file (required; written atomically)", out);
-        p.option("--tolerance", "M", "max |pixel - cell value| in every layer, metres (default 0.25)", o.toleranceM);
-        p.option("--min-cell", "M", "finest cell size, metres (default: the source pixel size after projection)", o.minCellM);
-        p.option("--max-cell", "M", "coarsest cell size, metres, rounded down to finest * 2^k (default: largest <= 96 m)", o.maxCellM);
-        p.option("--t_srs", "CRS", "project into this CRS (EPSG:xxxx, WKT, PROJ string) with GDAL, bilinear, exact transformer; a\n"
-                 "      geographic input across 180 degrees is split there (default: a projected input keeps its CRS; a geographic\n"
-                 "      one goes to the UTM zone of its centre via GeographicLib, longitudes 0..360 accepted)", o.targetSrs);
-        p.option("--s_srs", "CRS", "CRS of the input, overriding or supplying its own (e.g. EPSG:27700 for an .asc without .prj);\n"
-                 "      'local' takes the coordinates as metres in a local frame (no CRS; without --s_srs, coordinates that look like\n"
-                 "      degrees are taken as WGS 84, with a warning)", o.sourceSrs);
-        o.band = kBandNotGiven;
-        p.option("--band", "N", "band to read, 1-based (default 1; a 3-band 8-bit image is refused without it or --terrain-rgb)", o.band);
-        p.option("--nodata", "V", "a further nodata value (the band's own nodata, NaN and +-inf always count; a warning names\n"
-                 "      classic sentinels such as -9999 that the file holds without declaring them)", nodata);
-        p.option("--z-scale", "F", "multiply elevations by F after unit conversion (default 1)", o.zScale);
-        p.flag("--terrain-rgb", "decode Terrain-RGB bands 1-3: h = -10000 + 0.1 * (R * 65536 + G * 256 + B) metres", o.terrainRgb);
-        p.option("--water", "RASTER", "water depth raster, metres (resampled onto the terrain; nodata and <= 0 are dry)", water);
-        p.option("--water-surface", "RASTER", "water surface elevation raster, metres (depth = surface - terrain; <= 0 is dry)", waterSurface);
-        p.option("--water-level", "L", "bathtub flood: depth = L - z, metres, where below L and connected to the domain boundary\n"
-                 "      (raster edge or nodata) through pixels below L, 4-connected: pixels touching only at a corner do not connect", waterLevel);
-        p.option("--threads", "N", "worker threads (default 0 = all cores)", o.threads);
-        p.flag("--quiet", "print only warnings and failures (no progress, no summary)", quiet);
-        p.exclusive({"--water", "--water-surface", "--water-level"});
-        if (!p.parse(argc, argv)) return 0;
-        o.bandGiven = o.band != kBandNotGiven;
-        if (!o.bandGiven) o.band = 1;
-        if (out.empty()) throw hc::Error("no output file: give -o OUT.hcg");
-        o.nodata = nodata;
-        if (!water.empty()) o.water = hc::ingest::WaterSource::Depth, o.waterPath = water;
-        if (!waterSurface.empty()) o.water = hc::ingest::WaterSource::Surface, o.waterPath = waterSurface;
-        if (waterLevel) o.water = hc::ingest::WaterSource::Level, o.waterLevelM = *waterLevel;
-        o.progress = !quiet;
-        hc::ingest::validateOptions(o);
-        hc::cli::checkWritable(out, "output grid");
-        hc::cli::checkNotSame(out, o.input, "output grid");
-
+        if (!parseOptions(argc, argv, o, out, quiet)) return 0;
         hc::ingest::LoadReport report;
-        auto printWarnings = [&] {
-            for (const auto& w : report.warnings) std::fprintf(stderr, "hc-ingest: warning: %s\n", w.c_str());
-        };
-        hc::ingest::BuildSummary summary;
-        try {
-            summary = hc::ingest::ingestToFile(o, out, report);
-        } catch (...) {
-            printWarnings();  // what was guessed before the failure (degrees, units) often explains it
-            throw;
-        }
-        printWarnings();
+        const hc::ingest::BuildSummary summary = buildGrid(o, out, report);
         if (!quiet) printSummary(summary, report, out);
         return 0;
     });
