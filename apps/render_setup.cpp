@@ -4,6 +4,8 @@
 #include <cstdio>
 #include <vector>
 
+#include <fmt/format.h>
+
 #include "heightcast/core/error.h"
 #include "heightcast/grid/grid_file.h"
 
@@ -51,11 +53,7 @@ void RenderSetup::finish() {
     if (std::string why = params.validate(); !why.empty()) throw Error("--sigma/--truncation: " + why);
     parseSize(size, width, height);
     std::vector<double> cam, look;
-    auto num = [](double v) {
-        char b[32];
-        std::snprintf(b, sizeof b, "%g", v);
-        return std::string(b);
-    };
+    auto num = [](double v) { return fmt::format("{:g}", v); };
     if (!(nearM >= 0) || !std::isfinite(nearM)) throw Error("--near " + num(nearM) + ": must be a distance >= 0 m");
     if (!(farM >= 0) || !std::isfinite(farM)) throw Error("--far " + num(farM) + ": must be a distance >= 0 m");
     if (farM > 0 && nearM >= farM) throw Error("--far " + num(farM) + " m is not beyond --near " + num(nearM) + " m");
