@@ -4,40 +4,15 @@
 #include <filesystem>
 #include <string>
 
+#include <nlohmann/json.hpp>
+#include <proj.h>
+
 #include "cli.h"
 #include "heightcast/core/atomic_file.h"
 #include "heightcast/core/error.h"
 #include "heightcast/grid/grid_file.h"
 
 namespace {
-
-std::string jsonString(const std::string& s) {
-    std::string o = "\"";
-    for (unsigned char c : s) {
-        switch (c) {
-            case '"': o += "\\\""; break;
-            case '\\': o += "\\\\"; break;
-            case '\n': o += "\\n"; break;
-            case '\r': o += "\\r"; break;
-            case '\t': o += "\\t"; break;
-            default:
-                if (c < 0x20) {
-                    char b[8];
-                    std::snprintf(b, sizeof b, "\\u%04x", c);
-                    o += b;
-                } else {
-                    o += static_cast<char>(c);
-                }
-        }
-    }
-    return o + "\"";
-}
-
-std::string num(double v) {
-    char b[40];
-    std::snprintf(b, sizeof b, "%.17g", v);
-    return b;
-}
 
 struct Summary {
     uint16_t fileMinor = 0;  // the file's format minor version (major is kGridFileMajor, or it would not read)
@@ -68,54 +43,60 @@ Summary summarise(const hc::Grid& g) {
     return s;
 }
 
-void printJson(const hc::Grid& g, const Summary& s, const std::string& path) {
-    std::string j = "{\n";
-    j += "  \"file\": " + jsonString(path) + ",\n";
-    j += "  \"format_version\": \"" + std::to_string(hc::kGridFileMajor) + "." + std::to_string(s.fileMinor) + "\",\n";
-    j += "  \"valid\": true,\n";
-    j += "  \"cells\": " + std::to_string(g.cellCount()) + ",\n";
-    j += "  \"levels\": [";
-    for (size_t l = 0; l < s.perLevel.size(); ++l)
-        j += std::string(l ? ", " : "") + "{\"level\": " + std::to_string(l) + ", \"size_m\": " + num(g.levelSizeM(int(l))) +
-             ", \"cells\": " + std::to_string(s.perLevel[l]) + "}";
-    j += "],\n";
-    j += "  \"min_cell_m\": " + num(s.minCell) + ",\n";
-    j += "  \"max_cell_m\": " + num(s.maxCell) + ",\n";
-    j += "  \"finest_cell_m\": " + num(g.finestCellM) + ",\n";
-    j += "  \"root_level\": " + std::to_string(g.rootLevel) + ",\n";
-    j += "  \"domain_m\": " + num(g.domainSizeM()) + ",\n";
-    j += "  \"origin\": [" + num(g.originWorldX) + ", " + num(g.originWorldY) + "],\n";
-    j += "  \"crs_wkt\": " + jsonString(g.crsWkt) + ",\n";
-    j += "  \"extent\": [" + num(s.extent[0]) + ", " + num(s.extent[1]) + ", " + num(s.extent[2]) + ", " + num(s.extent[3]) + "],\n";
-    j += "  \"layers\": [";
-    for (size_t l = 0; l < g.layers.size(); ++l)
-        j += std::string(l ? ", " : "") + "{\"name\": " + jsonString(g.layers[l].name) + ", \"units\": " + jsonString(g.layers[l].units) + "}";
-    j += "],\n";
-    j += "  \"source\": " + jsonString(g.stats.sourcePath) + ",\n";
-    j += "  \"source_crs\": " + jsonString(g.stats.sourceCrsName) + ",\n";
-    j += "  \"valid_pixels\": " + std::to_string(g.stats.validPixels) + ",\n";
-    j += "  \"tolerance_m\": " + num(g.stats.toleranceM) + ",\n";
-    j += "  \"max_dev_m\": " + num(g.stats.maxDevM) + ",\n";
-    j += "  \"rms_dev_m\": " + num(g.stats.rmsDevM) + ",\n";
-    char hash[40];
-    std::snprintf(hash, sizeof hash, "%016" PRIx64, g.structureHash());
-    j += "  \"structure_hash\": \"" + std::string(hash) + "\",\n";
-    std::snprintf(hash, sizeof hash, "%016" PRIx64, g.contentHash());
-    j += "  \"content_hash\": \"" + std::string(hash) + "\"\n}\n";
-    std::fputs(j.c_str(), stdout);
+// The grid CRS's name: as ingest stored it (format 1.1), or else (a 1.0 file) what PROJ reads from the WKT, in the
+// form GDAL gives at ingest, "NAME (AUTHORITY:CODE)". "" without a CRS; "unnamed CRS" where PROJ reads no name.
+std::string crsName(const hc::Grid& g) {
+    if (!g.crsName.empty() || g.crsWkt.empty()) return g.crsName;
+    PJ_CONTEXT* ctx = proj_context_create();
+    proj_log_level(ctx, PJ_LOG_NONE);  // a WKT that PROJ cannot read gets "unnamed CRS", not a log line on stderr
+    PJ* crs = proj_create_from_wkt(ctx, g.crsWkt.c_str(), nullptr, nullptr, nullptr);
+    const char* name = crs ? proj_get_name(crs) : nullptr;
+    std::string label = name ? name : "unnamed CRS";
+    const char* authority = crs ? proj_get_id_auth_name(crs, 0) : nullptr;
+    const char* code = crs ? proj_get_id_code(crs, 0) : nullptr;
+    if (authority && code) label += std::string(" (") + authority + ":" + code + ")";
+    proj_destroy(crs);
+    proj_context_destroy(ctx);
+    return label;
 }
 
-// "NAME (EPSG:CODE)" from a WKT: its first quoted string and its last top-level ID.
-std::string crsLabel(const std::string& wkt) {
-    auto q0 = wkt.find('"'), q1 = q0 == std::string::npos ? q0 : wkt.find('"', q0 + 1);
-    std::string label = q1 == std::string::npos ? "unnamed CRS" : wkt.substr(q0 + 1, q1 - q0 - 1);
-    auto id = wkt.rfind("ID[\"");
-    if (id != std::string::npos && wkt.find("]]", id) != std::string::npos && wkt.find(']', id) + 1 >= wkt.size() - 2) {
-        auto a0 = id + 4, a1 = wkt.find('"', a0), c0 = wkt.find(',', a1), c1 = wkt.find(']', c0);
-        if (a1 != std::string::npos && c0 != std::string::npos && c1 != std::string::npos)
-            label += " (" + wkt.substr(a0, a1 - a0) + ":" + wkt.substr(c0 + 1, c1 - c0 - 1) + ")";
-    }
-    return label;
+std::string hex16(uint64_t v) {
+    char b[20];
+    std::snprintf(b, sizeof b, "%016" PRIx64, v);
+    return b;
+}
+
+void printJson(const hc::Grid& g, const Summary& s, const std::string& path) {
+    nlohmann::ordered_json j;
+    j["file"] = path;
+    j["format_version"] = std::to_string(hc::kGridFileMajor) + "." + std::to_string(s.fileMinor);
+    j["valid"] = true;
+    j["cells"] = g.cellCount();
+    j["levels"] = nlohmann::ordered_json::array();
+    for (size_t l = 0; l < s.perLevel.size(); ++l)
+        j["levels"].push_back({{"level", l}, {"size_m", g.levelSizeM(int(l))}, {"cells", s.perLevel[l]}});
+    j["min_cell_m"] = s.minCell;
+    j["max_cell_m"] = s.maxCell;
+    j["finest_cell_m"] = g.finestCellM;
+    j["root_level"] = g.rootLevel;
+    j["domain_m"] = g.domainSizeM();
+    j["origin"] = {g.originWorldX, g.originWorldY};
+    j["crs_wkt"] = g.crsWkt;
+    j["crs_name"] = crsName(g);
+    j["extent"] = s.extent;
+    j["layers"] = nlohmann::ordered_json::array();
+    for (const auto& l : g.layers) j["layers"].push_back({{"name", l.name}, {"units", l.units}});
+    j["source"] = g.stats.sourcePath;
+    j["source_crs"] = g.stats.sourceCrsName;
+    j["valid_pixels"] = g.stats.validPixels;
+    j["tolerance_m"] = g.stats.toleranceM;
+    j["max_dev_m"] = g.stats.maxDevM;
+    j["rms_dev_m"] = g.stats.rmsDevM;
+    j["structure_hash"] = hex16(g.structureHash());
+    j["content_hash"] = hex16(g.contentHash());
+    // Paths and names are bytes from the file system and the file: any that are not UTF-8 are printed with
+    // U+FFFD in their place rather than refused.
+    std::fputs((j.dump(2, ' ', false, nlohmann::ordered_json::error_handler_t::replace) + "\n").c_str(), stdout);
 }
 
 void printText(const hc::Grid& g, const Summary& s, const std::string& path) {
@@ -129,7 +110,7 @@ void printText(const hc::Grid& g, const Summary& s, const std::string& path) {
         std::printf("    level %zu  %10.4g m  %10llu cells\n", l, g.levelSizeM(int(l)), (unsigned long long)s.perLevel[l]);
     std::printf("  origin       %.17g, %.17g\n", g.originWorldX, g.originWorldY);
     std::printf("  extent       %.17g, %.17g .. %.17g, %.17g\n", s.extent[0], s.extent[1], s.extent[2], s.extent[3]);
-    std::string crs = g.crsWkt.empty() ? "none (local metres)" : crsLabel(g.crsWkt) + " (full WKT: --json)";
+    std::string crs = g.crsWkt.empty() ? "none (local metres)" : crsName(g) + " (full WKT: --json)";
     std::printf("  CRS          %s\n", crs.c_str());
     std::printf("  source       %s (%s); working raster %llu x %llu px, %llu valid\n", g.stats.sourcePath.c_str(),
                 g.stats.sourceCrsName.empty() ? "no CRS" : g.stats.sourceCrsName.c_str(),
@@ -177,8 +158,8 @@ int main(int argc, char** argv) {
                           "Reads a heightcast grid file, validates all of it (header, checksums, every cell) and prints its\n"
                           "header and statistics. Exits non-zero, naming the byte offset, if anything is wrong.");
         p.positional("FILE.hcg", "grid file to inspect", path);
-        p.flag("--json", "print the summary as JSON (keys: cells, levels, min_cell_m, max_cell_m, origin, crs_wkt, extent,\n"
-               "      layers, tolerance_m, max_dev_m, rms_dev_m, ...)", json);
+        p.flag("--json", "print the summary as JSON (keys: cells, levels, min_cell_m, max_cell_m, origin, crs_wkt, crs_name,\n"
+               "      extent, layers, tolerance_m, max_dev_m, rms_dev_m, ...)", json);
         p.option("--cells-csv", "OUT.csv", "write one line per cell: x,y,size,level,elevation[,layers...] (cell centres in the\n"
                  "      grid CRS, metres, full double precision)", csv);
         if (!p.parse(argc, argv)) return 0;

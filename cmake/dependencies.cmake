@@ -1,17 +1,23 @@
 # Every third-party dependency of heightcast, found here and nowhere else, each with the oldest version we build
 # against (all from Debian 12 / Ubuntu 22.04+ packages: scripts/deps.sh installs them). Which folder may use which
 # is a rule of the layout (CONTRIBUTING.md); a folder links its dependencies PRIVATE, so none leaks upward:
-#   core/      Threads
+#   core/      Threads; core/exr/ (hc_exr, the one OpenEXR writer): OpenEXR
 #   grid/      GLM (header-only; no GLM type in grid's public headers)
 #   ingest/    GDAL (and its PROJ), GeographicLib
 #   influence/ -
-#   export/    GDAL, OpenEXR, OpenVDB (HC_WITH_VDB)
-#   render/    GLM, OpenEXR, libpng, fmt; render/gl/: OpenGL + EGL, glslangValidator (HC_WITH_GL)
-#   apps/      fmt, nlohmann-json; hc-view: GLFW + OpenGL (HC_WITH_GL)
+#   export/    GDAL, OpenVDB (HC_WITH_VDB); .exr through hc_exr
+#   render/    GLM, libpng, fmt; .exr through hc_exr; render/gl/: OpenGL + EGL, glslangValidator (HC_WITH_GL)
+#   apps/      fmt, nlohmann-json; hc-info: PROJ; hc-view: GLFW + OpenGL (HC_WITH_GL)
 #   tests/     GoogleTest, and any library above to read files back; bench/: fmt, nlohmann-json
 find_package(Threads REQUIRED)
 find_package(GDAL 3.0 REQUIRED)
 find_package(OpenEXR 3 CONFIG REQUIRED)
+# PROJ's C API (GDAL's own PROJ; Debian: libproj-dev). Its config file accepts only a request for its own major
+# version, so the oldest we build against (8, Ubuntu 22.04) is checked by hand.
+find_package(PROJ CONFIG REQUIRED)
+if(PROJ_VERSION VERSION_LESS 8)
+  message(FATAL_ERROR "PROJ ${PROJ_VERSION} found; heightcast needs 8 or newer")
+endif()
 find_package(PNG 1.6 REQUIRED)
 find_package(glm 0.9.9 CONFIG REQUIRED)
 find_package(nlohmann_json 3.10 CONFIG REQUIRED)

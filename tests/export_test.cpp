@@ -135,8 +135,10 @@ TEST(Export, ExrReadsBackThroughOpenExr) {
     const Imf::Header& h = in.header();
     ASSERT_TRUE(h.channels().findChannel("water_depth"));
     ASSERT_TRUE(h.channels().findChannel("A"));
-    EXPECT_EQ(h.typedAttribute<Imf::DoubleAttribute>("heightcast.originX").value(), r.originWorldX);
-    EXPECT_EQ(h.typedAttribute<Imf::DoubleAttribute>("heightcast.northY").value(), r.northWorld);
+    EXPECT_EQ(h.typedAttribute<Imf::DoubleAttribute>("heightcast.gridOriginX").value(), r.originWorldX);
+    EXPECT_EQ(h.typedAttribute<Imf::DoubleAttribute>("heightcast.gridOriginY").value(), r.originWorldY);
+    EXPECT_EQ(h.typedAttribute<Imf::DoubleAttribute>("heightcast.rasterNorthWestX").value(), r.westWorld);
+    EXPECT_EQ(h.typedAttribute<Imf::DoubleAttribute>("heightcast.rasterNorthWestY").value(), r.northWorld);
     EXPECT_EQ(h.typedAttribute<Imf::DoubleAttribute>("heightcast.pixelSizeM").value(), 200.0);
     EXPECT_EQ(h.typedAttribute<Imf::StringAttribute>("heightcast.crsWkt").value(), r.crsWkt);
     auto dw = h.dataWindow();
@@ -182,8 +184,10 @@ TEST(Export, VdbLevelSetsCrossZeroOnTheSurface) {
         EXPECT_EQ(grid->getGridClass(), openvdb::GRID_LEVEL_SET);
         const SampledRaster& r = grid->getName() == "terrain" ? terrain : water;
         ASSERT_TRUE(grid->getName() == "terrain" || grid->getName() == "water_surface") << grid->getName();
-        EXPECT_EQ(grid->metaValue<double>("heightcast.originX"), r.westWorld);
-        EXPECT_NEAR(grid->metaValue<double>("heightcast.originY"), r.northWorld - double(r.height) * 100.0, 1e-6);
+        EXPECT_EQ(grid->metaValue<double>("heightcast.gridOriginX"), r.originWorldX);
+        EXPECT_EQ(grid->metaValue<double>("heightcast.gridOriginY"), r.originWorldY);
+        EXPECT_EQ(grid->metaValue<double>("heightcast.rasterSouthWestX"), r.westWorld);
+        EXPECT_NEAR(grid->metaValue<double>("heightcast.rasterSouthWestY"), r.northWorld - double(r.height) * 100.0, 1e-6);
         EXPECT_NEAR(grid->voxelSize()[0], 100.0, 1e-12);
         auto acc = grid->getConstAccessor();
         size_t checked = 0;
@@ -224,6 +228,46 @@ TEST(Export, VdbBuiltOutIsRefused) {
     EXPECT_FALSE(std::filesystem::exists(path));
 }
 #endif
+
+// The two georeference frames apart (export.h): on a raster whose corner lies away from the grid's origin,
+// gridOrigin stays the grid's origin and the raster corners are the origin plus the corner's local offset.
+// A writer that stored one for the other (as heightcast.originX once meant the origin in .exr and the raster
+// corner in .vdb) fails here. 1e-6 m: world y is summed from offsets near 5e6 m (a double's step there is 1e-9 m).
+TEST(Export, GridOriginAndRasterCornersAreDistinctAttributes) {
+    Scene& s = scene();
+    const double res = 100, offX = 1200, offY = 700;  // the raster's south-west corner, local [m]
+    const size_t cols = 20, rows = 15;
+    const hc::exporting::BoxWorld box{s.grid.originWorldX + offX, s.grid.originWorldY + offY,
+                                      s.grid.originWorldX + offX + double(cols) * res, s.grid.originWorldY + offY + double(rows) * res};
+    SampledRaster r = hc::exporting::sampleSurface(*s.eval, hc::influence::Layer{}, "elevation", res, box, true, 0, false);
+    ASSERT_EQ(r.width, cols);
+    ASSERT_EQ(r.height, rows);
+
+    const std::string exrPath = (dir() / "corner.exr").string();
+    hc::exporting::writeExr(r, exrPath);
+    Imf::InputFile in(exrPath.c_str());
+    const Imf::Header& h = in.header();
+    auto exrDouble = [&](const char* name) { return h.typedAttribute<Imf::DoubleAttribute>(name).value(); };
+    EXPECT_EQ(exrDouble("heightcast.gridOriginX"), s.grid.originWorldX);
+    EXPECT_EQ(exrDouble("heightcast.gridOriginY"), s.grid.originWorldY);
+    EXPECT_NEAR(exrDouble("heightcast.rasterNorthWestX"), s.grid.originWorldX + offX, 1e-6);
+    EXPECT_NEAR(exrDouble("heightcast.rasterNorthWestY"), s.grid.originWorldY + offY + double(rows) * res, 1e-6);
+#if HC_WITH_VDB
+    const std::string vdbPath = (dir() / "corner.vdb").string();
+    hc::exporting::writeVdb(r, nullptr, vdbPath);
+    openvdb::initialize();
+    openvdb::io::File file(vdbPath);
+    file.open();
+    auto grids = file.getGrids();
+    file.close();
+    ASSERT_EQ(grids->size(), 1u);
+    const auto& grid = (*grids)[0];
+    EXPECT_EQ(grid->metaValue<double>("heightcast.gridOriginX"), s.grid.originWorldX);
+    EXPECT_EQ(grid->metaValue<double>("heightcast.gridOriginY"), s.grid.originWorldY);
+    EXPECT_NEAR(grid->metaValue<double>("heightcast.rasterSouthWestX"), s.grid.originWorldX + offX, 1e-6);
+    EXPECT_NEAR(grid->metaValue<double>("heightcast.rasterSouthWestY"), s.grid.originWorldY + offY, 1e-6);
+#endif
+}
 
 TEST(Export, FailedWritesLeaveNothing) {
     SampledRaster r = sample("elevation", 500);

@@ -27,6 +27,7 @@ Grid tinyGrid() {
     g.minLevel = 0;
     g.maxLevel = 1;
     g.crsWkt = "PROJCRS[\"test\"]";
+    g.crsName = "test (TEST:1)";
     g.layers.push_back({"water_depth", "m"});
     g.values.emplace_back();
     g.stats.sourcePath = "tiny.tif";
@@ -77,6 +78,7 @@ void expectEqualGrids(const Grid& a, const Grid& b) {
     EXPECT_EQ(a.minLevel, b.minLevel);
     EXPECT_EQ(a.maxLevel, b.maxLevel);
     EXPECT_EQ(a.crsWkt, b.crsWkt);
+    EXPECT_EQ(a.crsName, b.crsName);
     ASSERT_EQ(a.layers.size(), b.layers.size());
     for (size_t l = 0; l < a.layers.size(); ++l) {
         EXPECT_EQ(a.layers[l].name, b.layers[l].name);
@@ -129,10 +131,16 @@ TEST_F(GridFile, EmptyLayerValuesAndLargeGridRoundTrip) {
     expectEqualGrids(g, hc::readGrid(path("big.hcg")));
 }
 
-// Golden bytes pin format 1.0: a change to the layout fails here. Regenerate deliberately with
-// HC_UPDATE_GOLDEN=1 only when the format version changes.
+// Rewrites the header checksum after an edit, to reach the checks behind it.
+void fixHeaderCrc(std::vector<char>& b) {
+    uint32_t crc = hc::crc32(std::as_bytes(std::span(b.data(), 124)));
+    std::memcpy(b.data() + 124, &crc, 4);
+}
+
+// Golden bytes pin format 1.1: a change to the layout fails here. Regenerate deliberately with
+// HC_UPDATE_GOLDEN=1 only when the format version changes (and keep the older version's file: next test).
 TEST_F(GridFile, GoldenBytes) {
-    const std::string golden = std::string(HC_GOLDEN_DIR) + "/tiny_v1_0.hcg";
+    const std::string golden = std::string(HC_GOLDEN_DIR) + "/tiny_v1_1.hcg";
     Grid g = tinyGrid();
     hc::writeGrid(g, path("t.hcg"));
     std::vector<char> bytes = readBytes(path("t.hcg"));
@@ -150,6 +158,35 @@ TEST_F(GridFile, GoldenBytes) {
     std::memcpy(&originY, want.data() + 40, 8);
     EXPECT_EQ(major, 1);
     EXPECT_EQ(originY, 5189000.5);
+}
+
+// Format 1.0 (tinyGrid written before 1.1 added the META key crs_name) still reads, every field as written
+// then, and its CRS name empty: hc-info asks PROJ for one from the WKT instead.
+TEST_F(GridFile, Version10FileStillReads) {
+    uint16_t fileMinor = 99;
+    const Grid old = hc::readGrid(std::string(HC_GOLDEN_DIR) + "/tiny_v1_0.hcg", &fileMinor);
+    EXPECT_EQ(fileMinor, 0);
+    EXPECT_EQ(old.crsName, "");
+    Grid want = tinyGrid();
+    want.crsName.clear();
+    expectEqualGrids(want, old);
+    EXPECT_EQ(old.contentHash(), want.contentHash());
+}
+
+// A 1.1 file must carry crs_name: a writer that forgot it is caught (its META rewritten without the key).
+TEST_F(GridFile, Version11WithoutCrsNameIsRefused) {
+    std::vector<char> v10 = readBytes(std::string(HC_GOLDEN_DIR) + "/tiny_v1_0.hcg");
+    ASSERT_FALSE(v10.empty());
+    uint16_t one = 1;
+    std::memcpy(v10.data() + 10, &one, 2);  // a 1.0 file (no crs_name) relabelled 1.1
+    fixHeaderCrc(v10);
+    writeBytes(path("relabelled.hcg"), v10, v10.size());
+    try {
+        hc::readGrid(path("relabelled.hcg"));
+        FAIL() << "a 1.1 file without crs_name was accepted";
+    } catch (const hc::Error& e) {
+        EXPECT_NE(std::string(e.what()).find("crs_name"), std::string::npos) << e.what();
+    }
 }
 
 TEST_F(GridFile, EveryTruncationIsRefused) {
@@ -180,12 +217,6 @@ TEST_F(GridFile, EveryFlippedByteIsCaught) {
             writeBytes(path("bad.hcg"), bad, bad.size());
             EXPECT_THROW(hc::readGrid(path("bad.hcg")), hc::Error) << "flipping byte " << i << " went unnoticed";
         }
-}
-
-// Rewrites the header checksum after an edit, to reach the checks behind it.
-void fixHeaderCrc(std::vector<char>& b) {
-    uint32_t crc = hc::crc32(std::as_bytes(std::span(b.data(), 124)));
-    std::memcpy(b.data() + 124, &crc, 4);
 }
 
 TEST_F(GridFile, VersionsNewerMajorRefusedNewerMinorRead) {

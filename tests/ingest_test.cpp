@@ -211,6 +211,10 @@ TEST_P(IngestRaster, GuaranteeHoldsPixelByPixel) {
     Grid back = hc::readGrid(f.string());
     EXPECT_EQ(back.contentHash(), l.grid.contentHash());
     EXPECT_EQ(back.crsWkt, l.grid.crsWkt);
+    // The grid carries its CRS's name as GDAL gave it at ingest (hc-info prints it), and the file keeps it.
+    EXPECT_EQ(l.grid.crsName, l.report.gridCrsName);
+    EXPECT_EQ(l.grid.crsName.empty(), l.grid.crsWkt.empty()) << l.grid.crsName;
+    EXPECT_EQ(back.crsName, l.grid.crsName);
     fs::remove(f);
 }
 
@@ -605,6 +609,8 @@ TEST(Ingest, StreamedFileEqualsInMemoryGrid) {
         EXPECT_EQ(s.cellsPerLevel, mem.cellsPerLevel());
         EXPECT_EQ(back.stats.maxDevM, mem.stats.maxDevM);
         EXPECT_EQ(back.stats.validPixels, mem.stats.validPixels);
+        EXPECT_EQ(back.crsName, "NAD83 / UTM zone 15N (EPSG:26915)") << "the streamed file stores the CRS name too";
+        EXPECT_EQ(back.crsName, mem.crsName);
         size_t wet = 0;
         if (water)
             for (float d : mem.values[1]) wet += d > 0;

@@ -460,8 +460,8 @@ TEST(Render, ExrLayersReadBackWithOpenExr) {
     writeFrameExr(f, path.string());
     Imf::InputFile in(path.c_str());
     const Imf::Header& h = in.header();
-    EXPECT_EQ(h.typedAttribute<Imf::DoubleAttribute>("heightcast.originX").value(), w.grid.originWorldX);
-    EXPECT_EQ(h.typedAttribute<Imf::DoubleAttribute>("heightcast.originY").value(), w.grid.originWorldY);
+    EXPECT_EQ(h.typedAttribute<Imf::DoubleAttribute>("heightcast.gridOriginX").value(), w.grid.originWorldX);
+    EXPECT_EQ(h.typedAttribute<Imf::DoubleAttribute>("heightcast.gridOriginY").value(), w.grid.originWorldY);
     const Imath::Box2i dw = h.dataWindow();
     ASSERT_EQ(dw.max.x - dw.min.x + 1, f.width);
     ASSERT_EQ(dw.max.y - dw.min.y + 1, f.height);

@@ -44,8 +44,7 @@ void appendString(std::vector<std::byte>& out, const std::string& s) {
 }
 
 std::vector<std::byte> encodeMeta(const Grid& g) {
-    std::vector<std::pair<std::string, std::string>> kv;
-    kv.emplace_back("crs_wkt", g.crsWkt);
+    std::vector<std::pair<std::string, std::string>> kv{{"crs_wkt", g.crsWkt}, {"crs_name", g.crsName}};
     for (size_t l = 0; l < g.layers.size(); ++l) {
         kv.emplace_back("layer." + std::to_string(l) + ".name", g.layers[l].name);
         kv.emplace_back("layer." + std::to_string(l) + ".units", g.layers[l].units);
@@ -101,6 +100,7 @@ void parseMeta(const SectionedFileReader& file, const FileSection& s, Grid& g) {
             fail(s.offset, "META value of '" + k + "' is not a number: '" + it->second + "'");
     };
     g.crsWkt = need("crs_wkt");
+    if (file.minor() >= 1) g.crsName = need("crs_name");  // 1.0 files have none: ""
     for (size_t l = 0; l < g.layers.size(); ++l) {
         g.layers[l].name = need("layer." + std::to_string(l) + ".name");
         g.layers[l].units = need("layer." + std::to_string(l) + ".units");
@@ -212,6 +212,7 @@ GridFileWriter::GridFileWriter(const std::string& path, const Grid& shape, uint6
     bare.minLevel = shape.minLevel;
     bare.maxLevel = shape.maxLevel;
     bare.crsWkt = shape.crsWkt;
+    bare.crsName = shape.crsName;
     bare.layers = shape.layers;
     bare.values.assign(shape.layers.size(), {});
     // Layout: CELLS, LAYER..., then META (last: its statistics are known only at the end).

@@ -333,6 +333,7 @@ Grid shapeFor(const Raster& terrain, const Raster* waterDepth, const BuildOption
     g.minLevel = 0;
     g.maxLevel = maxLevel;
     g.crsWkt = terrain.crsWkt;
+    g.crsName = terrain.crsName;
     if (waterDepth) {
         g.layers.push_back({"water_depth", "m"});
         g.values.emplace_back();

@@ -63,6 +63,7 @@ Raster fromSourceAffine(SourceBand&& src, const GeoTransform& gt, double pixelM,
                         const Options& opt, LoadReport& report, detail::SourceTrace* trace) {
     Raster r;
     r.crsWkt = wkt;
+    r.crsName = report.gridCrsName;  // each caller names the grid CRS in the report before it comes here
     const double* g = gt.g;
     bool square = std::abs(std::abs(g[1]) - std::abs(g[5])) <= kSquareTolerance * std::max(std::abs(g[1]), std::abs(g[5]));
     bool sameSize = !opt.minCellM || std::abs(*opt.minCellM - std::abs(g[1])) <= 1e-9 * std::abs(g[1]);
@@ -228,6 +229,7 @@ Raster projectToUtm(SourceBand&& src, const GeoTransform& gt, const OGRSpatialRe
     utm.AutoIdentifyEPSG();
     r.crsWkt = detail::toWkt(utm);
     report.gridCrsName = detail::crsName(&utm);
+    r.crsName = report.gridCrsName;
     report.method = "projected to UTM zone " + std::to_string(zone) + (north ? "N" : "S") + " (GeographicLib, " +
                     "pixels " + fmt(dx, 4) + " x " + fmt(dy, 4) + " m) and resampled onto " + fmt(r.pixelSizeM, 4) +
                     " m squares (bilinear)";

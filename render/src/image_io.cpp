@@ -3,15 +3,11 @@
 #include <csetjmp>
 #include <cstdio>
 
-#include <ImfChannelList.h>
-#include <ImfDoubleAttribute.h>
-#include <ImfFrameBuffer.h>
-#include <ImfHeader.h>
-#include <ImfOutputFile.h>
 #include <png.h>
 
 #include "heightcast/core/atomic_file.h"
 #include "heightcast/core/error.h"
+#include "heightcast/core/exr.h"
 
 namespace hc::render {
 
@@ -39,35 +35,16 @@ void writePng(const Frame& f, const std::string& path) {
 }
 
 void writeFrameExr(const Frame& f, const std::string& path) {
-    AtomicPath out(path);
-    try {
-        Imf::Header header(f.width, f.height);
-        header.compression() = Imf::ZIP_COMPRESSION;
-        header.insert("heightcast.originX", Imf::DoubleAttribute(f.originWorldX));
-        header.insert("heightcast.originY", Imf::DoubleAttribute(f.originWorldY));
-        Imf::FrameBuffer fb;
-        const size_t xs = sizeof(float), ys = sizeof(float) * size_t(f.width);
-        auto add = [&](const char* name, const std::vector<float>& v) {
-            header.channels().insert(name, Imf::Channel(Imf::FLOAT));
-            fb.insert(name, Imf::Slice(Imf::FLOAT, reinterpret_cast<char*>(const_cast<float*>(v.data())), xs, ys));
-        };
-        add("Z", f.distanceM);
-        add("P.X", f.posX);
-        add("P.Y", f.posY);
-        add("P.Z", f.posZ);
-        add("N.X", f.nX);
-        add("N.Y", f.nY);
-        add("N.Z", f.nZ);
-        add("cascade", f.cascade);
-        add("water_depth", f.waterDepthM);
-        add("wall", f.wall);
-        Imf::OutputFile file(out.temp().c_str(), header);
-        file.setFrameBuffer(fb);
-        file.writePixels(f.height);
-    } catch (const std::exception& e) {
-        throw Error(path + ": cannot write OpenEXR: " + e.what());
-    }
-    out.commit();
+    const exr::FloatChannel channels[] = {
+        {"Z", f.distanceM}, {"P.X", f.posX}, {"P.Y", f.posY}, {"P.Z", f.posZ},
+        {"N.X", f.nX}, {"N.Y", f.nY}, {"N.Z", f.nZ}, {"cascade", f.cascade},
+        {"water_depth", f.waterDepthM}, {"wall", f.wall},
+    };
+    const exr::Attribute attributes[] = {
+        {"heightcast.gridOriginX", f.originWorldX},
+        {"heightcast.gridOriginY", f.originWorldY},
+    };
+    exr::writeFloatImage(path, size_t(f.width), size_t(f.height), channels, attributes);
 }
 
 }  // namespace hc::render

@@ -5,6 +5,17 @@
 // (col, row) holds the surface at its centre. Undefined samples (holes, outside the grid, dry land
 // for the water surface) are NaN here and are written as each format marks missing data. Every writer
 // writes to a temporary file beside the target and renames it into place: no partial file survives.
+//
+// Georeference attributes (.exr header attributes, .vdb grid metadata; doubles, world = the grid's CRS [m]).
+// One name, one meaning, in every heightcast file (hc-render's .exr frames too, render/image_io.h):
+//   heightcast.gridOriginX/Y        the grid's origin, its domain's south-west corner: local = world - this
+//                                   (.exr, .vdb)
+//   heightcast.rasterNorthWestX/Y   the raster's north-west corner: the west edge of column 0, the north edge
+//                                   of row 0 (.exr, whose row 0 is the top)
+//   heightcast.rasterSouthWestX/Y   the raster's south-west corner: where voxel index space starts (.vdb)
+//   heightcast.pixelSizeM           pixel side [m] (.exr; a .vdb has it as its voxel size)
+// Strings: heightcast.crsWkt (the grid's CRS, "" = local metres) and heightcast.layer (.exr, .vdb),
+// heightcast.units (.exr).
 #pragma once
 
 #include <optional>
@@ -47,19 +58,20 @@ SampledRaster sampleSurface(const influence::SurfaceEvaluator& eval, const influ
 // (float32's lowest: below any elevation) where undefined.
 void writeGeoTiff(const SampledRaster& raster, const std::string& path);
 
-// OpenEXR: one FLOAT channel named after the layer (NaN where undefined) and "A" (coverage: 1 defined,
-// 0 undefined), ZIP compression. Header attributes (double unless noted): heightcast.originX/Y (the
-// grid origin), heightcast.westX, heightcast.northY, heightcast.pixelSizeM, and strings
-// heightcast.crsWkt, heightcast.layer, heightcast.units.
+// OpenEXR (through hc::exr::writeFloatImage): one FLOAT channel named after the layer (NaN where undefined)
+// and "A" (coverage: 1 defined, 0 undefined), ZIP compression. Header attributes (above):
+// heightcast.gridOriginX/Y, heightcast.rasterNorthWestX/Y, heightcast.pixelSizeM, heightcast.crsWkt,
+// heightcast.layer, heightcast.units.
 void writeExr(const SampledRaster& raster, const std::string& path);
 
 // OpenVDB: narrow-band level sets (FloatGrid, GRID_LEVEL_SET, half width 3 voxels, voxel = the
 // raster's pixel): "terrain" from `terrain`, and "water_surface" from `water` where defined. Values
 // are signed distances [m], negative below the surface, approximated by the vertical distance times
-// the cosine of the slope. Index space is the grid's local frame (x east, y north, z up; index
-// (i, j, k) at ((i + 0.5) v, (j + 0.5) v, k v) relative to the raster's south-west corner);
-// metadata: heightcast.originX/Y (world position of that corner, double), heightcast.crsWkt.
-// Throws hc::Error naming `path` in a build without OpenVDB (-DHC_WITH_VDB=OFF), as checkVdbAvailable().
+// the cosine of the slope. Index space: x east, y north, z up; voxel (i, j, k) at ((i + 0.5) v, (j + 0.5) v,
+// k v) [m] from the raster's south-west corner horizontally and from elevation 0 vertically. Metadata
+// (above): heightcast.gridOriginX/Y, heightcast.rasterSouthWestX/Y (that corner), heightcast.crsWkt,
+// heightcast.layer.
+// Throws hc::Error naming `path` in a build without OpenVDB (-DHC_WITH_VDB=OFF): as checkVdbAvailable().
 void writeVdb(const SampledRaster& terrain, const SampledRaster* water, const std::string& path);
 // Whether this build writes .vdb (CMake option HC_WITH_VDB).
 bool vdbAvailable();

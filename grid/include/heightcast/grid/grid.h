@@ -53,6 +53,8 @@ public:
     int minLevel = 0;          // every cell's level lies in [minLevel, maxLevel]
     int maxLevel = 0;
     std::string crsWkt;        // "" = local metres with no CRS
+    std::string crsName;       // crsWkt's name as ingest's GDAL gave it, "WGS 84 / UTM zone 32N (EPSG:32632)";
+                               // "" with no CRS, and in files of format 1.0 (grid_file.h)
     std::vector<LayerInfo> layers{{"elevation", "m"}};
     IngestStats stats;
 

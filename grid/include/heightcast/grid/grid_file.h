@@ -1,4 +1,4 @@
-// heightcast/grid/grid_file.h: the .hcg grid file format, version 1.0.
+// heightcast/grid/grid_file.h: the .hcg grid file format, version 1.1 (reads 1.0).
 //
 // A sectioned container (sectioned_file.h: magic, version, declared size, CRC-32 of header, table
 // and every section, 64-byte aligned sections, zero padding checked). The grid's own header fields:
@@ -19,7 +19,11 @@
 //
 // Sections, in file order: CELLS (kind 2: u64 cell codes, sorted), LAYER (kind 3, index = layer:
 // float32 values, one section per layer), META (kind 1: u32-length-prefixed key/value strings:
-// crs_wkt, layer.N.name, layer.N.units, ingest.*). Readers locate sections by the table, not by order.
+// crs_wkt, crs_name, layer.N.name, layer.N.units, ingest.*). Readers locate sections by the table, not by order.
+//
+// Versions (a newer minor only adds what an older reader skips: sectioned_file.h):
+//   1.0  the layout above, META without crs_name
+//   1.1  META key crs_name (Grid::crsName); read from a 1.0 file as ""
 //
 // Hashes: structure = Hash64 over (finest size f64, root level i32, cell count u64, codes);
 // content = Hash64 over (structure hash, then per layer its name + NUL and Hash64 of its values).
@@ -36,7 +40,7 @@
 namespace hc {
 
 constexpr uint16_t kGridFileMajor = 1;
-constexpr uint16_t kGridFileMinor = 0;
+constexpr uint16_t kGridFileMinor = 1;
 constexpr uint32_t kGridHeaderBytes = 128;
 
 // Writes `grid` to `path` atomically (temporary file + rename). Throws hc::Error on I/O failure or if
