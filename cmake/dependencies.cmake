@@ -2,12 +2,12 @@
 # against (all from Debian 12 / Ubuntu 22.04+ packages: scripts/deps.sh installs them). Which folder may use which
 # is a rule of the layout (CONTRIBUTING.md); a folder links its dependencies PRIVATE, so none leaks upward:
 #   core/      Threads; core/exr/ (hc_exr, the one OpenEXR writer): OpenEXR
-#   grid/      GLM (header-only; no GLM type in grid's public headers)
-#   ingest/    GDAL (and its PROJ), GeographicLib
+#   grid/      -
+#   ingest/    GDAL (and its PROJ), GeographicLib, fmt
 #   influence/ -
 #   export/    GDAL, OpenVDB (HC_WITH_VDB); .exr through hc_exr
-#   render/    GLM, libpng, fmt; .exr through hc_exr; render/gl/: OpenGL + EGL, glslangValidator (HC_WITH_GL)
-#   apps/      fmt, nlohmann-json; hc-info: PROJ; hc-view: GLFW + OpenGL (HC_WITH_GL)
+#   render/    GLM (PUBLIC: the camera math's vocabulary), libpng, nlohmann-json; .exr through hc_exr; render/gl/: OpenGL + EGL, glslangValidator (HC_WITH_GL)
+#   apps/      fmt, nlohmann-json (bookmarks, hc-info); hc-info: PROJ; hc-view: GLFW + OpenGL (HC_WITH_GL)
 #   tests/     GoogleTest, and any library above to read files back; bench/: fmt, nlohmann-json
 find_package(Threads REQUIRED)
 find_package(GDAL 3.0 REQUIRED)

@@ -7,7 +7,7 @@ set -euo pipefail
 # and Xvfb for the viewer's test on machines with no display.
 packages=(build-essential cmake pkg-config libgdal-dev gdal-bin libgtest-dev libopenexr-dev libopenvdb-dev
           libboost-iostreams-dev libtbb-dev libblosc-dev
-          nlohmann-json3-dev libfmt-dev libglm-dev
+          nlohmann-json3-dev libfmt-dev libglm-dev libproj-dev
           libegl-dev libopengl-dev libgl-dev libegl1 libegl-mesa0 libgl1-mesa-dri libglfw3-dev glslang-tools xvfb xauth)
 installed() { dpkg-query -W -f='${Status}' "$1" 2>/dev/null | grep -q "install ok installed"; }
 

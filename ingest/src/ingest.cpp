@@ -3,6 +3,8 @@
 #include <cmath>
 #include <cstdio>
 
+#include <fmt/format.h>
+
 #include "heightcast/core/error.h"
 #include "heightcast/ingest/build.h"
 #include "heightcast/core/parallel.h"
@@ -12,11 +14,7 @@
 namespace hc::ingest {
 
 namespace {
-std::string fmtM(double v) {
-    char b[32];
-    std::snprintf(b, sizeof b, "%.6g", v);
-    return b;
-}
+std::string fmtM(double v) { return fmt::format("{:.6g}", v); }
 }  // namespace
 
 int chooseMaxLevel(const Options& opt, double pixelSizeM, LoadReport&) {

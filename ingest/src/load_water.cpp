@@ -3,6 +3,8 @@
 #include <deque>
 #include <limits>
 
+#include <fmt/format.h>
+
 #include "gdal_util.h"
 #include "heightcast/core/error.h"
 #include "heightcast/core/progress.h"
@@ -72,11 +74,7 @@ Raster loadWater(const Options& opt, const Raster& terrain, LoadReport& report) 
     // Warp onto exactly the terrain's working raster: same CRS, extent and pixel size.
     const double west = terrain.westWorld, north = terrain.northWorld;
     const double east = west + static_cast<double>(terrain.width) * terrain.pixelSizeM, south = terrain.southWorld();
-    auto num = [](double v) {
-        char b[40];
-        std::snprintf(b, sizeof b, "%.17g", v);
-        return std::string(b);
-    };
+    auto num = [](double v) { return fmt::format("{:.17g}", v); };
     std::vector<std::string> args{"-of", "MEM", "-ot", "Float32", "-r", "bilinear", "-et", "0", "-dstnodata", "nan",
                                   "-te", num(west), num(south), num(east), num(north),
                                   "-ts", std::to_string(terrain.width), std::to_string(terrain.height)};
