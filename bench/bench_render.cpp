@@ -13,7 +13,6 @@
 // (>= 8.29 M rays/s at other sizes).
 // Why a program and not a test: the figures depend on the machine; tests never time anything.
 #include <algorithm>
-#include <charconv>
 #include <cmath>
 #include <cstdint>
 #include <cstdio>
@@ -35,6 +34,7 @@
 #include "heightcast/core/error.h"
 #include "heightcast/core/parallel.h"
 #include "heightcast/core/progress.h"
+#include "heightcast/core/rounded.h"
 #include "heightcast/core/timer.h"
 #include "heightcast/grid/grid.h"
 #include "heightcast/influence/influence.h"
@@ -248,18 +248,10 @@ bool raycastMet(const RunResult& r) {
     return (r.width == 1920 && r.height == 1080) ? r.raycastMs <= kTargetRaycastMs : raysPerS(r) >= kTargetRaysPerS;
 }
 
-// A JSON number as the tables print it: `digits` decimals (fixed) or significant digits (general), so the file
-// carries each figure's precision rather than every bit of a timer's reading.
-double rounded(double v, std::chars_format style, int digits) {
-    char text[64];
-    const auto printed = std::to_chars(text, text + sizeof text, v, style, digits);
-    double back = v;
-    if (printed.ec == std::errc{}) std::from_chars(text, printed.ptr, back);
-    return back;
-}
-double ms(double v) { return rounded(v, std::chars_format::fixed, 3); }
-double sig6(double v) { return rounded(v, std::chars_format::general, 6); }
-double fixed1(double v) { return rounded(v, std::chars_format::fixed, 1); }
+// JSON numbers as the tables print them (core/rounded.h).
+double ms(double v) { return hc::rounded(v, std::chars_format::fixed, 3); }
+double sig6(double v) { return hc::rounded(v, std::chars_format::general, 6); }
+double fixed1(double v) { return hc::rounded(v, std::chars_format::fixed, 1); }
 
 void writeJson(const std::vector<const Scenario*>& scs, const std::vector<RunResult>& rs, const Settings& set, const std::string& path) {
     using Json = nlohmann::ordered_json;  // keys in the order written
@@ -293,7 +285,7 @@ void writeJson(const std::vector<const Scenario*>& scs, const std::vector<RunRes
         o["list_p99"] = r.listP99;
         o["list_max"] = r.listMax;
         o["lists_mb"] = ms(mb(r.listBytes));
-        auto degrees = [](double v) { return rounded(v, std::chars_format::fixed, 4); };
+        auto degrees = [](double v) { return hc::rounded(v, std::chars_format::fixed, 4); };
         o["camera"] = {{"x", ms(r.camera[0])}, {"y", ms(r.camera[1])}, {"z", ms(r.camera[2])},
                        {"yaw_deg", degrees(r.camera[3])}, {"pitch_deg", degrees(r.camera[4])}, {"fov_y_deg", degrees(r.camera[5])}};
         o["width"] = r.width;
@@ -337,7 +329,7 @@ void writeJson(const std::vector<const Scenario*>& scs, const std::vector<RunRes
             o["fly_approximation_ms_cached"] = ms(r.flyApproxCachedMs);
             o["fly_total_ms_fresh"] = ms(r.flyTotalFreshMs);
             o["fly_total_ms_cached"] = ms(r.flyTotalCachedMs);
-            o["fly_texels_kept"] = rounded(r.flyKept, std::chars_format::fixed, 4);
+            o["fly_texels_kept"] = hc::rounded(r.flyKept, std::chars_format::fixed, 4);
         }
         all.push_back(std::move(o));
     }

@@ -4,7 +4,6 @@
 
 #include <algorithm>
 #include <array>
-#include <charconv>
 #include <cmath>
 #include <cstdio>
 #include <limits>
@@ -15,6 +14,7 @@
 
 #include "heightcast/core/error.h"
 #include "heightcast/core/parallel.h"
+#include "heightcast/core/rounded.h"
 #include "heightcast/core/timer.h"
 #include "heightcast/render/gpu_layout.h"
 #include "textures.h"
@@ -257,6 +257,16 @@ LegendLayout legendLayout(const Scene& scene, const RenderOptions& options, int 
     return l;
 }
 
+CascadeStats statsOf(const Cascade& c) {
+    CascadeStats cs;
+    cs.nearM = c.splitNear;
+    cs.farM = c.farWithOverlap;
+    cs.splitFarM = c.splitFar;
+    cs.texelM = c.texelM;
+    cs.visibleTexels = c.visibleTexels();
+    return cs;
+}
+
 }  // namespace detail
 
 struct CascadeCache::Impl {
@@ -301,12 +311,7 @@ std::vector<detail::CascadeTextures> approximateCascades(const Scene& scene, con
     for (size_t k = 0; k < fit.cascades.size(); ++k) {
         const Cascade& c = fit.cascades[k];
         const std::optional<detail::TexelReuse> reuse = kept ? reusableCascade(*kept, c) : std::nullopt;
-        CascadeStats cs;
-        cs.nearM = c.splitNear;
-        cs.farM = c.farWithOverlap;
-        cs.splitFarM = c.splitFar;
-        cs.texelM = c.texelM;
-        cs.visibleTexels = c.visibleTexels();
+        CascadeStats cs = detail::statsOf(c);
         Stopwatch clock;
         if (!c.empty())
             cs.gaussians = detail::approximate(scene, c, tex[k], options.waterMinDepthM, options.threads, reuse ? &*reuse : nullptr, &cs.reusedTexels);
@@ -466,14 +471,6 @@ Frame renderFrame(const Scene& scene, const Camera& camera, const RenderOptions&
 }
 
 namespace {
-// A JSON number with the precision the figure has: `digits` decimals (fixed) or significant digits (general).
-double rounded(double v, std::chars_format style, int digits) {
-    char text[64];
-    const auto printed = std::to_chars(text, text + sizeof text, v, style, digits);
-    double back = v;
-    if (printed.ec == std::errc{}) std::from_chars(text, printed.ptr, back);
-    return back;
-}
 // Milliseconds to the microsecond, metres to the millimetre.
 double threeDecimals(double v) { return rounded(v, std::chars_format::fixed, 3); }
 }  // namespace

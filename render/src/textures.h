@@ -76,6 +76,8 @@ FrameSetup setUpFrame(const Scene& scene, const Camera& camera);
 // The frame's cascades (stage 1 of both backends), with Timings' fittingMs and view direction. A camera below
 // the terrain (cameraBelowTerrainM > 0) sees nothing: no cascade is fitted (an empty fit).
 CascadeFit fitFrame(const Scene& scene, const Camera& camera, const FrameSetup& setup, const RenderOptions& options, Timings& timings);
+// A cascade's extent and texels as Timings reports them (both backends; the work counts are filled by the caller).
+CascadeStats statsOf(const Cascade& c);
 
 // Where the legend goes and what it says (drawn by renderFrame() and by shade.comp).
 struct LegendLayout {

@@ -257,13 +257,7 @@ struct GlRenderer::Impl {
         for (size_t k = 0; k < fit.cascades.size(); ++k) {
             const Cascade& c = fit.cascades[k];
             gpu::GpuCascade& gc = block.cascades[k];
-            CascadeStats cs;
-            cs.nearM = c.splitNear;
-            cs.farM = c.farWithOverlap;
-            cs.splitFarM = c.splitFar;
-            cs.texelM = c.texelM;
-            cs.visibleTexels = c.visibleTexels();
-            timings.cascades.push_back(cs);
+            timings.cascades.push_back(detail::statsOf(c));
             gc.splitNear = float(c.splitNear), gc.splitFar = float(c.splitFar), gc.farWithOverlap = float(c.farWithOverlap);
             if (c.empty()) continue;  // n = 0: the shaders skip it
             const size_t n = size_t(c.n), texels = n * n;
