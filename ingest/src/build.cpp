@@ -10,7 +10,6 @@
 #include <algorithm>
 #include <array>
 #include <cassert>
-#include <chrono>
 #include <cmath>
 #include <limits>
 #include <memory>
@@ -20,6 +19,7 @@
 #include "heightcast/core/error.h"
 #include "heightcast/core/parallel.h"
 #include "heightcast/core/progress.h"
+#include "heightcast/core/timer.h"
 
 namespace hc::ingest {
 namespace {
@@ -400,7 +400,7 @@ Grid buildGrid(const Raster& terrain, const Raster* waterDepth, const BuildOptio
 
 BuildSummary buildGridFile(const Raster& terrain, const Raster* waterDepth, const BuildOptions& options,
                            const std::string& path, const IngestStats& extraStats) {
-    const auto start = std::chrono::steady_clock::now();
+    const Stopwatch clock;
     int rootLevel = 0, maxLevel = 0;
     BuildSummary out;
     out.shape = shapeFor(terrain, waterDepth, options, rootLevel, maxLevel);
@@ -412,7 +412,7 @@ BuildSummary buildGridFile(const Raster& terrain, const Raster* waterDepth, cons
     stats.sourceHeight = out.shape.stats.sourceHeight;
     stats.toleranceM = options.toleranceM;
     fillStats(st, stats);
-    stats.seconds = extraStats.seconds + std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    stats.seconds = extraStats.seconds + clock.seconds();
     sink.writer().commit(stats);
     out.shape.stats = stats;
     out.cellsPerLevel = st.perLevel;
