@@ -47,6 +47,8 @@ if(HC_WITH_GL)
   # render/gl/: libglvnd's OpenGL and EGL (headless through the EGL surfaceless platform; libOpenGL exports the core
   # functions, so no loader), and glslangValidator to check the compute shaders at build time (Debian: libegl-dev
   # libgl-dev glslang-tools; Mesa's libgl1-mesa-dri provides llvmpipe where there is no GPU). hc-view: GLFW (X11).
+  # CMake's OpenGL module has no version: the OpenGL 4.3 core context the backend needs is asked for at run time,
+  # and a driver without it is refused with the reason (render/gl/src/context.cpp).
   find_package(OpenGL REQUIRED COMPONENTS OpenGL EGL)
   find_program(HC_GLSLANG_VALIDATOR glslangValidator REQUIRED)
   find_package(glfw3 3.3 REQUIRED)
