@@ -26,8 +26,6 @@
 
 namespace hc::render {
 
-bool glBackendBuilt() { return true; }
-
 std::string headlessGlUnavailable(std::string* device) {
     try {
         const auto context = gl::HeadlessContext::create();
@@ -36,12 +34,6 @@ std::string headlessGlUnavailable(std::string* device) {
     } catch (const Error& e) {
         return e.what();
     }
-}
-
-bool isSoftwareRenderer(const std::string& device) {
-    for (const char* name : {"llvmpipe", "softpipe", "swrast", "Software Rasterizer"})
-        if (device.find(name) != std::string::npos) return true;
-    return false;
 }
 
 namespace {

@@ -9,14 +9,7 @@ const char* const kBuiltOut = "this heightcast was built without the OpenGL back
                               "-DHC_WITH_GL=ON, Debian packages libegl-dev libgl-dev glslang-tools libglfw3-dev)";
 }
 
-bool glBackendBuilt() { return false; }
 std::string headlessGlUnavailable(std::string*) { return kBuiltOut; }
-bool isSoftwareRenderer(const std::string& device) {
-    for (const char* name : {"llvmpipe", "softpipe", "swrast", "Software Rasterizer"})
-        if (device.find(name) != std::string::npos) return true;
-    return false;
-}
-
 struct GlRenderer::Impl {};
 GlRenderer::GlRenderer(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {}
 GlRenderer::~GlRenderer() = default;

@@ -22,8 +22,6 @@ namespace hc::render {
 // drops it again): lets a tool refuse --backend gl before loading a scene. Where one can, *device gets
 // its renderer and version (as GlRenderer::deviceName()).
 std::string headlessGlUnavailable(std::string* device = nullptr);
-// Whether this build has the GL backend (CMake option HC_WITH_GL).
-bool glBackendBuilt();
 // Whether a GL_RENDERER string names a software rasteriser (Mesa's llvmpipe, softpipe, swrast).
 bool isSoftwareRenderer(const std::string& device);
 
