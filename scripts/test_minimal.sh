@@ -6,12 +6,7 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/deps.sh
-werror=OFF
-[ "${CI:-}" = "true" ] && werror=ON
-launcher=()
-command -v ccache >/dev/null && launcher=(-DCMAKE_CXX_COMPILER_LAUNCHER=ccache)
-cmake -S . -B build-minimal -DCMAKE_BUILD_TYPE=Release -DHC_WERROR=$werror -DHC_WITH_GL=OFF -DHC_WITH_VDB=OFF "${launcher[@]}" >/dev/null
-cmake --build build-minimal -j"$(nproc)"
+bash scripts/build.sh build-minimal -DHC_WITH_GL=OFF -DHC_WITH_VDB=OFF
 
 optional='lib(OpenGL|GL|GLX|EGL|GLdispatch|glfw|openvdb)\.so'
 status=0
