@@ -323,9 +323,9 @@ std::vector<detail::CascadeTextures> approximateCascades(const Scene& scene, con
     for (size_t k = 0; k < fit.cascades.size(); ++k) {
         const Cascade& c = fit.cascades[k];
         // A reused cascade's textures are updated in place (approximate() copies within them): allocating 3 x 4 MB
-        // afresh while the last frame's are held grew the heap, and freeing those gave it back, so every frame of a
-        // moving camera paid page faults over all its textures (60-110 ms of a 10 m step's approximation in Wachau
-        // on a loaded machine, where a fresh frame reuses the heap freed by the last one).
+        // afresh while the last frame's were held took 22-116 ms per cascade for a 10 m step in Wachau on a loaded
+        // machine, against under 1 ms in a fresh frame (which reuses the heap its predecessor freed): most likely
+        // page faults as the heap grew and shrank every frame.
         std::optional<detail::TexelReuse> reuse;
         if (const std::optional<Reusable> r = kept ? reusableCascade(*kept, taken, c) : std::nullopt) {
             taken[r->entry] = true;
