@@ -90,6 +90,7 @@ struct RunResult {
     char device[256] = {};        // what rendered: "CPU" or the GL renderer and version
     // --fly-frames (CPU): means over frames 2..N of a camera flying forward, without and with a CascadeCache.
     double flyApproxFreshMs = 0, flyApproxCachedMs = 0, flyTotalFreshMs = 0, flyTotalCachedMs = 0, flyKept = 0;
+    double flyCellsFresh = 0, flyCellsCached = 0;  // grid cells the approximation visited per frame (CascadeStats::cellsVisited)
 };
 
 struct Settings {
@@ -199,7 +200,7 @@ RunResult runScenario(const Scenario& sc, const Settings& set) {
             for (int cached = 0; cached < 2; ++cached) {
                 hc::render::CascadeCache cache;
                 double approx = 0, total = 0;
-                uint64_t kept = 0, visible = 0;
+                uint64_t kept = 0, visible = 0, cells = 0;
                 for (int k = 0; k < set.flyFrames; ++k) {
                     say(fmt::format("fly-through {}, frame {} of {} ...", cached ? "with the cache" : "fresh", k + 1, set.flyFrames).c_str());
                     hc::render::Camera c = cam;
@@ -209,11 +210,12 @@ RunResult runScenario(const Scenario& sc, const Settings& set) {
                     (void)hc::render::renderFrame(scene, c, set.options, tm, cached ? &cache : nullptr);
                     if (k == 0) continue;
                     approx += tm.approximationMs, total += tm.totalMs;
-                    for (const auto& cs : tm.cascades) kept += cs.reusedTexels, visible += cs.visibleTexels;
+                    for (const auto& cs : tm.cascades) kept += cs.reusedTexels, visible += cs.visibleTexels, cells += cs.cellsVisited;
                 }
                 const double frames = set.flyFrames - 1;
                 (cached ? r.flyApproxCachedMs : r.flyApproxFreshMs) = approx / frames;
                 (cached ? r.flyTotalCachedMs : r.flyTotalFreshMs) = total / frames;
+                (cached ? r.flyCellsCached : r.flyCellsFresh) = double(cells) / frames;
                 if (cached) r.flyKept = visible ? double(kept) / double(visible) : 0;
             }
         }
@@ -330,6 +332,8 @@ void writeJson(const std::vector<const Scenario*>& scs, const std::vector<RunRes
             o["fly_total_ms_fresh"] = ms(r.flyTotalFreshMs);
             o["fly_total_ms_cached"] = ms(r.flyTotalCachedMs);
             o["fly_texels_kept"] = hc::rounded(r.flyKept, std::chars_format::fixed, 4);
+            o["fly_cells_visited_fresh"] = std::llround(r.flyCellsFresh);
+            o["fly_cells_visited_cached"] = std::llround(r.flyCellsCached);
         }
         all.push_back(std::move(o));
     }
@@ -506,15 +510,16 @@ int main(int argc, char** argv) {
 
         if (set.flyFrames > 1 && set.backend == hc::cli::Backend::Cpu) {
             std::printf("\nincremental cascades: the camera flies forward %g m a frame for %d frames; means over frames 2..%d,\n"
-                        "every frame evaluated afresh against frames through a CascadeCache (texels kept from the last frame)\n\n",
+                        "every frame evaluated afresh against frames through a CascadeCache (texels kept from the last frame);\n"
+                        "cells = grid cells the approximation visited per frame\n\n",
                         set.flyStepM, set.flyFrames, set.flyFrames);
-            std::printf("%-14s %16s %16s %6s %14s %14s %14s\n", "scenario", "approx ms fresh", "approx ms cache", "x", "frame ms fresh",
-                        "frame ms cache", "texels kept %");
+            std::printf("%-14s %16s %16s %6s %14s %14s %14s %12s %12s\n", "scenario", "approx ms fresh", "approx ms cache", "x", "frame ms fresh",
+                        "frame ms cache", "texels kept %", "cells fresh", "cells cache");
             for (size_t k = 0; k < results.size(); ++k) {
                 const RunResult& r = results[k];
-                std::printf("%-14s %16.1f %16.1f %6.1f %14.1f %14.1f %14.1f\n", chosen[k]->name, r.flyApproxFreshMs, r.flyApproxCachedMs,
+                std::printf("%-14s %16.1f %16.1f %6.1f %14.1f %14.1f %14.1f %12.0f %12.0f\n", chosen[k]->name, r.flyApproxFreshMs, r.flyApproxCachedMs,
                             r.flyApproxCachedMs > 0 ? r.flyApproxFreshMs / r.flyApproxCachedMs : 0.0, r.flyTotalFreshMs, r.flyTotalCachedMs,
-                            100 * r.flyKept);
+                            100 * r.flyKept, r.flyCellsFresh, r.flyCellsCached);
             }
         }
 

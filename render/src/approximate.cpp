@@ -9,6 +9,7 @@
 #include <cmath>
 #include <cstring>
 #include <limits>
+#include <optional>
 
 #include "heightcast/core/parallel.h"
 #include "heightcast/influence/surface.h"
@@ -45,29 +46,47 @@ struct Todo {
     int a0 = 0, a1 = -1, b0 = 0, b1 = -1;  // inclusive; empty when the end is below the start
 };
 
-// Copies into tex the visible texels of c that were visible in `reuse` (if any; their count added to `copied`),
-// and returns the spans left to evaluate.
+// Writes every texel of tex: the visible texels of c that were visible in `reuse` (if any) copied, their count
+// added to `copied`; every other one "no surface" (-inf, depth 0) until evaluated. Returns the spans left to
+// evaluate. reuse->tex may be tex itself (renderFrame hands the last frame's storage on, so a moving camera
+// allocates nothing): this frame's row j reads the last frame's row j + dj, so rows are written in the order
+// that reads each of the last frame's rows before overwriting it.
 std::vector<Todo> copyReusedTexels(const Cascade& c, const TexelReuse* reuse, CascadeTextures& tex, uint64_t& copied) {
     const int n = c.n;
+    const float noSurface = -std::numeric_limits<float>::infinity();
     std::vector<Todo> todo(static_cast<size_t>(n));
-    for (int j = 0; j < n; ++j) {
+    const bool upwards = reuse && reuse->dj < 0;
+    for (int step = 0; step < n; ++step) {
+        const int j = upwards ? n - 1 - step : step;
         const Cascade::RowSpan& r = c.rows[size_t(j)];
         Todo& t = todo[size_t(j)];
         t.a0 = r.first, t.a1 = r.last;
-        if (!reuse || r.last < r.first) continue;
-        const int jp = j + reuse->dj;
-        if (jp < 0 || jp >= reuse->cascade->n) continue;
-        const Cascade::RowSpan& p = reuse->cascade->rows[size_t(jp)];
-        const int f = std::max(r.first, p.first - reuse->di), l = std::min(r.last, p.last - reuse->di);
-        if (l < f) continue;
-        const size_t from = size_t(jp) * size_t(n) + size_t(f + reuse->di), to = size_t(j) * size_t(n) + size_t(f), count = size_t(l - f + 1);
-        std::copy_n(&reuse->tex->terrain.h[from], count, &tex.terrain.h[to]);
-        if (tex.hasWater) {
-            std::copy_n(&reuse->tex->water.h[from], count, &tex.water.h[to]);
-            std::copy_n(&reuse->tex->depth[from], count, &tex.depth[to]);
+        int f = 0, l = -1;  // the copied texels of row j
+        const int jp = reuse ? j + reuse->dj : -1;
+        if (reuse && r.first <= r.last && jp >= 0 && jp < reuse->cascade->n) {
+            const Cascade::RowSpan& p = reuse->cascade->rows[size_t(jp)];
+            f = std::max(r.first, p.first - reuse->di), l = std::min(r.last, p.last - reuse->di);
         }
-        copied += count;
-        t = {r.first, f - 1, l + 1, r.last};
+        const size_t row = size_t(j) * size_t(n);
+        auto place = [&](std::vector<float>& to, const std::vector<float>& from, float none) {
+            float* const out = &to[row];
+            if (l < f) {
+                std::fill(out, out + n, none);
+                return;
+            }
+            std::memmove(out + f, &from[size_t(jp) * size_t(n) + size_t(f + reuse->di)], size_t(l - f + 1) * sizeof(float));  // may overlap
+            std::fill(out, out + f, none);
+            std::fill(out + l + 1, out + n, none);
+        };
+        place(tex.terrain.h, reuse ? reuse->tex->terrain.h : tex.terrain.h, noSurface);
+        if (tex.hasWater) {
+            place(tex.water.h, reuse ? reuse->tex->water.h : tex.water.h, noSurface);
+            place(tex.depth, reuse ? reuse->tex->depth : tex.depth, 0.0f);
+        }
+        if (f <= l) {
+            copied += uint64_t(l - f + 1);
+            t = {r.first, f - 1, l + 1, r.last};
+        }
     }
     return todo;
 }
@@ -111,64 +130,111 @@ double gatherCandidates(const Scene& scene, uint32_t k, Candidates& cand) {
     return lk;
 }
 
+// The texels left to evaluate are listed cell by cell. Their bounding box's cells (Grid::cellsInBox) serve a
+// fresh cascade, whose visible texels fill 25-100 % of that box. A moving camera leaves thin strips along the
+// cascade's edges, whose bounding box is still the whole cascade: listing its cells would examine every cell
+// under the cascade (about 2 M in Wachau's far cascade) for a few thousand texels. Below one texel to evaluate
+// in kSparseTodo of the box, each texel's cell is located instead (Grid::locate, a binary search over the cells),
+// so the work follows the texels. 16 sits between the two cases, not at a measured break-even: fresh cascades
+// (above 1/4) always list the box, as before, and a moving camera's strips (0.1-1 % of the box in hc-bench's
+// fly-through) are always located.
+constexpr uint64_t kSparseTodo = 16;
+
+// Appends to `cells` (sorted, each once) the cells whose half-open squares hold a texel centre of `todo`:
+// the cells the box listing would keep (a cell holding no texel to evaluate is skipped there too).
+void cellsUnderTexels(const Grid& g, const Cascade& c, const std::vector<Todo>& todo, unsigned threads, std::vector<uint32_t>& cells) {
+    const double s = c.texelM;
+    std::vector<std::vector<uint32_t>> found(resolveThreads(threads));
+    parallelFor(todo.size(), 64, threads, [&](size_t b, size_t e, unsigned worker) {
+        std::vector<uint32_t>& out = found[worker];
+        for (size_t j = b; j < e; ++j) {
+            const Todo& t = todo[j];
+            const double y = c.y0 + double(int(j)) * s;
+            for (auto [lo, hi] : {std::pair{t.a0, t.a1}, {t.b0, t.b1}}) {
+                Grid::Square last{0, 0, -1, -1};  // empty: no point is inside
+                for (int i = lo; i <= hi; ++i) {
+                    const double x = c.x0 + i * s;
+                    // Along a row, texels smaller than the cells fall into the cell just located.
+                    if (x >= last.x0 && x < last.x1 && y >= last.y0 && y < last.y1) continue;
+                    const std::optional<uint32_t> k = g.locate(x, y);
+                    if (!k) continue;
+                    out.push_back(*k);
+                    last = g.cellSquare(*k);
+                }
+            }
+        }
+    });
+    for (const std::vector<uint32_t>& f : found) cells.insert(cells.end(), f.begin(), f.end());
+    std::sort(cells.begin(), cells.end());
+    cells.erase(std::unique(cells.begin(), cells.end()), cells.end());
+}
+
 }  // namespace
 
 void Heightfield::buildMip() {
-    mip.clear();
+    // Sides n - 1, then halving to 1. The levels' storage is reused when this heightfield's was (CascadeCache).
     mipSide.clear();
-    int side = n - 1;
-    std::vector<float> level(size_t(side) * size_t(side));
-    for (int j = 0; j < side; ++j)
-        for (int i = 0; i < side; ++i) {
+    for (int side = n - 1;; side = (side + 1) / 2) {
+        mipSide.push_back(side);
+        if (side <= 1) break;
+    }
+    mip.resize(mipSide.size());
+    const int side0 = mipSide[0];
+    std::vector<float>& level = mip[0];
+    level.resize(size_t(side0) * size_t(side0));
+    for (int j = 0; j < side0; ++j)
+        for (int i = 0; i < side0; ++i) {
             const float* r0 = &h[size_t(j) * size_t(n) + size_t(i)];
             const float* r1 = r0 + n;
-            level[size_t(j) * size_t(side) + size_t(i)] = std::max(std::max(r0[0], r0[1]), std::max(r1[0], r1[1]));
+            level[size_t(j) * size_t(side0) + size_t(i)] = std::max(std::max(r0[0], r0[1]), std::max(r1[0], r1[1]));
         }
-    mip.push_back(std::move(level));
-    mipSide.push_back(side);
-    while (side > 1) {
-        const int next = (side + 1) / 2;
-        std::vector<float> up(size_t(next) * size_t(next), -std::numeric_limits<float>::infinity());
-        const auto& lo = mip.back();
+    for (size_t l = 1; l < mip.size(); ++l) {
+        const int side = mipSide[l - 1], next = mipSide[l];
+        std::vector<float>& up = mip[l];
+        up.assign(size_t(next) * size_t(next), -std::numeric_limits<float>::infinity());
+        const std::vector<float>& lo = mip[l - 1];
         for (int j = 0; j < side; ++j)
             for (int i = 0; i < side; ++i) {
                 float& m = up[size_t(j / 2) * size_t(next) + size_t(i / 2)];
                 m = std::max(m, lo[size_t(j) * size_t(side) + size_t(i)]);
             }
-        mip.push_back(std::move(up));
-        mipSide.push_back(next);
-        side = next;
     }
 }
 
-uint64_t approximate(const Scene& scene, const Cascade& c, CascadeTextures& tex, double waterMinDepthM, unsigned threads,
-                     const TexelReuse* reuse, uint64_t* reused) {
+ApproximationWork approximate(const Scene& scene, const Cascade& c, CascadeTextures& tex, double waterMinDepthM, unsigned threads,
+                              const TexelReuse* reuse) {
     const Grid& g = scene.grid();
     const auto& lists = scene.lists();
     const int n = c.n;
-    const float noSurface = -std::numeric_limits<float>::infinity();
     tex.hasWater = scene.hasWater();
     tex.terrain.n = tex.water.n = n;
-    tex.terrain.h.assign(size_t(n) * size_t(n), noSurface);
+    // Sized only: copyReusedTexels writes every texel.
+    tex.terrain.h.resize(size_t(n) * size_t(n));
     if (tex.hasWater) {
-        tex.water.h.assign(size_t(n) * size_t(n), noSurface);
-        tex.depth.assign(size_t(n) * size_t(n), 0.0f);
+        tex.water.h.resize(size_t(n) * size_t(n));
+        tex.depth.resize(size_t(n) * size_t(n));
     }
-    uint64_t copied = 0;
-    const std::vector<Todo> todo = copyReusedTexels(c, reuse, tex, copied);
-    if (reused) *reused = copied;
+    ApproximationWork work;
+    const std::vector<Todo> todo = copyReusedTexels(c, reuse, tex, work.reusedTexels);
 
-    // Their bounding box, and the cells that meet it.
+    // Their bounding box and count.
     int i0 = n, i1 = -1, j0 = n, j1 = -1;
+    uint64_t todoTexels = 0;
     for (int j = 0; j < n; ++j) {
         const Todo& t = todo[size_t(j)];
         for (auto [lo, hi] : {std::pair{t.a0, t.a1}, {t.b0, t.b1}})
-            if (lo <= hi) i0 = std::min(i0, lo), i1 = std::max(i1, hi), j0 = std::min(j0, j), j1 = std::max(j1, j);
+            if (lo <= hi) {
+                i0 = std::min(i0, lo), i1 = std::max(i1, hi), j0 = std::min(j0, j), j1 = std::max(j1, j);
+                todoTexels += uint64_t(hi - lo + 1);
+            }
     }
-    if (i1 < 0) return 0;
+    if (i1 < 0) return work;
     const double s = c.texelM;
+    const uint64_t boxTexels = uint64_t(i1 - i0 + 1) * uint64_t(j1 - j0 + 1);
     std::vector<uint32_t> cells;
-    g.cellsInBox(c.x0 + i0 * s, c.y0 + j0 * s, c.x0 + i1 * s, c.y0 + j1 * s, cells);
+    if (todoTexels * kSparseTodo < boxTexels) cellsUnderTexels(g, c, todo, threads, cells);
+    else g.cellsInBox(c.x0 + i0 * s, c.y0 + j0 * s, c.x0 + i1 * s, c.y0 + j1 * s, cells);
+    work.cellsVisited = cells.size();
 
     const float tail = static_cast<float>(lists.params().tail());
     const float minDepth = static_cast<float>(waterMinDepthM);
@@ -251,9 +317,8 @@ uint64_t approximate(const Scene& scene, const Cascade& c, CascadeTextures& tex,
             }
         }
     });
-    uint64_t total = 0;
-    for (uint64_t v : gaussians) total += v;
-    return total;
+    for (uint64_t v : gaussians) work.gaussians += v;
+    return work;
 }
 
 }  // namespace hc::render::detail

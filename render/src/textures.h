@@ -30,17 +30,25 @@ struct CascadeTextures {
 };
 
 // The last frame's textures of a cascade with the same texel size, side and lattice: this frame's texel (i, j)
-// is that one's (i + di, j + dj).
+// is that one's (i + di, j + dj). `tex` may be the textures being filled (updated in place).
 struct TexelReuse {
     const Cascade* cascade;
     const CascadeTextures* tex;
     int di, dj;
 };
 
-// Approximation (approximate.cpp): fills the textures of one cascade; returns Gaussians evaluated. With `reuse`,
-// the visible texels that were visible there too are copied (their count in *reused), the others evaluated.
-uint64_t approximate(const Scene& scene, const Cascade& c, CascadeTextures& tex, double waterMinDepthM, unsigned threads,
-                     const TexelReuse* reuse = nullptr, uint64_t* reused = nullptr);
+// What one cascade's approximation did, in counts that do not depend on the machine.
+struct ApproximationWork {
+    uint64_t gaussians = 0;     // kernel evaluations
+    uint64_t cellsVisited = 0;  // cells whose squares were examined for texel centres to evaluate
+    uint64_t reusedTexels = 0;  // visible texels copied from `reuse`
+};
+
+// Approximation (approximate.cpp): fills the textures of one cascade. With `reuse`, the visible texels that were
+// visible there too are copied, the others evaluated; the cells visited then follow the texels evaluated (a few
+// per texel), not the cascade's area.
+ApproximationWork approximate(const Scene& scene, const Cascade& c, CascadeTextures& tex, double waterMinDepthM, unsigned threads,
+                              const TexelReuse* reuse = nullptr);
 
 // One ray through the cascades (raycast.cpp).
 struct Hit {

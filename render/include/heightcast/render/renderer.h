@@ -56,6 +56,7 @@ struct CascadeStats {
     uint64_t visibleTexels = 0;
     uint64_t gaussians = 0;             // kernel evaluations in the approximation
     uint64_t reusedTexels = 0;          // visible texels copied from the last frame (renderFrame with a CascadeCache)
+    uint64_t cellsVisited = 0;          // CPU: grid cells whose squares the approximation examined for texels to evaluate (0 on GL)
     double approximationMs = 0;
 };
 
