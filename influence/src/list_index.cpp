@@ -85,9 +85,7 @@ ListIndex::ListIndex(const Grid& g, const KernelParams& params) : g_(g), params_
     }
 }
 
-void ListIndex::listsFor(const NodeRange& node, Scratch& s, std::vector<uint32_t>& entries, std::vector<uint32_t>& lengths) const {
-    if (node.lo == node.hi) return;
-    const Grid::Square box = boundsOf(g_, node.lo, node.hi);
+void ListIndex::candidatesFor(const Grid::Square& box, Scratch& s) const {
     s.cx.clear(), s.cy.clear(), s.r2.clear(), s.index.clear();
     for (size_t l = 0; l < byLevel_.size(); ++l) {
         const Grid& lg = byLevel_[l];
@@ -106,6 +104,12 @@ void ListIndex::listsFor(const NodeRange& node, Scratch& s, std::vector<uint32_t
             s.index.push_back(levelIndex_[l][j]);
         }
     }
+}
+
+void ListIndex::listsFor(const NodeRange& node, Scratch& s, std::vector<uint32_t>& entries, std::vector<uint32_t>& lengths) const {
+    if (node.lo == node.hi) return;
+    const Grid::Square box = boundsOf(g_, node.lo, node.hi);
+    candidatesFor(box, s);
     for (const NodeRange& blk : splitNodes(g_, node, 16)) {
         // The node's candidates narrowed to the block, then every one of those against each cell.
         const Grid::Square bbox = boundsOf(g_, blk.lo, blk.hi);

@@ -43,6 +43,10 @@ public:
         std::vector<uint32_t> hits;
         std::vector<uint8_t> keep;
     };
+    // The cells whose kernel disks reach into the closed box with a positive weight (kernelReaches): their
+    // centres, squared radii and cell indices into s.cx, s.cy, s.r2, s.index (replacing what was there),
+    // each level's in Morton order, finer levels first.
+    void candidatesFor(const Grid::Square& box, Scratch& s) const;
     // Appends the lists of the cells of `node` (at most a few hundred cells: one range query per level
     // serves them all) to `entries`, one length per cell to `lengths`, in cell order.
     void listsFor(const NodeRange& node, Scratch& s, std::vector<uint32_t>& entries, std::vector<uint32_t>& lengths) const;
