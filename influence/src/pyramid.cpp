@@ -1,9 +1,9 @@
 // influence/src/pyramid.cpp: building the surface pyramid (pyramid.h) and looking samples up.
 //
-// Per tile: the cells whose kernels reach the tile's sample points are gathered once (one range query per
-// level, list_index.h), narrowed per block of 4 x 4 samples, and every sample sums its block's candidates in
-// double, relative to the value of the cell that contains it (as the exact evaluator does, surface.cpp), so
-// a constant field stays exactly constant and centimetre relief at 8000 m keeps its digits.
+// Per block of 4 x 4 samples of a tile: the cells whose kernels reach the block are gathered (one range query
+// per level, list_index.h), and every sample sums them in double, relative to one cell value of the block
+// (as the exact evaluator sums relative to the containing cell's, surface.cpp), so a constant field stays
+// exactly constant and centimetre relief at 8000 m keeps its digits.
 #include "heightcast/influence/pyramid.h"
 
 #include <algorithm>
@@ -66,7 +66,8 @@ std::string defaultPyramidPath(const std::string& gridPath) {
 namespace {
 
 constexpr float kNaN = std::numeric_limits<float>::quiet_NaN();
-constexpr int kBlock = 4;  // samples per side of a candidate-narrowing block
+constexpr int kBlock = 4;      // samples per side of a candidate-gathering block
+constexpr size_t kLanes = 4;  // doubles per AVX2 register
 
 // The tiles of each level: nodes of level t + log2(side) holding a cell of level <= t (any cell at the top).
 std::vector<std::vector<uint64_t>> tileKeys(const Grid& g, int top, const std::vector<int>& sides) {
@@ -105,39 +106,57 @@ void buildTile(const Grid& g, const detail::ListIndex& index, const KernelParams
             const Grid::Square box{x0 + bi * h, y0 + bj * h, x0 + (bi1 - 1) * h, y0 + (bj1 - 1) * h};
             index.candidatesFor(box, w.wide);
             const size_t m = w.wide.index.size();
-            w.ex.resize(m), w.ey.resize(m), w.a.resize(m), w.r2.resize(m), w.z.resize(m), w.level.resize(m), w.wet.resize(m);
+            // Relative to one cell's value per block, and to one wet cell's level (as surface.cpp does per point:
+            // any value of the neighbourhood keeps the digits; a constant field stays exactly constant).
+            double base = kNaN, baseLevel = kNaN;
+            for (size_t c = 0; c < m && std::isnan(base); ++c) base = z[w.wide.index[c]];
+            for (size_t c = 0; c < m && depth && std::isnan(baseLevel); ++c)
+                if (const uint32_t i = w.wide.index[c]; depth[i] > 0) baseLevel = double(z[i]) + double(depth[i]);
+            // Padded to whole vectors of kLanes; padding never counts (r2 = -1: d2 < -1 is false).
+            const size_t padded = (m + kLanes - 1) / kLanes * kLanes;
+            for (auto* v : {&w.ex, &w.ey, &w.a, &w.z, &w.level, &w.wet}) v->assign(padded, 0.0);
+            w.r2.assign(padded, -1.0);
             for (size_t c = 0; c < m; ++c) {
                 const uint32_t i = w.wide.index[c];
+                const bool wet = depth && depth[i] > 0;
                 w.ex[c] = w.wide.cx[c], w.ey[c] = w.wide.cy[c], w.r2[c] = w.wide.r2[c];
                 w.a[c] = halfR2 / w.wide.r2[c];  // 1 / (2 sigma^2 c^2), as r2 = (R sigma c)^2
-                w.z[c] = z[i];
-                w.wet[c] = depth && depth[i] > 0 ? 1.0 : 0.0;
-                w.level[c] = depth && depth[i] > 0 ? double(z[i]) + double(depth[i]) : 0.0;
+                w.z[c] = double(z[i]) - base;
+                w.wet[c] = wet ? 1.0 : 0.0;
+                w.level[c] = wet ? double(z[i]) + double(depth[i]) - baseLevel : 0.0;
             }
+            const double* __restrict ex = w.ex.data();
+            const double* __restrict ey = w.ey.data();
+            const double* __restrict ca = w.a.data();
+            const double* __restrict cr2 = w.r2.data();
+            const double* __restrict cz = w.z.data();
+            const double* __restrict cl = w.level.data();
+            const double* __restrict cw = w.wet.data();
             for (int j = bj; j < bj1; ++j)
                 for (int i = bi; i < bi1; ++i) {
                     const double px = x0 + i * h, py = y0 + j * h;
                     const size_t at = size_t(j) * size_t(side) + size_t(i);
-                    const std::optional<uint32_t> k = g.locate(px, py);
-                    if (!k) {
+                    if (!g.locate(px, py)) {
                         for (int c = 0; c < channels; ++c) out[size_t(c) * plane + at] = kNaN;
                         continue;
                     }
-                    // Relative to the containing cell's value and to a wet cell's level (surface.cpp).
-                    const double base = z[*k];
-                    double baseLevel = depth && depth[*k] > 0 ? double(z[*k]) + double(depth[*k]) : kNaN;
-                    for (size_t c = 0; c < m && depth && std::isnan(baseLevel); ++c)
-                        if (w.wet[c] > 0) baseLevel = w.level[c];
+                    // Branch-free over the candidates, kLanes partial sums, so that the loop vectorises (surface.cpp's
+                    // batch path).
+                    double nz[kLanes] = {}, d[kLanes] = {}, nl[kLanes] = {}, dw[kLanes] = {};
+                    for (size_t c0 = 0; c0 < padded; c0 += kLanes)
+                        for (size_t l = 0; l < kLanes; ++l) {
+                            const size_t c = c0 + l;
+                            const double dx = px - ex[c], dy = py - ey[c];
+                            const double d2 = dx * dx + dy * dy;
+                            const double wt = std::max(detail::expNonPositive(-d2 * ca[c]) - tail, 0.0) * double(d2 < cr2[c]);
+                            nz[l] += wt * cz[c];
+                            d[l] += wt;
+                            nl[l] += wt * cl[c];
+                            dw[l] += wt * cw[c];
+                        }
                     double num = 0, den = 0, numL = 0, denW = 0;
-                    for (size_t c = 0; c < m; ++c) {
-                        const double dx = px - w.ex[c], dy = py - w.ey[c];
-                        const double d2 = dx * dx + dy * dy;
-                        const double wt = std::max(detail::expNonPositive(-d2 * w.a[c]) - tail, 0.0) * double(d2 < w.r2[c]);
-                        num += wt * (w.z[c] - base);
-                        den += wt;
-                        numL += wt * w.wet[c] * (w.level[c] - (std::isnan(baseLevel) ? 0.0 : baseLevel));
-                        denW += wt * w.wet[c];
-                    }
+                    for (size_t l = 0; l < kLanes; ++l) num += nz[l], den += d[l], numL += nl[l], denW += dw[l];
+                    // den >= the containing cell's own weight there (kernel.h): never zero.
                     out[at] = float(base + num / den);
                     if (channels == 3) {
                         out[plane + at] = denW > 0 ? float(baseLevel + numL / denW) : kNaN;
