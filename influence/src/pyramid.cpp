@@ -7,7 +7,6 @@
 #include "heightcast/influence/pyramid.h"
 
 #include <algorithm>
-#include <atomic>
 #include <bit>
 #include <cmath>
 #include <filesystem>
@@ -233,14 +232,12 @@ SurfacePyramid buildSurfacePyramid(const Grid& g, const KernelParams& params, un
         auto& samples = owned->samples[size_t(t)];
         samples.resize(keys.size() * size_t(p.channels) * plane);
         owned->errors[size_t(t)].assign(keys.size() * size_t(p.channels), 0.0f);
-        std::atomic<uint64_t> done{0};
         parallelFor(keys.size(), 8, threads, [&](size_t b, size_t e, unsigned worker) {
             for (size_t tile = b; tile < e; ++tile)
                 buildTile(g, index, params, t, sides[size_t(t)], keys[tile], p.channels, depthLayer,
                           &samples[tile * size_t(p.channels) * plane], scratch[worker]);
-            done += e - b;
+            bar.advance(e - b);
         });
-        bar.advance(done);
     }
     bar.finish();
     p.levels.resize(size_t(top) + 1);

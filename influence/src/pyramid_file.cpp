@@ -95,7 +95,11 @@ SurfacePyramid readSurfacePyramid(const std::string& path, const Grid& grid, con
         throw Error(path + ": surface pyramid built for sigma " + std::to_string(p.params.sigma) + ", R " +
                     std::to_string(p.params.truncation) + "; wanted sigma " + std::to_string(params.sigma) + ", R " +
                     std::to_string(params.truncation));
-    // The hashes cover finest size and root level; the rest of the shape must be what this reader builds.
+    // The grid's geometry, field by field (a file whose hashes match may still declare another root level,
+    // from which every size below would be computed).
+    if (p.rootLevel != grid.rootLevel) file.fail(off::rootLevel, "root level " + std::to_string(p.rootLevel) + ", the grid's is " + std::to_string(grid.rootLevel));
+    if (p.finestCellM != grid.finestCellM) file.fail(off::finestCellM, "finest cell size differs from the grid's");
+    // The rest of the shape must be what this reader builds.
     const int wantChannels = grid.findLayer("water_depth") >= 0 ? 3 : 1;
     if (p.channels != wantChannels) file.fail(off::channels, "declares " + std::to_string(p.channels) + " channels, expected " + std::to_string(wantChannels));
     if (tileLog2 != kPyramidTileLog2) file.fail(off::tileLog2, "tile side 2^" + std::to_string(tileLog2) + ", this reader uses 2^" + std::to_string(kPyramidTileLog2));
