@@ -38,9 +38,12 @@ struct TexelReuse {
 };
 
 // Approximation (approximate.cpp): fills the textures of one cascade; returns Gaussians evaluated. With `reuse`,
-// the visible texels that were visible there too are copied (their count in *reused), the others evaluated.
+// the visible texels that were visible there too are copied (their count in *reused); with a scene pyramid at
+// the cascade's texel size, texels whose samples it holds are copied from it (their count in *pyramidTexels, the
+// level in *pyramidLevel, -1 when none fits); the others are evaluated.
 uint64_t approximate(const Scene& scene, const Cascade& c, CascadeTextures& tex, double waterMinDepthM, unsigned threads,
-                     const TexelReuse* reuse = nullptr, uint64_t* reused = nullptr);
+                     const TexelReuse* reuse = nullptr, uint64_t* reused = nullptr, uint64_t* pyramidTexels = nullptr,
+                     int* pyramidLevel = nullptr);
 
 // One ray through the cascades (raycast.cpp).
 struct Hit {
