@@ -531,11 +531,10 @@ std::string Timings::toTable() const {
             s += b;
         }
         if (c.pyramidLevel >= 0) {
-            std::snprintf(b, sizeof b, ", %llu from pyramid level %d", (unsigned long long)c.pyramidTexels, c.pyramidLevel);
+            std::snprintf(b, sizeof b, ", %llu copied from pyramid level %d (within %.2g m)", (unsigned long long)c.pyramidTexels, c.pyramidLevel,
+                          c.errorBoundM);
             s += b;
         }
-        std::snprintf(b, sizeof b, ", error bound %.2g m", c.errorBoundM);
-        s += b;
         s += "\n";
     }
     std::snprintf(b, sizeof b, "  mipmaps         %9.2f\n  ray casting     %9.2f   %llu rays, %llu hits\n  shading         %9.2f\n  total           %9.2f\n",
