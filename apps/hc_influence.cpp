@@ -1,4 +1,5 @@
-// hc-influence: grid -> influencing-cell lists (.hci cache).
+// hc-influence: grid -> influencing-cell lists (.hci cache) and the surface pyramid (.hcp).
+#include <algorithm>
 #include <cstdio>
 
 #include "cli.h"
@@ -7,48 +8,82 @@
 #include "heightcast/core/timer.h"
 #include "heightcast/grid/grid_file.h"
 #include "heightcast/influence/influence.h"
+#include "heightcast/influence/pyramid.h"
 
 namespace {
 
 struct InfluenceArgs {
-    std::string gridPath, out;
+    std::string gridPath, out, pyramidOut;
     hc::influence::KernelParams params;
     unsigned threads = 0;
     bool quiet = false;
+    bool lists = true, pyramid = true;
 };
 
 // The options, validated before any work; false after --help.
 bool parseOptions(int argc, char** argv, InfluenceArgs& a) {
-    hc::cli::Parser p("hc-influence", "GRID.hcg [-o OUT.hci] [--sigma S] [--truncation R]",
+    bool noLists = false, noPyramid = false;
+    hc::cli::Parser p("hc-influence", "GRID.hcg [-o OUT.hci] [-p OUT.hcp] [--sigma S] [--truncation R] [--no-lists | --no-pyramid]",
                       "Builds the influence list of every cell (the cells whose truncated Gaussian reaches into it)\n"
                       "and writes them as a cache that hc-probe, hc-export and the renderer reuse. A cache depends\n"
-                      "only on the grid's tree, sigma and R: new water values on the same tree keep it valid.");
+                      "only on the grid's tree, sigma and R: new water values on the same tree keep it valid.\n"
+                      "Then samples the exact smooth surface into the surface pyramid (DESIGN.md section 10): dyadic\n"
+                      "lattices (spacing finest cell * 2^t) in 16 x 16 tiles kept where cells are as fine as the\n"
+                      "spacing, each tile with its measured error against the next coarser level. The lists take\n"
+                      "about 220 bytes per cell; the pyramid about 4-20 per channel and needs no lists: for grids whose\n"
+                      "lists do not fit in memory (100 M cells), use --no-lists.");
     p.positional("GRID.hcg", "grid file (hc-ingest)", a.gridPath);
     p.option("-o", "OUT.hci", "cache file (default: the grid's path with .hci)", a.out);
     p.option("--sigma", "S", "Gaussian width in cell sizes (default 1.0, the report's)", a.params.sigma);
     p.option("--truncation", "R", "kernel cut-off in sigmas; a cell reaches R * sigma cell sizes (default 3.5)", a.params.truncation);
+    p.option("-p", "OUT.hcp", "surface pyramid file (default: the grid's path with .hcp)", a.pyramidOut);
     p.option("--threads", "N", "worker threads (default 0 = all cores)", a.threads);
+    p.flag("--no-lists", "build the surface pyramid only (no .hci)", noLists);
+    p.flag("--no-pyramid", "build the influence lists only (no .hcp)", noPyramid);
     p.flag("--quiet", "no progress output", a.quiet);
     if (!p.parse(argc, argv)) return false;
     if (std::string why = a.params.validate(); !why.empty()) throw hc::Error("--sigma/--truncation: " + why);
+    if (noLists && noPyramid) throw hc::Error("--no-lists and --no-pyramid together leave nothing to build");
+    a.lists = !noLists;
+    a.pyramid = !noPyramid;
     if (a.out.empty()) a.out = hc::influence::defaultCachePath(a.gridPath);
-    hc::cli::checkWritable(a.out, "influence cache");
-    hc::cli::checkNotSame(a.out, a.gridPath, "influence cache");
+    if (a.pyramidOut.empty()) a.pyramidOut = hc::influence::defaultPyramidPath(a.gridPath);
+    if (a.lists) {
+        hc::cli::checkWritable(a.out, "influence cache");
+        hc::cli::checkNotSame(a.out, a.gridPath, "influence cache");
+    }
+    if (a.pyramid) {
+        hc::cli::checkWritable(a.pyramidOut, "surface pyramid");
+        hc::cli::checkNotSame(a.pyramidOut, a.gridPath, "surface pyramid");
+        if (a.lists) hc::cli::checkNotSame(a.pyramidOut, a.out, "surface pyramid");
+    }
     return true;
 }
 
-void printSummary(const InfluenceArgs& a, const hc::influence::InfluenceLists& lists, double buildS, double writeS) {
+void printListsSummary(const InfluenceArgs& a, const hc::influence::InfluenceLists& lists, double buildS, double writeS) {
     auto s = lists.stats();
-    std::printf("hc-influence: %s -> %s\n", a.gridPath.c_str(), a.out.c_str());
-    std::printf("  kernel       truncated Gaussian, sigma %g, R %g (reach %g cell sizes)\n", a.params.sigma, a.params.truncation,
-                a.params.truncation * a.params.sigma);
-    std::printf("  cells        %zu\n", lists.cellCount());
-    std::printf("  entries      %llu (per cell: mean %.1f, p99 %llu, max %llu)\n", (unsigned long long)lists.entryCount(),
+    std::printf("  lists        -> %s\n", a.out.c_str());
+    std::printf("    entries    %llu (per cell: mean %.1f, p99 %llu, max %llu)\n", (unsigned long long)lists.entryCount(),
                 s.meanLength, (unsigned long long)s.p99Length, (unsigned long long)s.maxLength);
-    std::printf("  bytes        %.1f MB\n", double(s.bytes) / 1e6);
-    std::printf("  time         %.3f s build (%.2f M cells/s) + %.3f s write\n", buildS, double(lists.cellCount()) / buildS / 1e6,
+    std::printf("    bytes      %.1f MB (%.1f per cell)\n", double(s.bytes) / 1e6, double(s.bytes) / double(std::max<size_t>(1, lists.cellCount())));
+    std::printf("    time       %.3f s build (%.2f M cells/s) + %.3f s write\n", buildS, double(lists.cellCount()) / buildS / 1e6,
                 writeS);
-    std::printf("  memory       peak %.1f MB resident\n", double(hc::peakRssBytes()) / 1e6);
+}
+
+void printPyramidSummary(const InfluenceArgs& a, const hc::Grid& grid, const hc::influence::SurfacePyramid& p, double buildS, double writeS) {
+    std::printf("  pyramid      -> %s\n", a.pyramidOut.c_str());
+    std::printf("    levels     0..%d (spacing %g .. %g m), %d channel%s\n", p.topLevel(), p.spacingM(0), p.spacingM(p.topLevel()), p.channels,
+                p.channels == 1 ? " (elevation)" : "s (elevation, water level, wet share)");
+    std::printf("    samples    %llu (%.2f per cell per channel)\n", (unsigned long long)p.sampleCount(),
+                double(p.sampleCount()) / double(p.channels) / double(std::max<size_t>(1, grid.cellCount())));
+    std::printf("    bytes      %.1f MB (%.1f per cell)\n", double(p.bytes()) / 1e6, double(p.bytes()) / double(std::max<size_t>(1, grid.cellCount())));
+    std::printf("    level  spacing m    tiles   max error vs next level m\n");
+    for (const auto& L : p.levels) {
+        float worst = 0;
+        for (size_t i = 0; i < L.parentErrorM.size(); i += size_t(p.channels)) worst = std::max(worst, L.parentErrorM[i]);
+        std::printf("    %5d %10g %8zu   %.4g\n", L.level, p.spacingM(L.level), L.tileCount(), double(worst));
+    }
+    std::printf("    time       %.3f s build (%.2f M samples/s) + %.3f s write\n", buildS, double(p.sampleCount()) / buildS / 1e6, writeS);
 }
 
 }  // namespace
@@ -58,12 +93,24 @@ int main(int argc, char** argv) {
         InfluenceArgs a;
         if (!parseOptions(argc, argv, a)) return 0;
         const hc::Grid grid = hc::readGrid(a.gridPath);
+        std::printf("hc-influence: %s\n", a.gridPath.c_str());
+        std::printf("  kernel       truncated Gaussian, sigma %g, R %g (reach %g cell sizes)\n", a.params.sigma, a.params.truncation,
+                    a.params.truncation * a.params.sigma);
+        std::printf("  cells        %zu\n", grid.cellCount());
         hc::Stopwatch clock;
-        const hc::influence::InfluenceLists lists = hc::influence::buildInfluenceLists(grid, a.params, a.threads, !a.quiet);
-        const double buildS = clock.lap();
-        hc::influence::writeInfluenceCache(lists, a.out);
-        const double writeS = clock.lap();
-        printSummary(a, lists, buildS, writeS);
+        if (a.lists) {
+            const hc::influence::InfluenceLists lists = hc::influence::buildInfluenceLists(grid, a.params, a.threads, !a.quiet);
+            const double buildS = clock.lap();
+            hc::influence::writeInfluenceCache(lists, a.out);
+            printListsSummary(a, lists, buildS, clock.lap());
+        }
+        if (a.pyramid) {
+            const hc::influence::SurfacePyramid pyramid = hc::influence::buildSurfacePyramid(grid, a.params, a.threads, !a.quiet);
+            const double buildS = clock.lap();
+            hc::influence::writeSurfacePyramid(pyramid, a.pyramidOut);
+            printPyramidSummary(a, grid, pyramid, buildS, clock.lap());
+        }
+        std::printf("  memory       peak %.1f MB resident\n", double(hc::peakRssBytes()) / 1e6);
         return 0;
     });
 }

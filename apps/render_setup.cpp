@@ -2,6 +2,7 @@
 
 #include <cmath>
 #include <cstdio>
+#include <filesystem>
 #include <vector>
 
 #include <fmt/format.h>
@@ -30,6 +31,9 @@ void RenderSetup::addRenderOptions(Parser& p) {
     p.flag("--cells", "overlay the outlines of the adaptive cells", cells);
     p.flag("--no-legend", "leave the colour bar out", noLegend);
     p.option("--cache", "C.hci", "influence cache (default: the grid's path with .hci; built if missing or stale)", cachePath);
+    p.option("--pyramid", "P.hcp", "surface pyramid (hc-influence) to copy texels from (default: the grid's path with .hcp, used if\n"
+             "valid; cascade texel sizes then double per step instead of 2^(1/8))", pyramidPath);
+    p.flag("--no-pyramid", "sum every texel from the kernels, even with a pyramid beside the grid", noPyramid);
     p.option("--sigma", "S", "kernel width in cell sizes (default 1.0)", params.sigma);
     p.option("--truncation", "R", "kernel cut-off in sigmas (default 3.5)", params.truncation);
 }
@@ -75,12 +79,30 @@ void RenderSetup::finish() {
 }
 
 std::unique_ptr<LoadedScene> loadScene(const char* program, const std::string& gridPath, const RenderSetup& setup) {
-    auto s = std::make_unique<LoadedScene>(LoadedScene{readGrid(gridPath), {}, nullptr});
+    auto s = std::make_unique<LoadedScene>(LoadedScene{readGrid(gridPath), {}, std::nullopt, nullptr});
     const std::string cachePath = setup.cachePath.empty() ? influence::defaultCachePath(gridPath) : setup.cachePath;
     std::string note;
     s->lists = influence::loadOrBuildCache(s->grid, setup.params, cachePath, setup.options.threads, true, note);
     std::fprintf(stderr, "%s: %s\n", program, note.c_str());
-    s->scene = std::make_unique<render::Scene>(s->grid, s->lists);
+    const std::string pyramidPath = setup.pyramidPath.empty() ? influence::defaultPyramidPath(gridPath) : setup.pyramidPath;
+    std::error_code ec;
+    if (setup.noPyramid) {
+        std::fprintf(stderr, "%s: --no-pyramid: every texel summed from the kernels\n", program);
+    } else if (!std::filesystem::exists(pyramidPath, ec)) {
+        // A pyramid asked for by name must exist; the default one is optional.
+        if (!setup.pyramidPath.empty()) throw Error(pyramidPath + ": no such file");
+        std::fprintf(stderr, "%s: no surface pyramid at %s: every texel summed from the kernels (hc-influence writes one)\n", program,
+                     pyramidPath.c_str());
+    } else {
+        try {
+            s->pyramid = influence::readSurfacePyramid(pyramidPath, s->grid, setup.params);
+            std::fprintf(stderr, "%s: using surface pyramid %s\n", program, pyramidPath.c_str());
+        } catch (const Error& e) {
+            if (!setup.pyramidPath.empty()) throw;
+            std::fprintf(stderr, "%s: %s: not used, every texel summed from the kernels (hc-influence rebuilds it)\n", program, e.what());
+        }
+    }
+    s->scene = std::make_unique<render::Scene>(s->grid, s->lists, s->pyramid ? &*s->pyramid : nullptr);
     return s;
 }
 

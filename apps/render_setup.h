@@ -9,16 +9,17 @@
 #include "cli.h"
 #include "heightcast/grid/grid.h"
 #include "heightcast/influence/influence.h"
+#include "heightcast/influence/pyramid.h"
 #include "heightcast/render/camera.h"
 #include "heightcast/render/renderer.h"
 
 namespace hc::cli {
 
 struct RenderSetup {
-    std::string cachePath, cameraText, lookAt, size, color = "elevation";
+    std::string cachePath, pyramidPath, cameraText, lookAt, size, color = "elevation";
     render::RenderOptions options;
     influence::KernelParams params;
-    bool cells = false, noLegend = false;
+    bool cells = false, noLegend = false, noPyramid = false;
     double nearM = 0, farM = 0;                // --near, --far [m]; 0: from the scene
 
     // Set by finish():
@@ -28,7 +29,8 @@ struct RenderSetup {
     explicit RenderSetup(std::string defaultSize) : size(std::move(defaultSize)) {}
     // --camera, --look-at (exclusive with each other and with `alsoExclusive`, e.g. "--view"), --near, --far.
     void addCameraOptions(Parser& p, const std::string& alsoExclusive = "");
-    // --size, --cascades, --texels, --threads, --color, --cells, --no-legend, --cache, --sigma, --truncation.
+    // --size, --cascades, --texels, --threads, --color, --cells, --no-legend, --cache, --pyramid, --no-pyramid,
+    // --sigma, --truncation.
     void addRenderOptions(Parser& p);
     // After Parser::parse: validates every option and the camera's numbers (before any expensive work).
     // Throws hc::Error naming the option.
@@ -43,10 +45,13 @@ void parseSize(const std::string& text, int& width, int& height);
 struct LoadedScene {
     Grid grid;
     influence::InfluenceLists lists;
+    std::optional<influence::SurfacePyramid> pyramid;
     std::unique_ptr<render::Scene> scene;
 };
 // Reads the grid, loads or (re)builds the cache (default: the grid's path with .hci) saying why on stderr as
-// "PROGRAM: NOTE", and prepares the scene. Throws hc::Error.
+// "PROGRAM: NOTE", reads the surface pyramid (default: the grid's path with .hcp) when there is a valid one
+// (saying which, or why none is used: missing, stale or damaged ones are not rebuilt here: hc-influence does),
+// and prepares the scene. Throws hc::Error.
 std::unique_ptr<LoadedScene> loadScene(const char* program, const std::string& gridPath, const RenderSetup& setup);
 
 // The camera the options gave, or the overview framing the whole grid; of the given size, with --near/--far.

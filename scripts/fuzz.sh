@@ -32,7 +32,7 @@ cmake --build build-fuzz -j "$(nproc)" --target fuzz
 
 mkdir -p build-fuzz/findings
 status=0
-for reader in hcg hci bookmarks points; do
+for reader in hcg hci hcp bookmarks points; do
   work=$(mktemp -d)
   cp fuzz/corpus/$reader/* "$work/"
   dict=()

@@ -18,6 +18,7 @@
 
 #include "heightcast/core/error.h"
 #include "heightcast/influence/surface.h"
+#include "heightcast/influence/pyramid.h"
 #include "heightcast/ingest/build.h"
 #include "heightcast/ingest/ingest.h"
 #include "heightcast/render/cascades.h"
@@ -231,6 +232,68 @@ TEST(Render, TexelsEqualTheExactSurfaceWithin1mm) {
     EXPECT_LE(worstZ, 1e-3) << "terrain texels [m]";
     EXPECT_LE(worstDepth, 1e-3) << "water depth texels [m]";
     std::printf("%zu texels (%zu wet): worst terrain error %.2e m, worst depth error %.2e m\n", checked, wet, worstZ, worstDepth);
+}
+
+// With the surface pyramid (DESIGN.md section 10): cascade texel sizes are the pyramid's spacings, texels whose
+// samples it holds are copies of the exact surface rounded to float (within one float ulp of the exact value:
+// half an ulp of rounding plus the double sums' own 1e-12), the rest are summed as without it (1 mm, above), and
+// the water drawn from the copied channels follows the same rule. 64 texels a side put the demo DEM's cascades on
+// levels 1-3 (127-509 m; its cells are 64-254 m).
+TEST(Render, PyramidTexelsAreCopiesOfTheExactSurface) {
+    World& w = hef();
+    const hc::influence::SurfacePyramid pyramid = hc::influence::buildSurfacePyramid(w.grid, w.lists.params());
+    const Scene scene(w.grid, w.lists, &pyramid);
+    const Camera c = overviewCamera(scene, 320, 200);
+    const detail::FrameSetup setup = detail::setUpFrame(scene, c);
+    ASSERT_EQ(setup.view.ladderStepsPerOctave, 1);
+    const CascadeFit fit = fitCascades(setup.view, 3, 64);
+    const auto depthLayer = hc::influence::Layer::byName(w.grid, "water_depth");
+    uint64_t copiedSeen = 0, copiedCounted = 0, summed = 0, wet = 0, ties = 0;
+    for (const Cascade& k : fit.cascades) {
+        const double t = std::log2(k.texelM / w.grid.finestCellM);
+        ASSERT_EQ(t, std::round(t)) << "texel " << k.texelM << " m is not a pyramid spacing";
+        detail::CascadeTextures tex;
+        const detail::ApproximationWork work = detail::approximate(scene, k, tex, 0.01, 0);
+        const int level = work.pyramidLevel;
+        ASSERT_EQ(level, int(t));
+        copiedCounted += work.pyramidTexels;
+        for (int j = 0; j < k.n; ++j)
+            for (int i = k.rows[size_t(j)].first; i <= k.rows[size_t(j)].last; ++i) {
+                const double x = k.x0 + i * k.texelM, y = k.y0 + j * k.texelM;
+                const size_t at = size_t(j) * size_t(k.n) + size_t(i);
+                const auto z = w.eval->value(x, y, {});
+                if (!z) {
+                    EXPECT_TRUE(std::isinf(tex.terrain.h[at]) && tex.terrain.h[at] < 0) << "no surface at " << x << "," << y;
+                    continue;
+                }
+                const bool held = x >= 0 && y >= 0 &&
+                                  pyramid.sample(level, uint64_t(std::llround(x / k.texelM)), uint64_t(std::llround(y / k.texelM)),
+                                                 hc::influence::PyramidChannel::Elevation);
+                const double tol = held ? std::ldexp(std::abs(*z), -23) + 1e-9 : 1e-3;
+                ASSERT_NEAR(double(tex.terrain.h[at]), *z, tol) << (held ? "copied" : "summed") << " texel at " << x << "," << y;
+                const double d = std::max(0.0, w.eval->value(x, y, depthLayer).value_or(0.0));
+                // The water rule's wet share threshold decides a tie at exactly 1/2 (a point symmetric between wet
+                // and dry cells) by rounding: the exact evaluator sums wet and all weights apart, the pyramid in one
+                // loop. Such texels are counted, not compared.
+                if (held) {
+                    const float share = *pyramid.sample(level, uint64_t(std::llround(x / k.texelM)), uint64_t(std::llround(y / k.texelM)),
+                                                        hc::influence::PyramidChannel::WetShare);
+                    if (std::abs(double(share) - hc::influence::kWetShareMin) < 1e-6) {
+                        ++ties;
+                        continue;
+                    }
+                }
+                EXPECT_NEAR(double(tex.depth[at]), d, held ? std::ldexp(std::abs(*z), -22) + 1e-9 : 1e-3) << "depth at " << x << "," << y;
+                held ? ++copiedSeen : ++summed;
+                wet += d > 0;
+            }
+    }
+    EXPECT_GT(copiedSeen, 2000u);
+    EXPECT_LT(ties, 10u);
+    EXPECT_GE(copiedCounted, copiedSeen * 9 / 10) << "copied texels must not be summed again";
+    EXPECT_GT(wet, 20u) << "the flood at 2600 m is in view";
+    std::printf("%llu texels copied from the pyramid, %llu summed, %llu wet, %llu on the wet share tie\n", (unsigned long long)copiedSeen,
+                (unsigned long long)summed, (unsigned long long)wet, (unsigned long long)ties);
 }
 
 TEST(Render, HitsLieOnTheExactSurfaceFrom200RandomCameras) {

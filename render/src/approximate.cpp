@@ -91,6 +91,69 @@ std::vector<Todo> copyReusedTexels(const Cascade& c, const TexelReuse* reuse, Ca
     return todo;
 }
 
+// Copies into tex the texels of `todo` whose centres are samples of a tile the surface pyramid holds at the
+// cascade's level (texelM is that level's spacing and the corner lies on its lattice: cascades.h), applying the
+// water rule of surface.h to the water channels as the kernel path does. Each span of `todo` shrinks to the
+// texels it could not copy, conservatively: from the first to the last of them (the kernel path evaluates
+// copied texels in between again, to the same value within float rounding). Returns the texels copied and not
+// left in `todo`, and sets *level to the pyramid level used (-1: none fits the cascade).
+uint64_t copyPyramidTexels(const Scene& scene, const Cascade& c, CascadeTextures& tex, double waterMinDepthM, unsigned threads,
+                           std::vector<Todo>& todo, int* level) {
+    *level = -1;
+    const influence::SurfacePyramid* p = scene.pyramid();
+    if (!p) return 0;
+    const double t = std::round(std::log2(c.texelM / p->finestCellM));
+    if (t < 0 || t > p->topLevel() || std::abs(p->spacingM(int(t)) - c.texelM) > 1e-9 * c.texelM) return 0;
+    *level = int(t);
+    const influence::SurfacePyramid::Level& L = p->levels[size_t(t)];
+    const size_t side = size_t(L.tileSide), plane = side * side, channels = size_t(p->channels);
+    const double i0 = std::round(c.x0 / c.texelM), j0 = std::round(c.y0 / c.texelM);
+    const float minDepth = float(waterMinDepthM);
+    std::vector<uint64_t> copied(resolveThreads(threads), 0);
+    parallelFor(todo.size(), 16, threads, [&](size_t b, size_t e, unsigned worker) {
+        for (size_t j = b; j < e; ++j) {
+            Todo& span = todo[j];
+            const double gj = j0 + double(j);
+            long tile = -1;
+            uint64_t tileI = ~uint64_t{0}, tileJ = 0;
+            // Copies texel i if the pyramid holds its sample; false if it does not.
+            auto copy = [&](int i) {
+                const double gi = i0 + double(i);
+                if (gi < 0 || gj < 0) return false;
+                const uint64_t I = uint64_t(gi), J = uint64_t(gj);
+                if (I / side != tileI || J / side != tileJ) {
+                    tileI = I / side, tileJ = J / side;
+                    tile = p->tileAt(int(t), I, J);
+                }
+                if (tile < 0) return false;
+                const float* s = &L.samples[size_t(tile) * channels * plane + (J % side) * side + (I % side)];
+                const size_t at = j * size_t(c.n) + size_t(i);
+                if (std::isnan(s[0])) return true;  // outside every cell: no surface, as the kernel path leaves it
+                tex.terrain.h[at] = s[0];
+                if (channels == 3) {
+                    const float lvl = s[plane], share = s[2 * plane];
+                    if (!std::isnan(lvl) && double(share) >= influence::kWetShareMin) {
+                        const float d = lvl - s[0];
+                        if (d > 0) tex.depth[at] = d;
+                        if (d > minDepth) tex.water.h[at] = lvl;
+                    }
+                }
+                return true;
+            };
+            for (auto [lo, hi] : {std::pair<int*, int*>{&span.a0, &span.a1}, {&span.b0, &span.b1}}) {
+                int first = *hi + 1, last = *lo - 1;
+                for (int i = *lo; i <= *hi; ++i)
+                    if (!copy(i)) first = std::min(first, i), last = i;
+                copied[worker] += uint64_t(std::max(0, *hi - *lo + 1) - std::max(0, last - first + 1));
+                *lo = first, *hi = last;
+            }
+        }
+    });
+    uint64_t total = 0;
+    for (uint64_t v : copied) total += v;
+    return total;
+}
+
 // Gathers the influence list of cell k into cand, relative to k's centre and value. Returns the water level
 // base lk: the level of a wet cell, k's own if k is wet (NaN when no cell of the list is wet).
 double gatherCandidates(const Scene& scene, uint32_t k, Candidates& cand) {
@@ -215,7 +278,8 @@ ApproximationWork approximate(const Scene& scene, const Cascade& c, CascadeTextu
         tex.depth.resize(size_t(n) * size_t(n));
     }
     ApproximationWork work;
-    const std::vector<Todo> todo = copyReusedTexels(c, reuse, tex, work.reusedTexels);
+    std::vector<Todo> todo = copyReusedTexels(c, reuse, tex, work.reusedTexels);
+    work.pyramidTexels = copyPyramidTexels(scene, c, tex, waterMinDepthM, threads, todo, &work.pyramidLevel);
 
     // Their bounding box and count.
     int i0 = n, i1 = -1, j0 = n, j1 = -1;

@@ -106,7 +106,7 @@ std::vector<double> splitOffsets(double n, double f, int count, double finestCel
 
 // Places cascade c's texture over its polygon (texel size from the ladder, corner on the lattice) and finds
 // its visible texels.
-void placeTexture(Cascade& c, int texelsPerSide, double finestCellM) {
+void placeTexture(Cascade& c, int texelsPerSide, double finestCellM, int stepsPerOctave) {
     double bx0 = HUGE_VAL, by0 = HUGE_VAL, bx1 = -HUGE_VAL, by1 = -HUGE_VAL;
     for (const glm::dvec2& p : c.polygon) {
         bx0 = std::min(bx0, p.x);
@@ -115,7 +115,7 @@ void placeTexture(Cascade& c, int texelsPerSide, double finestCellM) {
         by1 = std::max(by1, p.y);
     }
     c.n = texelsPerSide;
-    c.texelM = ladderTexelSize(std::max(bx1 - bx0, by1 - by0), texelsPerSide, finestCellM);
+    c.texelM = ladderTexelSize(std::max(bx1 - bx0, by1 - by0), texelsPerSide, finestCellM, stepsPerOctave);
     // Corner on the lattice, one texel outside the box so every patch of the box is whole.
     c.x0 = (std::floor(bx0 / c.texelM) - 1) * c.texelM;
     c.y0 = (std::floor(by0 / c.texelM) - 1) * c.texelM;
@@ -161,13 +161,14 @@ std::vector<glm::dvec2> convexHull(std::vector<glm::dvec2> p) {
     return h;
 }
 
-double ladderTexelSize(double extentM, int texelsPerSide, double finestCellM) {
-    // Smallest s = finest * 2^(q/8) with (N - 1) s >= extent + 2 s (room to snap the corner to the
-    // lattice): at most 9 % of the texture is lost to the ladder's steps.
+double ladderTexelSize(double extentM, int texelsPerSide, double finestCellM, int stepsPerOctave) {
+    // Smallest s = finest * 2^(q/k) with (N - 1) s >= extent + 2 s (room to snap the corner to the
+    // lattice): with k = 8 steps per octave at most 9 % of the texture is lost to the ladder's steps.
+    const double k = stepsPerOctave;
     const double need = extentM / (texelsPerSide - 3);
-    double q = std::ceil(8.0 * std::log2(need / finestCellM) - 1e-9);
-    double s = finestCellM * std::exp2(q / 8.0);
-    while ((texelsPerSide - 3) * s < extentM) s = finestCellM * std::exp2(++q / 8.0);  // rounding guard
+    double q = std::ceil(k * std::log2(need / finestCellM) - 1e-9);
+    double s = finestCellM * std::exp2(q / k);
+    while ((texelsPerSide - 3) * s < extentM) s = finestCellM * std::exp2(++q / k);  // rounding guard
     return s;
 }
 
@@ -197,7 +198,7 @@ CascadeFit fitCascades(const ViewVolume& v, int count, int texelsPerSide) {
         c.farWithOverlap = k + 1 < count ? c.splitFar + std::max(0.1 * width, 4 * v.finestCellM) : c.splitFar;
         const double lo = k == 0 ? -HUGE_VAL : c.splitNear;  // the first cascade takes everything nearer
         c.polygon = clipSlab(fit.hull, fit.dir, eyeOffset + lo, eyeOffset + c.farWithOverlap);
-        if (c.polygon.size() >= 3) placeTexture(c, texelsPerSide, v.finestCellM);
+        if (c.polygon.size() >= 3) placeTexture(c, texelsPerSide, v.finestCellM, v.ladderStepsPerOctave);
         fit.cascades.push_back(std::move(c));
     }
     return fit;

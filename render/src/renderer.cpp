@@ -28,10 +28,16 @@ std::string RenderOptions::validate() const {
     return {};
 }
 
-Scene::Scene(const Grid& grid, const influence::InfluenceLists& lists) : grid_(grid), lists_(lists) {
+Scene::Scene(const Grid& grid, const influence::InfluenceLists& lists, const influence::SurfacePyramid* pyramid)
+    : grid_(grid), lists_(lists), pyramid_(pyramid) {
     if (grid.cellCount() == 0) throw Error("the grid has no cells: nothing to render");
     if (lists.cellCount() != grid.cellCount() || lists.gridStructureHash() != grid.structureHash())
         throw Error("the influence lists do not belong to this grid");
+    if (pyramid && (pyramid->structureHash != grid.structureHash() || pyramid->contentHash != grid.contentHash()))
+        throw Error("the surface pyramid does not belong to this grid");
+    if (pyramid && (pyramid->params.sigma != lists.params().sigma || pyramid->params.truncation != lists.params().truncation ||
+                    pyramid->params.kernelId != lists.params().kernelId))
+        throw Error("the surface pyramid was built for another kernel than the influence lists");
     waterLayer_ = grid.findLayer("water_depth");
     grid.boundsLocal(xMin, yMin, xMax, yMax);
     elevationMin = HUGE_VAL, elevationMax = -HUGE_VAL, depthMax = 0;
@@ -223,6 +229,7 @@ FrameSetup setUpFrame(const Scene& scene, const Camera& camera) {
     view.boxMin = {scene.xMin, scene.yMin, scene.zMin};
     view.boxMax = {scene.xMax, scene.yMax, scene.zMax};
     view.finestCellM = g.finestCellM;
+    if (scene.pyramid()) view.ladderStepsPerOctave = 1;
     return s;
 }
 
@@ -337,7 +344,10 @@ std::vector<detail::CascadeTextures> approximateCascades(const Scene& scene, con
         if (!c.empty()) {
             const detail::ApproximationWork work = detail::approximate(scene, c, tex[k], options.waterMinDepthM, options.threads, reuse ? &*reuse : nullptr);
             cs.gaussians = work.gaussians, cs.cellsVisited = work.cellsVisited, cs.reusedTexels = work.reusedTexels;
+            cs.pyramidTexels = work.pyramidTexels, cs.pyramidLevel = work.pyramidLevel;
         }
+        // A copied sample is the exact surface rounded to float once: half an ulp of the largest height.
+        if (cs.pyramidTexels) cs.errorBoundM = std::ldexp(std::max(std::abs(scene.zMin), std::abs(scene.zMax)), -24);
         cs.approximationMs = clock.milliseconds();
         timings.approximationMs += cs.approximationMs;
         clock.restart();
@@ -520,6 +530,9 @@ std::string Timings::toJson() const {
                                  {"texel_m", rounded(c.texelM, std::chars_format::general, 6)},
                                  {"visible_texels", c.visibleTexels},
                                  {"reused_texels", c.reusedTexels},
+                                 {"pyramid_level", c.pyramidLevel},
+                                 {"pyramid_texels", c.pyramidTexels},
+                                 {"error_bound_m", rounded(c.errorBoundM, std::chars_format::general, 3)},
                                  {"gaussians", c.gaussians},
                                  {"cells_visited", c.cellsVisited},
                                  {"approximation_ms", threeDecimals(c.approximationMs)}});
@@ -543,6 +556,11 @@ std::string Timings::toTable() const {
         }
         if (c.reusedTexels) {
             std::snprintf(b, sizeof b, " (%llu texels kept from the last frame)", (unsigned long long)c.reusedTexels);
+            s += b;
+        }
+        if (c.pyramidLevel >= 0) {
+            std::snprintf(b, sizeof b, ", %llu copied from pyramid level %d (within %.2g m)", (unsigned long long)c.pyramidTexels, c.pyramidLevel,
+                          c.errorBoundM);
             s += b;
         }
         s += "\n";

@@ -42,11 +42,14 @@ struct ApproximationWork {
     uint64_t gaussians = 0;     // kernel evaluations
     uint64_t cellsVisited = 0;  // cells whose squares were examined for texel centres to evaluate
     uint64_t reusedTexels = 0;  // visible texels copied from `reuse`
+    uint64_t pyramidTexels = 0; // visible texels copied from the scene's surface pyramid (and not evaluated again)
+    int pyramidLevel = -1;      // the pyramid level whose spacing is the cascade's texel size, -1 when none fits
 };
 
 // Approximation (approximate.cpp): fills the textures of one cascade. With `reuse`, the visible texels that were
-// visible there too are copied, the others evaluated; the cells visited then follow the texels evaluated (a few
-// per texel), not the cascade's area.
+// visible there too are copied; with a scene pyramid at the cascade's texel size, texels whose samples it holds
+// are copied from it; the others are evaluated. The cells visited follow the texels evaluated (a few per texel),
+// not the cascade's area.
 ApproximationWork approximate(const Scene& scene, const Cascade& c, CascadeTextures& tex, double waterMinDepthM, unsigned threads,
                               const TexelReuse* reuse = nullptr);
 

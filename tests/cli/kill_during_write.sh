@@ -29,12 +29,12 @@ make_grid() { "$HC_INGEST" "$src" -o "$1/g.hcg" --quiet >/dev/null && "$HC_INFLU
 make_points() { "$HC_INFO" "$1/g.hcg" --cells-csv "$1/pts.csv" >/dev/null; }
 
 # The cases: inputs, command (run in its directory), outputs.
-inputs=(g.hcg g.hci)
+inputs=(g.hcg g.hci g.hcp)
 case $case_name in
   ingest)     inputs=(); cmd=("$HC_INGEST" "$src" -o g.hcg --quiet); outputs=(g.hcg) ;;
-  influence)  inputs=(g.hcg); cmd=("$HC_INFLUENCE" g.hcg -o g.hci --quiet); outputs=(g.hci) ;;
+  influence)  inputs=(g.hcg); cmd=("$HC_INFLUENCE" g.hcg -o g.hci --quiet); outputs=(g.hci g.hcp) ;;
   info_csv)   cmd=("$HC_INFO" g.hcg --cells-csv cells.csv); outputs=(cells.csv) ;;
-  probe_csv)  inputs=(g.hcg g.hci pts.csv); cmd=("$HC_PROBE" g.hcg --cache g.hci --points pts.csv -o p.csv); outputs=(p.csv) ;;
+  probe_csv)  inputs=(g.hcg g.hci g.hcp pts.csv); cmd=("$HC_PROBE" g.hcg --cache g.hci --points pts.csv -o p.csv); outputs=(p.csv) ;;
   render)     cmd=("$HC_RENDER" g.hcg --cache g.hci -o o.png --exr o.exr --timings t.json --size 480x270)
               outputs=(o.png o.exr t.json) ;;
   export_tif) cmd=("$HC_EXPORT" g.hcg --cache g.hci --resolution 30 --quiet -o e.tif); outputs=(e.tif) ;;

@@ -7,7 +7,8 @@
 // Each cascade's slab of the hull, its far side widened by an overlap for blending, is fitted into
 // a square texture of N x N texels.
 //
-// Stable fitting: texel sizes come from a fixed ladder s = finest * 2^(q/8) and the texture's
+// Stable fitting: texel sizes come from a fixed ladder s = finest * 2^(q/8) (2^q with a surface pyramid,
+// ViewVolume::ladderStepsPerOctave) and the texture's
 // corner texel sits on the global lattice of multiples of s (local frame). A camera that moves a
 // little keeps s, and every texel centre stays on that lattice: sample positions never swim.
 #pragma once
@@ -29,6 +30,9 @@ struct ViewVolume {
     double yawRad;                  // d = (sin yaw, cos yaw)
     glm::dvec3 boxMin, boxMax;      // scene bounds, local [m]
     double finestCellM;
+    // Texel sizes per octave of the ladder: 8 (s = finest * 2^(q/8), at most 9 % of a texture lost to the steps)
+    // or 1 (s = finest * 2^t: the surface pyramid's spacings, so texel centres are its samples; up to 2x coarser).
+    int ladderStepsPerOctave = 8;
 };
 
 struct Cascade {
@@ -64,7 +68,7 @@ struct CascadeFit {
 CascadeFit fitCascades(const ViewVolume& view, int count, int texelsPerSide);
 
 // Exposed for tests: the ladder texel size for an extent, and the convex hull.
-double ladderTexelSize(double extentM, int texelsPerSide, double finestCellM);
+double ladderTexelSize(double extentM, int texelsPerSide, double finestCellM, int stepsPerOctave = 8);
 std::vector<glm::dvec2> convexHull(std::vector<glm::dvec2> points);
 
 }  // namespace hc::render

@@ -15,6 +15,7 @@
 
 #include "heightcast/grid/grid.h"
 #include "heightcast/influence/influence.h"
+#include "heightcast/influence/pyramid.h"
 #include "heightcast/render/camera.h"
 
 namespace hc::render {
@@ -57,6 +58,12 @@ struct CascadeStats {
     uint64_t gaussians = 0;             // kernel evaluations in the approximation
     uint64_t reusedTexels = 0;          // visible texels copied from the last frame (renderFrame with a CascadeCache)
     uint64_t cellsVisited = 0;          // CPU: grid cells whose squares the approximation examined for texels to evaluate (0 on GL)
+    int pyramidLevel = -1;              // the surface pyramid level whose spacing is texelM, -1 without a pyramid
+    uint64_t pyramidTexels = 0;         // visible texels copied from the pyramid's samples (the others: Gaussians)
+    // Largest |texel - exact surface| of the texels copied from the pyramid [m]: a sample is the exact surface
+    // rounded to float once, so half a float ulp of the largest |height|; 0 when none was copied. The texels
+    // summed from the kernels in float are not bounded here (tests: within 1 mm of the exact surface).
+    double errorBoundM = 0;
     double approximationMs = 0;
 };
 
@@ -73,12 +80,17 @@ struct Timings {
     std::string toTable() const;
 };
 
-// A grid with its influence lists and per-cell data prepared once for many frames.
+// A grid with its influence lists and per-cell data prepared once for many frames, and optionally its
+// surface pyramid (influence/pyramid.h): then cascade texel sizes are the pyramid's spacings (powers of two of
+// the finest cell) and texels where the pyramid holds that level are copied from it instead of summed.
 class Scene {
 public:
-    Scene(const Grid& grid, const influence::InfluenceLists& lists);
+    // All must outlive the scene. Throws hc::Error if the lists or the pyramid are not the grid's, or the
+    // pyramid's kernel is not the lists'.
+    Scene(const Grid& grid, const influence::InfluenceLists& lists, const influence::SurfacePyramid* pyramid = nullptr);
     const Grid& grid() const { return grid_; }
     const influence::InfluenceLists& lists() const { return lists_; }
+    const influence::SurfacePyramid* pyramid() const { return pyramid_; }
     bool hasWater() const { return waterLayer_ >= 0; }
     int waterLayer() const { return waterLayer_; }  // grid layer of water_depth, or -1
     // Per cell, computed once for every frame: centre [m local] and the kernel's 1 / (2 sigma^2 c^2)
@@ -98,6 +110,7 @@ public:
 private:
     const Grid& grid_;
     const influence::InfluenceLists& lists_;
+    const influence::SurfacePyramid* pyramid_ = nullptr;
     int waterLayer_ = -1;
     std::vector<CellKernel> kernels_;
 };

@@ -1,0 +1,99 @@
+// heightcast/influence/pyramid.h: the surface pyramid (DESIGN.md section 10) and its .hcp file.
+//
+// The exact smooth surface (surface.h) sampled on dyadic lattices aligned with the finest-cell lattice:
+// level t has spacing h_t = finestCellM * 2^t, and its sample (i, j) lies at local (i h_t, j h_t), a corner
+// of the finest cells. Samples come in tiles of kPyramidTileSide^2: tile (ti, tj) of level t holds samples
+// i in [ti S, ti S + S), j likewise, and covers the quadtree node of level t + log2(S) whose corner key is
+// mortonEncode(ti S 2^t, tj S 2^t) (the tile's "key"; for a domain smaller than one tile, the whole domain).
+//
+// Stored only where the surface has detail at that scale: a tile of level t is kept when its node holds a
+// cell no larger than h_t (level <= t). The top level (one tile covers the domain) is kept wherever there
+// are cells, so every point over a cell has a coarsest sample; a tile's parent is always kept (the parent's
+// node holds the same small cell). Storage therefore follows the cells (about 4/3 samples per cell where the
+// tiles are full), not the area at the finest spacing.
+//
+// Channels, per sample (float32; NaN where the surface is undefined: holes and outside the domain):
+//   Elevation   the smooth terrain z (section 4)
+//   WaterLevel  level(p), the wet cells' weighted level (section 12); NaN where no wet cell weighs
+//   WetShare    sum of wet weights / sum of all weights, in [0, 1]; water is drawn where it is at least
+//               kWetShareMin and WaterLevel > Elevation (surface.h)
+// The water channels exist only for a grid with a water_depth layer.
+//
+// Bound: each tile records, per channel, parentErrorM: the largest |sample - bilinear interpolation of the
+// parent level's samples| over the tile's samples where all are defined. It is what a reader gives up at
+// this tile's points by reading the coarser level instead (measured, not estimated); 0 on the top level.
+#pragma once
+
+#include <cstdint>
+#include <memory>
+#include <optional>
+#include <span>
+#include <string>
+#include <vector>
+
+#include "heightcast/grid/grid.h"
+#include "heightcast/influence/kernel.h"
+
+namespace hc {
+class MappedFile;
+}
+
+namespace hc::influence {
+
+constexpr int kPyramidTileLog2 = 4;
+constexpr int kPyramidTileSide = 1 << kPyramidTileLog2;  // samples per tile side
+constexpr size_t kPyramidTileSamples = size_t(kPyramidTileSide) * kPyramidTileSide;
+
+enum class PyramidChannel : int { Elevation = 0, WaterLevel = 1, WetShare = 2 };
+
+class SurfacePyramid {
+public:
+    struct Level {
+        int level = 0;                 // t: spacing finestCellM * 2^t
+        int tileSide = 0;              // samples per tile side (kPyramidTileSide, less when the domain is smaller)
+        std::span<const uint64_t> keys;        // tile keys, ascending
+        std::span<const float> parentErrorM;   // [tile * channels + channel]
+        std::span<const float> samples;        // [(tile * channels + channel) * tileSide^2 + j * tileSide + i]
+        size_t tileCount() const { return keys.size(); }
+        // Index of the tile with this key, or -1.
+        long findTile(uint64_t key) const;
+    };
+
+    double finestCellM = 1;
+    int rootLevel = 0;
+    int channels = 1;  // 1 (elevation) or 3 (with water)
+    KernelParams params;
+    uint64_t structureHash = 0, contentHash = 0;  // of the grid it samples
+    std::vector<Level> levels;                    // index t = level t, 0 .. top
+
+    int topLevel() const { return int(levels.size()) - 1; }
+    double spacingM(int t) const { return finestCellM * double(uint64_t{1} << t); }
+    // The sample at lattice point (i, j) of level t, or nullopt where no tile of level t is stored there
+    // (a stored NaN, undefined surface, comes back as NaN).
+    std::optional<float> sample(int t, uint64_t i, uint64_t j, PyramidChannel c) const;
+    // The tile of level t holding lattice point (i, j), or -1.
+    long tileAt(int t, uint64_t i, uint64_t j) const;
+    // Storage: samples and bytes (keys, bounds, samples) over all levels.
+    uint64_t sampleCount() const;
+    uint64_t bytes() const;
+
+    // Owned storage (built) or a mapped file (read) behind the spans.
+    struct Storage;
+    std::shared_ptr<const Storage> storage;
+};
+
+// Samples the exact surface of `grid` (kernel `params`) into a pyramid, on `threads` workers (0 = all
+// cores), with terminal progress if asked. Each tile evaluates its samples against the cells whose kernels
+// reach it (gathered once per tile, narrowed per block of 4 x 4 samples), in double, without influence lists.
+// Throws hc::Error for invalid parameters.
+SurfacePyramid buildSurfacePyramid(const Grid& grid, const KernelParams& params, unsigned threads = 0, bool progress = false);
+
+// The .hcp file: written atomically; read memory-mapped, validated (checksums, sizes, keys ascending and
+// inside the domain) and checked to belong to `grid` with `params` (like the .hci cache). Throws hc::Error.
+void writeSurfacePyramid(const SurfacePyramid& pyramid, const std::string& path);
+SurfacePyramid readSurfacePyramid(const std::string& path, const Grid& grid, const KernelParams& params);
+
+// The pyramid path a tool uses by default: the grid's path with its extension replaced by ".hcp".
+std::string defaultPyramidPath(const std::string& gridPath);
+
+}  // namespace hc::influence

@@ -1,0 +1,257 @@
+// influence/src/pyramid.cpp: building the surface pyramid (pyramid.h) and looking samples up.
+//
+// Per block of 4 x 4 samples of a tile: the cells whose kernels reach the block are gathered (one range query
+// per level, list_index.h), and every sample sums them in double, relative to one cell value of the block
+// (as the exact evaluator sums relative to the containing cell's, surface.cpp), so a constant field stays
+// exactly constant and centimetre relief at 8000 m keeps its digits.
+#include "heightcast/influence/pyramid.h"
+
+#include <algorithm>
+#include <bit>
+#include <cmath>
+#include <filesystem>
+#include <limits>
+
+#include "exp_neg.h"
+#include "heightcast/core/error.h"
+#include "heightcast/core/parallel.h"
+#include "heightcast/core/progress.h"
+#include "heightcast/influence/surface.h"
+#include "list_index.h"
+#include "pyramid_storage.h"
+
+namespace hc::influence {
+
+long SurfacePyramid::Level::findTile(uint64_t key) const {
+    const auto it = std::lower_bound(keys.begin(), keys.end(), key);
+    return it != keys.end() && *it == key ? long(it - keys.begin()) : -1;
+}
+
+long SurfacePyramid::tileAt(int t, uint64_t i, uint64_t j) const {
+    if (t < 0 || t > topLevel()) return -1;
+    const Level& L = levels[size_t(t)];
+    const uint64_t side = uint64_t(L.tileSide), perSide = uint64_t{1} << (rootLevel - t);
+    if (i >= perSide || j >= perSide) return -1;
+    const uint64_t key = mortonEncode(uint32_t((i / side * side) << t), uint32_t((j / side * side) << t));
+    return L.findTile(key);
+}
+
+std::optional<float> SurfacePyramid::sample(int t, uint64_t i, uint64_t j, PyramidChannel c) const {
+    const long tile = tileAt(t, i, j);
+    if (tile < 0) return std::nullopt;
+    const Level& L = levels[size_t(t)];
+    const size_t side = size_t(L.tileSide);
+    return L.samples[(size_t(tile) * size_t(channels) + size_t(c)) * side * side + (j % side) * side + (i % side)];
+}
+
+uint64_t SurfacePyramid::sampleCount() const {
+    uint64_t n = 0;
+    for (const Level& L : levels) n += L.samples.size();
+    return n;
+}
+
+uint64_t SurfacePyramid::bytes() const {
+    uint64_t n = 0;
+    for (const Level& L : levels) n += L.keys.size_bytes() + L.parentErrorM.size_bytes() + L.samples.size_bytes();
+    return n;
+}
+
+std::string defaultPyramidPath(const std::string& gridPath) {
+    std::filesystem::path p(gridPath);
+    p.replace_extension(".hcp");
+    return p.string();
+}
+
+namespace {
+
+constexpr float kNaN = std::numeric_limits<float>::quiet_NaN();
+constexpr int kBlock = 4;      // samples per side of a candidate-gathering block
+constexpr size_t kLanes = 4;  // doubles per AVX2 register
+
+// The tiles of each level: nodes of level t + log2(side) holding a cell of level <= t (any cell at the top).
+std::vector<std::vector<uint64_t>> tileKeys(const Grid& g, int top, const std::vector<int>& sides) {
+    std::vector<std::vector<uint64_t>> keys(size_t(top) + 1);
+    for (int t = 0; t <= top; ++t) {
+        const int nodeLevel = t + std::countr_zero(unsigned(sides[size_t(t)]));
+        const uint64_t mask = ~(mortonSpan(nodeLevel) - 1);
+        auto& out = keys[size_t(t)];
+        for (uint64_t code : g.codes) {
+            if (t < top && codeLevel(code) > t) continue;
+            const uint64_t key = codeKey(code) & mask;
+            if (out.empty() || out.back() != key) out.push_back(key);
+        }
+    }
+    return keys;
+}
+
+struct Workspace {
+    detail::ListIndex::Scratch wide;
+    std::vector<double> ex, ey, a, r2, z, level, wet;  // one block's candidates
+    std::vector<uint8_t> keep;
+};
+
+// Fills the samples of one tile (all channels) of level t.
+void buildTile(const Grid& g, const detail::ListIndex& index, const KernelParams& params, int t, int side, uint64_t key, int channels,
+               int depthLayer, float* out, Workspace& w) {
+    const double h = g.levelSizeM(t);
+    const double x0 = double(mortonX(key)) * g.finestCellM, y0 = double(mortonY(key)) * g.finestCellM;
+    const double tail = params.tail(), halfR2 = 0.5 * params.truncation * params.truncation;
+    const float* z = g.values[0].data();
+    const float* depth = depthLayer >= 0 ? g.values[size_t(depthLayer)].data() : nullptr;
+    const size_t plane = size_t(side) * size_t(side);
+    for (int bj = 0; bj < side; bj += kBlock)
+        for (int bi = 0; bi < side; bi += kBlock) {
+            const int bi1 = std::min(side, bi + kBlock), bj1 = std::min(side, bj + kBlock);
+            const Grid::Square box{x0 + bi * h, y0 + bj * h, x0 + (bi1 - 1) * h, y0 + (bj1 - 1) * h};
+            index.candidatesFor(box, w.wide);
+            const size_t m = w.wide.index.size();
+            // Relative to one cell's value per block, and to one wet cell's level (as surface.cpp does per point:
+            // any value of the neighbourhood keeps the digits; a constant field stays exactly constant).
+            double base = kNaN, baseLevel = kNaN;
+            for (size_t c = 0; c < m && std::isnan(base); ++c) base = z[w.wide.index[c]];
+            for (size_t c = 0; c < m && depth && std::isnan(baseLevel); ++c)
+                if (const uint32_t i = w.wide.index[c]; depth[i] > 0) baseLevel = double(z[i]) + double(depth[i]);
+            // Padded to whole vectors of kLanes; padding never counts (r2 = -1: d2 < -1 is false).
+            const size_t padded = (m + kLanes - 1) / kLanes * kLanes;
+            for (auto* v : {&w.ex, &w.ey, &w.a, &w.z, &w.level, &w.wet}) v->assign(padded, 0.0);
+            w.r2.assign(padded, -1.0);
+            for (size_t c = 0; c < m; ++c) {
+                const uint32_t i = w.wide.index[c];
+                const bool wet = depth && depth[i] > 0;
+                w.ex[c] = w.wide.cx[c], w.ey[c] = w.wide.cy[c], w.r2[c] = w.wide.r2[c];
+                w.a[c] = halfR2 / w.wide.r2[c];  // 1 / (2 sigma^2 c^2), as r2 = (R sigma c)^2
+                w.z[c] = double(z[i]) - base;
+                w.wet[c] = wet ? 1.0 : 0.0;
+                w.level[c] = wet ? double(z[i]) + double(depth[i]) - baseLevel : 0.0;
+            }
+            const double* __restrict ex = w.ex.data();
+            const double* __restrict ey = w.ey.data();
+            const double* __restrict ca = w.a.data();
+            const double* __restrict cr2 = w.r2.data();
+            const double* __restrict cz = w.z.data();
+            const double* __restrict cl = w.level.data();
+            const double* __restrict cw = w.wet.data();
+            for (int j = bj; j < bj1; ++j)
+                for (int i = bi; i < bi1; ++i) {
+                    const double px = x0 + i * h, py = y0 + j * h;
+                    const size_t at = size_t(j) * size_t(side) + size_t(i);
+                    if (!g.locate(px, py)) {
+                        for (int c = 0; c < channels; ++c) out[size_t(c) * plane + at] = kNaN;
+                        continue;
+                    }
+                    // Branch-free over the candidates, kLanes partial sums, so that the loop vectorises (surface.cpp's
+                    // batch path).
+                    double nz[kLanes] = {}, d[kLanes] = {}, nl[kLanes] = {}, dw[kLanes] = {};
+                    for (size_t c0 = 0; c0 < padded; c0 += kLanes)
+                        for (size_t l = 0; l < kLanes; ++l) {
+                            const size_t c = c0 + l;
+                            const double dx = px - ex[c], dy = py - ey[c];
+                            const double d2 = dx * dx + dy * dy;
+                            const double wt = std::max(detail::expNonPositive(-d2 * ca[c]) - tail, 0.0) * double(d2 < cr2[c]);
+                            nz[l] += wt * cz[c];
+                            d[l] += wt;
+                            nl[l] += wt * cl[c];
+                            dw[l] += wt * cw[c];
+                        }
+                    double num = 0, den = 0, numL = 0, denW = 0;
+                    for (size_t l = 0; l < kLanes; ++l) num += nz[l], den += d[l], numL += nl[l], denW += dw[l];
+                    // den >= the containing cell's own weight there (kernel.h): never zero.
+                    out[at] = float(base + num / den);
+                    if (channels == 3) {
+                        out[plane + at] = denW > 0 ? float(baseLevel + numL / denW) : kNaN;
+                        out[2 * plane + at] = float(denW / den);
+                    }
+                }
+        }
+}
+
+// parentErrorM of every tile below the top (pyramid.h).
+void measureParentErrors(const SurfacePyramid& p, std::vector<std::vector<float>>& errors, unsigned threads) {
+    for (int t = 0; t < p.topLevel(); ++t) {
+        const SurfacePyramid::Level& L = p.levels[size_t(t)];
+        const size_t side = size_t(L.tileSide), plane = side * side;
+        parallelFor(L.tileCount(), 16, threads, [&](size_t b, size_t e, unsigned) {
+            for (size_t tile = b; tile < e; ++tile) {
+                const uint64_t i0 = mortonX(L.keys[tile]) >> t, j0 = mortonY(L.keys[tile]) >> t;
+                for (int c = 0; c < p.channels; ++c) {
+                    const auto ch = PyramidChannel(c);
+                    float worst = 0;
+                    const float* s = &L.samples[(tile * size_t(p.channels) + size_t(c)) * plane];
+                    for (size_t j = 0; j < side; ++j)
+                        for (size_t i = 0; i < side; ++i) {
+                            const uint64_t gi = i0 + i, gj = j0 + j;
+                            // Parent lattice: (gi / 2, gj / 2), half-way where odd.
+                            const uint64_t pi = gi / 2, pj = gj / 2;
+                            const uint64_t pi1 = pi + (gi & 1), pj1 = pj + (gj & 1);
+                            const auto a = p.sample(t + 1, pi, pj, ch), bb = p.sample(t + 1, pi1, pj, ch), cc = p.sample(t + 1, pi, pj1, ch),
+                                       d = p.sample(t + 1, pi1, pj1, ch);
+                            const float v = s[j * side + i];
+                            if (!a || !bb || !cc || !d || std::isnan(v)) continue;
+                            const double interp = 0.25 * (double(*a) + double(*bb) + double(*cc) + double(*d));
+                            if (std::isnan(interp)) continue;
+                            worst = std::max(worst, float(std::abs(double(v) - interp)));
+                        }
+                    errors[size_t(t)][tile * size_t(p.channels) + size_t(c)] = worst;
+                }
+            }
+        });
+    }
+}
+
+}  // namespace
+
+SurfacePyramid buildSurfacePyramid(const Grid& g, const KernelParams& params, unsigned threads, bool progress) {
+    if (std::string why = params.validate(); !why.empty()) throw Error("influence parameters: " + why);
+    if (g.cellCount() >= std::numeric_limits<uint32_t>::max()) throw Error("grid has too many cells for 32-bit cell indices");
+    threads = resolveThreads(threads);
+    SurfacePyramid p;
+    p.finestCellM = g.finestCellM;
+    p.rootLevel = g.rootLevel;
+    p.params = params;
+    p.structureHash = g.structureHash();
+    p.contentHash = g.contentHash();
+    const int depthLayer = g.findLayer("water_depth");
+    p.channels = depthLayer >= 0 ? 3 : 1;
+    const int top = std::max(0, g.rootLevel - kPyramidTileLog2);
+    std::vector<int> sides(size_t(top) + 1);
+    for (int t = 0; t <= top; ++t) sides[size_t(t)] = std::min(kPyramidTileSide, 1 << (g.rootLevel - t));
+
+    auto owned = std::make_shared<SurfacePyramid::Storage>();
+    owned->keys = g.cellCount() ? tileKeys(g, top, sides) : std::vector<std::vector<uint64_t>>(size_t(top) + 1);
+    uint64_t tiles = 0;
+    for (const auto& k : owned->keys) tiles += k.size();
+    owned->samples.resize(size_t(top) + 1);
+    owned->errors.resize(size_t(top) + 1);
+
+    const detail::ListIndex index(g, params);
+    std::vector<Workspace> scratch(threads);
+    Progress bar("surface pyramid", tiles, progress);
+    for (int t = top; t >= 0; --t) {
+        const auto& keys = owned->keys[size_t(t)];
+        const size_t plane = size_t(sides[size_t(t)]) * size_t(sides[size_t(t)]);
+        auto& samples = owned->samples[size_t(t)];
+        samples.resize(keys.size() * size_t(p.channels) * plane);
+        owned->errors[size_t(t)].assign(keys.size() * size_t(p.channels), 0.0f);
+        parallelFor(keys.size(), 8, threads, [&](size_t b, size_t e, unsigned worker) {
+            for (size_t tile = b; tile < e; ++tile)
+                buildTile(g, index, params, t, sides[size_t(t)], keys[tile], p.channels, depthLayer,
+                          &samples[tile * size_t(p.channels) * plane], scratch[worker]);
+            bar.advance(e - b);
+        });
+    }
+    bar.finish();
+    p.levels.resize(size_t(top) + 1);
+    for (int t = 0; t <= top; ++t) {
+        SurfacePyramid::Level& L = p.levels[size_t(t)];
+        L.level = t;
+        L.tileSide = sides[size_t(t)];
+        L.keys = owned->keys[size_t(t)];
+        L.samples = owned->samples[size_t(t)];
+        L.parentErrorM = owned->errors[size_t(t)];
+    }
+    measureParentErrors(p, owned->errors, threads);
+    p.storage = std::move(owned);
+    return p;
+}
+
+}  // namespace hc::influence

@@ -1,0 +1,228 @@
+// The surface pyramid (influence/pyramid.h) against the exact evaluator (surface.h, with whole-grid influence
+// lists: an independent path): every stored sample of every level, on real rasters with a cell-size ratio of
+// 128, holes and water; which tiles are stored; the recorded parent errors; the .hcp file.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <set>
+#include <unistd.h>
+#include <cstring>
+#include <bit>
+
+#include "heightcast/core/error.h"
+#include "heightcast/influence/influence.h"
+#include "heightcast/influence/pyramid.h"
+#include "heightcast/influence/surface.h"
+#include "test_data.h"
+#include "test_grids.h"
+
+namespace {
+
+namespace fs = std::filesystem;
+using hc::Grid;
+using hc::influence::KernelParams;
+using hc::influence::Layer;
+using hc::influence::PyramidChannel;
+using hc::influence::SurfacePyramid;
+
+// A sample is the exact surface (double) rounded to float once: within half a float ulp of the value, plus
+// the double evaluations' own differences (other summation order, 1e-12 relative). One float ulp is 2^-23 |v|.
+double sampleTolerance(double v) { return std::ldexp(std::abs(v), -23) + 1e-9; }
+
+// Calls f(level, i, j, value) for every stored sample of channel c.
+template <typename F>
+void forEachSample(const SurfacePyramid& p, PyramidChannel c, F&& f) {
+    for (const SurfacePyramid::Level& L : p.levels) {
+        const size_t side = size_t(L.tileSide), plane = side * side;
+        for (size_t tile = 0; tile < L.tileCount(); ++tile) {
+            const uint64_t i0 = hc::mortonX(L.keys[tile]) >> L.level, j0 = hc::mortonY(L.keys[tile]) >> L.level;
+            const float* s = &L.samples[(tile * size_t(p.channels) + size_t(c)) * plane];
+            for (size_t j = 0; j < side; ++j)
+                for (size_t i = 0; i < side; ++i) f(L.level, i0 + i, j0 + j, s[j * side + i]);
+        }
+    }
+}
+
+void expectSamplesExact(const Grid& g, const SurfacePyramid& p) {
+    const auto lists = hc::influence::buildInfluenceLists(g, p.params);
+    const hc::influence::SurfaceEvaluator exact(g, lists);
+    const Layer elevation = Layer::byName(g, "elevation");
+    uint64_t checked = 0, undefined = 0;
+    forEachSample(p, PyramidChannel::Elevation, [&](int t, uint64_t i, uint64_t j, float v) {
+        const double x = double(i) * p.spacingM(t), y = double(j) * p.spacingM(t);
+        const auto want = exact.value(x, y, elevation);
+        if (!want) {
+            EXPECT_TRUE(std::isnan(v)) << "level " << t << " sample " << i << "," << j << " outside every cell holds " << v;
+            ++undefined;
+            return;
+        }
+        ASSERT_NEAR(double(v), *want, sampleTolerance(*want)) << "level " << t << " sample " << i << "," << j;
+        ++checked;
+    });
+    EXPECT_EQ(checked + undefined, p.sampleCount() / uint64_t(p.channels));
+    EXPECT_GT(checked, g.cellCount()) << "fewer defined samples than cells";
+}
+
+TEST(SurfacePyramid, EverySampleEqualsTheExactSurfaceAtCellRatio128WithAHole) {
+    const Grid g = hc::test::ratio128Grid();
+    const SurfacePyramid p = hc::influence::buildSurfacePyramid(g, KernelParams{});
+    ASSERT_EQ(p.channels, 1);
+    ASSERT_EQ(p.topLevel(), std::max(0, g.rootLevel - hc::influence::kPyramidTileLog2));
+    expectSamplesExact(g, p);
+}
+
+// Which tiles are stored: exactly the nodes holding a cell no larger than the spacing (any cell at the top),
+// by brute force over every cell; and every stored tile's parent is stored.
+TEST(SurfacePyramid, TilesAreStoredExactlyWhereCellsAreAsFineAsTheSpacing) {
+    const Grid g = hc::test::ratio128Grid();
+    const SurfacePyramid p = hc::influence::buildSurfacePyramid(g, KernelParams{});
+    uint64_t finestTiles = 0;
+    for (const SurfacePyramid::Level& L : p.levels) {
+        const int nodeLevel = L.level + std::countr_zero(unsigned(L.tileSide));
+        std::set<uint64_t> want;
+        for (uint64_t code : g.codes)
+            if (L.level == p.topLevel() || hc::codeLevel(code) <= L.level) want.insert(hc::codeKey(code) & ~(hc::mortonSpan(nodeLevel) - 1));
+        EXPECT_EQ(std::set<uint64_t>(L.keys.begin(), L.keys.end()), want) << "level " << L.level;
+        if (L.level == 0) finestTiles = L.tileCount();
+        for (uint64_t key : L.keys) {
+            if (L.level < p.topLevel()) {
+                EXPECT_GE(p.tileAt(L.level + 1, hc::mortonX(key) >> (L.level + 1), hc::mortonY(key) >> (L.level + 1)), 0);
+            }
+        }
+    }
+    // The grid's 0.75 m cells fill a 16 x 256 px strip: few level-0 tiles, not the whole 640 x 512 raster's 1280.
+    EXPECT_GT(finestTiles, 0u);
+    EXPECT_LT(finestTiles, 100u);
+}
+
+// parentErrorM is the largest |sample - bilinear of the parent's samples| over the tile: recomputed here from
+// sample() (not the builder's loop), it is never exceeded and is reached.
+TEST(SurfacePyramid, ParentErrorIsTheLargestInterpolationErrorOfTheTile) {
+    const Grid g = hc::test::ratio128Grid();
+    const SurfacePyramid p = hc::influence::buildSurfacePyramid(g, KernelParams{});
+    uint64_t tilesWithError = 0;
+    for (int t = 0; t < p.topLevel(); ++t) {
+        const SurfacePyramid::Level& L = p.levels[size_t(t)];
+        for (size_t tile = 0; tile < L.tileCount(); ++tile) {
+            const uint64_t i0 = hc::mortonX(L.keys[tile]) >> t, j0 = hc::mortonY(L.keys[tile]) >> t;
+            double worst = 0;
+            for (uint64_t j = j0; j < j0 + uint64_t(L.tileSide); ++j)
+                for (uint64_t i = i0; i < i0 + uint64_t(L.tileSide); ++i) {
+                    const float v = *p.sample(t, i, j, PyramidChannel::Elevation);
+                    double sum = 0;
+                    bool ok = !std::isnan(v);
+                    for (uint64_t dj : {j / 2, (j + 1) / 2})
+                        for (uint64_t di : {i / 2, (i + 1) / 2}) {
+                            const auto s = p.sample(t + 1, di, dj, PyramidChannel::Elevation);
+                            ok = ok && s && !std::isnan(*s);
+                            if (ok) sum += *s;
+                        }
+                    if (ok) worst = std::max(worst, std::abs(double(v) - 0.25 * sum));
+                }
+            EXPECT_NEAR(L.parentErrorM[tile], worst, 1e-6 * std::max(1.0, worst)) << "level " << t << " tile " << tile;
+            tilesWithError += worst > 0.01;
+        }
+    }
+    EXPECT_GT(tilesWithError, 0u) << "the rough strip must show somewhere";
+}
+
+// Water (DESIGN.md section 12) on the real LiDAR tile with a sloping river: wherever the exact evaluator draws
+// water the level channel equals its water surface and the pyramid's rule draws it too; wherever it does not,
+// the pyramid's rule does not either (samples whose wet share or level sits within float rounding of the rule's
+// thresholds are counted and excluded: float cannot decide them).
+TEST(SurfacePyramid, WaterChannelsFollowTheExactWaterRule) {
+    HC_REQUIRE_DATA(lidar, "lidar1m_minnesota_utm15.tif");
+    Grid g = hc::test::ingestFile(lidar, 0.25, 397.0);
+    const int depth = g.findLayer("water_depth");
+    double x0, y0, x1, y1;
+    g.boundsLocal(x0, y0, x1, y1);
+    for (size_t i = 0; i < g.cellCount(); ++i) {
+        double cx, cy;
+        g.cellCenterLocal(i, cx, cy);
+        const double level = 395.0 + 4.0 * (cx - x0) / (x1 - x0);
+        g.values[size_t(depth)][i] = static_cast<float>(std::max(0.0, level - double(g.values[0][i])));
+    }
+    const SurfacePyramid p = hc::influence::buildSurfacePyramid(g, KernelParams{});
+    ASSERT_EQ(p.channels, 3);
+    expectSamplesExact(g, p);
+    const auto lists = hc::influence::buildInfluenceLists(g, p.params);
+    const hc::influence::SurfaceEvaluator exact(g, lists);
+    const Layer surface = Layer::byName(g, "water_surface");
+    uint64_t wet = 0, dry = 0, undecidable = 0;
+    forEachSample(p, PyramidChannel::Elevation, [&](int t, uint64_t i, uint64_t j, float z) {
+        if (std::isnan(z)) return;
+        const float level = *p.sample(t, i, j, PyramidChannel::WaterLevel), share = *p.sample(t, i, j, PyramidChannel::WetShare);
+        ASSERT_TRUE(share >= 0 && share <= 1) << share;
+        const double x = double(i) * p.spacingM(t), y = double(j) * p.spacingM(t);
+        const auto want = exact.value(x, y, surface);
+        if (std::abs(double(share) - hc::influence::kWetShareMin) < 1e-6 ||
+            (!std::isnan(level) && std::abs(double(level) - double(z)) < 2 * sampleTolerance(z))) {
+            ++undecidable;
+            return;
+        }
+        const bool drawn = !std::isnan(level) && share >= hc::influence::kWetShareMin && level > z;
+        ASSERT_EQ(drawn, want.has_value()) << "level " << t << " sample " << i << "," << j;
+        if (want) {
+            ASSERT_NEAR(double(level), *want, sampleTolerance(*want));
+            ++wet;
+        } else {
+            ++dry;
+        }
+    });
+    EXPECT_GT(wet, 1000u);
+    EXPECT_GT(dry, 1000u);
+    EXPECT_LT(undecidable, (wet + dry) / 1000) << "more samples on the thresholds than float rounding explains";
+}
+
+class PyramidFile : public ::testing::Test {
+protected:
+    fs::path dir = fs::temp_directory_path() / ("hc_pyramid_test_" + std::to_string(::getpid()));
+    void SetUp() override { fs::create_directories(dir); }
+    void TearDown() override { fs::remove_all(dir); }
+    std::string path(const std::string& name) const { return (dir / name).string(); }
+};
+
+TEST_F(PyramidFile, RoundTripsAndRefusesForeignGridsAndDamage) {
+    Grid g = hc::test::ratio128Grid();
+    const SurfacePyramid built = hc::influence::buildSurfacePyramid(g, KernelParams{});
+    hc::influence::writeSurfacePyramid(built, path("g.hcp"));
+    const SurfacePyramid read = hc::influence::readSurfacePyramid(path("g.hcp"), g, KernelParams{});
+    ASSERT_EQ(read.levels.size(), built.levels.size());
+    for (size_t t = 0; t < built.levels.size(); ++t) {
+        EXPECT_TRUE(std::equal(read.levels[t].keys.begin(), read.levels[t].keys.end(), built.levels[t].keys.begin(), built.levels[t].keys.end()));
+        EXPECT_EQ(0, std::memcmp(read.levels[t].samples.data(), built.levels[t].samples.data(), built.levels[t].samples.size_bytes()));
+        EXPECT_TRUE(std::equal(read.levels[t].parentErrorM.begin(), read.levels[t].parentErrorM.end(), built.levels[t].parentErrorM.begin()));
+    }
+    // Another sigma, other values on the same tree: refused, saying so.
+    KernelParams wide;
+    wide.sigma = 1.5;
+    EXPECT_THROW(hc::influence::readSurfacePyramid(path("g.hcp"), g, wide), hc::Error);
+    g.values[0][0] += 1.0f;
+    try {
+        hc::influence::readSurfacePyramid(path("g.hcp"), g, KernelParams{});
+        ADD_FAILURE() << "a pyramid of other values was read";
+    } catch (const hc::Error& e) {
+        EXPECT_NE(std::string(e.what()).find("stale or foreign"), std::string::npos) << e.what();
+    }
+    g.values[0][0] -= 1.0f;
+    // A flipped byte in the samples and a truncation: refused, naming the file.
+    std::ifstream in(path("g.hcp"), std::ios::binary);
+    std::vector<char> bytes((std::istreambuf_iterator<char>(in)), {});
+    for (size_t at : {size_t(40), bytes.size() / 2, bytes.size() - 1}) {
+        std::vector<char> bad = bytes;
+        bad[at] = char(bad[at] ^ 0x04);
+        std::ofstream(path("bad.hcp"), std::ios::binary).write(bad.data(), std::streamsize(bad.size()));
+        try {
+            hc::influence::readSurfacePyramid(path("bad.hcp"), g, KernelParams{});
+            ADD_FAILURE() << "byte " << at << " flipped was read";
+        } catch (const hc::Error& e) {
+            EXPECT_NE(std::string(e.what()).find("bad.hcp"), std::string::npos) << e.what();
+        }
+    }
+    std::ofstream(path("cut.hcp"), std::ios::binary).write(bytes.data(), std::streamsize(bytes.size() - 64));
+    EXPECT_THROW(hc::influence::readSurfacePyramid(path("cut.hcp"), g, KernelParams{}), hc::Error);
+}
+
+}  // namespace
