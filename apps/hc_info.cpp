@@ -141,7 +141,8 @@ void printText(const hc::GridFileInfo& info, const Summary& s, const std::string
     std::printf("  deviation    max %.6g m, RMS %.6g m (tolerance %.6g m)\n", g.stats.maxDevM, g.stats.rmsDevM, g.stats.toleranceM);
     std::printf("  hashes       structure %016" PRIx64 ", content %016" PRIx64 "%s\n", info.structureHash, info.contentHash,
                 info.verified ? "" : " (as stored)");
-    std::printf("  checked      %llu of %llu bytes' checksums\n", (unsigned long long)info.bytesChecked, (unsigned long long)info.fileBytes);
+    std::printf("  checked      checksums of %llu section bytes (the file has %llu)\n", (unsigned long long)info.bytesChecked,
+                (unsigned long long)info.fileBytes);
 }
 
 void writeCsv(const hc::Grid& g, const std::string& path) {
