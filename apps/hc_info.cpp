@@ -1,4 +1,5 @@
-// hc-info: header, statistics and full validation of a grid file; JSON and per-cell CSV export.
+// hc-info: header and statistics of a grid file (from its META, or --verify: the whole file checked); JSON and
+// per-cell CSV export.
 #include <cinttypes>
 #include <cstdio>
 #include <filesystem>
@@ -15,18 +16,17 @@
 namespace {
 
 struct Summary {
-    uint16_t fileMinor = 0;  // the file's format minor version (major is kGridFileMajor, or it would not read)
     double minCell = 0, maxCell = 0;
     double extent[4] = {0, 0, 0, 0};  // world xmin, ymin, xmax, ymax
-    std::vector<uint64_t> perLevel;
 };
 
-Summary summarise(const hc::Grid& g) {
+Summary summarise(const hc::GridFileInfo& info) {
+    const hc::Grid& g = info.shape;
+    const auto& perLevel = info.summary.cellsPerLevel;
     Summary s;
-    s.perLevel = g.cellsPerLevel();
     int lo = -1, hi = -1;
-    for (size_t l = 0; l < s.perLevel.size(); ++l)
-        if (s.perLevel[l]) {
+    for (size_t l = 0; l < perLevel.size(); ++l)
+        if (perLevel[l]) {
             if (lo < 0) lo = int(l);
             hi = int(l);
         }
@@ -34,13 +34,21 @@ Summary summarise(const hc::Grid& g) {
         s.minCell = g.levelSizeM(lo);
         s.maxCell = g.levelSizeM(hi);
     }
-    double x0, y0, x1, y1;
-    g.boundsLocal(x0, y0, x1, y1);
-    s.extent[0] = g.originWorldX + x0;
-    s.extent[1] = g.originWorldY + y0;
-    s.extent[2] = g.originWorldX + x1;
-    s.extent[3] = g.originWorldY + y1;
+    // Finest units to world metres as Grid::boundsLocal computes the edges (integer times the cell size).
+    for (int k = 0; k < 4; ++k)
+        s.extent[k] = (k % 2 ? g.originWorldY : g.originWorldX) + static_cast<double>(info.summary.boundsFinest[k]) * g.finestCellM;
     return s;
+}
+
+// What was checked, in one line: a summary must not claim a check it did not make.
+std::string checkedLine(const hc::GridFileInfo& info) {
+    if (!info.verified)
+        return "header, section table and META checked; cells and values NOT verified (hc-info --verify checks them)";
+    if (info.fileMinor < 2)
+        return "valid (every checksum, every cell invariant and both hashes checked; format 1." + std::to_string(info.fileMinor) +
+               " stores no summary: read in full)";
+    return "valid (every checksum by " + std::to_string(info.blockBytes >> 10) +
+           " KiB block, every cell invariant, both hashes and the stored summary checked)";
 }
 
 // The grid CRS's name: as ingest stored it (format 1.1), or else (a 1.0 file) what PROJ reads from the WKT, in the
@@ -66,15 +74,18 @@ std::string hex16(uint64_t v) {
     return b;
 }
 
-void printJson(const hc::Grid& g, const Summary& s, const std::string& path) {
+void printJson(const hc::GridFileInfo& info, const Summary& s, const std::string& path) {
+    const hc::Grid& g = info.shape;
     nlohmann::ordered_json j;
     j["file"] = path;
-    j["format_version"] = std::to_string(hc::kGridFileMajor) + "." + std::to_string(s.fileMinor);
-    j["valid"] = true;
-    j["cells"] = g.cellCount();
+    j["format_version"] = std::to_string(hc::kGridFileMajor) + "." + std::to_string(info.fileMinor);
+    j["verified"] = info.verified;  // false: header, table and META checked, cells and values not (--verify)
+    if (info.verified) j["valid"] = true;
+    j["checked"] = checkedLine(info);
+    j["cells"] = info.cellCount;
     j["levels"] = nlohmann::ordered_json::array();
-    for (size_t l = 0; l < s.perLevel.size(); ++l)
-        j["levels"].push_back({{"level", l}, {"size_m", g.levelSizeM(int(l))}, {"cells", s.perLevel[l]}});
+    for (size_t l = 0; l < info.summary.cellsPerLevel.size(); ++l)
+        j["levels"].push_back({{"level", l}, {"size_m", g.levelSizeM(int(l))}, {"cells", info.summary.cellsPerLevel[l]}});
     j["min_cell_m"] = s.minCell;
     j["max_cell_m"] = s.maxCell;
     j["finest_cell_m"] = g.finestCellM;
@@ -85,29 +96,40 @@ void printJson(const hc::Grid& g, const Summary& s, const std::string& path) {
     j["crs_name"] = crsName(g);
     j["extent"] = s.extent;
     j["layers"] = nlohmann::ordered_json::array();
-    for (const auto& l : g.layers) j["layers"].push_back({{"name", l.name}, {"units", l.units}});
+    for (size_t l = 0; l < g.layers.size(); ++l) {
+        nlohmann::ordered_json layer{{"name", g.layers[l].name}, {"units", g.layers[l].units}};
+        if (l < info.summary.layerMin.size()) {
+            layer["min"] = info.summary.layerMin[l];
+            layer["max"] = info.summary.layerMax[l];
+        }
+        j["layers"].push_back(layer);
+    }
     j["source"] = g.stats.sourcePath;
     j["source_crs"] = g.stats.sourceCrsName;
     j["valid_pixels"] = g.stats.validPixels;
     j["tolerance_m"] = g.stats.toleranceM;
     j["max_dev_m"] = g.stats.maxDevM;
     j["rms_dev_m"] = g.stats.rmsDevM;
-    j["structure_hash"] = hex16(g.structureHash());
-    j["content_hash"] = hex16(g.contentHash());
+    j["structure_hash"] = hex16(info.structureHash);
+    j["content_hash"] = hex16(info.contentHash);
+    j["bytes_checked"] = info.bytesChecked;
     // Paths and names are bytes from the file system and the file: any that are not UTF-8 are printed with
     // U+FFFD in their place rather than refused.
     std::fputs((j.dump(2, ' ', false, nlohmann::ordered_json::error_handler_t::replace) + "\n").c_str(), stdout);
 }
 
-void printText(const hc::Grid& g, const Summary& s, const std::string& path) {
-    std::printf("%s: heightcast grid, format %d.%d, valid (all checksums and invariants checked)\n", path.c_str(),
-                hc::kGridFileMajor, s.fileMinor);
-    std::printf("  cells        %zu, %zu layer%s:", g.cellCount(), g.layerCount(), g.layerCount() == 1 ? "" : "s");
+void printText(const hc::GridFileInfo& info, const Summary& s, const std::string& path) {
+    const hc::Grid& g = info.shape;
+    std::printf("%s: heightcast grid, format %d.%d, %s\n", path.c_str(), hc::kGridFileMajor, info.fileMinor, checkedLine(info).c_str());
+    std::printf("  cells        %llu, %zu layer%s:", (unsigned long long)info.cellCount, g.layerCount(), g.layerCount() == 1 ? "" : "s");
     for (const auto& l : g.layers) std::printf(" %s [%s]", l.name.c_str(), l.units.c_str());
     std::printf("\n  cell sizes   %.6g .. %.6g m (finest %.6g m, domain %.6g m = 2^%d finest)\n", s.minCell, s.maxCell,
                 g.finestCellM, g.domainSizeM(), g.rootLevel);
-    for (size_t l = 0; l < s.perLevel.size(); ++l)
-        std::printf("    level %zu  %10.4g m  %10llu cells\n", l, g.levelSizeM(int(l)), (unsigned long long)s.perLevel[l]);
+    for (size_t l = 0; l < info.summary.cellsPerLevel.size(); ++l)
+        std::printf("    level %zu  %10.4g m  %10llu cells\n", l, g.levelSizeM(int(l)), (unsigned long long)info.summary.cellsPerLevel[l]);
+    for (size_t l = 0; l < info.summary.layerMin.size(); ++l)
+        std::printf("  values       %s %.9g .. %.9g %s\n", g.layers[l].name.c_str(), double(info.summary.layerMin[l]),
+                    double(info.summary.layerMax[l]), g.layers[l].units.c_str());
     std::printf("  origin       %.17g, %.17g\n", g.originWorldX, g.originWorldY);
     std::printf("  extent       %.17g, %.17g .. %.17g, %.17g\n", s.extent[0], s.extent[1], s.extent[2], s.extent[3]);
     std::string crs = g.crsWkt.empty() ? "none (local metres)" : crsName(g) + " (full WKT: --json)";
@@ -117,7 +139,10 @@ void printText(const hc::Grid& g, const Summary& s, const std::string& path) {
                 (unsigned long long)g.stats.sourceWidth, (unsigned long long)g.stats.sourceHeight,
                 (unsigned long long)g.stats.validPixels);
     std::printf("  deviation    max %.6g m, RMS %.6g m (tolerance %.6g m)\n", g.stats.maxDevM, g.stats.rmsDevM, g.stats.toleranceM);
-    std::printf("  hashes       structure %016" PRIx64 ", content %016" PRIx64 "\n", g.structureHash(), g.contentHash());
+    std::printf("  hashes       structure %016" PRIx64 ", content %016" PRIx64 "%s\n", info.structureHash, info.contentHash,
+                info.verified ? "" : " (as stored)");
+    std::printf("  checked      checksums of %llu section bytes (the file has %llu)\n", (unsigned long long)info.bytesChecked,
+                (unsigned long long)info.fileBytes);
 }
 
 void writeCsv(const hc::Grid& g, const std::string& path) {
@@ -153,29 +178,32 @@ void writeCsv(const hc::Grid& g, const std::string& path) {
 int main(int argc, char** argv) {
     return hc::cli::run("hc-info", [&] {
         std::string path, csv;
-        bool json = false;
-        hc::cli::Parser p("hc-info", "FILE.hcg [--json] [--cells-csv OUT.csv]",
-                          "Reads a heightcast grid file, validates all of it (header, checksums, every cell) and prints its\n"
-                          "header and statistics. Exits non-zero, naming the byte offset, if anything is wrong.");
+        bool json = false, verify = false;
+        hc::cli::Parser p("hc-info", "FILE.hcg [--verify] [--json] [--cells-csv OUT.csv]",
+                          "Prints a heightcast grid file's header and statistics. From format 1.2 on these are read from the\n"
+                          "header and META without reading the cells (milliseconds at any size): the first line then says that\n"
+                          "cells and values were not verified. --verify (or --cells-csv, which reads every cell) checks all of\n"
+                          "the file: every checksum, every cell invariant, both hashes and the stored summary. A 1.0/1.1 file\n"
+                          "has no stored summary and is always read and checked in full. Exits non-zero, naming the byte\n"
+                          "offset, if anything checked is wrong.");
         p.positional("FILE.hcg", "grid file to inspect", path);
-        p.flag("--json", "print the summary as JSON (keys: cells, levels, min_cell_m, max_cell_m, origin, crs_wkt, crs_name,\n"
-               "      extent, layers, tolerance_m, max_dev_m, rms_dev_m, ...)", json);
+        p.flag("--verify", "check the whole file (reads all of it: seconds per GB); default: header, table and META only", verify);
+        p.flag("--json", "print the summary as JSON (keys: verified, checked, cells, levels, min_cell_m, max_cell_m, origin,\n"
+               "      crs_wkt, crs_name, extent, layers (with min, max), tolerance_m, max_dev_m, rms_dev_m, ...)", json);
         p.option("--cells-csv", "OUT.csv", "write one line per cell: x,y,size,level,elevation[,layers...] (cell centres in the\n"
-                 "      grid CRS, metres, full double precision)", csv);
+                 "      grid CRS, metres, full double precision); implies --verify", csv);
         if (!p.parse(argc, argv)) return 0;
         if (!csv.empty()) {
             hc::cli::checkWritable(csv, "cells CSV");
             hc::cli::checkNotSame(csv, path, "cells CSV");
         }
-        uint16_t fileMinor = 0;
-        hc::Grid g = hc::readGrid(path, &fileMinor);
-        Summary s = summarise(g);
-        s.fileMinor = fileMinor;
+        const hc::GridFileInfo info = verify || !csv.empty() ? hc::verifyGridFile(path) : hc::readGridInfo(path);
+        const Summary s = summarise(info);
         if (json)
-            printJson(g, s, path);
+            printJson(info, s, path);
         else
-            printText(g, s, path);
-        if (!csv.empty()) writeCsv(g, csv);
+            printText(info, s, path);
+        if (!csv.empty()) writeCsv(*info.grid, csv);
         return 0;
     });
 }

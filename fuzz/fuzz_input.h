@@ -3,8 +3,8 @@
 // Crafted files with VALID checksums are the threat (issue 11): a reader that trusts a count because its
 // CRC matches is the bug. A fuzzer that mutates bytes almost never keeps the CRCs right, so it would only
 // ever test the CRC check. fixContainer() therefore rewrites, before parsing, what the container derives
-// from the rest: the declared file size, every section's CRC (where its placement is in the file), the
-// section table's CRC and the header CRC. The CRC and size checks themselves are covered by the unit tests
+// from the rest: the declared file size, the block checksums (where their section fits), every section's CRC
+// (where its placement is in the file), the section table's CRC and the header CRC. The CRC and size checks themselves are covered by the unit tests
 // (every flipped byte, every truncation); the fuzzer explores everything behind them.
 #pragma once
 
@@ -14,6 +14,7 @@
 #include <cstddef>
 #include <cstdint>
 #include <cstdlib>
+#include <algorithm>
 #include <cstring>
 #include <span>
 #include <string>
@@ -25,7 +26,32 @@
 
 namespace hc::fuzz {
 
-// Offsets of the container's header (grid/sectioned_file.h).
+// A last section of the container's block-checksum kind whose size fits the sections before it gets their
+// block CRCs rewritten (its block size and zero field as they are), so mutations reach past the block checks.
+inline void fixBlockChecksums(std::vector<std::byte>& b, uint32_t count) {
+    if (count == 0) return;
+    const uint64_t size = b.size();
+    auto entry = [&](uint32_t s, size_t field) { return bytes::load<uint64_t>(b.data() + kFileHeaderBytes + size_t{s} * kFileSectionEntryBytes + field); };
+    const size_t last = kFileHeaderBytes + size_t{count - 1} * kFileSectionEntryBytes;
+    if (bytes::load<uint32_t>(b.data() + last) != kFileBlockChecksumsKind) return;
+    const uint64_t at = entry(count - 1, 8), length = entry(count - 1, 16);
+    if (at > size || length > size - at || length < 8) return;
+    const uint64_t blockBytes = bytes::load<uint32_t>(b.data() + at);
+    if (blockBytes < 4096 || (blockBytes & (blockBytes - 1)) != 0) return;
+    uint64_t need = 8;
+    for (uint32_t s = 0; s + 1 < count; ++s) {
+        const uint64_t offset = entry(s, 8), n = entry(s, 16);
+        if (offset > size || n > size - offset) return;
+        need += 4 * ((n + blockBytes - 1) / blockBytes);
+    }
+    if (need != length) return;
+    uint64_t crcAt = at + 8;
+    for (uint32_t s = 0; s + 1 < count; ++s)
+        for (uint64_t from = 0, offset = entry(s, 8), n = entry(s, 16); from < n; from += blockBytes, crcAt += 4)
+            bytes::store<uint32_t>(b, crcAt, crc32(std::span<const std::byte>(b.data() + offset + from, std::min(blockBytes, n - from))));
+}
+
+// Offsets of the container's header (core/sectioned_file.h).
 inline void fixContainer(std::vector<std::byte>& b) {
     if (b.size() < kFileHeaderBytes) return;
     const uint64_t size = b.size();
@@ -33,6 +59,7 @@ inline void fixContainer(std::vector<std::byte>& b) {
     const uint32_t count = bytes::load<uint32_t>(b.data() + 60);
     const uint64_t tableEnd = kFileHeaderBytes + uint64_t{count} * kFileSectionEntryBytes;
     if (count <= 4096 && tableEnd <= size) {
+        fixBlockChecksums(b, count);
         for (uint32_t s = 0; s < count; ++s) {
             const size_t at = kFileHeaderBytes + size_t{s} * kFileSectionEntryBytes;
             const uint64_t offset = bytes::load<uint64_t>(b.data() + at + 8), length = bytes::load<uint64_t>(b.data() + at + 16);

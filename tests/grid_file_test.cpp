@@ -2,13 +2,16 @@
 // content validation behind valid checksums, and atomic writes that leave nothing on failure.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <random>
+#include <thread>
 
 #include "heightcast/core/checksum.h"
 #include "heightcast/core/error.h"
+#include "heightcast/core/sectioned_file.h"
 #include "heightcast/grid/grid_file.h"
 #include "hostile_files.h"
 
@@ -137,10 +140,37 @@ void fixHeaderCrc(std::vector<char>& b) {
     std::memcpy(b.data() + 124, &crc, 4);
 }
 
-// Golden bytes pin format 1.1: a change to the layout fails here. Regenerate deliberately with
-// HC_UPDATE_GOLDEN=1 only when the format version changes (and keep the older version's file: next test).
+// Rewrites every checksum a 1.2 file derives from its bytes (block CRCs, section CRCs, table and header CRCs)
+// after an edit, to reach the content checks behind them. Container layout: sectioned_file.h.
+void fixAllChecksums(std::vector<char>& b) {
+    auto load32 = [&](size_t at) { uint32_t v; std::memcpy(&v, b.data() + at, 4); return v; };
+    auto load64 = [&](size_t at) { uint64_t v; std::memcpy(&v, b.data() + at, 8); return v; };
+    auto crcOf = [&](uint64_t at, uint64_t n) { return hc::crc32(std::as_bytes(std::span(b.data() + at, n))); };
+    const uint32_t count = load32(60);
+    const size_t last = 128 + 32 * size_t{count - 1};
+    ASSERT_EQ(load32(last), hc::kFileBlockChecksumsKind);
+    const uint64_t blocks = load64(last + 8), blockBytes = load32(static_cast<size_t>(blocks));
+    uint64_t at = blocks + 8;
+    for (uint32_t s = 0; s + 1 < count; ++s) {
+        const uint64_t offset = load64(128 + 32 * s + 8), bytes = load64(128 + 32 * s + 16);
+        for (uint64_t from = 0; from < bytes; from += blockBytes, at += 4) {
+            const uint32_t crc = crcOf(offset + from, std::min(blockBytes, bytes - from));
+            std::memcpy(b.data() + at, &crc, 4);
+        }
+    }
+    for (uint32_t s = 0; s < count; ++s) {
+        const uint32_t crc = crcOf(load64(128 + 32 * s + 8), load64(128 + 32 * s + 16));
+        std::memcpy(b.data() + 128 + 32 * s + 24, &crc, 4);
+    }
+    const uint32_t table = crcOf(128, 32 * count);
+    std::memcpy(b.data() + 120, &table, 4);
+    fixHeaderCrc(b);
+}
+
+// Golden bytes pin format 1.2: a change to the layout fails here. Regenerate deliberately with
+// HC_UPDATE_GOLDEN=1 only when the format version changes (and keep the older versions' files: next tests).
 TEST_F(GridFile, GoldenBytes) {
-    const std::string golden = std::string(HC_GOLDEN_DIR) + "/tiny_v1_1.hcg";
+    const std::string golden = std::string(HC_GOLDEN_DIR) + "/tiny_v1_2.hcg";
     Grid g = tinyGrid();
     hc::writeGrid(g, path("t.hcg"));
     std::vector<char> bytes = readBytes(path("t.hcg"));
@@ -171,6 +201,22 @@ TEST_F(GridFile, Version10FileStillReads) {
     want.crsName.clear();
     expectEqualGrids(want, old);
     EXPECT_EQ(old.contentHash(), want.contentHash());
+}
+
+// Format 1.1 (no block checksums, no summary) still reads: whole, and through readGridInfo, which then reads
+// it in full and says so (verified), with the summary computed from the cells.
+TEST_F(GridFile, Version11FileStillReads) {
+    const std::string v11 = std::string(HC_GOLDEN_DIR) + "/tiny_v1_1.hcg";
+    uint16_t fileMinor = 99;
+    const Grid old = hc::readGrid(v11, &fileMinor);
+    EXPECT_EQ(fileMinor, 1);
+    expectEqualGrids(tinyGrid(), old);
+    const hc::GridFileInfo info = hc::readGridInfo(v11);
+    EXPECT_TRUE(info.verified) << "a 1.1 file has no summary: the full pass is the only source";
+    EXPECT_EQ(info.fileMinor, 1);
+    EXPECT_EQ(info.blockBytes, 0u);
+    EXPECT_EQ(info.summary.cellsPerLevel, tinyGrid().cellsPerLevel());
+    EXPECT_GE(info.bytesChecked, 6u * (8 + 4 + 4)) << "cells and both layers are read and checked";
 }
 
 // A 1.1 file must carry crs_name: a writer that forgot it is caught (its META rewritten without the key).
@@ -253,11 +299,8 @@ TEST_F(GridFile, InvalidCellsBehindValidChecksumsAreRefused) {
     std::memcpy(&cellsBytes, b.data() + 128 + 16, 8);
     std::swap_ranges(b.begin() + static_cast<long>(cellsOffset), b.begin() + static_cast<long>(cellsOffset) + 8,
                      b.begin() + static_cast<long>(cellsOffset) + 8);
-    uint32_t crc = hc::crc32(std::as_bytes(std::span(b.data() + cellsOffset, cellsBytes)));
-    std::memcpy(b.data() + 128 + 24, &crc, 4);
-    uint32_t tableCrc = hc::crc32(std::as_bytes(std::span(b.data() + 128, 32 * 4)));
-    std::memcpy(b.data() + 120, &tableCrc, 4);
-    fixHeaderCrc(b);
+    ASSERT_GE(cellsBytes, 16u);
+    fixAllChecksums(b);
     writeBytes(path("swapped.hcg"), b, b.size());
     try {
         hc::readGrid(path("swapped.hcg"));
@@ -305,6 +348,9 @@ TEST(Checksum, KnownValues) {
     for (size_t i = 0; i < data.size(); ++i) data[i] = static_cast<std::byte>(i * 7 + 3);
     uint32_t whole = hc::crc32(data);
     EXPECT_EQ(hc::crc32(std::span(data).subspan(333), hc::crc32(std::span(data).first(333))), whole);
+    // Combined from the parts' CRCs alone (the writer's section CRCs from its block CRCs), any split.
+    for (size_t cut : {size_t{0}, size_t{1}, size_t{333}, size_t{999}, size_t{1000}})
+        EXPECT_EQ(hc::crc32Combine(hc::crc32(std::span(data).first(cut)), hc::crc32(std::span(data).subspan(cut)), 1000 - cut), whole) << cut;
     hc::Hash64 a, b;
     a.update(data);
     b.update(std::span(data).first(5));
@@ -395,6 +441,165 @@ TEST_F(GridFile, FuzzFindingCellCountWrappingToTheSectionSizes) {
         FAIL() << "accepted";
     } catch (const hc::Error& e) {
         EXPECT_EQ(std::string(e.what()).rfind(file + ": at byte offset 24: header declares 4611686018427388112 cells", 0), 0u) << e.what();
+    }
+}
+
+// ------------------------------------------------------------------ block checksums and the stored summary
+
+// The container as the .hcg reader sees it (grid_file.cpp), to read sections in parts.
+const hc::FileFormat kGridFormat12{{'\x89', 'H', 'C', 'G', 'R', 'I', 'D', '\n'}, 1, 2, "heightcast grid (.hcg)", {1, 2, 3}, 2};
+
+// 300 k level-0 cells: CELLS spans 3 blocks of 1 MiB (2.4 MB), the elevation layer 2.
+Grid threeBlockGrid() {
+    Grid g;
+    g.finestCellM = 0.5;
+    g.rootLevel = 10;
+    for (uint64_t k = 0; k < 300000; ++k) {
+        const float v = static_cast<float>(k % 977) * 0.25f - 12.0f;
+        g.appendCell(hc::mortonX(k), hc::mortonY(k), 0, &v);
+    }
+    return g;
+}
+
+// A flipped byte in one block of CELLS is caught by reading that block, with the block's offset, and by
+// nothing that reads only other blocks; readGridInfo (no cells read) does not see it, verification does.
+TEST_F(GridFile, AFlippedByteIsCaughtByReadingItsBlockOnly) {
+    hc::writeGrid(threeBlockGrid(), path("t.hcg"));
+    std::vector<char> b = readBytes(path("t.hcg"));
+    uint64_t cellsOffset;
+    std::memcpy(&cellsOffset, b.data() + 128 + 8, 8);  // section 0 = CELLS
+    const uint64_t block2 = cellsOffset + 2 * uint64_t{hc::kFileBlockBytes};
+    b[block2 + 12345] ^= 0x10;
+    writeBytes(path("bad.hcg"), b, b.size());
+
+    const hc::SectionedFileReader r(path("bad.hcg"), kGridFormat12);  // open reads no data: no error yet
+    EXPECT_EQ(r.blockBytes(), hc::kFileBlockBytes);
+    const hc::FileSection& cells = r.sections()[0];
+    ASSERT_EQ(cells.kind, 2u);
+    EXPECT_NO_THROW(r.read(cells, 0, 8));
+    EXPECT_NO_THROW(r.read(cells, hc::kFileBlockBytes - 4, 8));  // blocks 0 and 1
+    EXPECT_EQ(r.bytesChecked(), 2 * uint64_t{hc::kFileBlockBytes}) << "exactly the two blocks touched are checked";
+    const std::string want = path("bad.hcg") + ": at byte offset " + std::to_string(block2) + ": checksum mismatch in section 0, block 2";
+    try {
+        r.read(cells, 2 * uint64_t{hc::kFileBlockBytes} + 100000, 8);
+        FAIL() << "a flipped byte in block 2 went unnoticed when block 2 was read";
+    } catch (const hc::Error& e) {
+        EXPECT_EQ(std::string(e.what()).rfind(want, 0), 0u) << e.what();
+    }
+    EXPECT_THROW(r.verifyAll(), hc::Error);
+
+    const hc::GridFileInfo info = hc::readGridInfo(path("bad.hcg"));
+    EXPECT_FALSE(info.verified);
+    EXPECT_EQ(info.cellCount, 300000u);
+    EXPECT_LT(info.bytesChecked, 4096u) << "readGridInfo read more than META";
+    for (auto read : {+[](const std::string& p) { hc::readGrid(p); }, +[](const std::string& p) { hc::verifyGridFile(p); }}) {
+        try {
+            read(path("bad.hcg"));
+            FAIL() << "full verification missed the flipped byte";
+        } catch (const hc::Error& e) {
+            EXPECT_EQ(std::string(e.what()).rfind(want, 0), 0u) << e.what();
+        }
+    }
+}
+
+// Blocks are marked checked with atomics: threads reading the same blocks at once agree, each block counted once.
+TEST_F(GridFile, ConcurrentReadsCheckEachBlockOnce) {
+    hc::writeGrid(threeBlockGrid(), path("t.hcg"));
+    const hc::SectionedFileReader r(path("t.hcg"), kGridFormat12);
+    std::vector<std::thread> threads;
+    for (int t = 0; t < 4; ++t) threads.emplace_back([&] { r.verifyAll(); });
+    for (auto& t : threads) t.join();
+    uint64_t sections = 0;
+    for (const hc::FileSection& s : r.sections()) sections += s.bytes;
+    EXPECT_EQ(r.bytesChecked(), sections);
+}
+
+// A file of an older minor (one CRC per section) is checked whole at the first touch of a section.
+TEST_F(GridFile, OldMinorSectionsAreCheckedWholeAtFirstTouch) {
+    std::vector<char> b = readBytes(std::string(HC_GOLDEN_DIR) + "/tiny_v1_1.hcg");
+    uint64_t layerOffset;
+    std::memcpy(&layerOffset, b.data() + 128 + 32 + 8, 8);  // section 1 = LAYER 0
+    b[layerOffset + 20] ^= 0x01;                             // the sixth value, not the first
+    writeBytes(path("old.hcg"), b, b.size());
+    const hc::SectionedFileReader r(path("old.hcg"), kGridFormat12);
+    EXPECT_EQ(r.blockBytes(), 0u);
+    EXPECT_NO_THROW(r.data(r.sections()[0]));
+    EXPECT_EQ(r.bytesChecked(), r.sections()[0].bytes);
+    try {
+        r.read(r.sections()[1], 0, 4);
+        FAIL() << "reading the first value of a damaged 1.1 section did not check the whole section";
+    } catch (const hc::Error& e) {
+        EXPECT_NE(std::string(e.what()).find("at byte offset " + std::to_string(layerOffset) + ": checksum mismatch in section 1"),
+                  std::string::npos) << e.what();
+    }
+}
+
+// readGridInfo's summary is what a full pass over the cells gives, without reading them.
+TEST_F(GridFile, SummaryEqualsAFullPass) {
+    for (const Grid& g : {tinyGrid(), threeBlockGrid()}) {
+        hc::writeGrid(g, path("t.hcg"));
+        const hc::GridFileInfo info = hc::readGridInfo(path("t.hcg"));
+        EXPECT_FALSE(info.verified);
+        EXPECT_EQ(info.fileMinor, hc::kGridFileMinor);
+        EXPECT_EQ(info.cellCount, g.cellCount());
+        EXPECT_EQ(info.summary.cellsPerLevel, g.cellsPerLevel());
+        double x0, y0, x1, y1;
+        g.boundsLocal(x0, y0, x1, y1);
+        EXPECT_EQ(static_cast<double>(info.summary.boundsFinest[0]) * g.finestCellM, x0);
+        EXPECT_EQ(static_cast<double>(info.summary.boundsFinest[1]) * g.finestCellM, y0);
+        EXPECT_EQ(static_cast<double>(info.summary.boundsFinest[2]) * g.finestCellM, x1);
+        EXPECT_EQ(static_cast<double>(info.summary.boundsFinest[3]) * g.finestCellM, y1);
+        ASSERT_EQ(info.summary.layerMin.size(), g.layers.size());
+        for (size_t l = 0; l < g.layers.size(); ++l) {
+            EXPECT_EQ(info.summary.layerMin[l], *std::min_element(g.values[l].begin(), g.values[l].end()));
+            EXPECT_EQ(info.summary.layerMax[l], *std::max_element(g.values[l].begin(), g.values[l].end()));
+        }
+        EXPECT_EQ(info.structureHash, g.structureHash());
+        EXPECT_EQ(info.contentHash, g.contentHash());
+        EXPECT_EQ(info.shape.crsName, g.crsName);
+        EXPECT_EQ(info.shape.stats.validPixels, g.stats.validPixels);
+        const hc::GridFileInfo full = hc::verifyGridFile(path("t.hcg"));
+        EXPECT_TRUE(full.verified);
+        EXPECT_EQ(full.summary.cellsPerLevel, info.summary.cellsPerLevel);
+        uint64_t sectionBytes = 0;
+        const hc::SectionedFileReader reader(path("t.hcg"), kGridFormat12);
+        for (const hc::FileSection& sec : reader.sections()) sectionBytes += sec.bytes;
+        EXPECT_EQ(full.bytesChecked, sectionBytes)
+            << "verification checks every section byte";
+    }
+}
+
+// A summary that lies (behind valid checksums) passes readGridInfo when it fits the header, and is caught by
+// every full read; one that does not fit the header is refused by readGridInfo too.
+TEST_F(GridFile, ALyingSummaryIsCaughtByVerification) {
+    hc::writeGrid(tinyGrid(), path("t.hcg"));
+    const std::vector<char> good = readBytes(path("t.hcg"));
+    // META's value strings are length-prefixed (u32 3, then "3 3").
+    auto value = [](const char* v) { return std::string("\x03\0\0\0", 4) + v; };
+    auto edit = [&](const std::string& from, const std::string& to) {
+        std::vector<char> b = good;
+        const auto at = std::search(b.begin(), b.end(), from.begin(), from.end());
+        EXPECT_NE(at, b.end()) << from;
+        std::copy(to.begin(), to.end(), at);  // same length: the layout stays
+        fixAllChecksums(b);
+        writeBytes(path("lie.hcg"), b, b.size());
+    };
+    ASSERT_EQ(tinyGrid().cellsPerLevel(), (std::vector<uint64_t>{3, 3}));
+    edit(value("3 3"), value("2 4"));  // the same total, other levels
+    EXPECT_EQ(hc::readGridInfo(path("lie.hcg")).summary.cellsPerLevel, (std::vector<uint64_t>{2, 4}));
+    try {
+        hc::verifyGridFile(path("lie.hcg"));
+        FAIL() << "a lying summary passed verification";
+    } catch (const hc::Error& e) {
+        EXPECT_NE(std::string(e.what()).find("META summary"), std::string::npos) << e.what();
+    }
+    EXPECT_THROW(hc::readGrid(path("lie.hcg")), hc::Error);
+    edit(value("3 3"), value("3 4"));  // 7 cells for the header's 6
+    try {
+        hc::readGridInfo(path("lie.hcg"));
+        FAIL() << "a summary of 7 cells in a 6-cell file was accepted";
+    } catch (const hc::Error& e) {
+        EXPECT_NE(std::string(e.what()).find("META summary.cells_per_level does not fit the header's 6 cells"), std::string::npos) << e.what();
     }
 }
 

@@ -524,9 +524,24 @@ TEST_F(CacheFile, RoundTripAndGoldenBytes) {
     ASSERT_EQ(back.cellCount(), lists.cellCount());
     EXPECT_TRUE(std::equal(back.offsets().begin(), back.offsets().end(), lists.offsets().begin()));
     EXPECT_TRUE(std::equal(back.indices().begin(), back.indices().end(), lists.indices().begin()));
-    const std::string golden = std::string(HC_GOLDEN_DIR) + "/tiny_v1_0.hci";
+    const std::string golden = std::string(HC_GOLDEN_DIR) + "/tiny_v1_1.hci";
     if (std::getenv("HC_UPDATE_GOLDEN")) writeBytes(golden, readBytes(path("t.hci")), readBytes(path("t.hci")).size());
-    EXPECT_EQ(readBytes(path("t.hci")), readBytes(golden)) << "format 1.0 changed: update deliberately";
+    EXPECT_EQ(readBytes(path("t.hci")), readBytes(golden)) << "format 1.1 changed: update deliberately";
+}
+
+// Format 1.0 (one CRC per section, no block checksums) still reads, with the same lists; and a flipped byte in
+// it is still caught (the whole section is checked at its first touch).
+TEST_F(CacheFile, Version10CacheStillReads) {
+    Grid g = tinyGrid();
+    const InfluenceLists lists = hc::influence::buildInfluenceLists(g, KernelParams{});
+    const std::string v10 = std::string(HC_GOLDEN_DIR) + "/tiny_v1_0.hci";
+    const InfluenceLists old = hc::influence::readInfluenceCache(v10, g, KernelParams{});
+    EXPECT_TRUE(std::equal(old.offsets().begin(), old.offsets().end(), lists.offsets().begin(), lists.offsets().end()));
+    EXPECT_TRUE(std::equal(old.indices().begin(), old.indices().end(), lists.indices().begin(), lists.indices().end()));
+    std::vector<char> bad = readBytes(v10);
+    bad[bad.size() - 3] ^= 0x01;  // in INDICES, the last section
+    writeBytes(path("bad.hci"), bad, bad.size());
+    EXPECT_THROW(hc::influence::readInfluenceCache(path("bad.hci"), g, KernelParams{}), hc::Error);
 }
 
 TEST_F(CacheFile, EveryTruncationAndEveryFlippedByteIsRefused) {

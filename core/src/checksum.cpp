@@ -47,6 +47,43 @@ uint32_t crc32(std::span<const std::byte> bytes, uint32_t crc) {
 }
 
 namespace {
+
+// Polynomial arithmetic modulo the CRC polynomial, in the reflected bit order (zlib 1.2.12's crc32_combine):
+// combining shifts crc(A) by 8 * len(B) zero bits, i.e. multiplies it by x^(8 len(B)) mod P.
+uint32_t multModP(uint32_t a, uint32_t b) {
+    uint32_t m = 1u << 31, p = 0;
+    for (;;) {
+        if (a & m) {
+            p ^= b;
+            if ((a & (m - 1)) == 0) break;
+        }
+        m >>= 1;
+        b = (b & 1) ? (b >> 1) ^ 0xEDB88320u : b >> 1;
+    }
+    return p;
+}
+
+// kX2n[k] = x^(2^k) mod P.
+struct X2nTable {
+    std::array<uint32_t, 32> t{};
+    X2nTable() {
+        uint32_t p = 1u << 30;  // x^1
+        t[0] = p;
+        for (size_t n = 1; n < 32; ++n) t[n] = p = multModP(p, p);
+    }
+};
+
+}  // namespace
+
+uint32_t crc32Combine(uint32_t crcA, uint32_t crcB, uint64_t bytesB) {
+    static const X2nTable x2n;
+    uint32_t p = 1u << 31;  // x^0
+    for (unsigned k = 3; bytesB; bytesB >>= 1, ++k)  // x^(8 bytesB) = product of x^(2^k) over B's bits, k from 3
+        if (bytesB & 1) p = multModP(x2n.t[k & 31], p);
+    return multModP(p, crcA) ^ crcB;
+}
+
+namespace {
 constexpr uint64_t kP1 = 0x9E3779B185EBCA87ull;
 constexpr uint64_t kP2 = 0xC2B2AE3D27D4EB4Full;
 }  // namespace

@@ -1,8 +1,11 @@
 #include "heightcast/core/sectioned_file.h"
 
+#include <atomic>
+#include <bit>
 #include <cerrno>
 #include <cstring>
 #include <filesystem>
+#include <functional>
 #include <new>
 
 #include <fcntl.h>
@@ -24,7 +27,25 @@ constexpr size_t major = 8, minor = 10, headerBytes = 12, fileBytes = 16, sectio
 
 uint64_t alignUp(uint64_t v) { return (v + kFileSectionAlign - 1) / kFileSectionAlign * kFileSectionAlign; }
 
+// The block checksum table's own fields (sectioned_file.h).
+constexpr uint64_t kBlockTableHead = 8;
+constexpr uint64_t kMinBlockBytes = 4096, kMaxBlockBytes = uint64_t{1} << 30;
+
+uint64_t blockCount(uint64_t bytes, uint64_t blockBytes) { return bytes / blockBytes + (bytes % blockBytes != 0); }
+
 }  // namespace
+
+struct SectionedFileReader::Checks {
+    struct Section {
+        uint64_t blockBytes = 0;           // the whole section for a file without block checksums
+        uint64_t blocks = 0;
+        const std::byte* crcs = nullptr;   // its block CRCs in the mapping; nullptr: the table CRC, one block
+        uint64_t firstBit = 0;             // its first block's bit in `checked`
+    };
+    std::vector<Section> sections;
+    std::unique_ptr<std::atomic<uint64_t>[]> checked;  // one bit per block, set once its CRC matched
+    std::atomic<uint64_t> bytesChecked{0};
+};
 
 MappedFile::MappedFile(const std::string& path) {
     std::error_code ec;
@@ -111,6 +132,7 @@ SectionedFileReader::SectionedFileReader(const std::string& path, const FileForm
     if (bytes::load<uint32_t>(h + off::tableCrc) != crc32(std::span(h + kFileHeaderBytes, tableEnd - kFileHeaderBytes)))
         fail(kFileHeaderBytes, "section table checksum mismatch (corrupt section table)");
     uint64_t cursor = tableEnd;
+    std::vector<FileSection> all;
     for (uint32_t s = 0; s < count; ++s) {
         const uint64_t at = entryOffset(s);
         FileSection e;
@@ -125,16 +147,103 @@ SectionedFileReader::SectionedFileReader(const std::string& path, const FileForm
                              " bytes) is misplaced or runs past the end of the file");
         for (uint64_t p = cursor; p < e.offset; ++p)
             if (h[p] != std::byte{0}) fail(p, "padding byte is not zero");
-        if (crc32(std::span(h + e.offset, e.bytes)) != e.crc)
-            fail(e.offset, "checksum mismatch in section " + std::to_string(s) + " (corrupt data)");
-        bool known = false;
+        bool known = e.kind == kFileBlockChecksumsKind;
         for (uint32_t k : format.knownKinds) known |= k == e.kind;
         if (!known && minor_ <= format.minor) fail(at, "unknown section kind " + std::to_string(e.kind));
+        if (e.kind == kFileBlockChecksumsKind && s + 1 != count) fail(at, "block checksums are not the last section");
         cursor = e.offset + e.bytes;
-        sections_.push_back(e);
+        all.push_back(e);
     }
     if (cursor != size) fail(cursor, "data after the last section");
+
+    // The block checksum table: small, checked whole here; then each section's table CRC must equal its
+    // blocks' CRCs combined, so a reader of an older minor (table CRCs) and this one agree on every file.
+    const bool hasBlocks = !all.empty() && all.back().kind == kFileBlockChecksumsKind;
+    if (!hasBlocks && minor_ >= format.blockChecksumsSince)
+        fail(kFileHeaderBytes, "format version " + version + " requires a block checksum section, and the file has none");
+    checks_ = std::make_unique<Checks>();
+    uint64_t bits = 0;
+    if (hasBlocks) {
+        const FileSection t = all.back();
+        all.pop_back();
+        const uint64_t tableAt = entryOffset(all.size());
+        if (crc32(std::span(h + t.offset, t.bytes)) != t.crc) fail(t.offset, "checksum mismatch in the block checksum section (corrupt data)");
+        if (t.bytes < kBlockTableHead) fail(tableAt + 16, "block checksum section of " + std::to_string(t.bytes) + " bytes is too short");
+        blockBytes_ = bytes::load<uint32_t>(h + t.offset);
+        if (!std::has_single_bit(blockBytes_) || blockBytes_ < kMinBlockBytes || blockBytes_ > kMaxBlockBytes)
+            fail(t.offset, "block size " + std::to_string(blockBytes_) + " is not a power of two from 4 KiB to 1 GiB");
+        if (bytes::load<uint32_t>(h + t.offset + 4) != 0) fail(t.offset + 4, "reserved block-checksum field is not zero");
+        // Each count is at most size / 4 KiB: the sum cannot wrap.
+        uint64_t crcBytes = kBlockTableHead;
+        for (const FileSection& e : all) crcBytes += 4 * blockCount(e.bytes, blockBytes_);
+        if (crcBytes != t.bytes)
+            fail(tableAt + 16, "block checksum section holds " + std::to_string(t.bytes) + " bytes, the sections' blocks need " +
+                                   std::to_string(crcBytes));
+        const std::byte* crcs = h + t.offset + kBlockTableHead;
+        for (size_t s = 0; s < all.size(); ++s) {
+            const FileSection& e = all[s];
+            Checks::Section c{blockBytes_, blockCount(e.bytes, blockBytes_), crcs, bits};
+            uint32_t combined = 0;
+            for (uint64_t b = 0; b < c.blocks; ++b)
+                combined = crc32Combine(combined, bytes::load<uint32_t>(crcs + 4 * b), std::min(blockBytes_, e.bytes - b * blockBytes_));
+            if (combined != e.crc)
+                fail(entryOffset(s) + 24, "section " + std::to_string(s) + "'s checksum disagrees with its block checksums");
+            crcs += 4 * c.blocks;
+            bits += c.blocks;
+            checks_->sections.push_back(c);
+        }
+    } else {
+        for (size_t s = 0; s < all.size(); ++s) {
+            const FileSection& e = all[s];
+            if (e.bytes == 0 && e.crc != 0) fail(e.offset, "checksum mismatch in section " + std::to_string(s) + " (corrupt data)");
+            checks_->sections.push_back({e.bytes, e.bytes > 0 ? 1u : 0u, nullptr, bits});
+            bits += e.bytes > 0;
+        }
+    }
+    checks_->checked = std::make_unique<std::atomic<uint64_t>[]>(bits / 64 + 1);
+    sections_ = std::move(all);
 }
+
+SectionedFileReader::~SectionedFileReader() = default;
+
+void SectionedFileReader::checkBlock(size_t s, uint64_t b) const {
+    const Checks::Section& c = checks_->sections[s];
+    const uint64_t bit = c.firstBit + b;
+    std::atomic<uint64_t>& word = checks_->checked[bit / 64];
+    const uint64_t mask = uint64_t{1} << (bit % 64);
+    if (word.load(std::memory_order_acquire) & mask) return;
+    const FileSection& e = sections_[s];
+    const uint64_t from = b * c.blockBytes, bytes = std::min(c.blockBytes, e.bytes - from);
+    const uint32_t want = c.crcs ? bytes::load<uint32_t>(c.crcs + 4 * b) : e.crc;
+    if (crc32(map_->bytes().subspan(e.offset + from, bytes)) != want) {
+        if (c.crcs)
+            fail(e.offset + from, "checksum mismatch in section " + std::to_string(s) + ", block " + std::to_string(b) + " (" +
+                                      std::to_string(bytes) + " bytes) (corrupt data)");
+        fail(e.offset, "checksum mismatch in section " + std::to_string(s) + " (corrupt data)");
+    }
+    if (!(word.fetch_or(mask, std::memory_order_acq_rel) & mask)) checks_->bytesChecked.fetch_add(bytes, std::memory_order_relaxed);
+}
+
+std::span<const std::byte> SectionedFileReader::read(const FileSection& s, uint64_t offset, uint64_t bytes) const {
+    // std::less: a total order even for a pointer into another reader's table.
+    if (sections_.empty() || std::less<const FileSection*>{}(&s, sections_.data()) || std::less<const FileSection*>{}(&sections_.back(), &s))
+        failFile("internal error: a section of another file");
+    const auto index = static_cast<size_t>(&s - sections_.data());
+    if (offset > s.bytes || bytes > s.bytes - offset)
+        fail(s.offset, "a read of " + std::to_string(bytes) + " bytes at " + std::to_string(offset) + " runs past section " +
+                           std::to_string(index) + " (" + std::to_string(s.bytes) + " bytes)");
+    if (bytes > 0) {
+        const uint64_t blockBytes = checks_->sections[index].blockBytes;
+        for (uint64_t b = offset / blockBytes, last = (offset + bytes - 1) / blockBytes; b <= last; ++b) checkBlock(index, b);
+    }
+    return map_->bytes().subspan(s.offset + offset, bytes);
+}
+
+void SectionedFileReader::verifyAll() const {
+    for (const FileSection& s : sections_) data(s);
+}
+
+uint64_t SectionedFileReader::bytesChecked() const { return checks_->bytesChecked.load(std::memory_order_relaxed); }
 
 struct SectionedFileWriter::Impl {
     Impl(const std::string& p, const FileFormat& f) : out(p), format(f) {}
@@ -142,6 +251,9 @@ struct SectionedFileWriter::Impl {
     FileFormat format;
     std::vector<FileSection> sections;
     std::vector<uint64_t> written;  // bytes appended so far, per section
+    std::vector<std::vector<uint32_t>> blockCrcs;  // per section: CRC of each complete block so far
+    std::vector<uint32_t> partialCrc;              // per section: CRC of its block being appended
+    bool blockTable = false;  // the format's minor has block checksums: the writer adds them as a last section
     size_t tableEntries = 0;
     uint64_t end = 0;  // end of the last placed section
 };
@@ -149,7 +261,8 @@ struct SectionedFileWriter::Impl {
 SectionedFileWriter::SectionedFileWriter(const std::string& path, const FileFormat& format, std::vector<FileSection> layout,
                                          size_t laterSections)
     : impl_(std::make_unique<Impl>(path, format)) {
-    impl_->tableEntries = layout.size() + laterSections;
+    impl_->blockTable = format.minor >= format.blockChecksumsSince;
+    impl_->tableEntries = layout.size() + laterSections + impl_->blockTable;
     uint64_t cursor = kFileHeaderBytes + impl_->tableEntries * kFileSectionEntryBytes;
     for (FileSection& s : layout) {
         s.offset = alignUp(cursor);
@@ -159,6 +272,8 @@ SectionedFileWriter::SectionedFileWriter(const std::string& path, const FileForm
     impl_->end = cursor;
     impl_->sections = std::move(layout);
     impl_->written.assign(impl_->sections.size(), 0);
+    impl_->blockCrcs.resize(impl_->sections.size());
+    impl_->partialCrc.assign(impl_->sections.size(), 0);
 }
 
 SectionedFileWriter::~SectionedFileWriter() = default;
@@ -170,8 +285,18 @@ void SectionedFileWriter::append(size_t s, std::span<const std::byte> bytes) {
     FileSection& sec = w.sections.at(s);
     if (bytes.size() > sec.bytes - w.written[s]) throw Error(path() + ": section " + std::to_string(s) + " overflows its declared size");
     w.out.writeAt(sec.offset + w.written[s], bytes);
-    sec.crc = crc32(bytes, sec.crc);
-    w.written[s] += bytes.size();
+    // Block CRCs as the data passes (the section's own CRC is combined from them at commit).
+    while (!bytes.empty()) {
+        const uint64_t inBlock = w.written[s] % kFileBlockBytes;
+        const size_t take = static_cast<size_t>(std::min<uint64_t>(bytes.size(), kFileBlockBytes - inBlock));
+        w.partialCrc[s] = crc32(bytes.first(take), w.partialCrc[s]);
+        w.written[s] += take;
+        bytes = bytes.subspan(take);
+        if (w.written[s] % kFileBlockBytes == 0) {
+            w.blockCrcs[s].push_back(w.partialCrc[s]);
+            w.partialCrc[s] = 0;
+        }
+    }
 }
 
 void SectionedFileWriter::addSection(uint32_t kind, uint32_t index, std::span<const std::byte> bytes) {
@@ -180,17 +305,39 @@ void SectionedFileWriter::addSection(uint32_t kind, uint32_t index, std::span<co
     FileSection s{kind, index, alignUp(w.end), bytes.size(), 0};
     w.sections.push_back(s);
     w.written.push_back(0);
+    w.blockCrcs.emplace_back();
+    w.partialCrc.push_back(0);
     w.end = s.offset + s.bytes;
     append(w.sections.size() - 1, bytes);
 }
 
 void SectionedFileWriter::commit(std::vector<std::byte> header) {
     Impl& w = *impl_;
-    if (w.sections.size() != w.tableEntries) throw Error(path() + ": " + std::to_string(w.sections.size()) + " sections of " + std::to_string(w.tableEntries));
-    for (size_t s = 0; s < w.sections.size(); ++s)
+    const size_t dataSections = w.tableEntries - w.blockTable;
+    if (w.sections.size() != dataSections) throw Error(path() + ": " + std::to_string(w.sections.size()) + " sections of " + std::to_string(dataSections));
+    // Each section's CRC is its block CRCs combined (the last block may be short).
+    auto finishBlocks = [&](size_t s) {
         if (w.written[s] != w.sections[s].bytes)
             throw Error(path() + ": section " + std::to_string(s) + " has " + std::to_string(w.written[s]) + " of its " +
                         std::to_string(w.sections[s].bytes) + " bytes");
+        if (w.written[s] % kFileBlockBytes != 0) w.blockCrcs[s].push_back(w.partialCrc[s]);
+        uint32_t crc = 0;
+        for (size_t b = 0; b < w.blockCrcs[s].size(); ++b)
+            crc = crc32Combine(crc, w.blockCrcs[s][b], std::min<uint64_t>(kFileBlockBytes, w.written[s] - b * kFileBlockBytes));
+        w.sections[s].crc = crc;
+    };
+    for (size_t s = 0; s < dataSections; ++s) finishBlocks(s);
+    if (w.blockTable) {
+        std::vector<std::byte> table(8, std::byte{0});
+        bytes::store(table, 0, kFileBlockBytes);
+        for (size_t s = 0; s < dataSections; ++s)
+            for (uint32_t crc : w.blockCrcs[s]) {
+                table.resize(table.size() + 4);
+                bytes::store(table, table.size() - 4, crc);
+            }
+        addSection(kFileBlockChecksumsKind, 0, table);
+        finishBlocks(dataSections);
+    }
     // Zero padding between sections: the gaps were never written (a sparse hole), make them explicit.
     uint64_t cursor = kFileHeaderBytes + w.sections.size() * kFileSectionEntryBytes;
     const std::vector<std::byte> zeros(kFileSectionAlign, std::byte{0});

@@ -19,7 +19,8 @@ namespace {
 enum SectionKind : uint32_t { kMeta = 1, kCells = 2, kLayer = 3 };
 
 const FileFormat kFormat{{'\x89', 'H', 'C', 'G', 'R', 'I', 'D', '\n'}, kGridFileMajor, kGridFileMinor,
-                         "heightcast grid (.hcg)", {kMeta, kCells, kLayer}};
+                         "heightcast grid (.hcg)", {kMeta, kCells, kLayer}, /*blockChecksumsSince=*/2};
+constexpr uint16_t kSummarySince = 2;  // the minor from which META holds the summary (GridSummary)
 
 // The grid's own header fields (grid_file.h); pinned by the golden-bytes test.
 namespace off {
@@ -35,6 +36,12 @@ std::string fmtDouble(double v) {
     return std::string(buf, r.ptr);
 }
 
+std::string fmtFloat(float v) {
+    char buf[32];
+    auto r = std::to_chars(buf, buf + sizeof buf, v);  // shortest decimal that reads back as this float
+    return std::string(buf, r.ptr);
+}
+
 void appendString(std::vector<std::byte>& out, const std::string& s) {
     auto n = static_cast<uint32_t>(s.size());
     auto* p = reinterpret_cast<const std::byte*>(&n);
@@ -43,12 +50,27 @@ void appendString(std::vector<std::byte>& out, const std::string& s) {
     out.insert(out.end(), q, q + s.size());
 }
 
-std::vector<std::byte> encodeMeta(const Grid& g) {
+std::string joinNumbers(std::span<const uint64_t> v) {
+    std::string out;
+    for (uint64_t x : v) {
+        if (!out.empty()) out += ' ';
+        out += std::to_string(x);
+    }
+    return out;
+}
+
+std::vector<std::byte> encodeMeta(const Grid& g, const GridSummary& summary) {
     std::vector<std::pair<std::string, std::string>> kv{{"crs_wkt", g.crsWkt}, {"crs_name", g.crsName}};
     for (size_t l = 0; l < g.layers.size(); ++l) {
         kv.emplace_back("layer." + std::to_string(l) + ".name", g.layers[l].name);
         kv.emplace_back("layer." + std::to_string(l) + ".units", g.layers[l].units);
+        if (l < summary.layerMin.size()) {  // an empty grid has no values, so no range
+            kv.emplace_back("layer." + std::to_string(l) + ".min", fmtFloat(summary.layerMin[l]));
+            kv.emplace_back("layer." + std::to_string(l) + ".max", fmtFloat(summary.layerMax[l]));
+        }
     }
+    kv.emplace_back("summary.cells_per_level", joinNumbers(summary.cellsPerLevel));
+    kv.emplace_back("summary.bounds_finest", joinNumbers(summary.boundsFinest));
     const IngestStats& s = g.stats;
     kv.emplace_back("ingest.source", s.sourcePath);
     kv.emplace_back("ingest.source_crs", s.sourceCrsName);
@@ -67,9 +89,13 @@ std::vector<std::byte> encodeMeta(const Grid& g) {
     return out;
 }
 
-void parseMeta(const SectionedFileReader& file, const FileSection& s, Grid& g) {
+// Parses META (checked on this first touch); for a file of a minor with a summary, fills `summary` and
+// checks it against the header: counts per level add up to the cell count, only at levels in range, a
+// bounding box inside the domain, a finite min <= max per layer. Whether it matches the cells is left to
+// checkSummary() (a full pass).
+void parseMeta(const SectionedFileReader& file, const FileSection& s, Grid& g, uint64_t cellCount, GridSummary* summary) {
     auto fail = [&](uint64_t at, const std::string& what) { file.fail(at, what); };
-    const std::byte* d = file.data(s).data() - s.offset;  // file bytes, so offsets stay absolute
+    const std::byte* d = file.data(s).data() - s.offset;  // file bytes, so offsets stay absolute (checked: data())
     std::map<std::string, std::string> kv;
     uint64_t p = s.offset, end = s.offset + s.bytes;
     auto readString = [&](std::string& out) {
@@ -114,14 +140,130 @@ void parseMeta(const SectionedFileReader& file, const FileSection& s, Grid& g) {
     number("ingest.max_dev_m", g.stats.maxDevM);
     number("ingest.rms_dev_m", g.stats.rmsDevM);
     number("ingest.seconds", g.stats.seconds);
+    if (file.minor() < kSummarySince || !summary) return;
+    auto numbers = [&](const std::string& k, size_t count) {
+        std::vector<uint64_t> out;
+        const std::string& v = need(k);
+        const char* c = v.data();
+        const char* e = v.data() + v.size();
+        while (c < e && out.size() <= count) {
+            uint64_t x = 0;
+            auto r = std::from_chars(c, e, x);
+            if (r.ec != std::errc()) break;
+            out.push_back(x);
+            c = r.ptr;
+            if (c < e && *c == ' ') ++c;
+            else if (c < e) break;
+        }
+        if (out.size() != count || c != e)
+            fail(s.offset, "META value of '" + k + "' is not " + std::to_string(count) + " numbers: '" + v + "'");
+        return out;
+    };
+    summary->cellsPerLevel = numbers("summary.cells_per_level", static_cast<size_t>(g.maxLevel) + 1);
+    uint64_t sum = 0;
+    for (size_t l = 0; l < summary->cellsPerLevel.size(); ++l) {
+        const uint64_t n = summary->cellsPerLevel[l];
+        if (n > cellCount - sum || (n > 0 && static_cast<int>(l) < g.minLevel))
+            fail(s.offset, "META summary.cells_per_level does not fit the header's " + std::to_string(cellCount) + " cells and levels");
+        sum += n;
+    }
+    if (sum != cellCount) fail(s.offset, "META summary.cells_per_level adds up to " + std::to_string(sum) + " cells, the header declares " + std::to_string(cellCount));
+    const auto b = numbers("summary.bounds_finest", 4);
+    const uint64_t side = uint64_t{1} << g.rootLevel;
+    if (b[0] > b[2] || b[1] > b[3] || b[2] > side || b[3] > side || (cellCount > 0 && (b[0] == b[2] || b[1] == b[3])))
+        fail(s.offset, "META summary.bounds_finest is not a box in the domain of " + std::to_string(side) + " finest cells");
+    std::copy(b.begin(), b.end(), summary->boundsFinest.begin());
+    summary->layerMin.clear();
+    summary->layerMax.clear();
+    if (cellCount == 0) return;
+    for (size_t l = 0; l < g.layers.size(); ++l) {
+        float lo = 0, hi = 0;
+        number("layer." + std::to_string(l) + ".min", lo);
+        number("layer." + std::to_string(l) + ".max", hi);
+        need("layer." + std::to_string(l) + ".min");
+        need("layer." + std::to_string(l) + ".max");
+        if (!std::isfinite(lo) || !std::isfinite(hi) || lo > hi)
+            fail(s.offset, "META range of layer " + std::to_string(l) + " is not finite min <= max");
+        summary->layerMin.push_back(lo);
+        summary->layerMax.push_back(hi);
+    }
 }
 
-Grid parseGrid(const SectionedFileReader& file) {
+// The summary of cells in memory (what the writer computes as they stream past).
+class SummaryBuilder {
+public:
+    SummaryBuilder(int maxLevel, size_t layers) : layers_(layers) { s_.cellsPerLevel.assign(static_cast<size_t>(maxLevel) + 1, 0); }
+    // Cells already checked (CellStreamCheck or Grid::validate): levels in range, values finite.
+    void add(std::span<const uint64_t> codes, const std::vector<std::span<const float>>& values) {
+        for (uint64_t c : codes) {
+            const int level = codeLevel(c);
+            ++s_.cellsPerLevel[static_cast<size_t>(level)];
+            const uint64_t key = codeKey(c), x = mortonX(key), y = mortonY(key), span = uint64_t{1} << level;
+            if (first_) s_.boundsFinest = {x, y, x + span, y + span};
+            s_.boundsFinest = {std::min(s_.boundsFinest[0], x), std::min(s_.boundsFinest[1], y), std::max(s_.boundsFinest[2], x + span),
+                               std::max(s_.boundsFinest[3], y + span)};
+            first_ = false;
+        }
+        if (codes.empty()) return;
+        if (s_.layerMin.empty()) {
+            s_.layerMin.assign(layers_, HUGE_VALF);
+            s_.layerMax.assign(layers_, -HUGE_VALF);
+        }
+        for (size_t l = 0; l < layers_; ++l)
+            for (float v : values[l]) {
+                s_.layerMin[l] = std::min(s_.layerMin[l], v);
+                s_.layerMax[l] = std::max(s_.layerMax[l], v);
+            }
+    }
+    const GridSummary& summary() const { return s_; }
+
+private:
+    size_t layers_;
+    bool first_ = true;
+    GridSummary s_;
+};
+
+GridSummary summarise(const Grid& g) {
+    SummaryBuilder b(g.maxLevel, g.layers.size());
+    std::vector<std::span<const float>> values(g.values.begin(), g.values.end());
+    b.add(g.codes, values);
+    return b.summary();
+}
+
+bool operator==(const GridSummary& a, const GridSummary& b) {
+    return a.cellsPerLevel == b.cellsPerLevel && a.boundsFinest == b.boundsFinest && a.layerMin == b.layerMin && a.layerMax == b.layerMax;
+}
+
+// A grid's geometry, CRS, layers and statistics, never its cells.
+Grid shapeOf(const Grid& g) {
+    Grid bare;
+    bare.originWorldX = g.originWorldX;
+    bare.originWorldY = g.originWorldY;
+    bare.finestCellM = g.finestCellM;
+    bare.rootLevel = g.rootLevel;
+    bare.minLevel = g.minLevel;
+    bare.maxLevel = g.maxLevel;
+    bare.crsWkt = g.crsWkt;
+    bare.crsName = g.crsName;
+    bare.layers = g.layers;
+    bare.values.assign(g.layers.size(), {});
+    bare.stats = g.stats;
+    return bare;
+}
+
+struct Located {
+    uint64_t cellCount = 0;
+    const FileSection* meta = nullptr;
+    const FileSection* cells = nullptr;
+    std::vector<const FileSection*> layers;
+};
+
+// The header's fields into `g` (no cells) and the sections located and sized: no section data read.
+Located parseHeader(const SectionedFileReader& file, Grid& g) {
     const std::byte* h = file.header();
     auto fail = [&](uint64_t at, const std::string& what) { file.fail(at, what); };
     for (size_t i = off::reserved; i < off::reservedEnd; ++i)
         if (h[i] != std::byte{0}) fail(i, "reserved header byte is not zero");
-    Grid g;
     const uint64_t cellCount = bytes::load<uint64_t>(h + off::cellCount);
     g.originWorldX = bytes::load<double>(h + off::originX);
     g.originWorldY = bytes::load<double>(h + off::originY);
@@ -173,11 +315,24 @@ Grid parseGrid(const SectionedFileReader& file) {
         if (!layerSec[l]) file.failFile("no LAYER section for layer " + std::to_string(l));
 
     g.layers.assign(layerCount, LayerInfo{});
-    parseMeta(file, *meta, g);
+    return {cellCount, meta, cells, std::move(layerSec)};
+}
+
+Grid parseGrid(const SectionedFileReader& file) {
+    const std::byte* h = file.header();
+    auto fail = [&](uint64_t at, const std::string& what) { file.fail(at, what); };
+    Grid g;
+    const Located at = parseHeader(file, g);
+    const uint64_t cellCount = at.cellCount;
+    const FileSection* cells = at.cells;
+    const auto& layerSec = at.layers;
+    const size_t layerCount = layerSec.size();
+    GridSummary stored;
+    parseMeta(file, *at.meta, g, cellCount, &stored);
     g.codes.resize(cellCount);
     std::memcpy(g.codes.data(), file.data(*cells).data(), cells->bytes);
     g.values.assign(layerCount, {});
-    for (unsigned l = 0; l < layerCount; ++l) {
+    for (size_t l = 0; l < layerCount; ++l) {
         g.values[l].resize(cellCount);
         std::memcpy(g.values[l].data(), file.data(*layerSec[l]).data(), layerSec[l]->bytes);
     }
@@ -185,6 +340,8 @@ Grid parseGrid(const SectionedFileReader& file) {
     if (!problem.empty()) fail(cells->offset, "invalid grid: " + problem);
     if (g.structureHash() != bytes::load<uint64_t>(h + off::structureHash)) fail(off::structureHash, "structure hash does not match the cells");
     if (g.contentHash() != bytes::load<uint64_t>(h + off::contentHash)) fail(off::contentHash, "content hash does not match the cells and values");
+    if (file.minor() >= kSummarySince && !(summarise(g) == stored))
+        fail(at.meta->offset, "META summary (cells per level, bounds, value ranges) does not match the cells");
     return g;
 }
 
@@ -192,29 +349,21 @@ Grid parseGrid(const SectionedFileReader& file) {
 
 struct GridFileWriter::Impl {
     Impl(const std::string& path, const Grid& gridShape, uint64_t cells, std::vector<FileSection> layout)
-        : out(path, kFormat, std::move(layout), 1), shape(gridShape), cellCount(cells), check(shape), hasher(shape, cells) {}
+        : out(path, kFormat, std::move(layout), 1), shape(gridShape), cellCount(cells), check(shape), hasher(shape, cells),
+          summary(shape.maxLevel, shape.layers.size()) {}
     SectionedFileWriter out;
     Grid shape;  // geometry, CRS and layers; no cells
     uint64_t cellCount;
     CellStreamCheck check;
     GridHasher hasher;
+    SummaryBuilder summary;
     uint64_t written = 0;
 };
 
 GridFileWriter::GridFileWriter(const std::string& path, const Grid& shape, uint64_t cellCount) {
     std::string problem = shape.validateShape();
     if (!problem.empty()) throw Error(path + ": refusing to write an invalid grid: " + problem);
-    Grid bare;  // copy the shape only, never its cells
-    bare.originWorldX = shape.originWorldX;
-    bare.originWorldY = shape.originWorldY;
-    bare.finestCellM = shape.finestCellM;
-    bare.rootLevel = shape.rootLevel;
-    bare.minLevel = shape.minLevel;
-    bare.maxLevel = shape.maxLevel;
-    bare.crsWkt = shape.crsWkt;
-    bare.crsName = shape.crsName;
-    bare.layers = shape.layers;
-    bare.values.assign(shape.layers.size(), {});
+    Grid bare = shapeOf(shape);
     // Layout: CELLS, LAYER..., then META (last: its statistics are known only at the end).
     std::vector<FileSection> layout{{kCells, 0, 0, cellCount * 8, 0}};
     for (size_t l = 0; l < shape.layers.size(); ++l) layout.push_back({kLayer, static_cast<uint32_t>(l), 0, cellCount * 4, 0});
@@ -238,6 +387,7 @@ void GridFileWriter::append(std::span<const uint64_t> codes, const std::vector<s
         std::string problem = w.check.next(codes[i], v);
         if (!problem.empty()) throw Error(path + ": refusing to write an invalid grid: " + problem);
     }
+    w.summary.add(codes, layerValues);
     w.out.append(0, std::as_bytes(codes));
     w.hasher.addCodes(codes);
     for (size_t l = 0; l < layers; ++l) {
@@ -252,7 +402,7 @@ void GridFileWriter::commit(const IngestStats& stats) {
     if (w.written != w.cellCount)
         throw Error(w.out.path() + ": " + std::to_string(w.written) + " cells written of " + std::to_string(w.cellCount) + " announced");
     w.shape.stats = stats;
-    w.out.addSection(kMeta, 0, encodeMeta(w.shape));
+    w.out.addSection(kMeta, 0, encodeMeta(w.shape, w.summary.summary()));
     const Grid& g = w.shape;
     std::vector<std::byte> head(kFileHeaderBytes, std::byte{0});
     bytes::store(head, off::cellCount, w.cellCount);
@@ -281,7 +431,54 @@ void writeGrid(const Grid& g, const std::string& path) {
 Grid readGrid(const std::string& path, uint16_t* fileMinor) {
     const SectionedFileReader reader(path, kFormat);
     if (fileMinor) *fileMinor = reader.minor();
+    reader.verifyAll();  // every checksum before any content check, as the error order always was
     return parseGrid(reader);
+}
+
+GridFileInfo readGridInfo(const std::string& path) {
+    const SectionedFileReader reader(path, kFormat);
+    GridFileInfo info;
+    info.fileMinor = reader.minor();
+    info.fileBytes = reader.mapping()->bytes().size();
+    info.blockBytes = reader.blockBytes();
+    const std::byte* h = reader.header();
+    info.structureHash = bytes::load<uint64_t>(h + off::structureHash);
+    info.contentHash = bytes::load<uint64_t>(h + off::contentHash);
+    if (reader.minor() < kSummarySince) {
+        // No stored summary: the full pass, with the full validation that comes with reading everything.
+        reader.verifyAll();
+        const Grid g = parseGrid(reader);
+        info.cellCount = g.cellCount();
+        info.summary = summarise(g);
+        info.shape = shapeOf(g);
+        info.verified = true;
+    } else {
+        const Located at = parseHeader(reader, info.shape);
+        info.cellCount = at.cellCount;
+        parseMeta(reader, *at.meta, info.shape, at.cellCount, &info.summary);
+        info.shape.values.assign(info.shape.layers.size(), {});
+    }
+    info.bytesChecked = reader.bytesChecked();
+    return info;
+}
+
+GridFileInfo verifyGridFile(const std::string& path) {
+    const SectionedFileReader reader(path, kFormat);
+    reader.verifyAll();
+    Grid g = parseGrid(reader);
+    GridFileInfo info;
+    info.fileMinor = reader.minor();
+    info.fileBytes = reader.mapping()->bytes().size();
+    info.blockBytes = reader.blockBytes();
+    info.structureHash = g.structureHash();
+    info.contentHash = g.contentHash();
+    info.cellCount = g.cellCount();
+    info.summary = summarise(g);
+    info.bytesChecked = reader.bytesChecked();
+    info.verified = true;
+    info.shape = shapeOf(g);
+    info.grid = std::make_shared<const Grid>(std::move(g));
+    return info;
 }
 
 }  // namespace hc

@@ -1,4 +1,4 @@
-// The .hci influence cache, format 1.0: a sectioned container (grid/sectioned_file.h) with
+// The .hci influence cache, format 1.1 (reads 1.0): a sectioned container (core/sectioned_file.h) with
 //
 //   offset  size  field
 //   0       8     magic "\x89HCINFL\n"
@@ -14,6 +14,9 @@
 //
 // Sections: OFFSETS (kind 1: u64[n + 1], offsets[0] = 0, non-decreasing, offsets[n] = m) and
 // INDICES (kind 2: u32[m], each < n, every cell in its own list). Both mmap-ready (64-byte aligned).
+//
+// Versions: 1.0 the layout above; 1.1 adds the container's block checksums (a CRC-32 per 1 MiB,
+// sectioned_file.h), which a reader that reads part of a cache checks for just that part.
 #include <cstring>
 #include <filesystem>
 
@@ -26,7 +29,8 @@ namespace hc::influence {
 namespace {
 
 enum : uint32_t { kOffsets = 1, kIndices = 2 };
-const FileFormat kFormat{{'\x89', 'H', 'C', 'I', 'N', 'F', 'L', '\n'}, 1, 0, "heightcast influence cache (.hci)", {kOffsets, kIndices}};
+const FileFormat kFormat{{'\x89', 'H', 'C', 'I', 'N', 'F', 'L', '\n'}, 1, 1, "heightcast influence cache (.hci)", {kOffsets, kIndices},
+                        /*blockChecksumsSince=*/1};
 
 namespace off {
 constexpr size_t cellCount = 24, entryCount = 32, structureHash = 40, contentHash = 48, kernelId = 56, sigma = 64,
@@ -62,6 +66,7 @@ void writeInfluenceCache(const InfluenceLists& lists, const std::string& path) {
 
 InfluenceLists readInfluenceCache(const std::string& path, const Grid& grid, const KernelParams& params) {
     SectionedFileReader file(path, kFormat);
+    file.verifyAll();  // the whole cache is walked below: every checksum first, as before block checksums
     const std::byte* h = file.header();
     for (size_t i = off::reserved; i < off::reservedEnd; ++i)
         if (h[i] != std::byte{0}) file.fail(i, "reserved header byte is not zero");

@@ -32,7 +32,8 @@ namespace hc::influence {
 namespace {
 
 enum : uint32_t { kKeys = 1, kErrors = 2, kSamples = 3 };
-const FileFormat kFormat{{'\x89', 'H', 'C', 'P', 'Y', 'R', 'A', '\n'}, 1, 0, "heightcast surface pyramid (.hcp)", {kKeys, kErrors, kSamples}};
+const FileFormat kFormat{{'\x89', 'H', 'C', 'P', 'Y', 'R', 'A', '\n'}, 1, 0, "heightcast surface pyramid (.hcp)", {kKeys, kErrors, kSamples},
+                         0};  // block checksums from the first version (core/sectioned_file.h)
 
 namespace off {
 constexpr size_t structureHash = 24, contentHash = 32, finestCellM = 40, rootLevel = 48, channels = 49, tileLog2 = 50, levelCount = 51,

@@ -45,12 +45,12 @@ esac
 
 # check FILE: is kill/FILE complete and valid? Outputs that are the same bytes on every run (checked in step 1)
 # must equal the reference; the .hcg (a few bytes of its statistics differ between runs) is validated whole by
-# hc-info; the timings JSON must have the reference's keys and structure (its numbers are times); a VDB (a fresh
+# hc-info --verify; the timings JSON must have the reference's keys and structure (its numbers are times); a VDB (a fresh
 # UUID per file) must hold the reference's grids with the same active voxels.
 check() {
   local f=$1
   case $f in
-    *.hcg) "$HC_INFO" "kill/$f" >/dev/null 2>&1 ;;
+    *.hcg) "$HC_INFO" --verify "kill/$f" >/dev/null 2>&1 ;;
     *.json) cmp -s <(sed -E 's/-?[0-9][0-9.eE+-]*//g' "kill/$f") <(sed -E 's/-?[0-9][0-9.eE+-]*//g' "ref/$f") ;;
     *.vdb) local got want
            got=$("$HC_FILE_CHECK" "kill/$f" 2>&1) && want=$("$HC_FILE_CHECK" "ref/$f" 2>&1) && [ "$got" = "$want" ] ;;

@@ -14,6 +14,10 @@ namespace hc {
 // CRC-32 of `bytes`, continuing from `crc` (pass 0 to start).
 uint32_t crc32(std::span<const std::byte> bytes, uint32_t crc = 0);
 
+// The CRC-32 of A followed by B, from crc32(A), crc32(B) and B's length (as zlib's crc32_combine):
+// O(log bytesB), no data.
+uint32_t crc32Combine(uint32_t crcA, uint32_t crcB, uint64_t bytesB);
+
 // Streaming 64-bit hash: the same bytes give the same value however they are split into update()s.
 class Hash64 {
 public:

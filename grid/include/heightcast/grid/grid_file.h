@@ -1,4 +1,4 @@
-// heightcast/grid/grid_file.h: the .hcg grid file format, version 1.1 (reads 1.0).
+// heightcast/grid/grid_file.h: the .hcg grid file format, version 1.2 (reads 1.0 and 1.1).
 //
 // A sectioned container (sectioned_file.h: magic, version, declared size, CRC-32 of header, table
 // and every section, 64-byte aligned sections, zero padding checked). The grid's own header fields:
@@ -19,16 +19,27 @@
 //
 // Sections, in file order: CELLS (kind 2: u64 cell codes, sorted), LAYER (kind 3, index = layer:
 // float32 values, one section per layer), META (kind 1: u32-length-prefixed key/value strings:
-// crs_wkt, crs_name, layer.N.name, layer.N.units, ingest.*). Readers locate sections by the table, not by order.
+// crs_wkt, crs_name, layer.N.name, layer.N.units, layer.N.min, layer.N.max, summary.*, ingest.*), then
+// (1.2) the container's block checksums. Readers locate sections by the table, not by order.
+//
+// The summary (1.2), written as the cells stream past, so a reader need not read them (readGridInfo):
+//   summary.cells_per_level  "n0 n1 ... nMax": cells per level 0..max level, decimal, space-separated
+//   summary.bounds_finest    "x0 y0 x1 y1": bounding box of the cells in finest cells (local frame / finest
+//                            cell size; "0 0 0 0" for an empty grid)
+//   layer.N.min, layer.N.max the least and greatest value of layer N (shortest exact decimal of the float32;
+//                            absent in an empty grid)
 //
 // Versions (a newer minor only adds what an older reader skips: sectioned_file.h):
 //   1.0  the layout above, META without crs_name
 //   1.1  META key crs_name (Grid::crsName); read from a 1.0 file as ""
+//   1.2  block checksums (sectioned_file.h: a CRC-32 per 1 MiB, checked when first read) and the summary
+//        in META; a 1.0/1.1 file has neither: readGridInfo reads it whole
 //
 // Hashes: structure = Hash64 over (finest size f64, root level i32, cell count u64, codes);
 // content = Hash64 over (structure hash, then per layer its name + NUL and Hash64 of its values).
 #pragma once
 
+#include <array>
 #include <cstdint>
 #include <memory>
 #include <span>
@@ -40,7 +51,7 @@
 namespace hc {
 
 constexpr uint16_t kGridFileMajor = 1;
-constexpr uint16_t kGridFileMinor = 1;
+constexpr uint16_t kGridFileMinor = 2;
 constexpr uint32_t kGridHeaderBytes = 128;
 
 // Writes `grid` to `path` atomically (temporary file + rename). Throws hc::Error on I/O failure or if
@@ -73,5 +84,36 @@ private:
 // `fileMinor`, when given, receives the file's minor version (a newer minor than kGridFileMinor is
 // read: it only adds sections this reader skips).
 Grid readGrid(const std::string& path, uint16_t* fileMinor = nullptr);
+
+// What a full pass over the cells would tell (stored in META from format 1.2 on).
+struct GridSummary {
+    std::vector<uint64_t> cellsPerLevel;        // index: level 0..maxLevel
+    std::array<uint64_t, 4> boundsFinest{};     // x0, y0, x1, y1 [finest cells, local frame]; zero when empty
+    std::vector<float> layerMin, layerMax;      // per layer; empty for a grid without cells
+};
+
+// A grid file's header, META and summary.
+struct GridFileInfo {
+    Grid shape;                    // geometry, CRS, layers, ingest statistics; no cells, no values
+    uint64_t cellCount = 0;
+    uint16_t fileMinor = 0;
+    uint64_t fileBytes = 0;
+    uint64_t blockBytes = 0;       // of the block checksums; 0 for a 1.0/1.1 file (one CRC per section)
+    uint64_t structureHash = 0, contentHash = 0;  // as the header stores them (recomputed only when verified)
+    GridSummary summary;
+    bool verified = false;         // every checksum, cell invariant, hash and the summary checked against the cells
+    uint64_t bytesChecked = 0;     // section bytes whose checksums were checked
+    std::shared_ptr<const Grid> grid;  // the whole grid, from verifyGridFile only
+};
+
+// Header, META and summary without reading CELLS or LAYER data: what open checks (sectioned_file.h:
+// header, table, placement, padding, block checksum table) plus META's checksum and its fields. Cells and
+// values are NOT verified (verified = false). A 1.0/1.1 file stores no summary: it is then read and
+// validated whole, as readGrid does (verified = true). Throws hc::Error naming the file and byte offset.
+GridFileInfo readGridInfo(const std::string& path);
+
+// Everything readGrid checks (every block checksum, every cell invariant, both hashes) and, from 1.2 on,
+// that the stored summary matches the cells; returns the summary computed from the cells and the grid.
+GridFileInfo verifyGridFile(const std::string& path);
 
 }  // namespace hc
