@@ -62,11 +62,14 @@ constexpr double kTargetRaysPerS = 1920.0 * 1080.0 / (kTargetRaycastMs / 1e3);  
 constexpr double kTargetGlFrameMs = 8.0;  // GL backend on a GPU (issue 5): a whole 1920 x 1080 frame
 
 constexpr int kMaxLevels = 24;        // cells-per-level slots sent back from a child
-// The memory guard before building lists: cells sampled for their estimated size, and what a render holds per cell
-// beside the lists and the grid (the Scene's per-cell arrays and the frame's buffers, measured as peak RSS - grid RSS
-// - list bytes: 47-52 B a cell at 1-7.5 M cells), rounded up.
+// The memory guard before building lists: cells sampled for their estimated size, and what a render holds beside
+// the grid and the lists: per cell (the Scene's arrays) and per cascade texel and pixel (the frame's buffers).
+// Measured as peak RSS - grid RSS - list bytes of two scenes (Petzenkirchen 1.84 M cells: 240 MB, Marchfeld 7.53 M:
+// 386 MB, 1920x1080, 3 x 1024^2; hc-bench --scenarios Petzenkirchen,Marchfeld --repeat 1 --json), solved for the
+// two parts (26 B a cell, 193 MB for 5.2 M texels and pixels = 37 B each) and rounded up.
 constexpr size_t kListsEstimateSample = 20000;
-constexpr double kRenderBytesPerCellBesideLists = 64;
+constexpr double kRenderBytesPerCellBesideLists = 32;
+constexpr double kRenderBytesPerTexelOrPixel = 40;
 
 // ---------------- one scenario, in a child ----------------
 
@@ -148,7 +151,10 @@ RunResult runScenario(const Scenario& sc, const Settings& set) {
 
         // Lists that would not fit are not built: the scenario reports its grid and skips the frames.
         r.listsEstimateBytes = hc::scenes::estimateInfluenceLists(g, hc::influence::KernelParams{}, kListsEstimateSample).bytes;
-        r.renderNeedBytes = r.listsEstimateBytes + uint64_t(kRenderBytesPerCellBesideLists * double(g.cellCount()));
+        const double texelsAndPixels = double(set.options.cascades) * double(set.options.texelsPerSide) * double(set.options.texelsPerSide) +
+                                       double(set.width) * double(set.height);
+        r.renderNeedBytes = r.listsEstimateBytes +
+                            uint64_t(kRenderBytesPerCellBesideLists * double(g.cellCount()) + kRenderBytesPerTexelOrPixel * texelsAndPixels);
         r.memAvailableBytes = hc::bench::memoryAvailableBytes();
         if (r.renderNeedBytes > r.memAvailableBytes) {
             r.renderSkipped = true;

@@ -7,12 +7,12 @@
 #   hc-influence WORKDIR/grid.hcg                 (writes WORKDIR/grid.hci)
 #   hc-probe WORKDIR/grid.hcg --xy X,Y            (the raster's centre; builds the cache itself if it is missing)
 #   hc-render WORKDIR/grid.hcg --size 1920x1080 --backend cpu   (one frame, the default overview camera)
-# and prints a markdown table, also written with the raw figures to WORKDIR/scale.csv (logs: WORKDIR/<tool>.log,
+# and prints markdown tables, also written with the raw figures to WORKDIR/scale.csv and WORKDIR/files.csv (logs: WORKDIR/<tool>.log,
 # WORKDIR/<tool>.time). A tool that fails (out of memory, killed, timed out) is a row saying so, with the last
 # line of its error output; the script goes on (hc-probe and hc-render then build the missing cache themselves,
 # as a user's would).
 #
-# The memory cap (HC_SCALE_CAP_MB, default 12000 = 12 GB, for every tool) is `ulimit -v`: an address-space limit,
+# The memory cap (HC_SCALE_CAP_MIB, default 12000 MiB, for every tool) is `ulimit -v`: an address-space limit,
 # not an RSS one, so file mappings and untouched reservations count against it too. That makes it strict (a tool
 # under it can never have more than the cap resident, so the machine's other users are safe) but it may refuse a
 # tool that maps a large file and touches little of it; the table's peak RSS is the figure to compare with the
@@ -30,7 +30,7 @@ usage() { echo "usage: $0 RASTER WORKDIR" >&2; exit 2; }
 raster=$1 work=$2
 here=$(cd "$(dirname "$0")/../.." && pwd)
 bin=${HC_BIN:-$here/build/bin}
-cap_mb=${HC_SCALE_CAP_MB:-12000}
+cap_mb=${HC_SCALE_CAP_MIB:-12000}
 timeout_s=${HC_SCALE_TIMEOUT_S:-1800}
 [[ -r $raster ]] || { echo "run.sh: error: $raster: cannot read" >&2; exit 1; }
 for t in hc-ingest hc-info hc-influence hc-probe hc-render; do
@@ -47,7 +47,7 @@ j = json.load(sys.stdin); g = j["geoTransform"]; w, h = j["size"]
 print(w, h, repr(g[0] + g[1] * w / 2 + g[2] * h / 2), repr(g[3] + g[4] * w / 2 + g[5] * h / 2))')
 
 csv=$work/scale.csv
-echo "raster_px,tool,exit,status,wall_s,peak_rss_mb,cap_mb,target_s,met,note" > "$csv"
+echo "raster_px,tool,exit,status,wall_s,peak_rss_mib,cap_mib,target_s,met,note" > "$csv"
 declare -a rows
 
 # measure NAME TARGET_S CMD...: one tool in its own capped process; appends a row.
@@ -75,7 +75,7 @@ measure() {
     [[ $status == ok ]] && awk -v w="$wall" -v t="$target" -v r="$rss" 'BEGIN { exit !(w <= t && r <= 4096) }' && met=yes
     echo "${width}x${height},$name,$code,$status,$wall,$rss,$cap_mb,$target,$met,$note" >> "$csv"
     rows+=("| $name | $status | $wall | $target | $rss | $met | $note |")
-    echo "[$(date +%T)] $name: $status, ${wall} s, ${rss} MB" >&2
+    echo "[$(date +%T)] $name: $status, ${wall} s, ${rss} MiB" >&2
 }
 
 measure hc-ingest 180 "$bin/hc-ingest" "$raster" -o "$grid"
@@ -91,16 +91,16 @@ size_of() { [[ -f $1 ]] && stat -c %s "$1" || echo ""; }
 hcg=$(size_of "$grid") hci=$(size_of "$cache") tif=$(size_of "$raster")
 per_cell() { [[ -n $1 && -n $cells && $cells -gt 0 ]] && awk -v b="$1" -v c="$cells" 'BEGIN { printf "%.1f", b / c }' || echo "-"; }
 {
-    echo "files,grid.hcg,$hcg,$(per_cell "$hcg")"
-    echo "files,grid.hci,$hci,$(per_cell "$hci")"
-    echo "files,cells,$cells,"
-} >> "$csv"
+    echo "raster_px,file,bytes,cells,bytes_per_cell"
+    echo "${width}x${height},grid.hcg,$hcg,$cells,$(per_cell "$hcg")"
+    echo "${width}x${height},grid.hci,$hci,$cells,$(per_cell "$hci")"
+} > "$work/files.csv"
 
 echo
 echo "raster $(basename "$raster"): ${width} x ${height} px ($(awk -v n=$((width * height)) 'BEGIN { printf "%.1f", n / 1e6 }') M), $tif bytes;" \
-     "grid: ${cells:-?} cells; cap ${cap_mb} MB (ulimit -v) per tool; $(nproc) cores; load $(cut -d' ' -f1 /proc/loadavg)"
+     "grid: ${cells:-?} cells; cap ${cap_mb} MiB (ulimit -v) per tool; $(nproc) cores; load $(cut -d' ' -f1 /proc/loadavg)"
 echo
-echo "| tool | status | wall s | target s | peak RSS MB | met (time and <= 4096 MB) | error |"
+echo "| tool | status | wall s | target s | peak RSS MiB | met (time and <= 4096 MiB) | error |"
 echo "|---|---|---:|---:|---:|---|---|"
 printf '%s\n' "${rows[@]}"
 echo
@@ -109,4 +109,4 @@ echo "|---|---:|---:|"
 echo "| grid.hcg | ${hcg:-absent} | $(per_cell "$hcg") |"
 echo "| grid.hci | ${hci:-absent} | $(per_cell "$hci") |"
 echo
-echo "rows written to $csv"
+echo "rows written to $csv and $work/files.csv"
