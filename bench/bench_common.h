@@ -1,14 +1,18 @@
-// bench/bench_common.h: what every benchmark program shares: the machine's load, a list option, and
+// bench/bench_common.h: what every benchmark program shares: the machine's load and free memory, a list option, and
 // running one measurement in a forked child so that its peak RSS (getrusage) is its own. Benchmarks format
 // with fmt::format and time with hc::Stopwatch.
 #pragma once
 
+#include <sys/resource.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cerrno>
 #include <csignal>
+#include <cstdint>
 #include <cstdio>
+#include <cstdlib>
 #include <cstring>
 #include <functional>
 #include <string>
@@ -29,6 +33,33 @@ inline std::string loadAverage() {
         std::fclose(f);
     }
     return one < 0 ? "unknown" : fmt::format("{:.2f}", one);
+}
+
+// Bytes this process could still allocate without pushing the machine into swap or the OOM killer: the kernel's
+// MemAvailable (/proc/meminfo), or less where an address-space limit (ulimit -v) leaves less above the
+// process's current virtual size. 0 if /proc cannot be read.
+inline uint64_t memoryAvailableBytes() {
+    auto fieldKb = [](const char* path, const char* key) -> uint64_t {
+        FILE* f = std::fopen(path, "r");
+        if (!f) return 0;
+        char line[256];
+        uint64_t kb = 0;
+        const size_t keyLength = std::strlen(key);
+        while (std::fgets(line, sizeof line, f))
+            if (std::strncmp(line, key, keyLength) == 0) {
+                kb = std::strtoull(line + keyLength, nullptr, 10);
+                break;
+            }
+        std::fclose(f);
+        return kb;
+    };
+    uint64_t available = fieldKb("/proc/meminfo", "MemAvailable:") * 1024;
+    rlimit limit{};
+    if (getrlimit(RLIMIT_AS, &limit) == 0 && limit.rlim_cur != RLIM_INFINITY) {
+        const uint64_t used = fieldKb("/proc/self/status", "VmSize:") * 1024;
+        available = std::min<uint64_t>(available, limit.rlim_cur > used ? limit.rlim_cur - used : 0);
+    }
+    return available;
 }
 
 // "a,b,c" -> {"a", "b", "c"}; an empty entry is an error naming `what`.

@@ -2,12 +2,16 @@
 //
 // The scenes are the report's four flood simulations as synthetic stand-ins with the same extents, cell sizes
 // and cell counts, generated deterministically by hc_scenes (bench/scenes/include/heightcast/scenes/scenes.h
-// says how: terrain, water, the calibrated quadtree, the camera); --scale divides every cell count, and the
-// actual count is printed beside the target (the table's cell sizes show where the finest size was raised).
+// says how: terrain, water, the calibrated quadtree, the camera); --scale divides every cell count (below 1: more
+// cells than the report's), --cells asks every scenario for the same count, and the actual count is printed beside
+// the target (the table's cell sizes show where the finest size was raised or lowered).
 // Each scenario then runs in its own forked child (so getrusage's peak RSS is that scenario's alone, and
 // its memory is returned before the next): generate the grid, build the influence lists (sigma 1, R 3.5;
 // timed), and render --repeat frames (default 3) at 1920 x 1080 with three 1024^2 cascades from the scene's
-// fixed oblique camera over the flood (hc::scenes::floodCamera). Stage times are the best over the repeats;
+// fixed oblique camera over the flood (hc::scenes::floodCamera). Before building the lists the child estimates
+// their size (hc::scenes::estimateInfluenceLists) plus what a render holds beside them; if that exceeds the memory
+// available (MemAvailable, or what ulimit -v leaves), it skips the lists and the frames and the tables say so, rather
+// than being killed for memory (today's lists take ~220 B a cell: 22 GB at 100 M cells). Stage times are the best over the repeats;
 // Gaussians/s = the cascades' kernel evaluations / approximation time; rays/s = pixels / ray casting time.
 // Targets on this 2-core machine: approximation >= 2 G Gaussians/s; ray casting of 1920 x 1080 within 250 ms
 // (>= 8.29 M rays/s at other sizes).
@@ -58,6 +62,14 @@ constexpr double kTargetRaysPerS = 1920.0 * 1080.0 / (kTargetRaycastMs / 1e3);  
 constexpr double kTargetGlFrameMs = 8.0;  // GL backend on a GPU (issue 5): a whole 1920 x 1080 frame
 
 constexpr int kMaxLevels = 24;        // cells-per-level slots sent back from a child
+// The memory guard before building lists: cells sampled for their estimated size, and what a render holds beside
+// the grid and the lists: per cell (the Scene's arrays) and per cascade texel and pixel (the frame's buffers).
+// Measured as peak RSS - grid RSS - list bytes of two scenes (Petzenkirchen 1.84 M cells: 240 MB, Marchfeld 7.53 M:
+// 386 MB, 1920x1080, 3 x 1024^2; hc-bench --scenarios Petzenkirchen,Marchfeld --repeat 1 --json), solved for the
+// two parts (26 B a cell, 193 MB for 5.2 M texels and pixels = 37 B each) and rounded up.
+constexpr size_t kListsEstimateSample = 20000;
+constexpr double kRenderBytesPerCellBesideLists = 32;
+constexpr double kRenderBytesPerTexelOrPixel = 40;
 
 // ---------------- one scenario, in a child ----------------
 
@@ -73,7 +85,11 @@ struct RunResult {
     uint64_t cellsPerLevel[kMaxLevels] = {};
     double thresholdM = 0, calibrationS = 0, generationS = 0;
     uint64_t sampleTiles = 0, tiles = 0;
-    bool finestRaised = false;
+    bool finestRaised = false, finestLowered = false;
+    double targetCells = 0;
+    // The guard before the lists: their estimated bytes, the render's estimated need, what was available.
+    uint64_t listsEstimateBytes = 0, renderNeedBytes = 0, memAvailableBytes = 0;
+    bool renderSkipped = false;  // the need exceeded what was available: no lists, no frames
     double listsMs = 0, listMean = 0;
     uint64_t listP99 = 0, listMax = 0, listBytes = 0;
     double camera[6] = {};  // x, y, z (world), yaw, pitch, fov
@@ -95,6 +111,7 @@ struct RunResult {
 
 struct Settings {
     double scale = 1;
+    double cells = 0;       // --cells: every scenario's target cell count (0: the report's count / scale)
     int width = 1920, height = 1080, repeat = 3;
     hc::render::RenderOptions options;
     std::string imagesDir;
@@ -112,7 +129,8 @@ RunResult runScenario(const Scenario& sc, const Settings& set) {
         r.baselineRss = hc::currentRssBytes();
         say("generating the grid ...");
         hc::Stopwatch clock;
-        hc::scenes::Generated gen = hc::scenes::generate(sc, set.scale, set.options.threads);
+        r.targetCells = set.cells > 0 ? set.cells : hc::scenes::targetCells(sc, set.scale);
+        hc::scenes::Generated gen = hc::scenes::generateCells(sc, r.targetCells, set.options.threads);
         r.generationS = clock.lap();
         const Grid& g = gen.grid;
         if (std::string why = g.validate(); !why.empty()) throw hc::Error("generated grid is invalid: " + why);
@@ -130,6 +148,21 @@ RunResult runScenario(const Scenario& sc, const Settings& set) {
         r.sampleTiles = gen.sampleTiles;
         r.tiles = gen.tiles;
         r.finestRaised = gen.finestRaised;
+        r.finestLowered = gen.finestLowered;
+
+        // Lists that would not fit are not built: the scenario reports its grid and skips the frames.
+        r.listsEstimateBytes = hc::scenes::estimateInfluenceLists(g, hc::influence::KernelParams{}, kListsEstimateSample).bytes;
+        const double texelsAndPixels = double(set.options.cascades) * double(set.options.texelsPerSide) * double(set.options.texelsPerSide) +
+                                       double(set.width) * double(set.height);
+        r.renderNeedBytes = r.listsEstimateBytes +
+                            uint64_t(kRenderBytesPerCellBesideLists * double(g.cellCount()) + kRenderBytesPerTexelOrPixel * texelsAndPixels);
+        r.memAvailableBytes = hc::bench::memoryAvailableBytes();
+        if (r.renderNeedBytes > r.memAvailableBytes) {
+            r.renderSkipped = true;
+            r.peakRss = hc::peakRssBytes();
+            say("");
+            return;
+        }
 
         say("building influence lists ...");
         clock.restart();
@@ -270,7 +303,7 @@ void writeJson(const std::vector<const Scenario*>& scs, const std::vector<RunRes
         o["rays_per_s"] = sig6(raysPerS(r));
         o["peak_rss_mb"] = fixed1(mb(r.peakRss));
         o["scale"] = set.scale;
-        o["target_cells"] = static_cast<int64_t>(std::nearbyint(sc.reportCellsM * 1e6 / set.scale));  // ties to even, as the tables
+        o["target_cells"] = static_cast<int64_t>(std::nearbyint(r.targetCells));  // ties to even, as the tables
         o["extent_x_m"] = std::llround(r.extentXM);
         o["extent_y_m"] = std::llround(r.extentYM);
         o["finest_m"] = r.finestM;
@@ -356,7 +389,7 @@ void writeCsv(const std::vector<const Scenario*>& scs, const std::vector<RunResu
         const RunResult& r = rs[k];
         f << fmt::format("{},{:g},{:.0f},{:.0f},{:g},{:g},{:.0f},{},{},{:.6g},{:.3f},{:.3f},{:.3f},{:.3f},{},{},{},{},{:.3f},{:.3f},{:.3f},{:.3f},{:.3f},{:.3f},{},{:.6g},{},{:.6g},"
                  "{:.1f},{:.1f},{:.1f},{},{},{:.3f},{:.3f}\n",
-                 sc.name, set.scale, r.extentXM, r.extentYM, r.finestM, r.coarsestM, sc.reportCellsM * 1e6 / set.scale,
+                 sc.name, set.scale, r.extentXM, r.extentYM, r.finestM, r.coarsestM, r.targetCells,
                  r.cells, r.wetCells, r.thresholdM, r.generationS, r.listsMs, r.listMean,
                  mb(r.listBytes), r.width, r.height, set.options.cascades, set.options.texelsPerSide, r.fittingMs, r.approximationMs,
                  r.mipmapMs, r.raycastMs, r.shadingMs, r.totalMs, r.gaussians, gaussiansPerS(r),
@@ -381,8 +414,12 @@ int main(int argc, char** argv) {
                           "(sigma 1, R 3.5), render --repeat frames from a fixed oblique camera over the flood; it prints the best\n"
                           "stage times beside the report's GTX 1080 times, Gaussians/s, rays/s and peak RSS, then checks the\n"
                           "targets (approximation >= 2 G Gaussians/s; ray casting of 1920x1080 within 250 ms). MB = 10^6 bytes.");
-        p.option("--scale", "F", "divide every scenario's cell count by F >= 1 (a weaker refinement threshold; the finest size\n"
-                 "      doubles only where the forced wet-edge and bank cells alone exceed the count) (default 1)", set.scale);
+        p.option("--scale", "F", "divide every scenario's cell count by F > 0; below 1 asks for more cells than the report's\n"
+                 "      (the refinement threshold follows; the finest size doubles where the forced wet-edge and bank cells alone\n"
+                 "      exceed the count, and halves where the domain holds fewer than 1.5 x the count at it) (default 1)", set.scale);
+        p.option("--cells", "N", "every scenario's target cell count instead (e.g. 1e8; scenarios whose influence lists and\n"
+                 "      frame would not fit in the memory available are generated but not rendered, and say so)\n"
+                 "      (default: the report's count / --scale)", set.cells);
         p.option("--scenarios", "LIST", "comma-separated subset, in the order given (default Marchfeld,Petzenkirchen,Wachau,Florence)", scenarios);
         p.option("--size", "WxH", "image size in pixels (default 1920x1080)", size);
         p.option("--cascades", "K", "cascades per frame, 1..4 (default 3)", set.options.cascades);
@@ -402,7 +439,10 @@ int main(int argc, char** argv) {
         p.option("--plot", "OUT.svg", "also draw each scenario's best stage times as stacked bars with the targets, SVG\n"
                  "      (default: none)", plot);
         if (!p.parse(argc, argv)) return 0;
-        if (!(set.scale >= 1)) throw hc::Error("--scale " + fmt::format("{:g}", set.scale) + ": must be at least 1");
+        if (!(set.scale > 0) || !std::isfinite(set.scale)) throw hc::Error("--scale " + fmt::format("{:g}", set.scale) + ": must be a number > 0");
+        if (!(set.cells >= 0) || !std::isfinite(set.cells) || (set.cells > 0 && set.cells < 1000) || set.cells >= 4e9)
+            throw hc::Error("--cells " + fmt::format("{:g}", set.cells) + ": must be a count in 1000 .. 4e9 (a grid holds fewer than 2^32 cells)");
+        if (set.cells > 0 && set.scale != 1) throw hc::Error("--cells and --scale: give one of them");
         if (set.repeat < 1) throw hc::Error("--repeat " + std::to_string(set.repeat) + ": must be at least 1");
         set.backend = hc::cli::parseBackend(backendText);
         if (set.backend == hc::cli::Backend::Auto) throw hc::Error("--backend auto: a benchmark names its backend, cpu or gl");
@@ -434,8 +474,9 @@ int main(int argc, char** argv) {
         set.interactive = isatty(STDERR_FILENO);
         const unsigned threads = hc::resolveThreads(set.options.threads);
 
-        std::printf("hc-bench: %u worker thread%s (hardware threads: %u), scale %g, %dx%d, %d cascade%s of %d^2 texels, best of %d\n",
-                    threads, threads == 1 ? "" : "s", std::thread::hardware_concurrency(), set.scale, set.width, set.height,
+        const std::string sizeText = set.cells > 0 ? fmt::format("{:g} cells each", set.cells) : fmt::format("scale {:g}", set.scale);
+        std::printf("hc-bench: %u worker thread%s (hardware threads: %u), %s, %dx%d, %d cascade%s of %d^2 texels, best of %d\n",
+                    threads, threads == 1 ? "" : "s", std::thread::hardware_concurrency(), sizeText.c_str(), set.width, set.height,
                     set.options.cascades, set.options.cascades == 1 ? "" : "s", set.options.texelsPerSide, set.repeat);
         std::printf("load average (1 min) at start: %s\n", loadAverage().c_str());
         const hc::Stopwatch wall;
@@ -453,7 +494,7 @@ int main(int argc, char** argv) {
                     "cells", "diff %", "T m", "wet %", "calib s", "build s", "lists ms", "mean", "p99", "max", "lists MB");
         for (size_t k = 0; k < results.size(); ++k) {
             const RunResult& r = results[k];
-            const double target = chosen[k]->reportCellsM * 1e6 / set.scale;
+            const double target = r.targetCells;
             std::printf("%-14s %13s %10s %10.0f %10llu %+7.1f %8.3g %6.1f %7.1f %7.1f %9.1f %6.1f %5llu %5llu %8.1f\n", chosen[k]->name,
                         extentText(r).c_str(), sizesText(r).c_str(), target, (unsigned long long)r.cells, (double(r.cells) / target - 1) * 100,
                         r.thresholdM, 100.0 * double(r.wetCells) / double(r.cells), r.calibrationS, r.generationS - r.calibrationS,
@@ -467,7 +508,28 @@ int main(int argc, char** argv) {
             for (int l = 0; l <= levels && l < kMaxLevels; ++l)
                 counts += fmt::format("{}{:g} m: {}", l ? ", " : "", r.finestM * double(1 << l), r.cellsPerLevel[l]);
             std::printf("%-14s cells per size: %s%s\n", chosen[k]->name, counts.c_str(),
-                        r.finestRaised ? " (finest size raised: the forced cells alone exceeded the scaled count)" : "");
+                        r.finestRaised    ? " (finest size raised: the forced cells alone exceeded the scaled count)"
+                        : r.finestLowered ? " (finest size lowered: the domain held too few cells at the scenario's)"
+                                          : "");
+        }
+        // Scenarios whose lists and frame would not fit were generated only: said here, left out of what follows.
+        {
+            std::vector<const Scenario*> renderedScenarios;
+            std::vector<RunResult> rendered;
+            for (size_t k = 0; k < results.size(); ++k) {
+                const RunResult& r = results[k];
+                if (!r.renderSkipped) {
+                    renderedScenarios.push_back(chosen[k]);
+                    rendered.push_back(r);
+                    continue;
+                }
+                std::printf("%-14s RENDERING SKIPPED: influence lists ~%.1f GB (estimated) + frame ~%.1f GB need %.1f GB; %.1f GB available"
+                            " (MemAvailable, or what ulimit -v leaves); grid generated in %.1f s, peak RSS %.0f MB\n",
+                            chosen[k]->name, double(r.listsEstimateBytes) / 1e9, double(r.renderNeedBytes - r.listsEstimateBytes) / 1e9,
+                            double(r.renderNeedBytes) / 1e9, double(r.memAvailableBytes) / 1e9, r.generationS, mb(r.peakRss));
+            }
+            chosen = std::move(renderedScenarios);
+            results = std::move(rendered);
         }
 
         // ---- table 2: the renderer, in the report's form ----
@@ -564,7 +626,7 @@ int main(int argc, char** argv) {
             hc::bench::BarPlot bp;
             bp.title = std::string("hc-bench, ") + (gl ? "GL" : "CPU") + " backend: best stage times of a " + std::to_string(set.width) + "x" +
                        std::to_string(set.height) + " frame, " + std::to_string(set.options.cascades) + " cascades of " +
-                       std::to_string(set.options.texelsPerSide) + "^2" + (set.scale != 1 ? ", scale " + fmt::format("{:g}", set.scale) : "");
+                       std::to_string(set.options.texelsPerSide) + "^2" + (set.cells > 0 || set.scale != 1 ? ", " + sizeText : "");
             bp.xLabel = "milliseconds";
             // Ray casting first, so its bar ends where the ray casting target's line can meet it.
             bp.segmentNames = {"ray casting", "approximation", "mipmaps", "shading", "fitting"};

@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <array>
 #include <atomic>
+#include <cassert>
 #include <cmath>
 #include <numbers>
 #include <random>
@@ -18,6 +19,9 @@ namespace hc::scenes {
 namespace {
 
 constexpr int kTileLevelsAboveCoarsest = 3;  // generation tiles: 8 x 8 coarsest cells (768 m)
+// The finest size halves until the domain holds this many times the target at it: the calibration's bisection
+// needs its lower end (T = 1 mm, nearly every cell at the finest size) to give more cells than the target.
+constexpr double kFinestHeadroom = 1.5;
 
 const Scenario kScenarios[] = {
     {"Marchfeld", 82.9, 57.1, 3.0, 7.46, 15.1, 5.1, 580000, 5330000,
@@ -109,10 +113,13 @@ double Terrain::sum(const std::vector<Wave>& waves, double x, double y) {
 
 namespace {
 
-struct Leaf {
-    uint32_t ix, iy;
-    int level;
-    float z, depth;
+// Where a tile's cells go: straight into the grid's arrays from index `at` on (each tile's range is known
+// from an exact count first, so tiles fill the grid in parallel and nothing is held twice).
+struct CellSink {
+    uint64_t* codes;
+    float* z;
+    float* depth;
+    size_t at;
 };
 
 // Top-down refinement of one scenario's domain (see scenes.h).
@@ -121,9 +128,9 @@ public:
     Refiner(const Terrain& t, double finestM, int maxLevel, uint32_t extentX, uint32_t extentY)
         : t_(t), f_(finestM), maxLevel_(maxLevel), ex_(extentX), ey_(extentY) {}
 
-    // Visits the tree under node (ix, iy, level) with threshold T; appends leaves when `out` is given,
+    // Visits the tree under node (ix, iy, level) with threshold T; writes the leaves when `out` is given,
     // and returns the leaf count. Stops early (returning what it has) once the count passes `cap`.
-    uint64_t run(uint32_t ix, uint32_t iy, int level, double T, std::vector<Leaf>* out, uint64_t cap) const {
+    uint64_t run(uint32_t ix, uint32_t iy, int level, double T, CellSink* out, uint64_t cap) const {
         std::array<Terrain::Sample, 9> s;
         const double size = f_ * double(uint64_t{1} << level);
         for (int b = 0; b < 3; ++b)
@@ -135,7 +142,7 @@ public:
 
 private:
     // s: the node's samples at its corners, edge midpoints and centre, row-major from the south-west.
-    void visit(uint32_t ix, uint32_t iy, int level, const std::array<Terrain::Sample, 9>& s, float T, std::vector<Leaf>* out,
+    void visit(uint32_t ix, uint32_t iy, int level, const std::array<Terrain::Sample, 9>& s, float T, CellSink* out,
                uint64_t& count, uint64_t cap) const {
         if (count > cap) return;
         const uint32_t span = uint32_t{1} << level;
@@ -154,7 +161,12 @@ private:
         }
         if (!split) {
             ++count;
-            if (out) out->push_back({ix, iy, level, s[4].z, s[4].depth});
+            if (out) {
+                out->codes[out->at] = hc::makeCellCode(hc::mortonEncode(ix, iy), level);
+                out->z[out->at] = s[4].z;
+                out->depth[out->at] = s[4].depth;
+                ++out->at;
+            }
             return;
         }
         // The 5 x 5 lattice of the four children's samples: the parent's at even positions.
@@ -189,12 +201,20 @@ uint64_t hash64(uint64_t x) {  // splitmix64's finaliser: a fixed, well-spread t
 
 }  // namespace
 
-Generated generate(const Scenario& sc, double scale, unsigned threads) {
+double targetCells(const Scenario& sc, double scale) { return sc.reportCellsM * 1e6 / scale; }
+
+Generated generate(const Scenario& sc, double scale, unsigned threads) { return generateCells(sc, targetCells(sc, scale), threads); }
+
+Generated generateCells(const Scenario& sc, double target, unsigned threads) {
     Generated gen;
     const double extentX = extentXM(sc), extentY = extentYM(sc);  // whole coarsest cells
     const Terrain terrain(sc);
-    const double target = sc.reportCellsM * 1e6 / scale;
     double finest = sc.finestM;
+    // More cells than the domain holds at the finest size (with headroom, see kFinestHeadroom): halve it.
+    while (extentX / finest * (extentY / finest) < kFinestHeadroom * target) {
+        finest /= 2;
+        gen.finestLowered = true;
+    }
     for (;;) {
         const int maxLevel = int(std::lround(std::log2(kCoarsestM / finest)));
         const int tileLevel = maxLevel + kTileLevelsAboveCoarsest;
@@ -213,24 +233,35 @@ Generated generate(const Scenario& sc, double scale, unsigned threads) {
         const double sampleScale = double(tiles.size()) / double(sample.size());
         const Refiner refiner(terrain, finest, maxLevel, ex, ey);
 
+        // A count over every tile keeps its cells per tile: at the final T they place each tile in the grid.
+        std::vector<uint64_t> perTile(tiles.size());
+        double perTileT = -1;  // the T perTile was counted at (complete, under no cap), or -1
         // Cells for threshold T over a list of tiles, scaled by `factor` (capped: past the cap is only "too many").
-        auto count = [&](double T, const std::vector<size_t>& which, double factor) {
-            const uint64_t cap = uint64_t(4 * target / factor) + 1000;
+        auto count = [&](double T, const std::vector<size_t>& which, double factor, uint64_t cap) {
+            const bool every = which.size() == tiles.size();
             std::atomic<uint64_t> total{0};
+            std::atomic<bool> capped{false};
             hc::parallelFor(which.size(), 1, threads, [&](size_t b, size_t e, unsigned) {
                 for (size_t k = b; k < e; ++k) {
-                    if (total.load(std::memory_order_relaxed) > cap) return;
+                    if (total.load(std::memory_order_relaxed) > cap) {
+                        capped = true;
+                        return;
+                    }
                     const auto& tl = tiles[which[k]];
-                    total += refiner.run(tl[0] << tileLevel, tl[1] << tileLevel, tileLevel, T, nullptr, cap);
+                    const uint64_t n = refiner.run(tl[0] << tileLevel, tl[1] << tileLevel, tileLevel, T, nullptr, cap);
+                    if (every) perTile[which[k]] = n;
+                    total += n;
                 }
             });
+            if (every) perTileT = capped || total.load() > cap ? -1 : T;
             return double(total.load()) * factor;
         };
+        auto capFor = [&](double factor) { return uint64_t(4 * target / factor) + 1000; };
         std::vector<size_t> all(tiles.size());
         for (size_t k = 0; k < all.size(); ++k) all[k] = k;
         Stopwatch clock;
-        const double fewest = count(1e4, sample, sampleScale);
-        if (fewest > target && finest * 2 < kCoarsestM) {
+        const double fewest = count(1e4, sample, sampleScale, capFor(sampleScale));
+        if (fewest > target && finest * 2 < kCoarsestM && !gen.finestLowered) {
             finest *= 2;  // the forced cells alone are too many: coarser finest cells
             gen.finestRaised = true;
             continue;
@@ -243,26 +274,23 @@ Generated generate(const Scenario& sc, double scale, unsigned threads) {
             double lo = 1e-3, hi = 1e4;  // estimate(lo) >= target >= estimate(hi)
             for (int it = 0; it < 40; ++it) {
                 const double mid = std::sqrt(lo * hi);
-                const double n = count(mid, sample, sampleScale) * bias;
+                const double n = count(mid, sample, sampleScale, capFor(sampleScale)) * bias;
                 (n > target ? lo : hi) = mid;
                 gen.thresholdM = mid;
                 if (std::abs(n / target - 1) < 0.01 || hi / lo < 1.001) break;
             }
             if (sample.size() == all.size()) break;  // the sample is every tile: exact already
-            const double full = count(gen.thresholdM, all, 1.0);
+            const double full = count(gen.thresholdM, all, 1.0, capFor(1.0));
             if (std::abs(full / target - 1) < 0.03) break;
             bias *= full / target;
         }
+        // The exact count per tile at the final T, unless the calibration's last full count was that one.
+        if (perTileT != gen.thresholdM) count(gen.thresholdM, all, 1.0, UINT64_MAX);
         gen.calibrationS = clock.lap();
         gen.sampleTiles = sample.size();
         gen.tiles = tiles.size();
 
-        // The grid: every tile in parallel into its own list, then appended in order.
-        std::vector<std::vector<Leaf>> leaves(tiles.size());
-        hc::parallelFor(tiles.size(), 1, threads, [&](size_t b, size_t e, unsigned) {
-            for (size_t k = b; k < e; ++k)
-                refiner.run(tiles[k][0] << tileLevel, tiles[k][1] << tileLevel, tileLevel, gen.thresholdM, &leaves[k], UINT64_MAX);
-        });
+        // The grid: sized once, each tile written at its own offset, in parallel (16 bytes a cell in all).
         Grid& g = gen.grid;
         g.originWorldX = sc.originX;
         g.originWorldY = sc.originY;
@@ -272,20 +300,43 @@ Generated generate(const Scenario& sc, double scale, unsigned threads) {
         g.maxLevel = maxLevel;
         g.layers.push_back({"water_depth", "m"});
         g.values.emplace_back();
-        size_t total = 0;
-        for (const auto& l : leaves) total += l.size();
-        g.codes.reserve(total);
-        for (auto& v : g.values) v.reserve(total);
-        for (auto& l : leaves) {
-            for (const Leaf& c : l) {
-                const float values[2] = {c.z, c.depth};
-                g.appendCell(c.ix, c.iy, c.level, values);
+        std::vector<size_t> firstCell(tiles.size() + 1, 0);
+        for (size_t k = 0; k < tiles.size(); ++k) firstCell[k + 1] = firstCell[k] + perTile[k];
+        g.codes.resize(firstCell.back());
+        for (auto& v : g.values) v.resize(firstCell.back());
+        hc::parallelFor(tiles.size(), 1, threads, [&](size_t b, size_t e, unsigned) {
+            for (size_t k = b; k < e; ++k) {
+                CellSink sink{g.codes.data(), g.values[0].data(), g.values[1].data(), firstCell[k]};
+                refiner.run(tiles[k][0] << tileLevel, tiles[k][1] << tileLevel, tileLevel, gen.thresholdM, &sink, UINT64_MAX);
+                assert(sink.at == firstCell[k + 1]);  // the same T visits the same tree
             }
-            std::vector<Leaf>().swap(l);  // free as we go
-        }
+        });
         gen.buildS = clock.seconds();
         return gen;
     }
+}
+
+// ---------------- the lists' size ----------------
+
+ListsEstimate estimateInfluenceLists(const Grid& g, const influence::KernelParams& params, size_t sampleCells) {
+    ListsEstimate est;
+    const size_t n = g.cellCount();
+    if (n == 0) return est;
+    const size_t stride = std::max<size_t>(1, n / std::max<size_t>(1, sampleCells));
+    uint64_t entries = 0, sampled = 0;
+    std::vector<uint32_t> met;
+    for (size_t i = stride / 2; i < n; i += stride, ++sampled) {
+        double x, y;
+        g.cellCenterLocal(i, x, y);
+        met.clear();
+        // The kernel is zero on its disk's rim, and R sigma = 3.5 cell sizes puts rims exactly on the edges of
+        // cells of the same size: a disk only touching a square must not count, so the radius is a hair shorter.
+        g.cellsInDisk(x, y, params.radiusM(g.cellSizeM(i)) * (1 - 1e-9), met);
+        entries += met.size();
+    }
+    est.meanLength = double(entries) / double(sampled);
+    est.bytes = uint64_t(8.0 * double(n + 1) + 4.0 * est.meanLength * double(n));
+    return est;
 }
 
 // ---------------- the camera ----------------

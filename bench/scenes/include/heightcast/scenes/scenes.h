@@ -21,9 +21,13 @@
 //             centre. T is calibrated per scenario by bisection, counting the cells of a fixed sample of 1/8 of
 //             the 768 m tiles (all tiles of a small domain); one count over every tile then measures the sample's
 //             bias (the river crosses few sample tiles) and the bisection repeats with it (at most 3 rounds), so
-//             the cell count lands within a few % of the report's count divided by `scale`. If even T = infinity
+//             the cell count lands within a few % of the target (the report's count divided by `scale`, or a
+//             count asked for). If even T = infinity
 //             gives too many cells (the forced wet-edge and bank cells alone exceed the target: a large scale),
-//             the finest size doubles until it fits (Generated::finestRaised).
+//             the finest size doubles until it fits (Generated::finestRaised); if the domain holds fewer than
+//             1.5 times the count at the finest size (a count above the report's), it halves until it does
+//             (Generated::finestLowered). The grid is sized once from an exact count per tile and every tile
+//             writes its cells in place: generating holds 16 bytes a cell (code + two floats) and little else.
 //   camera    a fixed oblique view a user would pick over the flood: 1.5 km above the river, 10 % of the way
 //             downstream, looking 4.1 km along it (where the centre ray meets the valley floor) at pitch -20
 //             degrees, 50 degree vertical field of view.
@@ -36,6 +40,7 @@
 #include <vector>
 
 #include "heightcast/grid/grid.h"
+#include "heightcast/influence/kernel.h"
 #include "heightcast/render/camera.h"
 
 namespace hc::scenes {
@@ -107,11 +112,26 @@ struct Generated {
     double calibrationS = 0, buildS = 0;  // wall time finding T, and building the grid
     uint64_t sampleTiles = 0, tiles = 0;
     bool finestRaised = false; // the finest size was doubled (see the top of this file)
+    bool finestLowered = false;// the finest size was halved (the same)
 };
 
-// The scenario's grid with about reportCellsM * 1e6 / scale cells (scale >= 1), on `threads` workers
-// (0 = all cores).
+// The cell count a scale asks for: the report's count / scale (scale > 0; below 1 is more than the report's).
+double targetCells(const Scenario& sc, double scale);
+// The scenario's grid with about `targetCells` cells (> 0), on `threads` workers (0 = all cores).
+Generated generateCells(const Scenario& sc, double targetCells, unsigned threads);
+// generateCells(sc, targetCells(sc, scale), threads).
 Generated generate(const Scenario& sc, double scale, unsigned threads);
+
+// The influence lists' size for grid `g` (sigma and R from `params`), estimated before building them, from
+// the influencing side: cell i's disk (radius R sigma c_i about its centre) meets the squares of the cells whose
+// lists hold i, so the sum of list lengths is the sum over cells of the cells their disks meet; that is counted
+// for `sampleCells` cells at a fixed stride (Grid::cellsInDisk) and scaled to every cell. Bytes as
+// InfluenceLists::Stats counts them: 8 per offset (cells + 1) and 4 per entry.
+struct ListsEstimate {
+    double meanLength = 0;  // entries per list
+    uint64_t bytes = 0;
+};
+ListsEstimate estimateInfluenceLists(const Grid& g, const influence::KernelParams& params, size_t sampleCells);
 
 // The fixed oblique camera over the scenario's flood (see the top of this file), for an image of
 // width x height pixels; `g` is the scenario's generated grid (its origin places the camera in the world).

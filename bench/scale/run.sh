@@ -1,0 +1,112 @@
+#!/usr/bin/env bash
+# bench/scale/run.sh RASTER WORKDIR: the issue-13 scale benchmark. Runs the toolkit's tools on one raster, each in
+# its own process (a cold start: nothing shared but the OS page cache) under an address-space cap and
+# /usr/bin/time -v, and records wall time, peak RSS, exit status and file sizes:
+#   hc-ingest RASTER -o WORKDIR/grid.hcg          (defaults: tolerance 0.25 m, finest = pixel, coarsest <= 96 m)
+#   hc-info WORKDIR/grid.hcg --json
+#   hc-influence WORKDIR/grid.hcg                 (writes WORKDIR/grid.hci)
+#   hc-probe WORKDIR/grid.hcg --xy X,Y            (the raster's centre; builds the cache itself if it is missing)
+#   hc-render WORKDIR/grid.hcg --size 1920x1080 --backend cpu   (one frame, the default overview camera)
+# and prints markdown tables, also written with the raw figures to WORKDIR/scale.csv and WORKDIR/files.csv (logs: WORKDIR/<tool>.log,
+# WORKDIR/<tool>.time). A tool that fails (out of memory, killed, timed out) is a row saying so, with the last
+# line of its error output; the script goes on (hc-probe and hc-render then build the missing cache themselves,
+# as a user's would).
+#
+# The memory cap (HC_SCALE_CAP_MIB, default 12000 MiB, for every tool) is `ulimit -v`: an address-space limit,
+# not an RSS one, so file mappings and untouched reservations count against it too. That makes it strict (a tool
+# under it can never have more than the cap resident, so the machine's other users are safe) but it may refuse a
+# tool that maps a large file and touches little of it; the table's peak RSS is the figure to compare with the
+# 4 GB target. A cgroup memory limit would cap RSS instead but needs systemd or cgroup delegation, which this
+# machine's shared setup does not give. HC_SCALE_TIMEOUT_S (default 1800) stops a tool that runs too long.
+# HC_BIN (default build/bin) is where the tools are.
+#
+# Targets (issue 13, on the 2-core / 24 GB machine): hc-ingest <= 180 s, hc-influence <= 300 s, hc-render one
+# frame from a cold start <= 5 s, hc-probe of one point and hc-info <= 1 s each, every tool <= 4 GB peak,
+# every file <= 40 B per cell.
+set -uo pipefail
+
+usage() { echo "usage: $0 RASTER WORKDIR" >&2; exit 2; }
+[[ $# -eq 2 ]] || usage
+raster=$1 work=$2
+here=$(cd "$(dirname "$0")/../.." && pwd)
+bin=${HC_BIN:-$here/build/bin}
+cap_mb=${HC_SCALE_CAP_MIB:-12000}
+timeout_s=${HC_SCALE_TIMEOUT_S:-1800}
+[[ -r $raster ]] || { echo "run.sh: error: $raster: cannot read" >&2; exit 1; }
+for t in hc-ingest hc-info hc-influence hc-probe hc-render; do
+    [[ -x $bin/$t ]] || { echo "run.sh: error: $bin/$t: not built (cmake --build build --target $t)" >&2; exit 1; }
+done
+mkdir -p "$work"
+grid=$work/grid.hcg cache=$work/grid.hci
+rm -f "$grid" "$cache" "$work/frame.png"
+
+# The raster's size and centre (the probe point).
+read -r width height cx cy < <(gdalinfo -json "$raster" | python3 -c '
+import json, sys
+j = json.load(sys.stdin); g = j["geoTransform"]; w, h = j["size"]
+print(w, h, repr(g[0] + g[1] * w / 2 + g[2] * h / 2), repr(g[3] + g[4] * w / 2 + g[5] * h / 2))')
+
+csv=$work/scale.csv
+echo "raster_px,tool,exit,status,wall_s,peak_rss_mib,cap_mib,target_s,met,note" > "$csv"
+declare -a rows
+
+# measure NAME TARGET_S CMD...: one tool in its own capped process; appends a row.
+measure() {
+    local name=$1 target=$2
+    shift 2
+    local log=$work/$name.log tm=$work/$name.time
+    echo "[$(date +%T)] $name: $*" >&2
+    (ulimit -v $((cap_mb * 1024)) && exec /usr/bin/time -v -o "$tm" timeout -k 10 "$timeout_s" "$@") > "$log" 2>&1
+    local rc=$?
+    local wall rss code sig status note met
+    wall=$(awk -F': ' '/Elapsed \(wall clock\)/ { n = split($2, p, ":"); s = 0; for (i = 1; i <= n; ++i) s = s * 60 + p[i]; printf "%.2f", s }' "$tm")
+    rss=$(awk -F': ' '/Maximum resident set size/ { printf "%.0f", $2 / 1024 }' "$tm")
+    code=$(awk -F': ' '/Exit status/ { print $2 }' "$tm")
+    sig=$(sed -n 's/.*terminated by signal \([0-9]*\).*/\1/p' "$tm")
+    [[ -n $code ]] || code=$rc
+    if [[ -n $sig ]]; then status="killed by signal $sig"
+    elif [[ $code -eq 124 ]]; then status="timed out after ${timeout_s} s"
+    elif [[ $code -ge 128 ]]; then status="killed by signal $((code - 128))"
+    elif [[ $code -ne 0 ]]; then status="failed"
+    else status="ok"; fi
+    note=""
+    [[ $status != ok ]] && note=$(grep -v '^\s*$' "$log" | tail -n 1 | tr -d '\r' | tr ',|' ';/' | cut -c1-160)
+    met=no
+    [[ $status == ok ]] && awk -v w="$wall" -v t="$target" -v r="$rss" 'BEGIN { exit !(w <= t && r <= 4096) }' && met=yes
+    echo "${width}x${height},$name,$code,$status,$wall,$rss,$cap_mb,$target,$met,$note" >> "$csv"
+    rows+=("| $name | $status | $wall | $target | $rss | $met | $note |")
+    echo "[$(date +%T)] $name: $status, ${wall} s, ${rss} MiB" >&2
+}
+
+measure hc-ingest 180 "$bin/hc-ingest" "$raster" -o "$grid"
+measure hc-info 1 "$bin/hc-info" "$grid" --json
+measure hc-influence 300 "$bin/hc-influence" "$grid" -o "$cache"
+measure hc-probe 1 "$bin/hc-probe" "$grid" --cache "$cache" --xy "$cx,$cy"
+measure hc-render 5 "$bin/hc-render" "$grid" --cache "$cache" -o "$work/frame.png" --size 1920x1080 --backend cpu
+
+# Cells from hc-info's JSON (or, if hc-info failed, from hc-ingest's summary).
+cells=$(python3 -c 'import json, sys; print(json.load(open(sys.argv[1]))["cells"])' "$work/hc-info.log" 2>/dev/null ||
+        awk '$1 == "cells" { print $2; exit }' "$work/hc-ingest.log")
+size_of() { [[ -f $1 ]] && stat -c %s "$1" || echo ""; }
+hcg=$(size_of "$grid") hci=$(size_of "$cache") tif=$(size_of "$raster")
+per_cell() { [[ -n $1 && -n $cells && $cells -gt 0 ]] && awk -v b="$1" -v c="$cells" 'BEGIN { printf "%.1f", b / c }' || echo "-"; }
+{
+    echo "raster_px,file,bytes,cells,bytes_per_cell"
+    echo "${width}x${height},grid.hcg,$hcg,$cells,$(per_cell "$hcg")"
+    echo "${width}x${height},grid.hci,$hci,$cells,$(per_cell "$hci")"
+} > "$work/files.csv"
+
+echo
+echo "raster $(basename "$raster"): ${width} x ${height} px ($(awk -v n=$((width * height)) 'BEGIN { printf "%.1f", n / 1e6 }') M), $tif bytes;" \
+     "grid: ${cells:-?} cells; cap ${cap_mb} MiB (ulimit -v) per tool; $(nproc) cores; load $(cut -d' ' -f1 /proc/loadavg)"
+echo
+echo "| tool | status | wall s | target s | peak RSS MiB | met (time and <= 4096 MiB) | error |"
+echo "|---|---|---:|---:|---:|---|---|"
+printf '%s\n' "${rows[@]}"
+echo
+echo "| file | bytes | bytes per cell (target <= 40) |"
+echo "|---|---:|---:|"
+echo "| grid.hcg | ${hcg:-absent} | $(per_cell "$hcg") |"
+echo "| grid.hci | ${hci:-absent} | $(per_cell "$hci") |"
+echo
+echo "rows written to $csv and $work/files.csv"
