@@ -17,7 +17,10 @@
 // (>= 8.29 M rays/s at other sizes).
 // Why a program and not a test: the figures depend on the machine; tests never time anything.
 #include <algorithm>
+#include <algorithm>
+#include <array>
 #include <cmath>
+#include <optional>
 #include <cstdint>
 #include <cstdio>
 #include <filesystem>
@@ -42,6 +45,8 @@
 #include "heightcast/core/timer.h"
 #include "heightcast/grid/grid.h"
 #include "heightcast/influence/influence.h"
+#include "heightcast/influence/pyramid.h"
+#include "heightcast/influence/surface.h"
 #include "heightcast/render/gl/gl_renderer.h"
 #include "heightcast/render/image_io.h"
 #include "heightcast/render/renderer.h"
@@ -76,6 +81,8 @@ constexpr double kRenderBytesPerTexelOrPixel = 40;
 struct CascadeOut {
     double nearM, farM, texelM, approximationMs;
     uint64_t visibleTexels, gaussians;
+    int pyramidLevel;        // -1: no pyramid level fits the cascade (or none was built)
+    uint64_t pyramidTexels;  // texels copied from the pyramid
 };
 
 // What a scenario's child reports. Plain bytes through a pipe, so trivially copyable.
@@ -107,6 +114,12 @@ struct RunResult {
     // --fly-frames (CPU): means over frames 2..N of a camera flying forward, without and with a CascadeCache.
     double flyApproxFreshMs = 0, flyApproxCachedMs = 0, flyTotalFreshMs = 0, flyTotalCachedMs = 0, flyKept = 0;
     double flyCellsFresh = 0, flyCellsCached = 0;  // grid cells the approximation visited per frame (CascadeStats::cellsVisited)
+    // --pyramid: the surface pyramid's build time and bytes.
+    double pyramidMs = 0;
+    uint64_t pyramidBytes = 0;
+    // --accuracy: |hit height - exact surface height| over terrain hits of the last frame (walls and water aside) [m].
+    uint64_t accuracySamples = 0;
+    double accuracyMaxM = 0, accuracyRmsM = 0, accuracyP99M = 0;
 };
 
 struct Settings {
@@ -119,7 +132,34 @@ struct Settings {
     hc::cli::Backend backend = hc::cli::Backend::Cpu;  // Cpu or Gl (Auto is resolved in main)
     int flyFrames = 0;      // after the timed frames: a fly-through of this many frames, fresh and incremental (CPU)
     double flyStepM = 10;   // metres forward per fly-through frame
+    bool pyramid = false;   // build the surface pyramid and render from it (CPU: copies; texel sizes on its ladder)
+    bool accuracy = false;  // measure the last frame's hits against the exact surface
 };
+
+// The rendered error (--accuracy): every terrain hit of the frame (not a wall, no water over it) against the exact
+// surface at the hit's position, in parallel; the quantity the issue 13 targets keep "no worse than today's".
+void measureAccuracy(const hc::render::Frame& f, const Grid& g, const hc::influence::InfluenceLists& lists, unsigned threads, RunResult& r) {
+    const hc::influence::SurfaceEvaluator exact(g, lists);
+    std::vector<std::array<double, 2>> points;
+    std::vector<double> heights;
+    for (size_t i = 0; i < f.distanceM.size(); ++i) {
+        if (!std::isfinite(f.distanceM[i]) || f.wall[i] > 0 || f.waterDepthM[i] > 0) continue;
+        points.push_back({double(f.posX[i]), double(f.posY[i])});
+        heights.push_back(double(f.posZ[i]));
+    }
+    const auto want = exact.values(points, hc::influence::Layer::byName(g, "elevation"), threads);
+    std::vector<double> errors;
+    for (size_t k = 0; k < points.size(); ++k)
+        if (want[k]) errors.push_back(std::abs(heights[k] - *want[k]));
+    if (errors.empty()) return;
+    double sum2 = 0;
+    for (double e : errors) sum2 += e * e, r.accuracyMaxM = std::max(r.accuracyMaxM, e);
+    r.accuracySamples = errors.size();
+    r.accuracyRmsM = std::sqrt(sum2 / double(errors.size()));
+    auto p99 = errors.begin() + std::ptrdiff_t(errors.size() * 99 / 100);
+    std::nth_element(errors.begin(), p99, errors.end());
+    r.accuracyP99M = *p99;
+}
 
 RunResult runScenario(const Scenario& sc, const Settings& set) {
     return inChild<RunResult>(sc.name, [&](RunResult& r) {
@@ -174,7 +214,15 @@ RunResult runScenario(const Scenario& sc, const Settings& set) {
         r.listMax = st.maxLength;
         r.listBytes = st.bytes;
 
-        const hc::render::Scene scene(g, lists);
+        std::optional<hc::influence::SurfacePyramid> pyramid;
+        if (set.pyramid) {
+            say("building the surface pyramid ...");
+            clock.restart();
+            pyramid = hc::influence::buildSurfacePyramid(g, hc::influence::KernelParams{}, set.options.threads);
+            r.pyramidMs = clock.milliseconds();
+            r.pyramidBytes = pyramid->bytes();
+        }
+        const hc::render::Scene scene(g, lists, pyramid ? &*pyramid : nullptr);
         const hc::render::Camera cam = hc::scenes::floodCamera(sc, g, set.width, set.height);
         r.camera[0] = cam.xWorld, r.camera[1] = cam.yWorld, r.camera[2] = cam.zWorld;
         r.camera[3] = cam.yawDeg, r.camera[4] = cam.pitchDeg, r.camera[5] = cam.fovYDeg;
@@ -220,7 +268,9 @@ RunResult runScenario(const Scenario& sc, const Settings& set) {
                 for (size_t c = 0; c < tm.cascades.size(); ++c) {
                     const auto& cs = tm.cascades[c];
                     r.gaussians += cs.gaussians;
-                    if (c < 4) r.cascades[c] = {cs.nearM, cs.farM, cs.texelM, cs.approximationMs, cs.visibleTexels, cs.gaussians};
+                    if (c < 4)
+                        r.cascades[c] = {cs.nearM,          cs.farM,          cs.texelM,      cs.approximationMs,
+                                         cs.visibleTexels, cs.gaussians,     cs.pyramidLevel, cs.pyramidTexels};
                 }
             }
             r.rays = tm.rays;
@@ -259,6 +309,10 @@ RunResult runScenario(const Scenario& sc, const Settings& set) {
             r.readbackMs = tm.readbackMs;
         }
         for (size_t i = 0; i < frame.waterDepthM.size(); ++i) r.wetHits += frame.waterDepthM[i] > 0;
+        if (set.accuracy) {
+            say("measuring hits against the exact surface ...");
+            measureAccuracy(frame, g, lists, set.options.threads, r);
+        }
         if (!set.imagesDir.empty()) {
             const std::string path = (fs::path(set.imagesDir) / (std::string(sc.name) + ".png")).string();
             hc::render::writePng(frame, path);
@@ -347,7 +401,8 @@ void writeJson(const std::vector<const Scenario*>& scs, const std::vector<RunRes
         for (int c = 0; c < r.cascadeCount; ++c) {
             const CascadeOut& cs = r.cascades[c];
             cascades.push_back({{"near_m", ms(cs.nearM)}, {"far_m", ms(cs.farM)}, {"texel_m", sig6(cs.texelM)},
-                                {"visible_texels", cs.visibleTexels}, {"gaussians", cs.gaussians}, {"approximation_ms", ms(cs.approximationMs)}});
+                                {"visible_texels", cs.visibleTexels}, {"gaussians", cs.gaussians}, {"approximation_ms", ms(cs.approximationMs)},
+                                {"pyramid_level", cs.pyramidLevel}, {"pyramid_texels", cs.pyramidTexels}});
         }
         o["cascades"] = cascades;
         o["report_gtx1080_approximation_ms"] = sc.gpuApproxMs;
@@ -357,6 +412,16 @@ void writeJson(const std::vector<const Scenario*>& scs, const std::vector<RunRes
         o["approximation_target"] = approximationMet(r) ? "met" : "MISSED";
         o["raycast_target"] = raycastMet(r) ? "met" : "MISSED";
         if (r.image[0]) o["image"] = std::string(r.image);
+        if (set.pyramid) {
+            o["pyramid_ms"] = ms(r.pyramidMs);
+            o["pyramid_mb"] = ms(mb(r.pyramidBytes));
+        }
+        if (set.accuracy) {
+            o["accuracy_samples"] = r.accuracySamples;
+            o["accuracy_max_m"] = sig6(r.accuracyMaxM);
+            o["accuracy_p99_m"] = sig6(r.accuracyP99M);
+            o["accuracy_rms_m"] = sig6(r.accuracyRmsM);
+        }
         if (set.flyFrames > 1 && set.backend == hc::cli::Backend::Cpu) {
             o["fly_frames"] = set.flyFrames;
             o["fly_step_m"] = set.flyStepM;
@@ -436,6 +501,10 @@ int main(int argc, char** argv) {
         p.option("--fly-frames", "N", "CPU: after the timed frames, fly the camera forward for N frames, each evaluated afresh and\n"
                  "      then with incremental cascades (texels kept from the last frame); prints both (default 0: off)", set.flyFrames);
         p.option("--fly-step", "M", "metres the camera moves forward per fly-through frame (default 10)", set.flyStepM);
+        p.flag("--pyramid", "also build the surface pyramid (hc-influence's .hcp, DESIGN.md section 10) and render from it:\n"
+               "      texel sizes on its ladder (powers of two of the finest cell), texels it holds copied (CPU)", set.pyramid);
+        p.flag("--accuracy", "measure the last frame's terrain hits against the exact surface: max, p99 and RMS of\n"
+               "      |hit height - exact height| [m] (walls and water aside)", set.accuracy);
         p.option("--plot", "OUT.svg", "also draw each scenario's best stage times as stacked bars with the targets, SVG\n"
                  "      (default: none)", plot);
         if (!p.parse(argc, argv)) return 0;
@@ -562,9 +631,17 @@ int main(int argc, char** argv) {
             const RunResult& r = results[k];
             for (int c = 0; c < r.cascadeCount; ++c) {
                 const CascadeOut& cs = r.cascades[c];
-                std::printf("  %-14s %d  %8.0f..%-8.0f %8.3g %9llu %11llu %8.1f\n", chosen[k]->name, c, cs.nearM, cs.farM, cs.texelM,
+                std::printf("  %-14s %d  %8.0f..%-8.0f %8.3g %9llu %11llu %8.1f", chosen[k]->name, c, cs.nearM, cs.farM, cs.texelM,
                             (unsigned long long)cs.visibleTexels, (unsigned long long)cs.gaussians, cs.approximationMs);
+                if (cs.pyramidLevel >= 0) std::printf("   %llu copied from pyramid level %d", (unsigned long long)cs.pyramidTexels, cs.pyramidLevel);
+                std::printf("\n");
             }
+            if (set.pyramid)
+                std::printf("  %-14s    surface pyramid built in %.1f s (not part of a frame), %.1f MB = %.1f bytes per cell\n", chosen[k]->name,
+                            r.pyramidMs / 1e3, mb(r.pyramidBytes), double(r.pyramidBytes) / double(r.cells));
+            if (set.accuracy)
+                std::printf("  %-14s    rendered error (terrain hits vs exact surface, %llu hits): max %.3g m, p99 %.3g m, RMS %.3g m\n",
+                            chosen[k]->name, (unsigned long long)r.accuracySamples, r.accuracyMaxM, r.accuracyP99M, r.accuracyRmsM);
             std::printf("  %-14s    hits %.1f %% of pixels, water %.1f %%; camera %.0f, %.0f, %.0f yaw %.1f\n", chosen[k]->name,
                         100.0 * double(r.hits) / double(r.rays), 100.0 * double(r.wetHits) / double(r.rays), r.camera[0], r.camera[1],
                         r.camera[2], r.camera[3]);
