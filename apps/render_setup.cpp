@@ -32,8 +32,10 @@ void RenderSetup::addRenderOptions(Parser& p) {
     p.flag("--no-legend", "leave the colour bar out", noLegend);
     p.option("--cache", "C.hci", "influence cache (default: the grid's path with .hci; built if missing or stale)", cachePath);
     p.option("--pyramid", "P.hcp", "surface pyramid (hc-influence) to copy texels from (default: the grid's path with .hcp, used if\n"
-             "valid; cascade texel sizes then double per step instead of 2^(1/8))", pyramidPath);
+             "valid; cascade texel sizes are then its spacings, powers of two of the finest cell)", pyramidPath);
     p.flag("--no-pyramid", "sum every texel from the kernels, even with a pyramid beside the grid", noPyramid);
+    p.flag("--pyramid-coarse", "with a pyramid: texels up to 2x coarser than without one (N a side: faster, less accurate)\n"
+           "instead of up to 2x finer (up to 2N a side: as accurate as without a pyramid, or more)", options.pyramidCoarseTexels);
     p.option("--sigma", "S", "kernel width in cell sizes (default 1.0)", params.sigma);
     p.option("--truncation", "R", "kernel cut-off in sigmas (default 3.5)", params.truncation);
 }

@@ -503,6 +503,8 @@ int main(int argc, char** argv) {
         p.option("--fly-step", "M", "metres the camera moves forward per fly-through frame (default 10)", set.flyStepM);
         p.flag("--pyramid", "also build the surface pyramid (hc-influence's .hcp, DESIGN.md section 10) and render from it:\n"
                "      texel sizes on its ladder (powers of two of the finest cell), texels it holds copied (CPU)", set.pyramid);
+        p.flag("--pyramid-coarse", "with --pyramid: texels up to 2x coarser than without it (N a side) instead of up to\n"
+               "      2x finer (up to 2N a side)", set.options.pyramidCoarseTexels);
         p.flag("--accuracy", "measure the last frame's terrain hits against the exact surface: max, p99 and RMS of\n"
                "      |hit height - exact height| [m] (walls and water aside)", set.accuracy);
         p.option("--plot", "OUT.svg", "also draw each scenario's best stage times as stacked bars with the targets, SVG\n"

@@ -247,6 +247,23 @@ TEST(Render, PyramidTexelsAreCopiesOfTheExactSurface) {
     const detail::FrameSetup setup = detail::setUpFrame(scene, c);
     ASSERT_EQ(setup.view.ladderStepsPerOctave, 1);
     const CascadeFit fit = fitCascades(setup.view, 3, 64);
+    // The ladder: texels never coarser than without a pyramid (more of them), or with coarserTexels never finer (N).
+    detail::FrameSetup plain = setup;
+    plain.view.ladderStepsPerOctave = 8;
+    const CascadeFit eighth = fitCascades(plain.view, 3, 64);
+    detail::FrameSetup coarse = setup;
+    coarse.view.coarserTexels = true;
+    const CascadeFit coarser = fitCascades(coarse.view, 3, 64);
+    ASSERT_EQ(fit.cascades.size(), eighth.cascades.size());
+    for (size_t k = 0; k < fit.cascades.size(); ++k) {
+        EXPECT_LE(fit.cascades[k].texelM, eighth.cascades[k].texelM);
+        EXPECT_GT(fit.cascades[k].texelM, eighth.cascades[k].texelM / 2);
+        EXPECT_GE(fit.cascades[k].n, 64);
+        EXPECT_LE(fit.cascades[k].n, 2 * 64);
+        EXPECT_GE(coarser.cascades[k].texelM, eighth.cascades[k].texelM);
+        EXPECT_LT(coarser.cascades[k].texelM, eighth.cascades[k].texelM * 2);
+        EXPECT_EQ(coarser.cascades[k].n, 64);
+    }
     const auto depthLayer = hc::influence::Layer::byName(w.grid, "water_depth");
     uint64_t copiedSeen = 0, copiedCounted = 0, summed = 0, wet = 0, ties = 0;
     for (const Cascade& k : fit.cascades) {
@@ -289,7 +306,9 @@ TEST(Render, PyramidTexelsAreCopiesOfTheExactSurface) {
             }
     }
     EXPECT_GT(copiedSeen, 2000u);
-    EXPECT_LT(ties, 10u);
+    // Ties are lattice points equidistant from wet and dry cells of one size along straight shores of the flat lake: a
+    // few per thousand wet texels (22 in 4664 with the finer texels), never a large share.
+    EXPECT_LT(ties, wet / 100);
     EXPECT_GE(copiedCounted, copiedSeen * 9 / 10) << "copied texels must not be summed again";
     EXPECT_GT(wet, 20u) << "the flood at 2600 m is in view";
     std::printf("%llu texels copied from the pyramid, %llu summed, %llu wet, %llu on the wet share tie\n", (unsigned long long)copiedSeen,

@@ -106,7 +106,7 @@ std::vector<double> splitOffsets(double n, double f, int count, double finestCel
 
 // Places cascade c's texture over its polygon (texel size from the ladder, corner on the lattice) and finds
 // its visible texels.
-void placeTexture(Cascade& c, int texelsPerSide, double finestCellM, int stepsPerOctave) {
+void placeTexture(Cascade& c, int texelsPerSide, double finestCellM, int stepsPerOctave, bool coarser) {
     double bx0 = HUGE_VAL, by0 = HUGE_VAL, bx1 = -HUGE_VAL, by1 = -HUGE_VAL;
     for (const glm::dvec2& p : c.polygon) {
         bx0 = std::min(bx0, p.x);
@@ -114,8 +114,17 @@ void placeTexture(Cascade& c, int texelsPerSide, double finestCellM, int stepsPe
         bx1 = std::max(bx1, p.x);
         by1 = std::max(by1, p.y);
     }
+    const double extent = std::max(bx1 - bx0, by1 - by0);
     c.n = texelsPerSide;
-    c.texelM = ladderTexelSize(std::max(bx1 - bx0, by1 - by0), texelsPerSide, finestCellM, stepsPerOctave);
+    c.texelM = ladderTexelSize(extent, texelsPerSide, finestCellM);
+    if (stepsPerOctave == 1) {
+        // The pyramid's spacings: the largest power of two of the finest cell not above the 8-step size (never
+        // coarser texels than without a pyramid), with as many texels as the extent then needs (up to 2N - 3); or
+        // the smallest not below it, which N texels cover.
+        const double t = std::log2(c.texelM / finestCellM);
+        c.texelM = finestCellM * std::exp2(coarser ? std::ceil(t - 1e-9) : std::floor(t + 1e-9));
+        if (!coarser) c.n = int(std::ceil(extent / c.texelM)) + 3;
+    }
     // Corner on the lattice, one texel outside the box so every patch of the box is whole.
     c.x0 = (std::floor(bx0 / c.texelM) - 1) * c.texelM;
     c.y0 = (std::floor(by0 / c.texelM) - 1) * c.texelM;
@@ -161,14 +170,13 @@ std::vector<glm::dvec2> convexHull(std::vector<glm::dvec2> p) {
     return h;
 }
 
-double ladderTexelSize(double extentM, int texelsPerSide, double finestCellM, int stepsPerOctave) {
-    // Smallest s = finest * 2^(q/k) with (N - 1) s >= extent + 2 s (room to snap the corner to the
-    // lattice): with k = 8 steps per octave at most 9 % of the texture is lost to the ladder's steps.
-    const double k = stepsPerOctave;
+double ladderTexelSize(double extentM, int texelsPerSide, double finestCellM) {
+    // Smallest s = finest * 2^(q/8) with (N - 1) s >= extent + 2 s (room to snap the corner to the
+    // lattice): at most 9 % of the texture is lost to the ladder's steps.
     const double need = extentM / (texelsPerSide - 3);
-    double q = std::ceil(k * std::log2(need / finestCellM) - 1e-9);
-    double s = finestCellM * std::exp2(q / k);
-    while ((texelsPerSide - 3) * s < extentM) s = finestCellM * std::exp2(++q / k);  // rounding guard
+    double q = std::ceil(8.0 * std::log2(need / finestCellM) - 1e-9);
+    double s = finestCellM * std::exp2(q / 8.0);
+    while ((texelsPerSide - 3) * s < extentM) s = finestCellM * std::exp2(++q / 8.0);  // rounding guard
     return s;
 }
 
@@ -198,7 +206,7 @@ CascadeFit fitCascades(const ViewVolume& v, int count, int texelsPerSide) {
         c.farWithOverlap = k + 1 < count ? c.splitFar + std::max(0.1 * width, 4 * v.finestCellM) : c.splitFar;
         const double lo = k == 0 ? -HUGE_VAL : c.splitNear;  // the first cascade takes everything nearer
         c.polygon = clipSlab(fit.hull, fit.dir, eyeOffset + lo, eyeOffset + c.farWithOverlap);
-        if (c.polygon.size() >= 3) placeTexture(c, texelsPerSide, v.finestCellM, v.ladderStepsPerOctave);
+        if (c.polygon.size() >= 3) placeTexture(c, texelsPerSide, v.finestCellM, v.ladderStepsPerOctave, v.coarserTexels);
         fit.cascades.push_back(std::move(c));
     }
     return fit;

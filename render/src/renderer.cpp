@@ -236,7 +236,9 @@ FrameSetup setUpFrame(const Scene& scene, const Camera& camera) {
 CascadeFit fitFrame(const Scene& scene, const Camera& camera, const FrameSetup& setup, const RenderOptions& options, Timings& timings) {
     const Stopwatch clock;
     // A camera inside the terrain sees nothing (raycast.cpp): no cascade to fit or fill.
-    const CascadeFit fit = cameraBelowTerrainM(scene, camera) > 0 ? CascadeFit{} : fitCascades(setup.view, options.cascades, options.texelsPerSide);
+    ViewVolume view = setup.view;
+    view.coarserTexels = options.pyramidCoarseTexels;
+    const CascadeFit fit = cameraBelowTerrainM(scene, camera) > 0 ? CascadeFit{} : fitCascades(view, options.cascades, options.texelsPerSide);
     timings.fittingMs = clock.milliseconds();
     timings.viewDirX = fit.dir.x;
     timings.viewDirY = fit.dir.y;

@@ -431,6 +431,7 @@ struct GlRenderer::Impl {
         const Stopwatch frameClock;
         timings = Timings{};
         setup = detail::setUpFrame(scene, camera);
+        setup.view.ladderStepsPerOctave = 8;  // this backend does not read the surface pyramid (yet): its textures are N^2
         const CascadeFit fit = detail::fitFrame(scene, camera, setup, options, timings);  // stage 1, on the CPU
         gpu::FrameBlock block{};
         uploadFrame(block, fit, camera, options, timings);

@@ -7,8 +7,8 @@
 // Each cascade's slab of the hull, its far side widened by an overlap for blending, is fitted into
 // a square texture of N x N texels.
 //
-// Stable fitting: texel sizes come from a fixed ladder s = finest * 2^(q/8) (2^q with a surface pyramid,
-// ViewVolume::ladderStepsPerOctave) and the texture's
+// Stable fitting: texel sizes come from a fixed ladder s = finest * 2^(q/8) (2^q with a surface pyramid, with
+// up to 2N texels a side: ViewVolume::ladderStepsPerOctave) and the texture's
 // corner texel sits on the global lattice of multiples of s (local frame). A camera that moves a
 // little keeps s, and every texel centre stays on that lattice: sample positions never swim.
 #pragma once
@@ -31,8 +31,10 @@ struct ViewVolume {
     glm::dvec3 boxMin, boxMax;      // scene bounds, local [m]
     double finestCellM;
     // Texel sizes per octave of the ladder: 8 (s = finest * 2^(q/8), at most 9 % of a texture lost to the steps)
-    // or 1 (s = finest * 2^t: the surface pyramid's spacings, so texel centres are its samples; up to 2x coarser).
+    // or 1 (s = finest * 2^t, the surface pyramid's spacings, so texel centres are its samples: the largest such
+    // s not above the 8-step one, with more texels per side than asked, up to 2N, to cover the same extent).
     int ladderStepsPerOctave = 8;
+    bool coarserTexels = false;     // with 1 step per octave: the smallest power of two not below the 8-step size, N texels
 };
 
 struct Cascade {
@@ -64,11 +66,12 @@ struct CascadeFit {
     std::vector<Cascade> cascades;  // near to far
 };
 
-// count 1..4 cascades of texelsPerSide texels. An empty fit (no hull) means nothing is visible.
+// count 1..4 cascades of texelsPerSide texels (more with ladderStepsPerOctave 1). An empty fit (no hull) means
+// nothing is visible.
 CascadeFit fitCascades(const ViewVolume& view, int count, int texelsPerSide);
 
 // Exposed for tests: the ladder texel size for an extent, and the convex hull.
-double ladderTexelSize(double extentM, int texelsPerSide, double finestCellM, int stepsPerOctave = 8);
+double ladderTexelSize(double extentM, int texelsPerSide, double finestCellM);
 std::vector<glm::dvec2> convexHull(std::vector<glm::dvec2> points);
 
 }  // namespace hc::render

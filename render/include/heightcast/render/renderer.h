@@ -30,6 +30,11 @@ struct RenderOptions {
     bool cellOutlines = false;    // draw the adaptive cells' edges
     bool legend = true;           // colour bar of the water depth (or elevation) in the image
     double waterMinDepthM = 0.01; // water thinner than this is not drawn (smoothing spreads depth thinly)
+    // With a surface pyramid, texel sizes are its spacings (powers of two of the finest cell). false: the largest
+    // not above the size without a pyramid, with up to 2N texels a side (never coarser, so the rendered error is
+    // no worse); true: the smallest not below it, N texels (up to 2x coarser: faster, more texels copied, larger
+    // rendered error). BENCHMARKS.md measures both.
+    bool pyramidCoarseTexels = false;
     std::string validate() const; // "" or what is wrong
 };
 
