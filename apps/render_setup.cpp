@@ -81,18 +81,19 @@ void RenderSetup::finish() {
 }
 
 std::unique_ptr<LoadedScene> loadScene(const char* program, const std::string& gridPath, const RenderSetup& setup) {
+    // A pyramid asked for by name must exist (checked before any work); the default one is optional.
+    const std::string pyramidPath = setup.pyramidPath.empty() ? influence::defaultPyramidPath(gridPath) : setup.pyramidPath;
+    std::error_code ec;
+    const bool pyramidExists = std::filesystem::exists(pyramidPath, ec);
+    if (!setup.noPyramid && !setup.pyramidPath.empty() && !pyramidExists) throw Error(pyramidPath + ": no such file");
     auto s = std::make_unique<LoadedScene>(LoadedScene{readGrid(gridPath), {}, std::nullopt, nullptr});
     const std::string cachePath = setup.cachePath.empty() ? influence::defaultCachePath(gridPath) : setup.cachePath;
     std::string note;
     s->lists = influence::loadOrBuildCache(s->grid, setup.params, cachePath, setup.options.threads, true, note);
     std::fprintf(stderr, "%s: %s\n", program, note.c_str());
-    const std::string pyramidPath = setup.pyramidPath.empty() ? influence::defaultPyramidPath(gridPath) : setup.pyramidPath;
-    std::error_code ec;
     if (setup.noPyramid) {
         std::fprintf(stderr, "%s: --no-pyramid: every texel summed from the kernels\n", program);
-    } else if (!std::filesystem::exists(pyramidPath, ec)) {
-        // A pyramid asked for by name must exist; the default one is optional.
-        if (!setup.pyramidPath.empty()) throw Error(pyramidPath + ": no such file");
+    } else if (!pyramidExists) {
         std::fprintf(stderr, "%s: no surface pyramid at %s: every texel summed from the kernels (hc-influence writes one)\n", program,
                      pyramidPath.c_str());
     } else {
