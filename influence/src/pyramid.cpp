@@ -12,11 +12,11 @@
 #include <filesystem>
 #include <limits>
 
-#include "exp_neg.h"
 #include "heightcast/core/error.h"
 #include "heightcast/core/parallel.h"
 #include "heightcast/core/progress.h"
 #include "heightcast/influence/surface.h"
+#include "kernel_sums.h"
 #include "list_index.h"
 #include "pyramid_storage.h"
 
@@ -65,8 +65,7 @@ std::string defaultPyramidPath(const std::string& gridPath) {
 namespace {
 
 constexpr float kNaN = std::numeric_limits<float>::quiet_NaN();
-constexpr int kBlock = 4;      // samples per side of a candidate-gathering block
-constexpr size_t kLanes = 4;  // doubles per AVX2 register
+constexpr int kBlock = 4;  // samples per side of a candidate-gathering block
 
 // The tiles of each level: nodes of level t + log2(side) holding a cell of level <= t (any cell at the top).
 std::vector<std::vector<uint64_t>> tileKeys(const Grid& g, int top, const std::vector<int>& sides) {
@@ -86,8 +85,7 @@ std::vector<std::vector<uint64_t>> tileKeys(const Grid& g, int top, const std::v
 
 struct Workspace {
     detail::ListIndex::Scratch wide;
-    std::vector<double> ex, ey, a, r2, z, level, wet;  // one block's candidates
-    std::vector<uint8_t> keep;
+    detail::Gathered block;  // one block's candidates, in the local frame
 };
 
 // Fills the samples of one tile (all channels) of level t.
@@ -107,30 +105,22 @@ void buildTile(const Grid& g, const detail::ListIndex& index, const KernelParams
             const size_t m = w.wide.index.size();
             // Relative to one cell's value per block, and to one wet cell's level (as surface.cpp does per point:
             // any value of the neighbourhood keeps the digits; a constant field stays exactly constant).
-            double base = kNaN, baseLevel = kNaN;
-            for (size_t c = 0; c < m && std::isnan(base); ++c) base = z[w.wide.index[c]];
+            const double base = m ? double(z[w.wide.index[0]]) : kNaN;
+            double baseLevel = kNaN;
             for (size_t c = 0; c < m && depth && std::isnan(baseLevel); ++c)
                 if (const uint32_t i = w.wide.index[c]; depth[i] > 0) baseLevel = double(z[i]) + double(depth[i]);
-            // Padded to whole vectors of kLanes; padding never counts (r2 = -1: d2 < -1 is false).
-            const size_t padded = (m + kLanes - 1) / kLanes * kLanes;
-            for (auto* v : {&w.ex, &w.ey, &w.a, &w.z, &w.level, &w.wet}) v->assign(padded, 0.0);
-            w.r2.assign(padded, -1.0);
+            detail::Gathered& g0 = w.block;
+            g0.reset(m);
             for (size_t c = 0; c < m; ++c) {
                 const uint32_t i = w.wide.index[c];
-                const bool wet = depth && depth[i] > 0;
-                w.ex[c] = w.wide.cx[c], w.ey[c] = w.wide.cy[c], w.r2[c] = w.wide.r2[c];
-                w.a[c] = halfR2 / w.wide.r2[c];  // 1 / (2 sigma^2 c^2), as r2 = (R sigma c)^2
-                w.z[c] = double(z[i]) - base;
-                w.wet[c] = wet ? 1.0 : 0.0;
-                w.level[c] = wet ? double(z[i]) + double(depth[i]) - baseLevel : 0.0;
+                g0.ex[c] = w.wide.cx[c], g0.ey[c] = w.wide.cy[c], g0.r2[c] = w.wide.r2[c];
+                g0.a[c] = halfR2 / w.wide.r2[c];  // 1 / (2 sigma^2 c^2), as r2 = (R sigma c)^2
+                g0.rel0[c] = double(z[i]) - base;
+                if (depth && depth[i] > 0) {
+                    g0.wet[c] = 1.0;
+                    g0.rel1[c] = double(z[i]) + double(depth[i]) - baseLevel;
+                }
             }
-            const double* __restrict ex = w.ex.data();
-            const double* __restrict ey = w.ey.data();
-            const double* __restrict ca = w.a.data();
-            const double* __restrict cr2 = w.r2.data();
-            const double* __restrict cz = w.z.data();
-            const double* __restrict cl = w.level.data();
-            const double* __restrict cw = w.wet.data();
             for (int j = bj; j < bj1; ++j)
                 for (int i = bi; i < bi1; ++i) {
                     const double px = x0 + i * h, py = y0 + j * h;
@@ -139,27 +129,12 @@ void buildTile(const Grid& g, const detail::ListIndex& index, const KernelParams
                         for (int c = 0; c < channels; ++c) out[size_t(c) * plane + at] = kNaN;
                         continue;
                     }
-                    // Branch-free over the candidates, kLanes partial sums, so that the loop vectorises (surface.cpp's
-                    // batch path).
-                    double nz[kLanes] = {}, d[kLanes] = {}, nl[kLanes] = {}, dw[kLanes] = {};
-                    for (size_t c0 = 0; c0 < padded; c0 += kLanes)
-                        for (size_t l = 0; l < kLanes; ++l) {
-                            const size_t c = c0 + l;
-                            const double dx = px - ex[c], dy = py - ey[c];
-                            const double d2 = dx * dx + dy * dy;
-                            const double wt = std::max(detail::expNonPositive(-d2 * ca[c]) - tail, 0.0) * double(d2 < cr2[c]);
-                            nz[l] += wt * cz[c];
-                            d[l] += wt;
-                            nl[l] += wt * cl[c];
-                            dw[l] += wt * cw[c];
-                        }
-                    double num = 0, den = 0, numL = 0, denW = 0;
-                    for (size_t l = 0; l < kLanes; ++l) num += nz[l], den += d[l], numL += nl[l], denW += dw[l];
+                    const detail::KernelSums sum = detail::sumKernels(g0, px, py, tail);
                     // den >= the containing cell's own weight there (kernel.h): never zero.
-                    out[at] = float(base + num / den);
+                    out[at] = float(base + sum.num0 / sum.den);
                     if (channels == 3) {
-                        out[plane + at] = denW > 0 ? float(baseLevel + numL / denW) : kNaN;
-                        out[2 * plane + at] = float(denW / den);
+                        out[plane + at] = sum.denWet > 0 ? float(baseLevel + sum.num1 / sum.denWet) : kNaN;
+                        out[2 * plane + at] = float(sum.denWet / sum.den);
                     }
                 }
         }

@@ -9,7 +9,7 @@
 #include "heightcast/core/parallel.h"
 
 #include "heightcast/core/error.h"
-#include "exp_neg.h"
+#include "kernel_sums.h"
 
 namespace hc::influence {
 
@@ -141,21 +141,6 @@ std::optional<ValueGradient> SurfaceEvaluator::valueGradient(double x, double y,
     return evaluate(x, y, layer, true);
 }
 
-namespace {
-
-using detail::expNonPositive;
-
-constexpr size_t kLanes = 4;  // doubles per AVX2 register
-
-// One cell's influence list gathered once, relative to the cell's centre and values, for every point
-// of a batch that falls in that cell (structure of arrays, padded to kLanes with zero weights).
-struct Gathered {
-    std::vector<double> ex, ey, a, r2, rel0, rel1, wet;  // rel1, wet: the level relative to its base, 1 for a wet cell
-    size_t padded = 0;
-};
-
-}  // namespace
-
 std::vector<std::optional<double>> SurfaceEvaluator::values(std::span<const std::array<double, 2>> pts, const Layer& layer,
                                                             unsigned threads) const {
     std::vector<std::optional<double>> out(pts.size());
@@ -176,9 +161,9 @@ std::vector<std::optional<double>> SurfaceEvaluator::values(std::span<const std:
     const bool water = layer.kind != Layer::Cells;
     const float* v0 = grid_.values[water ? 0 : layer.index].data();
     const float* depth = water ? grid_.values[static_cast<size_t>(depthLayer_)].data() : nullptr;
-    std::vector<Gathered> scratch(workers);
+    std::vector<detail::Gathered> scratch(workers);
     parallelFor(order.size(), 4096, threads, [&](size_t b, size_t e, unsigned worker) {
-        Gathered& g = scratch[worker];
+        detail::Gathered& g = scratch[worker];
         // A chunk may start inside a run of points of one cell: that is fine, the run is gathered twice.
         for (size_t j = b; j < e;) {
             const uint32_t k = order[j].first;
@@ -188,9 +173,7 @@ std::vector<std::optional<double>> SurfaceEvaluator::values(std::span<const std:
             const double base0 = v0[k], base1 = water ? levelBase(k) : 0.0;
             const bool anyWet = water && !std::isnan(base1);
             const auto list = lists_.list(k);
-            g.padded = (list.size() + kLanes - 1) / kLanes * kLanes;
-            for (auto* a : {&g.ex, &g.ey, &g.a, &g.rel0, &g.rel1, &g.wet}) a->assign(g.padded, 0.0);
-            g.r2.assign(g.padded, -1.0);  // padding: d2 < -1 never holds
+            g.reset(list.size());
             for (size_t idx = 0; idx < list.size(); ++idx) {
                 const uint32_t i = list[idx];
                 g.ex[idx] = k_[i].cx - kk.cx;
@@ -206,30 +189,8 @@ std::vector<std::optional<double>> SurfaceEvaluator::values(std::span<const std:
             for (; j < runEnd; ++j) {
                 const uint32_t p = order[j].second;
                 const double px = pts[p][0] - kk.cx, py = pts[p][1] - kk.cy;
-                double num0[kLanes] = {}, num1[kLanes] = {}, den[kLanes] = {}, denWet[kLanes] = {};
-                const double* __restrict ex = g.ex.data();
-                const double* __restrict ey = g.ey.data();
-                const double* __restrict ca = g.a.data();
-                const double* __restrict cr2 = g.r2.data();
-                const double* __restrict r0 = g.rel0.data();
-                const double* __restrict r1 = g.rel1.data();
-                const double* __restrict wet = g.wet.data();
-                for (size_t base = 0; base < g.padded; base += kLanes)
-                    for (size_t l = 0; l < kLanes; ++l) {
-                        const size_t idx = base + l;
-                        const double dx = px - ex[idx], dy = py - ey[idx];
-                        const double d2 = dx * dx + dy * dy;
-                        // Beyond the radius the mask zeroes the weight (and expNonPositive clamps the
-                        // exponent, so nothing overflows there).
-                        const double w = std::max(expNonPositive(-d2 * ca[idx]) - tail_, 0.0) *
-                                         static_cast<double>(d2 < cr2[idx]);
-                        num0[l] += w * r0[idx];
-                        num1[l] += w * r1[idx];  // r1 is 0 for dry cells
-                        den[l] += w;
-                        denWet[l] += w * wet[idx];
-                    }
-                double n0 = 0, n1 = 0, d = 0, dw = 0;
-                for (size_t l = 0; l < kLanes; ++l) n0 += num0[l], n1 += num1[l], d += den[l], dw += denWet[l];
+                const detail::KernelSums sum = detail::sumKernels(g, px, py, tail_);
+                const double n0 = sum.num0, n1 = sum.num1, d = sum.den, dw = sum.denWet;
                 // d >= the cell's own weight at its farthest point (kernel.h): never zero here.
                 const double z = base0 + n0 / d;
                 if (!water) {
