@@ -44,6 +44,17 @@ std::optional<float> SurfacePyramid::sample(int t, uint64_t i, uint64_t j, Pyram
     return L.samples[(size_t(tile) * size_t(channels) + size_t(c)) * side * side + (j % side) * side + (i % side)];
 }
 
+SurfacePyramid::Cursor::Cursor(const SurfacePyramid& p, int t) : p_(p), t_(t), side_(size_t(p.levels[size_t(t)].tileSide)) {}
+
+const float* SurfacePyramid::Cursor::find(uint64_t i, uint64_t j) {
+    if (i / side_ != tileI_ || j / side_ != tileJ_) {
+        tileI_ = i / side_, tileJ_ = j / side_;
+        const long tile = p_.tileAt(t_, i, j);
+        tile_ = tile < 0 ? nullptr : &p_.levels[size_t(t_)].samples[size_t(tile) * size_t(p_.channels) * plane()];
+    }
+    return tile_ ? tile_ + (j % side_) * side_ + (i % side_) : nullptr;
+}
+
 uint64_t SurfacePyramid::sampleCount() const {
     uint64_t n = 0;
     for (const Level& L : levels) n += L.samples.size();
@@ -146,10 +157,11 @@ void measureParentErrors(const SurfacePyramid& p, std::vector<std::vector<float>
         const SurfacePyramid::Level& L = p.levels[size_t(t)];
         const size_t side = size_t(L.tileSide), plane = side * side;
         parallelFor(L.tileCount(), 16, threads, [&](size_t b, size_t e, unsigned) {
+            SurfacePyramid::Cursor parent(p, t + 1);  // a tile's parent samples lie in one parent tile (the far edges: its neighbours)
             for (size_t tile = b; tile < e; ++tile) {
                 const uint64_t i0 = mortonX(L.keys[tile]) >> t, j0 = mortonY(L.keys[tile]) >> t;
                 for (int c = 0; c < p.channels; ++c) {
-                    const auto ch = PyramidChannel(c);
+                    const size_t channel = size_t(c) * parent.plane();
                     float worst = 0;
                     const float* s = &L.samples[(tile * size_t(p.channels) + size_t(c)) * plane];
                     for (size_t j = 0; j < side; ++j)
@@ -158,12 +170,16 @@ void measureParentErrors(const SurfacePyramid& p, std::vector<std::vector<float>
                             // Parent lattice: (gi / 2, gj / 2), half-way where odd.
                             const uint64_t pi = gi / 2, pj = gj / 2;
                             const uint64_t pi1 = pi + (gi & 1), pj1 = pj + (gj & 1);
-                            const auto a = p.sample(t + 1, pi, pj, ch), bb = p.sample(t + 1, pi1, pj, ch), cc = p.sample(t + 1, pi, pj1, ch),
-                                       d = p.sample(t + 1, pi1, pj1, ch);
                             const float v = s[j * side + i];
-                            if (!a || !bb || !cc || !d || std::isnan(v)) continue;
-                            const double interp = 0.25 * (double(*a) + double(*bb) + double(*cc) + double(*d));
-                            if (std::isnan(interp)) continue;
+                            if (std::isnan(v)) continue;
+                            double interp = 0;
+                            bool held = true;
+                            for (const auto& [qi, qj] : {std::pair{pi, pj}, {pi1, pj}, {pi, pj1}, {pi1, pj1}}) {
+                                const float* q = parent.find(qi, qj);
+                                held = held && q;
+                                if (q) interp += 0.25 * double(q[channel]);
+                            }
+                            if (!held || std::isnan(interp)) continue;
                             worst = std::max(worst, float(std::abs(double(v) - interp)));
                         }
                     errors[size_t(t)][tile * size_t(p.channels) + size_t(c)] = worst;

@@ -105,28 +105,22 @@ uint64_t copyPyramidTexels(const Scene& scene, const Cascade& c, CascadeTextures
     const double t = std::round(std::log2(c.texelM / p->finestCellM));
     if (t < 0 || t > p->topLevel() || std::abs(p->spacingM(int(t)) - c.texelM) > 1e-9 * c.texelM) return 0;
     *level = int(t);
-    const influence::SurfacePyramid::Level& L = p->levels[size_t(t)];
-    const size_t side = size_t(L.tileSide), plane = side * side, channels = size_t(p->channels);
+    const size_t channels = size_t(p->channels);
     const double i0 = std::round(c.x0 / c.texelM), j0 = std::round(c.y0 / c.texelM);
     const float minDepth = float(waterMinDepthM);
     std::vector<uint64_t> copied(resolveThreads(threads), 0);
     parallelFor(todo.size(), 16, threads, [&](size_t b, size_t e, unsigned worker) {
+        influence::SurfacePyramid::Cursor samples(*p, int(t));  // neighbouring rows share tiles
+        const size_t plane = samples.plane();
         for (size_t j = b; j < e; ++j) {
             Todo& span = todo[j];
             const double gj = j0 + double(j);
-            long tile = -1;
-            uint64_t tileI = ~uint64_t{0}, tileJ = 0;
             // Copies texel i if the pyramid holds its sample; false if it does not.
             auto copy = [&](int i) {
                 const double gi = i0 + double(i);
                 if (gi < 0 || gj < 0) return false;
-                const uint64_t I = uint64_t(gi), J = uint64_t(gj);
-                if (I / side != tileI || J / side != tileJ) {
-                    tileI = I / side, tileJ = J / side;
-                    tile = p->tileAt(int(t), I, J);
-                }
-                if (tile < 0) return false;
-                const float* s = &L.samples[size_t(tile) * channels * plane + (J % side) * side + (I % side)];
+                const float* s = samples.find(uint64_t(gi), uint64_t(gj));
+                if (!s) return false;
                 const size_t at = j * size_t(c.n) + size_t(i);
                 if (std::isnan(s[0])) return true;  // outside every cell: no surface, as the kernel path leaves it
                 tex.terrain.h[at] = s[0];

@@ -77,6 +77,24 @@ public:
     uint64_t sampleCount() const;
     uint64_t bytes() const;
 
+    // Reads the samples of one level at lattice points near each other, remembering the tile of the last read:
+    // a read in that tile costs no search (tileAt is a binary search over the level's tiles). One per thread.
+    class Cursor {
+    public:
+        Cursor(const SurfacePyramid& p, int t);
+        // The elevation sample at lattice point (i, j), with channel c at [c * plane()], or nullptr where no tile
+        // of this level is stored there.
+        const float* find(uint64_t i, uint64_t j);
+        size_t plane() const { return side_ * side_; }
+
+    private:
+        const SurfacePyramid& p_;
+        int t_;
+        size_t side_;
+        uint64_t tileI_ = ~uint64_t{0}, tileJ_ = ~uint64_t{0};
+        const float* tile_ = nullptr;  // the remembered tile's first sample, nullptr if not stored
+    };
+
     // Owned storage (built) or a mapped file (read) behind the spans.
     struct Storage;
     std::shared_ptr<const Storage> storage;
