@@ -135,9 +135,14 @@ int main(int argc, char** argv) {
     return hc::cli::run("hc-render", [&] {
         RenderArgs a;
         if (!parseOptions(argc, argv, a)) return 0;
-        const hc::cli::BackendDecision decision = chooseBackend(a.backend);
+        hc::cli::BackendDecision decision = chooseBackend(a.backend);
         checkOutputs(a);
-        auto loaded = hc::cli::loadScene("hc-render", a.gridPath, a.setup);
+        // Without a cache the CPU backend reads the grid out of core; the GL one needs the grid and a cache in memory.
+        auto loaded = hc::cli::loadScene("hc-render", a.gridPath, a.setup, !decision.useGl);
+        if (loaded->scene->outOfCore() && decision.useGl && a.backend == hc::cli::Backend::Auto) {
+            decision.useGl = false;
+            decision.note = "--out-of-core: the GL backend needs the whole grid and an influence cache: rendering on the CPU";
+        }
         const hc::render::Camera camera = hc::cli::initialCamera(a.setup, *loaded->scene);
         refuseCameraBelowTerrain(*loaded->scene, camera);
         const Rendered rendered = renderImage(decision, *loaded->scene, camera, a.setup.options);

@@ -30,7 +30,11 @@ void RenderSetup::addRenderOptions(Parser& p) {
     p.option("--color", "MODE", "elevation (hypsometric terrain, water by depth) or water_depth (grey terrain) (default elevation)", color);
     p.flag("--cells", "overlay the outlines of the adaptive cells", cells);
     p.flag("--no-legend", "leave the colour bar out", noLegend);
-    p.option("--cache", "C.hci", "influence cache (default: the grid's path with .hci; built if missing or stale)", cachePath);
+    p.option("--cache", "C.hci", "influence cache: the grid is read whole with its lists (default: the grid's path with .hci when\n"
+             "that exists; rebuilt if stale)", cachePath);
+    p.flag("--out-of-core", "read the grid a region at a time, without lists (hc-render's default on the CPU backend when no\n"
+           "cache is beside the grid): memory follows the cascades, not the grid (105 M cells: 0.8 GB); CPU only", outOfCore);
+    p.exclusive({"--cache", "--out-of-core"});
     p.option("--pyramid", "P.hcp", "surface pyramid (hc-influence) to copy texels from (default: the grid's path with .hcp, used if\n"
              "valid; cascade texel sizes are then its spacings, powers of two of the finest cell)", pyramidPath);
     p.flag("--no-pyramid", "sum every texel from the kernels, even with a pyramid beside the grid", noPyramid);
@@ -80,17 +84,32 @@ void RenderSetup::finish() {
     if (camera) camera->validate();
 }
 
-std::unique_ptr<LoadedScene> loadScene(const char* program, const std::string& gridPath, const RenderSetup& setup) {
+std::unique_ptr<LoadedScene> loadScene(const char* program, const std::string& gridPath, const RenderSetup& setup,
+                                       bool outOfCoreWithoutCache) {
     // A pyramid asked for by name must exist (checked before any work); the default one is optional.
     const std::string pyramidPath = setup.pyramidPath.empty() ? influence::defaultPyramidPath(gridPath) : setup.pyramidPath;
     std::error_code ec;
     const bool pyramidExists = std::filesystem::exists(pyramidPath, ec);
     if (!setup.noPyramid && !setup.pyramidPath.empty() && !pyramidExists) throw Error(pyramidPath + ": no such file");
-    auto s = std::make_unique<LoadedScene>(LoadedScene{readGrid(gridPath), {}, std::nullopt, nullptr});
     const std::string cachePath = setup.cachePath.empty() ? influence::defaultCachePath(gridPath) : setup.cachePath;
-    std::string note;
-    s->lists = influence::loadOrBuildCache(s->grid, setup.params, cachePath, setup.options.threads, true, note);
-    std::fprintf(stderr, "%s: %s\n", program, note.c_str());
+    const bool outOfCore =
+        setup.outOfCore || (outOfCoreWithoutCache && setup.cachePath.empty() && !std::filesystem::exists(cachePath, ec));
+    auto s = std::make_unique<LoadedScene>();
+    if (outOfCore) {
+        s->file = std::make_unique<GridRegionReader>(gridPath);
+        if (setup.outOfCore)
+            std::fprintf(stderr, "%s: --out-of-core: the grid is read a region at a time, without an influence cache\n", program);
+        else
+            std::fprintf(stderr,
+                         "%s: no influence cache at %s: the grid is read a region at a time (out of core; hc-influence writes a cache,\n"
+                         "  --cache %s builds one here)\n",
+                         program, cachePath.c_str(), cachePath.c_str());
+    } else {
+        s->grid = readGrid(gridPath);
+        std::string note;
+        s->lists = influence::loadOrBuildCache(s->grid, setup.params, cachePath, setup.options.threads, true, note);
+        std::fprintf(stderr, "%s: %s\n", program, note.c_str());
+    }
     if (setup.noPyramid) {
         std::fprintf(stderr, "%s: --no-pyramid: every texel summed from the kernels\n", program);
     } else if (!pyramidExists) {
@@ -98,14 +117,17 @@ std::unique_ptr<LoadedScene> loadScene(const char* program, const std::string& g
                      pyramidPath.c_str());
     } else {
         try {
-            s->pyramid = influence::readSurfacePyramid(pyramidPath, s->grid, setup.params);
+            s->pyramid = s->file ? influence::readSurfacePyramid(pyramidPath, s->file->info(), setup.params)
+                                 : influence::readSurfacePyramid(pyramidPath, s->grid, setup.params);
             std::fprintf(stderr, "%s: using surface pyramid %s\n", program, pyramidPath.c_str());
         } catch (const Error& e) {
             if (!setup.pyramidPath.empty()) throw;
             std::fprintf(stderr, "%s: %s: not used, every texel summed from the kernels (hc-influence rebuilds it)\n", program, e.what());
         }
     }
-    s->scene = std::make_unique<render::Scene>(s->grid, s->lists, s->pyramid ? &*s->pyramid : nullptr);
+    const influence::SurfacePyramid* pyramid = s->pyramid ? &*s->pyramid : nullptr;
+    s->scene = s->file ? std::make_unique<render::Scene>(*s->file, setup.params, pyramid)
+                       : std::make_unique<render::Scene>(s->grid, s->lists, pyramid);
     return s;
 }
 

@@ -19,7 +19,7 @@ struct RenderSetup {
     std::string cachePath, pyramidPath, cameraText, lookAt, size, color = "elevation";
     render::RenderOptions options;
     influence::KernelParams params;
-    bool cells = false, noLegend = false, noPyramid = false;
+    bool cells = false, noLegend = false, noPyramid = false, outOfCore = false;
     double nearM = 0, farM = 0;                // --near, --far [m]; 0: from the scene
 
     // Set by finish():
@@ -29,8 +29,8 @@ struct RenderSetup {
     explicit RenderSetup(std::string defaultSize) : size(std::move(defaultSize)) {}
     // --camera, --look-at (exclusive with each other and with `alsoExclusive`, e.g. "--view"), --near, --far.
     void addCameraOptions(Parser& p, const std::string& alsoExclusive = "");
-    // --size, --cascades, --texels, --threads, --color, --cells, --no-legend, --cache, --pyramid, --no-pyramid,
-    // --sigma, --truncation.
+    // --size, --cascades, --texels, --threads, --color, --cells, --no-legend, --cache, --out-of-core, --pyramid,
+    // --no-pyramid, --sigma, --truncation.
     void addRenderOptions(Parser& p);
     // After Parser::parse: validates every option and the camera's numbers (before any expensive work).
     // Throws hc::Error naming the option.
@@ -40,19 +40,23 @@ struct RenderSetup {
 // "WxH" -> whole numbers in 1..16384; throws hc::Error naming --size.
 void parseSize(const std::string& text, int& width, int& height);
 
-// A grid, its influence lists (read from the cache, or built and written there) and the scene over them,
-// kept together: the scene refers to the other two.
+// A grid, its influence lists (read from the cache, or built and written there) and the scene over them, or (out
+// of core) the grid file read a region at a time, kept together: the scene refers to them.
 struct LoadedScene {
     Grid grid;
     influence::InfluenceLists lists;
+    std::unique_ptr<GridRegionReader> file;  // out of core; then grid and lists stay empty
     std::optional<influence::SurfacePyramid> pyramid;
     std::unique_ptr<render::Scene> scene;
 };
-// Reads the grid, loads or (re)builds the cache (default: the grid's path with .hci) saying why on stderr as
-// "PROGRAM: NOTE", reads the surface pyramid (default: the grid's path with .hcp) when there is a valid one
+// In memory (a cache named with --cache, one beside the grid, or none and not `outOfCoreWithoutCache`): reads the
+// grid, loads or (re)builds the cache saying why on stderr as "PROGRAM: NOTE". Out of core (--out-of-core, or no
+// cache beside the grid, none named and `outOfCoreWithoutCache`): opens the grid file for region reads
+// (render::Scene), saying so. Then reads the surface pyramid (default: the grid's path with .hcp) when there is a valid one
 // (saying which, or why none is used: missing, stale or damaged ones are not rebuilt here: hc-influence does),
 // and prepares the scene. Throws hc::Error.
-std::unique_ptr<LoadedScene> loadScene(const char* program, const std::string& gridPath, const RenderSetup& setup);
+std::unique_ptr<LoadedScene> loadScene(const char* program, const std::string& gridPath, const RenderSetup& setup,
+                                       bool outOfCoreWithoutCache = false);
 
 // The camera the options gave, or the overview framing the whole grid; of the given size, with --near/--far.
 render::Camera initialCamera(const RenderSetup& setup, const render::Scene& scene);

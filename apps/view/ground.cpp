@@ -6,11 +6,14 @@
 
 namespace hc::view {
 
-Ground::Ground(const cli::LoadedScene& loaded)
-    : loaded_(loaded), evaluator_(loaded.grid, loaded.lists), elevation_(influence::Layer::byName(loaded.grid, "elevation")) {}
+Ground::Ground(const cli::LoadedScene& loaded) : loaded_(loaded) {
+    if (!loaded.scene->outOfCore()) evaluator_.emplace(loaded.grid, loaded.lists);
+}
 
 std::optional<double> Ground::elevationAt(double xWorld, double yWorld) const {
-    return evaluator_.value(xWorld - loaded_.grid.originWorldX, yWorld - loaded_.grid.originWorldY, elevation_);
+    const Grid& g = loaded_.scene->grid();
+    const double x = xWorld - g.originWorldX, y = yWorld - g.originWorldY;
+    return evaluator_ ? evaluator_->value(x, y, elevation_) : loaded_.scene->terrainAt(x, y);
 }
 
 std::optional<double> Ground::heightAboveGround(const render::Camera& c) const {
@@ -28,7 +31,7 @@ double Ground::aboveHighestM(const render::Camera& c) const { return c.zWorld - 
 double Ground::speed(const render::Camera& c) const {
     auto h = heightAboveGround(c);
     const double height = h ? std::abs(*h) : aboveHighestM(c);
-    return std::max({0.5 * height, 4 * loaded_.grid.finestCellM, 1.0});
+    return std::max({0.5 * height, 4 * loaded_.scene->grid().finestCellM, 1.0});
 }
 
 std::array<double, 3> Ground::pickCentre(const render::Camera& c, double centreDistanceM) const {
@@ -39,7 +42,9 @@ std::array<double, 3> Ground::pickCentre(const render::Camera& c, double centreD
     const render::Scene& scene = *loaded_.scene;
     const double diag = std::hypot(scene.xMax - scene.xMin, scene.yMax - scene.yMin, scene.zMax - scene.zMin);
     const double reach = diag + std::hypot(c.zWorld - scene.zMin, 1.0) * 4;
-    const double step = std::max(reach / 2000, loaded_.grid.finestCellM * 0.5);
+    // Out of core each probe reads the cells around its point (about a millisecond): 200 steps, not 2000.
+    const double steps = loaded_.scene->outOfCore() ? 200 : 2000;
+    const double step = std::max(reach / steps, loaded_.scene->grid().finestCellM * 0.5);
     auto below = [&](double t) {
         const auto p = along(t);
         auto g = elevationAt(p[0], p[1]);
@@ -59,8 +64,8 @@ std::array<double, 3> Ground::pickCentre(const render::Camera& c, double centreD
         prevT = t;
     }
     // No hit: orbit around a point in front, at the distance of the scene's centre.
-    const double cx = loaded_.grid.originWorldX + 0.5 * (scene.xMin + scene.xMax);
-    const double cy = loaded_.grid.originWorldY + 0.5 * (scene.yMin + scene.yMax);
+    const double cx = scene.grid().originWorldX + 0.5 * (scene.xMin + scene.xMax);
+    const double cy = scene.grid().originWorldY + 0.5 * (scene.yMin + scene.yMax);
     return along(std::max(std::hypot(cx - c.xWorld, cy - c.yWorld), 1.0));
 }
 

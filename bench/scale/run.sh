@@ -4,13 +4,15 @@
 # /usr/bin/time -v, and records wall time, peak RSS, exit status and file sizes:
 #   hc-ingest RASTER -o WORKDIR/grid.hcg          (defaults: tolerance 0.25 m, finest = pixel, coarsest <= 96 m)
 #   hc-info WORKDIR/grid.hcg --json
-#   hc-influence WORKDIR/grid.hcg                 (writes WORKDIR/grid.hci)
-#   hc-probe WORKDIR/grid.hcg --xy X,Y            (the raster's centre; builds the cache itself if it is missing)
-#   hc-render WORKDIR/grid.hcg --size 1920x1080 --backend cpu   (one frame, the default overview camera)
+#   hc-influence WORKDIR/grid.hcg --no-lists      (writes the surface pyramid WORKDIR/grid.hcp; lists of 100 M cells
+#                                                 need ~22 GB and nothing below needs them)
+#   hc-probe WORKDIR/grid.hcg --xy X,Y            (the raster's centre; out of core: the cells around the point)
+#   hc-render WORKDIR/grid.hcg --size 1920x1080 --backend cpu   (one frame, the default overview camera; out of core,
+#                                                 texels from the pyramid)
 # and prints markdown tables, also written with the raw figures to WORKDIR/scale.csv and WORKDIR/files.csv (logs: WORKDIR/<tool>.log,
 # WORKDIR/<tool>.time). A tool that fails (out of memory, killed, timed out) is a row saying so, with the last
-# line of its error output; the script goes on (hc-probe and hc-render then build the missing cache themselves,
-# as a user's would).
+# line of its error output; the script goes on. HC_SCALE_COLD=1 (root only) drops the page cache before each tool,
+# so that every one starts from the disk.
 #
 # The memory cap (HC_SCALE_CAP_MIB, default 12000 MiB, for every tool) is `ulimit -v`: an address-space limit,
 # not an RSS one, so file mappings and untouched reservations count against it too. That makes it strict (a tool
@@ -37,8 +39,8 @@ for t in hc-ingest hc-info hc-influence hc-probe hc-render; do
     [[ -x $bin/$t ]] || { echo "run.sh: error: $bin/$t: not built (cmake --build build --target $t)" >&2; exit 1; }
 done
 mkdir -p "$work"
-grid=$work/grid.hcg cache=$work/grid.hci
-rm -f "$grid" "$cache" "$work/frame.png"
+grid=$work/grid.hcg cache=$work/grid.hci pyramid=$work/grid.hcp
+rm -f "$grid" "$cache" "$pyramid" "$work/frame.png"
 
 # The raster's size and centre (the probe point).
 read -r width height cx cy < <(gdalinfo -json "$raster" | python3 -c '
@@ -56,6 +58,7 @@ measure() {
     shift 2
     local log=$work/$name.log tm=$work/$name.time
     echo "[$(date +%T)] $name: $*" >&2
+    [[ ${HC_SCALE_COLD:-0} == 1 ]] && sync && echo 3 > /proc/sys/vm/drop_caches
     (ulimit -v $((cap_mb * 1024)) && exec /usr/bin/time -v -o "$tm" timeout -k 10 "$timeout_s" "$@") > "$log" 2>&1
     local rc=$?
     local wall rss code sig status note met
@@ -80,20 +83,20 @@ measure() {
 
 measure hc-ingest 180 "$bin/hc-ingest" "$raster" -o "$grid"
 measure hc-info 1 "$bin/hc-info" "$grid" --json
-measure hc-influence 300 "$bin/hc-influence" "$grid" -o "$cache"
-measure hc-probe 1 "$bin/hc-probe" "$grid" --cache "$cache" --xy "$cx,$cy"
-measure hc-render 5 "$bin/hc-render" "$grid" --cache "$cache" -o "$work/frame.png" --size 1920x1080 --backend cpu
+measure hc-influence 300 "$bin/hc-influence" "$grid" --no-lists -p "$pyramid"
+measure hc-probe 1 "$bin/hc-probe" "$grid" --xy "$cx,$cy"
+measure hc-render 5 "$bin/hc-render" "$grid" -o "$work/frame.png" --size 1920x1080 --backend cpu
 
 # Cells from hc-info's JSON (or, if hc-info failed, from hc-ingest's summary).
 cells=$(python3 -c 'import json, sys; print(json.load(open(sys.argv[1]))["cells"])' "$work/hc-info.log" 2>/dev/null ||
         awk '$1 == "cells" { print $2; exit }' "$work/hc-ingest.log")
 size_of() { [[ -f $1 ]] && stat -c %s "$1" || echo ""; }
-hcg=$(size_of "$grid") hci=$(size_of "$cache") tif=$(size_of "$raster")
+hcg=$(size_of "$grid") hcp=$(size_of "$pyramid") tif=$(size_of "$raster")
 per_cell() { [[ -n $1 && -n $cells && $cells -gt 0 ]] && awk -v b="$1" -v c="$cells" 'BEGIN { printf "%.1f", b / c }' || echo "-"; }
 {
     echo "raster_px,file,bytes,cells,bytes_per_cell"
     echo "${width}x${height},grid.hcg,$hcg,$cells,$(per_cell "$hcg")"
-    echo "${width}x${height},grid.hci,$hci,$cells,$(per_cell "$hci")"
+    echo "${width}x${height},grid.hcp,$hcp,$cells,$(per_cell "$hcp")"
 } > "$work/files.csv"
 
 echo
@@ -107,6 +110,7 @@ echo
 echo "| file | bytes | bytes per cell (target <= 40) |"
 echo "|---|---:|---:|"
 echo "| grid.hcg | ${hcg:-absent} | $(per_cell "$hcg") |"
-echo "| grid.hci | ${hci:-absent} | $(per_cell "$hci") |"
+echo "| grid.hcp | ${hcp:-absent} | $(per_cell "$hcp") |"
+[[ -n $hcg && -n $hcp ]] && echo "| all files | $((hcg + hcp)) | $(per_cell $((hcg + hcp))) |"
 echo
 echo "rows written to $csv and $work/files.csv"

@@ -6,6 +6,7 @@
 #include <sstream>
 
 #include "heightcast/core/checksum.h"
+#include "quadtree_walk.h"
 
 namespace hc {
 
@@ -35,7 +36,7 @@ void Grid::appendCell(uint32_t ix, uint32_t iy, int cellLevel, const float* laye
     for (size_t l = 0; l < layers.size(); ++l) values[l].push_back(layerValues[l]);
 }
 
-std::optional<uint32_t> Grid::locate(double xLocal, double yLocal) const {
+std::optional<uint64_t> Grid::finestKeyAt(double xLocal, double yLocal) const {
     double side = domainSizeM();
     // Written so that NaN fails the test too.
     if (!(xLocal >= 0 && yLocal >= 0 && xLocal < side && yLocal < side)) return std::nullopt;
@@ -47,8 +48,13 @@ std::optional<uint32_t> Grid::locate(double xLocal, double yLocal) const {
         if (i < limit && v >= static_cast<double>(i + 1) * finestCellM) ++i;
         return i;
     };
-    uint64_t ix = finest(xLocal), iy = finest(yLocal);
-    uint64_t key = mortonEncode(static_cast<uint32_t>(ix), static_cast<uint32_t>(iy));
+    return mortonEncode(static_cast<uint32_t>(finest(xLocal)), static_cast<uint32_t>(finest(yLocal)));
+}
+
+std::optional<uint32_t> Grid::locate(double xLocal, double yLocal) const {
+    const std::optional<uint64_t> at = finestKeyAt(xLocal, yLocal);
+    if (!at) return std::nullopt;
+    const uint64_t key = *at;
     // The last cell whose corner key is <= key is the only one that can contain it.
     auto it = std::upper_bound(codes.begin(), codes.end(), makeCellCode(key, (1 << kLevelBits) - 1));
     if (it == codes.begin()) return std::nullopt;
@@ -58,47 +64,18 @@ std::optional<uint32_t> Grid::locate(double xLocal, double yLocal) const {
     return static_cast<uint32_t>(it - codes.begin());
 }
 
-// Depth-first walk over the implicit quadtree. A node (level L, corner key k) owns exactly the
-// cells with keys in [k, k + 4^L): one binary search splits a node's run into its children's.
 template <typename Pred, typename Emit>
 void Grid::visitNodes(Pred&& nodeMeets, Emit&& emit, std::vector<uint32_t>& out) const {
-    struct Node {
-        uint64_t key;
-        int level;
-        size_t lo, hi;  // cell index range [lo, hi)
-    };
-    if (codes.empty()) return;
-    std::vector<Node> stack;
-    stack.push_back({0, rootLevel, 0, codes.size()});
-    while (!stack.empty()) {
-        Node n = stack.back();
-        stack.pop_back();
-        int meets = nodeMeets(squareOf(n.key, n.level));  // 0: disjoint, 1: partly, 2: node inside the query
-        if (meets == 0) continue;
-        if (meets == 2) {
-            for (size_t i = n.lo; i < n.hi; ++i) out.push_back(static_cast<uint32_t>(i));
-            continue;
-        }
-        if (n.hi - n.lo == 1 || n.level == 0 || codeLevel(codes[n.lo]) == n.level) {
-            // A single cell (or the leaf itself): test the cells directly.
-            for (size_t i = n.lo; i < n.hi; ++i) emit(i);
-            continue;
-        }
-        uint64_t quarter = mortonSpan(n.level - 1);
-        size_t bounds[5];
-        bounds[0] = n.lo;
-        bounds[4] = n.hi;
-        for (int q = 1; q < 4; ++q) {
-            uint64_t childCode = makeCellCode(n.key + quarter * static_cast<uint64_t>(q), 0);
-            bounds[q] = static_cast<size_t>(
-                std::lower_bound(codes.begin() + static_cast<std::ptrdiff_t>(bounds[q - 1]),
-                                 codes.begin() + static_cast<std::ptrdiff_t>(n.hi), childCode) -
-                codes.begin());
-        }
-        for (int q = 3; q >= 0; --q)  // pushed in reverse so children pop in Morton order
-            if (bounds[q] < bounds[q + 1])
-                stack.push_back({n.key + quarter * static_cast<uint64_t>(q), n.level - 1, bounds[q], bounds[q + 1]});
-    }
+    detail::walkQuadtree(
+        0, rootLevel, 0, codes.size(), [&](size_t i) { return codes[i]; },
+        [&](size_t lo, size_t hi, uint64_t code) {
+            return size_t(std::lower_bound(codes.begin() + std::ptrdiff_t(lo), codes.begin() + std::ptrdiff_t(hi), code) - codes.begin());
+        },
+        [&](uint64_t key, int lv) { return nodeMeets(squareOf(key, lv)); },
+        [&](size_t lo, size_t hi) {
+            for (size_t i = lo; i < hi; ++i) out.push_back(static_cast<uint32_t>(i));
+        },
+        emit);
 }
 
 Grid::Square Grid::squareOf(uint64_t key, int lv) const {

@@ -71,6 +71,15 @@ void writeSurfacePyramid(const SurfacePyramid& p, const std::string& path) {
 }
 
 SurfacePyramid readSurfacePyramid(const std::string& path, const Grid& grid, const KernelParams& params) {
+    return readSurfacePyramid(path, grid, grid.structureHash(), grid.contentHash(), params);
+}
+
+SurfacePyramid readSurfacePyramid(const std::string& path, const GridFileInfo& grid, const KernelParams& params) {
+    return readSurfacePyramid(path, grid.shape, grid.structureHash, grid.contentHash, params);
+}
+
+SurfacePyramid readSurfacePyramid(const std::string& path, const Grid& grid, uint64_t structureHash, uint64_t contentHash,
+                                  const KernelParams& params) {
     SectionedFileReader file(path, kFormat);
     const std::byte* h = file.header();
     for (size_t i : {off::reserved0, off::reserved0 + 1, off::reserved0 + 2, off::reserved0 + 3})
@@ -90,7 +99,7 @@ SurfacePyramid readSurfacePyramid(const std::string& path, const Grid& grid, con
     p.params.truncation = bytes::load<double>(h + off::truncation);
 
     // Whose pyramid is it? Say exactly what differs.
-    if (p.structureHash != grid.structureHash() || p.contentHash != grid.contentHash())
+    if (p.structureHash != structureHash || p.contentHash != contentHash)
         throw Error(path + ": stale or foreign surface pyramid: built for another grid (or other values on this grid's tree)");
     if (p.params.kernelId != params.kernelId || p.params.sigma != params.sigma || p.params.truncation != params.truncation)
         throw Error(path + ": surface pyramid built for sigma " + std::to_string(p.params.sigma) + ", R " +

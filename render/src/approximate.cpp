@@ -10,8 +10,10 @@
 #include <cstring>
 #include <limits>
 #include <optional>
+#include <unordered_map>
 
 #include "heightcast/core/parallel.h"
+#include "heightcast/influence/region.h"
 #include "heightcast/influence/surface.h"
 #include "textures.h"
 
@@ -94,11 +96,12 @@ std::vector<Todo> copyReusedTexels(const Cascade& c, const TexelReuse* reuse, Ca
 // Copies into tex the texels of `todo` whose centres are samples of a tile the surface pyramid holds at the
 // cascade's level (texelM is that level's spacing and the corner lies on its lattice: cascades.h), applying the
 // water rule of surface.h to the water channels as the kernel path does. Each span of `todo` shrinks to the
-// texels it could not copy, conservatively: from the first to the last of them (the kernel path evaluates
-// copied texels in between again, to the same value within float rounding). Returns the texels copied and not
-// left in `todo`, and sets *level to the pyramid level used (-1: none fits the cascade).
+// texels it could not copy, from the first to the last of them, and `copiedMask` (n^2, zero) marks the copied
+// texels, so that the kernel path skips those left inside a span (a row with holes at both ends keeps its whole span: 23 % of a
+// far cascade's texels at 105 M cells, all of them copies). Returns the texels copied and sets *level to the
+// pyramid level used (-1: none fits the cascade).
 uint64_t copyPyramidTexels(const Scene& scene, const Cascade& c, CascadeTextures& tex, double waterMinDepthM, unsigned threads,
-                           std::vector<Todo>& todo, int* level) {
+                           std::vector<Todo>& todo, std::vector<uint8_t>& copiedMask, int* level) {
     *level = -1;
     const influence::SurfacePyramid* p = scene.pyramid();
     if (!p) return 0;
@@ -136,9 +139,14 @@ uint64_t copyPyramidTexels(const Scene& scene, const Cascade& c, CascadeTextures
             };
             for (auto [lo, hi] : {std::pair<int*, int*>{&span.a0, &span.a1}, {&span.b0, &span.b1}}) {
                 int first = *hi + 1, last = *lo - 1;
-                for (int i = *lo; i <= *hi; ++i)
-                    if (!copy(i)) first = std::min(first, i), last = i;
-                copied[worker] += uint64_t(std::max(0, *hi - *lo + 1) - std::max(0, last - first + 1));
+                for (int i = *lo; i <= *hi; ++i) {
+                    if (copy(i)) {
+                        copiedMask[j * size_t(c.n) + size_t(i)] = 1;
+                        ++copied[worker];
+                    } else {
+                        first = std::min(first, i), last = i;
+                    }
+                }
                 *lo = first, *hi = last;
             }
         }
@@ -148,16 +156,29 @@ uint64_t copyPyramidTexels(const Scene& scene, const Cascade& c, CascadeTextures
     return total;
 }
 
+// The cells the approximation sums over: the scene's own (in memory) or a region's (out of core).
+struct CellData {
+    const Grid& grid;
+    const influence::InfluenceLists& lists;
+    const std::vector<Scene::CellKernel>& kernels;
+    int waterLayer;  // grid layer of water_depth, or -1
+};
+
+// An inclusive range of texel columns and rows.
+struct TexelRange {
+    int i0, i1, j0, j1;
+};
+
 // Gathers the influence list of cell k into cand, relative to k's centre and value. Returns the water level
 // base lk: the level of a wet cell, k's own if k is wet (NaN when no cell of the list is wet).
-double gatherCandidates(const Scene& scene, uint32_t k, Candidates& cand) {
-    const Grid& g = scene.grid();
-    const auto& kernels = scene.kernels();
+double gatherCandidates(const CellData& cells, uint32_t k, Candidates& cand) {
+    const Grid& g = cells.grid;
+    const auto& kernels = cells.kernels;
     const double kx = kernels[k].cx, ky = kernels[k].cy;
     const double zk = g.values[0][k];
-    const int depthLayer = scene.waterLayer();
+    const int depthLayer = cells.waterLayer;
     const float* depthValues = depthLayer >= 0 ? g.values[size_t(depthLayer)].data() : nullptr;
-    const auto list = scene.lists().list(k);
+    const auto list = cells.lists.list(k);
     // The water level field (DESIGN.md section 12, influence/surface.h) is taken relative to a wet cell's
     // level, k's own if k is wet, as the exact evaluator's levelBase() does: a constant level stays exact.
     double lk = std::numeric_limits<double>::quiet_NaN();
@@ -197,27 +218,28 @@ double gatherCandidates(const Scene& scene, uint32_t k, Candidates& cand) {
 // fly-through) are always located.
 constexpr uint64_t kSparseTodo = 16;
 
-// Appends to `cells` (sorted, each once) the cells whose half-open squares hold a texel centre of `todo`:
+// Appends to `cells` (sorted, each once) the cells whose half-open squares hold a texel centre `need`ed in r:
 // the cells the box listing would keep (a cell holding no texel to evaluate is skipped there too).
-void cellsUnderTexels(const Grid& g, const Cascade& c, const std::vector<Todo>& todo, unsigned threads, std::vector<uint32_t>& cells) {
+void cellsUnderTexels(const Grid& g, const Cascade& c, const std::vector<uint8_t>& need, const TexelRange& r, unsigned threads,
+                      std::vector<uint32_t>& cells) {
     const double s = c.texelM;
     std::vector<std::vector<uint32_t>> found(resolveThreads(threads));
-    parallelFor(todo.size(), 64, threads, [&](size_t b, size_t e, unsigned worker) {
+    parallelFor(size_t(r.j1 - r.j0 + 1), 64, threads, [&](size_t b, size_t e, unsigned worker) {
         std::vector<uint32_t>& out = found[worker];
-        for (size_t j = b; j < e; ++j) {
-            const Todo& t = todo[j];
+        for (size_t jr = b; jr < e; ++jr) {
+            const size_t j = size_t(r.j0) + jr;
             const double y = c.y0 + double(int(j)) * s;
-            for (auto [lo, hi] : {std::pair{t.a0, t.a1}, {t.b0, t.b1}}) {
-                Grid::Square last{0, 0, -1, -1};  // empty: no point is inside
-                for (int i = lo; i <= hi; ++i) {
-                    const double x = c.x0 + i * s;
-                    // Along a row, texels smaller than the cells fall into the cell just located.
-                    if (x >= last.x0 && x < last.x1 && y >= last.y0 && y < last.y1) continue;
-                    const std::optional<uint32_t> k = g.locate(x, y);
-                    if (!k) continue;
-                    out.push_back(*k);
-                    last = g.cellSquare(*k);
-                }
+            const uint8_t* row = &need[j * size_t(c.n)];
+            Grid::Square last{0, 0, -1, -1};  // empty: no point is inside
+            for (int i = r.i0; i <= r.i1; ++i) {
+                if (!row[i]) continue;
+                const double x = c.x0 + i * s;
+                // Along a row, texels smaller than the cells fall into the cell just located.
+                if (x >= last.x0 && x < last.x1 && y >= last.y0 && y < last.y1) continue;
+                const std::optional<uint32_t> k = g.locate(x, y);
+                if (!k) continue;
+                out.push_back(*k);
+                last = g.cellSquare(*k);
             }
         }
     });
@@ -258,43 +280,17 @@ void Heightfield::buildMip() {
     }
 }
 
-ApproximationWork approximate(const Scene& scene, const Cascade& c, CascadeTextures& tex, double waterMinDepthM, unsigned threads,
-                              const TexelReuse* reuse) {
-    const Grid& g = scene.grid();
-    const auto& lists = scene.lists();
+namespace {
+
+// Sums the kernels at the texels of `todo` inside range r that `need` it (not copied from the pyramid), whose centres
+// lie in `cells` (sorted), each cell's texels over its influence list. Adds the kernel evaluations to *gaussians.
+void sumTexels(const CellData& data, const Cascade& c, const std::vector<Todo>& todo, const std::vector<uint8_t>& need, const TexelRange& r,
+               const std::vector<uint32_t>& cells, CascadeTextures& tex, double waterMinDepthM, unsigned threads, uint64_t* gaussiansOut) {
+    const Grid& g = data.grid;
     const int n = c.n;
-    tex.hasWater = scene.hasWater();
-    tex.terrain.n = tex.water.n = n;
-    // Sized only: copyReusedTexels writes every texel.
-    tex.terrain.h.resize(size_t(n) * size_t(n));
-    if (tex.hasWater) {
-        tex.water.h.resize(size_t(n) * size_t(n));
-        tex.depth.resize(size_t(n) * size_t(n));
-    }
-    ApproximationWork work;
-    std::vector<Todo> todo = copyReusedTexels(c, reuse, tex, work.reusedTexels);
-    work.pyramidTexels = copyPyramidTexels(scene, c, tex, waterMinDepthM, threads, todo, &work.pyramidLevel);
-
-    // Their bounding box and count.
-    int i0 = n, i1 = -1, j0 = n, j1 = -1;
-    uint64_t todoTexels = 0;
-    for (int j = 0; j < n; ++j) {
-        const Todo& t = todo[size_t(j)];
-        for (auto [lo, hi] : {std::pair{t.a0, t.a1}, {t.b0, t.b1}})
-            if (lo <= hi) {
-                i0 = std::min(i0, lo), i1 = std::max(i1, hi), j0 = std::min(j0, j), j1 = std::max(j1, j);
-                todoTexels += uint64_t(hi - lo + 1);
-            }
-    }
-    if (i1 < 0) return work;
     const double s = c.texelM;
-    const uint64_t boxTexels = uint64_t(i1 - i0 + 1) * uint64_t(j1 - j0 + 1);
-    std::vector<uint32_t> cells;
-    if (todoTexels * kSparseTodo < boxTexels) cellsUnderTexels(g, c, todo, threads, cells);
-    else g.cellsInBox(c.x0 + i0 * s, c.y0 + j0 * s, c.x0 + i1 * s, c.y0 + j1 * s, cells);
-    work.cellsVisited = cells.size();
-
-    const float tail = static_cast<float>(lists.params().tail());
+    const int i0 = r.i0, i1 = r.i1, j0 = r.j0, j1 = r.j1;
+    const float tail = static_cast<float>(data.lists.params().tail());
     const float minDepth = static_cast<float>(waterMinDepthM);
     std::vector<uint64_t> gaussians(resolveThreads(threads), 0);
     std::vector<Candidates> scratch(gaussians.size());
@@ -322,10 +318,10 @@ ApproximationWork approximate(const Scene& scene, const Cascade& c, CascadeTextu
                 any = std::max(ia, t.a0) <= std::min(ib - 1, t.a1) || std::max(ia, t.b0) <= std::min(ib - 1, t.b1);
             }
             if (!any) continue;
-            const double lk = gatherCandidates(scene, k, cand);
+            const double lk = gatherCandidates(data, k, cand);
             const bool anyWet = !std::isnan(lk);
             const size_t m = cand.count, padded = cand.ex.size();
-            const double kx = scene.kernels()[k].cx, ky = scene.kernels()[k].cy;
+            const double kx = data.kernels[k].cx, ky = data.kernels[k].cy;
             const double zk = g.values[0][k];
             for (int j = ja; j < jb; ++j) {
                 const float fy = static_cast<float>(c.y0 + j * s - ky);
@@ -333,6 +329,7 @@ ApproximationWork approximate(const Scene& scene, const Cascade& c, CascadeTextu
                 for (auto [lo, hi] : {std::pair{span.a0, span.a1}, {span.b0, span.b1}}) {
                     for (int i = std::max(ia, lo), rb = std::min(ib, hi + 1); i < rb; ++i) {
                         const size_t t = size_t(j) * size_t(n) + size_t(i);
+                        if (!need[t]) continue;
                         const float fx = static_cast<float>(c.x0 + i * s - kx);
                         gaussians[worker] += m;
                         float num[kLanes] = {}, den[kLanes] = {}, numL[kLanes] = {}, denW[kLanes] = {};
@@ -375,7 +372,132 @@ ApproximationWork approximate(const Scene& scene, const Cascade& c, CascadeTextu
             }
         }
     });
-    for (uint64_t v : gaussians) work.gaussians += v;
+    for (uint64_t v : gaussians) *gaussiansOut += v;
+}
+
+// Out of core, the texels left to evaluate are taken a block of kOutOfCoreBlock^2 at a time: the block's cells,
+// with those whose kernels reach it, are read from the grid file and their lists built (influence/region.h), then
+// dropped. 256: a block of a fresh far cascade (texels up to 2x the cells) reads ~0.1-0.3 M cells (~30-70 MB with
+// their lists) and the per-block overhead (the kernel margin read twice at block edges) stays a small share.
+constexpr int kOutOfCoreBlock = 256;
+// Blocks whose texels to evaluate fill less than 1/kSparseTodo of them are split down to this side.
+constexpr int kOutOfCoreMinBlock = 16;
+
+// Clears `need` at the texels of r whose pyramid tile (level t, its lattice: copyPyramidTexels) is not stored because
+// its quadtree node holds no cell at all: the surface is undefined at every texel there (a hole, or outside the data),
+// so no cell need be read for them. Counting a node's cells takes two binary searches over the file's codes, next to
+// each other; each tile is asked once. Texels outside the domain are cleared too.
+void dropEmptyTiles(const GridRegionReader& file, const Cascade& c, int t, const TexelRange& r, std::vector<uint8_t>& need) {
+    const Grid& shape = file.shape();
+    if (t + influence::kPyramidTileLog2 > shape.rootLevel) return;  // one tile covers the domain: no node to ask
+    const uint64_t last = (uint64_t{1} << (shape.rootLevel - t)) - 1;  // the lattice's last index inside the domain
+    const double i0 = std::round(c.x0 / c.texelM), j0 = std::round(c.y0 / c.texelM);
+    std::unordered_map<uint64_t, bool> empty;  // per tile (ti << 32 | tj)
+    for (int j = r.j0; j <= r.j1; ++j)
+        for (int i = r.i0; i <= r.i1; ++i) {
+            uint8_t& flag = need[size_t(j) * size_t(c.n) + size_t(i)];
+            if (!flag) continue;
+            const double gi = i0 + i, gj = j0 + j;
+            if (gi < 0 || gj < 0 || gi > double(last) || gj > double(last)) {
+                flag = 0;
+                continue;
+            }
+            const uint64_t ti = uint64_t(gi) >> influence::kPyramidTileLog2, tj = uint64_t(gj) >> influence::kPyramidTileLog2;
+            auto [it, fresh] = empty.try_emplace(ti << 32 | tj, false);
+            if (fresh) {
+                const int shift = t + influence::kPyramidTileLog2;
+                it->second = file.cellsInNode(mortonEncode(uint32_t(ti << shift), uint32_t(tj << shift)), shift) == 0;
+            }
+            if (it->second) flag = 0;
+        }
+}
+
+}  // namespace
+
+ApproximationWork approximate(const Scene& scene, const Cascade& c, CascadeTextures& tex, double waterMinDepthM, unsigned threads,
+                              const TexelReuse* reuse) {
+    const int n = c.n;
+    tex.hasWater = scene.hasWater();
+    tex.terrain.n = tex.water.n = n;
+    // Sized only: copyReusedTexels writes every texel.
+    tex.terrain.h.resize(size_t(n) * size_t(n));
+    if (tex.hasWater) {
+        tex.water.h.resize(size_t(n) * size_t(n));
+        tex.depth.resize(size_t(n) * size_t(n));
+    }
+    ApproximationWork work;
+    std::vector<Todo> todo = copyReusedTexels(c, reuse, tex, work.reusedTexels);
+    // The texels left to evaluate: `need` (n^2) marks them, the spans of `todo` hold them (and copies between them).
+    std::vector<uint8_t> copied(size_t(n) * size_t(n), 0), need(size_t(n) * size_t(n), 0);
+    work.pyramidTexels = copyPyramidTexels(scene, c, tex, waterMinDepthM, threads, todo, copied, &work.pyramidLevel);
+    int i0 = n, i1 = -1, j0 = n, j1 = -1;
+    uint64_t todoTexels = 0;
+    for (int j = 0; j < n; ++j) {
+        const Todo& t = todo[size_t(j)];
+        for (auto [lo, hi] : {std::pair{t.a0, t.a1}, {t.b0, t.b1}})
+            for (int i = lo; i <= hi; ++i) {
+                const size_t at = size_t(j) * size_t(n) + size_t(i);
+                if (copied[at]) continue;
+                need[at] = 1;
+                i0 = std::min(i0, i), i1 = std::max(i1, i), j0 = std::min(j0, j), j1 = std::max(j1, j), ++todoTexels;
+            }
+    }
+    copied = {};
+    if (i1 < 0) return work;
+    const double s = c.texelM;
+    auto cellsFor = [&](const Grid& g, const TexelRange& r, uint64_t todoInRange, std::vector<uint32_t>& cells) {
+        const uint64_t boxTexels = uint64_t(r.i1 - r.i0 + 1) * uint64_t(r.j1 - r.j0 + 1);
+        if (todoInRange * kSparseTodo < boxTexels) cellsUnderTexels(g, c, need, r, threads, cells);
+        else g.cellsInBox(c.x0 + r.i0 * s, c.y0 + r.j0 * s, c.x0 + r.i1 * s, c.y0 + r.j1 * s, cells);
+        work.cellsVisited += cells.size();
+    };
+    std::vector<uint32_t> cells;
+    if (!scene.outOfCore()) {
+        const TexelRange all{i0, i1, j0, j1};
+        cellsFor(scene.grid(), all, todoTexels, cells);
+        sumTexels({scene.grid(), scene.lists(), scene.kernels(), scene.waterLayer()}, c, todo, need, all, cells, tex, waterMinDepthM, threads,
+                  &work.gaussians);
+        return work;
+    }
+    // Out of core: less the texels in pyramid tiles whose nodes hold no cell.
+    if (work.pyramidLevel >= 0) dropEmptyTiles(*scene.file(), c, work.pyramidLevel, TexelRange{i0, i1, j0, j1}, need);
+    // Blocks of at most kOutOfCoreBlock^2 texels, shrunk to the texels they need and split while those are sparse, so
+    // that a region read follows the texels (a frame's few stray texels along a hole's edge must not read the cells
+    // of whole blocks around them).
+    std::vector<TexelRange> blocks{{i0, i1, j0, j1}};
+    while (!blocks.empty()) {
+        TexelRange r = blocks.back();
+        blocks.pop_back();
+        uint64_t count = 0;
+        TexelRange box{r.i1 + 1, r.i0 - 1, r.j1 + 1, r.j0 - 1};
+        for (int j = r.j0; j <= r.j1; ++j)
+            for (int i = r.i0; i <= r.i1; ++i)
+                if (need[size_t(j) * size_t(n) + size_t(i)]) {
+                    ++count;
+                    box = {std::min(box.i0, i), std::max(box.i1, i), std::min(box.j0, j), std::max(box.j1, j)};
+                }
+        if (count == 0) continue;
+        r = box;
+        const int w = r.i1 - r.i0 + 1, h = r.j1 - r.j0 + 1;
+        const uint64_t area = uint64_t(w) * uint64_t(h);
+        if (area > uint64_t(kOutOfCoreBlock) * kOutOfCoreBlock || (count * kSparseTodo < area && std::max(w, h) > kOutOfCoreMinBlock)) {
+            const int mi = r.i0 + w / 2, mj = r.j0 + h / 2;
+            for (const TexelRange& q : {TexelRange{r.i0, mi - 1, r.j0, mj - 1}, TexelRange{mi, r.i1, r.j0, mj - 1},
+                                        TexelRange{r.i0, mi - 1, mj, r.j1}, TexelRange{mi, r.i1, mj, r.j1}})
+                if (q.i0 <= q.i1 && q.j0 <= q.j1) blocks.push_back(q);
+            continue;
+        }
+        const influence::SurfaceRegion region = influence::readSurfaceRegion(
+            *scene.file(), {c.x0 + r.i0 * s, c.y0 + r.j0 * s, c.x0 + r.i1 * s, c.y0 + r.j1 * s}, scene.params(), threads);
+        ++work.regionsRead;
+        work.cellsRead += region.grid.cellCount();
+        if (region.grid.cellCount() == 0) continue;
+        const std::vector<Scene::CellKernel> kernels = Scene::kernelsOf(region.grid, scene.params());
+        cells.clear();
+        cellsFor(region.grid, r, count, cells);
+        sumTexels({region.grid, region.lists, kernels, scene.waterLayer()}, c, todo, need, r, cells, tex, waterMinDepthM, threads,
+                  &work.gaussians);
+    }
     return work;
 }
 

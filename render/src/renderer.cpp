@@ -16,6 +16,7 @@
 #include "heightcast/core/parallel.h"
 #include "heightcast/core/rounded.h"
 #include "heightcast/core/timer.h"
+#include "heightcast/influence/region.h"
 #include "heightcast/render/gpu_layout.h"
 #include "textures.h"
 
@@ -28,16 +29,54 @@ std::string RenderOptions::validate() const {
     return {};
 }
 
+namespace {
+
+void checkPyramid(const influence::SurfacePyramid* pyramid, uint64_t structureHash, uint64_t contentHash, const influence::KernelParams& params,
+                  const char* kernelOf) {
+    if (pyramid && (pyramid->structureHash != structureHash || pyramid->contentHash != contentHash))
+        throw Error("the surface pyramid does not belong to this grid");
+    if (pyramid && (pyramid->params.sigma != params.sigma || pyramid->params.truncation != params.truncation ||
+                    pyramid->params.kernelId != params.kernelId))
+        throw Error(std::string("the surface pyramid was built for another kernel than ") + kernelOf);
+}
+
+// The sum of DESIGN.md section 4 over the list of cell k, in double, as the approximation evaluates it.
+double terrainIn(const Grid& g, const influence::InfluenceLists& lists, const std::vector<Scene::CellKernel>& kernels, uint32_t k,
+                 double xLocal, double yLocal) {
+    const double tail = lists.params().tail(), zk = g.values[0][k];
+    double num = 0, den = 0;
+    for (const uint32_t i : lists.list(k)) {
+        const Scene::CellKernel& c = kernels[i];
+        const double d2 = (c.cx - xLocal) * (c.cx - xLocal) + (c.cy - yLocal) * (c.cy - yLocal);
+        if (!(d2 < c.r2)) continue;
+        const double w = std::max(0.0, std::exp(-d2 * c.a) - tail);
+        num += w * (g.values[0][i] - zk);
+        den += w;
+    }
+    return zk + num / den;  // den >= the cell's own weight inside it (kernel.h): never zero
+}
+
+}  // namespace
+
+std::vector<Scene::CellKernel> Scene::kernelsOf(const Grid& grid, const influence::KernelParams& params) {
+    std::vector<CellKernel> kernels(grid.cellCount());
+    const double sigma = params.sigma;
+    for (size_t i = 0; i < grid.cellCount(); ++i) {
+        CellKernel& k = kernels[i];
+        grid.cellCenterLocal(i, k.cx, k.cy);
+        const double size = grid.cellSizeM(i), r = params.radiusM(size);
+        k.a = static_cast<float>(1.0 / (2.0 * sigma * sigma * size * size));
+        k.r2 = static_cast<float>(r * r);
+    }
+    return kernels;
+}
+
 Scene::Scene(const Grid& grid, const influence::InfluenceLists& lists, const influence::SurfacePyramid* pyramid)
-    : grid_(grid), lists_(lists), pyramid_(pyramid) {
+    : grid_(grid), lists_(&lists), pyramid_(pyramid), params_(lists.params()), cellCount_(grid.cellCount()) {
     if (grid.cellCount() == 0) throw Error("the grid has no cells: nothing to render");
     if (lists.cellCount() != grid.cellCount() || lists.gridStructureHash() != grid.structureHash())
         throw Error("the influence lists do not belong to this grid");
-    if (pyramid && (pyramid->structureHash != grid.structureHash() || pyramid->contentHash != grid.contentHash()))
-        throw Error("the surface pyramid does not belong to this grid");
-    if (pyramid && (pyramid->params.sigma != lists.params().sigma || pyramid->params.truncation != lists.params().truncation ||
-                    pyramid->params.kernelId != lists.params().kernelId))
-        throw Error("the surface pyramid was built for another kernel than the influence lists");
+    checkPyramid(pyramid, grid.structureHash(), grid.contentHash(), lists.params(), "the influence lists");
     waterLayer_ = grid.findLayer("water_depth");
     grid.boundsLocal(xMin, yMin, xMax, yMax);
     elevationMin = HUGE_VAL, elevationMax = -HUGE_VAL, depthMax = 0;
@@ -54,34 +93,51 @@ Scene::Scene(const Grid& grid, const influence::InfluenceLists& lists, const inf
         }
         surfaceMax = std::max(surfaceMax, top);
     }
-    kernels_.resize(grid.cellCount());
-    const double sigma = lists.params().sigma;
-    for (size_t i = 0; i < grid.cellCount(); ++i) {
-        CellKernel& k = kernels_[i];
-        grid.cellCenterLocal(i, k.cx, k.cy);
-        const double size = grid.cellSizeM(i), r = lists.params().radiusM(size);
-        k.a = static_cast<float>(1.0 / (2.0 * sigma * sigma * size * size));
-        k.r2 = static_cast<float>(r * r);
-    }
+    kernels_ = kernelsOf(grid, lists.params());
     // The smooth surface is a convex combination of cell values: it stays within their range.
     zMin = elevationMin;
     zMax = surfaceMax;
 }
 
+Scene::Scene(const GridRegionReader& file, const influence::KernelParams& params, const influence::SurfacePyramid* pyramid)
+    : grid_(file.shape()), file_(&file), pyramid_(pyramid), params_(params), cellCount_(file.cellCount()) {
+    if (cellCount_ == 0) throw Error(file.path() + ": the grid has no cells: nothing to render");
+    if (std::string why = params.validate(); !why.empty()) throw Error("kernel parameters: " + why);
+    checkPyramid(pyramid, file.info().structureHash, file.info().contentHash, params, "this render's --sigma/--truncation");
+    const GridSummary& sum = file.info().summary;
+    waterLayer_ = grid_.findLayer("water_depth");
+    const double f = grid_.finestCellM;
+    xMin = double(sum.boundsFinest[0]) * f, yMin = double(sum.boundsFinest[1]) * f;
+    xMax = double(sum.boundsFinest[2]) * f, yMax = double(sum.boundsFinest[3]) * f;
+    elevationMin = sum.layerMin.at(0), elevationMax = sum.layerMax.at(0);
+    depthMax = waterLayer_ >= 0 ? std::max(0.0, double(sum.layerMax.at(size_t(waterLayer_)))) : 0.0;
+    zMin = elevationMin;
+    zMax = elevationMax + depthMax;
+}
+
+const influence::InfluenceLists& Scene::lists() const {
+    if (!lists_) throw Error("an out-of-core scene has no influence lists (its regions build their own)");
+    return *lists_;
+}
+
 std::optional<double> Scene::terrainAt(double xLocal, double yLocal) const {
-    const auto k = grid_.locate(xLocal, yLocal);
-    if (!k) return std::nullopt;
-    const double tail = lists_.params().tail(), zk = grid_.values[0][*k];
-    double num = 0, den = 0;
-    for (const uint32_t i : lists_.list(*k)) {
-        const CellKernel& c = kernels_[i];
-        const double d2 = (c.cx - xLocal) * (c.cx - xLocal) + (c.cy - yLocal) * (c.cy - yLocal);
-        if (!(d2 < c.r2)) continue;
-        const double w = std::max(0.0, std::exp(-d2 * c.a) - tail);
-        num += w * (grid_.values[0][i] - zk);
-        den += w;
+    if (!file_) {
+        const auto k = grid_.locate(xLocal, yLocal);
+        if (!k) return std::nullopt;
+        return terrainIn(grid_, *lists_, kernels_, *k, xLocal, yLocal);
     }
-    return zk + num / den;  // den >= the cell's own weight inside it (kernel.h): never zero
+    const influence::SurfaceRegion r = influence::readSurfaceRegion(*file_, {xLocal, yLocal, xLocal, yLocal}, params_, 1);
+    const auto k = r.grid.locate(xLocal, yLocal);
+    if (!k) return std::nullopt;
+    return terrainIn(r.grid, r.lists, kernelsOf(r.grid, params_), *k, xLocal, yLocal);
+}
+
+std::optional<Grid::Square> Scene::cellSquareAt(double xLocal, double yLocal) const {
+    if (!file_) {
+        const auto k = grid_.locate(xLocal, yLocal);
+        return k ? std::optional<Grid::Square>(grid_.cellSquare(*k)) : std::nullopt;
+    }
+    return file_->cellSquareAt(xLocal, yLocal);
 }
 
 double cameraBelowTerrainM(const Scene& scene, const Camera& camera) {
@@ -296,7 +352,7 @@ namespace {
 
 // The cache's entries, emptied when they were evaluated for another scene or water threshold.
 CascadeCache::Impl* keptFor(CascadeCache::Impl& kept, const Scene& scene, const RenderOptions& options) {
-    if (kept.scene != &scene || kept.cells != scene.grid().cellCount() || kept.waterMinDepthM != options.waterMinDepthM) kept.entries.clear();
+    if (kept.scene != &scene || kept.cells != scene.cellCount() || kept.waterMinDepthM != options.waterMinDepthM) kept.entries.clear();
     return &kept;
 }
 
@@ -346,6 +402,7 @@ std::vector<detail::CascadeTextures> approximateCascades(const Scene& scene, con
         if (!c.empty()) {
             const detail::ApproximationWork work = detail::approximate(scene, c, tex[k], options.waterMinDepthM, options.threads, reuse ? &*reuse : nullptr);
             cs.gaussians = work.gaussians, cs.cellsVisited = work.cellsVisited, cs.reusedTexels = work.reusedTexels;
+            cs.cellsRead = work.cellsRead, cs.regionsRead = work.regionsRead;
             cs.pyramidTexels = work.pyramidTexels, cs.pyramidLevel = work.pyramidLevel;
         }
         // A copied sample is the exact surface rounded to float once: half an ulp of the largest height.
@@ -415,7 +472,6 @@ PixelRays castRays(const Scene& scene, const detail::FrameSetup& setup, const Ca
 // Stage 5: hillshade light, elevation or depth colours, distance fog, sky, outlines, legend into f.rgb.
 void shadePixels(const Scene& scene, const RenderOptions& options, const CameraBasis& basis, const PixelRays& rays, Frame& f, Timings& timings) {
     const Stopwatch clock;
-    const Grid& g = scene.grid();
     const int W = f.width, H = f.height;
     f.rgb.assign(size_t(W) * size_t(H) * 3, 0);
     const double sunAz = gpu::kSunAzimuthDeg * M_PI / 180, sunAlt = gpu::kSunAltitudeDeg * M_PI / 180;
@@ -452,8 +508,8 @@ void shadePixels(const Scene& scene, const RenderOptions& options, const CameraB
                     }
                     c = {toLinear(base.r) * light, toLinear(base.g) * light, toLinear(base.b) * light};
                     if (options.cellOutlines && !wall) {
-                        if (auto cell = g.locate(f.posX[i], f.posY[i])) {
-                            const auto q = g.cellSquare(*cell);
+                        if (auto cell = scene.cellSquareAt(f.posX[i], f.posY[i])) {
+                            const auto q = *cell;
                             const double edge = std::min({f.posX[i] - q.x0, q.x1 - f.posX[i], f.posY[i] - q.y0, q.y1 - f.posY[i]});
                             if (edge < 0.7 * f.distanceM[i] * pixelAngle) c = {c.r * 0.35, c.g * 0.35, c.b * 0.35};
                         }
@@ -476,7 +532,7 @@ void shadePixels(const Scene& scene, const RenderOptions& options, const CameraB
 // This frame's textures into the cache, for the next.
 void keepCascades(CascadeCache::Impl& kept, const Scene& scene, const RenderOptions& options, const CascadeFit& fit,
                   std::vector<detail::CascadeTextures>& tex) {
-    kept.scene = &scene, kept.cells = scene.grid().cellCount(), kept.waterMinDepthM = options.waterMinDepthM;
+    kept.scene = &scene, kept.cells = scene.cellCount(), kept.waterMinDepthM = options.waterMinDepthM;
     kept.entries.clear();
     for (size_t k = 0; k < fit.cascades.size(); ++k)
         if (!fit.cascades[k].empty()) kept.entries.push_back({fit.cascades[k], std::move(tex[k])});
@@ -537,6 +593,8 @@ std::string Timings::toJson() const {
                                  {"error_bound_m", rounded(c.errorBoundM, std::chars_format::general, 3)},
                                  {"gaussians", c.gaussians},
                                  {"cells_visited", c.cellsVisited},
+                                 {"cells_read", c.cellsRead},
+                                 {"regions_read", c.regionsRead},
                                  {"approximation_ms", threeDecimals(c.approximationMs)}});
     }
     return j.dump(2) + "\n";
@@ -554,6 +612,11 @@ std::string Timings::toTable() const {
         s += b;
         if (c.cellsVisited) {
             std::snprintf(b, sizeof b, ", %llu cells visited", (unsigned long long)c.cellsVisited);
+            s += b;
+        }
+        if (c.regionsRead) {
+            std::snprintf(b, sizeof b, ", %llu cells read from the grid file in %llu blocks", (unsigned long long)c.cellsRead,
+                          (unsigned long long)c.regionsRead);
             s += b;
         }
         if (c.reusedTexels) {

@@ -44,6 +44,8 @@ struct ApproximationWork {
     uint64_t reusedTexels = 0;  // visible texels copied from `reuse`
     uint64_t pyramidTexels = 0; // visible texels copied from the scene's surface pyramid (and not evaluated again)
     int pyramidLevel = -1;      // the pyramid level whose spacing is the cascade's texel size, -1 when none fits
+    uint64_t regionsRead = 0;   // out of core: blocks of texels whose cells were read from the grid file
+    uint64_t cellsRead = 0;     // out of core: the cells those regions held (kernel margins included)
 };
 
 // Approximation (approximate.cpp): fills the textures of one cascade. With `reuse`, the visible texels that were

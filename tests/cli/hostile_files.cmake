@@ -28,14 +28,14 @@ hc_cli_test(hostile.grid_2e62_cells_probe nonzero [[^hc-probe: error: huge\.hcg:
 # the value equals the one from a cache built afresh.
 hc_cli_test(hostile.cache_2e62_entries 0
   [[^hc-probe: k\.hci: at byte offset 32: header declares 4611686018427387904 entries, more than the [0-9]+-byte file holds .4 bytes of INDICES each.: rebuilt]]
-  --setup "${KOOTENAI_CACHE} && $<TARGET_FILE:hc-probe> k.hcg --xy 556460.5,5394950.5 > fresh.csv 2>/dev/null && ${CRAFT} cache-entries k.hci k.hci 4611686018427387904"
+  --setup "${KOOTENAI_CACHE} && $<TARGET_FILE:hc-probe> k.hcg --cache k.hci --xy 556460.5,5394950.5 > fresh.csv 2>/dev/null && ${CRAFT} cache-entries k.hci k.hci 4611686018427387904"
   --check [[grep -Eq '^556460\.5,5394950\.5,[0-9]' fresh.csv && grep -v '^hc-probe' "$OUTPUT" | cmp - fresh.csv]]
-  -- ${PROBE} k.hcg --xy 556460.5,5394950.5)
+  -- ${PROBE} k.hcg --cache k.hci --xy 556460.5,5394950.5)
 # Issue 11: OFFSETS ending at the entry count but overshooting it before (0, m + 100, ...) read 100 indices
 # past the end of INDICES before the decrease was noticed.
 hc_cli_test(hostile.cache_list_past_end 0 [[^hc-probe: k\.hci: at byte offset [0-9]+: OFFSETS exceed the entry count [0-9]+ at cell 0: rebuilt]]
   --setup "${KOOTENAI_CACHE} && ${CRAFT} cache-past-end k.hci k.hci 100"
-  -- ${PROBE} k.hcg --xy 0,0)
+  -- ${PROBE} k.hcg --cache k.hci --xy 0,0)
 
 # Points CSV (parsed by hc::cli::parsePointsCsv, fuzzed by fuzz_points): a binary line of 5000 bytes is
 # quoted by its first 80 only, in one line, and nothing is written.

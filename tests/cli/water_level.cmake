@@ -11,7 +11,7 @@ awk 'BEGIN { print "x,y"
 
 # Every point with water lies within 1 cm of 397 m (the issue's figure; the wet cells' stored levels differ from
 # 397 m by float rounding, about 3e-5 m); the lattice sees both water and dry land.
-hc_cli_test(probe.water_surface_is_level 0 [[no influence cache at f\.hci: built]]
+hc_cli_test(probe.water_surface_is_level 0 [[cells around the points]]
   --setup ${WATER_LIDAR} --exists s.csv
   --check [[awk -F, 'NR > 1 { if ($3 == "") { dry++ } else { wet++
                                               d = $3 - 397
@@ -23,7 +23,7 @@ hc_cli_test(probe.water_surface_is_level 0 [[no influence cache at f\.hci: built
   -- ${PROBE} f.hcg --layer water_surface --points p.csv -o s.csv)
 # The depth is level - terrain where there is water and 0 on dry land (1e-6 m: three doubles printed with 17
 # digits), at the same points.
-hc_cli_test(probe.water_depth_is_level_minus_terrain 0 [[using influence cache f\.hci]]
+hc_cli_test(probe.water_depth_is_level_minus_terrain 0 [[cells around the points]]
   --setup ${WATER_LIDAR}
   --setup [[$HC_PROBE f.hcg --layer water_surface --points p.csv -o s.csv 2>/dev/null && $HC_PROBE f.hcg --points p.csv -o z.csv 2>/dev/null]]
   --check [[paste -d, s.csv z.csv d.csv | awk -F, 'NR > 1 { s = $3

@@ -522,11 +522,22 @@ struct GlRenderer::Impl {
 GlRenderer::GlRenderer(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {}
 GlRenderer::~GlRenderer() = default;
 
+namespace {
+// The GL backend uploads every cell and list once (gpu_layout.h): an out-of-core scene has neither.
+void requireInMemory(const Scene& scene) {
+    if (scene.outOfCore())
+        throw Error("the GL backend needs the grid in memory with its influence lists (an .hci cache); this scene is read out of "
+                    "core (" + scene.file()->path() + "): render it on the CPU backend (--backend cpu)");
+}
+}  // namespace
+
 std::unique_ptr<GlRenderer> GlRenderer::inCurrentContext(const Scene& scene) {
+    requireInMemory(scene);
     return std::unique_ptr<GlRenderer>(new GlRenderer(std::make_unique<Impl>(scene, nullptr)));
 }
 
 std::unique_ptr<GlRenderer> GlRenderer::headless(const Scene& scene) {
+    requireInMemory(scene);
     auto context = gl::HeadlessContext::create();
     return std::unique_ptr<GlRenderer>(new GlRenderer(std::make_unique<Impl>(scene, std::move(context))));
 }

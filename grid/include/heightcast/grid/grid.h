@@ -87,6 +87,9 @@ public:
     // The cell whose half-open square [min, min + size) contains (x, y), or nullopt for a hole or a
     // point outside the domain. O(log n).
     std::optional<uint32_t> locate(double xLocal, double yLocal) const;
+    // The Morton key of the finest cell whose half-open square contains (x, y), with locate()'s edge rule, or
+    // nullopt outside the domain (geometry only: no cells needed).
+    std::optional<uint64_t> finestKeyAt(double xLocal, double yLocal) const;
     // Appends to `out` every cell whose closed square meets the closed box. O(log n + k) per
     // quadtree level touched by the box boundary.
     void cellsInBox(double xMin, double yMin, double xMax, double yMax, std::vector<uint32_t>& out) const;

@@ -42,6 +42,7 @@
 #include <array>
 #include <cstdint>
 #include <memory>
+#include <optional>
 #include <span>
 #include <string>
 #include <vector>
@@ -115,5 +116,40 @@ GridFileInfo readGridInfo(const std::string& path);
 // Everything readGrid checks (every block checksum, every cell invariant, both hashes) and, from 1.2 on,
 // that the stored summary matches the cells; returns the summary computed from the cells and the grid.
 GridFileInfo verifyGridFile(const std::string& path);
+
+// A grid file read a region at a time, never whole (out of core, DESIGN.md section 10): the tools that work on
+// part of a grid too large to hold (hc-probe, hc-render) keep one of these instead of the grid. Opening reads
+// what readGridInfo reads (milliseconds). A region reads the cells it returns and the codes its binary searches
+// touch, checking the block checksums of exactly those bytes (each block once, sectioned_file.h), and validates
+// the cells it returns (Grid::validate). Thread-safe: regions may be read from several threads at once.
+class GridRegionReader {
+public:
+    explicit GridRegionReader(const std::string& path);  // throws hc::Error naming the file
+    ~GridRegionReader();
+    GridRegionReader(const GridRegionReader&) = delete;
+    GridRegionReader& operator=(const GridRegionReader&) = delete;
+
+    const std::string& path() const;
+    const GridFileInfo& info() const;       // shape (no cells), cell count, stored hashes and summary
+    const Grid& shape() const { return info().shape; }
+    uint64_t cellCount() const { return info().cellCount; }
+
+    // Every cell whose closed square meets the closed box grown by marginM[level of the cell] (levels past the
+    // span's end: the last margin; an empty span: 0), as a grid of the file's geometry, CRS and layers (its hashes
+    // are the region's own, not the file's). Cells come in file order. Throws hc::Error naming the file and
+    // the byte offset if a block read is damaged or the cells break an invariant.
+    Grid region(const Grid::Square& box, std::span<const double> marginM = {}) const;
+    // The square of the cell containing a local point (Grid::locate's rule), or nullopt: one binary search.
+    std::optional<Grid::Square> cellSquareAt(double xLocal, double yLocal) const;
+    // How many cells meet the quadtree node of `level` with corner key `key`: those inside it, and the one coarser
+    // cell that may contain it (two binary searches). 0: the node is all hole.
+    uint64_t cellsInNode(uint64_t key, int level) const;
+    // Section bytes whose block checksums have been checked so far.
+    uint64_t bytesChecked() const;
+
+private:
+    struct Impl;
+    std::unique_ptr<Impl> impl_;
+};
 
 }  // namespace hc

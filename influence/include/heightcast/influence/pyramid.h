@@ -32,6 +32,7 @@
 #include <vector>
 
 #include "heightcast/grid/grid.h"
+#include "heightcast/grid/grid_file.h"
 #include "heightcast/influence/kernel.h"
 
 namespace hc {
@@ -110,6 +111,11 @@ SurfacePyramid buildSurfacePyramid(const Grid& grid, const KernelParams& params,
 // inside the domain) and checked to belong to `grid` with `params` (like the .hci cache). Throws hc::Error.
 void writeSurfacePyramid(const SurfacePyramid& pyramid, const std::string& path);
 SurfacePyramid readSurfacePyramid(const std::string& path, const Grid& grid, const KernelParams& params);
+// The same for a grid file not read whole (GridRegionReader): its geometry and the hashes its header stores.
+SurfacePyramid readSurfacePyramid(const std::string& path, const GridFileInfo& grid, const KernelParams& params);
+// Both: `grid` gives the geometry and layers (its cells are not read), the hashes are the grid's.
+SurfacePyramid readSurfacePyramid(const std::string& path, const Grid& grid, uint64_t structureHash, uint64_t contentHash,
+                                  const KernelParams& params);
 
 // The pyramid path a tool uses by default: the grid's path with its extension replaced by ".hcp".
 std::string defaultPyramidPath(const std::string& gridPath);

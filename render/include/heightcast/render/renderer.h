@@ -14,6 +14,7 @@
 #include <vector>
 
 #include "heightcast/grid/grid.h"
+#include "heightcast/grid/grid_file.h"
 #include "heightcast/influence/influence.h"
 #include "heightcast/influence/pyramid.h"
 #include "heightcast/render/camera.h"
@@ -63,6 +64,8 @@ struct CascadeStats {
     uint64_t gaussians = 0;             // kernel evaluations in the approximation
     uint64_t reusedTexels = 0;          // visible texels copied from the last frame (renderFrame with a CascadeCache)
     uint64_t cellsVisited = 0;          // CPU: grid cells whose squares the approximation examined for texels to evaluate (0 on GL)
+    uint64_t cellsRead = 0;             // CPU out of core (Scene): cells read from the grid file for the texels summed, kernel margins
+    uint64_t regionsRead = 0;           // included, in that many blocks of texels (0 in memory and on GL)
     int pyramidLevel = -1;              // the surface pyramid level whose spacing is texelM, -1 without a pyramid
     uint64_t pyramidTexels = 0;         // visible texels copied from the pyramid's samples (the others: Gaussians)
     // Largest |texel - exact surface| of the texels copied from the pyramid [m]: a sample is the exact surface
@@ -85,37 +88,60 @@ struct Timings {
     std::string toTable() const;
 };
 
-// A grid with its influence lists and per-cell data prepared once for many frames, and optionally its
-// surface pyramid (influence/pyramid.h): then cascade texel sizes are the pyramid's spacings (powers of two of
-// the finest cell) and texels where the pyramid holds that level are copied from it instead of summed.
+// What a frame renders: the grid, its surface pyramid (optional) and how the kernels are reached.
+//   In memory: a grid with its influence lists and per-cell data prepared once for many frames (about 300 bytes
+//   per cell with the lists: up to ~10 M cells on a 24 GB machine).
+//   Out of core (DESIGN.md section 10): a grid file read a region at a time (GridRegionReader) and no lists: the
+//   texels that need the kernels read the cells around them, build their lists and drop them, a block of texels
+//   at a time (influence/region.h), so memory follows the cascades, not the grid. The frames are the same bits.
+// With a surface pyramid (influence/pyramid.h) cascade texel sizes are the pyramid's spacings (powers of two of the
+// finest cell) and texels where the pyramid holds that level are copied from it instead of summed.
 class Scene {
 public:
     // All must outlive the scene. Throws hc::Error if the lists or the pyramid are not the grid's, or the
     // pyramid's kernel is not the lists'.
     Scene(const Grid& grid, const influence::InfluenceLists& lists, const influence::SurfacePyramid* pyramid = nullptr);
+    // Out of core: `file` and `pyramid` must outlive the scene. The bounds come from the file's stored summary
+    // (format 1.2; older files are read whole once by GridRegionReader). Throws hc::Error if the pyramid is not the
+    // file's grid's or was built for another kernel.
+    Scene(const GridRegionReader& file, const influence::KernelParams& params, const influence::SurfacePyramid* pyramid = nullptr);
+
+    bool outOfCore() const { return file_ != nullptr; }
+    // The grid: in memory its cells; out of core its shape only (geometry, CRS, layers; no cells).
     const Grid& grid() const { return grid_; }
-    const influence::InfluenceLists& lists() const { return lists_; }
+    const GridRegionReader* file() const { return file_; }  // out of core, else nullptr
+    uint64_t cellCount() const { return cellCount_; }
+    const influence::KernelParams& params() const { return params_; }
+    // In memory only (throws hc::Error out of core).
+    const influence::InfluenceLists& lists() const;
     const influence::SurfacePyramid* pyramid() const { return pyramid_; }
     bool hasWater() const { return waterLayer_ >= 0; }
     int waterLayer() const { return waterLayer_; }  // grid layer of water_depth, or -1
-    // Per cell, computed once for every frame: centre [m local] and the kernel's 1 / (2 sigma^2 c^2)
-    // and squared radius, in the form the approximation reads.
+    // Per cell, computed once for every frame (in memory; out of core per region): centre [m local] and the
+    // kernel's 1 / (2 sigma^2 c^2) and squared radius, in the form the approximation reads.
     struct CellKernel {
         double cx, cy;
         float a, r2;
     };
-    const std::vector<CellKernel>& kernels() const { return kernels_; }
-    // Local bounding box of the cells and the value range (terrain and water surface) [m].
+    static std::vector<CellKernel> kernelsOf(const Grid& grid, const influence::KernelParams& params);
+    const std::vector<CellKernel>& kernels() const { return kernels_; }  // empty out of core
+    // Local bounding box of the cells and the value range (terrain and water surface) [m]. Out of core the
+    // water surface's top is bounded by the largest elevation plus the largest depth (the summary has no more).
     double xMin, yMin, xMax, yMax, zMin, zMax;
     double elevationMin, elevationMax, depthMax;
     // The smooth terrain's height at a local point [m] (the RBF sum of DESIGN.md section 4 over the list of
     // the cell containing it, as the approximation evaluates it, in double), or nullopt outside every cell.
     std::optional<double> terrainAt(double xLocal, double yLocal) const;
+    // The square of the cell containing a local point, or nullopt (holes, outside the domain).
+    std::optional<Grid::Square> cellSquareAt(double xLocal, double yLocal) const;
 
 private:
     const Grid& grid_;
-    const influence::InfluenceLists& lists_;
+    const influence::InfluenceLists* lists_ = nullptr;
+    const GridRegionReader* file_ = nullptr;
     const influence::SurfacePyramid* pyramid_ = nullptr;
+    influence::KernelParams params_;
+    uint64_t cellCount_ = 0;
     int waterLayer_ = -1;
     std::vector<CellKernel> kernels_;
 };

@@ -1,0 +1,244 @@
+// Out of core (DESIGN.md section 10): a grid file read a region at a time (GridRegionReader), the exact surface
+// from the cells around its points (influence/region.h) and frames rendered without the whole grid or its lists
+// (render::Scene over a file), each against the in-memory path on real rasters.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <random>
+#include <set>
+
+#include <unistd.h>
+
+#include "heightcast/core/error.h"
+#include "heightcast/grid/grid_file.h"
+#include "heightcast/influence/pyramid.h"
+#include "heightcast/influence/region.h"
+#include "heightcast/render/renderer.h"
+#include "test_data.h"
+#include "test_grids.h"
+
+namespace fs = std::filesystem;
+using hc::Grid;
+using hc::GridRegionReader;
+namespace inf = hc::influence;
+
+namespace {
+
+// A grid written to a temporary .hcg, removed at the end.
+struct GridOnDisk {
+    Grid grid;
+    fs::path path;
+    GridOnDisk(Grid g, const std::string& tag) : grid(std::move(g)) {
+        path = fs::temp_directory_path() / ("hc_region_" + tag + "_" + std::to_string(::getpid()) + ".hcg");
+        hc::writeGrid(grid, path.string());
+    }
+    ~GridOnDisk() { fs::remove(path); }
+};
+
+// The LiDAR tile flooded at 397 m (adaptive cells 1-16 m, holes along its edges, water and dry land) and the demo
+// DEM flooded at 2600 m (cells 64-254 m).
+GridOnDisk& lidar() {
+    static GridOnDisk g(hc::test::ingestFile(hc::test::dataFile("lidar1m_minnesota_utm15.tif"), 0.25, 397.0), "lidar");
+    return g;
+}
+GridOnDisk& hef() {
+    static GridOnDisk g(hc::test::ingestFile(hc::test::dataFile("hef_srtm.tif"), 0.5, 2600.0), "hef");
+    return g;
+}
+
+bool meets(const Grid::Square& q, const Grid::Square& box, double m) {
+    return !(q.x1 < box.x0 - m || q.x0 > box.x1 + m || q.y1 < box.y0 - m || q.y0 > box.y1 + m);
+}
+
+}  // namespace
+
+// The region is exactly the cells whose squares meet the box grown by their level's margin (brute force over every
+// cell), in file order, with their values; cellsInNode and cellSquareAt agree with the in-memory grid.
+TEST(GridRegionReader, RegionIsExactlyTheCellsWithinTheirMarginOfTheBox) {
+    if (hc::test::dataFile("lidar1m_minnesota_utm15.tif").empty()) GTEST_SKIP() << "no LiDAR raster";
+    const GridOnDisk& d = lidar();
+    const Grid& g = d.grid;
+    const GridRegionReader file(d.path.string());
+    EXPECT_EQ(file.cellCount(), g.cellCount());
+    const std::vector<double> margin = inf::kernelReachM(g, {});
+    std::mt19937_64 rng(7);
+    double x0, y0, x1, y1;
+    g.boundsLocal(x0, y0, x1, y1);
+    std::uniform_real_distribution<double> ux(x0 - 20, x1 + 20), uy(y0 - 20, y1 + 20), size(0, 40);
+    size_t nonEmpty = 0;
+    for (int trial = 0; trial < 60; ++trial) {
+        const double bx = ux(rng), by = uy(rng);
+        const Grid::Square box{bx, by, bx + (trial % 3 == 0 ? 0.0 : size(rng)), by + (trial % 3 == 0 ? 0.0 : size(rng))};
+        const Grid r = file.region(box, margin);
+        std::vector<size_t> want;
+        for (size_t i = 0; i < g.cellCount(); ++i)
+            if (meets(g.cellSquare(i), box, margin[size_t(g.level(i))])) want.push_back(i);
+        ASSERT_EQ(r.cellCount(), want.size()) << "box " << box.x0 << "," << box.y0 << " .. " << box.x1 << "," << box.y1;
+        for (size_t k = 0; k < want.size(); ++k) {
+            ASSERT_EQ(r.codes[k], g.codes[want[k]]);
+            for (size_t l = 0; l < g.layerCount(); ++l) ASSERT_EQ(r.values[l][k], g.values[l][want[k]]);
+        }
+        nonEmpty += !want.empty();
+        // A point query's node counts and cell squares, as the whole grid answers them.
+        const double px = box.x0, py = box.y0;
+        const auto k = g.locate(px, py);
+        const auto sq = file.cellSquareAt(px, py);
+        ASSERT_EQ(bool(k), bool(sq));
+        if (k) {
+            EXPECT_EQ(g.cellSquare(*k).x0, sq->x0);
+            EXPECT_EQ(g.cellSquare(*k).y1, sq->y1);
+        }
+        if (const auto key = g.finestKeyAt(px, py))
+            for (int level : {0, 2, 5, 9}) {
+                const uint64_t node = *key & ~(hc::mortonSpan(level) - 1);
+                uint64_t brute = 0;
+                for (size_t i = 0; i < g.cellCount(); ++i) {
+                    const uint64_t ck = hc::codeKey(g.codes[i]), span = hc::mortonSpan(g.level(i));
+                    brute += ck < node + hc::mortonSpan(level) && node < ck + span;  // the cell and the node overlap
+                }
+                EXPECT_EQ(file.cellsInNode(node, level), brute) << "node of level " << level;
+            }
+    }
+    EXPECT_GT(nonEmpty, 30u);
+    // One point reads a few blocks of the file, not all of it.
+    EXPECT_LT(file.bytesChecked(), fs::file_size(d.path));
+}
+
+// The surface at points from the file, a region per group of points, equals the whole grid's with its lists bit for
+// bit (the cells left out weigh exactly 0 and the rest keep their order), for the terrain and both water layers; one
+// point at a time too, where each region holds a few dozen cells.
+TEST(Region, ValuesFromTheFileAreTheWholeGridsBitForBit) {
+    if (hc::test::dataFile("lidar1m_minnesota_utm15.tif").empty()) GTEST_SKIP() << "no LiDAR raster";
+    const GridOnDisk& d = lidar();
+    const Grid& g = d.grid;
+    const inf::InfluenceLists lists = inf::buildInfluenceLists(g, {});
+    const inf::SurfaceEvaluator whole(g, lists);
+    const GridRegionReader file(d.path.string());
+    double x0, y0, x1, y1;
+    g.boundsLocal(x0, y0, x1, y1);
+    std::mt19937_64 rng(11);
+    std::uniform_real_distribution<double> ux(x0 - 5, x1 + 5), uy(y0 - 5, y1 + 5);
+    std::vector<std::array<double, 2>> pts(3000);
+    for (auto& p : pts) p = {ux(rng), uy(rng)};
+    size_t defined = 0, wet = 0;
+    for (const char* name : {"elevation", "water_surface", "water_depth"}) {
+        const inf::Layer layer = inf::Layer::byName(g, name);
+        const auto want = whole.values(pts, layer);
+        inf::RegionReadStats st;
+        const auto got = inf::valuesFromFile(file, pts, layer, {}, 0, &st);
+        ASSERT_EQ(got.size(), want.size());
+        for (size_t i = 0; i < pts.size(); ++i) {
+            ASSERT_EQ(bool(got[i]), bool(want[i])) << name << " at " << pts[i][0] << "," << pts[i][1];
+            if (want[i]) {
+                ASSERT_EQ(*got[i], *want[i]) << name << " at " << pts[i][0] << "," << pts[i][1];
+            }
+        }
+        for (const auto& v : want) defined += bool(v), wet += std::string(name) == "water_depth" && v && *v > 0;
+        EXPECT_GE(st.regions, 1u);
+    }
+    EXPECT_GT(defined, 6000u);
+    EXPECT_GT(wet, 100u);
+    // One point at a time: regions of the kernel margin only.
+    const inf::Layer level = inf::Layer::byName(g, "water_surface");
+    for (size_t i = 0; i < 200; ++i) {
+        inf::RegionReadStats st;
+        const auto one = inf::valuesFromFile(file, std::span(&pts[i], 1), level, {}, 1, &st);
+        const auto ref = whole.value(pts[i][0], pts[i][1], level);
+        ASSERT_EQ(bool(one[0]), bool(ref));
+        if (ref) {
+            ASSERT_EQ(*one[0], *ref);
+        }
+        EXPECT_LT(st.largestRegion, g.cellCount() / 20);
+    }
+}
+
+// A damaged block is found when a region reads it, named by its offset; regions elsewhere still read.
+TEST(GridRegionReader, ADamagedBlockIsRefusedWhereItIsRead) {
+    if (hc::test::dataFile("lidar1m_minnesota_utm15.tif").empty()) GTEST_SKIP() << "no LiDAR raster";
+    const GridOnDisk& d = lidar();
+    const fs::path bad = fs::path(d.path).replace_extension(".bad.hcg");
+    fs::copy_file(d.path, bad, fs::copy_options::overwrite_existing);
+    const Grid& g = d.grid;
+    // Flip a byte of the last cell's code: CELLS starts after the header and table, 8 bytes a cell.
+    std::fstream f(bad, std::ios::in | std::ios::out | std::ios::binary);
+    std::vector<char> head(4096);
+    f.read(head.data(), std::streamsize(head.size()));
+    uint64_t cellsOffset = 0;
+    for (uint32_t s = 0; s < 8; ++s) {
+        uint32_t kind;
+        std::memcpy(&kind, &head[128 + 32 * s], 4);
+        if (kind == 2) std::memcpy(&cellsOffset, &head[128 + 32 * s + 8], 8);
+    }
+    ASSERT_GT(cellsOffset, 0u);
+    const uint64_t at = cellsOffset + 8 * (g.cellCount() - 1) + 2;
+    f.seekp(std::streamoff(at));
+    f.put('\x5a');
+    f.close();
+    const GridRegionReader file(bad.string());  // opening reads no cell
+    double x0, y0, x1, y1;
+    g.boundsLocal(x0, y0, x1, y1);
+    const std::vector<double> margin = inf::kernelReachM(g, {});
+    try {
+        (void)file.region({x0, y0, x1, y1}, margin);
+        ADD_FAILURE() << "a region over the damaged block was read";
+    } catch (const hc::Error& e) {
+        EXPECT_NE(std::string(e.what()).find("checksum mismatch"), std::string::npos) << e.what();
+        EXPECT_NE(std::string(e.what()).find(bad.filename().string()), std::string::npos) << e.what();
+    }
+    fs::remove(bad);
+}
+
+// A frame rendered out of core (no lists, no per-cell arrays: the texels that need the kernels read the cells
+// around them) shows what the in-memory scene shows: the same hits, at the same distances within float rounding
+// (a region's shorter lists put the same non-zero weights in other vector lanes), with and without the pyramid.
+TEST(Region, OutOfCoreFramesEqualInMemoryOnes) {
+    if (hc::test::dataFile("hef_srtm.tif").empty()) GTEST_SKIP() << "no demo DEM";
+    const GridOnDisk& d = hef();
+    const Grid& g = d.grid;
+    const inf::InfluenceLists lists = inf::buildInfluenceLists(g, {});
+    const inf::SurfacePyramid pyramid = inf::buildSurfacePyramid(g, {});
+    const GridRegionReader file(d.path.string());
+    for (const inf::SurfacePyramid* p : {static_cast<const inf::SurfacePyramid*>(nullptr), &pyramid}) {
+        const hc::render::Scene memory(g, lists, p);
+        hc::render::Scene outOfCore(file, {}, p);
+        EXPECT_TRUE(outOfCore.outOfCore());
+        EXPECT_EQ(outOfCore.xMin, memory.xMin);
+        EXPECT_EQ(outOfCore.yMax, memory.yMax);
+        EXPECT_EQ(outOfCore.elevationMin, memory.elevationMin);
+        EXPECT_EQ(outOfCore.depthMax, memory.depthMax);
+        EXPECT_GE(outOfCore.zMax, memory.zMax);  // the summary bounds the water's top by max elevation + max depth
+        outOfCore.zMax = memory.zMax;             // the same view box, so that the same cascades are fitted
+        hc::render::RenderOptions o;
+        o.texelsPerSide = 256;
+        for (int view = 0; view < 2; ++view) {
+            hc::render::Camera c = hc::render::overviewCamera(memory, 320, 200);
+            if (view == 1) c = hc::render::Camera::lookAt({c.xWorld + 8000, c.yWorld + 9000, 3400}, {c.xWorld + 12000, c.yWorld + 13000, 2700}, 50, 320, 200);
+            hc::render::Timings tm, to;
+            const hc::render::Frame a = hc::render::renderFrame(memory, c, o, tm);
+            const hc::render::Frame b = hc::render::renderFrame(outOfCore, c, o, to);
+            uint64_t read = 0;
+            for (const auto& cs : to.cascades) read += cs.cellsRead;
+            if (!p) {
+                EXPECT_GT(read, 0u);  // with the pyramid every texel of a view may be a copy
+            }
+            EXPECT_LT(read, 3 * g.cellCount());
+            size_t hits = 0, differ = 0;
+            for (size_t i = 0; i < a.distanceM.size(); ++i) {
+                const bool ha = std::isfinite(a.distanceM[i]), hb = std::isfinite(b.distanceM[i]);
+                if (ha != hb) {
+                    ++differ;
+                    continue;
+                }
+                if (!ha) continue;
+                ++hits;
+                // Texels agree to float rounding of the height (1e-6 relative); a hit moves by that over the ray's slope.
+                if (std::abs(a.distanceM[i] - b.distanceM[i]) > 1e-3 * a.distanceM[i]) ++differ;
+            }
+            EXPECT_GT(hits, 10000u);
+            EXPECT_LE(differ, hits / 1000) << (p ? "with" : "without") << " the pyramid, view " << view;
+        }
+    }
+}
