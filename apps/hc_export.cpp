@@ -40,7 +40,9 @@ bool parseOptions(int argc, char** argv, ExportArgs& a) {
     p.option("--layer", "L", "elevation, water_depth, water_surface or another layer (default elevation; .vdb always\n"
              "      writes terrain and, with water, the water surface). Water as hc-probe gives it: the wet cells'\n"
              "      level where water is drawn, depth = level - elevation there and 0 on dry land [m]", a.layerName);
-    p.option("--cache", "C.hci", "influence cache (default: the grid's path with .hci; built if missing or stale)", a.cachePath);
+    p.option("--cache", "C.hci", "read the whole grid and this influence cache (built if missing or stale; default: the grid's\n"
+             "path with .hci when that exists); without one the grid is read a tile at a time (out of core,\n"
+             "the same values)", a.cachePath);
     p.option("--sigma", "S", "kernel width in cell sizes (default 1.0)", a.params.sigma);
     p.option("--truncation", "R", "kernel cut-off in sigmas (default 3.5)", a.params.truncation);
     p.option("--threads", "N", "worker threads (default 0 = all cores)", a.threads);
@@ -70,17 +72,28 @@ struct Exported {
     size_t waterDefined = 0;  // .vdb: samples of the water surface's level set that are defined
 };
 
+// Where the surface comes from: the whole grid and its lists, or (out of core) the grid file a band at a time.
+struct Source {
+    const hc::Grid& shape;  // geometry and layers
+    const hc::influence::SurfaceEvaluator* eval = nullptr;  // in memory
+    const hc::GridRegionReader* file = nullptr;              // out of core
+    hc::influence::KernelParams params;
+    hc::exporting::SampledRaster sample(const ExportArgs& a, const hc::influence::Layer& layer, const std::string& name) const {
+        const bool grads = a.vdb();
+        return eval ? hc::exporting::sampleSurface(*eval, layer, name, a.resolution, a.box, grads, a.threads, !a.quiet)
+                    : hc::exporting::sampleSurface(*file, params, layer, name, a.resolution, a.box, grads, a.threads, !a.quiet);
+    }
+};
+
 // Samples `layer` (a .vdb: the terrain and, with water, the water surface) and writes the file.
-Exported sampleAndWrite(const ExportArgs& a, const hc::Grid& grid, const hc::influence::SurfaceEvaluator& eval,
-                        const hc::influence::Layer& layer) {
+Exported sampleAndWrite(const ExportArgs& a, const Source& src, const hc::influence::Layer& layer) {
     const bool vdb = a.vdb();
-    Exported e{hc::exporting::sampleSurface(eval, layer, vdb ? "elevation" : a.layerName, a.resolution, a.box, vdb, a.threads, !a.quiet)};
+    Exported e{src.sample(a, layer, vdb ? "elevation" : a.layerName)};
     if (e.raster.definedCount() == 0) throw hc::Error("the surface is undefined everywhere in the requested area (all holes)");
     if (vdb) {
         std::optional<hc::exporting::SampledRaster> water;
-        if (grid.findLayer("water_depth") >= 0) {
-            water = hc::exporting::sampleSurface(eval, hc::influence::Layer::byName(grid, "water_surface"), "water_surface",
-                                                 a.resolution, a.box, true, a.threads, !a.quiet);
+        if (src.shape.findLayer("water_depth") >= 0) {
+            water = src.sample(a, hc::influence::Layer::byName(src.shape, "water_surface"), "water_surface");
             e.waterDefined = water->definedCount();
         }
         hc::exporting::writeVdb(e.raster, water && e.waterDefined ? &*water : nullptr, a.out);
@@ -110,15 +123,26 @@ int main(int argc, char** argv) {
         ExportArgs a;
         if (!parseOptions(argc, argv, a)) return 0;
         const hc::Stopwatch clock;
-        const hc::Grid grid = hc::readGrid(a.gridPath);
-        hc::exporting::planRaster(grid, a.resolution, a.box);  // refuse a bad request before any real work
-        const auto layer = hc::influence::Layer::byName(grid, a.vdb() ? "elevation" : a.layerName);
         const std::string cachePath = a.cachePath.empty() ? hc::influence::defaultCachePath(a.gridPath) : a.cachePath;
-        std::string note;
-        const auto lists = hc::influence::loadOrBuildCache(grid, a.params, cachePath, a.threads, !a.quiet, note);
-        std::fprintf(stderr, "hc-export: %s\n", note.c_str());
-        const hc::influence::SurfaceEvaluator eval(grid, lists);
-        const Exported exported = sampleAndWrite(a, grid, eval, layer);
+        std::error_code ec;
+        Exported exported;
+        if (a.cachePath.empty() && !std::filesystem::exists(cachePath, ec)) {
+            // No cache: out of core, a tile at a time (the same bits).
+            const hc::GridRegionReader file(a.gridPath);
+            hc::exporting::planRaster(file.info(), a.resolution, a.box);  // refuse a bad request before any real work
+            const auto layer = hc::influence::Layer::byName(file.shape(), a.vdb() ? "elevation" : a.layerName);
+            std::fprintf(stderr, "hc-export: no influence cache at %s: the grid is read a tile at a time (out of core)\n", cachePath.c_str());
+            exported = sampleAndWrite(a, Source{file.shape(), nullptr, &file, a.params}, layer);
+        } else {
+            const hc::Grid grid = hc::readGrid(a.gridPath);
+            hc::exporting::planRaster(grid, a.resolution, a.box);  // refuse a bad request before any real work
+            const auto layer = hc::influence::Layer::byName(grid, a.vdb() ? "elevation" : a.layerName);
+            std::string note;
+            const auto lists = hc::influence::loadOrBuildCache(grid, a.params, cachePath, a.threads, !a.quiet, note);
+            std::fprintf(stderr, "hc-export: %s\n", note.c_str());
+            const hc::influence::SurfaceEvaluator eval(grid, lists);
+            exported = sampleAndWrite(a, Source{grid, &eval, nullptr, a.params}, layer);
+        }
         printSummary(a, exported, clock.seconds());
         return 0;
     });

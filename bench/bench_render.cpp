@@ -45,7 +45,9 @@
 #include "heightcast/core/timer.h"
 #include "heightcast/grid/grid.h"
 #include "heightcast/influence/influence.h"
+#include "heightcast/grid/grid_file.h"
 #include "heightcast/influence/pyramid.h"
+#include "heightcast/influence/region.h"
 #include "heightcast/influence/surface.h"
 #include "heightcast/render/gl/gl_renderer.h"
 #include "heightcast/render/image_io.h"
@@ -134,12 +136,14 @@ struct Settings {
     double flyStepM = 10;   // metres forward per fly-through frame
     bool pyramid = false;   // build the surface pyramid and render from it (CPU: copies; texel sizes on its ladder)
     bool accuracy = false;  // measure the last frame's hits against the exact surface
+    bool outOfCore = false; // write the grid to a file and render from it out of core (render::Scene over a GridRegionReader)
 };
 
 // The rendered error (--accuracy): every terrain hit of the frame (not a wall, no water over it) against the exact
 // surface at the hit's position, in parallel; the quantity the issue 13 targets keep "no worse than today's".
-void measureAccuracy(const hc::render::Frame& f, const Grid& g, const hc::influence::InfluenceLists& lists, unsigned threads, RunResult& r) {
-    const hc::influence::SurfaceEvaluator exact(g, lists);
+// `lists` null: out of core, the exact surface from the cells around the hits, read from `file`.
+void measureAccuracy(const hc::render::Frame& f, const Grid& g, const hc::influence::InfluenceLists* lists, const hc::GridRegionReader* file,
+                     unsigned threads, RunResult& r) {
     std::vector<std::array<double, 2>> points;
     std::vector<double> heights;
     for (size_t i = 0; i < f.distanceM.size(); ++i) {
@@ -147,7 +151,9 @@ void measureAccuracy(const hc::render::Frame& f, const Grid& g, const hc::influe
         points.push_back({double(f.posX[i]), double(f.posY[i])});
         heights.push_back(double(f.posZ[i]));
     }
-    const auto want = exact.values(points, hc::influence::Layer::byName(g, "elevation"), threads);
+    const auto layer = hc::influence::Layer::byName(g, "elevation");
+    const auto want = lists ? hc::influence::SurfaceEvaluator(g, *lists).values(points, layer, threads)
+                            : hc::influence::valuesFromFile(*file, points, layer, {}, threads);
     std::vector<double> errors;
     for (size_t k = 0; k < points.size(); ++k)
         if (want[k]) errors.push_back(std::abs(heights[k] - *want[k]));
@@ -190,29 +196,45 @@ RunResult runScenario(const Scenario& sc, const Settings& set) {
         r.finestRaised = gen.finestRaised;
         r.finestLowered = gen.finestLowered;
 
-        // Lists that would not fit are not built: the scenario reports its grid and skips the frames.
-        r.listsEstimateBytes = hc::scenes::estimateInfluenceLists(g, hc::influence::KernelParams{}, kListsEstimateSample).bytes;
-        const double texelsAndPixels = double(set.options.cascades) * double(set.options.texelsPerSide) * double(set.options.texelsPerSide) +
-                                       double(set.width) * double(set.height);
-        r.renderNeedBytes = r.listsEstimateBytes +
-                            uint64_t(kRenderBytesPerCellBesideLists * double(g.cellCount()) + kRenderBytesPerTexelOrPixel * texelsAndPixels);
-        r.memAvailableBytes = hc::bench::memoryAvailableBytes();
-        if (r.renderNeedBytes > r.memAvailableBytes) {
-            r.renderSkipped = true;
-            r.peakRss = hc::peakRssBytes();
-            say("");
-            return;
+        std::optional<hc::influence::InfluenceLists> lists;
+        std::unique_ptr<hc::GridRegionReader> file;
+        struct RemoveFile {
+            fs::path path;
+            ~RemoveFile() {
+                std::error_code ec;
+                if (!path.empty()) fs::remove(path, ec);
+            }
+        } written;
+        if (set.outOfCore) {
+            // Out of core: no lists; the renderer reads the grid file a region at a time.
+            say("writing the grid file ...");
+            written.path = fs::temp_directory_path() / fmt::format("hc_bench_{}_{}.hcg", sc.name, ::getpid());
+            hc::writeGrid(g, written.path.string());
+            file = std::make_unique<hc::GridRegionReader>(written.path.string());
+        } else {
+            // Lists that would not fit are not built: the scenario reports its grid and skips the frames.
+            r.listsEstimateBytes = hc::scenes::estimateInfluenceLists(g, hc::influence::KernelParams{}, kListsEstimateSample).bytes;
+            const double texelsAndPixels = double(set.options.cascades) * double(set.options.texelsPerSide) * double(set.options.texelsPerSide) +
+                                           double(set.width) * double(set.height);
+            r.renderNeedBytes = r.listsEstimateBytes +
+                                uint64_t(kRenderBytesPerCellBesideLists * double(g.cellCount()) + kRenderBytesPerTexelOrPixel * texelsAndPixels);
+            r.memAvailableBytes = hc::bench::memoryAvailableBytes();
+            if (r.renderNeedBytes > r.memAvailableBytes) {
+                r.renderSkipped = true;
+                r.peakRss = hc::peakRssBytes();
+                say("");
+                return;
+            }
+            say("building influence lists ...");
+            clock.restart();
+            lists = hc::influence::buildInfluenceLists(g, hc::influence::KernelParams{}, set.options.threads);
+            r.listsMs = clock.milliseconds();
+            const auto st = lists->stats();
+            r.listMean = st.meanLength;
+            r.listP99 = st.p99Length;
+            r.listMax = st.maxLength;
+            r.listBytes = st.bytes;
         }
-
-        say("building influence lists ...");
-        clock.restart();
-        const hc::influence::InfluenceLists lists = hc::influence::buildInfluenceLists(g, hc::influence::KernelParams{}, set.options.threads);
-        r.listsMs = clock.milliseconds();
-        const auto st = lists.stats();
-        r.listMean = st.meanLength;
-        r.listP99 = st.p99Length;
-        r.listMax = st.maxLength;
-        r.listBytes = st.bytes;
 
         std::optional<hc::influence::SurfacePyramid> pyramid;
         if (set.pyramid) {
@@ -222,7 +244,16 @@ RunResult runScenario(const Scenario& sc, const Settings& set) {
             r.pyramidMs = clock.milliseconds();
             r.pyramidBytes = pyramid->bytes();
         }
-        const hc::render::Scene scene(g, lists, pyramid ? &*pyramid : nullptr);
+        const hc::influence::SurfacePyramid* pyr = pyramid ? &*pyramid : nullptr;
+        std::unique_ptr<hc::render::Scene> scenePtr = file ? std::make_unique<hc::render::Scene>(*file, hc::influence::KernelParams{}, pyr)
+                                                           : std::make_unique<hc::render::Scene>(g, *lists, pyr);
+        hc::render::Scene& scene = *scenePtr;
+        if (file) {
+            // The same view box as in memory (the summary bounds the water's top by max elevation + max depth only).
+            double top = -HUGE_VAL;
+            for (size_t i = 0; i < g.cellCount(); ++i) top = std::max(top, double(g.values[0][i]) + std::max(0.0, double(g.values[1][i])));
+            scene.zMax = top;
+        }
         const hc::render::Camera cam = hc::scenes::floodCamera(sc, g, set.width, set.height);
         r.camera[0] = cam.xWorld, r.camera[1] = cam.yWorld, r.camera[2] = cam.zWorld;
         r.camera[3] = cam.yawDeg, r.camera[4] = cam.pitchDeg, r.camera[5] = cam.fovYDeg;
@@ -311,7 +342,7 @@ RunResult runScenario(const Scenario& sc, const Settings& set) {
         for (size_t i = 0; i < frame.waterDepthM.size(); ++i) r.wetHits += frame.waterDepthM[i] > 0;
         if (set.accuracy) {
             say("measuring hits against the exact surface ...");
-            measureAccuracy(frame, g, lists, set.options.threads, r);
+            measureAccuracy(frame, g, lists ? &*lists : nullptr, file.get(), set.options.threads, r);
         }
         if (!set.imagesDir.empty()) {
             const std::string path = (fs::path(set.imagesDir) / (std::string(sc.name) + ".png")).string();
@@ -505,6 +536,8 @@ int main(int argc, char** argv) {
                "      texel sizes on its ladder (powers of two of the finest cell), texels it holds copied (CPU)", set.pyramid);
         p.flag("--pyramid-coarse", "with --pyramid: texels up to 2x coarser than without it (N a side) instead of up to\n"
                "      2x finer (up to 2N a side)", set.options.pyramidCoarseTexels);
+        p.flag("--out-of-core", "CPU: write each grid to a temporary .hcg and render out of core from it, without lists\n"
+               "      (render::Scene over a GridRegionReader; with --pyramid the texels it holds need no cell)", set.outOfCore);
         p.flag("--accuracy", "measure the last frame's terrain hits against the exact surface: max, p99 and RMS of\n"
                "      |hit height - exact height| [m] (walls and water aside)", set.accuracy);
         p.option("--plot", "OUT.svg", "also draw each scenario's best stage times as stacked bars with the targets, SVG\n"
@@ -519,6 +552,7 @@ int main(int argc, char** argv) {
         if (set.backend == hc::cli::Backend::Auto) throw hc::Error("--backend auto: a benchmark names its backend, cpu or gl");
         if (set.flyFrames < 0 || set.flyFrames == 1) throw hc::Error("--fly-frames " + std::to_string(set.flyFrames) + ": 0 (off) or at least 2");
         if (set.flyFrames > 0 && set.backend != hc::cli::Backend::Cpu) throw hc::Error("--fly-frames: the CPU backend's (incremental cascades)");
+        if (set.outOfCore && set.backend != hc::cli::Backend::Cpu) throw hc::Error("--out-of-core: the CPU backend's (GL needs the lists)");
         if (!(set.flyStepM >= 0) || !std::isfinite(set.flyStepM)) throw hc::Error("--fly-step " + fmt::format("{:g}", set.flyStepM) + ": metres >= 0");
         if (std::string why = set.options.validate(); !why.empty()) throw hc::Error(why);
         {

@@ -1,3 +1,4 @@
+#include <algorithm>
 #include <cmath>
 #include <limits>
 
@@ -5,6 +6,7 @@
 #include "heightcast/core/error.h"
 #include "heightcast/core/parallel.h"
 #include "heightcast/core/progress.h"
+#include "heightcast/influence/region.h"
 
 namespace hc::exporting {
 
@@ -14,13 +16,13 @@ size_t SampledRaster::definedCount() const {
     return n;
 }
 
-SampledRaster planRaster(const Grid& g, double resolutionM, std::optional<BoxWorld> box, size_t maxPixels) {
+namespace {
+
+// The request checked against the cells' bounding box (local frame [m]) of the grid `g` (geometry only).
+SampledRaster planIn(const Grid& g, double bx0, double by0, double bx1, double by1, double resolutionM, std::optional<BoxWorld> box,
+                     size_t maxPixels) {
     if (!(resolutionM > 0) || !std::isfinite(resolutionM)) throw Error("--resolution must be a positive number of metres");
-    if (!box) {
-        double x0, y0, x1, y1;
-        g.boundsLocal(x0, y0, x1, y1);
-        box = BoxWorld{g.originWorldX + x0, g.originWorldY + y0, g.originWorldX + x1, g.originWorldY + y1};
-    }
+    if (!box) box = BoxWorld{g.originWorldX + bx0, g.originWorldY + by0, g.originWorldX + bx1, g.originWorldY + by1};
     if (!(box->xMin < box->xMax && box->yMin < box->yMax)) throw Error("--bbox must have XMIN < XMAX and YMIN < YMAX");
     const double w = std::ceil((box->xMax - box->xMin) / resolutionM - 1e-9);
     const double h = std::ceil((box->yMax - box->yMin) / resolutionM - 1e-9);
@@ -28,10 +30,8 @@ SampledRaster planRaster(const Grid& g, double resolutionM, std::optional<BoxWor
         throw Error("the export would be " + std::to_string(static_cast<long long>(w)) + " x " + std::to_string(static_cast<long long>(h)) +
                     " pixels, more than " + std::to_string(maxPixels) + ": choose a coarser --resolution or a smaller --bbox");
     // Does the box meet the grid at all?
-    double x0, y0, x1, y1;
-    g.boundsLocal(x0, y0, x1, y1);
-    if (box->xMax <= g.originWorldX + x0 || box->xMin >= g.originWorldX + x1 || box->yMax <= g.originWorldY + y0 ||
-        box->yMin >= g.originWorldY + y1)
+    if (box->xMax <= g.originWorldX + bx0 || box->xMin >= g.originWorldX + bx1 || box->yMax <= g.originWorldY + by0 ||
+        box->yMin >= g.originWorldY + by1)
         throw Error("the requested area lies outside the grid: the surface is undefined everywhere in it");
     SampledRaster r;
     r.width = static_cast<size_t>(w);
@@ -45,11 +45,30 @@ SampledRaster planRaster(const Grid& g, double resolutionM, std::optional<BoxWor
     return r;
 }
 
-SampledRaster sampleSurface(const influence::SurfaceEvaluator& eval, const influence::Layer& layer, const std::string& layerName,
-                            double resolutionM, std::optional<BoxWorld> box, bool gradients, unsigned threads, bool progress,
-                            size_t maxPixels) {
-    const Grid& g = eval.grid();
-    SampledRaster r = planRaster(g, resolutionM, box, maxPixels);
+// Rows [b, e), columns [c0, c1) of r from `eval` (pixel centres; local coordinates of the first: x0, y0).
+void sampleRows(const influence::SurfaceEvaluator& eval, const influence::Layer& layer, bool gradients, double x0, double y0, size_t b,
+                size_t e, size_t c0, size_t c1, SampledRaster& r) {
+    const double res = r.pixelSizeM;
+    for (size_t row = b; row < e; ++row) {
+        const double y = y0 - static_cast<double>(row) * res;
+        for (size_t col = c0; col < c1; ++col) {
+            const double x = x0 + static_cast<double>(col) * res;
+            const size_t i = row * r.width + col;
+            if (gradients) {
+                if (auto v = eval.valueGradient(x, y, layer)) {
+                    r.values[i] = static_cast<float>(v->value);
+                    r.gradX[i] = static_cast<float>(v->dx);
+                    r.gradY[i] = static_cast<float>(v->dy);
+                }
+            } else if (auto v = eval.value(x, y, layer)) {
+                r.values[i] = static_cast<float>(*v);
+            }
+        }
+    }
+}
+
+// Every value NaN (undefined until sampled), the gradients too if asked; the layer's name and units.
+void prepare(SampledRaster& r, const Grid& g, const influence::Layer& layer, const std::string& layerName, bool gradients) {
     r.layer = layerName;
     r.units = layer.kind == influence::Layer::Cells ? g.layers[layer.index].units : "m";
     const float nan = std::numeric_limits<float>::quiet_NaN();
@@ -58,29 +77,66 @@ SampledRaster sampleSurface(const influence::SurfaceEvaluator& eval, const influ
         r.gradX.assign(r.values.size(), nan);
         r.gradY.assign(r.values.size(), nan);
     }
+}
+
+}  // namespace
+
+SampledRaster planRaster(const Grid& g, double resolutionM, std::optional<BoxWorld> box, size_t maxPixels) {
+    double x0, y0, x1, y1;
+    g.boundsLocal(x0, y0, x1, y1);
+    return planIn(g, x0, y0, x1, y1, resolutionM, box, maxPixels);
+}
+
+SampledRaster planRaster(const GridFileInfo& file, double resolutionM, std::optional<BoxWorld> box, size_t maxPixels) {
+    const auto& b = file.summary.boundsFinest;
+    const double f = file.shape.finestCellM;
+    return planIn(file.shape, double(b[0]) * f, double(b[1]) * f, double(b[2]) * f, double(b[3]) * f, resolutionM, box, maxPixels);
+}
+
+SampledRaster sampleSurface(const influence::SurfaceEvaluator& eval, const influence::Layer& layer, const std::string& layerName,
+                            double resolutionM, std::optional<BoxWorld> box, bool gradients, unsigned threads, bool progress,
+                            size_t maxPixels) {
+    const Grid& g = eval.grid();
+    SampledRaster r = planRaster(g, resolutionM, box, maxPixels);
+    prepare(r, g, layer, layerName, gradients);
     // Local coordinates of the first pixel centre: the world offsets are subtracted once, in double.
     const double x0 = r.westWorld - g.originWorldX + 0.5 * resolutionM;
     const double y0 = r.northWorld - g.originWorldY - 0.5 * resolutionM;
     Progress bar("sampling " + layerName, r.height, progress);
     parallelFor(r.height, 8, threads, [&](size_t b, size_t e, unsigned) {
-        for (size_t row = b; row < e; ++row) {
-            const double y = y0 - static_cast<double>(row) * resolutionM;
-            for (size_t col = 0; col < r.width; ++col) {
-                const double x = x0 + static_cast<double>(col) * resolutionM;
-                const size_t i = row * r.width + col;
-                if (gradients) {
-                    if (auto v = eval.valueGradient(x, y, layer)) {
-                        r.values[i] = static_cast<float>(v->value);
-                        r.gradX[i] = static_cast<float>(v->dx);
-                        r.gradY[i] = static_cast<float>(v->dy);
-                    }
-                } else if (auto v = eval.value(x, y, layer)) {
-                    r.values[i] = static_cast<float>(*v);
-                }
-            }
-        }
+        sampleRows(eval, layer, gradients, x0, y0, b, e, 0, r.width, r);
         bar.advance(e - b);
     });
+    bar.finish();
+    return r;
+}
+
+SampledRaster sampleSurface(const GridRegionReader& file, const influence::KernelParams& params, const influence::Layer& layer,
+                            const std::string& layerName, double resolutionM, std::optional<BoxWorld> box, bool gradients, unsigned threads,
+                            bool progress, size_t maxPixels) {
+    const Grid& g = file.shape();
+    SampledRaster r = planRaster(file.info(), resolutionM, box, maxPixels);
+    prepare(r, g, layer, layerName, gradients);
+    const double x0 = r.westWorld - g.originWorldX + 0.5 * resolutionM;
+    const double y0 = r.northWorld - g.originWorldY - 0.5 * resolutionM;
+    // Tiles of kExportTileCells^2 finest cells (at least one pixel): a region of at most ~65 k cells plus its kernel
+    // margin, whatever the resolution.
+    const size_t side = size_t(std::clamp(std::floor(double(kExportTileCells) * g.finestCellM / resolutionM), 1.0, 4096.0));
+    Progress bar("sampling " + layerName + " out of core", r.height, progress);
+    for (size_t band = 0; band < r.height; band += side) {
+        const size_t end = std::min(r.height, band + side);
+        for (size_t c0 = 0; c0 < r.width; c0 += side) {
+            const size_t c1 = std::min(r.width, c0 + side);
+            const Grid::Square area{x0 + double(c0) * resolutionM, y0 - double(end - 1) * resolutionM, x0 + double(c1 - 1) * resolutionM,
+                                    y0 - double(band) * resolutionM};
+            const influence::SurfaceRegion region = influence::readSurfaceRegion(file, area, params, threads);
+            if (region.grid.cellCount() == 0) continue;
+            const influence::SurfaceEvaluator eval(region.grid, region.lists);
+            parallelFor(end - band, 4, threads,
+                        [&](size_t b, size_t e, unsigned) { sampleRows(eval, layer, gradients, x0, y0, band + b, band + e, c0, c1, r); });
+        }
+        bar.advance(end - band);
+    }
     bar.finish();
     return r;
 }

@@ -22,6 +22,7 @@
 #include <string>
 #include <vector>
 
+#include "heightcast/grid/grid_file.h"
 #include "heightcast/influence/surface.h"
 
 namespace hc::exporting {
@@ -46,6 +47,8 @@ struct SampledRaster {
 // The raster that sampleSurface() would fill (geometry only, no values): checks the request first, so
 // tools refuse it before any expensive work. Throws hc::Error as sampleSurface() does.
 SampledRaster planRaster(const Grid& grid, double resolutionM, std::optional<BoxWorld> box, size_t maxPixels = size_t{1} << 30);
+// The same for a grid file not read whole: its shape and the bounds its summary stores.
+SampledRaster planRaster(const GridFileInfo& file, double resolutionM, std::optional<BoxWorld> box, size_t maxPixels = size_t{1} << 30);
 
 // Samples `layer` over `box` (default: the grid's cells' extent) every resolutionM metres.
 // Throws hc::Error for a non-positive resolution, an empty or inverted box, or a raster beyond
@@ -53,6 +56,15 @@ SampledRaster planRaster(const Grid& grid, double resolutionM, std::optional<Box
 SampledRaster sampleSurface(const influence::SurfaceEvaluator& eval, const influence::Layer& layer, const std::string& layerName,
                             double resolutionM, std::optional<BoxWorld> box, bool gradients, unsigned threads, bool progress,
                             size_t maxPixels = size_t{1} << 30);
+
+// The same out of core (DESIGN.md section 10): the raster is sampled a tile of kExportTileCells^2 finest cells (at
+// least a pixel) at a time, each from the cells whose kernels reach it, read from the file with their lists built on
+// the spot (influence/region.h) and dropped: memory follows the tile and the raster, not the grid. The same bits as
+// sampleSurface over the whole grid and its lists.
+constexpr size_t kExportTileCells = 256;
+SampledRaster sampleSurface(const GridRegionReader& file, const influence::KernelParams& params, const influence::Layer& layer,
+                            const std::string& layerName, double resolutionM, std::optional<BoxWorld> box, bool gradients, unsigned threads,
+                            bool progress, size_t maxPixels = size_t{1} << 30);
 
 // GeoTIFF through GDAL: Float32, deflate, tiled; CRS and geotransform set; nodata -3.4028234663852886e+38
 // (float32's lowest: below any elevation) where undefined.
