@@ -1,5 +1,9 @@
 #include "cli.h"
 
+#include <glob.h>
+
+#include <algorithm>
+#include <cctype>
 #include <cerrno>
 #include <charconv>
 #include <cmath>
@@ -141,9 +145,60 @@ std::vector<double> parseNumberList(const std::string& text, const std::string& 
         start = comma + 1;
     }
     if (v.size() < minCount || v.size() > maxCount)
-        throw Error(what + " " + text + ": expected " + std::to_string(minCount) +
-                    (maxCount > minCount ? " or " + std::to_string(maxCount) : "") + " comma-separated numbers");
+        throw Error(what + " " + text + ": expected " + (maxCount == SIZE_MAX ? "at least " : "") + std::to_string(minCount) +
+                    (maxCount > minCount && maxCount != SIZE_MAX ? " or " + std::to_string(maxCount) : "") + " comma-separated numbers");
     return v;
+}
+
+namespace {
+
+// Natural order: runs of digits compare as numbers, so step_9 comes before step_10.
+bool naturalLess(const std::string& a, const std::string& b) {
+    size_t i = 0, j = 0;
+    while (i < a.size() && j < b.size()) {
+        if (std::isdigit(static_cast<unsigned char>(a[i])) && std::isdigit(static_cast<unsigned char>(b[j]))) {
+            size_t ie = i, je = j;
+            while (ie < a.size() && std::isdigit(static_cast<unsigned char>(a[ie]))) ++ie;
+            while (je < b.size() && std::isdigit(static_cast<unsigned char>(b[je]))) ++je;
+            std::string_view x(a.data() + i, ie - i), y(b.data() + j, je - j);
+            while (x.size() > 1 && x[0] == '0') x.remove_prefix(1);
+            while (y.size() > 1 && y[0] == '0') y.remove_prefix(1);
+            if (x.size() != y.size()) return x.size() < y.size();
+            if (x != y) return x < y;
+            i = ie, j = je;
+        } else {
+            if (a[i] != b[j]) return a[i] < b[j];
+            ++i, ++j;
+        }
+    }
+    return a.size() - i < b.size() - j;
+}
+
+}  // namespace
+
+std::vector<std::string> expandFileList(const std::string& text, const std::string& what) {
+    std::vector<std::string> out;
+    size_t start = 0;
+    for (;;) {
+        const size_t comma = text.find(',', start);
+        const std::string item = text.substr(start, comma == std::string::npos ? std::string::npos : comma - start);
+        if (item.empty()) throw Error(what + " " + text + ": an empty file name in the list");
+        if (item.find_first_of("*?[") == std::string::npos) {
+            out.push_back(item);
+        } else {
+            glob_t g{};
+            const int rc = ::glob(item.c_str(), 0, nullptr, &g);
+            std::vector<std::string> matches;
+            for (size_t k = 0; rc == 0 && k < g.gl_pathc; ++k) matches.emplace_back(g.gl_pathv[k]);
+            globfree(&g);
+            if (matches.empty()) throw Error(what + " " + item + ": the pattern matches no file");
+            std::sort(matches.begin(), matches.end(), naturalLess);
+            out.insert(out.end(), matches.begin(), matches.end());
+        }
+        if (comma == std::string::npos) break;
+        start = comma + 1;
+    }
+    return out;
 }
 
 std::vector<std::array<double, 2>> parsePointsCsv(std::string_view text, const std::string& name) {

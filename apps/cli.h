@@ -57,6 +57,10 @@ double parseNumber(const std::string& text, const std::string& what);
 // Parses "A,B,C..." into minCount..maxCount finite doubles; throws hc::Error naming `what`.
 std::vector<double> parseNumberList(const std::string& text, const std::string& what, size_t minCount, size_t maxCount);
 
+// A list of files: "A,B,C" in that order, and any element holding a glob pattern (* ? [) replaced by its matches in
+// natural order (depth_2 before depth_10). Throws hc::Error naming `what` when a pattern matches nothing.
+std::vector<std::string> expandFileList(const std::string& text, const std::string& what);
+
 // Probe points: CSV text whose first line starts with x,y, then one "x,y[,more columns]" line per point
 // (finite numbers; blank lines skipped; CRLF accepted). Errors are "NAME: line N: problem". Throws hc::Error.
 std::vector<std::array<double, 2>> parsePointsCsv(std::string_view text, const std::string& name);

@@ -19,6 +19,7 @@ struct ExportArgs {
     std::optional<hc::exporting::BoxWorld> box;
     hc::influence::KernelParams params;
     unsigned threads = 0;
+    unsigned step = 0;  // --step
     bool quiet = false;
     bool vdb() const { return ext == ".vdb"; }
 };
@@ -43,6 +44,7 @@ bool parseOptions(int argc, char** argv, ExportArgs& a) {
     p.option("--cache", "C.hci", "read the whole grid and this influence cache (built if missing or stale; default: the grid's\n"
              "path with .hci when that exists); without one the grid is read a tile at a time (out of core,\n"
              "the same values)", a.cachePath);
+    p.option("--step", "K", "water step to export, 0-based (default 0; hc-info lists a grid's steps and their times)", a.step);
     p.option("--sigma", "S", "kernel width in cell sizes (default 1.0)", a.params.sigma);
     p.option("--truncation", "R", "kernel cut-off in sigmas (default 3.5)", a.params.truncation);
     p.option("--threads", "N", "worker threads (default 0 = all cores)", a.threads);
@@ -128,13 +130,13 @@ int main(int argc, char** argv) {
         Exported exported;
         if (a.cachePath.empty() && !std::filesystem::exists(cachePath, ec)) {
             // No cache: out of core, a tile at a time (the same bits).
-            const hc::GridRegionReader file(a.gridPath);
+            const hc::GridRegionReader file(a.gridPath, a.step);
             hc::exporting::planRaster(file.info(), a.resolution, a.box);  // refuse a bad request before any real work
             const auto layer = hc::influence::Layer::byName(file.shape(), a.vdb() ? "elevation" : a.layerName);
             std::fprintf(stderr, "hc-export: no influence cache at %s: the grid is read a tile at a time (out of core)\n", cachePath.c_str());
             exported = sampleAndWrite(a, Source{file.shape(), nullptr, &file, a.params}, layer);
         } else {
-            const hc::Grid grid = hc::readGrid(a.gridPath);
+            const hc::Grid grid = hc::readGrid(a.gridPath, nullptr, a.step);
             hc::exporting::planRaster(grid, a.resolution, a.box);  // refuse a bad request before any real work
             const auto layer = hc::influence::Layer::byName(grid, a.vdb() ? "elevation" : a.layerName);
             std::string note;

@@ -18,6 +18,9 @@ struct InfluenceArgs {
     unsigned threads = 0;
     bool quiet = false;
     bool lists = true, pyramid = true;
+    int step = -1;                       // --step: the one water step whose pyramid to build; -1: every step
+    size_t stepCount = 0;                // the grid's water steps
+    std::vector<std::string> pyramidPaths;  // per step built (one entry when the grid has at most one step)
 };
 
 // The options, validated before any work; false after --help.
@@ -36,7 +39,9 @@ bool parseOptions(int argc, char** argv, InfluenceArgs& a) {
     p.option("-o", "OUT.hci", "cache file (default: the grid's path with .hci)", a.out);
     p.option("--sigma", "S", "Gaussian width in cell sizes (default 1.0, the report's)", a.params.sigma);
     p.option("--truncation", "R", "kernel cut-off in sigmas; a cell reaches R * sigma cell sizes (default 3.5)", a.params.truncation);
-    p.option("-p", "OUT.hcp", "surface pyramid file (default: the grid's path with .hcp)", a.pyramidOut);
+    p.option("-p", "OUT.hcp", "surface pyramid file (default: the grid's path with .hcp; with several water steps one per step,\n"
+             "      GRID.step0007.hcp for step 7; -p then needs --step)", a.pyramidOut);
+    p.option("--step", "K", "build the pyramid of water step K only, 0-based (default: every step; the lists serve all steps)", a.step);
     p.option("--threads", "N", "worker threads (default 0 = all cores)", a.threads);
     p.flag("--no-lists", "build the surface pyramid only (no .hci)", noLists);
     p.flag("--no-pyramid", "build the influence lists only (no .hcp)", noPyramid);
@@ -47,16 +52,28 @@ bool parseOptions(int argc, char** argv, InfluenceArgs& a) {
     a.lists = !noLists;
     a.pyramid = !noPyramid;
     if (a.out.empty()) a.out = hc::influence::defaultCachePath(a.gridPath);
-    if (a.pyramidOut.empty()) a.pyramidOut = hc::influence::defaultPyramidPath(a.gridPath);
+    a.stepCount = hc::readGridInfo(a.gridPath).shape.stepCount();
+    if (a.step < -1 || (a.step >= 0 && size_t(a.step) >= std::max<size_t>(1, a.stepCount)))
+        throw hc::Error("--step " + std::to_string(a.step) + ": " + a.gridPath + " has " + std::to_string(a.stepCount) + " water steps");
+    if (!a.pyramidOut.empty() && a.stepCount > 1 && a.step < 0)
+        throw hc::Error("-p names one pyramid file but " + a.gridPath + " has " + std::to_string(a.stepCount) +
+                        " water steps: add --step K, or leave -p out for one file per step");
+    if (!a.pyramidOut.empty()) {
+        a.pyramidPaths = {a.pyramidOut};
+    } else {
+        for (size_t k = 0; k < std::max<size_t>(1, a.stepCount); ++k)
+            if (a.step < 0 || size_t(a.step) == k) a.pyramidPaths.push_back(hc::influence::defaultPyramidPath(a.gridPath, k, a.stepCount));
+    }
     if (a.lists) {
         hc::cli::checkWritable(a.out, "influence cache");
         hc::cli::checkNotSame(a.out, a.gridPath, "influence cache");
     }
-    if (a.pyramid) {
-        hc::cli::checkWritable(a.pyramidOut, "surface pyramid");
-        hc::cli::checkNotSame(a.pyramidOut, a.gridPath, "surface pyramid");
-        if (a.lists) hc::cli::checkNotSame(a.pyramidOut, a.out, "surface pyramid");
-    }
+    if (a.pyramid)
+        for (const std::string& path : a.pyramidPaths) {
+            hc::cli::checkWritable(path, "surface pyramid");
+            hc::cli::checkNotSame(path, a.gridPath, "surface pyramid");
+            if (a.lists) hc::cli::checkNotSame(path, a.out, "surface pyramid");
+        }
     return true;
 }
 
@@ -70,8 +87,9 @@ void printListsSummary(const InfluenceArgs& a, const hc::influence::InfluenceLis
                 writeS);
 }
 
-void printPyramidSummary(const InfluenceArgs& a, const hc::Grid& grid, const hc::influence::SurfacePyramid& p, double buildS, double writeS) {
-    std::printf("  pyramid      -> %s\n", a.pyramidOut.c_str());
+void printPyramidSummary(const std::string& path, const hc::Grid& grid, const hc::influence::SurfacePyramid& p, double buildS, double writeS) {
+    if (grid.steps.size() > 1) std::printf("  step %zu       at %.9g s, %llu wet cells\n", grid.step, grid.stepTimeS(), (unsigned long long)grid.steps[grid.step].wetCells);
+    std::printf("  pyramid      -> %s\n", path.c_str());
     std::printf("    levels     0..%d (spacing %g .. %g m), %d channel%s\n", p.topLevel(), p.spacingM(0), p.spacingM(p.topLevel()), p.channels,
                 p.channels == 1 ? " (elevation)" : "s (elevation, water level, wet share)");
     std::printf("    samples    %llu (%.2f per cell per channel)\n", (unsigned long long)p.sampleCount(),
@@ -92,7 +110,7 @@ int main(int argc, char** argv) {
     return hc::cli::run("hc-influence", [&] {
         InfluenceArgs a;
         if (!parseOptions(argc, argv, a)) return 0;
-        const hc::Grid grid = hc::readGrid(a.gridPath);
+        hc::Grid grid = hc::readGrid(a.gridPath, nullptr, a.step < 0 ? 0 : size_t(a.step));
         std::printf("hc-influence: %s\n", a.gridPath.c_str());
         std::printf("  kernel       truncated Gaussian, sigma %g, R %g (reach %g cell sizes)\n", a.params.sigma, a.params.truncation,
                     a.params.truncation * a.params.sigma);
@@ -104,11 +122,14 @@ int main(int argc, char** argv) {
             hc::influence::writeInfluenceCache(lists, a.out);
             printListsSummary(a, lists, buildS, clock.lap());
         }
-        if (a.pyramid) {
+        for (size_t i = 0; a.pyramid && i < a.pyramidPaths.size(); ++i) {
+            // One pyramid per water step; the grid switches steps reading only the next step's section.
+            if (a.step < 0 && i > 0) hc::readGridStep(a.gridPath, grid, i);
+            clock.lap();
             const hc::influence::SurfacePyramid pyramid = hc::influence::buildSurfacePyramid(grid, a.params, a.threads, !a.quiet);
             const double buildS = clock.lap();
-            hc::influence::writeSurfacePyramid(pyramid, a.pyramidOut);
-            printPyramidSummary(a, grid, pyramid, buildS, clock.lap());
+            hc::influence::writeSurfacePyramid(pyramid, a.pyramidPaths[i]);
+            printPyramidSummary(a.pyramidPaths[i], grid, pyramid, buildS, clock.lap());
         }
         std::printf("  memory       peak %.1f MB resident\n", double(hc::peakRssBytes()) / 1e6);
         return 0;

@@ -104,6 +104,11 @@ void printJson(const hc::GridFileInfo& info, const Summary& s, const std::string
         }
         j["layers"].push_back(layer);
     }
+    // Water steps (DESIGN.md section 11): a 1.2 file's water layer, or a grid written from memory, is one step at 0 s.
+    j["steps"] = nlohmann::ordered_json::array();
+    for (size_t k = 0; k < g.steps.size(); ++k)
+        j["steps"].push_back({{"step", k}, {"time_s", g.steps[k].timeS}, {"wet_cells", g.steps[k].wetCells}});
+    if (!g.steps.empty()) j["step"] = g.step;  // the step whose values "layers" and "content_hash" describe
     j["source"] = g.stats.sourcePath;
     j["source_crs"] = g.stats.sourceCrsName;
     j["valid_pixels"] = g.stats.validPixels;
@@ -128,8 +133,16 @@ void printText(const hc::GridFileInfo& info, const Summary& s, const std::string
     for (size_t l = 0; l < info.summary.cellsPerLevel.size(); ++l)
         std::printf("    level %zu  %10.4g m  %10llu cells\n", l, g.levelSizeM(int(l)), (unsigned long long)info.summary.cellsPerLevel[l]);
     for (size_t l = 0; l < info.summary.layerMin.size(); ++l)
-        std::printf("  values       %s %.9g .. %.9g %s\n", g.layers[l].name.c_str(), double(info.summary.layerMin[l]),
-                    double(info.summary.layerMax[l]), g.layers[l].units.c_str());
+        std::printf("  values       %s %.9g .. %.9g %s%s\n", g.layers[l].name.c_str(), double(info.summary.layerMin[l]),
+                    double(info.summary.layerMax[l]), g.layers[l].units.c_str(),
+                    !g.steps.empty() && l >= g.firstStepLayer() ? (" (step " + std::to_string(g.step) + ")").c_str() : "");
+    if (!g.steps.empty()) {
+        uint64_t lo = UINT64_MAX, hi = 0;
+        for (const auto& st : g.steps) lo = std::min(lo, st.wetCells), hi = std::max(hi, st.wetCells);
+        std::printf("  steps        %zu water step%s, %.9g .. %.9g s, %llu .. %llu wet cells (--json lists each)\n", g.steps.size(),
+                    g.steps.size() == 1 ? "" : "s", g.steps.front().timeS, g.steps.back().timeS, (unsigned long long)lo,
+                    (unsigned long long)hi);
+    }
     std::printf("  origin       %.17g, %.17g\n", g.originWorldX, g.originWorldY);
     std::printf("  extent       %.17g, %.17g .. %.17g, %.17g\n", s.extent[0], s.extent[1], s.extent[2], s.extent[3]);
     std::string crs = g.crsWkt.empty() ? "none (local metres)" : crsName(g) + " (full WKT: --json)";
@@ -179,6 +192,7 @@ int main(int argc, char** argv) {
     return hc::cli::run("hc-info", [&] {
         std::string path, csv;
         bool json = false, verify = false;
+        unsigned step = 0;
         hc::cli::Parser p("hc-info", "FILE.hcg [--verify] [--json] [--cells-csv OUT.csv]",
                           "Prints a heightcast grid file's header and statistics. From format 1.2 on these are read from the\n"
                           "header and META without reading the cells (milliseconds at any size): the first line then says that\n"
@@ -189,7 +203,9 @@ int main(int argc, char** argv) {
         p.positional("FILE.hcg", "grid file to inspect", path);
         p.flag("--verify", "check the whole file (reads all of it: seconds per GB); default: header, table and META only", verify);
         p.flag("--json", "print the summary as JSON (keys: verified, checked, cells, levels, min_cell_m, max_cell_m, origin,\n"
-               "      crs_wkt, crs_name, extent, layers (with min, max), tolerance_m, max_dev_m, rms_dev_m, ...)", json);
+               "      crs_wkt, crs_name, extent, layers (with min, max), steps (step, time_s, wet_cells), step, tolerance_m, max_dev_m,\n"
+               "      rms_dev_m, ...)", json);
+        p.option("--step", "K", "water step whose values the ranges, hash and cells CSV show, 0-based (default 0)", step);
         p.option("--cells-csv", "OUT.csv", "write one line per cell: x,y,size,level,elevation[,layers...] (cell centres in the\n"
                  "      grid CRS, metres, full double precision); implies --verify", csv);
         if (!p.parse(argc, argv)) return 0;
@@ -197,7 +213,7 @@ int main(int argc, char** argv) {
             hc::cli::checkWritable(csv, "cells CSV");
             hc::cli::checkNotSame(csv, path, "cells CSV");
         }
-        const hc::GridFileInfo info = verify || !csv.empty() ? hc::verifyGridFile(path) : hc::readGridInfo(path);
+        const hc::GridFileInfo info = verify || !csv.empty() ? hc::verifyGridFile(path, step) : hc::readGridInfo(path, step);
         const Summary s = summarise(info);
         if (json)
             printJson(info, s, path);

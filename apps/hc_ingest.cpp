@@ -1,5 +1,7 @@
 // hc-ingest: raster DEM (+ water) -> adaptive quadtree grid file (.hcg).
+#include <algorithm>
 #include <cmath>
+#include <cstdint>
 #include <cstdio>
 #include <filesystem>
 
@@ -13,7 +15,7 @@ namespace {
 
 constexpr int kBandNotGiven = -1000000;  // --band's value before parsing: tells "not given" from any number a user types
 
-void printSummary(const hc::ingest::BuildSummary& b, const hc::ingest::LoadReport& r, const std::string& out) {
+void printSummary(const hc::ingest::BuildSummary& b, const hc::ingest::LoadReport& r, const std::string& out, bool timesGuessed) {
     const hc::Grid& g = b.shape;
     const hc::IngestStats& s = g.stats;
     std::printf("hc-ingest: %s -> %s\n", s.sourcePath.c_str(), out.c_str());
@@ -30,7 +32,16 @@ void printSummary(const hc::ingest::BuildSummary& b, const hc::ingest::LoadRepor
     for (size_t l = 0; l < b.cellsPerLevel.size(); ++l)
         std::printf("    level %zu  %10.4g m  %10llu cells  %6.2f %%\n", l, g.levelSizeM(int(l)),
                     (unsigned long long)b.cellsPerLevel[l], b.cellCount ? 100.0 * double(b.cellsPerLevel[l]) / double(b.cellCount) : 0.0);
-    if (g.layerCount() > 1) std::printf("  water        %llu wet cells of %llu\n", (unsigned long long)b.wetCells, (unsigned long long)b.cellCount);
+    if (b.steps.size() == 1) {
+        std::printf("  water        %llu wet cells of %llu\n", (unsigned long long)b.wetCells, (unsigned long long)b.cellCount);
+    } else if (b.steps.size() > 1) {
+        uint64_t lo = UINT64_MAX, hi = 0;
+        for (const auto& st : b.steps) lo = std::min(lo, st.wetCells), hi = std::max(hi, st.wetCells);
+        std::printf("  water        %zu steps, %.6g s .. %.6g s%s; %llu .. %llu wet cells of %llu; %.1f kB a step on average\n", b.steps.size(),
+                    b.steps.front().timeS, b.steps.back().timeS, timesGuessed ? " (the step index: no --times given)" : "",
+                    (unsigned long long)lo, (unsigned long long)hi, (unsigned long long)b.cellCount,
+                    double(b.stepBytes) / double(b.steps.size()) / 1e3);
+    }
     // Which pixels the deviation is measured on, said plainly: the working raster is the source
     // itself only when nothing was projected or resampled.
     const auto& c = r.sourceCheck;
@@ -48,14 +59,14 @@ void printSummary(const hc::ingest::BuildSummary& b, const hc::ingest::LoadRepor
     }
     if (r.infPixels) std::printf("  infinite     %llu pixels of +-inf taken as nodata\n", (unsigned long long)r.infPixels);
     std::printf("  time         %.3f s (read, project, build, write)\n", s.seconds);
-    std::printf("  memory       peak %.1f MB resident (the grid streams to disk: %zu bytes per cell there)\n",
-                double(hc::peakRssBytes()) / 1e6, size_t(8 + 4 * g.layerCount()));
+    std::printf("  memory       peak %.1f MB resident (the grid streams to disk: %zu bytes per cell there%s)\n",
+                double(hc::peakRssBytes()) / 1e6, size_t(8 + 4 * g.firstStepLayer()), b.steps.empty() ? "" : ", and 8 per wet cell and step");
 }
 
 // The options into `o`, validated before any work; false after --help.
 bool parseOptions(int argc, char** argv, hc::ingest::Options& o, std::string& out, bool& quiet) {
-    std::string water, waterSurface;
-    std::optional<double> waterLevel, nodata;
+    std::string water, waterSurface, waterLevel, times;
+    std::optional<double> nodata;
     hc::cli::Parser p("hc-ingest", "INPUT -o OUT.hcg [options]",
                       "Converts a raster DEM (any format GDAL reads, any CRS) into an adaptive quadtree grid file.\n"
                       "Four cells merge into one while their mean stays within --tolerance of every pixel they\n"
@@ -77,10 +88,15 @@ bool parseOptions(int argc, char** argv, hc::ingest::Options& o, std::string& ou
              "      classic sentinels such as -9999 that the file holds without declaring them)", nodata);
     p.option("--z-scale", "F", "multiply elevations by F after unit conversion (default 1)", o.zScale);
     p.flag("--terrain-rgb", "decode Terrain-RGB bands 1-3: h = -10000 + 0.1 * (R * 65536 + G * 256 + B) metres", o.terrainRgb);
-    p.option("--water", "RASTER", "water depth raster, metres (resampled onto the terrain; nodata and <= 0 are dry)", water);
-    p.option("--water-surface", "RASTER", "water surface elevation raster, metres (depth = surface - terrain; <= 0 is dry)", waterSurface);
-    p.option("--water-level", "L", "bathtub flood: depth = L - z, metres, where below L and connected to the domain boundary\n"
-             "      (raster edge or nodata) through pixels below L, 4-connected: pixels touching only at a corner do not connect", waterLevel);
+    p.option("--water", "RASTERS", "water depth raster(s), metres (resampled onto the terrain; nodata and <= 0 are dry); several\n"
+             "      make a flood scenario, one water step each, in the order given: A.tif,B.tif or a quoted glob 'depth_*.tif'\n"
+             "      (natural order: depth_9 before depth_10); every step must share the first's size, georeferencing and CRS", water);
+    p.option("--water-surface", "RASTERS", "water surface elevation raster(s), metres (depth = surface - terrain; <= 0 is dry); a list\n"
+             "      or glob makes steps, as for --water", waterSurface);
+    p.option("--water-level", "L[,L...]", "bathtub flood: depth = L - z, metres, where below L and connected to the domain boundary\n"
+             "      (raster edge or nodata) through pixels below L, 4-connected: pixels touching only at a corner do not connect;\n"
+             "      several levels make several steps (a rising flood: 300,302,304)", waterLevel);
+    p.option("--times", "T[,T...]", "time of each water step, seconds, strictly increasing (default: the step index 0, 1, 2, ...)", times);
     p.option("--threads", "N", "worker threads (default 0 = all cores)", o.threads);
     p.flag("--quiet", "print only warnings and failures (no progress, no summary)", quiet);
     p.exclusive({"--water", "--water-surface", "--water-level"});
@@ -89,9 +105,15 @@ bool parseOptions(int argc, char** argv, hc::ingest::Options& o, std::string& ou
     if (!o.bandGiven) o.band = 1;
     if (out.empty()) throw hc::Error("no output file: give -o OUT.hcg");
     o.nodata = nodata;
-    if (!water.empty()) o.water = hc::ingest::WaterSource::Depth, o.waterPath = water;
-    if (!waterSurface.empty()) o.water = hc::ingest::WaterSource::Surface, o.waterPath = waterSurface;
-    if (waterLevel) o.water = hc::ingest::WaterSource::Level, o.waterLevelM = *waterLevel;
+    if (!water.empty()) o.water = hc::ingest::WaterSource::Depth, o.waterPaths = hc::cli::expandFileList(water, "--water");
+    if (!waterSurface.empty())
+        o.water = hc::ingest::WaterSource::Surface, o.waterPaths = hc::cli::expandFileList(waterSurface, "--water-surface");
+    if (!waterLevel.empty())
+        o.water = hc::ingest::WaterSource::Level, o.waterLevelsM = hc::cli::parseNumberList(waterLevel, "--water-level", 1, SIZE_MAX);
+    if (!times.empty()) o.timesS = hc::cli::parseNumberList(times, "--times", 1, SIZE_MAX);
+    if (o.waterPaths.size() == 1) o.waterPath = o.waterPaths[0], o.waterPaths.clear();
+    if (o.waterLevelsM.size() == 1) o.waterLevelM = o.waterLevelsM[0], o.waterLevelsM.clear();
+    for (const auto& w : o.waterPaths) hc::cli::checkNotSame(out, w, "output grid");
     o.progress = !quiet;
     hc::ingest::validateOptions(o);
     hc::cli::checkWritable(out, "output grid");
@@ -103,7 +125,12 @@ bool parseOptions(int argc, char** argv, hc::ingest::Options& o, std::string& ou
 // before the failure, degrees or units, often explains it).
 hc::ingest::BuildSummary buildGrid(const hc::ingest::Options& o, const std::string& out, hc::ingest::LoadReport& report) {
     auto printWarnings = [&] {
-        for (const auto& w : report.warnings) std::fprintf(stderr, "hc-ingest: warning: %s\n", w.c_str());
+        std::vector<std::string> said;  // a series read twice repeats its warnings: each is said once
+        for (const auto& w : report.warnings)
+            if (std::find(said.begin(), said.end(), w) == said.end()) {
+                std::fprintf(stderr, "hc-ingest: warning: %s\n", w.c_str());
+                said.push_back(w);
+            }
     };
     hc::ingest::BuildSummary summary;
     try {
@@ -126,7 +153,7 @@ int main(int argc, char** argv) {
         if (!parseOptions(argc, argv, o, out, quiet)) return 0;
         hc::ingest::LoadReport report;
         const hc::ingest::BuildSummary summary = buildGrid(o, out, report);
-        if (!quiet) printSummary(summary, report, out);
+        if (!quiet) printSummary(summary, report, out, o.timesS.empty());
         return 0;
     });
 }

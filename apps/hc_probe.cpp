@@ -1,5 +1,7 @@
 // hc-probe: the exact smooth surface at given points.
+#include <algorithm>
 #include <cstdio>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -16,6 +18,8 @@ struct ProbeArgs {
     std::string gridPath, cachePath, layerName = "elevation", pointsPath, xy, out;
     hc::influence::KernelParams params;
     unsigned threads = 0;
+    unsigned step = 0;       // --step
+    bool allSteps = false;   // --all-steps: the hydrograph
 };
 
 // The options, validated before any work; false after --help.
@@ -37,6 +41,10 @@ bool parseOptions(int argc, char** argv, ProbeArgs& a) {
     p.option("--points", "IN.csv", "CSV with a header line starting x,y and one point per line", a.pointsPath);
     p.option("--xy", "X,Y", "a single point", a.xy);
     p.option("-o", "OUT.csv", "output CSV (default: standard output)", a.out);
+    p.option("--step", "K", "water step to evaluate, 0-based (default 0; hc-info lists a grid's steps and their times)", a.step);
+    p.flag("--all-steps", "every water step, in order: each point's hydrograph as CSV x,y,step,time_s,value (time in seconds;\n"
+           "      the influence data is shared, each step reads its own water only)", a.allSteps);
+    p.exclusive({"--step", "--all-steps"});
     p.option("--sigma", "S", "kernel width in cell sizes (default 1.0)", a.params.sigma);
     p.option("--truncation", "R", "kernel cut-off in sigmas (default 3.5)", a.params.truncation);
     p.option("--threads", "N", "worker threads (default 0 = all cores)", a.threads);
@@ -62,28 +70,47 @@ std::vector<std::array<double, 2>> readPoints(const ProbeArgs& a) {
 // The surface's layer at each point; empty where it is undefined. By default from the cells around the points
 // (influence/region.h), saying how many were read; with --cache from the whole grid and that cache (loaded or
 // built, saying which). Both give the same bits.
-std::vector<std::optional<double>> evaluate(const ProbeArgs& a, const std::vector<std::array<double, 2>>& pts) {
+class Prober {
+public:
+    Prober(const ProbeArgs& a) : a_(a) {}
+    // The layer at each point for water step `step`; `quiet`: no note on stderr.
+    std::vector<std::optional<double>> values(const std::vector<std::array<double, 2>>& pts, size_t step, bool quiet);
+
+private:
+    const ProbeArgs& a_;
+    std::optional<hc::Grid> grid_;  // --cache: the whole grid, its step switched in place
+    std::optional<hc::influence::InfluenceLists> lists_;
+};
+
+std::vector<std::optional<double>> Prober::values(const std::vector<std::array<double, 2>>& pts, size_t step, bool quiet) {
+    const ProbeArgs& a = a_;
     if (a.cachePath.empty()) {
-        const hc::GridRegionReader file(a.gridPath);
+        const hc::GridRegionReader file(a.gridPath, step);
         const hc::Grid& shape = file.shape();
         const auto layer = hc::influence::Layer::byName(shape, a.layerName);
         std::vector<std::array<double, 2>> local(pts.size());
         for (size_t i = 0; i < pts.size(); ++i) local[i] = {pts[i][0] - shape.originWorldX, pts[i][1] - shape.originWorldY};
         hc::influence::RegionReadStats st;
         auto values = hc::influence::valuesFromFile(file, local, layer, a.params, a.threads, &st);
-        std::fprintf(stderr,
+        if (!quiet)
+            std::fprintf(stderr,
                      "hc-probe: read %llu of the grid's %llu cells around the points (%llu region%s, the largest %llu cells; "
                      "%.1f MB of the file checked) and built their lists: no influence cache used\n",
                      (unsigned long long)st.cellsRead, (unsigned long long)file.cellCount(), (unsigned long long)st.regions,
                      st.regions == 1 ? "" : "s", (unsigned long long)st.largestRegion, double(file.bytesChecked()) / 1e6);
         return values;
     }
-    const hc::Grid grid = hc::readGrid(a.gridPath);
+    if (!grid_) {
+        grid_ = hc::readGrid(a.gridPath, nullptr, step);
+        std::string note;
+        lists_ = hc::influence::loadOrBuildCache(*grid_, a.params, a.cachePath, a.threads, false, note);
+        std::fprintf(stderr, "hc-probe: %s\n", note.c_str());
+    } else if (grid_->step != step) {
+        hc::readGridStep(a.gridPath, *grid_, step);  // the lists stay: they depend on the structure only
+    }
+    const hc::Grid& grid = *grid_;
     const auto layer = hc::influence::Layer::byName(grid, a.layerName);
-    std::string note;
-    const auto lists = hc::influence::loadOrBuildCache(grid, a.params, a.cachePath, a.threads, false, note);
-    std::fprintf(stderr, "hc-probe: %s\n", note.c_str());
-    const hc::influence::SurfaceEvaluator eval(grid, lists);
+    const hc::influence::SurfaceEvaluator eval(grid, *lists_);
     std::vector<std::array<double, 2>> local(pts.size());
     for (size_t i = 0; i < pts.size(); ++i) local[i] = {pts[i][0] - grid.originWorldX, pts[i][1] - grid.originWorldY};
     return eval.values(local, layer, a.threads);
@@ -123,8 +150,31 @@ int main(int argc, char** argv) {
         ProbeArgs a;
         if (!parseOptions(argc, argv, a)) return 0;
         const std::vector<std::array<double, 2>> pts = readPoints(a);
-        const std::vector<std::optional<double>> values = evaluate(a, pts);
-        writeOutput(a.out, toCsv(pts, values));
+        Prober prober(a);
+        if (!a.allSteps) {
+            writeOutput(a.out, toCsv(pts, prober.values(pts, a.step, false)));
+            return 0;
+        }
+        // The hydrograph: every step, the points in the order given within each step.
+        const hc::Grid shape = hc::readGridInfo(a.gridPath).shape;
+        const size_t steps = std::max<size_t>(1, shape.stepCount());
+        std::string text = "x,y,step,time_s,value\n";
+        char buf[160];
+        for (size_t k = 0; k < steps; ++k) {
+            const auto values = prober.values(pts, k, k > 0);
+            const double t = k < shape.steps.size() ? shape.steps[k].timeS : 0.0;
+            for (size_t i = 0; i < pts.size(); ++i) {
+                std::snprintf(buf, sizeof buf, "%.17g,%.17g,%zu,%.17g,", pts[i][0], pts[i][1], k, t);
+                text += buf;
+                if (values[i]) {
+                    std::snprintf(buf, sizeof buf, "%.17g", *values[i]);
+                    text += buf;
+                }
+                text += '\n';
+            }
+        }
+        if (steps > 1) std::fprintf(stderr, "hc-probe: %zu steps, %zu point%s each\n", steps, pts.size(), pts.size() == 1 ? "" : "s");
+        writeOutput(a.out, text);
         return 0;
     });
 }

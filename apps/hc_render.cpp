@@ -1,6 +1,17 @@
 // hc-render: a picture (PNG, and EXR layers) of the smooth surface of a grid from a camera.
+#include <spawn.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <cmath>
 #include <cstdio>
+#include <cstdlib>
+#include <filesystem>
+#include <optional>
 #include <string>
+#include <vector>
+
+#include <fmt/format.h>
 
 #include "backend_choice.h"
 #include "cli.h"
@@ -9,6 +20,7 @@
 #include "heightcast/core/error.h"
 #include "heightcast/grid/grid_file.h"
 #include "heightcast/core/parallel.h"
+#include "heightcast/core/timer.h"
 #include "heightcast/render/gl/gl_renderer.h"
 #include "heightcast/render/image_io.h"
 #include "heightcast/render/renderer.h"
@@ -16,10 +28,67 @@
 namespace {
 
 struct RenderArgs {
-    std::string gridPath, out, exr, timingsPath;
+    std::string gridPath, out, exr, timingsPath, video;
     hc::cli::Backend backend = hc::cli::Backend::Auto;
     hc::cli::RenderSetup setup{"1280x720"};
+    bool sequence = false;        // --steps A:B: one image per step
+    unsigned firstStep = 0, lastStep = 0;
+    double fps = 4;               // --fps, of the --video
 };
+
+// OUT.png -> OUT_0007.png for step 7 of a sequence (and likewise the EXR and timings files).
+std::string numbered(const std::string& path, unsigned step) {
+    std::filesystem::path p(path);
+    char tail[32];
+    std::snprintf(tail, sizeof tail, "_%04u", step);
+    return (p.parent_path() / (p.stem().string() + tail + p.extension().string())).string();
+}
+
+// The path of a program on PATH, or "".
+std::string onPath(const std::string& program) {
+    const char* path = std::getenv("PATH");
+    std::string dirs = path ? path : "/usr/bin:/bin";
+    size_t start = 0;
+    for (;;) {
+        const size_t colon = dirs.find(':', start);
+        const std::string dir = dirs.substr(start, colon == std::string::npos ? std::string::npos : colon - start);
+        const std::string candidate = (dir.empty() ? std::string(".") : dir) + "/" + program;
+        if (::access(candidate.c_str(), X_OK) == 0) return candidate;
+        if (colon == std::string::npos) return "";
+        start = colon + 1;
+    }
+}
+
+// The numbered PNGs of steps first..last as an H.264 MP4 (yuv420p, padded to even sizes) through ffmpeg, written to a
+// temporary name and renamed into place: no partial video survives a failure. Throws hc::Error.
+void writeVideo(const std::string& ffmpeg, const RenderArgs& a) {
+    std::string pattern;
+    for (char c : numbered(a.out, 0)) pattern += c == '%' ? std::string("%%") : std::string(1, c);
+    pattern.replace(pattern.rfind("_0000"), 5, "_%04d");
+    const std::string tmp = a.video + ".partial";
+    std::vector<std::string> args{ffmpeg, "-hide_banner", "-loglevel", "error", "-y", "-framerate", fmt::format("{:g}", a.fps),
+                                  "-start_number", std::to_string(a.firstStep), "-i", pattern, "-frames:v",
+                                  std::to_string(a.lastStep - a.firstStep + 1), "-vf", "pad=ceil(iw/2)*2:ceil(ih/2)*2",
+                                  "-c:v", "libx264", "-pix_fmt", "yuv420p", "-f", "mp4", tmp};
+    std::vector<char*> argv;
+    for (auto& s : args) argv.push_back(s.data());
+    argv.push_back(nullptr);
+    pid_t pid = 0;
+    if (posix_spawn(&pid, ffmpeg.c_str(), nullptr, nullptr, argv.data(), environ) != 0) throw hc::Error(ffmpeg + ": cannot be started");
+    int status = 0;
+    waitpid(pid, &status, 0);
+    std::error_code ec;
+    if (!WIFEXITED(status) || WEXITSTATUS(status) != 0) {
+        std::filesystem::remove(tmp, ec);
+        throw hc::Error(a.video + ": ffmpeg failed (exit status " + std::to_string(WIFEXITED(status) ? WEXITSTATUS(status) : -1) +
+                        "); the images are written");
+    }
+    std::filesystem::rename(tmp, a.video, ec);
+    if (ec) {
+        std::filesystem::remove(tmp, ec);
+        throw hc::Error(a.video + ": cannot be written: " + ec.message());
+    }
+}
 
 // The options, validated with the camera's numbers before any expensive work; false after --help.
 bool parseOptions(int argc, char** argv, RenderArgs& a) {
@@ -39,6 +108,12 @@ bool parseOptions(int argc, char** argv, RenderArgs& a) {
     p.option("--exr", "OUT.exr", "also write float layers: Z, P.X/Y/Z, N.X/Y/Z, cascade, water_depth, wall (1 on hits on\n"
              "the walls drawn at hole and domain edges, 0 elsewhere)", a.exr);
     p.option("--timings", "OUT.json", "also write the per-stage timings as JSON", a.timingsPath);
+    std::string stepsText;
+    p.option("--steps", "A:B", "render water steps A..B (0-based, inclusive), one image each: OUT_0007.png for step 7 (likewise\n"
+             "      --exr and --timings); the camera is the same for every step, and only the water changes between them", stepsText);
+    p.option("--video", "OUT.mp4", "with --steps: also an H.264 video of the images through ffmpeg (Debian package ffmpeg)", a.video);
+    p.option("--fps", "F", "frames (steps) per second of the --video (default 4)", a.fps);
+    p.exclusive({"--step", "--steps"});
     p.option("--backend", "B", "gl (OpenGL 4.3 compute shaders; headless, no display needed), cpu, or auto: gl where an\n"
              "OpenGL 4.3 context on a GPU can be had, else cpu with a note saying why (no 4.3 context, or only\n"
              "software OpenGL such as Mesa's llvmpipe, which is slower than cpu) (default auto). --threads\n"
@@ -48,6 +123,21 @@ bool parseOptions(int argc, char** argv, RenderArgs& a) {
     if (!view.empty() && view != "overview") throw hc::Error("--view " + view + ": the only view is 'overview'");
     a.backend = hc::cli::parseBackend(backendText);
     a.setup.finish();
+    if (!stepsText.empty()) {
+        const size_t colon = stepsText.find(':');
+        if (colon == std::string::npos) throw hc::Error("--steps " + stepsText + ": expected A:B, e.g. 0:23");
+        const double v[2] = {hc::cli::parseNumber(stepsText.substr(0, colon), "--steps"),
+                             hc::cli::parseNumber(stepsText.substr(colon + 1), "--steps")};
+        if (v[0] < 0 || v[1] < v[0] || v[0] != std::floor(v[0]) || v[1] != std::floor(v[1]) || v[1] > 1e6)
+            throw hc::Error("--steps " + stepsText + ": expected A:B, whole step numbers with 0 <= A <= B");
+        a.sequence = true;
+        a.firstStep = unsigned(v[0]), a.lastStep = unsigned(v[1]);
+        a.setup.step = a.firstStep;
+        if (!a.setup.pyramidPath.empty())
+            throw hc::Error("--pyramid names one step's pyramid but --steps renders several: leave it out (each step's own is used)");
+    }
+    if (!a.video.empty() && !a.sequence) throw hc::Error("--video needs --steps A:B (one frame per step)");
+    if (!(a.fps > 0) || a.fps > 240) throw hc::Error("--fps " + fmt::format("{:g}", a.fps) + ": must be in (0, 240]");
     return true;
 }
 
@@ -58,11 +148,17 @@ hc::cli::BackendDecision chooseBackend(hc::cli::Backend requested) {
 }
 
 void checkOutputs(const RenderArgs& a) {
-    for (const std::string* o : {&a.out, &a.exr, &a.timingsPath})
+    for (const std::string* o : {&a.out, &a.exr, &a.timingsPath, &a.video})
         if (!o->empty()) {
             hc::cli::checkWritable(*o, "output");
             hc::cli::checkNotSame(*o, a.gridPath, "output");
         }
+    if (a.sequence) {
+        const size_t steps = hc::readGridInfo(a.gridPath).shape.stepCount();
+        if (a.lastStep >= std::max<size_t>(1, steps))
+            throw hc::Error("--steps " + std::to_string(a.firstStep) + ":" + std::to_string(a.lastStep) + ": " + a.gridPath + " has " +
+                            std::to_string(steps) + " water step" + (steps == 1 ? "" : "s"));
+    }
 }
 
 // Inside the terrain every ray starts in the solid block and sees nothing: say so, before any evaluation.
@@ -100,11 +196,12 @@ Rendered renderImage(const hc::cli::BackendDecision& decision, const hc::render:
     return r;
 }
 
-void writeOutputs(const RenderArgs& a, const Rendered& r) {
-    hc::render::writePng(r.frame, a.out);
-    if (!a.exr.empty()) hc::render::writeFrameExr(r.frame, a.exr);
+void writeOutputs(const RenderArgs& a, const Rendered& r, std::optional<unsigned> step) {
+    auto name = [&](const std::string& path) { return step ? numbered(path, *step) : path; };
+    hc::render::writePng(r.frame, name(a.out));
+    if (!a.exr.empty()) hc::render::writeFrameExr(r.frame, name(a.exr));
     if (!a.timingsPath.empty()) {
-        hc::AtomicFileWriter tw(a.timingsPath);
+        hc::AtomicFileWriter tw(name(a.timingsPath));
         const std::string j = r.timings.toJson();
         tw.write(std::as_bytes(std::span(j)));
         tw.commit();
@@ -145,9 +242,40 @@ int main(int argc, char** argv) {
         }
         const hc::render::Camera camera = hc::cli::initialCamera(a.setup, *loaded->scene);
         refuseCameraBelowTerrain(*loaded->scene, camera);
-        const Rendered rendered = renderImage(decision, *loaded->scene, camera, a.setup.options);
-        writeOutputs(a, rendered);
-        printSummary(a, decision, camera, rendered);
+        if (!a.sequence) {
+            const Rendered rendered = renderImage(decision, *loaded->scene, camera, a.setup.options);
+            writeOutputs(a, rendered, std::nullopt);
+            printSummary(a, decision, camera, rendered);
+            const hc::Grid& shape = loaded->file ? loaded->file->shape() : loaded->grid;
+            if (shape.steps.size() > 1)
+                std::printf("  step         %u of %zu, at %.9g s\n", a.setup.step, shape.steps.size(), shape.stepTimeS());
+            return 0;
+        }
+        // A sequence: the same camera, one frame per step; only the water is read again between steps.
+        const std::string ffmpeg = a.video.empty() ? "" : onPath("ffmpeg");
+        if (!a.video.empty() && ffmpeg.empty())
+            throw hc::Error("--video: ffmpeg is not installed (Debian: apt install ffmpeg); the images alone need no --video");
+        std::printf("hc-render: %s, steps %u..%u -> %s\n", a.gridPath.c_str(), a.firstStep, a.lastStep,
+                    numbered(a.out, a.firstStep).c_str());
+        std::printf("  step     time s   wet cells   switch ms    frame ms   image\n");
+        hc::Stopwatch total;
+        for (unsigned k = a.firstStep; k <= a.lastStep; ++k) {
+            hc::Stopwatch clock;
+            if (k != a.firstStep) hc::cli::switchStep("hc-render", *loaded, a.gridPath, a.setup, k);
+            const double switchMs = clock.lap() * 1e3;
+            if (k != a.firstStep) decision.note.clear();  // said once
+            const Rendered rendered = renderImage(decision, *loaded->scene, camera, a.setup.options);
+            writeOutputs(a, rendered, k);
+            const hc::Grid& shape = loaded->file ? loaded->file->shape() : loaded->grid;
+            std::printf("  %4u %10.6g %11llu %11.1f %11.1f   %s\n", k, shape.stepTimeS(),
+                        (unsigned long long)(shape.steps.empty() ? 0 : shape.steps[k].wetCells), switchMs, rendered.timings.totalMs,
+                        numbered(a.out, k).c_str());
+        }
+        std::printf("  total        %.3f s for %u steps\n", total.seconds(), a.lastStep - a.firstStep + 1);
+        if (!a.video.empty()) {
+            writeVideo(ffmpeg, a);
+            std::printf("  video        %s (%g steps per second)\n", a.video.c_str(), a.fps);
+        }
         return 0;
     });
 }

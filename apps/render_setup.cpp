@@ -40,6 +40,7 @@ void RenderSetup::addRenderOptions(Parser& p) {
     p.flag("--no-pyramid", "sum every texel from the kernels, even with a pyramid beside the grid", noPyramid);
     p.flag("--pyramid-coarse", "with a pyramid: texels up to 2x coarser than without one (N a side: faster, less accurate)\n"
            "instead of up to 2x finer (up to 2N a side: as accurate as without a pyramid, or more)", options.pyramidCoarseTexels);
+    p.option("--step", "K", "water step to show, 0-based (default 0; hc-info lists a grid's steps and their times)", step);
     p.option("--sigma", "S", "kernel width in cell sizes (default 1.0)", params.sigma);
     p.option("--truncation", "R", "kernel cut-off in sigmas (default 3.5)", params.truncation);
 }
@@ -84,19 +85,53 @@ void RenderSetup::finish() {
     if (camera) camera->validate();
 }
 
+namespace {
+
+// The pyramid of the scene's current step (read when valid, saying which or why none is used) and a new scene over
+// the grid or the file. `quiet`: say only what went wrong (the later steps of a sequence).
+void attachScene(const char* program, LoadedScene& s, const std::string& gridPath, const RenderSetup& setup, size_t step, bool quiet) {
+    s.scene.reset();
+    s.pyramid.reset();
+    const size_t stepCount = s.file ? s.file->shape().stepCount() : s.grid.stepCount();
+    const std::string pyramidPath =
+        setup.pyramidPath.empty() ? influence::defaultPyramidPath(gridPath, step, stepCount) : setup.pyramidPath;
+    std::error_code ec;
+    const bool pyramidExists = std::filesystem::exists(pyramidPath, ec);
+    if (setup.noPyramid) {
+        if (!quiet) std::fprintf(stderr, "%s: --no-pyramid: every texel summed from the kernels\n", program);
+    } else if (!pyramidExists) {
+        if (!quiet)
+            std::fprintf(stderr, "%s: no surface pyramid at %s: every texel summed from the kernels (hc-influence writes one)\n", program,
+                         pyramidPath.c_str());
+    } else {
+        try {
+            s.pyramid = s.file ? influence::readSurfacePyramid(pyramidPath, s.file->info(), setup.params)
+                               : influence::readSurfacePyramid(pyramidPath, s.grid, setup.params);
+            if (!quiet) std::fprintf(stderr, "%s: using surface pyramid %s\n", program, pyramidPath.c_str());
+        } catch (const Error& e) {
+            if (!setup.pyramidPath.empty()) throw;
+            std::fprintf(stderr, "%s: %s: not used, every texel summed from the kernels (hc-influence rebuilds it)\n", program, e.what());
+        }
+    }
+    const influence::SurfacePyramid* pyramid = s.pyramid ? &*s.pyramid : nullptr;
+    s.scene = s.file ? std::make_unique<render::Scene>(*s.file, setup.params, pyramid)
+                     : std::make_unique<render::Scene>(s.grid, s.lists, pyramid);
+}
+
+}  // namespace
+
 std::unique_ptr<LoadedScene> loadScene(const char* program, const std::string& gridPath, const RenderSetup& setup,
                                        bool outOfCoreWithoutCache) {
     // A pyramid asked for by name must exist (checked before any work); the default one is optional.
-    const std::string pyramidPath = setup.pyramidPath.empty() ? influence::defaultPyramidPath(gridPath) : setup.pyramidPath;
     std::error_code ec;
-    const bool pyramidExists = std::filesystem::exists(pyramidPath, ec);
-    if (!setup.noPyramid && !setup.pyramidPath.empty() && !pyramidExists) throw Error(pyramidPath + ": no such file");
+    if (!setup.noPyramid && !setup.pyramidPath.empty() && !std::filesystem::exists(setup.pyramidPath, ec))
+        throw Error(setup.pyramidPath + ": no such file");
     const std::string cachePath = setup.cachePath.empty() ? influence::defaultCachePath(gridPath) : setup.cachePath;
     const bool outOfCore =
         setup.outOfCore || (outOfCoreWithoutCache && setup.cachePath.empty() && !std::filesystem::exists(cachePath, ec));
     auto s = std::make_unique<LoadedScene>();
     if (outOfCore) {
-        s->file = std::make_unique<GridRegionReader>(gridPath);
+        s->file = std::make_unique<GridRegionReader>(gridPath, setup.step);
         if (setup.outOfCore)
             std::fprintf(stderr, "%s: --out-of-core: the grid is read a region at a time, without an influence cache\n", program);
         else
@@ -105,30 +140,20 @@ std::unique_ptr<LoadedScene> loadScene(const char* program, const std::string& g
                          "  --cache %s builds one here)\n",
                          program, cachePath.c_str(), cachePath.c_str());
     } else {
-        s->grid = readGrid(gridPath);
+        s->grid = readGrid(gridPath, nullptr, setup.step);
         std::string note;
         s->lists = influence::loadOrBuildCache(s->grid, setup.params, cachePath, setup.options.threads, true, note);
         std::fprintf(stderr, "%s: %s\n", program, note.c_str());
     }
-    if (setup.noPyramid) {
-        std::fprintf(stderr, "%s: --no-pyramid: every texel summed from the kernels\n", program);
-    } else if (!pyramidExists) {
-        std::fprintf(stderr, "%s: no surface pyramid at %s: every texel summed from the kernels (hc-influence writes one)\n", program,
-                     pyramidPath.c_str());
-    } else {
-        try {
-            s->pyramid = s->file ? influence::readSurfacePyramid(pyramidPath, s->file->info(), setup.params)
-                                 : influence::readSurfacePyramid(pyramidPath, s->grid, setup.params);
-            std::fprintf(stderr, "%s: using surface pyramid %s\n", program, pyramidPath.c_str());
-        } catch (const Error& e) {
-            if (!setup.pyramidPath.empty()) throw;
-            std::fprintf(stderr, "%s: %s: not used, every texel summed from the kernels (hc-influence rebuilds it)\n", program, e.what());
-        }
-    }
-    const influence::SurfacePyramid* pyramid = s->pyramid ? &*s->pyramid : nullptr;
-    s->scene = s->file ? std::make_unique<render::Scene>(*s->file, setup.params, pyramid)
-                       : std::make_unique<render::Scene>(s->grid, s->lists, pyramid);
+    attachScene(program, *s, gridPath, setup, setup.step, false);
     return s;
+}
+
+void switchStep(const char* program, LoadedScene& s, const std::string& gridPath, const RenderSetup& setup, size_t step) {
+    s.scene.reset();  // it refers to the grid or file replaced here
+    if (s.file) s.file = std::make_unique<GridRegionReader>(gridPath, step);
+    else readGridStep(gridPath, s.grid, step);
+    attachScene(program, s, gridPath, setup, step, true);
 }
 
 render::Camera initialCamera(const RenderSetup& setup, const render::Scene& scene) {

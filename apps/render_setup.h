@@ -21,6 +21,7 @@ struct RenderSetup {
     influence::KernelParams params;
     bool cells = false, noLegend = false, noPyramid = false, outOfCore = false;
     double nearM = 0, farM = 0;                // --near, --far [m]; 0: from the scene
+    unsigned step = 0;                         // --step: the water step shown
 
     // Set by finish():
     int width = 0, height = 0;                 // from --size [pixels]
@@ -30,7 +31,7 @@ struct RenderSetup {
     // --camera, --look-at (exclusive with each other and with `alsoExclusive`, e.g. "--view"), --near, --far.
     void addCameraOptions(Parser& p, const std::string& alsoExclusive = "");
     // --size, --cascades, --texels, --threads, --color, --cells, --no-legend, --cache, --out-of-core, --pyramid,
-    // --no-pyramid, --sigma, --truncation.
+    // --no-pyramid, --step, --sigma, --truncation.
     void addRenderOptions(Parser& p);
     // After Parser::parse: validates every option and the camera's numbers (before any expensive work).
     // Throws hc::Error naming the option.
@@ -54,9 +55,15 @@ struct LoadedScene {
 // cache beside the grid, none named and `outOfCoreWithoutCache`): opens the grid file for region reads
 // (render::Scene), saying so. Then reads the surface pyramid (default: the grid's path with .hcp) when there is a valid one
 // (saying which, or why none is used: missing, stale or damaged ones are not rebuilt here: hc-influence does),
-// and prepares the scene. Throws hc::Error.
+// and prepares the scene, all for water step setup.step (the step's own pyramid: influence::defaultPyramidPath).
+// Throws hc::Error.
 std::unique_ptr<LoadedScene> loadScene(const char* program, const std::string& gridPath, const RenderSetup& setup,
                                        bool outOfCoreWithoutCache = false);
+
+// Moves a loaded scene to water step `step`: in memory the grid reads that step's section only (the lists stay: they
+// depend on the structure alone); out of core a reader of that step. Then that step's pyramid and a new scene (notes
+// only for problems). Throws hc::Error.
+void switchStep(const char* program, LoadedScene& s, const std::string& gridPath, const RenderSetup& setup, size_t step);
 
 // The camera the options gave, or the overview framing the whole grid; of the given size, with --near/--far.
 render::Camera initialCamera(const RenderSetup& setup, const render::Scene& scene);

@@ -6,6 +6,7 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <functional>
 #include <random>
 #include <thread>
 
@@ -107,17 +108,29 @@ TEST_F(GridFile, RoundTripIsExact) {
 }
 
 TEST_F(GridFile, NamedScalarLayersRoundTrip) {
-    // Layers beyond water depth (velocity, ...) keep their names, units and values.
+    // Static layers before water depth (manning_n) and step layers after it (velocity, stored on wet cells only)
+    // keep their names, units and values.
     Grid g = tinyGrid();
+    g.layers.insert(g.layers.begin() + 1, {"manning_n", "s/m^(1/3)"});
+    g.values.insert(g.values.begin() + 1, {0.03f, 0.03f, 0.05f, 0.1f, 0.03f, 0.03f});
     g.layers.push_back({"velocity", "m/s"});
-    g.values.push_back({0.0f, 1.5f, 2.25f, 0.0f, 0.5f, 3.0f});
-    g.layers.push_back({"manning_n", "s/m^(1/3)"});
-    g.values.push_back({0.03f, 0.03f, 0.05f, 0.1f, 0.03f, 0.03f});
+    g.values.push_back({0.0f, 1.5f, 2.25f, 0.0f, 0.5f, 3.0f});  // 0 on the dry cells 0 and 3
     hc::writeGrid(g, path("layers.hcg"));
     Grid r = hc::readGrid(path("layers.hcg"));
     expectEqualGrids(g, r);
-    EXPECT_EQ(r.findLayer("velocity"), 2);
-    EXPECT_EQ(r.layers[3].units, "s/m^(1/3)");
+    EXPECT_EQ(r.findLayer("velocity"), 3);
+    EXPECT_EQ(r.firstStepLayer(), 2u);
+    EXPECT_EQ(r.layers[1].units, "s/m^(1/3)");
+    EXPECT_EQ(r.contentHash(), g.contentHash());
+    // A step layer's value on a dry cell would be lost (steps store wet cells only): refused, and no file left.
+    g.values[3][0] = 0.75f;
+    try {
+        hc::writeGrid(g, path("lossy.hcg"));
+        FAIL() << "a velocity on a dry cell was written";
+    } catch (const hc::Error& e) {
+        EXPECT_NE(std::string(e.what()).find("velocity"), std::string::npos) << e.what();
+    }
+    EXPECT_FALSE(fs::exists(path("lossy.hcg")));
 }
 
 TEST_F(GridFile, EmptyLayerValuesAndLargeGridRoundTrip) {
@@ -167,10 +180,10 @@ void fixAllChecksums(std::vector<char>& b) {
     fixHeaderCrc(b);
 }
 
-// Golden bytes pin format 1.2: a change to the layout fails here. Regenerate deliberately with
+// Golden bytes pin format 1.3: a change to the layout fails here. Regenerate deliberately with
 // HC_UPDATE_GOLDEN=1 only when the format version changes (and keep the older versions' files: next tests).
 TEST_F(GridFile, GoldenBytes) {
-    const std::string golden = std::string(HC_GOLDEN_DIR) + "/tiny_v1_2.hcg";
+    const std::string golden = std::string(HC_GOLDEN_DIR) + "/tiny_v1_3.hcg";
     Grid g = tinyGrid();
     hc::writeGrid(g, path("t.hcg"));
     std::vector<char> bytes = readBytes(path("t.hcg"));
@@ -217,6 +230,26 @@ TEST_F(GridFile, Version11FileStillReads) {
     EXPECT_EQ(info.blockBytes, 0u);
     EXPECT_EQ(info.summary.cellsPerLevel, tinyGrid().cellsPerLevel());
     EXPECT_GE(info.bytesChecked, 6u * (8 + 4 + 4)) << "cells and both layers are read and checked";
+}
+
+// Format 1.2 stored water as a LAYER: it still reads as a grid with water and no steps (one step at time 0), with the
+// same content hash (so its influence caches and pyramids stay valid), and a 1.3 rewrite holds the same values.
+TEST_F(GridFile, Version12WaterLayerStillReads) {
+    const std::string v12 = std::string(HC_GOLDEN_DIR) + "/tiny_v1_2.hcg";
+    uint16_t fileMinor = 99;
+    const Grid old = hc::readGrid(v12, &fileMinor);
+    EXPECT_EQ(fileMinor, 2);
+    expectEqualGrids(tinyGrid(), old);
+    EXPECT_TRUE(old.steps.empty());
+    EXPECT_EQ(old.stepCount(), 1u);
+    EXPECT_EQ(old.contentHash(), tinyGrid().contentHash());
+    EXPECT_THROW(hc::readGrid(v12, nullptr, 1), hc::Error) << "a 1.2 file has one step";
+    hc::writeGrid(old, path("v13.hcg"));
+    const Grid now = hc::readGrid(path("v13.hcg"));
+    expectEqualGrids(old, now);
+    ASSERT_EQ(now.steps.size(), 1u);
+    EXPECT_EQ(now.steps[0].wetCells, 4u);
+    EXPECT_EQ(now.steps[0].contentHash, old.contentHash());
 }
 
 // A 1.1 file must carry crs_name: a writer that forgot it is caught (its META rewritten without the key).
@@ -372,12 +405,12 @@ TEST_F(GridFile, StreamedWriteEqualsWholeWrite) {
     Grid g = tinyGrid();
     hc::writeGrid(g, path("whole.hcg"));
     for (size_t batch : {size_t{1}, size_t{2}, size_t{4}, size_t{6}}) {
-        hc::GridFileWriter w(path("stream.hcg"), g, g.cellCount());
+        hc::GridFileWriter w(path("stream.hcg"), g, g.cellCount(), 1);
         for (size_t i = 0; i < g.cellCount(); i += batch) {
             size_t n = std::min(batch, g.cellCount() - i);
-            w.append(std::span(g.codes).subspan(i, n),
-                     {std::span<const float>(g.values[0]).subspan(i, n), std::span<const float>(g.values[1]).subspan(i, n)});
+            w.append(std::span(g.codes).subspan(i, n), {std::span<const float>(g.values[0]).subspan(i, n)});
         }
+        w.appendStep(hc::sparseStep(g));
         w.commit(g.stats);
         EXPECT_EQ(readBytes(path("stream.hcg")), readBytes(path("whole.hcg"))) << "batch " << batch;
     }
@@ -385,23 +418,47 @@ TEST_F(GridFile, StreamedWriteEqualsWholeWrite) {
 
 TEST_F(GridFile, StreamedWriteRefusesBadStreams) {
     Grid g = tinyGrid();
-    auto values = [&](size_t i, size_t n) {
-        return std::vector<std::span<const float>>{std::span<const float>(g.values[0]).subspan(i, n),
-                                                   std::span<const float>(g.values[1]).subspan(i, n)};
-    };
+    auto values = [&](size_t i, size_t n) { return std::vector<std::span<const float>>{std::span<const float>(g.values[0]).subspan(i, n)}; };
     {  // too few cells: commit refuses and nothing is left
-        hc::GridFileWriter w(path("short.hcg"), g, g.cellCount());
+        hc::GridFileWriter w(path("short.hcg"), g, g.cellCount(), 1);
         w.append(std::span(g.codes).first(3), values(0, 3));
         EXPECT_THROW(w.commit(g.stats), hc::Error);
     }
     {  // out of order
-        hc::GridFileWriter w(path("order.hcg"), g, g.cellCount());
+        hc::GridFileWriter w(path("order.hcg"), g, g.cellCount(), 1);
         w.append(std::span(g.codes).subspan(3, 1), values(3, 1));
         EXPECT_THROW(w.append(std::span(g.codes).subspan(2, 1), values(2, 1)), hc::Error);
     }
     {  // more than announced
-        hc::GridFileWriter w(path("long.hcg"), g, 2);
+        hc::GridFileWriter w(path("long.hcg"), g, 2, 1);
         EXPECT_THROW(w.append(std::span(g.codes).first(3), values(0, 3)), hc::Error);
+    }
+    {  // a water grid without steps, steps without water
+        EXPECT_THROW(hc::GridFileWriter(path("nosteps.hcg"), g, g.cellCount(), 0), hc::Error);
+        Grid dry = g;
+        dry.layers.resize(1), dry.values.resize(1);
+        EXPECT_THROW(hc::GridFileWriter(path("dry.hcg"), dry, dry.cellCount(), 1), hc::Error);
+    }
+    {  // a step before the cells, steps missing at commit, unsorted times, bad indices or depths
+        hc::GridFileWriter w(path("steps.hcg"), g, g.cellCount(), 2);
+        hc::WaterStepData s = hc::sparseStep(g);
+        EXPECT_THROW(w.appendStep(s), hc::Error) << "a step before all cells";
+        w.append(g.codes, values(0, g.cellCount()));
+        s.timeS = 60;
+        w.appendStep(s);
+        hc::WaterStepData bad = s;
+        EXPECT_THROW(w.appendStep(bad), hc::Error) << "the same time again";
+        bad.timeS = 30;
+        EXPECT_THROW(w.appendStep(bad), hc::Error) << "an earlier time";
+        bad = s, bad.timeS = 120, std::swap(bad.wet[0], bad.wet[1]);
+        EXPECT_THROW(w.appendStep(bad), hc::Error) << "indices out of order";
+        bad = s, bad.timeS = 120, bad.wet.back() = uint32_t(g.cellCount());
+        EXPECT_THROW(w.appendStep(bad), hc::Error) << "an index past the cells";
+        bad = s, bad.timeS = 120, bad.values[0][0] = 0;
+        EXPECT_THROW(w.appendStep(bad), hc::Error) << "a stored dry cell";
+        bad = s, bad.timeS = NAN;
+        EXPECT_THROW(w.appendStep(bad), hc::Error) << "a NaN time";
+        EXPECT_THROW(w.commit(g.stats), hc::Error) << "one step of two";
     }
     EXPECT_TRUE(fs::is_empty(dir_)) << "a failed streamed write left a file behind";
 }
@@ -604,3 +661,149 @@ TEST_F(GridFile, ALyingSummaryIsCaughtByVerification) {
 }
 
 }  // namespace
+
+// ---- water steps (format 1.3, DESIGN.md section 11) ----
+
+// tinyGrid's water as three steps: dry, the tiny grid's own water, and every cell wet. Velocity is a step layer.
+struct Scenario {
+    Grid shape;                               // tinyGrid with a velocity layer; its step layers hold step 0
+    std::vector<hc::WaterStepData> steps;
+};
+Scenario tinyScenario() {
+    Scenario s;
+    s.shape = tinyGrid();
+    s.shape.layers.push_back({"velocity", "m/s"});
+    s.shape.values.push_back(std::vector<float>(s.shape.cellCount(), 0.0f));
+    hc::WaterStepData dry;
+    dry.timeS = 0;
+    dry.values.resize(2);
+    hc::WaterStepData mid = hc::sparseStep(s.shape);
+    mid.timeS = 1800;
+    mid.values[1] = std::vector<float>(mid.wet.size(), 0.5f);
+    hc::WaterStepData full;
+    full.timeS = 5400.5;
+    full.values.resize(2);
+    for (uint32_t i = 0; i < s.shape.cellCount(); ++i) {
+        full.wet.push_back(i);
+        full.values[0].push_back(1.0f + float(i));
+        full.values[1].push_back(-0.25f * float(i));  // a step layer may be negative
+    }
+    s.steps = {dry, mid, full};
+    return s;
+}
+
+void writeScenario(const Scenario& s, const std::string& path) {
+    hc::GridFileWriter w(path, s.shape, s.shape.cellCount(), s.steps.size());
+    w.append(s.shape.codes, {std::span<const float>(s.shape.values[0])});
+    for (const auto& step : s.steps) w.appendStep(step);
+    w.commit(s.shape.stats);
+}
+
+// The scenario's grid with step k selected, built in memory (the reference for every read).
+Grid scenarioAt(const Scenario& s, size_t k) {
+    Grid g = s.shape;
+    hc::selectStep(g, s.steps[k], k);
+    return g;
+}
+
+TEST_F(GridFile, WaterStepsRoundTripStepByStep) {
+    const Scenario s = tinyScenario();
+    writeScenario(s, path("flood.hcg"));
+    const hc::GridFileInfo info = hc::readGridInfo(path("flood.hcg"));
+    ASSERT_EQ(info.shape.steps.size(), 3u);
+    EXPECT_EQ(info.shape.layers.size(), 3u);
+    EXPECT_EQ(info.shape.firstStepLayer(), 1u) << "water_depth and velocity are the step layers";
+    const double times[3] = {0, 1800, 5400.5};
+    const uint64_t wet[3] = {0, 4, 6};
+    for (size_t k = 0; k < 3; ++k) {
+        SCOPED_TRACE("step " + std::to_string(k));
+        EXPECT_EQ(info.shape.steps[k].timeS, times[k]);
+        EXPECT_EQ(info.shape.steps[k].wetCells, wet[k]);
+        const Grid want = scenarioAt(s, k);
+        const Grid got = hc::readGrid(path("flood.hcg"), nullptr, k);
+        expectEqualGrids(want, got);
+        EXPECT_EQ(got.step, k);
+        EXPECT_EQ(got.contentHash(), info.shape.steps[k].contentHash) << "the stored hash is the step's grid's hash";
+        // The summary of a step is that of the grid with it selected (dry cells read 0).
+        const hc::GridFileInfo at = hc::readGridInfo(path("flood.hcg"), k);
+        EXPECT_EQ(at.contentHash, want.contentHash());
+        const hc::GridFileInfo verified = hc::verifyGridFile(path("flood.hcg"), k);
+        EXPECT_EQ(verified.summary.layerMin, at.summary.layerMin);
+        EXPECT_EQ(verified.summary.layerMax, at.summary.layerMax);
+        // A region read carries the step's values too.
+        const hc::GridRegionReader reader(path("flood.hcg"), k);
+        const Grid region = reader.region({0, 0, reader.shape().domainSizeM(), reader.shape().domainSizeM()});
+        ASSERT_EQ(region.codes, want.codes);
+        for (size_t l = 0; l < want.layers.size(); ++l) EXPECT_EQ(region.values[l], want.values[l]) << want.layers[l].name;
+    }
+    // Steps differ, so do their hashes; the lists' key (the structure) does not.
+    EXPECT_NE(info.shape.steps[1].contentHash, info.shape.steps[2].contentHash);
+    EXPECT_EQ(scenarioAt(s, 0).structureHash(), scenarioAt(s, 2).structureHash());
+    EXPECT_THROW(hc::readGrid(path("flood.hcg"), nullptr, 3), hc::Error);
+    EXPECT_THROW(hc::GridRegionReader(path("flood.hcg"), 3), hc::Error);
+}
+
+TEST_F(GridFile, SwitchingStepsReadsThatStepOnly) {
+    const Scenario s = tinyScenario();
+    writeScenario(s, path("flood.hcg"));
+    Grid g = hc::readGrid(path("flood.hcg"), nullptr, 0);
+    for (size_t k : {2u, 1u, 0u, 2u}) {
+        hc::readGridStep(path("flood.hcg"), g, k);
+        expectEqualGrids(scenarioAt(s, k), g);
+        EXPECT_EQ(g.step, k);
+    }
+    // A grid of another tree is refused, and left as it was.
+    Grid other = tinyGrid();
+    other.layers.push_back({"velocity", "m/s"});
+    other.values.push_back(std::vector<float>(other.cellCount(), 0.0f));
+    other.codes.pop_back();
+    for (auto& v : other.values) v.pop_back();
+    const Grid before = other;
+    EXPECT_THROW(hc::readGridStep(path("flood.hcg"), other, 1), hc::Error);
+    expectEqualGrids(before, other);
+}
+
+// Rendering step k reads step k: a damaged section of another step goes unnoticed by readGrid(k) (it is never read)
+// and is caught by every read of that step and by a full verification.
+TEST_F(GridFile, StepsAreReadLazilyAndCheckedWhenRead) {
+    const Scenario s = tinyScenario();
+    writeScenario(s, path("flood.hcg"));
+    std::vector<char> bytes = readBytes(path("flood.hcg"));
+    // Find step 2's section in the table (kind 5, index 2) and flip a byte of its depths.
+    uint32_t count;
+    std::memcpy(&count, bytes.data() + 60, 4);
+    uint64_t offset = 0;
+    for (uint32_t e = 0; e < count; ++e) {
+        uint32_t kind, index;
+        std::memcpy(&kind, bytes.data() + 128 + 32 * e, 4);
+        std::memcpy(&index, bytes.data() + 132 + 32 * e, 4);
+        if (kind == 5 && index == 2) std::memcpy(&offset, bytes.data() + 136 + 32 * e, 8);
+    }
+    ASSERT_NE(offset, 0u);
+    bytes[offset + 4 * 6 + 1] ^= 0x40;  // a depth of step 2's first wet cell
+    writeBytes(path("bad.hcg"), bytes, bytes.size());
+    expectEqualGrids(scenarioAt(s, 1), hc::readGrid(path("bad.hcg"), nullptr, 1));
+    const std::string where = "at byte offset " + std::to_string(offset);
+    for (auto read : std::vector<std::function<void()>>{[&] { hc::readGrid(path("bad.hcg"), nullptr, 2); },
+                                                       [&] { hc::verifyGridFile(path("bad.hcg"), 0); },
+                                                       [&] {
+                                                           Grid g = hc::readGrid(path("bad.hcg"));
+                                                           hc::readGridStep(path("bad.hcg"), g, 2);
+                                                       },
+                                                       [&] {
+                                                           const hc::GridRegionReader r(path("bad.hcg"), 2);
+                                                           r.region({0, 0, 10, 10});
+                                                       }}) {
+        try {
+            read();
+            ADD_FAILURE() << "a damaged step was read";
+        } catch (const hc::Error& e) {
+            EXPECT_NE(std::string(e.what()).find(where), std::string::npos) << e.what();
+        }
+    }
+    // The same damage behind rewritten checksums (a writer's bug, not the disk's): the content checks catch it.
+    fixAllChecksums(bytes);
+    writeBytes(path("bad2.hcg"), bytes, bytes.size());
+    EXPECT_THROW(hc::readGrid(path("bad2.hcg"), nullptr, 2), hc::Error);
+    EXPECT_THROW(hc::verifyGridFile(path("bad2.hcg"), 0), hc::Error);
+}

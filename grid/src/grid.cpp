@@ -16,6 +16,16 @@ int Grid::findLayer(const std::string& name) const {
     return -1;
 }
 
+size_t Grid::firstStepLayer() const {
+    const int w = findLayer("water_depth");
+    return w < 0 ? layers.size() : static_cast<size_t>(w);
+}
+
+size_t Grid::stepCount() const {
+    if (!steps.empty()) return steps.size();
+    return firstStepLayer() < layers.size() ? 1 : 0;
+}
+
 void Grid::cellMinLocal(size_t i, double& x, double& y) const {
     uint64_t key = codeKey(codes[i]);
     x = static_cast<double>(mortonX(key)) * finestCellM;
@@ -163,13 +173,38 @@ void GridHasher::addValues(size_t layer, std::span<const float> v) { layers_[lay
 uint64_t GridHasher::structureHash() const { return structure_.digest(); }
 
 uint64_t GridHasher::contentHash() const {
+    std::vector<std::pair<std::string, uint64_t>> parts;
+    for (size_t l = 0; l < layers_.size(); ++l) parts.emplace_back(shape_.layers[l].name, layers_[l].digest());
+    return combineContentHash(structure_.digest(), parts);
+}
+
+uint64_t combineContentHash(uint64_t structureHash, std::span<const std::pair<std::string, uint64_t>> layerDigests) {
     Hash64 h(0x6863636f6e74656eull);
-    h.updateValue(structure_.digest());
-    for (size_t l = 0; l < layers_.size(); ++l) {
-        const std::string& name = shape_.layers[l].name;
+    h.updateValue(structureHash);
+    for (const auto& [name, digest] : layerDigests) {
         h.update(std::as_bytes(std::span<const char>(name.data(), name.size() + 1)));
-        h.updateValue(layers_[l].digest());
+        h.updateValue(digest);
     }
+    return h.digest();
+}
+
+uint64_t sparseLayerDigest(uint64_t cellCount, std::span<const uint32_t> at, std::span<const float> values) {
+    Hash64 h;
+    static const std::vector<float> zeros(4096, 0.0f);
+    uint64_t next = 0;  // first cell not yet hashed
+    auto zeroTo = [&](uint64_t end) {
+        while (next < end) {
+            const uint64_t n = std::min<uint64_t>(end - next, zeros.size());
+            h.update(std::as_bytes(std::span<const float>(zeros.data(), n)));
+            next += n;
+        }
+    };
+    for (size_t j = 0; j < at.size(); ++j) {
+        zeroTo(at[j]);
+        h.updateValue(values[j]);
+        ++next;
+    }
+    zeroTo(cellCount);
     return h.digest();
 }
 
@@ -218,6 +253,18 @@ std::string Grid::validateShape() const {
     for (size_t l = 0; l < layers.size(); ++l)
         for (size_t m = 0; m < l; ++m)
             if (layers[m].name == layers[l].name) return "layer name " + layers[l].name + " appears twice";
+    if (!steps.empty()) {
+        if (firstStepLayer() >= layers.size()) return std::to_string(steps.size()) + " water steps but no water_depth layer";
+        if (step >= steps.size()) return "selected step " + std::to_string(step) + " of " + std::to_string(steps.size());
+        for (size_t k = 0; k < steps.size(); ++k) {
+            if (!std::isfinite(steps[k].timeS)) return "step " + std::to_string(k) + " has a time that is not finite";
+            if (k > 0 && !(steps[k].timeS > steps[k - 1].timeS))
+                return "step times are not strictly increasing: step " + std::to_string(k) + " at " + std::to_string(steps[k].timeS) +
+                       " s follows " + std::to_string(steps[k - 1].timeS) + " s";
+        }
+    } else if (step != 0) {
+        return "selected step " + std::to_string(step) + " of a grid without steps";
+    }
     return {};
 }
 

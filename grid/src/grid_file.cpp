@@ -18,11 +18,12 @@
 namespace hc {
 namespace {
 
-enum SectionKind : uint32_t { kMeta = 1, kCells = 2, kLayer = 3 };
+enum SectionKind : uint32_t { kMeta = 1, kCells = 2, kLayer = 3, kSteps = 4, kStep = 5 };
 
 const FileFormat kFormat{{'\x89', 'H', 'C', 'G', 'R', 'I', 'D', '\n'}, kGridFileMajor, kGridFileMinor,
-                         "heightcast grid (.hcg)", {kMeta, kCells, kLayer}, /*blockChecksumsSince=*/2};
+                         "heightcast grid (.hcg)", {kMeta, kCells, kLayer, kSteps, kStep}, /*blockChecksumsSince=*/2};
 constexpr uint16_t kSummarySince = 2;  // the minor from which META holds the summary (GridSummary)
+constexpr uint16_t kStepsSince = 3;    // the minor from which water is stored as steps (STEP, STEPS)
 
 // The grid's own header fields (grid_file.h); pinned by the golden-bytes test.
 namespace off {
@@ -63,7 +64,15 @@ std::string joinNumbers(std::span<const uint64_t> v) {
 
 std::vector<std::byte> encodeMeta(const Grid& g, const GridSummary& summary) {
     std::vector<std::pair<std::string, std::string>> kv{{"crs_wkt", g.crsWkt}, {"crs_name", g.crsName}};
-    for (size_t l = 0; l < g.layers.size(); ++l) {
+    const size_t firstStep = g.firstStepLayer();
+    if (firstStep < g.layers.size()) {
+        kv.emplace_back("step_layers", std::to_string(g.layers.size() - firstStep));
+        for (size_t l = firstStep; l < g.layers.size(); ++l) {
+            kv.emplace_back("step_layer." + std::to_string(l - firstStep) + ".name", g.layers[l].name);
+            kv.emplace_back("step_layer." + std::to_string(l - firstStep) + ".units", g.layers[l].units);
+        }
+    }
+    for (size_t l = 0; l < firstStep; ++l) {
         kv.emplace_back("layer." + std::to_string(l) + ".name", g.layers[l].name);
         kv.emplace_back("layer." + std::to_string(l) + ".units", g.layers[l].units);
         if (l < summary.layerMin.size()) {  // an empty grid has no values, so no range
@@ -129,9 +138,21 @@ void parseMeta(const SectionedFileReader& file, const FileSection& s, Grid& g, u
     };
     g.crsWkt = need("crs_wkt");
     if (file.minor() >= 1) g.crsName = need("crs_name");  // 1.0 files have none: ""
-    for (size_t l = 0; l < g.layers.size(); ++l) {
+    const size_t staticLayers = g.layers.size();
+    for (size_t l = 0; l < staticLayers; ++l) {
         g.layers[l].name = need("layer." + std::to_string(l) + ".name");
         g.layers[l].units = need("layer." + std::to_string(l) + ".units");
+        if (file.minor() >= kStepsSince && g.layers[l].name == "water_depth")
+            fail(s.offset, "META layer " + std::to_string(l) + " is water_depth: from format 1.3 on water is stored as steps");
+    }
+    if (file.minor() >= kStepsSince && kv.count("step_layers")) {
+        size_t n = 0;
+        number("step_layers", n);
+        if (n < 1 || n > 255 - staticLayers) fail(s.offset, "META step_layers is " + std::to_string(n) + ", not 1.." + std::to_string(255 - staticLayers));
+        for (size_t l = 0; l < n; ++l)
+            g.layers.push_back({need("step_layer." + std::to_string(l) + ".name"), need("step_layer." + std::to_string(l) + ".units")});
+        if (g.layers[staticLayers].name != "water_depth")
+            fail(s.offset, "META step_layer.0.name is '" + g.layers[staticLayers].name + "', not water_depth");
     }
     if (kv.count("ingest.source")) g.stats.sourcePath = kv["ingest.source"];
     if (kv.count("ingest.source_crs")) g.stats.sourceCrsName = kv["ingest.source_crs"];
@@ -178,7 +199,7 @@ void parseMeta(const SectionedFileReader& file, const FileSection& s, Grid& g, u
     summary->layerMin.clear();
     summary->layerMax.clear();
     if (cellCount == 0) return;
-    for (size_t l = 0; l < g.layers.size(); ++l) {
+    for (size_t l = 0; l < staticLayers; ++l) {
         float lo = 0, hi = 0;
         number("layer." + std::to_string(l) + ".min", lo);
         number("layer." + std::to_string(l) + ".max", hi);
@@ -250,6 +271,8 @@ Grid shapeOf(const Grid& g) {
     bare.layers = g.layers;
     bare.values.assign(g.layers.size(), {});
     bare.stats = g.stats;
+    bare.steps = g.steps;
+    bare.step = g.step;
     return bare;
 }
 
@@ -257,7 +280,9 @@ struct Located {
     uint64_t cellCount = 0;
     const FileSection* meta = nullptr;
     const FileSection* cells = nullptr;
-    std::vector<const FileSection*> layers;
+    std::vector<const FileSection*> layers;  // the static LAYER sections
+    const FileSection* stepsTable = nullptr;  // STEPS (1.3 files with water)
+    std::vector<const FileSection*> steps;    // STEP sections by step index (sized by parseSteps)
 };
 
 // The header's fields into `g` (no cells) and the sections located and sized: no section data read.
@@ -288,6 +313,8 @@ Located parseHeader(const SectionedFileReader& file, Grid& g) {
 
     const FileSection* meta = nullptr;
     const FileSection* cells = nullptr;
+    const FileSection* stepsTable = nullptr;
+    std::vector<const FileSection*> stepSec;
     std::vector<const FileSection*> layerSec(layerCount, nullptr);
     const auto& sections = file.sections();
     for (size_t s = 0; s < sections.size(); ++s) {
@@ -309,6 +336,13 @@ Located parseHeader(const SectionedFileReader& file, Grid& g) {
                 fail(at + 16, "LAYER section holds " + std::to_string(e.bytes) + " bytes, expected 4 for each of " +
                                   std::to_string(cellCount) + " cells");
             layerSec[e.index] = &e;
+        } else if (e.kind == kSteps) {
+            if (stepsTable) fail(at, "two STEPS sections");
+            stepsTable = &e;
+        } else if (e.kind == kStep) {
+            if (e.index >= stepSec.size()) stepSec.resize(size_t(e.index) + 1, nullptr);
+            if (stepSec[e.index]) fail(at + 4, "STEP section index " + std::to_string(e.index) + " is repeated");
+            stepSec[e.index] = &e;
         }
     }
     if (!meta) file.failFile("no META section");
@@ -317,69 +351,279 @@ Located parseHeader(const SectionedFileReader& file, Grid& g) {
         if (!layerSec[l]) file.failFile("no LAYER section for layer " + std::to_string(l));
 
     g.layers.assign(layerCount, LayerInfo{});
-    return {cellCount, meta, cells, std::move(layerSec)};
+    return {cellCount, meta, cells, std::move(layerSec), stepsTable, std::move(stepSec)};
 }
 
-Grid parseGrid(const SectionedFileReader& file) {
+// The STEPS table into g.steps, checked against the header, META's step layers and the STEP sections' sizes (after
+// parseMeta). Reads STEPS only.
+void parseSteps(const SectionedFileReader& file, Located& at, Grid& g) {
+    auto fail = [&](uint64_t off, const std::string& what) { file.fail(off, what); };
+    const size_t firstStep = g.firstStepLayer();
+    const size_t L = g.layers.size() - firstStep;
+    g.steps.clear();
+    g.step = 0;
+    if (L == 0) {
+        if (at.stepsTable) fail(at.stepsTable->offset, "STEPS section in a grid without step layers (META step_layers)");
+        if (!at.steps.empty()) file.failFile("STEP section in a grid without step layers (META step_layers)");
+        return;
+    }
+    if (file.minor() < kStepsSince) return;  // a 1.2 water LAYER: one step at time 0, no table
+    if (!at.stepsTable) file.failFile("META declares step layers but there is no STEPS section");
+    const FileSection& t = *at.stepsTable;
+    const uint64_t record = 24 + 8 * uint64_t(L);
+    if (t.bytes == 0 || t.bytes % record != 0)
+        fail(t.offset, "STEPS section holds " + std::to_string(t.bytes) + " bytes, not a positive multiple of " + std::to_string(record));
+    const uint64_t count = t.bytes / record;
+    if (at.cellCount > UINT32_MAX) fail(t.offset, "a grid with water steps holds at most 2^32 - 1 cells");
+    if (at.steps.size() != count) file.failFile("STEPS lists " + std::to_string(count) + " steps, the file has " + std::to_string(at.steps.size()) + " STEP sections");
+    const std::byte* d = file.data(t).data();
+    for (uint64_t k = 0; k < count; ++k) {
+        const std::byte* r = d + k * record;
+        const uint64_t where = t.offset + k * record;
+        StepInfo s;
+        s.timeS = bytes::load<double>(r);
+        s.wetCells = bytes::load<uint64_t>(r + 8);
+        s.contentHash = bytes::load<uint64_t>(r + 16);
+        const std::string name = "step " + std::to_string(k);
+        if (!std::isfinite(s.timeS)) fail(where, name + ": time is not finite");
+        if (k > 0 && !(s.timeS > g.steps.back().timeS)) fail(where, name + ": time " + fmtDouble(s.timeS) + " s does not follow " + fmtDouble(g.steps.back().timeS) + " s");
+        if (s.wetCells > at.cellCount) fail(where + 8, name + ": " + std::to_string(s.wetCells) + " wet cells of " + std::to_string(at.cellCount));
+        if (!at.steps[k]) file.failFile("no STEP section for " + name);
+        const FileSection& sec = *at.steps[k];
+        if (sec.bytes % (4 * (1 + L)) != 0 || sec.bytes / (4 * (1 + L)) != s.wetCells)
+            fail(sec.offset, "STEP section of " + name + " holds " + std::to_string(sec.bytes) + " bytes, expected " + std::to_string(4 * (1 + L)) +
+                                 " for each of " + std::to_string(s.wetCells) + " wet cells");
+        for (size_t l = 0; l < L; ++l) {
+            const float lo = bytes::load<float>(r + 24 + 8 * l), hi = bytes::load<float>(r + 28 + 8 * l);
+            const bool ok = s.wetCells == 0 ? (lo == 0 && hi == 0) : (std::isfinite(lo) && std::isfinite(hi) && lo <= hi && (l > 0 || lo > 0));
+            if (!ok) fail(where + 24 + 8 * l, name + ": range of " + g.layers[firstStep + l].name + " is not finite min <= max (min > 0 for water_depth)");
+            if (s.wetCells > 0) {
+                s.layerMin.push_back(lo);
+                s.layerMax.push_back(hi);
+            }
+        }
+        g.steps.push_back(std::move(s));
+    }
+}
+
+// Step k's STEP section, read whole (its blocks checked) and validated against its STEPS record.
+WaterStepData loadStep(const SectionedFileReader& file, const Located& at, const Grid& g, size_t k) {
+    const StepInfo& info = g.steps[k];
+    const FileSection& sec = *at.steps[k];
+    const size_t L = g.layers.size() - g.firstStepLayer();
+    const uint64_t w = info.wetCells;
+    const std::byte* d = file.data(sec).data();
+    WaterStepData out;
+    out.timeS = info.timeS;
+    out.wet.resize(w);
+    std::memcpy(out.wet.data(), d, 4 * w);
+    out.values.assign(L, std::vector<float>(w));
+    for (size_t l = 0; l < L; ++l) std::memcpy(out.values[l].data(), d + 4 * w * (1 + l), 4 * w);
+    const std::string name = "step " + std::to_string(k);
+    for (uint64_t j = 0; j < w; ++j)
+        if (out.wet[j] >= at.cellCount || (j > 0 && out.wet[j] <= out.wet[j - 1]))
+            file.fail(sec.offset + 4 * j, name + ": wet cell index " + std::to_string(out.wet[j]) + " is not ascending below the cell count");
+    for (size_t l = 0; l < L; ++l) {
+        float lo = HUGE_VALF, hi = -HUGE_VALF;
+        for (uint64_t j = 0; j < w; ++j) {
+            const float v = out.values[l][j];
+            if (!std::isfinite(v) || (l == 0 && !(v > 0)))
+                file.fail(sec.offset + 4 * w * (1 + l) + 4 * j, name + ": " + g.layers[g.firstStepLayer() + l].name + " value is not finite" +
+                                                                  (l == 0 ? " and > 0" : ""));
+            lo = std::min(lo, v);
+            hi = std::max(hi, v);
+        }
+        if (w > 0 && (lo != info.layerMin[l] || hi != info.layerMax[l]))
+            file.fail(sec.offset, name + ": the range of " + g.layers[g.firstStepLayer() + l].name + " does not match STEPS");
+    }
+    return out;
+}
+
+// The selected step's ranges appended to the static layers' summary: what summarise() of the grid with that
+// step selected gives (dry cells read as 0).
+void addStepRanges(GridSummary& s, const Grid& g, uint64_t cellCount) {
+    if (g.steps.empty() || cellCount == 0) return;
+    const StepInfo& info = g.steps[g.step];
+    const size_t L = g.layers.size() - g.firstStepLayer();
+    s.layerMin.resize(g.firstStepLayer());
+    s.layerMax.resize(g.firstStepLayer());
+    for (size_t l = 0; l < L; ++l) {
+        float lo = info.wetCells ? info.layerMin[l] : HUGE_VALF, hi = info.wetCells ? info.layerMax[l] : -HUGE_VALF;
+        if (info.wetCells < cellCount) lo = std::min(lo, 0.0f), hi = std::max(hi, 0.0f);
+        s.layerMin.push_back(lo);
+        s.layerMax.push_back(hi);
+    }
+}
+
+// The header's content hash of a file with steps: the static grid's content hash and every step's (time, hash).
+uint64_t scenarioHash(uint64_t staticContentHash, const std::vector<StepInfo>& steps) {
+    Hash64 h(0x6863737465707321ull);
+    h.updateValue(staticContentHash);
+    for (const StepInfo& s : steps) {
+        h.updateValue(s.timeS);
+        h.updateValue(s.contentHash);
+    }
+    return h.digest();
+}
+
+// Name and digest of each static layer (combineContentHash's parts).
+std::vector<std::pair<std::string, uint64_t>> staticDigests(const Grid& g) {
+    std::vector<std::pair<std::string, uint64_t>> parts;
+    for (size_t l = 0; l < g.firstStepLayer(); ++l) {
+        Hash64 h;
+        h.update(std::as_bytes(std::span<const float>(g.values[l])));
+        parts.emplace_back(g.layers[l].name, h.digest());
+    }
+    return parts;
+}
+
+// Grid::contentHash of the grid's static layers alone.
+uint64_t staticContentHash(const Grid& g) { return combineContentHash(g.structureHash(), staticDigests(g)); }
+
+// Grid::contentHash of the grid with `data` as its step, without filling its step layers.
+uint64_t stepContentHash(const Grid& g, const WaterStepData& data) {
+    auto parts = staticDigests(g);
+    for (size_t l = 0; l < data.values.size(); ++l)
+        parts.emplace_back(g.layers[g.firstStepLayer() + l].name, sparseLayerDigest(g.cellCount(), data.wet, data.values[l]));
+    return combineContentHash(g.structureHash(), parts);
+}
+
+// Fails unless `step` is one of the file's steps (a grid without `steps` has only step 0).
+void checkStepIndex(const SectionedFileReader& file, const Grid& g, size_t step) {
+    const size_t n = g.steps.empty() ? 1 : g.steps.size();
+    if (step >= n)
+        file.failFile("has no step " + std::to_string(step) + ": it holds " + std::to_string(g.stepCount()) + " water step" +
+                      (g.stepCount() == 1 ? "" : "s") + (g.stepCount() ? " (0.." + std::to_string(g.stepCount() - 1) + ")" : ""));
+}
+
+Grid parseGrid(const SectionedFileReader& file, size_t step, Located* located = nullptr) {
     const std::byte* h = file.header();
     auto fail = [&](uint64_t at, const std::string& what) { file.fail(at, what); };
     Grid g;
-    const Located at = parseHeader(file, g);
+    Located at = parseHeader(file, g);
     const uint64_t cellCount = at.cellCount;
     const FileSection* cells = at.cells;
     const auto& layerSec = at.layers;
-    const size_t layerCount = layerSec.size();
+    const size_t staticLayers = layerSec.size();
     GridSummary stored;
     parseMeta(file, *at.meta, g, cellCount, &stored);
+    parseSteps(file, at, g);
+    checkStepIndex(file, g, step);
     g.codes.resize(cellCount);
     std::memcpy(g.codes.data(), file.data(*cells).data(), cells->bytes);
-    g.values.assign(layerCount, {});
-    for (size_t l = 0; l < layerCount; ++l) {
+    g.values.assign(g.layers.size(), {});
+    for (size_t l = 0; l < staticLayers; ++l) {
         g.values[l].resize(cellCount);
         std::memcpy(g.values[l].data(), file.data(*layerSec[l]).data(), layerSec[l]->bytes);
     }
+    if (!g.steps.empty()) selectStep(g, loadStep(file, at, g, step), step);
     std::string problem = g.validate();
     if (!problem.empty()) fail(cells->offset, "invalid grid: " + problem);
     if (g.structureHash() != bytes::load<uint64_t>(h + off::structureHash)) fail(off::structureHash, "structure hash does not match the cells");
-    if (g.contentHash() != bytes::load<uint64_t>(h + off::contentHash)) fail(off::contentHash, "content hash does not match the cells and values");
+    if (g.steps.empty()) {
+        if (g.contentHash() != bytes::load<uint64_t>(h + off::contentHash)) fail(off::contentHash, "content hash does not match the cells and values");
+    } else {
+        if (g.contentHash() != g.steps[step].contentHash)
+            fail(at.stepsTable->offset, "step " + std::to_string(step) + ": content hash does not match the cells and values");
+        if (scenarioHash(staticContentHash(g), g.steps) != bytes::load<uint64_t>(h + off::contentHash))
+            fail(off::contentHash, "content hash does not match the cells, values and steps");
+    }
+    addStepRanges(stored, g, cellCount);
     if (file.minor() >= kSummarySince && !(summarise(g) == stored))
         fail(at.meta->offset, "META summary (cells per level, bounds, value ranges) does not match the cells");
+    if (located) *located = std::move(at);
     return g;
 }
 
 }  // namespace
 
+// The grid's static part: its layers before the step layers, as the writer's hasher and summary see it.
+Grid staticShapeOf(const Grid& g) {
+    Grid bare = shapeOf(g);
+    bare.layers.resize(g.firstStepLayer());
+    bare.values.resize(g.firstStepLayer());
+    bare.steps.clear();
+    bare.step = 0;
+    return bare;
+}
+
+WaterStepData sparseStep(const Grid& g) {
+    WaterStepData out;
+    out.timeS = g.stepTimeS();
+    const size_t first = g.firstStepLayer();
+    if (first >= g.layers.size()) return out;
+    const auto& depth = g.values[first];
+    out.values.resize(g.layers.size() - first);
+    for (size_t i = 0; i < depth.size(); ++i) {
+        if (depth[i] > 0) {
+            out.wet.push_back(static_cast<uint32_t>(i));
+            for (size_t l = first; l < g.layers.size(); ++l) out.values[l - first].push_back(g.values[l][i]);
+            continue;
+        }
+        // A step stores its wet cells only: a value on a dry cell would be lost, so it is refused.
+        if (depth[i] < 0)
+            throw Error("cell " + std::to_string(i) + " has water_depth " + fmtFloat(depth[i]) + ": depths are >= 0 (0 = dry)");
+        for (size_t l = first + 1; l < g.layers.size(); ++l)
+            if (g.values[l][i] != 0)
+                throw Error("cell " + std::to_string(i) + " is dry (water_depth " + fmtFloat(depth[i]) + ") but its step layer " + g.layers[l].name +
+                            " is " + fmtFloat(g.values[l][i]) + ": step layers (water_depth and the layers after it) are stored on wet cells "
+                            "only; put a layer that does not change with the water before water_depth");
+    }
+    return out;
+}
+
+void selectStep(Grid& g, const WaterStepData& data, size_t step) {
+    const size_t first = g.firstStepLayer();
+    for (size_t l = first; l < g.layers.size(); ++l) {
+        auto& v = g.values[l];
+        v.assign(g.codes.size(), 0.0f);
+        const auto& src = data.values.at(l - first);
+        for (size_t j = 0; j < data.wet.size(); ++j) v.at(data.wet[j]) = src.at(j);
+    }
+    g.step = step;
+}
+
 struct GridFileWriter::Impl {
-    Impl(const std::string& path, const Grid& gridShape, uint64_t cells, std::vector<FileSection> layout)
-        : out(path, kFormat, std::move(layout), 1), shape(gridShape), cellCount(cells), check(shape), hasher(shape, cells),
-          summary(shape.maxLevel, shape.layers.size()) {}
+    Impl(const std::string& path, const Grid& gridShape, uint64_t cells, std::vector<FileSection> layout, size_t stepsAnnounced)
+        : out(path, kFormat, std::move(layout), 1 + (stepsAnnounced ? stepsAnnounced + 1 : 0)), shape(gridShape), staticShape(staticShapeOf(gridShape)),
+          cellCount(cells), stepCount(stepsAnnounced), check(staticShape), hasher(staticShape, cells),
+          summary(staticShape.maxLevel, staticShape.layers.size()) {}
     SectionedFileWriter out;
-    Grid shape;  // geometry, CRS and layers; no cells
+    Grid shape;        // geometry, CRS and layers (step layers too); no cells
+    Grid staticShape;  // the same without the step layers
     uint64_t cellCount;
+    size_t stepCount;
     CellStreamCheck check;
     GridHasher hasher;
     SummaryBuilder summary;
     uint64_t written = 0;
+    std::vector<StepInfo> steps;  // those appended so far
 };
 
-GridFileWriter::GridFileWriter(const std::string& path, const Grid& shape, uint64_t cellCount) {
+GridFileWriter::GridFileWriter(const std::string& path, const Grid& shape, uint64_t cellCount, size_t stepCount) {
     std::string problem = shape.validateShape();
     if (!problem.empty()) throw Error(path + ": refusing to write an invalid grid: " + problem);
+    const bool water = shape.firstStepLayer() < shape.layers.size();
+    if (water && stepCount == 0) throw Error(path + ": a grid with water needs at least one water step");
+    if (!water && stepCount > 0) throw Error(path + ": water steps need a water_depth layer");
+    if (water && cellCount > UINT32_MAX) throw Error(path + ": a grid with water steps holds at most 2^32 - 1 cells");
     Grid bare = shapeOf(shape);
-    // Layout: CELLS, LAYER..., then META (last: its statistics are known only at the end).
+    bare.steps.clear();
+    bare.step = 0;
+    // Layout: CELLS, static LAYER..., then the STEP sections, STEPS and META as they become known.
     std::vector<FileSection> layout{{kCells, 0, 0, cellCount * 8, 0}};
-    for (size_t l = 0; l < shape.layers.size(); ++l) layout.push_back({kLayer, static_cast<uint32_t>(l), 0, cellCount * 4, 0});
-    impl_ = std::make_unique<Impl>(path, bare, cellCount, std::move(layout));
+    for (size_t l = 0; l < shape.firstStepLayer(); ++l) layout.push_back({kLayer, static_cast<uint32_t>(l), 0, cellCount * 4, 0});
+    impl_ = std::make_unique<Impl>(path, bare, cellCount, std::move(layout), stepCount);
 }
 
 GridFileWriter::~GridFileWriter() = default;
 
 void GridFileWriter::append(std::span<const uint64_t> codes, const std::vector<std::span<const float>>& layerValues) {
     Impl& w = *impl_;
-    const size_t layers = w.shape.layers.size();
+    const size_t layers = w.staticShape.layers.size();
     const std::string& path = w.out.path();
     if (layerValues.size() != layers)
-        throw Error(path + ": " + std::to_string(layerValues.size()) + " value arrays for " + std::to_string(layers) + " layers");
+        throw Error(path + ": " + std::to_string(layerValues.size()) + " value arrays for " + std::to_string(layers) + " static layers");
     for (const auto& v : layerValues)
         if (v.size() != codes.size()) throw Error(path + ": layer values and cells differ in number");
     if (codes.size() > w.cellCount - w.written) throw Error(path + ": more cells than the " + std::to_string(w.cellCount) + " announced");
@@ -399,11 +643,75 @@ void GridFileWriter::append(std::span<const uint64_t> codes, const std::vector<s
     w.written += codes.size();
 }
 
+void GridFileWriter::appendStep(const WaterStepData& step) {
+    Impl& w = *impl_;
+    const std::string& path = w.out.path();
+    const size_t k = w.steps.size();
+    const std::string name = path + ": step " + std::to_string(k);
+    if (w.written != w.cellCount) throw Error(name + " comes before all " + std::to_string(w.cellCount) + " cells");
+    if (k >= w.stepCount) throw Error(name + ": more steps than the " + std::to_string(w.stepCount) + " announced");
+    const size_t first = w.shape.firstStepLayer(), L = w.shape.layers.size() - first;
+    if (step.values.size() != L) throw Error(name + ": " + std::to_string(step.values.size()) + " value arrays for " + std::to_string(L) + " step layers");
+    for (const auto& v : step.values)
+        if (v.size() != step.wet.size()) throw Error(name + ": step values and wet cells differ in number");
+    if (!std::isfinite(step.timeS)) throw Error(name + ": time is not finite");
+    if (k > 0 && !(step.timeS > w.steps.back().timeS))
+        throw Error(name + ": times must increase strictly, " + fmtDouble(step.timeS) + " s follows " + fmtDouble(w.steps.back().timeS) + " s");
+    const size_t n = step.wet.size();
+    for (size_t j = 0; j < n; ++j)
+        if (step.wet[j] >= w.cellCount || (j > 0 && step.wet[j] <= step.wet[j - 1]))
+            throw Error(name + ": wet cell indices must ascend below the cell count");
+    StepInfo info;
+    info.timeS = step.timeS;
+    info.wetCells = n;
+    std::vector<std::pair<std::string, uint64_t>> parts;
+    for (size_t l = 0; l < first; ++l) parts.emplace_back(w.shape.layers[l].name, w.hasher.layerDigest(l));
+    for (size_t l = 0; l < L; ++l) {
+        float lo = HUGE_VALF, hi = -HUGE_VALF;
+        for (float v : step.values[l]) {
+            if (!std::isfinite(v) || (l == 0 && !(v > 0)))
+                throw Error(name + ": " + w.shape.layers[first + l].name + " values must be finite" + (l == 0 ? " and > 0 (only wet cells are stored)" : ""));
+            lo = std::min(lo, v);
+            hi = std::max(hi, v);
+        }
+        if (n > 0) info.layerMin.push_back(lo), info.layerMax.push_back(hi);
+        parts.emplace_back(w.shape.layers[first + l].name, sparseLayerDigest(w.cellCount, step.wet, step.values[l]));
+    }
+    info.contentHash = combineContentHash(w.hasher.structureHash(), parts);
+    std::vector<std::byte> data(4 * n * (1 + L));
+    if (n > 0) {
+        std::memcpy(data.data(), step.wet.data(), 4 * n);
+        for (size_t l = 0; l < L; ++l) std::memcpy(data.data() + 4 * n * (1 + l), step.values[l].data(), 4 * n);
+    }
+    w.out.addSection(kStep, static_cast<uint32_t>(k), data);
+    w.steps.push_back(std::move(info));
+}
+
 void GridFileWriter::commit(const IngestStats& stats) {
     Impl& w = *impl_;
     if (w.written != w.cellCount)
         throw Error(w.out.path() + ": " + std::to_string(w.written) + " cells written of " + std::to_string(w.cellCount) + " announced");
+    if (w.steps.size() != w.stepCount)
+        throw Error(w.out.path() + ": " + std::to_string(w.steps.size()) + " water steps written of " + std::to_string(w.stepCount) + " announced");
     w.shape.stats = stats;
+    uint64_t contentHash = w.hasher.contentHash();
+    if (w.stepCount > 0) {
+        const size_t L = w.shape.layers.size() - w.shape.firstStepLayer();
+        std::vector<std::byte> table(w.steps.size() * (24 + 8 * L));
+        for (size_t k = 0; k < w.steps.size(); ++k) {
+            const StepInfo& s = w.steps[k];
+            const size_t at = k * (24 + 8 * L);
+            bytes::store(table, at, s.timeS);
+            bytes::store(table, at + 8, s.wetCells);
+            bytes::store(table, at + 16, s.contentHash);
+            for (size_t l = 0; l < L; ++l) {
+                bytes::store(table, at + 24 + 8 * l, s.wetCells ? s.layerMin[l] : 0.0f);
+                bytes::store(table, at + 28 + 8 * l, s.wetCells ? s.layerMax[l] : 0.0f);
+            }
+        }
+        w.out.addSection(kSteps, 0, table);
+        contentHash = scenarioHash(contentHash, w.steps);
+    }
     w.out.addSection(kMeta, 0, encodeMeta(w.shape, w.summary.summary()));
     const Grid& g = w.shape;
     std::vector<std::byte> head(kFileHeaderBytes, std::byte{0});
@@ -414,8 +722,8 @@ void GridFileWriter::commit(const IngestStats& stats) {
     bytes::store(head, off::rootLevel, static_cast<uint8_t>(g.rootLevel));
     bytes::store(head, off::minLevel, static_cast<uint8_t>(g.minLevel));
     bytes::store(head, off::maxLevel, static_cast<uint8_t>(g.maxLevel));
-    bytes::store(head, off::layerCount, static_cast<uint8_t>(g.layers.size()));
-    bytes::store(head, off::contentHash, w.hasher.contentHash());
+    bytes::store(head, off::layerCount, static_cast<uint8_t>(g.firstStepLayer()));
+    bytes::store(head, off::contentHash, contentHash);
     bytes::store(head, off::structureHash, w.hasher.structureHash());
     w.out.commit(std::move(head));
 }
@@ -423,25 +731,50 @@ void GridFileWriter::commit(const IngestStats& stats) {
 void writeGrid(const Grid& g, const std::string& path) {
     std::string problem = g.validate();
     if (!problem.empty()) throw Error(path + ": refusing to write an invalid grid: " + problem);
-    GridFileWriter w(path, g, g.cellCount());
+    const bool water = g.firstStepLayer() < g.layers.size();
+    GridFileWriter w(path, g, g.cellCount(), water ? 1 : 0);
     std::vector<std::span<const float>> values;
-    for (const auto& v : g.values) values.emplace_back(v);
+    for (size_t l = 0; l < g.firstStepLayer(); ++l) values.emplace_back(g.values[l]);
     w.append(g.codes, values);
+    if (water) w.appendStep(sparseStep(g));
     w.commit(g.stats);
 }
 
-Grid readGrid(const std::string& path, uint16_t* fileMinor) {
+Grid readGrid(const std::string& path, uint16_t* fileMinor, size_t step) {
     const SectionedFileReader reader(path, kFormat);
     if (fileMinor) *fileMinor = reader.minor();
-    reader.verifyAll();  // every checksum before any content check, as the error order always was
-    return parseGrid(reader);
+    // Every checksum before any content check, as the error order always was; other steps' sections are not read.
+    for (const FileSection& s : reader.sections())
+        if (s.kind != kStep || s.index == step) reader.data(s);
+    return parseGrid(reader, step);
+}
+
+void readGridStep(const std::string& path, Grid& grid, size_t step) {
+    const SectionedFileReader reader(path, kFormat);
+    Grid g;
+    Located at = parseHeader(reader, g);
+    parseMeta(reader, *at.meta, g, at.cellCount, nullptr);
+    parseSteps(reader, at, g);
+    checkStepIndex(reader, g, step);
+    if (at.cellCount != grid.cellCount() || bytes::load<uint64_t>(reader.header() + off::structureHash) != grid.structureHash() ||
+        g.layers.size() != grid.layers.size())
+        reader.failFile("is not the grid in memory (its cells or layers differ): cannot switch its step");
+    if (g.steps.empty()) {  // one step only: the grid already holds it
+        grid.step = 0;
+        return;
+    }
+    const WaterStepData data = loadStep(reader, at, g, step);
+    if (stepContentHash(grid, data) != g.steps[step].contentHash)  // checked before `grid` changes
+        reader.fail(at.steps[step]->offset, "step " + std::to_string(step) + ": content hash does not match the cells and values");
+    grid.steps = g.steps;
+    selectStep(grid, data, step);
 }
 
 namespace {
 
 // readGridInfo's work on an open file; `at` receives the located sections (1.2 files: not read; older ones:
 // read and validated whole, as they store no summary).
-GridFileInfo infoOf(const SectionedFileReader& reader, Located& at) {
+GridFileInfo infoOf(const SectionedFileReader& reader, Located& at, size_t step) {
     GridFileInfo info;
     info.fileMinor = reader.minor();
     info.fileBytes = reader.mapping()->bytes().size();
@@ -452,7 +785,7 @@ GridFileInfo infoOf(const SectionedFileReader& reader, Located& at) {
     if (reader.minor() < kSummarySince) {
         // No stored summary: the full pass, with the full validation that comes with reading everything.
         reader.verifyAll();
-        const Grid g = parseGrid(reader);
+        const Grid g = parseGrid(reader, step);
         info.cellCount = g.cellCount();
         info.summary = summarise(g);
         info.shape = shapeOf(g);
@@ -463,6 +796,11 @@ GridFileInfo infoOf(const SectionedFileReader& reader, Located& at) {
         at = parseHeader(reader, info.shape);
         info.cellCount = at.cellCount;
         parseMeta(reader, *at.meta, info.shape, at.cellCount, &info.summary);
+        parseSteps(reader, at, info.shape);
+        checkStepIndex(reader, info.shape, step);
+        info.shape.step = step;
+        if (!info.shape.steps.empty()) info.contentHash = info.shape.steps[step].contentHash;
+        addStepRanges(info.summary, info.shape, info.cellCount);
         info.shape.values.assign(info.shape.layers.size(), {});
     }
     info.bytesChecked = reader.bytesChecked();
@@ -471,16 +809,23 @@ GridFileInfo infoOf(const SectionedFileReader& reader, Located& at) {
 
 }  // namespace
 
-GridFileInfo readGridInfo(const std::string& path) {
+GridFileInfo readGridInfo(const std::string& path, size_t step) {
     const SectionedFileReader reader(path, kFormat);
     Located at;
-    return infoOf(reader, at);
+    return infoOf(reader, at, step);
 }
 
-GridFileInfo verifyGridFile(const std::string& path) {
+GridFileInfo verifyGridFile(const std::string& path, size_t step) {
     const SectionedFileReader reader(path, kFormat);
     reader.verifyAll();
-    Grid g = parseGrid(reader);
+    Located at;
+    Grid g = parseGrid(reader, step, &at);
+    // Every other step: its section against its STEPS record and its content hash.
+    for (size_t k = 0; k < g.steps.size(); ++k) {
+        if (k == step) continue;
+        if (stepContentHash(g, loadStep(reader, at, g, k)) != g.steps[k].contentHash)
+            reader.fail(at.steps[k]->offset, "step " + std::to_string(k) + ": content hash does not match the cells and values");
+    }
     GridFileInfo info;
     info.fileMinor = reader.minor();
     info.fileBytes = reader.mapping()->bytes().size();
@@ -501,7 +846,7 @@ GridFileInfo verifyGridFile(const std::string& path) {
 namespace hc {
 
 struct GridRegionReader::Impl {
-    explicit Impl(const std::string& path) : file(path, kFormat) { info = infoOf(file, at); }
+    Impl(const std::string& path, size_t step) : file(path, kFormat) { info = infoOf(file, at, step); }
     SectionedFileReader file;
     Located at;
     GridFileInfo info;
@@ -516,9 +861,20 @@ struct GridRegionReader::Impl {
         return lo;
     }
     uint64_t lowerBound(uint64_t code) const { return lowerBound(code, 0, info.cellCount); }
+    // The selected step's wet entries whose cell index is below `cell` (a binary search over its STEP section).
+    uint64_t wetBelow(uint64_t cell) const {
+        const FileSection& sec = *at.steps[info.shape.step];
+        uint64_t lo = 0, hi = info.shape.steps[info.shape.step].wetCells;
+        while (lo < hi) {
+            const uint64_t mid = lo + (hi - lo) / 2;
+            if (bytes::load<uint32_t>(file.read(sec, 4 * mid, 4).data()) < cell) lo = mid + 1;
+            else hi = mid;
+        }
+        return lo;
+    }
 };
 
-GridRegionReader::GridRegionReader(const std::string& path) : impl_(std::make_unique<Impl>(path)) {}
+GridRegionReader::GridRegionReader(const std::string& path, size_t step) : impl_(std::make_unique<Impl>(path, step)) {}
 GridRegionReader::~GridRegionReader() = default;
 const std::string& GridRegionReader::path() const { return impl_->file.path(); }
 const GridFileInfo& GridRegionReader::info() const { return impl_->info; }
@@ -621,10 +977,30 @@ Grid GridRegionReader::region(const Grid::Square& box, std::span<const double> m
         const size_t at = g.codes.size();
         g.codes.resize(at + (hi - lo));
         std::memcpy(g.codes.data() + at, codes.data(), codes.size());
-        for (size_t l = 0; l < g.values.size(); ++l) {
+        for (size_t l = 0; l < r.at.layers.size(); ++l) {
             const auto values = r.file.read(*r.at.layers[l], 4 * lo, 4 * (hi - lo));
             g.values[l].resize(at + (hi - lo));
             std::memcpy(g.values[l].data() + at, values.data(), values.size());
+        }
+        if (shape.steps.empty()) continue;
+        // The step layers: 0 where dry, the stored values at the run's wet cells.
+        const size_t first = shape.firstStepLayer(), L = shape.layers.size() - first;
+        for (size_t l = first; l < shape.layers.size(); ++l) g.values[l].resize(at + (hi - lo), 0.0f);
+        const FileSection& sec = *r.at.steps[shape.step];
+        const uint64_t w = shape.steps[shape.step].wetCells, j0 = r.wetBelow(lo), j1 = r.wetBelow(hi);
+        if (j1 == j0) continue;
+        const auto idx = r.file.read(sec, 4 * j0, 4 * (j1 - j0));
+        for (size_t l = 0; l < L; ++l) {
+            const auto vals = r.file.read(sec, 4 * w * (1 + l) + 4 * j0, 4 * (j1 - j0));
+            for (uint64_t j = 0; j < j1 - j0; ++j) {
+                const uint32_t cell = bytes::load<uint32_t>(idx.data() + 4 * j);
+                const float v = bytes::load<float>(vals.data() + 4 * j);
+                if (cell < lo || cell >= hi || (j > 0 && cell <= bytes::load<uint32_t>(idx.data() + 4 * (j - 1))) || !std::isfinite(v) ||
+                    (l == 0 && !(v > 0)))
+                    r.file.fail(sec.offset + 4 * (j0 + j), "step " + std::to_string(shape.step) + ": wet cell " + std::to_string(j0 + j) +
+                                                               " is out of order or its value is not finite (water_depth > 0)");
+                g.values[first + l][at + (cell - lo)] = v;
+            }
         }
     }
     if (std::string problem = g.validate(); !problem.empty()) r.file.fail(r.at.cells->offset, "invalid grid: " + problem);

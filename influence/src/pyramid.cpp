@@ -9,6 +9,7 @@
 #include <algorithm>
 #include <bit>
 #include <cmath>
+#include <cstdio>
 #include <filesystem>
 #include <limits>
 
@@ -67,9 +68,15 @@ uint64_t SurfacePyramid::bytes() const {
     return n;
 }
 
-std::string defaultPyramidPath(const std::string& gridPath) {
+std::string defaultPyramidPath(const std::string& gridPath, size_t step, size_t stepCount) {
     std::filesystem::path p(gridPath);
-    p.replace_extension(".hcp");
+    if (stepCount > 1) {
+        char tail[32];
+        std::snprintf(tail, sizeof tail, ".step%04zu.hcp", step);
+        p.replace_extension(tail);
+    } else {
+        p.replace_extension(".hcp");
+    }
     return p.string();
 }
 

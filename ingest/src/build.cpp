@@ -5,6 +5,12 @@
 // Pass C walks the coarse tree in Morton order to give every tile its output offset, then rebuilds
 // each tile's pyramid (cheap, cache-resident) and writes its cells straight into the final arrays:
 // no sort, no reallocation, and memory beyond the raster and the grid stays at a few hundred kB.
+//
+// Water (DESIGN.md section 11): every step's depth raster is read once before the build, one at a time, into a merge
+// mask (a byte per quadtree node: may these four cells merge, for every step?), so the terrain build keeps every
+// step's wet/dry edges and depth tolerance. After the cells are written, each step is read again and its depth per
+// cell computed exactly as a merge would (the float mean of the four children's means, bottom up): with one step the
+// cells and depths are those of a build over both layers at once.
 #include "heightcast/ingest/build.h"
 
 #include <algorithm>
@@ -13,6 +19,7 @@
 #include <cmath>
 #include <limits>
 #include <memory>
+#include <optional>
 
 #include "heightcast/grid/grid_file.h"
 
@@ -24,14 +31,115 @@
 namespace hc::ingest {
 namespace {
 
-constexpr int kMaxBuildLayers = 2;  // elevation, water depth
 constexpr int kTileLevelMax = 6;    // 64 x 64 pixel tiles: a pyramid fits in L2
 
 struct Node {
-    std::array<float, kMaxBuildLayers> mean{}, lo{}, hi{};
+    std::array<float, 1> mean{}, lo{}, hi{};  // elevation
     bool leaf = false;  // a single cell covers the whole node
-    bool wet = false;
 };
+
+// Which quadtree nodes the water steps let merge: per level 1..maxLevel, a byte per node (node (x, y) of level l covers
+// pixels [x 2^l, (x + 1) 2^l) east and likewise north of the south-west corner). Starts all allowed.
+class MergeMask {
+public:
+    MergeMask(size_t width, size_t height, int maxLevel) : levels_(size_t(maxLevel) + 1) {
+        for (int l = 1; l <= maxLevel; ++l) {
+            const size_t nx = (width + (size_t{1} << l) - 1) >> l, ny = (height + (size_t{1} << l) - 1) >> l;
+            levels_[size_t(l)] = {nx, ny, std::vector<uint8_t>(nx * ny, 1)};
+        }
+    }
+    bool allowed(int level, size_t x, size_t y) const {
+        const Level& L = levels_[size_t(level)];
+        return x < L.nx && y < L.ny && L.ok[y * L.nx + x];
+    }
+    void forbid(int level, size_t x, size_t y) {
+        Level& L = levels_[size_t(level)];
+        if (x < L.nx && y < L.ny) L.ok[y * L.nx + x] = 0;
+    }
+
+private:
+    struct Level {
+        size_t nx = 0, ny = 0;
+        std::vector<uint8_t> ok;
+    };
+    std::vector<Level> levels_;
+};
+
+// A depth pixel at finest coordinates (ix east, iy north of the south-west corner): NaN outside or on a hole.
+float depthAt(const Raster& d, size_t ix, size_t iy) {
+    if (ix >= d.width || iy >= d.height) return std::numeric_limits<float>::quiet_NaN();
+    return d.values[(d.height - 1 - iy) * d.width + ix];
+}
+
+// The depth a merged cell of `level` at (ix, iy) holds: the float mean of its four children's, bottom up, in the order
+// the build merges them (Builder::merge).
+float cellMean(const Raster& d, size_t ix, size_t iy, int level) {
+    if (level == 0) return depthAt(d, ix, iy);
+    const size_t h = size_t{1} << (level - 1);
+    const double sum = static_cast<double>(cellMean(d, ix, iy, level - 1)) + cellMean(d, ix + h, iy, level - 1) +
+                       cellMean(d, ix, iy + h, level - 1) + cellMean(d, ix + h, iy + h, level - 1);
+    return static_cast<float>(sum * 0.25);
+}
+
+// Forbids in `mask` every merge step `d` does not allow: four children that are not all wet or all dry, or whose
+// depths the parent's mean does not hold within the tolerance (build.h's rule for water).
+void restrictByStep(const Raster& d, double tolerance, int maxLevel, unsigned threads, MergeMask& mask) {
+    if (maxLevel < 1) return;
+    struct Depth {
+        float mean = 0, lo = 0, hi = 0;
+        uint8_t state = 0;  // 0: no merge possible (hole, outside, or a forbidden merge below), 1 dry, 2 wet
+    };
+    const int top = maxLevel;  // nodes of the top level are independent: one task each
+    const size_t side = size_t{1} << top;
+    const size_t nx = (d.width + side - 1) / side, ny = (d.height + side - 1) / side;
+    std::vector<std::vector<std::vector<Depth>>> scratch(resolveThreads(threads));
+    std::vector<std::vector<std::pair<int, std::pair<size_t, size_t>>>> forbidden(scratch.size());
+    parallelFor(nx * ny, 4, threads, [&](size_t b, size_t e, unsigned worker) {
+        auto& lv = scratch[worker];
+        lv.resize(size_t(top) + 1);
+        for (size_t t = b; t < e; ++t) {
+            const size_t tx = t % nx, ty = t / nx;
+            size_t n = side;
+            lv[0].resize(n * n);
+            for (size_t y = 0; y < n; ++y)
+                for (size_t x = 0; x < n; ++x) {
+                    const float v = depthAt(d, tx * side + x, ty * side + y);
+                    lv[0][y * n + x] = std::isnan(v) ? Depth{} : Depth{v, v, v, uint8_t(v > 0 ? 2 : 1)};
+                }
+            for (int l = 1; l <= top; ++l) {
+                const size_t cn = n;
+                n /= 2;
+                auto& cur = lv[size_t(l)];
+                const auto& ch = lv[size_t(l) - 1];
+                cur.resize(n * n);
+                for (size_t y = 0; y < n; ++y)
+                    for (size_t x = 0; x < n; ++x) {
+                        const size_t c = 2 * y * cn + 2 * x;
+                        const Depth& p = ch[c];
+                        const Depth& q = ch[c + 1];
+                        const Depth& r = ch[c + cn];
+                        const Depth& s = ch[c + cn + 1];
+                        Depth out;
+                        const bool same = p.state != 0 && p.state == q.state && q.state == r.state && r.state == s.state;
+                        const bool anyData = p.state || q.state || r.state || s.state;
+                        if (same) {
+                            const double sum = static_cast<double>(p.mean) + q.mean + r.mean + s.mean;
+                            out.mean = static_cast<float>(sum * 0.25);
+                            out.lo = std::min({p.lo, q.lo, r.lo, s.lo});
+                            out.hi = std::max({p.hi, q.hi, r.hi, s.hi});
+                            if (static_cast<double>(out.hi) - out.mean <= tolerance && out.mean - static_cast<double>(out.lo) <= tolerance)
+                                out.state = p.state;
+                        }
+                        if (out.state == 0 && anyData)
+                            forbidden[worker].push_back({l, {((tx * side) >> l) + x, ((ty * side) >> l) + y}});
+                        cur[y * n + x] = out;
+                    }
+            }
+        }
+    });
+    for (const auto& list : forbidden)
+        for (const auto& [l, xy] : list) mask.forbid(l, xy.first, xy.second);
+}
 
 // Cells on their way to the sink: one batch at a time, so the grid never has to be in memory.
 struct Batch {
@@ -47,8 +155,8 @@ struct Stats {
 
 class Builder {
 public:
-    Builder(const Raster& terrain, const Raster* water, const BuildOptions& opt, int rootLevel, int maxLevel)
-        : t_(terrain), w_(water), opt_(opt), layers_(water ? 2 : 1), rootLevel_(rootLevel), maxLevel_(maxLevel),
+    Builder(const Raster& terrain, const MergeMask* mask, const BuildOptions& opt, int rootLevel, int maxLevel)
+        : t_(terrain), mask_(mask), opt_(opt), layers_(1), rootLevel_(rootLevel), maxLevel_(maxLevel),
           tileLevel_(std::min(rootLevel, kTileLevelMax)), tile_(size_t{1} << tileLevel_),
           ntx_((terrain.width + tile_ - 1) / tile_), nty_((terrain.height + tile_ - 1) / tile_) {}
 
@@ -69,20 +177,15 @@ private:
             const double exact = static_cast<double>(z) + t_.roundingM[idx];
             (exact > z ? n.hi[0] : n.lo[0]) = std::nextafter(z, exact > z ? HUGE_VALF : -HUGE_VALF);
         }
-        if (w_) {
-            float d = w_->values[idx];
-            n.mean[1] = n.lo[1] = n.hi[1] = d;
-            n.wet = d > 0;
-        }
         n.leaf = true;
         return true;
     }
 
-    // The merge rule (build.h).
-    Node merge(const Node& a, const Node& b, const Node& c, const Node& d, int level) const {
+    // The merge rule (build.h); (x, y) is the parent node at `level`, for the water steps' mask.
+    Node merge(const Node& a, const Node& b, const Node& c, const Node& d, int level, size_t x, size_t y) const {
         Node p;
         if (!(a.leaf && b.leaf && c.leaf && d.leaf) || level > maxLevel_) return p;
-        if (w_ && !(a.wet == b.wet && b.wet == c.wet && c.wet == d.wet)) return p;
+        if (mask_ && !mask_->allowed(level, x, y)) return p;
         for (int l = 0; l < layers_; ++l) {
             double sum = static_cast<double>(a.mean[l]) + b.mean[l] + c.mean[l] + d.mean[l];
             float m = static_cast<float>(sum * 0.25);
@@ -94,7 +197,6 @@ private:
             p.lo[l] = lo;
             p.hi[l] = hi;
         }
-        p.wet = a.wet;
         p.leaf = true;
         return p;
     }
@@ -119,7 +221,8 @@ private:
             for (size_t y = 0; y < side; ++y)
                 for (size_t x = 0; x < side; ++x) {
                     size_t c = 2 * y * childSide + 2 * x;
-                    cur[y * side + x] = merge(ch[c], ch[c + 1], ch[c + childSide], ch[c + childSide + 1], l);
+                    cur[y * side + x] = merge(ch[c], ch[c + 1], ch[c + childSide], ch[c + childSide + 1], l, ((tx * tile_) >> l) + x,
+                                              ((ty * tile_) >> l) + y);
                 }
         }
         return scratch[static_cast<size_t>(tileLevel_)][0];
@@ -153,7 +256,7 @@ private:
     void measure(const Batch& b, size_t begin, size_t end, Stats& acc) const;
 
     const Raster& t_;
-    const Raster* w_;
+    const MergeMask* mask_;
     const BuildOptions& opt_;
     int layers_;
     int rootLevel_, maxLevel_, tileLevel_;
@@ -191,7 +294,7 @@ Stats Builder::run(CellSink& sink) {
             for (size_t y = 0; y < nh; ++y)
                 for (size_t x = 0; x < nw; ++x)
                     cur[y * nw + x] = merge(child(2 * x, 2 * y), child(2 * x + 1, 2 * y), child(2 * x, 2 * y + 1),
-                                            child(2 * x + 1, 2 * y + 1), l);
+                                            child(2 * x + 1, 2 * y + 1), l, x, y);
             coarse.push_back(std::move(cur));
             dims.emplace_back(nw, nh);
         }
@@ -285,7 +388,6 @@ void Builder::measure(const Batch& b, size_t begin, size_t end, Stats& a) const 
         const uint64_t key = codeKey(b.codes[i]);
         const int level = codeLevel(b.codes[i]);
         ++a.perLevel[static_cast<size_t>(level)];
-        if (w_ && b.values[1][i] > 0) ++a.wetCells;
         const size_t span = size_t{1} << level;
         const size_t ix0 = mortonX(key), iy0 = mortonY(key);
         const double z = b.values[0][i];
@@ -298,7 +400,6 @@ void Builder::measure(const Batch& b, size_t begin, size_t end, Stats& a) const 
                 if (opt_.cellElevations) (*opt_.cellElevations)[idx] = b.values[0][i];
                 a.sumSq += dz * dz;
                 a.maxDev = std::max(a.maxDev, std::abs(dz));
-                if (w_) a.maxDev = std::max(a.maxDev, std::abs(static_cast<double>(w_->values[idx]) - b.values[1][i]));
                 ++a.pixels;
             }
         }
@@ -310,16 +411,13 @@ void Builder::measure(const Batch& b, size_t begin, size_t end, Stats& a) const 
 namespace {
 
 // The grid's geometry for a raster: origin at its south-west corner, finest cell = its pixel.
-Grid shapeFor(const Raster& terrain, const Raster* waterDepth, const BuildOptions& options, int& rootLevel, int& maxLevel) {
+Grid shapeFor(const Raster& terrain, bool water, const BuildOptions& options, int& rootLevel, int& maxLevel) {
     if (terrain.width == 0 || terrain.height == 0 || terrain.values.size() != terrain.width * terrain.height)
         throw Error("raster is empty or inconsistent");
     if (!(options.toleranceM >= 0) || !std::isfinite(options.toleranceM)) throw Error("tolerance must be a finite number >= 0");
     if (!(terrain.pixelSizeM > 0)) throw Error("pixel size must be positive");
     if (!terrain.roundingM.empty() && terrain.roundingM.size() != terrain.values.size())
         throw Error("terrain rounding does not match the terrain raster");
-    if (waterDepth && (waterDepth->width != terrain.width || waterDepth->height != terrain.height ||
-                       waterDepth->values.size() != terrain.values.size()))
-        throw Error("water depth raster does not match the terrain raster's geometry");
     rootLevel = 0;
     while ((size_t{1} << rootLevel) < std::max(terrain.width, terrain.height)) ++rootLevel;
     if (rootLevel > kMaxRootLevel) throw Error("raster of " + std::to_string(terrain.width) + " x " +
@@ -334,7 +432,7 @@ Grid shapeFor(const Raster& terrain, const Raster* waterDepth, const BuildOption
     g.maxLevel = maxLevel;
     g.crsWkt = terrain.crsWkt;
     g.crsName = terrain.crsName;
-    if (waterDepth) {
+    if (water) {
         g.layers.push_back({"water_depth", "m"});
         g.values.emplace_back();
     }
@@ -342,6 +440,65 @@ Grid shapeFor(const Raster& terrain, const Raster* waterDepth, const BuildOption
     g.stats.sourceHeight = terrain.height;
     g.stats.toleranceM = options.toleranceM;
     return g;
+}
+
+void checkStepRaster(const Raster& terrain, const Raster& d, size_t k) {
+    if (d.width != terrain.width || d.height != terrain.height || d.values.size() != terrain.values.size())
+        throw Error("water step " + std::to_string(k) + ": depth raster does not match the terrain raster's geometry");
+}
+
+// The merge mask of every step, each step's raster read once (WaterSteps::load), or nullopt without water.
+std::optional<MergeMask> maskOf(const Raster& terrain, const WaterSteps* steps, const BuildOptions& opt, int maxLevel) {
+    if (!steps || steps->count == 0) return std::nullopt;
+    MergeMask mask(terrain.width, terrain.height, maxLevel);
+    Progress progress("water steps: wet/dry edges", steps->count, opt.progress && steps->count > 1);
+    for (size_t k = 0; k < steps->count; ++k) {
+        const Raster d = steps->load(k);
+        checkStepRaster(terrain, d, k);
+        restrictByStep(d, opt.toleranceM, maxLevel, opt.threads, mask);
+        progress.advance(1);
+    }
+    progress.finish();
+    return mask;
+}
+
+// One step's depth per cell (cellMean) for the cells `codes`: the wet ones (> 0) in stored form, and the largest
+// |pixel - cell depth| over the pixels the cells cover.
+WaterStepData stepValues(const Raster& d, std::span<const uint64_t> codes, double timeS, unsigned threads, double& maxDev) {
+    struct Part {
+        std::vector<uint32_t> wet;
+        std::vector<float> depth;
+        double maxDev = 0;
+    };
+    const size_t chunk = size_t{1} << 16;
+    std::vector<Part> parts((codes.size() + chunk - 1) / chunk);
+    parallelFor(parts.size(), 1, threads, [&](size_t b, size_t e, unsigned) {
+        for (size_t c = b; c < e; ++c) {
+            Part& part = parts[c];
+            for (size_t i = c * chunk; i < std::min(codes.size(), (c + 1) * chunk); ++i) {
+                const uint64_t key = codeKey(codes[i]);
+                const int level = codeLevel(codes[i]);
+                const size_t ix = mortonX(key), iy = mortonY(key), span = size_t{1} << level;
+                const float m = cellMean(d, ix, iy, level);
+                for (size_t y = iy; y < iy + span; ++y)
+                    for (size_t x = ix; x < ix + span; ++x)
+                        part.maxDev = std::max(part.maxDev, std::abs(static_cast<double>(depthAt(d, x, y)) - m));
+                if (m > 0) {
+                    part.wet.push_back(static_cast<uint32_t>(i));
+                    part.depth.push_back(m);
+                }
+            }
+        }
+    });
+    WaterStepData out;
+    out.timeS = timeS;
+    out.values.resize(1);
+    for (const Part& p : parts) {
+        out.wet.insert(out.wet.end(), p.wet.begin(), p.wet.end());
+        out.values[0].insert(out.values[0].end(), p.depth.begin(), p.depth.end());
+        maxDev = std::max(maxDev, p.maxDev);
+    }
+    return out;
 }
 
 void fillStats(const Stats& st, IngestStats& out) {
@@ -355,32 +512,39 @@ public:
     explicit GridSink(Grid& g) : g_(g) {}
     void begin(uint64_t cellCount) override {
         g_.codes.reserve(cellCount);
-        for (auto& v : g_.values) v.reserve(cellCount);
+        g_.values[0].reserve(cellCount);
     }
     void append(std::span<const uint64_t> codes, const std::vector<std::span<const float>>& values) override {
         g_.codes.insert(g_.codes.end(), codes.begin(), codes.end());
-        for (size_t l = 0; l < values.size(); ++l) g_.values[l].insert(g_.values[l].end(), values[l].begin(), values[l].end());
+        g_.values[0].insert(g_.values[0].end(), values[0].begin(), values[0].end());
     }
 
 private:
     Grid& g_;
 };
 
+// Streams the cells into a GridFileWriter; keeps their codes (8 bytes a cell) when water steps follow.
 class FileSink : public CellSink {
 public:
-    FileSink(const std::string& path, const Grid& shape) : path_(path), shape_(shape) {}
+    FileSink(const std::string& path, const Grid& shape, size_t steps) : path_(path), shape_(shape), steps_(steps) {}
     void begin(uint64_t cellCount) override {
         if (cellCount == 0) throw Error("the raster holds no valid pixel (all nodata): nothing to build");
-        writer_ = std::make_unique<GridFileWriter>(path_, shape_, cellCount);
+        if (steps_ > 0 && cellCount > UINT32_MAX)
+            throw Error(std::to_string(cellCount) + " cells: a grid with water steps holds at most 2^32 - 1 cells");
+        writer_ = std::make_unique<GridFileWriter>(path_, shape_, cellCount, steps_);
+        if (steps_ > 0) codes.reserve(cellCount);
     }
-    void append(std::span<const uint64_t> codes, const std::vector<std::span<const float>>& values) override {
-        writer_->append(codes, values);
+    void append(std::span<const uint64_t> c, const std::vector<std::span<const float>>& values) override {
+        writer_->append(c, values);
+        if (steps_ > 0) codes.insert(codes.end(), c.begin(), c.end());
     }
     GridFileWriter& writer() { return *writer_; }
+    std::vector<uint64_t> codes;
 
 private:
     std::string path_;
     const Grid& shape_;
+    size_t steps_;
     std::unique_ptr<GridFileWriter> writer_;
 };
 
@@ -388,25 +552,61 @@ private:
 
 Grid buildGrid(const Raster& terrain, const Raster* waterDepth, const BuildOptions& options) {
     int rootLevel = 0, maxLevel = 0;
-    Grid g = shapeFor(terrain, waterDepth, options, rootLevel, maxLevel);
+    Grid g = shapeFor(terrain, waterDepth != nullptr, options, rootLevel, maxLevel);
+    WaterSteps one;
+    if (waterDepth) {
+        checkStepRaster(terrain, *waterDepth, 0);
+        one.count = 1;
+        one.timesS = {0.0};
+        one.load = [&](size_t) { return *waterDepth; };
+    }
+    const std::optional<MergeMask> mask = maskOf(terrain, waterDepth ? &one : nullptr, options, maxLevel);
     GridSink sink(g);
     if (options.cellElevations) options.cellElevations->assign(terrain.values.size(), std::numeric_limits<float>::quiet_NaN());
-    Stats st = Builder(terrain, waterDepth, options, rootLevel, maxLevel).run(sink);
+    Stats st = Builder(terrain, mask ? &*mask : nullptr, options, rootLevel, maxLevel).run(sink);
     if (g.cellCount() == 0) throw Error("the raster holds no valid pixel (all nodata): nothing to build");
+    if (waterDepth) {
+        g.values[1].clear();
+        const WaterStepData data = stepValues(*waterDepth, g.codes, 0.0, options.threads, st.maxDev);
+        selectStep(g, data, 0);
+    }
     fillStats(st, g.stats);
     assert(g.validate().empty());
     return g;
 }
 
-BuildSummary buildGridFile(const Raster& terrain, const Raster* waterDepth, const BuildOptions& options,
-                           const std::string& path, const IngestStats& extraStats) {
+BuildSummary buildGridFile(const Raster& terrain, const WaterSteps* steps, const BuildOptions& options, const std::string& path,
+                           const IngestStats& extraStats) {
     const Stopwatch clock;
     int rootLevel = 0, maxLevel = 0;
+    const size_t stepCount = steps ? steps->count : 0;
+    if (steps && steps->timesS.size() != stepCount) throw Error("water steps: " + std::to_string(steps->timesS.size()) + " times for " + std::to_string(stepCount) + " steps");
+    for (size_t k = 1; k < stepCount; ++k)
+        if (!(steps->timesS[k] > steps->timesS[k - 1]))
+            throw Error("water step times must increase strictly: step " + std::to_string(k) + " at " + std::to_string(steps->timesS[k]) +
+                        " s follows " + std::to_string(steps->timesS[k - 1]) + " s");
     BuildSummary out;
-    out.shape = shapeFor(terrain, waterDepth, options, rootLevel, maxLevel);
-    FileSink sink(path, out.shape);
+    out.shape = shapeFor(terrain, stepCount > 0, options, rootLevel, maxLevel);
+    const std::optional<MergeMask> mask = maskOf(terrain, steps, options, maxLevel);
+    FileSink sink(path, out.shape, stepCount);
     if (options.cellElevations) options.cellElevations->assign(terrain.values.size(), std::numeric_limits<float>::quiet_NaN());
-    Stats st = Builder(terrain, waterDepth, options, rootLevel, maxLevel).run(sink);
+    Stats st = Builder(terrain, mask ? &*mask : nullptr, options, rootLevel, maxLevel).run(sink);
+    {
+        Progress progress("water steps: depth per cell", stepCount, options.progress && stepCount > 0);
+        for (size_t k = 0; k < stepCount; ++k) {
+            const Raster d = steps->load(k);
+            checkStepRaster(terrain, d, k);
+            const WaterStepData data = stepValues(d, sink.codes, steps->timesS[k], options.threads, st.maxDev);
+            StepInfo info;
+            info.timeS = data.timeS;
+            info.wetCells = data.wet.size();
+            out.steps.push_back(info);
+            out.stepBytes += 8 * data.wet.size();
+            sink.writer().appendStep(data);
+            progress.advance(1);
+        }
+        progress.finish();
+    }
     IngestStats stats = extraStats;
     stats.sourceWidth = out.shape.stats.sourceWidth;
     stats.sourceHeight = out.shape.stats.sourceHeight;
@@ -415,8 +615,9 @@ BuildSummary buildGridFile(const Raster& terrain, const Raster* waterDepth, cons
     stats.seconds = extraStats.seconds + clock.seconds();
     sink.writer().commit(stats);
     out.shape.stats = stats;
+    out.shape.steps = out.steps;
     out.cellsPerLevel = st.perLevel;
-    out.wetCells = st.wetCells;
+    out.wetCells = out.steps.empty() ? 0 : out.steps.back().wetCells;
     for (uint64_t c : st.perLevel) out.cellCount += c;
     return out;
 }

@@ -30,8 +30,9 @@ namespace {
 
 // Loads terrain (and water) and chooses the build options: the shared first half of both jobs.
 struct Prepared {
-    Raster terrain, water;
-    bool hasWater = false;
+    Raster terrain;
+    WaterSteps water;                   // count 0 without water
+    std::vector<Raster> waterCache;     // each step's raster, kept from its first load while they fit (kWaterCacheBytes)
     BuildOptions build;
     detail::SourceTrace trace;     // the source, when the working raster is not the source itself
     std::vector<float> cellElevations;  // filled by the build when trace holds a source
@@ -48,13 +49,32 @@ Prepared prepare(const Options& opt, LoadReport& report) {
                     fmtM(w) + " x " + fmtM(h) + " m, with " + std::to_string(report.sourceValidPixels) + " valid pixels)" +
                     (opt.minCellM ? ": choose a --min-cell well below the raster's size" : ""));
     }
-    p.hasWater = opt.water != WaterSource::None;
-    if (p.hasWater) p.water = loadWater(opt, p.terrain, report);
+    p.water.count = waterStepCount(opt);
+    for (size_t k = 0; k < p.water.count; ++k) p.water.timesS.push_back(waterStepTimeS(opt, k));
+    p.waterCache.resize(p.water.count);
+    return p;
+}
+
+// The build reads each step twice (structure, then values): steps are kept between the two reads while all of them
+// together stay under this, otherwise read (warped) again.
+constexpr uint64_t kWaterCacheBytes = uint64_t{1} << 30;
+
+// Sets p.water.load (p must not move afterwards).
+void bindWater(Prepared& p, const Options& opt, LoadReport& report) {
+    const bool cache = uint64_t(p.water.count) * p.terrain.values.size() * 4 <= kWaterCacheBytes;
+    p.water.load = [&p, &opt, &report, cache](size_t k) {
+        if (cache && !p.waterCache[k].values.empty()) return p.waterCache[k];
+        Raster d = loadWater(opt, p.terrain, report, k);
+        if (cache) p.waterCache[k] = d;
+        return d;
+    };
+}
+
+void setBuild(Prepared& p, const Options& opt, LoadReport& report) {
     p.build.toleranceM = opt.toleranceM;
     p.build.maxLevel = chooseMaxLevel(opt, p.terrain.pixelSizeM, report);
     p.build.threads = opt.threads;
     p.build.progress = opt.progress;
-    return p;
 }
 
 // Every valid source pixel against the cell covering its centre (LoadReport::sourceCheck): the
@@ -136,9 +156,14 @@ void afterBuild(const Prepared& p, const IngestStats& stats, const Options& opt,
 
 Grid ingest(const Options& opt, LoadReport& report) {
     const Stopwatch clock;
+    if (waterStepCount(opt) > 1)
+        throw Error("an in-memory grid holds one water step; " + std::to_string(waterStepCount(opt)) + " need ingestToFile (hc-ingest)");
     Prepared p = prepare(opt, report);
+    setBuild(p, opt, report);
     traceBuild(p);
-    Grid g = buildGrid(p.terrain, p.hasWater ? &p.water : nullptr, p.build);
+    Raster water;
+    if (p.water.count) water = loadWater(opt, p.terrain, report, 0);
+    Grid g = buildGrid(p.terrain, p.water.count ? &water : nullptr, p.build);
     afterBuild(p, g.stats, opt, report);
     g.stats.sourcePath = opt.input;
     g.stats.sourceCrsName = report.sourceCrsName;
@@ -149,12 +174,14 @@ Grid ingest(const Options& opt, LoadReport& report) {
 BuildSummary ingestToFile(const Options& opt, const std::string& path, LoadReport& report) {
     const Stopwatch clock;
     Prepared p = prepare(opt, report);
+    setBuild(p, opt, report);
+    bindWater(p, opt, report);
     traceBuild(p);
     IngestStats extra;
     extra.sourcePath = opt.input;
     extra.sourceCrsName = report.sourceCrsName;
     extra.seconds = clock.seconds();
-    BuildSummary b = buildGridFile(p.terrain, p.hasWater ? &p.water : nullptr, p.build, path, extra);
+    BuildSummary b = buildGridFile(p.terrain, p.water.count ? &p.water : nullptr, p.build, path, extra);
     afterBuild(p, b.shape.stats, opt, report);
     return b;
 }

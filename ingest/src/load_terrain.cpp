@@ -368,9 +368,34 @@ void validateOptions(const Options& o) {
         bad("--min-cell " + fmt(*o.minCellM) + " m is larger than --max-cell " + fmt(*o.maxCellM) + " m");
     if (!std::isfinite(o.zScale) || o.zScale == 0) bad("--z-scale " + fmt(o.zScale) + ": must be a finite non-zero factor");
     if (o.nodata && std::isnan(*o.nodata)) bad("--nodata nan: NaN is always nodata already");
-    if ((o.water == WaterSource::Depth || o.water == WaterSource::Surface) && o.waterPath.empty()) bad("no water raster given");
-    if (o.water == WaterSource::Level && !std::isfinite(o.waterLevelM)) bad("--water-level must be a finite elevation in metres");
+    if ((o.water == WaterSource::Depth || o.water == WaterSource::Surface) && o.waterPath.empty() && o.waterPaths.empty())
+        bad("no water raster given");
+    if (o.water == WaterSource::Level && o.waterLevelsM.empty() && !std::isfinite(o.waterLevelM))
+        bad("--water-level must be a finite elevation in metres");
+    for (double l : o.waterLevelsM)
+        if (!std::isfinite(l)) bad("--water-level " + fmt(l) + ": every level must be a finite elevation in metres");
+    const size_t steps = waterStepCount(o);
+    if (!o.timesS.empty()) {
+        if (steps == 0) bad("--times given without water (--water, --water-surface or --water-level)");
+        if (o.timesS.size() != steps)
+            bad("--times lists " + std::to_string(o.timesS.size()) + " times for " + std::to_string(steps) + " water steps");
+        for (size_t k = 0; k < o.timesS.size(); ++k) {
+            if (!std::isfinite(o.timesS[k])) bad("--times: time " + std::to_string(k) + " is not a finite number of seconds");
+            if (k > 0 && !(o.timesS[k] > o.timesS[k - 1]))
+                bad("--times must increase strictly: " + fmt(o.timesS[k]) + " s follows " + fmt(o.timesS[k - 1]) + " s (step " + std::to_string(k) + ")");
+        }
+    }
 }
+
+size_t waterStepCount(const Options& o) {
+    switch (o.water) {
+        case WaterSource::None: return 0;
+        case WaterSource::Level: return o.waterLevelsM.empty() ? 1 : o.waterLevelsM.size();
+        default: return o.waterPaths.empty() ? 1 : o.waterPaths.size();
+    }
+}
+
+double waterStepTimeS(const Options& o, size_t k) { return o.timesS.empty() ? static_cast<double>(k) : o.timesS.at(k); }
 
 namespace {
 

@@ -1,4 +1,6 @@
 // loadWater: a water depth or water surface raster warped onto the terrain, or a bathtub level.
+#include <algorithm>
+#include <array>
 #include <cmath>
 #include <deque>
 #include <limits>
@@ -60,13 +62,9 @@ Raster bathtub(const Raster& t, double level) {
     return d;
 }
 
-}  // namespace
-
-Raster loadWater(const Options& opt, const Raster& terrain, LoadReport& report) {
-    if (opt.water == WaterSource::Level) return bathtub(terrain, opt.waterLevelM);
-    const std::string role = opt.water == WaterSource::Depth ? "water depth raster" : "water surface raster";
-    detail::DatasetPtr ds = detail::openRaster(opt.waterPath, role);
-    const OGRSpatialReference* srs = ds->GetSpatialRef();
+// opt.waterPath's raster (open as `ds`) warped onto exactly the terrain's working raster, as depth [m].
+Raster warpedWater(const Options& opt, GDALDataset& ds, const Raster& terrain, LoadReport& report) {
+    const OGRSpatialReference* srs = ds.GetSpatialRef();
     bool waterHasCrs = srs && !srs->IsEmpty();
     if (waterHasCrs != !terrain.crsWkt.empty())
         report.warnings.push_back(opt.waterPath + ": " + (waterHasCrs ? "the terrain has no CRS" : "has no CRS") +
@@ -79,7 +77,7 @@ Raster loadWater(const Options& opt, const Raster& terrain, LoadReport& report) 
                                   "-te", num(west), num(south), num(east), num(north),
                                   "-ts", std::to_string(terrain.width), std::to_string(terrain.height)};
     if (waterHasCrs && !terrain.crsWkt.empty()) args.insert(args.end(), {"-t_srs", terrain.crsWkt});
-    detail::DatasetPtr warped = detail::warp(*ds, args, opt.waterPath + ": resampling onto the terrain");
+    detail::DatasetPtr warped = detail::warp(ds, args, opt.waterPath + ": resampling onto the terrain");
     detail::SourceBand band = detail::readFloatBand(*warped, opt.waterPath);
     Raster d = terrain;
     size_t negative = 0;
@@ -101,6 +99,41 @@ Raster loadWater(const Options& opt, const Raster& terrain, LoadReport& report) 
     if (negative > 0)
         report.warnings.push_back(opt.waterPath + ": " + std::to_string(negative) + " pixels of negative depth taken as dry");
     return d;
+}
+
+// Steps of one series must be one simulation's output: the same raster size, georeferencing and CRS as the first.
+void checkAgreesWithFirst(GDALDataset& ds, const std::string& path, const std::string& firstPath, const std::string& role) {
+    detail::DatasetPtr first = detail::openRaster(firstPath, role);
+    auto fail = [&](const std::string& what) {
+        throw Error(path + ": " + what + " differs from the series' first step " + firstPath +
+                    ": every water step must come from the same grid (same size, georeferencing and CRS)");
+    };
+    if (ds.GetRasterXSize() != first->GetRasterXSize() || ds.GetRasterYSize() != first->GetRasterYSize())
+        fail("size " + std::to_string(ds.GetRasterXSize()) + " x " + std::to_string(ds.GetRasterYSize()) + " px");
+    std::array<double, 6> a{}, b{};
+    const bool ga = ds.GetGeoTransform(a.data()) == CE_None, gb = first->GetGeoTransform(b.data()) == CE_None;
+    if (ga != gb) fail("having a georeferencing");
+    for (int i = 0; ga && i < 6; ++i)
+        if (std::abs(a[size_t(i)] - b[size_t(i)]) > 1e-9 * std::max({1.0, std::abs(a[size_t(i)]), std::abs(b[size_t(i)])}))
+            fail("the georeferencing (geotransform)");
+    const OGRSpatialReference* sa = ds.GetSpatialRef();
+    const OGRSpatialReference* sb = first->GetSpatialRef();
+    const bool ha = sa && !sa->IsEmpty(), hb = sb && !sb->IsEmpty();
+    if (ha != hb || (ha && !sa->IsSame(sb))) fail("the CRS");
+}
+
+}  // namespace
+
+Raster loadWater(const Options& opt, const Raster& terrain, LoadReport& report, size_t step) {
+    if (step >= waterStepCount(opt)) throw Error("water step " + std::to_string(step) + " of " + std::to_string(waterStepCount(opt)));
+    if (opt.water == WaterSource::Level) return bathtub(terrain, opt.waterLevelsM.empty() ? opt.waterLevelM : opt.waterLevelsM[step]);
+    const std::string role = opt.water == WaterSource::Depth ? "water depth raster" : "water surface raster";
+    const std::string& path = opt.waterPaths.empty() ? opt.waterPath : opt.waterPaths[step];
+    detail::DatasetPtr ds = detail::openRaster(path, role);
+    if (step > 0) checkAgreesWithFirst(*ds, path, opt.waterPaths[0], role);
+    Options one = opt;
+    one.waterPath = path;
+    return warpedWater(one, *ds, terrain, report);
 }
 
 }  // namespace hc::ingest

@@ -12,6 +12,11 @@
 //
 // Storage: one sorted array of packed cell codes (morton.h) and one float32 array per layer,
 // 8 + 4 * layers bytes per cell (12 bytes for elevation alone). Layer 0 is always elevation.
+//
+// Water steps (DESIGN.md section 11): a flood scenario is one structure and terrain and any number of water
+// steps. The layers from "water_depth" on (firstStepLayer()) are the step layers: in memory they hold ONE step,
+// the selected one (`step`), densely (0 where dry); `steps` describes every step of the scenario. Files store a
+// step sparsely, its wet cells only (grid_file.h). A grid with a water layer and no `steps` is one step at time 0.
 #pragma once
 
 #include <cstdint>
@@ -28,6 +33,14 @@ namespace hc {
 struct LayerInfo {
     std::string name;   // "elevation", "water_depth", "velocity", ...
     std::string units;  // "m", "m/s", ...
+};
+
+// One water step of a scenario, as a file describes it (grid_file.h: STEPS).
+struct StepInfo {
+    double timeS = 0;                 // seconds from the scenario's start; strictly increasing over the steps
+    uint64_t wetCells = 0;            // cells with water_depth > 0: only those store step values
+    uint64_t contentHash = 0;         // Grid::contentHash of the grid with this step selected
+    std::vector<float> layerMin, layerMax;  // per step layer, over the wet cells (empty when no cell is wet)
 };
 
 // What ingest measured when it built the grid (absent fields are NaN / 0 / empty).
@@ -57,6 +70,8 @@ public:
                                // "" with no CRS, and in files of format 1.0 (grid_file.h)
     std::vector<LayerInfo> layers{{"elevation", "m"}};
     IngestStats stats;
+    std::vector<StepInfo> steps;  // every water step of the scenario; empty: none, or one step at time 0 (above)
+    size_t step = 0;              // the step the step layers hold, an index into `steps` (0 when `steps` is empty)
 
     // ---- cells: codes sorted ascending; values[l][i] is layer l of cell i ----
     std::vector<uint64_t> codes;
@@ -66,6 +81,12 @@ public:
     size_t layerCount() const { return layers.size(); }
     // Index of a layer by name, or -1.
     int findLayer(const std::string& name) const;
+    // The first step layer: the index of "water_depth", or layerCount() when the grid has no water.
+    size_t firstStepLayer() const;
+    // How many water steps the scenario has: steps.size(), or 1 for a grid with water and no `steps`, else 0.
+    size_t stepCount() const;
+    // The selected step's time [s] (0 without steps).
+    double stepTimeS() const { return step < steps.size() ? steps[step].timeS : 0.0; }
 
     double domainSizeM() const { return finestCellM * static_cast<double>(uint64_t{1} << rootLevel); }
     double cellSizeM(size_t i) const { return levelSizeM(codeLevel(codes[i])); }
@@ -149,11 +170,18 @@ public:
     void addValues(size_t layer, std::span<const float> values);
     uint64_t structureHash() const;
     uint64_t contentHash() const;
+    uint64_t layerDigest(size_t layer) const { return layers_[layer].digest(); }
 
 private:
     const Grid& shape_;
     Hash64 structure_;
     std::vector<Hash64> layers_;
 };
+
+// Grid::contentHash from its parts: the structure hash, then per layer in order its name and the Hash64 digest of
+// its values (GridHasher's rule; lets a file compute the hash of each water step without holding the step densely).
+uint64_t combineContentHash(uint64_t structureHash, std::span<const std::pair<std::string, uint64_t>> layerDigests);
+// The Hash64 digest of a dense layer of `cellCount` values that are 0 except at the ascending indices `at`.
+uint64_t sparseLayerDigest(uint64_t cellCount, std::span<const uint32_t> at, std::span<const float> values);
 
 }  // namespace hc

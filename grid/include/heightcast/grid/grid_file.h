@@ -1,4 +1,4 @@
-// heightcast/grid/grid_file.h: the .hcg grid file format, version 1.2 (reads 1.0 and 1.1).
+// heightcast/grid/grid_file.h: the .hcg grid file format, version 1.3 (reads 1.0 to 1.2).
 //
 // A sectioned container (sectioned_file.h: magic, version, declared size, CRC-32 of header, table
 // and every section, 64-byte aligned sections, zero padding checked). The grid's own header fields:
@@ -12,8 +12,8 @@
 //   56      1     root level (domain = finest * 2^root per side)
 //   57      1     min level
 //   58      1     max level
-//   59      1     layer count (1 = elevation only)
-//   64      8     content hash (Grid::contentHash)
+//   59      1     layer count: the static LAYER sections (1 = elevation only; the step layers are not counted)
+//   64      8     content hash (Grid::contentHash; with water steps (1.3) the scenario's: below)
 //   72      8     structure hash (Grid::structureHash)
 //   80      40    reserved, zero
 //
@@ -29,11 +29,24 @@
 //   layer.N.min, layer.N.max the least and greatest value of layer N (shortest exact decimal of the float32;
 //                            absent in an empty grid)
 //
+// Water steps (1.3, DESIGN.md section 11). The layers from water_depth on are the step layers (Grid::firstStepLayer);
+// they are not LAYER sections. META holds step_layers (their count L) and step_layer.N.name / .units. Then:
+//   STEP  (kind 5, index = step k): the wet cells of step k (water_depth > 0), u32 ascending cell indices, then per
+//         step layer one f32 per wet cell (water_depth first): 4 * wet * (1 + L) bytes. Dry cells store nothing and
+//         read as 0. Grids with steps hold at most 2^32 - 1 cells.
+//   STEPS (kind 4, index 0): per step, 24 + 8 * L bytes: time [s] f64 (finite, strictly increasing), wet cells u64,
+//         the content hash of the grid with that step selected u64 (what influence data of that step keys on), and per
+//         step layer its min and max f32 over the wet cells (0 0 when none is wet).
+// A reader selects one step and reads that step's section only (lazily: rendering step k touches step k). The header's
+// content hash is then Hash64 over the static grid's content hash and every step's (time, hash).
+//
 // Versions (a newer minor only adds what an older reader skips: sectioned_file.h):
 //   1.0  the layout above, META without crs_name
 //   1.1  META key crs_name (Grid::crsName); read from a 1.0 file as ""
 //   1.2  block checksums (sectioned_file.h: a CRC-32 per 1 MiB, checked when first read) and the summary
 //        in META; a 1.0/1.1 file has neither: readGridInfo reads it whole
+//   1.3  water steps (STEP, STEPS, META step_layer*); water is no longer a LAYER. A 1.2 file's water_depth LAYER reads
+//        as a grid with water and no steps (one step at time 0)
 //
 // Hashes: structure = Hash64 over (finest size f64, root level i32, cell count u64, codes);
 // content = Hash64 over (structure hash, then per layer its name + NUL and Hash64 of its values).
@@ -52,11 +65,23 @@
 namespace hc {
 
 constexpr uint16_t kGridFileMajor = 1;
-constexpr uint16_t kGridFileMinor = 2;
+constexpr uint16_t kGridFileMinor = 3;
 constexpr uint32_t kGridHeaderBytes = 128;
 
+// One water step as a file stores it: its wet cells only.
+struct WaterStepData {
+    double timeS = 0;                        // [s]
+    std::vector<uint32_t> wet;               // ascending indices of the cells with water_depth > 0
+    std::vector<std::vector<float>> values;  // [step layer][j]: the value at cell wet[j]; layer 0 is water_depth (> 0)
+};
+// The selected step of a grid (its dense step layers) in stored form.
+WaterStepData sparseStep(const Grid& grid);
+// Fills the grid's step layers (dense, 0 where dry) from a step's stored form; `step` becomes grid.step.
+void selectStep(Grid& grid, const WaterStepData& data, size_t step);
+
 // Writes `grid` to `path` atomically (temporary file + rename). Throws hc::Error on I/O failure or if
-// the grid is invalid (Grid::validate), leaving no file behind.
+// the grid is invalid (Grid::validate), leaving no file behind. A grid with water is written with one step: the
+// selected one, at its time (GridFileWriter writes scenarios of many steps).
 void writeGrid(const Grid& grid, const std::string& path);
 
 // Streams a grid to a file without ever holding it: cells arrive in order, in batches of any size,
@@ -64,15 +89,20 @@ void writeGrid(const Grid& grid, const std::string& path);
 // Nothing appears under `path` unless commit() succeeds. Throws hc::Error.
 class GridFileWriter {
 public:
-    // `shape` gives geometry, CRS and layers (its cells, if any, are ignored).
-    GridFileWriter(const std::string& path, const Grid& shape, uint64_t cellCount);
+    // `shape` gives geometry, CRS and layers (its cells, if any, are ignored); `stepCount` water steps follow the
+    // cells (appendStep) when the shape has step layers (Grid::firstStepLayer), at least 1 then.
+    GridFileWriter(const std::string& path, const Grid& shape, uint64_t cellCount, size_t stepCount = 0);
     ~GridFileWriter();
     GridFileWriter(const GridFileWriter&) = delete;
     GridFileWriter& operator=(const GridFileWriter&) = delete;
 
-    // Next cells in Morton order; layerValues[l][i] is layer l of codes[i].
+    // Next cells in Morton order; layerValues[l][i] is static layer l (those before firstStepLayer) of codes[i].
     void append(std::span<const uint64_t> codes, const std::vector<std::span<const float>>& layerValues);
-    // After exactly cellCount cells: writes the statistics, header and table, and renames into place.
+    // The next water step, after all cells: times strictly increasing, indices ascending and below the cell count,
+    // water_depth > 0 and every value finite (checked). Written straight to the file: one step in memory at a time.
+    void appendStep(const WaterStepData& step);
+    // After exactly cellCount cells and stepCount steps: writes the statistics, header and table, and renames
+    // into place.
     void commit(const IngestStats& stats);
 
 private:
@@ -84,7 +114,13 @@ private:
 // every cell invariant, both hashes. Throws hc::Error naming the file, the byte offset and the problem.
 // `fileMinor`, when given, receives the file's minor version (a newer minor than kGridFileMinor is
 // read: it only adds sections this reader skips).
-Grid readGrid(const std::string& path, uint16_t* fileMinor = nullptr);
+// A file with water steps is read with step `step` selected (0 by default); the other steps' sections are not read.
+Grid readGrid(const std::string& path, uint16_t* fileMinor = nullptr, size_t step = 0);
+
+// Replaces the step layers of `grid` (read from `path` by readGrid) with step `step`'s, reading only that step's
+// section; checks the step's content hash. Switching steps of a grid in memory (hc-influence, hc-view) costs one
+// step's bytes, not the grid's. Throws hc::Error naming the file (and leaves `grid` as it was).
+void readGridStep(const std::string& path, Grid& grid, size_t step);
 
 // What a full pass over the cells would tell (stored in META from format 1.2 on).
 struct GridSummary {
@@ -95,13 +131,14 @@ struct GridSummary {
 
 // A grid file's header, META and summary.
 struct GridFileInfo {
-    Grid shape;                    // geometry, CRS, layers, ingest statistics; no cells, no values
+    Grid shape;                    // geometry, CRS, layers, ingest statistics, steps (shape.step selected); no cells
     uint64_t cellCount = 0;
     uint16_t fileMinor = 0;
     uint64_t fileBytes = 0;
     uint64_t blockBytes = 0;       // of the block checksums; 0 for a 1.0/1.1 file (one CRC per section)
-    uint64_t structureHash = 0, contentHash = 0;  // as the header stores them (recomputed only when verified)
-    GridSummary summary;
+    uint64_t structureHash = 0, contentHash = 0;  // as the header stores them (recomputed only when verified); with steps,
+                                                  // contentHash is the selected step's (STEPS)
+    GridSummary summary;           // layer ranges: the static layers' and the selected step's
     bool verified = false;         // every checksum, cell invariant, hash and the summary checked against the cells
     uint64_t bytesChecked = 0;     // section bytes whose checksums were checked
     std::shared_ptr<const Grid> grid;  // the whole grid, from verifyGridFile only
@@ -111,11 +148,12 @@ struct GridFileInfo {
 // header, table, placement, padding, block checksum table) plus META's checksum and its fields. Cells and
 // values are NOT verified (verified = false). A 1.0/1.1 file stores no summary: it is then read and
 // validated whole, as readGrid does (verified = true). Throws hc::Error naming the file and byte offset.
-GridFileInfo readGridInfo(const std::string& path);
+GridFileInfo readGridInfo(const std::string& path, size_t step = 0);
 
 // Everything readGrid checks (every block checksum, every cell invariant, both hashes) and, from 1.2 on,
-// that the stored summary matches the cells; returns the summary computed from the cells and the grid.
-GridFileInfo verifyGridFile(const std::string& path);
+// that the stored summary matches the cells, and every water step (its section, ranges and content hash); returns
+// the summary computed from the cells and the grid, with step `step` selected.
+GridFileInfo verifyGridFile(const std::string& path, size_t step = 0);
 
 // A grid file read a region at a time, never whole (out of core, DESIGN.md section 10): the tools that work on
 // part of a grid too large to hold (hc-probe, hc-render) keep one of these instead of the grid. Opening reads
@@ -124,7 +162,8 @@ GridFileInfo verifyGridFile(const std::string& path);
 // the cells it returns (Grid::validate). Thread-safe: regions may be read from several threads at once.
 class GridRegionReader {
 public:
-    explicit GridRegionReader(const std::string& path);  // throws hc::Error naming the file
+    // Regions carry water step `step` (out of range: hc::Error naming the file and the step count).
+    explicit GridRegionReader(const std::string& path, size_t step = 0);  // throws hc::Error naming the file
     ~GridRegionReader();
     GridRegionReader(const GridRegionReader&) = delete;
     GridRegionReader& operator=(const GridRegionReader&) = delete;

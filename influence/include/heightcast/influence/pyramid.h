@@ -118,6 +118,7 @@ SurfacePyramid readSurfacePyramid(const std::string& path, const Grid& grid, uin
                                   const KernelParams& params);
 
 // The pyramid path a tool uses by default: the grid's path with its extension replaced by ".hcp".
-std::string defaultPyramidPath(const std::string& gridPath);
+// A grid of several water steps has one pyramid per step (the water channels differ): grid.step0007.hcp for step 7.
+std::string defaultPyramidPath(const std::string& gridPath, size_t step = 0, size_t stepCount = 1);
 
 }  // namespace hc::influence

@@ -6,7 +6,9 @@
 //   - all four exist (no hole, not outside the raster) and the parent is no larger than maxLevel;
 //   - in every layer, the parent's value (the float32 mean of the four, i.e. the mean of every
 //     pixel it covers) lies within toleranceM of every pixel it covers;
-//   - for water, all four are wet or all four are dry (depth 0): merges never blur a wet/dry edge.
+//   - for water, in every water step: all four are wet or all four are dry (depth 0), so merges never blur a
+//     wet/dry edge of any step, and the step's depth stays within toleranceM too (DESIGN.md section 11: one
+//     structure for every step).
 // Merging by the mean keeps volumes: a cell holds exactly the water its pixels held.
 // Guarantee (checked pixel by pixel, reported in Grid::stats): every valid pixel differs from the
 // stored value of the cell covering it by at most toleranceM, in every layer. Where the terrain carries
@@ -50,20 +52,30 @@ struct BuildSummary {
     Grid shape;
     uint64_t cellCount = 0;
     std::vector<uint64_t> cellsPerLevel;  // index = level
-    uint64_t wetCells = 0;
+    uint64_t wetCells = 0;                // of the last step
+    std::vector<StepInfo> steps;          // time and wet cells of each water step
+    uint64_t stepBytes = 0;               // bytes of the steps' sections (8 per wet cell and step)
+};
+
+// The water steps of a scenario, loaded one at a time (a series of rasters need not fit in memory together): step k's
+// depth [m] on the terrain's working raster (0 = dry, NaN on the terrain's holes), at timesS[k] (strictly increasing).
+struct WaterSteps {
+    size_t count = 0;
+    std::vector<double> timesS;
+    std::function<Raster(size_t k)> load;  // called twice per step: for the structure, then for the values
 };
 
 // Builds the grid in memory. The grid's origin is the raster's south-west corner; its CRS the raster's.
-// waterDepth, when given, must have the raster's geometry; it becomes layer "water_depth" [m]
+// waterDepth, when given, must have the raster's geometry; it becomes layer "water_depth" [m], one step at time 0
 // (dry = 0, holes wherever the terrain has one). Fills grid.stats deviations (max over every
 // layer, RMS over elevation) and sourceWidth/Height/validPixels/toleranceM.
 Grid buildGrid(const Raster& terrain, const Raster* waterDepth, const BuildOptions& options);
 
 // Builds the grid straight into a .hcg file (GridFileWriter): the same cells, bytes identical to
-// writeGrid(buildGrid(...)) with the same statistics, but memory stays at the rasters plus a few MB
-// of batch buffers whatever the cell count. `extraStats` supplies source path, CRS name and the
-// seconds spent before the build (the build's own time is added).
-BuildSummary buildGridFile(const Raster& terrain, const Raster* waterDepth, const BuildOptions& options,
+// writeGrid(buildGrid(...)) with the same statistics for one step at time 0, but memory stays at the rasters plus a
+// few MB of batch buffers whatever the cell count (with water: plus 8 bytes a cell, and one step's raster at a time).
+// `extraStats` supplies source path, CRS name and the seconds spent before the build (the build's own time is added).
+BuildSummary buildGridFile(const Raster& terrain, const WaterSteps* steps, const BuildOptions& options,
                            const std::string& path, const IngestStats& extraStats);
 
 }  // namespace hc::ingest

@@ -11,7 +11,8 @@
 //                   longitudes 0..360 / past 180      normalised; split at the antimeridian for --t_srs
 //                   non-square, rotated, south-up     resampled / flipped north-up, never mis-placed
 //   loadWater     a water depth or water surface raster warped onto the terrain's working raster, or
-//                 a bathtub level flood-filled from the domain boundary
+//                 a bathtub level flood-filled from the domain boundary; one per water step (a series of
+//                 rasters or of levels, DESIGN.md section 11)
 //   buildGrid     the error-bounded quadtree (build.h)
 //   (check)       every valid source pixel against the cell covering its centre (LoadReport::sourceCheck)
 #pragma once
@@ -42,8 +43,11 @@ struct Options {
     std::optional<double> minCellM;     // finest cell [m]; default: source pixel size after projection
     std::optional<double> maxCellM;     // coarsest cell [m]; default: largest finest * 2^k <= 96 m
     WaterSource water = WaterSource::None;
-    std::string waterPath;              // for Depth and Surface
-    double waterLevelM = 0;             // for Level: bathtub water surface elevation [m]
+    std::string waterPath;              // for Depth and Surface: one step
+    double waterLevelM = 0;             // for Level: bathtub water surface elevation [m], one step
+    std::vector<std::string> waterPaths;  // for Depth and Surface: a series, one step each (replaces waterPath)
+    std::vector<double> waterLevelsM;   // for Level: a series of levels [m], one step each (replaces waterLevelM)
+    std::vector<double> timesS;         // time of each step [s], strictly increasing; empty: the step index
     unsigned threads = 0;               // 0 = all cores
     bool progress = false;              // terminal progress on stderr
 };
@@ -76,7 +80,13 @@ void validateOptions(const Options& options);
 
 Raster loadTerrain(const Options& options, LoadReport& report);
 // Depth raster [m] of the terrain's geometry (0 = dry; NaN where terrain is a hole).
-Raster loadWater(const Options& options, const Raster& terrain, LoadReport& report);
+// How many water steps the options describe (0 without water).
+size_t waterStepCount(const Options& options);
+// The time of step k [s]: timesS[k], or k when no times were given.
+double waterStepTimeS(const Options& options, size_t k);
+// Step k's water (0-based). A series of rasters must agree with its first in size, georeferencing and CRS (checked
+// when step k is opened: hc::Error naming both files).
+Raster loadWater(const Options& options, const Raster& terrain, LoadReport& report, size_t step = 0);
 // Coarsest level for the working raster: --max-cell rounded down to finest * 2^k (default 96 m).
 // Throws if --max-cell is below the finest cell.
 int chooseMaxLevel(const Options& options, double pixelSizeM, LoadReport& report);
