@@ -20,20 +20,25 @@ struct ExportArgs {
     hc::influence::KernelParams params;
     unsigned threads = 0;
     unsigned step = 0;  // --step
+    int startIndex = 0; // .nc: the UGRID connectivity's start_index
     bool quiet = false;
     bool vdb() const { return ext == ".vdb"; }
+    bool ugrid() const { return ext == ".nc"; }
 };
 
 // The options, validated before any work; false after --help.
 bool parseOptions(int argc, char** argv, ExportArgs& a) {
     std::string bbox;
-    hc::cli::Parser p("hc-export", "GRID.hcg --resolution M -o OUT.tif|OUT.exr|OUT.vdb [options]",
+    hc::cli::Parser p("hc-export", "GRID.hcg --resolution M -o OUT.tif|OUT.exr|OUT.vdb [options]  |  GRID.hcg -o MESH.nc",
                       "Samples the exact smooth surface at the centres of a regular raster and writes it for other tools:\n"
                       "  .tif  GeoTIFF (Float32; CRS, geotransform and nodata for holes) for QGIS, gdalinfo, ...\n"
                       "  .exr  OpenEXR (the layer as a FLOAT channel, NaN and A = 0 where undefined; georeference\n"
                       "        in heightcast.* header attributes)\n"
                       "  .vdb  OpenVDB narrow-band level sets 'terrain' and, when the grid has water, 'water_surface'\n"
-                      "        (voxel = --resolution; georeference in grid metadata) for film and VFX tools");
+                      "        (voxel = --resolution; georeference in grid metadata) for film and VFX tools\n"
+                      "and writes the grid's cells themselves (no sampling) as\n"
+                      "  .nc   a UGRID-1.0 mesh in NetCDF: one square face per cell, elevation zb, every water step's level\n"
+                      "        zs(time, face), as quadtree flood models (SFINCS) write theirs; hc-ingest reads it back");
     p.positional("GRID.hcg", "grid file", a.gridPath);
     p.option("--resolution", "M", "pixel (voxel) size, metres (required)", a.resolution);
     p.option("-o", "OUT", "output file; the format follows the extension .tif/.tiff, .exr or .vdb (required)", a.out);
@@ -44,18 +49,29 @@ bool parseOptions(int argc, char** argv, ExportArgs& a) {
     p.option("--cache", "C.hci", "read the whole grid and this influence cache (built if missing or stale; default: the grid's\n"
              "path with .hci when that exists); without one the grid is read a tile at a time (out of core,\n"
              "the same values)", a.cachePath);
-    p.option("--step", "K", "water step to export, 0-based (default 0; hc-info lists a grid's steps and their times)", a.step);
+    p.option("--step", "K", "water step to export, 0-based (default 0; hc-info lists a grid's steps and their times; a .nc\n"
+             "      holds every step)", a.step);
+    p.option("--start-index", "0|1", ".nc: the first node's index in the face connectivity (UGRID start_index, default 0)", a.startIndex);
     p.option("--sigma", "S", "kernel width in cell sizes (default 1.0)", a.params.sigma);
     p.option("--truncation", "R", "kernel cut-off in sigmas (default 3.5)", a.params.truncation);
     p.option("--threads", "N", "worker threads (default 0 = all cores)", a.threads);
     p.flag("--quiet", "no progress output", a.quiet);
     if (!p.parse(argc, argv)) return false;
-    if (!p.given("--resolution")) throw hc::Error("give --resolution M");
-    if (a.out.empty()) throw hc::Error("no output file: give -o OUT.tif|OUT.exr|OUT.vdb");
+    if (a.out.empty()) throw hc::Error("no output file: give -o OUT.tif|OUT.exr|OUT.vdb|MESH.nc");
     a.ext = std::filesystem::path(a.out).extension().string();
     std::transform(a.ext.begin(), a.ext.end(), a.ext.begin(), [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
-    if (a.ext != ".tif" && a.ext != ".tiff" && a.ext != ".exr" && a.ext != ".vdb")
-        throw hc::Error(a.out + ": unknown output format '" + a.ext + "' (use .tif, .exr or .vdb)");
+    if (a.ext != ".tif" && a.ext != ".tiff" && a.ext != ".exr" && a.ext != ".vdb" && a.ext != ".nc")
+        throw hc::Error(a.out + ": unknown output format '" + a.ext + "' (use .tif, .exr, .vdb or .nc)");
+    if (a.ugrid()) {
+        for (const char* o : {"--resolution", "--bbox", "--layer", "--step", "--cache"})
+            if (p.given(o)) throw hc::Error(std::string(o) + ": a .nc mesh holds the cells themselves, every layer and step, unsampled");
+        if (a.startIndex != 0 && a.startIndex != 1) throw hc::Error("--start-index " + std::to_string(a.startIndex) + ": use 0 or 1");
+        hc::cli::checkWritable(a.out, "export");
+        hc::cli::checkNotSame(a.out, a.gridPath, "export");
+        return true;
+    }
+    if (p.given("--start-index")) throw hc::Error("--start-index: only for a .nc mesh");
+    if (!p.given("--resolution")) throw hc::Error("give --resolution M");
     if (a.vdb() && p.given("--layer") && a.layerName != "elevation")
         throw hc::Error("--layer: a .vdb always holds the terrain and, with water, the water surface");
     if (a.vdb()) hc::exporting::checkVdbAvailable(a.out);
@@ -125,6 +141,14 @@ int main(int argc, char** argv) {
         ExportArgs a;
         if (!parseOptions(argc, argv, a)) return 0;
         const hc::Stopwatch clock;
+        if (a.ugrid()) {
+            const hc::exporting::UgridSummary m = hc::exporting::writeUgrid(a.gridPath, a.out, {a.startIndex});
+            std::printf("hc-export: %s -> %s\n", a.gridPath.c_str(), a.out.c_str());
+            std::printf("  mesh         UGRID-1.0: %zu faces (one per cell), %zu nodes, start_index %d\n", m.faces, m.nodes, a.startIndex);
+            std::printf("  steps        %zu (zs over time; %llu wet faces in all)\n", m.steps, (unsigned long long)m.wetFaces);
+            std::printf("  time         %.3f s\n", clock.seconds());
+            return 0;
+        }
         const std::string cachePath = a.cachePath.empty() ? hc::influence::defaultCachePath(a.gridPath) : a.cachePath;
         std::error_code ec;
         Exported exported;

@@ -1,5 +1,6 @@
 // hc-info: header and statistics of a grid file (from its META, or --verify: the whole file checked); JSON and
 // per-cell CSV export.
+#include <array>
 #include <cinttypes>
 #include <cstdio>
 #include <filesystem>
@@ -17,7 +18,7 @@ namespace {
 
 struct Summary {
     double minCell = 0, maxCell = 0;
-    double extent[4] = {0, 0, 0, 0};  // world xmin, ymin, xmax, ymax
+    std::array<double, 4> extent{};  // world xmin, ymin, xmax, ymax
 };
 
 Summary summarise(const hc::GridFileInfo& info) {
@@ -34,9 +35,15 @@ Summary summarise(const hc::GridFileInfo& info) {
         s.minCell = g.levelSizeM(lo);
         s.maxCell = g.levelSizeM(hi);
     }
-    // Finest units to world metres as Grid::boundsLocal computes the edges (integer times the cell size).
-    for (int k = 0; k < 4; ++k)
-        s.extent[k] = (k % 2 ? g.originWorldY : g.originWorldX) + static_cast<double>(info.summary.boundsFinest[k]) * g.finestCellM;
+    // Finest units to world metres as Grid::boundsLocal computes the edges (integer times the cell size); a rotated
+    // grid's extent is the box around its rotated bounds.
+    const auto& b = info.summary.boundsFinest;
+    s.extent = {HUGE_VAL, HUGE_VAL, -HUGE_VAL, -HUGE_VAL};
+    for (int corner = 0; corner < 4; ++corner) {
+        double x = 0, y = 0;
+        g.localToWorld(double(b[corner & 1 ? 2 : 0]) * g.finestCellM, double(b[corner & 2 ? 3 : 1]) * g.finestCellM, x, y);
+        s.extent = {std::min(s.extent[0], x), std::min(s.extent[1], y), std::max(s.extent[2], x), std::max(s.extent[3], y)};
+    }
     return s;
 }
 
@@ -92,6 +99,7 @@ void printJson(const hc::GridFileInfo& info, const Summary& s, const std::string
     j["root_level"] = g.rootLevel;
     j["domain_m"] = g.domainSizeM();
     j["origin"] = {g.originWorldX, g.originWorldY};
+    j["rotation_deg"] = g.rotationDeg;  // counterclockwise from the CRS's x axis, about the origin (UGRID meshes)
     j["crs_wkt"] = g.crsWkt;
     j["crs_name"] = crsName(g);
     j["extent"] = s.extent;
@@ -144,6 +152,8 @@ void printText(const hc::GridFileInfo& info, const Summary& s, const std::string
                     (unsigned long long)hi);
     }
     std::printf("  origin       %.17g, %.17g\n", g.originWorldX, g.originWorldY);
+    if (g.rotationDeg != 0)
+        std::printf("  rotation     %.17g degrees (the grid's axes, counterclockwise from the CRS's, about the origin)\n", g.rotationDeg);
     std::printf("  extent       %.17g, %.17g .. %.17g, %.17g\n", s.extent[0], s.extent[1], s.extent[2], s.extent[3]);
     std::string crs = g.crsWkt.empty() ? "none (local metres)" : crsName(g) + " (full WKT: --json)";
     std::printf("  CRS          %s\n", crs.c_str());
@@ -170,7 +180,8 @@ void writeCsv(const hc::Grid& g, const std::string& path) {
     for (size_t i = 0; i < g.cellCount(); ++i) {
         double x, y;
         g.cellCenterLocal(i, x, y);
-        std::snprintf(cell, sizeof cell, "%.17g,%.17g,%.17g,%d", g.originWorldX + x, g.originWorldY + y, g.cellSizeM(i), g.level(i));
+        g.localToWorld(x, y, x, y);
+        std::snprintf(cell, sizeof cell, "%.17g,%.17g,%.17g,%d", x, y, g.cellSizeM(i), g.level(i));
         buf += cell;
         for (size_t l = 0; l < g.layers.size(); ++l) {
             std::snprintf(cell, sizeof cell, ",%.9g", double(g.values[l][i]));  // 9 digits: float32 round-trips

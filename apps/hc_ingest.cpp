@@ -5,17 +5,20 @@
 #include <cstdio>
 #include <filesystem>
 
+#include <fmt/format.h>
+
 #include "cli.h"
 #include "heightcast/core/error.h"
 #include "heightcast/grid/grid_file.h"
 #include "heightcast/core/progress.h"
 #include "heightcast/ingest/ingest.h"
+#include "heightcast/ingest/ugrid.h"
 
 namespace {
 
 constexpr int kBandNotGiven = -1000000;  // --band's value before parsing: tells "not given" from any number a user types
 
-void printSummary(const hc::ingest::BuildSummary& b, const hc::ingest::LoadReport& r, const std::string& out, bool timesGuessed) {
+void printSummary(const hc::ingest::BuildSummary& b, const hc::ingest::LoadReport& r, const std::string& out, bool timesGuessed, bool mesh) {
     const hc::Grid& g = b.shape;
     const hc::IngestStats& s = g.stats;
     std::printf("hc-ingest: %s -> %s\n", s.sourcePath.c_str(), out.c_str());
@@ -23,8 +26,12 @@ void printSummary(const hc::ingest::BuildSummary& b, const hc::ingest::LoadRepor
     std::printf("  input CRS    %s\n", r.sourceCrsName.empty() ? "none" : r.sourceCrsName.c_str());
     std::printf("  grid CRS     %s\n", r.gridCrsName.empty() ? "none (local metres)" : r.gridCrsName.c_str());
     std::printf("  method       %s\n", r.method.c_str());
-    std::printf("  working      %llu x %llu px of %.6g m, %llu valid\n", (unsigned long long)s.sourceWidth,
-                (unsigned long long)s.sourceHeight, g.finestCellM, (unsigned long long)s.validPixels);
+    if (mesh)
+        std::printf("  finest face  %.9g m%s\n", g.finestCellM,
+                    g.rotationDeg != 0 ? fmt::format(", grid turned {:.9g} degrees", g.rotationDeg).c_str() : "");
+    else
+        std::printf("  working      %llu x %llu px of %.6g m, %llu valid\n", (unsigned long long)s.sourceWidth,
+                    (unsigned long long)s.sourceHeight, g.finestCellM, (unsigned long long)s.validPixels);
     std::printf("  cells        %llu (%.3f pixels per cell), %zu layer%s:", (unsigned long long)b.cellCount,
                 b.cellCount ? double(s.validPixels) / double(b.cellCount) : 0.0, g.layerCount(), g.layerCount() == 1 ? "" : "s");
     for (const auto& l : g.layers) std::printf(" %s [%s]", l.name.c_str(), l.units.c_str());
@@ -43,9 +50,11 @@ void printSummary(const hc::ingest::BuildSummary& b, const hc::ingest::LoadRepor
                     double(b.stepBytes) / double(b.steps.size()) / 1e3);
     }
     // Which pixels the deviation is measured on, said plainly: the working raster is the source
-    // itself only when nothing was projected or resampled.
+    // itself only when nothing was projected or resampled. A mesh is taken as it is: nothing to measure.
     const auto& c = r.sourceCheck;
-    if (!c.done) {
+    if (mesh) {
+        std::printf("  values       each face's own, as float32 (no merging, no resampling)\n");
+    } else if (!c.done) {
         std::printf("  deviation    max %.4g m, RMS %.4g m (tolerance %.4g m; every valid source pixel checked%s)\n", s.maxDevM,
                     s.rmsDevM, s.toleranceM, r.sourcePrecisionDouble ? ", in the source's own precision" : "");
     } else {
@@ -64,7 +73,7 @@ void printSummary(const hc::ingest::BuildSummary& b, const hc::ingest::LoadRepor
 }
 
 // The options into `o`, validated before any work; false after --help.
-bool parseOptions(int argc, char** argv, hc::ingest::Options& o, std::string& out, bool& quiet) {
+bool parseOptions(int argc, char** argv, hc::ingest::Options& o, std::string& out, bool& quiet, bool& mesh) {
     std::string water, waterSurface, waterLevel, times;
     std::optional<double> nodata;
     hc::cli::Parser p("hc-ingest", "INPUT -o OUT.hcg [options]",
@@ -97,10 +106,29 @@ bool parseOptions(int argc, char** argv, hc::ingest::Options& o, std::string& ou
              "      (raster edge or nodata) through pixels below L, 4-connected: pixels touching only at a corner do not connect;\n"
              "      several levels make several steps (a rising flood: 300,302,304)", waterLevel);
     p.option("--times", "T[,T...]", "time of each water step, seconds, strictly increasing (default: the step index 0, 1, 2, ...)", times);
+    p.option("--terrain-var", "NAME", "UGRID mesh input: the face variable of the terrain; faces where it is a fill value are holes\n"
+             "      (default zb)", o.terrainVar);
+    p.option("--water-surface-var", "NAME", "UGRID mesh input: the face variable of the water level over time, one step per time;\n"
+             "      fill values and levels not above the terrain are dry (default zs)", o.waterSurfaceVar);
     p.option("--threads", "N", "worker threads (default 0 = all cores)", o.threads);
     p.flag("--quiet", "print only warnings and failures (no progress, no summary)", quiet);
     p.exclusive({"--water", "--water-surface", "--water-level"});
     if (!p.parse(argc, argv)) return false;
+    if (out.empty()) throw hc::Error("no output file: give -o OUT.hcg");
+    // A UGRID quadtree mesh (a NetCDF map file of SFINCS and the like) goes in as it is: one cell per face.
+    mesh = !o.input.empty() && hc::ingest::isUgridMesh(o.input);
+    if (mesh) {
+        for (const char* opt : {"--water", "--water-surface", "--water-level", "--times", "--tolerance", "--min-cell", "--max-cell", "--t_srs",
+                                "--band", "--nodata", "--z-scale", "--terrain-rgb"})
+            if (p.given(opt))
+                throw hc::Error(std::string(opt) + ": " + o.input + " is a UGRID mesh, taken as it is (its faces, terrain and water levels): " +
+                                "only --terrain-var, --water-surface-var and --s_srs apply");
+        hc::cli::checkWritable(out, "output grid");
+        hc::cli::checkNotSame(out, o.input, "output grid");
+        return true;
+    }
+    if (p.given("--terrain-var") || p.given("--water-surface-var"))
+        throw hc::Error("--terrain-var / --water-surface-var: " + o.input + " is not a UGRID mesh (no mesh_topology variable)");
     o.bandGiven = o.band != kBandNotGiven;
     if (!o.bandGiven) o.band = 1;
     if (out.empty()) throw hc::Error("no output file: give -o OUT.hcg");
@@ -123,7 +151,7 @@ bool parseOptions(int argc, char** argv, hc::ingest::Options& o, std::string& ou
 
 // Builds the grid into `out`; the reader's warnings go to stderr also when the build fails (what was guessed
 // before the failure, degrees or units, often explains it).
-hc::ingest::BuildSummary buildGrid(const hc::ingest::Options& o, const std::string& out, hc::ingest::LoadReport& report) {
+hc::ingest::BuildSummary buildGrid(const hc::ingest::Options& o, const std::string& out, hc::ingest::LoadReport& report, bool mesh) {
     auto printWarnings = [&] {
         std::vector<std::string> said;  // a series read twice repeats its warnings: each is said once
         for (const auto& w : report.warnings)
@@ -134,7 +162,7 @@ hc::ingest::BuildSummary buildGrid(const hc::ingest::Options& o, const std::stri
     };
     hc::ingest::BuildSummary summary;
     try {
-        summary = hc::ingest::ingestToFile(o, out, report);
+        summary = mesh ? hc::ingest::ingestUgridToFile(o, out, report) : hc::ingest::ingestToFile(o, out, report);
     } catch (...) {
         printWarnings();
         throw;
@@ -149,11 +177,11 @@ int main(int argc, char** argv) {
     return hc::cli::run("hc-ingest", [&] {
         hc::ingest::Options o;
         std::string out;
-        bool quiet = false;
-        if (!parseOptions(argc, argv, o, out, quiet)) return 0;
+        bool quiet = false, mesh = false;
+        if (!parseOptions(argc, argv, o, out, quiet, mesh)) return 0;
         hc::ingest::LoadReport report;
-        const hc::ingest::BuildSummary summary = buildGrid(o, out, report);
-        if (!quiet) printSummary(summary, report, out, o.timesS.empty());
+        const hc::ingest::BuildSummary summary = buildGrid(o, out, report, mesh);
+        if (!quiet) printSummary(summary, report, out, o.timesS.empty() && !mesh, mesh);
         return 0;
     });
 }

@@ -89,7 +89,7 @@ std::vector<std::optional<double>> Prober::values(const std::vector<std::array<d
         const hc::Grid& shape = file.shape();
         const auto layer = hc::influence::Layer::byName(shape, a.layerName);
         std::vector<std::array<double, 2>> local(pts.size());
-        for (size_t i = 0; i < pts.size(); ++i) local[i] = {pts[i][0] - shape.originWorldX, pts[i][1] - shape.originWorldY};
+        for (size_t i = 0; i < pts.size(); ++i) shape.worldToLocal(pts[i][0], pts[i][1], local[i][0], local[i][1]);
         hc::influence::RegionReadStats st;
         auto values = hc::influence::valuesFromFile(file, local, layer, a.params, a.threads, &st);
         if (!quiet)
@@ -112,7 +112,7 @@ std::vector<std::optional<double>> Prober::values(const std::vector<std::array<d
     const auto layer = hc::influence::Layer::byName(grid, a.layerName);
     const hc::influence::SurfaceEvaluator eval(grid, *lists_);
     std::vector<std::array<double, 2>> local(pts.size());
-    for (size_t i = 0; i < pts.size(); ++i) local[i] = {pts[i][0] - grid.originWorldX, pts[i][1] - grid.originWorldY};
+    for (size_t i = 0; i < pts.size(); ++i) grid.worldToLocal(pts[i][0], pts[i][1], local[i][0], local[i][1]);
     return eval.values(local, layer, a.threads);
 }
 

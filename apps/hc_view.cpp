@@ -23,6 +23,7 @@ struct ViewArgs {
     std::string gridPath, screenshot;
     hc::cli::Backend backend = hc::cli::Backend::Auto;
     int frames = 0;  // 0: interactive
+    bool play = false;  // --play: scripted frames step through the water steps
     hc::cli::RenderSetup setup{"1280x720"};
 };
 
@@ -45,10 +46,13 @@ bool parseOptions(int argc, char** argv, ViewArgs& a) {
     a.setup.addRenderOptions(p);
     p.option("--frames", "N", "render N frames of a short scripted camera motion ending at the given view, then exit (default 0 = interactive)", a.frames);
     p.option("--screenshot", "OUT.png", "with --frames: write the window's last frame (image and HUD) as a PNG", a.screenshot);
+    p.flag("--play", "with --frames: each frame after the first shows the next water step (playback, wrapping around); the last\n"
+           "      frame's switch time is printed", a.play);
     if (!p.parse(argc, argv)) return false;
     a.setup.finish();
     a.backend = hc::cli::parseBackend(backendText);
     if (a.frames < 0 || a.frames > 100000) throw hc::Error("--frames " + std::to_string(a.frames) + " is outside 0..100000");
+    if (a.play && a.frames == 0) throw hc::Error("--play needs --frames N (interactively, Space plays the steps)");
     if (!a.screenshot.empty()) {
         if (a.frames == 0) throw hc::Error("--screenshot needs --frames N (the number of frames to render first)");
         hc::cli::checkWritable(a.screenshot, "screenshot");
@@ -77,24 +81,40 @@ void requireDisplay() {
 
 // The backend `decision` gave, made in the window's context (`gl`). Where the GL backend cannot be made there
 // after all, the choice is made again with its reason: --backend gl fails with it, auto renders on the CPU and
-// says why. Prints the note and the backend on stderr; `note` is the note ("" when none).
-std::unique_ptr<hc::view::ViewBackend> makeBackend(hc::cli::Backend requested, hc::cli::BackendDecision decision, hc::cli::GlOnHand gl,
-                                                   const hc::cli::LoadedScene& loaded, unsigned threads, std::string& note) {
-    std::unique_ptr<hc::view::ViewBackend> backend;
-    if (decision.useGl) {
-        try {
-            backend = hc::view::makeGlBackend(*loaded.scene);
-        } catch (const hc::Error& e) {
-            gl.unavailable = e.what();
-            decision = hc::cli::decideBackend(requested, gl);
+// says why. The first time, prints the note and the backend on stderr; `note` is the note ("" when none). Later
+// calls (a new water step's scene) use the backend chosen the first time.
+class BackendMaker {
+public:
+    BackendMaker(hc::cli::Backend requested, hc::cli::BackendDecision decision, hc::cli::GlOnHand gl, unsigned threads)
+        : requested_(requested), decision_(std::move(decision)), gl_(std::move(gl)), threads_(threads) {}
+    std::unique_ptr<hc::view::ViewBackend> operator()(const hc::render::Scene& scene) {
+        std::unique_ptr<hc::view::ViewBackend> backend;
+        if (decision_.useGl) {
+            try {
+                backend = hc::view::makeGlBackend(scene);
+            } catch (const hc::Error& e) {
+                if (made_) throw;
+                gl_.unavailable = e.what();
+                decision_ = hc::cli::decideBackend(requested_, gl_);
+            }
         }
+        if (!backend) backend = hc::view::makeCpuBackend(scene, threads_);
+        if (!made_) {
+            if (!decision_.note.empty()) std::fprintf(stderr, "hc-view: note: %s\n", decision_.note.c_str());
+            std::fprintf(stderr, "hc-view: backend %s (%s)\n", backend->name().c_str(), backend->device().c_str());
+        }
+        made_ = true;
+        return backend;
     }
-    if (!backend) backend = hc::view::makeCpuBackend(*loaded.scene, threads);
-    note = decision.note;
-    if (!note.empty()) std::fprintf(stderr, "hc-view: note: %s\n", note.c_str());
-    std::fprintf(stderr, "hc-view: backend %s (%s)\n", backend->name().c_str(), backend->device().c_str());
-    return backend;
-}
+    const std::string& note() const { return decision_.note; }
+
+private:
+    hc::cli::Backend requested_;
+    hc::cli::BackendDecision decision_;
+    hc::cli::GlOnHand gl_;
+    unsigned threads_;
+    bool made_ = false;
+};
 
 // The last camera and the last frame's stage times, after a scripted run.
 void printSummary(const ViewArgs& a, const hc::view::Viewer& viewer) {
@@ -102,6 +122,9 @@ void printSummary(const ViewArgs& a, const hc::view::Viewer& viewer) {
     const hc::render::Camera& c = viewer.camera();
     std::printf("  camera       %.3f, %.3f, %.3f  yaw %.2f  pitch %.2f  fov %.1f  %dx%d\n", c.xWorld, c.yWorld, c.zWorld, c.yawDeg,
                 c.pitchDeg, c.fovYDeg, c.width, c.height);
+    if (viewer.stepCount() > 1)
+        std::printf("  step         %zu of %zu (last switch %.1f ms: the step's water, its pyramid, a new scene and backend)\n", viewer.step(),
+                    viewer.stepCount(), viewer.lastSwitchMs());
     std::printf("%s", viewer.lastTimings().toTable().c_str());
 }
 
@@ -116,15 +139,16 @@ int main(int argc, char** argv) {
         // --backend gl without a 4.3 context fails here, before any work.
         const hc::cli::BackendDecision decision = hc::cli::decideBackend(a.backend, window.gl());
         auto loaded = hc::cli::loadScene("hc-view", a.gridPath, a.setup);
-        std::string note;
-        auto backend = makeBackend(a.backend, decision, window.gl(), *loaded, a.setup.options.threads, note);
+        auto maker = std::make_shared<BackendMaker>(a.backend, decision, window.gl(), a.setup.options.threads);
+        auto backend = (*maker)(*loaded->scene);  // the first one; a new water step's scene gets a new one from `maker`
         window.show();
-        hc::view::Viewer viewer(window, *loaded, a.setup, a.gridPath, std::move(backend), note);
+        hc::view::Viewer viewer(window, *loaded, a.setup, a.gridPath, std::move(backend),
+                                [maker](const hc::render::Scene& scene) { return (*maker)(scene); }, maker->note());
         if (a.frames == 0) {
             viewer.run();
             return 0;
         }
-        viewer.runScripted(a.frames, a.screenshot);
+        viewer.runScripted(a.frames, a.screenshot, a.play);
         printSummary(a, viewer);
         return 0;
     });

@@ -60,4 +60,8 @@ if(HC_BUILD_TESTS)
   # left out with a warning).
   find_program(HC_BASH bash REQUIRED)
   find_program(HC_XVFB_RUN xvfb-run)
+  # ffmpeg (Debian package ffmpeg) for hc-render --video: optional at run time; the CLI tests check the video where it
+  # is installed and the refusal where it is not. gdal_create (gdal-bin) makes the water rasters of the series tests.
+  find_program(HC_FFMPEG ffmpeg)
+  find_program(HC_GDAL_CREATE gdal_create)
 endif()

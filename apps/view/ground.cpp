@@ -12,7 +12,8 @@ Ground::Ground(const cli::LoadedScene& loaded) : loaded_(loaded) {
 
 std::optional<double> Ground::elevationAt(double xWorld, double yWorld) const {
     const Grid& g = loaded_.scene->grid();
-    const double x = xWorld - g.originWorldX, y = yWorld - g.originWorldY;
+    double x = 0, y = 0;
+    g.worldToLocal(xWorld, yWorld, x, y);
     return evaluator_ ? evaluator_->value(x, y, elevation_) : loaded_.scene->terrainAt(x, y);
 }
 
@@ -64,8 +65,8 @@ std::array<double, 3> Ground::pickCentre(const render::Camera& c, double centreD
         prevT = t;
     }
     // No hit: orbit around a point in front, at the distance of the scene's centre.
-    const double cx = scene.grid().originWorldX + 0.5 * (scene.xMin + scene.xMax);
-    const double cy = scene.grid().originWorldY + 0.5 * (scene.yMin + scene.yMax);
+    double cx = 0, cy = 0;
+    scene.grid().localToWorld(0.5 * (scene.xMin + scene.xMax), 0.5 * (scene.yMin + scene.yMax), cx, cy);
     return along(std::max(std::hypot(cx - c.xWorld, cy - c.yWorld), 1.0));
 }
 

@@ -30,6 +30,9 @@ const char* const kHelp =
     "1-9                go to bookmark\n"
     "Shift+1-9          save bookmark\n"
     "R                  back to the first view\n"
+    "[ ]                previous / next water step\n"
+    "Space              play / pause the water steps\n"
+    "- +                playback slower / faster\n"
     "U                  HUD on/off\n"
     "H                  this help\n"
     "Esc                quit";
@@ -66,6 +69,7 @@ bool Hud::compose(const HudStatus& s, int fw, int fh) {
                                                : fmt::format("outside the grid, {:.1f} m above its highest point", s.aboveHighestM)) +
                              fmt::format("   speed {:.0f} m/s", s.speedMps),
                          kText});
+        if (!s.stepLine.empty()) lines.push_back({s.stepLine, kText});
         lines.push_back({fmt::format("water {} (F)  cells {} (C)  cascades {} (K)  H help", t.water ? "on" : "off",
                                      t.cells ? "on" : "off", t.cascadeTint ? "on" : "off"),
                          kDim});

@@ -33,6 +33,7 @@ struct HudStatus {
     double aboveHighestM = 0;
     double speedMps = 0;
     Toggles toggles;
+    std::string stepLine;                 // the water step, its time and playback; "" without steps
 };
 
 class Hud {

@@ -41,6 +41,29 @@ void Viewer::onKey(int key, int action, int mods) {
             flash(toggles_.cascadeTint ? "cascade colouring on (near red, then green, blue, yellow)" : "cascade colouring off");
             break;
         case GLFW_KEY_H: toggles_.help = !toggles_.help; break;
+        case GLFW_KEY_RIGHT_BRACKET:
+        case GLFW_KEY_LEFT_BRACKET:
+            if (stepCount_ > 1) {
+                playing_ = false;
+                const size_t next = key == GLFW_KEY_RIGHT_BRACKET ? (step_ + 1) % stepCount_ : (step_ + stepCount_ - 1) % stepCount_;
+                try {
+                    showStep(next);
+                } catch (const Error& e) {
+                    flash(std::string("step failed: ") + e.what());
+                }
+            }
+            break;
+        case GLFW_KEY_SPACE:
+            if (stepCount_ > 1) playing_ = !playing_, stepShownAt_ = Clock::now(), flash(playing_ ? "playing" : "paused");
+            break;
+        case GLFW_KEY_EQUAL:
+        case GLFW_KEY_KP_ADD:
+            stepsPerSecond_ = std::min(30.0, stepsPerSecond_ * 2), flash(fmt::format("{:g} steps per second", stepsPerSecond_));
+            break;
+        case GLFW_KEY_MINUS:
+        case GLFW_KEY_KP_SUBTRACT:
+            stepsPerSecond_ = std::max(0.125, stepsPerSecond_ / 2), flash(fmt::format("{:g} steps per second", stepsPerSecond_));
+            break;
         case GLFW_KEY_U: toggles_.hud = !toggles_.hud; break;
         case GLFW_KEY_R: camera_ = withSize(home_), changed(), flash("first view"); break;
         case GLFW_KEY_P: {

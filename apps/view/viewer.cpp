@@ -5,21 +5,28 @@
 #include <cmath>
 #include <cstdio>
 
+#include <fmt/format.h>
+
 #include "heightcast/core/error.h"
+#include "heightcast/core/timer.h"
 
 namespace hc::view {
 
 using render::Camera;
 using render::RenderOptions;
 
-Viewer::Viewer(Window& window, const cli::LoadedScene& loaded, const cli::RenderSetup& setup, std::string gridPath,
-               std::unique_ptr<ViewBackend> backend, std::string backendNote)
-    : window_(window), scene_(*loaded.scene), ground_(loaded), options_(setup.options), gridPath_(std::move(gridPath)),
-      backend_(std::move(backend)), backendNote_(std::move(backendNote)), hudTexture_(makeTexture()) {
+Viewer::Viewer(Window& window, cli::LoadedScene& loaded, const cli::RenderSetup& setup, std::string gridPath,
+               std::unique_ptr<ViewBackend> backend, BackendFactory makeBackend, std::string backendNote)
+    : window_(window), loaded_(loaded), setup_(setup), makeBackend_(std::move(makeBackend)), ground_(loaded), options_(setup.options),
+      gridPath_(std::move(gridPath)), backend_(std::move(backend)), backendNote_(std::move(backendNote)), hudTexture_(makeTexture()) {
+    const Grid& shape = loaded_.file ? loaded_.file->shape() : loaded_.grid;
+    step_ = shape.step;
+    stepCount_ = shape.stepCount();
+    for (const StepInfo& s : shape.steps) stepTimesS_.push_back(s.timeS);
     toggles_.cells = options_.cellOutlines;
     baseWaterMinDepthM_ = options_.waterMinDepthM;
     const auto [fw, fh] = window_.framebufferSize();
-    camera_ = cli::initialCamera(setup, scene_);
+    camera_ = cli::initialCamera(setup, *loaded_.scene);
     camera_.width = std::max(1, fw), camera_.height = std::max(1, fh);
     home_ = camera_;
     bookmarksPath_ = bookmarksPath(gridPath_);
@@ -39,6 +46,7 @@ void Viewer::run() {
         const double dt = std::min(0.25, now - last);
         last = now;
         pollMotion(dt);
+        advancePlayback();
         schedule(false);
         if (backend_->collect(shown_)) frameDone();
         draw();
@@ -50,10 +58,11 @@ void Viewer::run() {
     }
 }
 
-void Viewer::runScripted(int frames, const std::string& screenshot) {
+void Viewer::runScripted(int frames, const std::string& screenshot, bool play) {
     const Camera end = camera_;
     for (int i = 0; i < frames && !window_.shouldClose(); ++i) {
         const int left = frames - 1 - i;
+        if (play && i > 0 && stepCount_ > 1) showStep((step_ + 1) % stepCount_);
         camera_ = end;
         if (left > 0) {  // approach the final view: turned a little and further back
             look(camera_, -0.4 * left, 0.0);
@@ -70,6 +79,40 @@ void Viewer::runScripted(int frames, const std::string& screenshot) {
         window_.swapBuffers();
         window_.pollEvents();
     }
+}
+
+void Viewer::showStep(size_t step) {
+    if (step == step_ || step >= std::max<size_t>(1, stepCount_)) return;
+    const Stopwatch clock;
+    backend_->wait();
+    backend_.reset();  // it refers to the scene replaced here
+    cli::switchStep("hc-view", loaded_, gridPath_, setup_, step);
+    backend_ = makeBackend_(*loaded_.scene);
+    step_ = step;
+    lastSwitchMs_ = clock.milliseconds();
+    stepShownAt_ = Clock::now();
+    submitted_ = false;  // the frame on screen shows the old water: render the view again
+}
+
+void Viewer::advancePlayback() {
+    if (!playing_ || stepCount_ < 2 || !shownCurrent() || backend_->busy()) return;
+    if (Clock::now() - stepShownAt_ < std::chrono::duration<double>(1.0 / stepsPerSecond_)) return;
+    try {
+        showStep((step_ + 1) % stepCount_);
+    } catch (const Error& e) {
+        playing_ = false;
+        flash(std::string("playback stopped: ") + e.what());
+    }
+}
+
+// "step 3/24  t 1:00:00 (3600 s)  playing 2/s  switch 12 ms", or "" without steps.
+std::string Viewer::stepLine() const {
+    if (stepCount_ < 2) return "";
+    const double t = step_ < stepTimesS_.size() ? stepTimesS_[step_] : 0.0;
+    const long whole = std::lround(std::floor(std::abs(t)));
+    const std::string clock = fmt::format("{}{}:{:02}:{:02}", t < 0 ? "-" : "", whole / 3600, (whole / 60) % 60, whole % 60);
+    return fmt::format("step {}/{}  t {} ({:g} s)  {}  switch {:.0f} ms   [ ] step  Space play/pause  - + speed", step_, stepCount_ - 1,
+                       clock, t, playing_ ? fmt::format("playing {:g}/s", stepsPerSecond_) : std::string("paused"), lastSwitchMs_);
 }
 
 bool Viewer::moving() const { return Clock::now() - lastChange_ < std::chrono::milliseconds(250); }
@@ -184,6 +227,7 @@ void Viewer::draw() {
     s.aboveHighestM = ground_.aboveHighestM(camera_);
     s.speedMps = ground_.speed(camera_);
     s.toggles = toggles_;
+    s.stepLine = stepLine();
     const auto [fw, fh] = window_.framebufferSize();
     if (hud_.compose(s, fw, fh)) {  // upload only what changed
         const Overlay& o = hud_.overlay();

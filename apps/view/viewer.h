@@ -5,6 +5,7 @@
 
 #include <array>
 #include <chrono>
+#include <functional>
 #include <memory>
 #include <optional>
 #include <string>
@@ -19,13 +20,16 @@
 
 namespace hc::view {
 
+// Makes the viewer's backend over a scene, in the window's context (again after each change of water step).
+using BackendFactory = std::function<std::unique_ptr<ViewBackend>(const render::Scene&)>;
+
 class Viewer {
 public:
-    // `window`, `loaded` and `backend` (made in the window's context) serve the viewer's whole life; `backendNote`
-    // is the backend choice's note ("" when none), shown on the HUD. Reads the grid's bookmarks (a broken file:
-    // a warning on stderr and none).
-    Viewer(Window& window, const cli::LoadedScene& loaded, const cli::RenderSetup& setup, std::string gridPath,
-           std::unique_ptr<ViewBackend> backend, std::string backendNote);
+    // `window` and `loaded` serve the viewer's whole life; `backend` (made in the window's context) renders until the
+    // water step changes, when `makeBackend` makes one over the new scene; `backendNote` is the backend choice's
+    // note ("" when none), shown on the HUD. Reads the grid's bookmarks (a broken file: a warning on stderr and none).
+    Viewer(Window& window, cli::LoadedScene& loaded, const cli::RenderSetup& setup, std::string gridPath,
+           std::unique_ptr<ViewBackend> backend, BackendFactory makeBackend, std::string backendNote);
     ~Viewer();
 
     const render::Camera& camera() const { return camera_; }
@@ -34,8 +38,15 @@ public:
     // Interactive: until the window closes or Esc.
     void run();
     // Scripted: `frames` frames of a small motion that ends at the initial camera (rendered at full
-    // resolution), then, unless `screenshot` is "", the window's contents as a PNG there.
-    void runScripted(int frames, const std::string& screenshot);
+    // resolution), then, unless `screenshot` is "", the window's contents as a PNG there. `play`: each frame after
+    // the first shows the next water step (wrapping around), as playback does.
+    void runScripted(int frames, const std::string& screenshot, bool play = false);
+
+    // Water steps (DESIGN.md section 11): the one shown, how many, and how long the last switch took [ms] (reading the
+    // step, its pyramid, the new scene and backend; the frame after it is timed as any frame).
+    size_t step() const { return step_; }
+    size_t stepCount() const { return stepCount_; }
+    double lastSwitchMs() const { return lastSwitchMs_; }
 
 private:
     using Clock = std::chrono::steady_clock;
@@ -60,11 +71,16 @@ private:
     void schedule(bool force);
     void frameDone();
     double framesPerSecond() const;
+    void showStep(size_t step);       // switches the water step (waits for the frame in flight)
+    void advancePlayback();           // playing: the next step once the current one is on screen and its time is up
+    std::string stepLine() const;
     void draw();
     void flash(const std::string& text) { hud_.flash(text); }
 
     Window& window_;
-    const render::Scene& scene_;
+    cli::LoadedScene& loaded_;
+    cli::RenderSetup setup_;
+    BackendFactory makeBackend_;
     Ground ground_;
     render::RenderOptions options_;
     double baseWaterMinDepthM_ = 0.01;
@@ -85,6 +101,12 @@ private:
     std::optional<std::array<double, 3>> pivot_;  // of the left drag under way
     std::string bookmarksPath_;
     Bookmarks bookmarks_;
+    size_t step_ = 0, stepCount_ = 0;
+    std::vector<double> stepTimesS_;  // of every step (empty without steps)
+    bool playing_ = false;
+    double stepsPerSecond_ = 2;
+    double lastSwitchMs_ = 0;
+    Clock::time_point stepShownAt_ = Clock::now();
 };
 
 }  // namespace hc::view

@@ -22,6 +22,17 @@ namespace {
 SampledRaster planIn(const Grid& g, double bx0, double by0, double bx1, double by1, double resolutionM, std::optional<BoxWorld> box,
                      size_t maxPixels) {
     if (!(resolutionM > 0) || !std::isfinite(resolutionM)) throw Error("--resolution must be a positive number of metres");
+    // The cells' bounds in the world: for a rotated grid the box around the rotated bounds.
+    if (g.rotationDeg != 0) {
+        double wx0 = HUGE_VAL, wy0 = HUGE_VAL, wx1 = -HUGE_VAL, wy1 = -HUGE_VAL;
+        for (int corner = 0; corner < 4; ++corner) {
+            double x = 0, y = 0;
+            g.localToWorld(corner & 1 ? bx1 : bx0, corner & 2 ? by1 : by0, x, y);
+            wx0 = std::min(wx0, x), wy0 = std::min(wy0, y), wx1 = std::max(wx1, x), wy1 = std::max(wy1, y);
+        }
+        // Offsets from the origin, so that the unrotated figures are those of plain subtraction.
+        bx0 = wx0 - g.originWorldX, by0 = wy0 - g.originWorldY, bx1 = wx1 - g.originWorldX, by1 = wy1 - g.originWorldY;
+    }
     if (!box) box = BoxWorld{g.originWorldX + bx0, g.originWorldY + by0, g.originWorldX + bx1, g.originWorldY + by1};
     if (!(box->xMin < box->xMax && box->yMin < box->yMax)) throw Error("--bbox must have XMIN < XMAX and YMIN < YMAX");
     const double w = std::ceil((box->xMax - box->xMin) / resolutionM - 1e-9);
@@ -45,20 +56,26 @@ SampledRaster planIn(const Grid& g, double bx0, double by0, double bx1, double b
     return r;
 }
 
-// Rows [b, e), columns [c0, c1) of r from `eval` (pixel centres; local coordinates of the first: x0, y0).
+// Rows [b, e), columns [c0, c1) of r from `eval` (pixel centres; offsets of the first from the grid's origin along
+// the CRS's axes: x0, y0; each turned into the grid's local frame, and gradients back to the CRS's axes).
 void sampleRows(const influence::SurfaceEvaluator& eval, const influence::Layer& layer, bool gradients, double x0, double y0, size_t b,
                 size_t e, size_t c0, size_t c1, SampledRaster& r) {
     const double res = r.pixelSizeM;
+    const Grid& g = eval.grid();
     for (size_t row = b; row < e; ++row) {
-        const double y = y0 - static_cast<double>(row) * res;
+        const double wy = y0 - static_cast<double>(row) * res;
         for (size_t col = c0; col < c1; ++col) {
-            const double x = x0 + static_cast<double>(col) * res;
+            const double wx = x0 + static_cast<double>(col) * res;
+            double x = 0, y = 0;
+            g.worldToLocalDir(wx, wy, x, y);
             const size_t i = row * r.width + col;
             if (gradients) {
                 if (auto v = eval.valueGradient(x, y, layer)) {
+                    double gx = 0, gy = 0;
+                    g.localToWorldDir(v->dx, v->dy, gx, gy);
                     r.values[i] = static_cast<float>(v->value);
-                    r.gradX[i] = static_cast<float>(v->dx);
-                    r.gradY[i] = static_cast<float>(v->dy);
+                    r.gradX[i] = static_cast<float>(gx);
+                    r.gradY[i] = static_cast<float>(gy);
                 }
             } else if (auto v = eval.value(x, y, layer)) {
                 r.values[i] = static_cast<float>(*v);
@@ -99,7 +116,7 @@ SampledRaster sampleSurface(const influence::SurfaceEvaluator& eval, const influ
     const Grid& g = eval.grid();
     SampledRaster r = planRaster(g, resolutionM, box, maxPixels);
     prepare(r, g, layer, layerName, gradients);
-    // Local coordinates of the first pixel centre: the world offsets are subtracted once, in double.
+    // The first pixel centre's offsets from the origin: the world offsets are subtracted once, in double.
     const double x0 = r.westWorld - g.originWorldX + 0.5 * resolutionM;
     const double y0 = r.northWorld - g.originWorldY - 0.5 * resolutionM;
     Progress bar("sampling " + layerName, r.height, progress);
@@ -127,8 +144,13 @@ SampledRaster sampleSurface(const GridRegionReader& file, const influence::Kerne
         const size_t end = std::min(r.height, band + side);
         for (size_t c0 = 0; c0 < r.width; c0 += side) {
             const size_t c1 = std::min(r.width, c0 + side);
-            const Grid::Square area{x0 + double(c0) * resolutionM, y0 - double(end - 1) * resolutionM, x0 + double(c1 - 1) * resolutionM,
-                                    y0 - double(band) * resolutionM};
+            // The tile's pixel centres in the local frame: the box around them (turned, for a rotated grid).
+            Grid::Square area{HUGE_VAL, HUGE_VAL, -HUGE_VAL, -HUGE_VAL};
+            for (int corner = 0; corner < 4; ++corner) {
+                double x = 0, y = 0;
+                g.worldToLocalDir(x0 + double(corner & 1 ? c1 - 1 : c0) * resolutionM, y0 - double(corner & 2 ? end - 1 : band) * resolutionM, x, y);
+                area = {std::min(area.x0, x), std::min(area.y0, y), std::max(area.x1, x), std::max(area.y1, y)};
+            }
             const influence::SurfaceRegion region = influence::readSurfaceRegion(file, area, params, threads);
             if (region.grid.cellCount() == 0) continue;
             const influence::SurfaceEvaluator eval(region.grid, region.lists);

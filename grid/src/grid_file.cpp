@@ -28,8 +28,9 @@ constexpr uint16_t kStepsSince = 3;    // the minor from which water is stored a
 // The grid's own header fields (grid_file.h); pinned by the golden-bytes test.
 namespace off {
 constexpr size_t cellCount = 24, originX = 32, originY = 40, finestCell = 48, rootLevel = 56, minLevel = 57,
-                 maxLevel = 58, layerCount = 59, contentHash = 64, structureHash = 72, reserved = 80, reservedEnd = 120;
+                 maxLevel = 58, layerCount = 59, contentHash = 64, structureHash = 72, rotation = 80, reserved = 80, reservedEnd = 120;
 }
+constexpr uint16_t kRotationSince = 3;  // from 1.3 on bytes 80..87 hold the rotation (f64 degrees); before, zero
 static_assert(kGridHeaderBytes == kFileHeaderBytes);
 
 
@@ -263,6 +264,7 @@ Grid shapeOf(const Grid& g) {
     bare.originWorldX = g.originWorldX;
     bare.originWorldY = g.originWorldY;
     bare.finestCellM = g.finestCellM;
+    bare.rotationDeg = g.rotationDeg;
     bare.rootLevel = g.rootLevel;
     bare.minLevel = g.minLevel;
     bare.maxLevel = g.maxLevel;
@@ -289,8 +291,13 @@ struct Located {
 Located parseHeader(const SectionedFileReader& file, Grid& g) {
     const std::byte* h = file.header();
     auto fail = [&](uint64_t at, const std::string& what) { file.fail(at, what); };
-    for (size_t i = off::reserved; i < off::reservedEnd; ++i)
+    const size_t reservedFrom = file.minor() >= kRotationSince ? off::rotation + 8 : off::reserved;
+    for (size_t i = reservedFrom; i < off::reservedEnd; ++i)
         if (h[i] != std::byte{0}) fail(i, "reserved header byte is not zero");
+    if (file.minor() >= kRotationSince) {
+        g.rotationDeg = bytes::load<double>(h + off::rotation);
+        if (!(g.rotationDeg > -180 && g.rotationDeg <= 180)) fail(off::rotation, "rotation is not a number of degrees in (-180, 180]");
+    }
     const uint64_t cellCount = bytes::load<uint64_t>(h + off::cellCount);
     g.originWorldX = bytes::load<double>(h + off::originX);
     g.originWorldY = bytes::load<double>(h + off::originY);
@@ -719,6 +726,7 @@ void GridFileWriter::commit(const IngestStats& stats) {
     bytes::store(head, off::originX, g.originWorldX);
     bytes::store(head, off::originY, g.originWorldY);
     bytes::store(head, off::finestCell, g.finestCellM);
+    bytes::store(head, off::rotation, g.rotationDeg == 0 ? 0.0 : g.rotationDeg);  // never -0: its sign bit is a byte
     bytes::store(head, off::rootLevel, static_cast<uint8_t>(g.rootLevel));
     bytes::store(head, off::minLevel, static_cast<uint8_t>(g.minLevel));
     bytes::store(head, off::maxLevel, static_cast<uint8_t>(g.maxLevel));

@@ -71,6 +71,18 @@ std::vector<Scene::CellKernel> Scene::kernelsOf(const Grid& grid, const influenc
     return kernels;
 }
 
+namespace {
+
+// The largest water depth over every step of the grid's scenario (the shown step's when it has no step table).
+double scenarioDepthMax(const Grid& grid, double shown) {
+    double m = shown;
+    for (const StepInfo& s : grid.steps)
+        if (!s.layerMax.empty()) m = std::max(m, double(s.layerMax[0]));
+    return m;
+}
+
+}  // namespace
+
 Scene::Scene(const Grid& grid, const influence::InfluenceLists& lists, const influence::SurfacePyramid* pyramid)
     : grid_(grid), lists_(&lists), pyramid_(pyramid), params_(lists.params()), cellCount_(grid.cellCount()) {
     if (grid.cellCount() == 0) throw Error("the grid has no cells: nothing to render");
@@ -97,6 +109,7 @@ Scene::Scene(const Grid& grid, const influence::InfluenceLists& lists, const inf
     // The smooth surface is a convex combination of cell values: it stays within their range.
     zMin = elevationMin;
     zMax = surfaceMax;
+    depthColorMaxM = scenarioDepthMax(grid, depthMax);
 }
 
 Scene::Scene(const GridRegionReader& file, const influence::KernelParams& params, const influence::SurfacePyramid* pyramid)
@@ -113,6 +126,7 @@ Scene::Scene(const GridRegionReader& file, const influence::KernelParams& params
     depthMax = waterLayer_ >= 0 ? std::max(0.0, double(sum.layerMax.at(size_t(waterLayer_)))) : 0.0;
     zMin = elevationMin;
     zMax = elevationMax + depthMax;
+    depthColorMaxM = scenarioDepthMax(grid_, depthMax);
 }
 
 const influence::InfluenceLists& Scene::lists() const {
@@ -143,7 +157,8 @@ std::optional<Grid::Square> Scene::cellSquareAt(double xLocal, double yLocal) co
 double cameraBelowTerrainM(const Scene& scene, const Camera& camera) {
     if (camera.nearM > 0) return 0;
     const Grid& g = scene.grid();
-    const double x = camera.xWorld - g.originWorldX, y = camera.yWorld - g.originWorldY;
+    double x = 0, y = 0;
+    g.worldToLocal(camera.xWorld, camera.yWorld, x, y);
     const std::optional<double> z = scene.terrainAt(x, y);
     return z ? *z - camera.zWorld : 0.0;
 }
@@ -158,11 +173,11 @@ Camera overviewCamera(const Scene& s, int width, int height) {
     c.fovYDeg = 45;
     c.width = width;
     c.height = height;
-    const CameraBasis b = basisOf(c);
+    const CameraBasis b = basisOf(c);  // in the local frame: 20 degrees from the grid's own y axis
     const double dist = 0.4 * diag / b.tanHalfY;
-    c.xWorld = g.originWorldX + cx - b.forward[0] * dist;
-    c.yWorld = g.originWorldY + cy - b.forward[1] * dist;
+    g.localToWorld(cx - b.forward[0] * dist, cy - b.forward[1] * dist, c.xWorld, c.yWorld);
     c.zWorld = cz - b.forward[2] * dist;
+    c.yawDeg = std::remainder(c.yawDeg - g.rotationDeg, 360.0);  // the same view, in the CRS's yaw
     return c;
 }
 
@@ -255,11 +270,30 @@ void drawLegend(Frame& f, const detail::LegendLayout& l) {
 
 namespace detail {
 
-FrameSetup setUpFrame(const Scene& scene, const Camera& camera) {
-    const Grid& g = scene.grid();
+Camera localCamera(const Grid& grid, const Camera& camera) {
+    Camera c = camera;
+    grid.worldToLocal(camera.xWorld, camera.yWorld, c.xWorld, c.yWorld);
+    // Yaw turns clockwise from north, the rotation counterclockwise from east: a local yaw is the world's plus it.
+    if (grid.rotationDeg != 0) c.yawDeg = camera.yawDeg + grid.rotationDeg;
+    return c;
+}
+
+void frameToWorldAxes(const Grid& grid, Frame& f) {
+    if (grid.rotationDeg == 0) return;
+    for (size_t i = 0; i < f.posX.size(); ++i) {
+        double x = 0, y = 0;
+        grid.localToWorldDir(f.posX[i], f.posY[i], x, y);
+        f.posX[i] = float(x), f.posY[i] = float(y);
+        grid.localToWorldDir(f.nX[i], f.nY[i], x, y);
+        f.nX[i] = float(x), f.nY[i] = float(y);
+    }
+}
+
+FrameSetup setUpFrame(const Scene& scene, const Camera& worldCamera) {
+    const Camera camera = localCamera(scene.grid(), worldCamera);
     FrameSetup s;
     s.basis = basisOf(camera);
-    s.eyeLocal = {camera.xWorld - g.originWorldX, camera.yWorld - g.originWorldY, camera.zWorld};
+    s.eyeLocal = {camera.xWorld, camera.yWorld, camera.zWorld};
     const glm::dvec3& eye = s.eyeLocal;
     // Near and far as the camera gives them, else from the scene: far reaches the farthest corner of the
     // bounds, near is far / 1e7 (at least 1 mm).
@@ -284,7 +318,7 @@ FrameSetup setUpFrame(const Scene& scene, const Camera& camera) {
     view.yawRad = camera.yawDeg * M_PI / 180.0;
     view.boxMin = {scene.xMin, scene.yMin, scene.zMin};
     view.boxMax = {scene.xMax, scene.yMax, scene.zMax};
-    view.finestCellM = g.finestCellM;
+    view.finestCellM = scene.grid().finestCellM;
     if (scene.pyramid()) view.ladderStepsPerOctave = 1;
     return s;
 }
@@ -305,8 +339,8 @@ LegendLayout legendLayout(const Scene& scene, const RenderOptions& options, int 
     LegendLayout l;
     if (!options.legend) return l;
     double lo = 0, hi = 0;
-    if (scene.hasWater() && scene.depthMax > 0) {
-        l.depth = true, lo = 0, hi = scene.depthMax;
+    if (scene.hasWater() && scene.depthColorMaxM > 0) {
+        l.depth = true, lo = 0, hi = scene.depthColorMaxM;
     } else if (options.color == ColorMode::Elevation) {
         lo = scene.elevationMin, hi = scene.elevationMax;
     } else {
@@ -480,7 +514,7 @@ void shadePixels(const Scene& scene, const RenderOptions& options, const CameraB
     const Rgb skyHorizon{gpu::kSkyHorizon[0], gpu::kSkyHorizon[1], gpu::kSkyHorizon[2]};
     const Rgb skyZenith{gpu::kSkyZenith[0], gpu::kSkyZenith[1], gpu::kSkyZenith[2]};
     const double zRange = std::max(scene.elevationMax - scene.elevationMin, 1e-6);
-    const double dRange = std::max(scene.depthMax, 1e-6);
+    const double dRange = std::max(scene.depthColorMaxM, 1e-6);
     const double pixelAngle = 2.0 * basis.tanHalfY / H;
     std::vector<uint64_t> hits(resolveThreads(options.threads), 0);
     parallelFor(size_t(H), 16, options.threads, [&](size_t b, size_t e, unsigned worker) {
@@ -556,6 +590,7 @@ Frame renderFrame(const Scene& scene, const Camera& camera, const RenderOptions&
     f.originWorldY = scene.grid().originWorldY;
     const PixelRays rays = castRays(scene, setup, fit, tex, options, f, timings);
     shadePixels(scene, options, setup.basis, rays, f, timings);
+    detail::frameToWorldAxes(scene.grid(), f);
     if (kept) keepCascades(*kept, scene, options, fit, tex);
     timings.totalMs = total.milliseconds();
     return f;

@@ -86,6 +86,12 @@ struct FrameSetup {
     ViewVolume view;
 };
 FrameSetup setUpFrame(const Scene& scene, const Camera& camera);
+// The camera in the grid's local frame: its position mapped (Grid::worldToLocal; x, y only) and its yaw turned by
+// the grid's rotation, so that rays cast in the local frame look where the world camera looks.
+Camera localCamera(const Grid& grid, const Camera& camera);
+// A finished frame's hit positions and normals turned from the local axes to the CRS's (Frame: offsets from the
+// origin along the CRS's axes); nothing to do for a grid without rotation.
+void frameToWorldAxes(const Grid& grid, Frame& f);
 // The frame's cascades (stage 1 of both backends), with Timings' fittingMs and view direction. A camera below
 // the terrain (cameraBelowTerrainM > 0) sees nothing: no cascade is fitted (an empty fit).
 CascadeFit fitFrame(const Scene& scene, const Camera& camera, const FrameSetup& setup, const RenderOptions& options, Timings& timings);

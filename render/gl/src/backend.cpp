@@ -213,7 +213,7 @@ struct GlRenderer::Impl {
         f.fogDistM = float(gpu::kFogExtents * std::hypot(scene.xMax - scene.xMin, scene.yMax - scene.yMin));
         f.elevationMin = float(scene.elevationMin);
         f.zRange = float(std::max(scene.elevationMax - scene.elevationMin, 1e-6));
-        f.dRange = float(std::max(scene.depthMax, 1e-6));
+        f.dRange = float(std::max(scene.depthColorMaxM, 1e-6));
         f.pixelAngle = float(2.0 * setup.basis.tanHalfY / camera.height);
         f.colorMode = options.color == ColorMode::WaterDepth ? 1 : 0;
         f.cellOutlines = options.cellOutlines ? 1 : 0;
@@ -513,6 +513,7 @@ struct GlRenderer::Impl {
                 }
         });
         glUnmapBuffer(GL_SHADER_STORAGE_BUFFER);
+        detail::frameToWorldAxes(scene.grid(), f);
         timings.readbackMs = clock.milliseconds();
         timings.totalMs += timings.readbackMs;
         return f;

@@ -66,6 +66,23 @@ SampledRaster sampleSurface(const GridRegionReader& file, const influence::Kerne
                             const std::string& layerName, double resolutionM, std::optional<BoxWorld> box, bool gradients, unsigned threads,
                             bool progress, size_t maxPixels = size_t{1} << 30);
 
+// The grid file's cells as a UGRID-1.0 mesh (CF conventions) in NetCDF, as quadtree flood models such as SFINCS
+// write their map files, through GDAL's multidimensional API (no other dependency): one square face per cell
+// (mesh2d_face_nodes, counterclockwise from the south-west corner, start_index 0 or 1), its corners as shared nodes
+// (mesh2d_node_x/y, world coordinates: a rotated grid gives a rotated mesh), the elevation as face variable zb, and
+// for a grid with water every step's water level as zs(time, face) (zb + depth; _FillValue -99999 where dry), any
+// further step layer likewise, and time [s]. The CRS as a CF grid_mapping variable "crs" (crs_wkt). hc-ingest reads
+// it back as the same grid. The whole mesh is built in memory (about 60 bytes a cell and 8 per cell and step): a tool
+// for meshes of simulation size, not for 100 M cells. Written to a temporary name and renamed. Throws hc::Error.
+struct UgridOptions {
+    int startIndex = 0;  // the connectivity's first node index (UGRID start_index): 0 or 1
+};
+struct UgridSummary {
+    size_t nodes = 0, faces = 0, steps = 0;
+    uint64_t wetFaces = 0;  // summed over the steps
+};
+UgridSummary writeUgrid(const std::string& gridPath, const std::string& path, const UgridOptions& options = {});
+
 // GeoTIFF through GDAL: Float32, deflate, tiled; CRS and geotransform set; nodata -3.4028234663852886e+38
 // (float32's lowest: below any elevation) where undefined.
 void writeGeoTiff(const SampledRaster& raster, const std::string& path);

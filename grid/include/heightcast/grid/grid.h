@@ -2,8 +2,10 @@
 //
 // Frames and units
 //   World: the grid's CRS (crsWkt), metres, x east, y north. Only doubles ever hold world values.
-//   Local: metres relative to the domain's south-west corner (originWorld). Queries take local
-//          coordinates, so no absolute coordinate (UTM northings are ~5e6 m) reaches float maths.
+//   Local: metres relative to the domain's south-west corner (originWorld), along the grid's own axes, which may be
+//          rotated against the CRS's by rotationDeg (a rotated quadtree model mesh: DESIGN.md section 11). Queries
+//          take local coordinates, so no absolute coordinate (UTM northings are ~5e6 m) reaches float maths; every
+//          world <-> local mapping goes through worldToLocal / localToWorld.
 //   Finest units: integers, one per finest cell; cell (ix, iy) covers local
 //          [ix * finestCellM, (ix + 2^level) * finestCellM) in x, likewise in y.
 //
@@ -62,6 +64,8 @@ public:
     double originWorldX = 0;   // domain's south-west corner in the grid CRS [m]
     double originWorldY = 0;
     double finestCellM = 1;    // size of a level-0 cell [m], > 0
+    double rotationDeg = 0;    // counterclockwise angle of the local x axis from the CRS's x (east) axis, about the
+                               // origin [degrees], in (-180, 180]; 0 for rasters
     int rootLevel = 0;         // domain side = finestCellM * 2^rootLevel, 0..kMaxRootLevel
     int minLevel = 0;          // every cell's level lies in [minLevel, maxLevel]
     int maxLevel = 0;
@@ -88,6 +92,13 @@ public:
     // The selected step's time [s] (0 without steps).
     double stepTimeS() const { return step < steps.size() ? steps[step].timeS : 0.0; }
 
+    // World (grid CRS) <-> local frame: local = R(-rotation) (world - origin). Without rotation exactly
+    // world - origin (and back), so an axis-aligned grid's figures are those of plain subtraction.
+    void worldToLocal(double xWorld, double yWorld, double& xLocal, double& yLocal) const;
+    void localToWorld(double xLocal, double yLocal, double& xWorld, double& yWorld) const;
+    // A direction (a vector, no origin) from local to world axes, and back.
+    void localToWorldDir(double dx, double dy, double& wx, double& wy) const;
+    void worldToLocalDir(double wx, double wy, double& dx, double& dy) const;
     double domainSizeM() const { return finestCellM * static_cast<double>(uint64_t{1} << rootLevel); }
     double cellSizeM(size_t i) const { return levelSizeM(codeLevel(codes[i])); }
     double levelSizeM(int level) const { return finestCellM * static_cast<double>(uint64_t{1} << level); }

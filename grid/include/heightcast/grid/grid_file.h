@@ -15,7 +15,8 @@
 //   59      1     layer count: the static LAYER sections (1 = elevation only; the step layers are not counted)
 //   64      8     content hash (Grid::contentHash; with water steps (1.3) the scenario's: below)
 //   72      8     structure hash (Grid::structureHash)
-//   80      40    reserved, zero
+//   80      8     (1.3) rotation [degrees], double: Grid::rotationDeg, 0 for rasters; zero bytes before 1.3
+//   88      32    reserved, zero
 //
 // Sections, in file order: CELLS (kind 2: u64 cell codes, sorted), LAYER (kind 3, index = layer:
 // float32 values, one section per layer), META (kind 1: u32-length-prefixed key/value strings:
@@ -45,7 +46,7 @@
 //   1.1  META key crs_name (Grid::crsName); read from a 1.0 file as ""
 //   1.2  block checksums (sectioned_file.h: a CRC-32 per 1 MiB, checked when first read) and the summary
 //        in META; a 1.0/1.1 file has neither: readGridInfo reads it whole
-//   1.3  water steps (STEP, STEPS, META step_layer*); water is no longer a LAYER. A 1.2 file's water_depth LAYER reads
+//   1.3  water steps (STEP, STEPS, META step_layer*); water is no longer a LAYER; the rotation at byte 80. A 1.2 file's water_depth LAYER reads
 //        as a grid with water and no steps (one step at time 0)
 //
 // Hashes: structure = Hash64 over (finest size f64, root level i32, cell count u64, codes);

@@ -48,6 +48,8 @@ struct Options {
     std::vector<std::string> waterPaths;  // for Depth and Surface: a series, one step each (replaces waterPath)
     std::vector<double> waterLevelsM;   // for Level: a series of levels [m], one step each (replaces waterLevelM)
     std::vector<double> timesS;         // time of each step [s], strictly increasing; empty: the step index
+    std::string terrainVar = "zb";      // UGRID meshes (ugrid.h): the face variable of the terrain
+    std::string waterSurfaceVar = "zs"; // UGRID meshes: the face variable of the water level over time ("" = none)
     unsigned threads = 0;               // 0 = all cores
     bool progress = false;              // terminal progress on stderr
 };

@@ -44,8 +44,9 @@ struct Frame {
     int width = 0, height = 0;
     std::vector<uint8_t> rgb;           // 8-bit sRGB, 3 per pixel
     std::vector<float> distanceM;       // along the ray [m]; +inf where the ray misses
-    std::vector<float> posX, posY, posZ;// hit position relative to the grid origin [m]
-    std::vector<float> nX, nY, nZ;      // unit surface normal (z up)
+    std::vector<float> posX, posY, posZ;// hit position relative to the grid origin [m], along the CRS's axes (for a
+                                        // rotated grid too: world = origin + pos)
+    std::vector<float> nX, nY, nZ;      // unit surface normal (z up), along the CRS's axes
     std::vector<float> cascade;         // index of the cascade that gave the hit (blend: the nearer), -1 miss
     std::vector<float> waterDepthM;     // water depth at the hit [m], 0 where dry or missed
     // 1 where the hit is on a cut face of the terrain block, else 0. The terrain is drawn as a solid block: the
@@ -129,6 +130,9 @@ public:
     // water surface's top is bounded by the largest elevation plus the largest depth (the summary has no more).
     double xMin, yMin, xMax, yMax, zMin, zMax;
     double elevationMin, elevationMax, depthMax;
+    // The water colours' scale [m]: the largest depth of every water step of the scenario (Grid::steps), not only
+    // the shown one's, so that a colour means the same depth in every step of a sequence.
+    double depthColorMaxM = 0;
     // The smooth terrain's height at a local point [m] (the RBF sum of DESIGN.md section 4 over the list of
     // the cell containing it, as the approximation evaluates it, in double), or nullopt outside every cell.
     std::optional<double> terrainAt(double xLocal, double yLocal) const;

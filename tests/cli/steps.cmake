@@ -1,0 +1,118 @@
+# tests/cli/steps.cmake: flood scenarios over time (issue 14, DESIGN.md section 11) end to end: water steps from a
+# series of levels or rasters into one grid, their pyramids, a sequence of images (and a video), a point's hydrograph,
+# one step exported, the viewer playing them; and the refusals (unsorted times, series that disagree, steps that do
+# not exist), each leaving nothing behind.
+#
+# The fixture: the bundled DEM (Hintereisferner, SRTM) flooded at 1900, 2100 and 2300 m at 0, 1 h and 2 h.
+set(HEF_STEPS [[$HC_INGEST --quiet "$HC_DATA_DIR/hef_srtm.tif" -o f.hcg --tolerance 1 --max-cell 512 --water-level 1900,2100,2300 --times 0,3600,7200 >/dev/null 2>&1]])
+# A point in the flooded valley at the domain's south-west corner (wet in every step), in UTM 32N.
+set(HEF_VALLEY 622800,5170600)
+
+hc_cli_test(ingest.steps_levels 0 [[water +3 steps, 0 s \.\. 7200 s. [0-9]+ \.\. [0-9]+ wet cells of [0-9]+]]
+  --match [[8 per wet cell and step]] --no-match [[error|warning]] --exists f.hcg
+  --check [["$HC_INFO" f.hcg --verify | grep -E '^f\.hcg: heightcast grid, format 1\.3, valid']]
+  --check [["$HC_INFO" f.hcg --json | tr -d ' \n' | grep -E '"steps":.\{"step":0,"time_s":0\.0,"wet_cells":[0-9]+\},\{"step":1,"time_s":3600\.0,"wet_cells":[0-9]+\},\{"step":2,"time_s":7200\.0,"wet_cells":[0-9]+\}.,"step":0,']]
+  --check [["$HC_INFO" f.hcg --step 2 | grep -E 'water_depth 0 \.\. [0-9.]+ m \(step 2\)' && "$HC_INFO" f.hcg | grep -E 'steps +3 water steps, 0 \.\. 7200 s']]
+  -- ${INGEST} ${D}/hef_srtm.tif -o f.hcg --tolerance 1 --max-cell 512 --water-level 1900,2100,2300 --times 0,3600,7200)
+
+# Times must increase, and there must be one per step: refused before any work, no file.
+hc_cli_test(ingest.steps_unsorted_times nonzero [[^hc-ingest: error: --times must increase strictly: 10 s follows 20 s \(step 2\)]]
+  --absent f.hcg
+  -- ${INGEST} ${D}/hef_srtm.tif -o f.hcg --water-level 1900,2100,2300 --times 0,20,10)
+hc_cli_test(ingest.steps_times_count nonzero [[^hc-ingest: error: --times lists 2 times for 3 water steps]]
+  --absent f.hcg
+  -- ${INGEST} ${D}/hef_srtm.tif -o f.hcg --water-level 1900,2100,2300 --times 0,60)
+hc_cli_test(ingest.steps_glob_matches_nothing nonzero [[^hc-ingest: error: --water nope_\*\.tif: the pattern matches no file]]
+  --absent f.hcg
+  -- ${INGEST} ${D}/hef_srtm.tif -o f.hcg --water "nope_*.tif")
+
+if(HC_GDAL_CREATE)
+  # Water surface rasters on the DEM's own grid at 2000, 2100 and 2200 m, named so that a plain sort would put s_10
+  # before s_2: the glob takes them in natural order, so the wet cells grow from step to step.
+  set(SERIES [[for l in 1:2000 2:2100 10:2200
+do gdal_create -q -if "$HC_DATA_DIR/hef_srtm.tif" -ot Float32 -burn ${l#*:} s_${l%%:*}.tif || exit 1
+done]])
+  hc_cli_test(ingest.steps_series_glob 0 [[water +3 steps, 0 s \.\. 2 s \(the step index: no --times given\)]]
+    --setup ${SERIES} --exists f.hcg --no-match [[error]]
+    --check [["$HC_INFO" f.hcg --json | tr -d ' \n' | grep -oE '"wet_cells":[0-9]+' | cut -d: -f2 > wet.txt
+             sort -n -c wet.txt && test "$(sort -u wet.txt | wc -l)" = 3 && cat wet.txt]]
+    -- ${INGEST} ${D}/hef_srtm.tif -o f.hcg --tolerance 1 --max-cell 512 --water-surface "s_*.tif")
+  # A step on another grid (the same surface, but with a coarser pixel) is refused naming both files, and nothing is written.
+  hc_cli_test(ingest.steps_series_disagree nonzero [[hc-ingest: error: s_odd\.tif: size [0-9]+ x [0-9]+ px differs from the series' first step s_1\.tif]]
+    --setup ${SERIES} --setup [[gdal_translate -q -outsize 50% 50% s_2.tif s_odd.tif]] --absent f.hcg
+    -- ${INGEST} ${D}/hef_srtm.tif -o f.hcg --water-surface s_1.tif,s_odd.tif)
+endif()
+
+# One pyramid per step, each built from the lists that serve all steps.
+hc_cli_test(influence.steps 0 [[step 2 +at 7200 s, [0-9]+ wet cells.*pyramid +-> f\.step0002\.hcp]]
+  --setup ${HEF_STEPS} --exists f.hci --exists f.step0000.hcp --exists f.step0001.hcp --exists f.step0002.hcp --absent f.hcp
+  --no-match [[error:|warning]]
+  -- ${INFLUENCE} f.hcg --quiet)
+hc_cli_test(influence.steps_named_pyramid nonzero [[^hc-influence: error: -p names one pyramid file but f\.hcg has 3 water steps: add --step K]]
+  --setup ${HEF_STEPS} --absent p.hcp --absent f.hci
+  -- ${INFLUENCE} f.hcg -p p.hcp)
+
+# A sequence: one image per step from the same camera, each with its own step's pyramid; the water differs.
+hc_cli_test(render.steps_sequence 0 [[steps 0\.\.2 -> f_0000\.png.*  +2 +7200 +[0-9]+ .*f_0002\.png]]
+  --setup ${HEF_STEPS} --setup [[$HC_INFLUENCE f.hcg --quiet >/dev/null]]
+  --exists f_0000.png --exists f_0001.png --exists f_0002.png --absent f.png --no-match [[error|not used]]
+  --check "'${PNG_CHECK}' f_0000.png && '${PNG_CHECK}' f_0002.png && ! cmp -s f_0000.png f_0002.png"
+  -- ${RENDER} f.hcg -o f.png --steps 0:2 --size 320x180 --texels 128 --backend cpu)
+hc_cli_test(render.step_out_of_range nonzero [[^hc-render: error: f\.hcg: has no step 3: it holds 3 water steps \(0\.\.2\)]]
+  --setup ${HEF_STEPS} --absent f.png
+  -- ${RENDER} f.hcg -o f.png --step 3 --size 320x180 --backend cpu)
+hc_cli_test(render.steps_out_of_range nonzero [[^hc-render: error: --steps 1:3: f\.hcg has 3 water steps]]
+  --setup ${HEF_STEPS} --absent f_0001.png
+  -- ${RENDER} f.hcg -o f.png --steps 1:3 --size 320x180 --backend cpu)
+if(HC_FFMPEG)
+  hc_cli_test(render.steps_video 0 [[video +v\.mp4 \(2 steps per second\)]]
+    --setup ${HEF_STEPS} --exists v.mp4 --absent v.mp4.partial --no-match [[error]]
+    --check [[test "$(ffprobe -v error -count_frames -show_entries stream=nb_read_frames -of csv=p=0 v.mp4)" = 3]]
+    -- ${RENDER} f.hcg -o f.png --steps 0:2 --video v.mp4 --fps 2 --size 321x181 --texels 128 --backend cpu)
+else()
+  hc_cli_test(render.steps_video_without_ffmpeg nonzero [[^hc-render: error: --video: ffmpeg is not installed]]
+    --setup ${HEF_STEPS} --absent v.mp4 --absent f_0000.png
+    -- ${RENDER} f.hcg -o f.png --steps 0:2 --video v.mp4 --size 320x180 --backend cpu)
+endif()
+hc_cli_test(render.video_needs_steps nonzero [[^hc-render: error: --video needs --steps A:B]]
+  --absent v.mp4
+  -- ${RENDER} f.hcg -o f.png --video v.mp4)
+
+# The hydrograph: the water surface at the valley point is each step's level (1 cm: float32 storage), the times the
+# file's; out of core and with the cache the same bits.
+hc_cli_test(probe.hydrograph 0 [[hc-probe: 3 steps, 1 point each]]
+  --setup ${HEF_STEPS} --exists h.csv --no-match [[error]] --check [[head -n 1 h.csv | grep -x 'x,y,step,time_s,value']]
+  --check [[awk -F, 'NR > 1 { want = 1900 + 200 * $3
+                             t = 3600 * $3
+                             e = $5 - want
+                             if (e < 0) e = -e
+                             if ($4 != t || e > 0.01) { print "line " NR ": " $0
+                                                        bad = 1 }
+                             n++ }
+                   END { exit bad || n != 3 }' h.csv]]
+  --check [[$HC_PROBE f.hcg --xy 622800,5170600 --layer water_surface --all-steps --cache f.hci 2>/dev/null | cmp - h.csv]]
+  --check [[cat h.csv]]
+  -- ${PROBE} f.hcg --xy ${HEF_VALLEY} --layer water_surface --all-steps -o h.csv)
+hc_cli_test(probe.step_out_of_range nonzero [[^hc-probe: error: f\.hcg: has no step 9: it holds 3 water steps \(0\.\.2\)]]
+  --setup ${HEF_STEPS}
+  -- ${PROBE} f.hcg --xy ${HEF_VALLEY} --step 9)
+
+# One step exported: the flooded valley's water surface lies at that step's level (1 cm).
+hc_cli_test(export.step 0 [[-> s\.tif]]
+  --setup ${HEF_STEPS} --exists s.tif
+  --check [[gdalinfo -stats s.tif > info.txt 2>&1
+            awk -F= '/STATISTICS_MINIMUM/ { lo = $2 } /STATISTICS_MAXIMUM/ { hi = $2 }
+                     END { print "water surface " lo " .. " hi
+                           exit !(lo != "" && lo > 2299.99 && hi < 2300.01) }' info.txt]]
+  -- ${EXPORT} f.hcg --step 2 --layer water_surface --resolution 200 -o s.tif --quiet)
+
+# The viewer plays the steps: each scripted frame after the first shows the next step (the water read again, the
+# terrain's lists kept); the last frame is of step 2 and shows terrain.
+if(HC_WITH_GL AND HC_XVFB_RUN)
+  hc_cli_test(view.play_steps 0 [[step +2 of 3 \(last switch [0-9.]+ ms]]
+    --setup ${HEF_STEPS} --exists shot.png --no-match [[error|warning]]
+    --check "'${PNG_CHECK}' shot.png"
+    -- ${HC_XVFB_RUN} -a -s "-screen 0 1280x1024x24" $<TARGET_FILE:hc-view> f.hcg --backend cpu --frames 3 --play --screenshot shot.png --size 480x300 --texels 128)
+  hc_cli_test(view.play_needs_frames nonzero [[^hc-view: error: --play needs --frames N]]
+    -- $<TARGET_FILE:hc-view> f.hcg --play)
+endif()
