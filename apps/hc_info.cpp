@@ -119,10 +119,13 @@ void printJson(const hc::GridFileInfo& info, const Summary& s, const std::string
     if (!g.steps.empty()) j["step"] = g.step;  // the step whose values "layers" and "content_hash" describe
     j["source"] = g.stats.sourcePath;
     j["source_crs"] = g.stats.sourceCrsName;
-    j["valid_pixels"] = g.stats.validPixels;
-    j["tolerance_m"] = g.stats.toleranceM;
-    j["max_dev_m"] = g.stats.maxDevM;
-    j["rms_dev_m"] = g.stats.rmsDevM;
+    j["source_kind"] = g.stats.sourceKind.empty() ? "raster" : g.stats.sourceKind;
+    j["valid_pixels"] = g.stats.validPixels;  // a mesh: its faces with terrain
+    if (g.stats.sourceKind.empty()) {  // a mesh is taken as it is: no tolerance, nothing deviates
+        j["tolerance_m"] = g.stats.toleranceM;
+        j["max_dev_m"] = g.stats.maxDevM;
+        j["rms_dev_m"] = g.stats.rmsDevM;
+    }
     j["structure_hash"] = hex16(info.structureHash);
     j["content_hash"] = hex16(info.contentHash);
     j["bytes_checked"] = info.bytesChecked;
@@ -157,11 +160,15 @@ void printText(const hc::GridFileInfo& info, const Summary& s, const std::string
     std::printf("  extent       %.17g, %.17g .. %.17g, %.17g\n", s.extent[0], s.extent[1], s.extent[2], s.extent[3]);
     std::string crs = g.crsWkt.empty() ? "none (local metres)" : crsName(g) + " (full WKT: --json)";
     std::printf("  CRS          %s\n", crs.c_str());
-    std::printf("  source       %s (%s); working raster %llu x %llu px, %llu valid\n", g.stats.sourcePath.c_str(),
-                g.stats.sourceCrsName.empty() ? "no CRS" : g.stats.sourceCrsName.c_str(),
-                (unsigned long long)g.stats.sourceWidth, (unsigned long long)g.stats.sourceHeight,
-                (unsigned long long)g.stats.validPixels);
-    std::printf("  deviation    max %.6g m, RMS %.6g m (tolerance %.6g m)\n", g.stats.maxDevM, g.stats.rmsDevM, g.stats.toleranceM);
+    const char* sourceCrs = g.stats.sourceCrsName.empty() ? "no CRS" : g.stats.sourceCrsName.c_str();
+    if (!g.stats.sourceKind.empty()) {
+        std::printf("  source       %s (%s, %s); %llu faces taken as cells as they are (no merging, no resampling: no deviation)\n",
+                    g.stats.sourcePath.c_str(), g.stats.sourceKind.c_str(), sourceCrs, (unsigned long long)g.stats.validPixels);
+    } else {
+        std::printf("  source       %s (%s); working raster %llu x %llu px, %llu valid\n", g.stats.sourcePath.c_str(), sourceCrs,
+                    (unsigned long long)g.stats.sourceWidth, (unsigned long long)g.stats.sourceHeight, (unsigned long long)g.stats.validPixels);
+        std::printf("  deviation    max %.6g m, RMS %.6g m (tolerance %.6g m)\n", g.stats.maxDevM, g.stats.rmsDevM, g.stats.toleranceM);
+    }
     std::printf("  hashes       structure %016" PRIx64 ", content %016" PRIx64 "%s\n", info.structureHash, info.contentHash,
                 info.verified ? "" : " (as stored)");
     std::printf("  checked      checksums of %llu section bytes (the file has %llu)\n", (unsigned long long)info.bytesChecked,

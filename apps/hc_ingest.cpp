@@ -32,8 +32,11 @@ void printSummary(const hc::ingest::BuildSummary& b, const hc::ingest::LoadRepor
     else
         std::printf("  working      %llu x %llu px of %.6g m, %llu valid\n", (unsigned long long)s.sourceWidth,
                     (unsigned long long)s.sourceHeight, g.finestCellM, (unsigned long long)s.validPixels);
-    std::printf("  cells        %llu (%.3f pixels per cell), %zu layer%s:", (unsigned long long)b.cellCount,
-                b.cellCount ? double(s.validPixels) / double(b.cellCount) : 0.0, g.layerCount(), g.layerCount() == 1 ? "" : "s");
+    if (mesh)
+        std::printf("  cells        %llu (one per face), %zu layer%s:", (unsigned long long)b.cellCount, g.layerCount(), g.layerCount() == 1 ? "" : "s");
+    else
+        std::printf("  cells        %llu (%.3f pixels per cell), %zu layer%s:", (unsigned long long)b.cellCount,
+                    b.cellCount ? double(s.validPixels) / double(b.cellCount) : 0.0, g.layerCount(), g.layerCount() == 1 ? "" : "s");
     for (const auto& l : g.layers) std::printf(" %s [%s]", l.name.c_str(), l.units.c_str());
     std::printf("\n");
     for (size_t l = 0; l < b.cellsPerLevel.size(); ++l)
@@ -74,7 +77,7 @@ void printSummary(const hc::ingest::BuildSummary& b, const hc::ingest::LoadRepor
 
 // The options into `o`, validated before any work; false after --help.
 bool parseOptions(int argc, char** argv, hc::ingest::Options& o, std::string& out, bool& quiet, bool& mesh) {
-    std::string water, waterSurface, waterLevel, times;
+    std::string water, waterSurface, waterLevel, times, faceLayers;
     std::optional<double> nodata;
     hc::cli::Parser p("hc-ingest", "INPUT -o OUT.hcg [options]",
                       "Converts a raster DEM (any format GDAL reads, any CRS) into an adaptive quadtree grid file.\n"
@@ -110,6 +113,8 @@ bool parseOptions(int argc, char** argv, hc::ingest::Options& o, std::string& ou
              "      (default zb)", o.terrainVar);
     p.option("--water-surface-var", "NAME", "UGRID mesh input: the face variable of the water level over time, one step per time;\n"
              "      fill values and levels not above the terrain are dry (default zs)", o.waterSurfaceVar);
+    p.option("--face-layers", "NAME[,NAME...]", "UGRID mesh input: further face variables over time (velocity magnitude, ...), each\n"
+             "      stored per step on the wet faces as a layer of that name and the variable's units (default none)", faceLayers);
     p.option("--threads", "N", "worker threads (default 0 = all cores)", o.threads);
     p.flag("--quiet", "print only warnings and failures (no progress, no summary)", quiet);
     p.exclusive({"--water", "--water-surface", "--water-level"});
@@ -122,16 +127,20 @@ bool parseOptions(int argc, char** argv, hc::ingest::Options& o, std::string& ou
                                 "--band", "--nodata", "--z-scale", "--terrain-rgb"})
             if (p.given(opt))
                 throw hc::Error(std::string(opt) + ": " + o.input + " is a UGRID mesh, taken as it is (its faces, terrain and water levels): " +
-                                "only --terrain-var, --water-surface-var and --s_srs apply");
+                                "only --terrain-var, --water-surface-var, --face-layers and --s_srs apply");
+        for (size_t b = 0, e = 0; b < faceLayers.size(); b = e + 1) {
+            e = std::min(faceLayers.find(',', b), faceLayers.size());
+            if (e == b) throw hc::Error("--face-layers " + faceLayers + ": an empty name");
+            o.faceLayerVars.push_back(faceLayers.substr(b, e - b));
+        }
         hc::cli::checkWritable(out, "output grid");
         hc::cli::checkNotSame(out, o.input, "output grid");
         return true;
     }
-    if (p.given("--terrain-var") || p.given("--water-surface-var"))
-        throw hc::Error("--terrain-var / --water-surface-var: " + o.input + " is not a UGRID mesh (no mesh_topology variable)");
+    if (p.given("--terrain-var") || p.given("--water-surface-var") || p.given("--face-layers"))
+        throw hc::Error("--terrain-var / --water-surface-var / --face-layers: " + o.input + " is not a UGRID mesh (no mesh_topology variable)");
     o.bandGiven = o.band != kBandNotGiven;
     if (!o.bandGiven) o.band = 1;
-    if (out.empty()) throw hc::Error("no output file: give -o OUT.hcg");
     o.nodata = nodata;
     if (!water.empty()) o.water = hc::ingest::WaterSource::Depth, o.waterPaths = hc::cli::expandFileList(water, "--water");
     if (!waterSurface.empty())

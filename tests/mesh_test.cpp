@@ -231,6 +231,7 @@ struct HandMesh {
     std::vector<double> zb;
     std::vector<double> times;
     std::vector<std::vector<double>> zs;  // per time, per face
+    std::vector<std::vector<double>> vel; // per time, per face: a further face variable "vel" [m/s] (empty: none)
 };
 
 void writeHandMesh(const HandMesh& m, const std::string& path) {
@@ -276,6 +277,14 @@ void writeHandMesh(const HandMesh& m, const std::string& path) {
         std::vector<double> all;
         for (const auto& row : m.zs) all.insert(all.end(), row.begin(), row.end());
         writeAll(zs, all.data(), GDT_Float64);
+        if (!m.vel.empty()) {
+            auto vel = root->CreateMDArray("vel", {time, faces}, GDALExtendedDataType::Create(GDT_Float64));
+            vel->SetNoDataValue(-99999.0);
+            str(vel, "units", "m s-1");
+            std::vector<double> v;
+            for (const auto& row : m.vel) v.insert(v.end(), row.begin(), row.end());
+            writeAll(vel, v.data(), GDT_Float64);
+        }
     }
 }
 
@@ -320,6 +329,47 @@ TEST_F(Mesh, HandWrittenQuadtreeReadsAsWritten) {
     ASSERT_TRUE(big);
     EXPECT_EQ(g.level(*big), 1);
     EXPECT_EQ(g.values[1][*big], 0.0f) << "a fill value is dry";
+}
+
+// A further face variable over time becomes a step layer: its values on the wet faces, 0 on dry ones, a fill value on a
+// wet face taken as 0 and counted in a warning; and it goes out to a mesh and back with the same values.
+TEST_F(Mesh, FaceLayersBecomeStepLayers) {
+    HandMesh m = goodMesh();
+    m.vel = {{0.1, 0.2, 0.3, 0.4, -99999}, {1.1, 1.2, 1.3, 1.4, 1.5}};
+    writeHandMesh(m, path("vel.nc"));
+    hc::ingest::Options o;
+    o.input = path("vel.nc");
+    o.faceLayerVars = {"vel"};
+    hc::ingest::LoadReport rep;
+    hc::ingest::ingestUgridToFile(o, path("v.hcg"), rep);
+    ASSERT_EQ(rep.warnings.size(), 2u) << "no CRS, and one fill value on a wet face";
+    EXPECT_NE(rep.warnings[1].find("vel is a fill value on 1 wet face"), std::string::npos) << rep.warnings[1];
+    const Grid g0 = hc::readGrid(path("v.hcg"), nullptr, 0), g1 = hc::readGrid(path("v.hcg"), nullptr, 1);
+    ASSERT_EQ(g0.layers.size(), 3u);
+    EXPECT_EQ(g0.layers[2].name, "vel");
+    EXPECT_EQ(g0.layers[2].units, "m s-1");
+    auto at = [](const Grid& g, double x, double y) { return g.values[2][*g.locate(x, y)]; };
+    EXPECT_EQ(at(g0, 2.5, 0.5), 0.2f) << "face 1, wet in step 0";
+    EXPECT_EQ(at(g0, 1.0, 1.0), 0.0f) << "face 0, dry in step 0: no value stored";
+    EXPECT_EQ(at(g0, 3.5, 1.5), 0.0f) << "face 4, wet in step 0 with a fill value";
+    EXPECT_EQ(at(g1, 1.0, 1.0), 1.1f);
+    EXPECT_EQ(at(g1, 3.5, 1.5), 1.5f);
+    // Out and back: the layer keeps its name, units and values.
+    hc::exporting::writeUgrid(path("v.hcg"), path("out.nc"));
+    o.input = path("out.nc");
+    hc::ingest::ingestUgridToFile(o, path("back.hcg"), rep);
+    for (size_t k = 0; k < 2; ++k) {
+        const Grid a = hc::readGrid(path("v.hcg"), nullptr, k), b = hc::readGrid(path("back.hcg"), nullptr, k);
+        EXPECT_EQ(a.layers[2].units, b.layers[2].units);
+        EXPECT_EQ(a.values[2], b.values[2]) << "step " << k;
+    }
+    // Names that are not further variables are refused.
+    for (const std::string bad : {"zs", "water_depth", "nosuch"}) {
+        o.input = path("vel.nc");
+        o.faceLayerVars = {bad};
+        EXPECT_THROW(hc::ingest::ingestUgridToFile(o, path("bad.hcg"), rep), hc::Error) << bad;
+        EXPECT_FALSE(fs::exists(path("bad.hcg")));
+    }
 }
 
 TEST_F(Mesh, MeshesThatAreNoQuadtreeAreRefused) {

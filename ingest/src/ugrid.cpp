@@ -318,6 +318,28 @@ BuildSummary ingestUgridToFile(const Options& opt, const std::string& path, Load
         r.fail("no variable '" + opt.waterSurfaceVar + "' (--water-surface-var)");
     }
     const std::optional<double> zsFill = levelVar ? r.fill(levelVar) : std::nullopt;
+    // Further step layers: face variables shaped as the water level, each read whole (8 bytes a face and step).
+    struct FaceLayer {
+        std::string name, units;
+        std::vector<double> values;
+        std::optional<double> fill;
+        uint64_t unset = 0;  // wet faces where it is a fill value (taken as 0)
+    };
+    std::vector<FaceLayer> faceLayers;
+    if (!opt.faceLayerVars.empty() && !levelVar)
+        r.fail("--face-layers needs the water level variable '" + opt.waterSurfaceVar + "': step layers are stored on wet faces");
+    for (const std::string& name : opt.faceLayerVars) {
+        if (name == "elevation" || name == "water_depth" || name == "water_surface" || name == opt.waterSurfaceVar || name == opt.terrainVar)
+            r.fail("--face-layers " + name + ": that name is the terrain or the water; name further variables (velocity, ...)");
+        for (const FaceLayer& f : faceLayers)
+            if (f.name == name) r.fail("--face-layers names " + name + " twice");
+        ArrayPtr a = r.open(name, "--face-layers");
+        FaceLayer f{name, a->GetUnit().empty() ? textAttr(a, "units") : a->GetUnit(), r.read(a), r.fill(a), 0};
+        if (f.values.size() != zs.size())
+            r.fail(name + " has " + std::to_string(f.values.size()) + " values, the water level " + opt.waterSurfaceVar + " " +
+                   std::to_string(zs.size()) + ": a step layer must be a face variable over the same times");
+        faceLayers.push_back(std::move(f));
+    }
 
     // The grid: cells in Morton order.
     Grid shape;
@@ -342,7 +364,8 @@ BuildSummary ingestUgridToFile(const Options& opt, const std::string& path, Load
     } else if (opt.sourceSrs.empty()) {
         report.warnings.push_back(opt.input + ": the mesh names no CRS: coordinates taken as metres in a local frame (name the CRS with --s_srs)");
     }
-    if (stepCount) shape.layers.push_back({"water_depth", "m"}), shape.values.emplace_back();
+    if (stepCount) shape.layers.push_back({"water_depth", "m"});
+    for (const FaceLayer& f : faceLayers) shape.layers.push_back({f.name, f.units});
     shape.values.resize(shape.layers.size());
     std::vector<size_t> order(faces.size());
     std::iota(order.begin(), order.end(), size_t{0});
@@ -357,6 +380,8 @@ BuildSummary ingestUgridToFile(const Options& opt, const std::string& path, Load
 
     IngestStats stats;
     stats.sourcePath = opt.input;
+    stats.sourceKind = "UGRID mesh";
+    stats.sourceCrsName = shape.crsName;
     stats.validPixels = faces.size();
     BuildSummary out;
     out.shape = shape;
@@ -369,7 +394,7 @@ BuildSummary ingestUgridToFile(const Options& opt, const std::string& path, Load
         for (size_t k = 0; k < stepCount; ++k) {
             WaterStepData step;
             step.timeS = times[k];
-            step.values.resize(1);
+            step.values.resize(1 + faceLayers.size());
             for (size_t i = 0; i < order.size(); ++i) {
                 const size_t f = ids[order[i]];
                 const double level = zs[k * faceCount + f];
@@ -378,6 +403,13 @@ BuildSummary ingestUgridToFile(const Options& opt, const std::string& path, Load
                 if (!(depth > 0)) continue;
                 step.wet.push_back(uint32_t(i));
                 step.values[0].push_back(depth);
+                for (size_t l = 0; l < faceLayers.size(); ++l) {
+                    FaceLayer& fl = faceLayers[l];
+                    const double v = fl.values[k * faceCount + f];
+                    const bool unset = !std::isfinite(v) || (fl.fill && v == *fl.fill);
+                    fl.unset += unset;
+                    step.values[1 + l].push_back(unset ? 0.0f : float(v));
+                }
             }
             out.steps.push_back({step.timeS, step.wet.size(), 0, {}, {}});
             out.stepBytes += 8 * step.wet.size();
@@ -391,6 +423,10 @@ BuildSummary ingestUgridToFile(const Options& opt, const std::string& path, Load
         if (m.find("overlap") != std::string::npos) r.fail("faces overlap (" + m + "): not a quadtree mesh");
         throw;
     }
+    for (const FaceLayer& f : faceLayers)
+        if (f.unset)
+            report.warnings.push_back(fmt::format("{}: {} is a fill value on {} wet face{} (summed over the steps): taken as 0", opt.input,
+                                                  f.name, f.unset, f.unset == 1 ? "" : "s"));
     out.shape.stats = stats;
     out.shape.steps = out.steps;
     out.wetCells = out.steps.empty() ? 0 : out.steps.back().wetCells;

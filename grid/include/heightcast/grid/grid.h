@@ -49,6 +49,8 @@ struct StepInfo {
 struct IngestStats {
     std::string sourcePath;      // the input raster as given
     std::string sourceCrsName;   // the input's CRS name ("" when it had none)
+    std::string sourceKind;      // "" for a raster (the working raster and deviation below apply); "UGRID mesh" for a
+                                 // mesh taken as it is (one cell per face: no working raster, nothing to deviate)
     uint64_t sourceWidth = 0;    // pixels of the working raster (after projection / resampling)
     uint64_t sourceHeight = 0;
     uint64_t validPixels = 0;    // working-raster pixels that carry data

@@ -21,7 +21,8 @@
 // Sections, in file order: CELLS (kind 2: u64 cell codes, sorted), LAYER (kind 3, index = layer:
 // float32 values, one section per layer), META (kind 1: u32-length-prefixed key/value strings:
 // crs_wkt, crs_name, layer.N.name, layer.N.units, layer.N.min, layer.N.max, summary.*, ingest.*), then
-// (1.2) the container's block checksums. Readers locate sections by the table, not by order.
+// (1.2) the container's block checksums. Readers locate sections by the table, not by order. ingest.source_kind
+// ("UGRID mesh") is written only for a grid not made from a raster; its absence means a raster.
 //
 // The summary (1.2), written as the cells stream past, so a reader need not read them (readGridInfo):
 //   summary.cells_per_level  "n0 n1 ... nMax": cells per level 0..max level, decimal, space-separated

@@ -50,6 +50,8 @@ struct Options {
     std::vector<double> timesS;         // time of each step [s], strictly increasing; empty: the step index
     std::string terrainVar = "zb";      // UGRID meshes (ugrid.h): the face variable of the terrain
     std::string waterSurfaceVar = "zs"; // UGRID meshes: the face variable of the water level over time ("" = none)
+    std::vector<std::string> faceLayerVars;  // UGRID meshes: further face variables over time (velocity magnitude, ...),
+                                        // each a step layer of that name, stored on the wet faces of every step
     unsigned threads = 0;               // 0 = all cores
     bool progress = false;              // terminal progress on stderr
 };

@@ -12,7 +12,9 @@
 // smallest face's, all faces turned by one angle against the CRS's axes (the grid's rotation), each face's corner on
 // the finest faces' lattice and aligned to its own size, no two faces overlapping. Anything else is refused naming
 // the face and what is wrong. Faces whose terrain is a fill value are holes; per step, faces whose level is a fill
-// value, or not above the terrain, are dry (depth = level - terrain).
+// value, or not above the terrain, are dry (depth = level - terrain). Further face variables over time
+// (Options::faceLayerVars: velocity magnitude, ...) become step layers of their own name and units, stored on the wet
+// faces of each step (a fill value there is taken as 0, with a warning that counts them).
 #pragma once
 
 #include <string>

@@ -1,0 +1,64 @@
+# tests/cli/mesh.cmake: UGRID quadtree meshes (issue 14, DESIGN.md section 11) end to end: a scenario written as a
+# mesh by hc-export and read back by hc-ingest as the same grid, a rotated quadtree (made by rotate_grid, written as a
+# turned mesh) kept with its rotation through info, probe and render; and the refusals, each leaving nothing behind.
+#
+# The fixture: the bundled DEM flooded at 1900, 2100 and 2300 m (steps.cmake's HEF_STEPS), written as a mesh.
+set(HEF_MESH "${HEF_STEPS} && $HC_EXPORT f.hcg -o f.nc >/dev/null")
+
+# Out and back: the same cells per level (a level without cells is not in a mesh), the same steps; the probe of the flooded valley gives each step's
+# level on both grids (the node coordinates carry the origin to 1e-6 m: the values agree to 1e-6 m).
+hc_cli_test(mesh.roundtrip 0 [[input +UGRID mesh: [0-9]+ faces \([0-9]+ with terrain\), [0-9]+ nodes, 3 steps.*cells +[0-9]+ \(one per face\)]]
+  --setup ${HEF_MESH} --exists m.hcg --no-match [[error|warning]]
+  --check [["$HC_INFO" f.hcg --json | tr -d ' \n' | grep -oE '"cells":[0-9]+|"time_s":[0-9.]+|"wet_cells":[0-9]+' | grep -v '"cells":0$' > a.txt
+            "$HC_INFO" m.hcg --json | tr -d ' \n' | grep -oE '"cells":[0-9]+|"time_s":[0-9.]+|"wet_cells":[0-9]+' | grep -v '"cells":0$' > b.txt
+            cat b.txt && cmp a.txt b.txt]]
+  --check [["$HC_INFO" m.hcg --json | tr -d ' \n' | grep -F '"source_kind":"UGRIDmesh"' && "$HC_INFO" m.hcg --json | grep -vq max_dev_m]]
+  --check [["$HC_INFO" m.hcg | grep -E 'source +f\.nc \(UGRID mesh, WGS 84 / UTM zone 32N \(EPSG:32632\)\)' && ! "$HC_INFO" m.hcg | grep '^  deviation']]
+  --check [["$HC_PROBE" f.hcg --xy 622800,5170600 --layer water_surface --all-steps > pa.csv
+            "$HC_PROBE" m.hcg --xy 622800,5170600 --layer water_surface --all-steps > pb.csv
+            paste -d, pa.csv pb.csv | awk -F, 'NR > 1 { e = $5 - $10
+                                                     if (e < 0) e = -e
+                                                     if (e > 1e-6 || $4 != $9) bad = 1
+                                                     n++ }
+                                               END { exit bad || n != 3 }']]
+  -- ${INGEST} f.nc -o m.hcg)
+
+# A rotated quadtree: the mesh's faces turned 30 degrees against UTM's axes. Ingested with its rotation (hc-info
+# prints it, --json has rotation_deg), the probe at a world point equals the unrotated grid's at the point turned
+# back, and the render shows terrain.
+set(TURNED "${HEF_STEPS} && '${ROTATE_GRID}' f.hcg t.hcg 30 && $HC_EXPORT t.hcg -o t.nc >/dev/null")
+hc_cli_test(mesh.rotated 0 [[quadtree is turned 30 degrees against the CRS's axes]]
+  --setup ${TURNED} --exists r.hcg --no-match [[error|warning]]
+  --check [["$HC_INFO" r.hcg | grep -E '^  rotation +30\.0000000'
+            "$HC_INFO" r.hcg --json | tr -d ' \n' | grep -E '"rotation_deg":30\.0000000']]
+  --check [[o=$("$HC_INFO" f.hcg --json | tr -d ' \n' | grep -oE '"origin":.[-0-9.e]+,[-0-9.e]+' | sed 's/.*://' | tr -d '[]')
+            ox=${o%,*}
+            oy=${o#*,}
+            awk -v ox="$ox" -v oy="$oy" 'BEGIN { c = cos(atan2(1, 1) / 1.5)
+                                                 s = sin(atan2(1, 1) / 1.5)
+                                                 x = 9000
+                                                 y = 12000
+                                                 printf "%.6f,%.6f\n", ox + x, oy + y
+                                                 printf "%.6f,%.6f\n", ox + c * x - s * y, oy + s * x + c * y }' > pts.txt
+            "$HC_PROBE" f.hcg --xy "$(sed -n 1p pts.txt)" | tail -n 1 | cut -d, -f3 > za.txt
+            "$HC_PROBE" r.hcg --xy "$(sed -n 2p pts.txt)" | tail -n 1 | cut -d, -f3 > zb.txt
+            paste za.txt zb.txt
+            paste za.txt zb.txt | awk '{ e = $1 - $2
+                                         if (e < 0) e = -e
+                                         exit !(NF == 2 && $1 > 1000 && e < 1e-3) }']]
+  --check "'$<TARGET_FILE:hc-render>' r.hcg -o r.png --step 2 --size 320x180 --texels 128 --backend cpu > /dev/null && '${PNG_CHECK}' r.png"
+  -- ${INGEST} t.nc -o r.hcg)
+
+# Refusals: raster options on a mesh, a step layer that is not there, and a mesh exported over its own grid.
+hc_cli_test(mesh.raster_option_refused nonzero [[^hc-ingest: error: --tolerance: f\.nc is a UGRID mesh, taken as it is]]
+  --setup ${HEF_MESH} --absent m.hcg
+  -- ${INGEST} f.nc -o m.hcg --tolerance 1)
+hc_cli_test(mesh.face_layer_missing nonzero [[^hc-ingest: error: f\.nc: no variable 'vel' \(--face-layers\)]]
+  --setup ${HEF_MESH} --absent m.hcg
+  -- ${INGEST} f.nc -o m.hcg --face-layers vel)
+hc_cli_test(mesh.face_layers_need_a_mesh nonzero [[^hc-ingest: error: --terrain-var / --water-surface-var / --face-layers: .*hef_srtm\.tif is not a UGRID mesh]]
+  --absent m.hcg
+  -- ${INGEST} ${D}/hef_srtm.tif -o m.hcg --face-layers vel)
+hc_cli_test(mesh.export_options_refused nonzero [[^hc-export: error: --resolution: a \.nc mesh holds the cells themselves]]
+  --setup ${HEF_STEPS} --absent m.nc
+  -- ${EXPORT} f.hcg -o m.nc --resolution 30)
