@@ -102,7 +102,9 @@ bool parseOptions(int argc, char** argv, hc::ingest::Options& o, std::string& ou
     p.flag("--terrain-rgb", "decode Terrain-RGB bands 1-3: h = -10000 + 0.1 * (R * 65536 + G * 256 + B) metres", o.terrainRgb);
     p.option("--water", "RASTERS", "water depth raster(s), metres (resampled onto the terrain; nodata and <= 0 are dry); several\n"
              "      make a flood scenario, one water step each, in the order given: A.tif,B.tif or a quoted glob 'depth_*.tif'\n"
-             "      (natural order: depth_9 before depth_10); every step must share the first's size, georeferencing and CRS", water);
+             "      (natural order: depth_9 before depth_10); every step must share the first's size, georeferencing and CRS;\n"
+             "      a NetCDF variable over time ('NETCDF:\"run.nc\":depth') is a series in itself: one step per time, the\n"
+             "      times (CF units) from the file", water);
     p.option("--water-surface", "RASTERS", "water surface elevation raster(s), metres (depth = surface - terrain; <= 0 is dry); a list\n"
              "      or glob makes steps, as for --water", waterSurface);
     p.option("--water-level", "L[,L...]", "bathtub flood: depth = L - z, metres, where below L and connected to the domain boundary\n"
@@ -189,6 +191,8 @@ int main(int argc, char** argv) {
         bool quiet = false, mesh = false;
         if (!parseOptions(argc, argv, o, out, quiet, mesh)) return 0;
         hc::ingest::LoadReport report;
+        // A NetCDF water variable over time is a series in one file: one step per time, times from the file.
+        if (!mesh && hc::ingest::expandWaterTimeSeries(o, report) > 0) hc::ingest::validateOptions(o);
         const hc::ingest::BuildSummary summary = buildGrid(o, out, report, mesh);
         if (!quiet) printSummary(summary, report, out, o.timesS.empty() && !mesh, mesh);
         return 0;

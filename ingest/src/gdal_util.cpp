@@ -115,6 +115,17 @@ std::string lower(std::string s) {
     return s;
 }
 
+double cfSecondsPerUnit(const std::string& text) {
+    const std::string units = lower(text);
+    if (units.find(" since ") == std::string::npos) return 0;
+    const std::string unit = units.substr(0, units.find(' '));
+    if (unit == "seconds" || unit == "second" || unit == "s" || unit == "sec" || unit == "secs") return 1;
+    if (unit == "minutes" || unit == "minute" || unit == "min" || unit == "mins") return 60;
+    if (unit == "hours" || unit == "hour" || unit == "h" || unit == "hr" || unit == "hrs") return 3600;
+    if (unit == "days" || unit == "day" || unit == "d") return 86400;
+    return 0;
+}
+
 std::string crsName(const OGRSpatialReference* srs) {
     if (!srs || srs->IsEmpty()) return "";
     const char* name = srs->GetName();

@@ -30,4 +30,9 @@ std::string lower(std::string s);
 std::string crsName(const OGRSpatialReference* srs);
 std::string toWkt(const OGRSpatialReference& srs);
 
+// Seconds per unit of a CF time coordinate ("hours since 2020-01-01 00:00:00": 3600), or 0 when the units are not
+// a CF time (no "since", or a unit other than seconds, minutes, hours, days). Months and years are refused (0):
+// CF's are not fixed lengths.
+double cfSecondsPerUnit(const std::string& units);
+
 }  // namespace hc::ingest::detail

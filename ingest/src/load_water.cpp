@@ -7,6 +7,8 @@
 
 #include <fmt/format.h>
 
+#include <gdal_utils.h>
+
 #include "gdal_util.h"
 #include "heightcast/core/error.h"
 #include "heightcast/core/progress.h"
@@ -60,6 +62,19 @@ Raster bathtub(const Raster& t, double level) {
     for (size_t i = 0; i < t.values.size(); ++i)
         if (std::isnan(t.values[i])) d.values[i] = std::numeric_limits<float>::quiet_NaN();
     return d;
+}
+
+// Band `band` of `ds` alone, as a virtual dataset (no copy): what the warper reads for one step of a time series.
+detail::DatasetPtr bandOf(GDALDataset& ds, int band, const std::string& what) {
+    const std::string b = std::to_string(band);
+    const char* args[] = {"-of", "VRT", "-b", b.c_str(), nullptr};
+    GDALTranslateOptions* options = GDALTranslateOptionsNew(const_cast<char**>(args), nullptr);
+    int usageError = 0;
+    CPLErrorReset();
+    GDALDatasetH out = GDALTranslate("", GDALDataset::ToHandle(&ds), options, &usageError);
+    GDALTranslateOptionsFree(options);
+    if (!out || usageError) throw Error(what + ": cannot take band " + b + ": " + detail::lastGdalError());
+    return detail::DatasetPtr(GDALDataset::FromHandle(out));
 }
 
 // opt.waterPath's raster (open as `ds`) warped onto exactly the terrain's working raster, as depth [m].
@@ -130,10 +145,68 @@ Raster loadWater(const Options& opt, const Raster& terrain, LoadReport& report, 
     const std::string role = opt.water == WaterSource::Depth ? "water depth raster" : "water surface raster";
     const std::string& path = opt.waterPaths.empty() ? opt.waterPath : opt.waterPaths[step];
     detail::DatasetPtr ds = detail::openRaster(path, role);
-    if (step > 0) checkAgreesWithFirst(*ds, path, opt.waterPaths[0], role);
+    if (step > 0 && path != opt.waterPaths[0]) checkAgreesWithFirst(*ds, path, opt.waterPaths[0], role);
     Options one = opt;
     one.waterPath = path;
-    return warpedWater(one, *ds, terrain, report);
+    if (opt.waterBands.empty()) return warpedWater(one, *ds, terrain, report);
+    const int band = opt.waterBands.at(step);
+    one.waterPath = fmt::format("{} (band {}, step {})", path, band, step);
+    detail::DatasetPtr slice = bandOf(*ds, band, path);
+    return warpedWater(one, *slice, terrain, report);
+}
+
+size_t expandWaterTimeSeries(Options& o, LoadReport& report) {
+    if (o.water != WaterSource::Depth && o.water != WaterSource::Surface) return 0;
+    if (o.waterPaths.size() > 1) {  // a list of files: one step each, each of one band
+        for (const std::string& p : o.waterPaths)
+            if (int n = detail::openRaster(p, "water raster")->GetRasterCount(); n != 1)
+                throw Error(p + ": has " + std::to_string(n) + " bands: each file of a series of water rasters is one step of one band");
+        return 0;
+    }
+    const std::string path = o.waterPaths.empty() ? o.waterPath : o.waterPaths[0];
+    detail::DatasetPtr ds = detail::openRaster(path, "water raster");
+    const int bands = ds->GetRasterCount();
+    // GDAL's netCDF driver lists a variable's dimensions beyond y and x as NETCDF_DIM_EXTRA "{time}", and gives each
+    // band its coordinate there (band metadata NETCDF_DIM_time) and the dimension's units (time#units).
+    std::string extra = ds->GetMetadataItem("NETCDF_DIM_EXTRA") ? ds->GetMetadataItem("NETCDF_DIM_EXTRA") : "";
+    extra.erase(std::remove_if(extra.begin(), extra.end(), [](char c) { return c == '{' || c == '}' || c == ' '; }), extra.end());
+    if (extra.empty()) {
+        if (bands > 1)
+            throw Error(path + ": has " + std::to_string(bands) + " bands and no time dimension: which is the water? Give one band per file " +
+                        "(gdal_translate -b N), or a NetCDF variable over time (one step per time)");
+        return 0;
+    }
+    if (extra.find(',') != std::string::npos)
+        throw Error(path + ": the variable has dimensions " + extra + " beside y and x: only one, time, can make water steps " +
+                    "(take a slice with gdal_translate -b N)");
+    const std::string dim = extra;
+    const char* unitsItem = ds->GetMetadataItem((dim + "#units").c_str());
+    const double unit = detail::cfSecondsPerUnit(unitsItem ? unitsItem : "");
+    std::vector<double> times;
+    for (int b = 1; b <= bands; ++b) {
+        const char* v = ds->GetRasterBand(b)->GetMetadataItem(("NETCDF_DIM_" + dim).c_str());
+        char* end = nullptr;
+        const double t = v ? std::strtod(v, &end) : 0.0;
+        if (!v || end == v || !std::isfinite(t)) throw Error(path + ": band " + std::to_string(b) + " has no " + dim + " coordinate");
+        times.push_back(unit > 0 ? t * unit : double(b - 1));
+    }
+    for (size_t k = 1; k < times.size(); ++k)
+        if (!(times[k] > times[k - 1]))
+            throw Error(fmt::format("{}: the times of its {} dimension do not increase: step {} at {:.9g} s follows {:.9g} s", path, dim, k,
+                                    times[k], times[k - 1]));
+    if (unit == 0)
+        report.warnings.push_back(path + ": the " + dim + " dimension has no CF time units (" + (unitsItem ? unitsItem : "none") +
+                                  "): the step index is taken as time (--times sets the times)");
+    if (o.timesS.empty()) {
+        if (unit > 0) o.timesS = times;
+    } else {
+        report.warnings.push_back(path + ": --times replaces the file's own times");
+    }
+    o.waterPaths.assign(size_t(bands), path);
+    o.waterBands.resize(size_t(bands));
+    for (int b = 1; b <= bands; ++b) o.waterBands[size_t(b - 1)] = b;
+    o.waterPath.clear();
+    return size_t(bands);
 }
 
 }  // namespace hc::ingest

@@ -73,18 +73,6 @@ struct Reader {
     }
 };
 
-// Seconds per unit of a CF time ("hours since 2020-01-01"), or 0 when the units are not a time.
-double secondsPerUnit(std::string units) {
-    std::transform(units.begin(), units.end(), units.begin(), [](unsigned char c) { return char(std::tolower(c)); });
-    const std::string unit = units.substr(0, units.find(' '));
-    if (units.find(" since ") == std::string::npos) return 0;
-    if (unit == "seconds" || unit == "second" || unit == "s" || unit == "sec" || unit == "secs") return 1;
-    if (unit == "minutes" || unit == "minute" || unit == "min" || unit == "mins") return 60;
-    if (unit == "hours" || unit == "hour" || unit == "h" || unit == "hr" || unit == "hrs") return 3600;
-    if (unit == "days" || unit == "day" || unit == "d") return 86400;
-    return 0;
-}
-
 std::string fmtNum(double v) { return fmt::format("{:.9g}", v); }
 
 // A face as read: its corners in order around it.
@@ -296,7 +284,7 @@ BuildSummary ingestUgridToFile(const Options& opt, const std::string& path, Load
             ArrayPtr t = dims[0]->GetIndexingVariable();
             if (!t) t = r.root->OpenMDArray(dims[0]->GetName());
             if (t) {
-                const double unit = secondsPerUnit(t->GetUnit().empty() ? textAttr(t, "units") : t->GetUnit());
+                const double unit = detail::cfSecondsPerUnit(t->GetUnit().empty() ? textAttr(t, "units") : t->GetUnit());
                 times = r.read(t);
                 if (unit == 0 || times.size() != stepCount) {
                     report.warnings.push_back(opt.input + ": the time variable " + t->GetName() + " has no CF time units: the step index is taken as time");

@@ -41,6 +41,38 @@ done]])
   hc_cli_test(ingest.steps_series_disagree nonzero [[hc-ingest: error: s_odd\.tif: size [0-9]+ x [0-9]+ px differs from the series' first step s_1\.tif]]
     --setup ${SERIES} --setup [[gdal_translate -q -outsize 50% 50% s_2.tif s_odd.tif]] --absent f.hcg
     -- ${INGEST} ${D}/hef_srtm.tif -o f.hcg --water-surface s_1.tif,s_odd.tif)
+  # A NetCDF variable over time (CF), as a simulation writes its results: GDAL reads one band per time; each band is a
+  # step at the file's time (hours here). The same three levels as above: the same wet cells per step as three files.
+  set(NETCDF_SERIES [[for l in 1:2000 2:2100 10:2200
+do gdal_create -q -if "$HC_DATA_DIR/hef_srtm.tif" -ot Float32 -burn ${l#*:} s_${l%%:*}.tif || exit 1
+done
+gdalbuildvrt -q -separate stack.vrt s_1.tif s_2.tif s_10.tif &&
+mk() { gdal_translate -q -of netCDF -mo 'NETCDF_DIM_EXTRA={time}' -mo 'NETCDF_DIM_time_DEF={3,6}' -mo "NETCDF_DIM_time_VALUES={$1}" -mo "time#units=$2" stack.vrt "$3"
+}
+mk 0,1.5,3 'hours since 2024-06-01 00:00:00' run.nc && mk 0,1,2 'months since 2024-06-01' months.nc && mk 0,2,1 'seconds since 2024-06-01' back.nc]])
+  hc_cli_test(ingest.steps_netcdf_time 0 [[water +3 steps, 0 s \.\. 10800 s. [0-9]+ \.\. [0-9]+ wet cells]]
+    --setup ${NETCDF_SERIES} --exists f.hcg --no-match [[error|warning|step index]]
+    --check [["$HC_INFO" f.hcg --json | tr -d ' \n' | grep -oE '"time_s":[0-9.]+' | tr '\n' ' ' | grep -x '"time_s":0.0 "time_s":5400.0 "time_s":10800.0 ']]
+    --check [["$HC_INGEST" --quiet "$HC_DATA_DIR/hef_srtm.tif" -o g.hcg --tolerance 1 --max-cell 512 --water-surface s_1.tif,s_2.tif,s_10.tif
+             "$HC_INFO" f.hcg --json | tr -d ' \n' | grep -oE '"wet_cells":[0-9]+' > a.txt
+             "$HC_INFO" g.hcg --json | tr -d ' \n' | grep -oE '"wet_cells":[0-9]+' > b.txt
+             cat a.txt && cmp a.txt b.txt]]
+    -- ${INGEST} ${D}/hef_srtm.tif -o f.hcg --tolerance 1 --max-cell 512 --water-surface run.nc)
+  # Time units that are not CF's fixed lengths (months): the step index, said in a warning.
+  hc_cli_test(ingest.steps_netcdf_months 0 [[warning: months\.nc: the time dimension has no CF time units \(months since 2024-06-01\): the step index is taken as time]]
+    --setup ${NETCDF_SERIES} --exists f.hcg
+    --check [["$HC_INFO" f.hcg --json | tr -d ' \n' | grep -oE '"time_s":[0-9.]+' | tr '\n' ' ' | grep -x '"time_s":0.0 "time_s":1.0 "time_s":2.0 ']]
+    -- ${INGEST} ${D}/hef_srtm.tif -o f.hcg --tolerance 1 --max-cell 512 --water-surface months.nc --quiet)
+  # Times that go back, and a raster of several bands with no time dimension: refused, nothing written.
+  hc_cli_test(ingest.steps_netcdf_unsorted nonzero [[^hc-ingest: error: back\.nc: the times of its time dimension do not increase: step 2 at 1 s follows 2 s]]
+    --setup ${NETCDF_SERIES} --absent f.hcg
+    -- ${INGEST} ${D}/hef_srtm.tif -o f.hcg --water-surface back.nc)
+  hc_cli_test(ingest.steps_bands_without_time nonzero [[^hc-ingest: error: stack\.vrt: has 3 bands and no time dimension: which is the water\?]]
+    --setup ${NETCDF_SERIES} --absent f.hcg
+    -- ${INGEST} ${D}/hef_srtm.tif -o f.hcg --water-surface stack.vrt)
+  hc_cli_test(ingest.steps_list_of_multiband nonzero [[^hc-ingest: error: stack\.vrt: has 3 bands: each file of a series of water rasters is one step of one band]]
+    --setup ${NETCDF_SERIES} --absent f.hcg
+    -- ${INGEST} ${D}/hef_srtm.tif -o f.hcg --water-surface s_1.tif,stack.vrt)
 endif()
 
 # One pyramid per step, each built from the lists that serve all steps.

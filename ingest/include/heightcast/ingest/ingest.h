@@ -48,6 +48,8 @@ struct Options {
     std::vector<std::string> waterPaths;  // for Depth and Surface: a series, one step each (replaces waterPath)
     std::vector<double> waterLevelsM;   // for Level: a series of levels [m], one step each (replaces waterLevelM)
     std::vector<double> timesS;         // time of each step [s], strictly increasing; empty: the step index
+    std::vector<int> waterBands;        // band (1-based) of each step's raster, beside waterPaths: a NetCDF time series is
+                                        // one file with one band per time (expandWaterTimeSeries); empty: band 1
     std::string terrainVar = "zb";      // UGRID meshes (ugrid.h): the face variable of the terrain
     std::string waterSurfaceVar = "zs"; // UGRID meshes: the face variable of the water level over time ("" = none)
     std::vector<std::string> faceLayerVars;  // UGRID meshes: further face variables over time (velocity magnitude, ...),
@@ -81,6 +83,14 @@ struct LoadReport {
 
 // Checks options that need no file (ranges, combinations). Throws hc::Error.
 void validateOptions(const Options& options);
+
+// A single water raster that holds a time series (a NetCDF variable with one more dimension than y and x, in CF time
+// units, as GDAL reads it: one band per time; DESIGN.md section 11) becomes one water step per time: waterPaths and
+// waterBands then name each step's band, and timesS holds the file's times in seconds since the units' reference
+// (unless times were given: those are kept, with a warning in `report`). Time units that are not CF's take the step
+// index as time, with a warning. Any other water raster of several bands is refused (which band is the water?),
+// and so is a variable of more than one extra dimension. Returns the steps it made (0: not a time series).
+size_t expandWaterTimeSeries(Options& options, LoadReport& report);
 
 Raster loadTerrain(const Options& options, LoadReport& report);
 // Depth raster [m] of the terrain's geometry (0 = dry; NaN where terrain is a hole).
