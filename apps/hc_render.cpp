@@ -233,9 +233,11 @@ int main(int argc, char** argv) {
         RenderArgs a;
         if (!parseOptions(argc, argv, a)) return 0;
         hc::cli::BackendDecision decision = chooseBackend(a.backend);
+        if (!a.setup.colorBy.empty()) hc::cli::requireCpu("--color-by " + a.setup.colorBy, a.backend, decision);
         checkOutputs(a);
-        // Without a cache the CPU backend reads the grid out of core; the GL one needs the grid and a cache in memory.
-        auto loaded = hc::cli::loadScene("hc-render", a.gridPath, a.setup, !decision.useGl);
+        // Without a cache the CPU backend reads the grid out of core; the GL one needs the grid and a cache in memory,
+        // and so does --color-by (the exact evaluator at every hit).
+        auto loaded = hc::cli::loadScene("hc-render", a.gridPath, a.setup, !decision.useGl && a.setup.colorBy.empty());
         if (loaded->scene->outOfCore() && decision.useGl && a.backend == hc::cli::Backend::Auto) {
             decision.useGl = false;
             decision.note = "--out-of-core: the GL backend needs the whole grid and an influence cache: rendering on the CPU";

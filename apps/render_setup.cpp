@@ -9,6 +9,7 @@
 
 #include "heightcast/core/error.h"
 #include "heightcast/grid/grid_file.h"
+#include "heightcast/influence/surface.h"
 
 namespace hc::cli {
 
@@ -28,6 +29,9 @@ void RenderSetup::addRenderOptions(Parser& p) {
     p.option("--texels", "N", "texels per cascade side, 16..8192 (default 1024)", options.texelsPerSide);
     p.option("--threads", "N", "worker threads (default 0 = all cores)", options.threads);
     p.option("--color", "MODE", "elevation (hypsometric terrain, water by depth) or water_depth (grey terrain) (default elevation)", color);
+    p.option("--color-by", "LAYER", "colour by this grid layer, with its legend (hc-info lists them): a step layer such as velocity\n"
+             "colours the water (its wet cells' field) and leaves dry land grey, a static layer colours the terrain; the\n"
+             "exact surface at every hit, so the grid is read whole with its influence cache; CPU backend (default none)", colorBy);
     p.flag("--cells", "overlay the outlines of the adaptive cells", cells);
     p.flag("--no-legend", "leave the colour bar out", noLegend);
     p.option("--cache", "C.hci", "influence cache: the grid is read whole with its lists (default: the grid's path with .hci when\n"
@@ -58,6 +62,10 @@ void RenderSetup::finish() {
     if (color == "elevation") options.color = render::ColorMode::Elevation;
     else if (color == "water_depth") options.color = render::ColorMode::WaterDepth;
     else throw Error("--color " + color + ": use elevation or water_depth");
+    if (colorBy == "elevation" || colorBy == "water_depth" || colorBy == "water_surface")
+        throw Error("--color-by " + colorBy + ": use --color elevation or water_depth for those; --color-by takes a further layer");
+    options.colorLayer = colorBy;
+    if (!colorBy.empty() && outOfCore) throw Error("--color-by needs the grid in memory with its influence lists: leave out --out-of-core");
     options.cellOutlines = cells;
     options.legend = !noLegend;
     if (std::string why = options.validate(); !why.empty()) throw Error(why);
@@ -126,6 +134,8 @@ std::unique_ptr<LoadedScene> loadScene(const char* program, const std::string& g
     std::error_code ec;
     if (!setup.noPyramid && !setup.pyramidPath.empty() && !std::filesystem::exists(setup.pyramidPath, ec))
         throw Error(setup.pyramidPath + ": no such file");
+    // So must a --color-by layer (from the header and META alone: no cells read, no lists built).
+    if (!setup.colorBy.empty()) (void)influence::Layer::byName(readGridInfo(gridPath).shape, setup.colorBy);
     const std::string cachePath = setup.cachePath.empty() ? influence::defaultCachePath(gridPath) : setup.cachePath;
     const bool outOfCore =
         setup.outOfCore || (outOfCoreWithoutCache && setup.cachePath.empty() && !std::filesystem::exists(cachePath, ec));

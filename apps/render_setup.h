@@ -16,7 +16,7 @@
 namespace hc::cli {
 
 struct RenderSetup {
-    std::string cachePath, pyramidPath, cameraText, lookAt, size, color = "elevation";
+    std::string cachePath, pyramidPath, cameraText, lookAt, size, color = "elevation", colorBy;
     render::RenderOptions options;
     influence::KernelParams params;
     bool cells = false, noLegend = false, noPyramid = false, outOfCore = false;

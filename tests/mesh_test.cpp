@@ -372,6 +372,99 @@ TEST_F(Mesh, FaceLayersBecomeStepLayers) {
     }
 }
 
+// A step layer after water_depth (velocity, ...) is a field of the wet cells (surface.h, Layer::WaterCells): a
+// constant on every wet cell is exactly that constant wherever water is drawn, undefined where it is not (dry
+// neighbours bring no zeros in), and the exact evaluator, its batch path and brute force agree on a varying one.
+TEST_F(Mesh, StepLayerIsAFieldOfTheWetCells) {
+    HC_REQUIRE_DATA(dem, "lidar1m_minnesota_utm15.tif");
+    lidarScenario(dem, path("flood.hcg"));
+    Grid g = hc::readGrid(path("flood.hcg"), nullptr, 1);
+    const std::vector<float> depth = g.values[1];  // a copy: values grows below
+    g.layers.push_back({"vel", "m s-1"});
+    g.values.emplace_back(g.cellCount(), 0.0f);
+    for (size_t i = 0; i < g.cellCount(); ++i)
+        if (depth[i] > 0) g.values[2][i] = 0.75f;
+    const auto lists = hc::influence::buildInfluenceLists(g, hc::influence::KernelParams{}, 0, false);
+    const hc::influence::SurfaceEvaluator e(g, lists);
+    const auto vel = hc::influence::Layer::byName(g, "vel"), water = hc::influence::Layer::byName(g, "water_surface");
+    ASSERT_EQ(vel.kind, hc::influence::Layer::WaterCells);
+    std::vector<std::array<double, 2>> pts;
+    for (int i = 0; i < 400; ++i) pts.push_back({2.5 + 0.99 * i, 3.0 + 0.97 * ((i * 53) % 400)});
+    size_t drawn = 0, dry = 0;
+    for (const auto& p : pts) {
+        const auto w = e.value(p[0], p[1], water), v = e.value(p[0], p[1], vel);
+        ASSERT_EQ(w.has_value(), v.has_value()) << p[0] << "," << p[1];
+        if (v) {
+            EXPECT_EQ(*v, 0.75) << "a constant on the wet cells stays exactly constant (values relative to a wet cell's)";
+        }
+        drawn += v.has_value();
+        dry += !v.has_value();
+    }
+    EXPECT_GT(drawn, 20u);
+    EXPECT_GT(dry, 20u);
+    // A varying layer: exact = batch = brute force (1e-9 relative: sums in another order).
+    for (size_t i = 0; i < g.cellCount(); ++i) {
+        double x = 0, y = 0;
+        g.cellCenterLocal(i, x, y);
+        g.values[2][i] = depth[i] > 0 ? float(0.2 + 0.003 * x + 0.001 * y) : 0.0f;
+    }
+    const hc::influence::SurfaceEvaluator e2(g, lists);
+    const auto batch = e2.values(pts, vel, 2);
+    for (size_t i = 0; i < pts.size(); i += 7) {
+        const auto v = e2.value(pts[i][0], pts[i][1], vel), b = e2.valueBruteForce(pts[i][0], pts[i][1], vel);
+        ASSERT_EQ(v.has_value(), b.has_value());
+        ASSERT_EQ(v.has_value(), batch[i].has_value());
+        if (v) {
+            EXPECT_NEAR(*v, *b, 1e-9 * std::abs(*b));
+            EXPECT_EQ(*v, *batch[i]);
+        }
+    }
+}
+
+// --color-by a step layer: every water hit is coloured by the layer's exact value there (Frame::colorLayerValue, to
+// float rounding of the hit position), dry hits carry none; an unknown layer and an out-of-core scene are refused.
+TEST_F(Mesh, ColorByAStepLayerShowsItsExactValuesOnTheWater) {
+    HC_REQUIRE_DATA(dem, "lidar1m_minnesota_utm15.tif");
+    lidarScenario(dem, path("flood.hcg"));
+    Grid g = hc::readGrid(path("flood.hcg"), nullptr, 2);
+    const std::vector<float> depth = g.values[1];
+    g.layers.push_back({"vel", "m s-1"});
+    g.values.emplace_back(g.cellCount(), 0.0f);
+    for (size_t i = 0; i < g.cellCount(); ++i) g.values[2][i] = depth[i] > 0 ? std::sqrt(9.81f * depth[i]) : 0.0f;
+    g.steps.at(2).layerMin = {*std::min_element(depth.begin(), depth.end()), 0.0f};  // the legend's range (step table)
+    g.steps.at(2).layerMax = {*std::max_element(depth.begin(), depth.end()), 9.0f};
+    const auto lists = hc::influence::buildInfluenceLists(g, hc::influence::KernelParams{}, 0, false);
+    const hc::render::Scene scene(g, lists);
+    const hc::render::Camera cam = hc::render::overviewCamera(scene, 200, 120);
+    hc::render::RenderOptions opt;
+    opt.texelsPerSide = 256;
+    opt.colorLayer = "vel";
+    hc::render::Timings t;
+    const hc::render::Frame f = hc::render::renderFrame(scene, cam, opt, t);
+    ASSERT_EQ(f.colorLayerValue.size(), f.distanceM.size());
+    const hc::influence::SurfaceEvaluator e(g, lists);
+    const auto vel = hc::influence::Layer::byName(g, "vel");
+    size_t water = 0, dry = 0;
+    for (size_t i = 0; i < f.distanceM.size(); ++i) {
+        if (!std::isfinite(f.distanceM[i]) || f.wall[i]) continue;
+        if (f.waterDepthM[i] > 0) {
+            const auto v = e.value(f.posX[i], f.posY[i], vel);
+            // The hit lies on the drawn water; its float position may straddle the water's edge by a rounding.
+            if (!v) continue;
+            ASSERT_FALSE(std::isnan(f.colorLayerValue[i])) << i;
+            EXPECT_NEAR(f.colorLayerValue[i], *v, 1e-4 * std::max(1.0, *v));
+            ++water;
+        } else {
+            EXPECT_TRUE(std::isnan(f.colorLayerValue[i])) << "dry land has no velocity";
+            ++dry;
+        }
+    }
+    EXPECT_GT(water, 200u);
+    EXPECT_GT(dry, 200u);
+    opt.colorLayer = "nosuch";
+    EXPECT_THROW(hc::render::renderFrame(scene, cam, opt, t), hc::Error);
+}
+
 TEST_F(Mesh, MeshesThatAreNoQuadtreeAreRefused) {
     auto refused = [&](HandMesh m, const std::string& what) {
         SCOPED_TRACE(what);

@@ -30,6 +30,7 @@ Layer Layer::byName(const Grid& grid, const std::string& name) {
         throw Error("no layer '" + name + "' in the grid (it has: " + have + ")");
     }
     l.index = static_cast<size_t>(i);
+    if (l.index > grid.firstStepLayer()) l.kind = WaterCells;  // a step layer after water_depth: wet cells only
     return l;
 }
 
@@ -55,8 +56,8 @@ SurfaceEvaluator::SurfaceEvaluator(const Grid& grid, const InfluenceLists& lists
 // Equal to the plain weighted mean in exact arithmetic, but a constant field comes out exactly
 // constant, and centimetre relief at 8000 m keeps its digits (no large products to cancel). The water
 // level's base is a wet cell's level (levelBase), so a constant level stays exactly constant too.
-void SurfaceEvaluator::sums(size_t k, double x, double y, size_t l, const float* depth, double base, double& num, double& den,
-                            double* dnum, double* dden) const {
+void SurfaceEvaluator::sums(size_t k, double x, double y, size_t l, const float* depth, bool addDepth, double base, double& num,
+                            double& den, double* dnum, double* dden) const {
     const float* v = grid_.values[l].data();
     num = den = 0;
     double gnx = 0, gny = 0, gdx = 0, gdy = 0;
@@ -69,7 +70,7 @@ void SurfaceEvaluator::sums(size_t k, double x, double y, size_t l, const float*
         const double e = std::exp(-d2 * q.a);
         const double w = e - tail_;
         if (w <= 0) continue;
-        const double rel = (depth ? double(v[i]) + double(depth[i]) : double(v[i])) - base;
+        const double rel = (depth && addDepth ? double(v[i]) + double(depth[i]) : double(v[i])) - base;
         num += w * rel;
         den += w;
         if (dnum) {
@@ -89,12 +90,13 @@ void SurfaceEvaluator::sums(size_t k, double x, double y, size_t l, const float*
     }
 }
 
-double SurfaceEvaluator::levelBase(size_t k) const {
-    const float* z = grid_.values[0].data();
+double SurfaceEvaluator::levelBase(size_t k, size_t l) const {
+    const float* v = grid_.values[l].data();
     const float* d = grid_.values[static_cast<size_t>(depthLayer_)].data();
-    if (d[k] > 0) return double(z[k]) + double(d[k]);
+    auto of = [&](size_t i) { return l == 0 ? double(v[i]) + double(d[i]) : double(v[i]); };
+    if (d[k] > 0) return of(k);
     for (uint32_t i : lists_.list(k))
-        if (d[i] > 0) return double(z[i]) + double(d[i]);
+        if (d[i] > 0) return of(i);
     return std::numeric_limits<double>::quiet_NaN();
 }
 
@@ -105,7 +107,7 @@ std::optional<ValueGradient> SurfaceEvaluator::evaluate(double x, double y, cons
     // the weights it took.
     auto one = [&](size_t l, const float* depth, double base, double& den) {
         double num, dn[2], dd[2];
-        sums(*k, x, y, l, depth, base, num, den, gradient ? dn : nullptr, gradient ? dd : nullptr);
+        sums(*k, x, y, l, depth, l == 0, base, num, den, gradient ? dn : nullptr, gradient ? dd : nullptr);
         ValueGradient r{base + num / den, 0, 0};
         if (gradient) {  // quotient rule (the base is a constant)
             r.dx = (dn[0] * den - num * dd[0]) / (den * den);
@@ -127,6 +129,11 @@ std::optional<ValueGradient> SurfaceEvaluator::evaluate(double x, double y, cons
         if (denWet > 0 && denWet >= kWetShareMin * denAll && l.value > z.value) level = l;
     }
     if (layer.kind == Layer::WaterSurface) return level;
+    if (layer.kind == Layer::WaterCells) {  // the wet cells' values, where water is drawn (surface.h)
+        if (!level) return std::nullopt;
+        double den = 0;
+        return one(layer.index, grid_.values[static_cast<size_t>(depthLayer_)].data(), levelBase(*k, layer.index), den);
+    }
     if (!level) return ValueGradient{0, 0, 0};  // dry land: no water, depth 0
     return ValueGradient{level->value - z.value, level->dx - z.dx, level->dy - z.dy};
 }
@@ -144,6 +151,12 @@ std::optional<ValueGradient> SurfaceEvaluator::valueGradient(double x, double y,
 std::vector<std::optional<double>> SurfaceEvaluator::values(std::span<const std::array<double, 2>> pts, const Layer& layer,
                                                             unsigned threads) const {
     std::vector<std::optional<double>> out(pts.size());
+    if (layer.kind == Layer::WaterCells) {  // rare (a probe of velocity): one point at a time, as value() does
+        parallelFor(pts.size(), 1024, threads, [&](size_t b, size_t e, unsigned) {
+            for (size_t i = b; i < e; ++i) out[i] = value(pts[i][0], pts[i][1], layer);
+        });
+        return out;
+    }
     // Sort by containing cell; points in holes keep their nullopt.
     std::vector<std::pair<uint32_t, uint32_t>> order;  // (cell, point)
     order.reserve(pts.size());
@@ -212,14 +225,14 @@ std::optional<double> SurfaceEvaluator::valueBruteForce(double x, double y, cons
     if (!grid_.locate(x, y)) return std::nullopt;
     // Plain weighted means over every cell (no base): `wetLevel` takes z + d of the wet cells only.
     const float* depth = depthLayer_ >= 0 ? grid_.values[static_cast<size_t>(depthLayer_)].data() : nullptr;
-    auto one = [&](size_t l, bool wetLevel, double& den) {
+    auto one = [&](size_t l, bool wet, double& den) {
         double num = 0;
         den = 0;
         for (size_t i = 0; i < grid_.cellCount(); ++i) {
-            if (wetLevel && !(depth[i] > 0)) continue;
+            if (wet && !(depth[i] > 0)) continue;
             const double dx = x - k_[i].cx, dy = y - k_[i].cy;
             const double w = std::max(0.0, std::exp(-(dx * dx + dy * dy) * k_[i].a) - tail_);
-            num += w * (double(grid_.values[l][i]) + (wetLevel ? double(depth[i]) : 0.0));
+            num += w * (double(grid_.values[l][i]) + (wet && l == 0 ? double(depth[i]) : 0.0));
             den += w;
         }
         return num / den;
@@ -229,6 +242,10 @@ std::optional<double> SurfaceEvaluator::valueBruteForce(double x, double y, cons
     const double z = one(0, false, denAll);
     const double level = one(0, true, denWet);
     const bool drawn = denWet > 0 && denWet >= kWetShareMin * denAll && level > z;
+    if (layer.kind == Layer::WaterCells) {
+        if (!drawn) return std::nullopt;
+        return one(layer.index, true, denWet);
+    }
     if (layer.kind == Layer::WaterDepth) return drawn ? level - z : 0.0;
     if (!drawn) return std::nullopt;
     return level;

@@ -129,6 +129,12 @@ Scene::Scene(const GridRegionReader& file, const influence::KernelParams& params
     depthColorMaxM = scenarioDepthMax(grid_, depthMax);
 }
 
+const influence::SurfaceEvaluator& Scene::evaluator() const {
+    if (!lists_) throw Error("colouring by a layer needs the grid in memory with its influence lists (hc-influence writes them; --cache)");
+    std::call_once(evaluatorMade_, [&] { evaluator_ = std::make_unique<influence::SurfaceEvaluator>(grid_, *lists_); });
+    return *evaluator_;
+}
+
 const influence::InfluenceLists& Scene::lists() const {
     if (!lists_) throw Error("an out-of-core scene has no influence lists (its regions build their own)");
     return *lists_;
@@ -245,16 +251,53 @@ void drawText(Frame& f, int x, int y, const std::string& text, int scale) {
     }
 }
 
-std::string label(double v) {
-    char b[32];
-    std::snprintf(b, sizeof b, std::abs(v) >= 100 ? "%.0fm" : "%.1fm", v);
+std::string label(double v, const std::string& units = "m") {
+    char b[48];
+    std::snprintf(b, sizeof b, std::abs(v) >= 100 ? "%.0f%s" : std::abs(v) >= 1 || v == 0 ? "%.1f%s" : "%.3g%s", v, units.c_str());
     return b;
+}
+
+// RenderOptions::colorLayer's ramp (perceptually ordered, dark violet to yellow, as viridis), distinct from the
+// elevation and depth ramps so that a picture never reads as one of those.
+const std::vector<std::pair<double, Rgb>> kLayerRamp = {
+    {0.0, {0.267, 0.005, 0.329}}, {0.25, {0.229, 0.322, 0.546}}, {0.5, {0.128, 0.567, 0.551}},
+    {0.75, {0.369, 0.789, 0.383}}, {1.0, {0.993, 0.906, 0.144}}};
+
+// The layer's range over the whole scenario (every step's, from the step table; a static layer's from its
+// values), so that a colour means the same value in every step.
+std::pair<double, double> layerRange(const Grid& g, const influence::Layer& layer) {
+    double lo = HUGE_VAL, hi = -HUGE_VAL;
+    if (layer.kind == influence::Layer::WaterCells) {
+        const size_t s = layer.index - g.firstStepLayer();
+        for (const StepInfo& step : g.steps)
+            if (s < step.layerMin.size()) lo = std::min(lo, double(step.layerMin[s])), hi = std::max(hi, double(step.layerMax[s]));
+    } else {
+        for (float v : g.values[layer.index]) lo = std::min(lo, double(v)), hi = std::max(hi, double(v));
+    }
+    if (!(lo <= hi)) lo = hi = 0;
+    return {lo, hi};
+}
+
+// The colour layer (RenderOptions::colorLayer) at every hit it colours: the water's hits for a step layer, the
+// terrain's (not walls) for a static one; NaN elsewhere and where the field is undefined.
+std::vector<float> colorLayerValues(const Scene& scene, const influence::Layer& layer, const RenderOptions& options, const Frame& f,
+                                    const std::vector<uint8_t>& isWater) {
+    std::vector<float> out(f.distanceM.size(), std::numeric_limits<float>::quiet_NaN());
+    std::vector<std::array<double, 2>> pts;
+    std::vector<size_t> at;
+    const bool onWater = layer.kind == influence::Layer::WaterCells;
+    for (size_t i = 0; i < out.size(); ++i)
+        if (std::isfinite(f.distanceM[i]) && !f.wall[i] && bool(isWater[i]) == onWater) pts.push_back({f.posX[i], f.posY[i]}), at.push_back(i);
+    const auto v = scene.evaluator().values(pts, layer, options.threads);
+    for (size_t j = 0; j < at.size(); ++j)
+        if (v[j]) out[at[j]] = float(*v[j]);
+    return out;
 }
 
 // A colour bar with its range, at the image's right edge.
 void drawLegend(Frame& f, const detail::LegendLayout& l) {
     if (!l.shown) return;
-    const auto& stops = l.depth ? kDepth : kElevation;
+    const auto& stops = l.layer ? kLayerRamp : l.depth ? kDepth : kElevation;
     for (int y = 0; y < l.barH; ++y) {
         const Rgb c = ramp(stops, 1.0 - double(y) / (l.barH - 1));
         for (int x = 0; x < l.barW; ++x) {
@@ -339,20 +382,28 @@ LegendLayout legendLayout(const Scene& scene, const RenderOptions& options, int 
     LegendLayout l;
     if (!options.legend) return l;
     double lo = 0, hi = 0;
-    if (scene.hasWater() && scene.depthColorMaxM > 0) {
+    std::string units = "m";
+    if (!options.colorLayer.empty()) {
+        const influence::Layer layer = influence::Layer::byName(scene.grid(), options.colorLayer);
+        std::tie(lo, hi) = layerRange(scene.grid(), layer);
+        l.layer = true;
+        units = scene.grid().layers[layer.index].units;
+        if (!units.empty()) units = " " + units;
+    } else if (scene.hasWater() && scene.depthColorMaxM > 0) {
         l.depth = true, lo = 0, hi = scene.depthColorMaxM;
     } else if (options.color == ColorMode::Elevation) {
         lo = scene.elevationMin, hi = scene.elevationMax;
     } else {
         return l;
     }
+    l.hi = label(hi, units);
+    l.lo = label(lo, units);
     l.scale = std::max(1, height / 360);
     l.barH = std::max(20, height * 2 / 5), l.barW = std::max(6, 6 * l.scale);
-    l.x0 = width - l.barW - 8 * l.scale - 4 * 4 * l.scale * 2, l.y0 = height / 2 - l.barH / 2;
-    if (l.x0 < 0 || l.y0 < 0) return l;
-    l.shown = true;
-    l.hi = label(hi);
-    l.lo = label(lo);
+    // Room for the longer label (glyphs 3 pixels and a space wide), and never less than 8 characters' worth.
+    const int chars = int(std::max<size_t>({8, l.hi.size(), l.lo.size()}));
+    l.x0 = width - l.barW - 8 * l.scale - 4 * l.scale * chars, l.y0 = height / 2 - l.barH / 2;
+    l.shown = l.x0 >= 0 && l.y0 >= 0;
     return l;
 }
 
@@ -516,6 +567,18 @@ void shadePixels(const Scene& scene, const RenderOptions& options, const CameraB
     const double zRange = std::max(scene.elevationMax - scene.elevationMin, 1e-6);
     const double dRange = std::max(scene.depthColorMaxM, 1e-6);
     const double pixelAngle = 2.0 * basis.tanHalfY / H;
+    // --color-by: the layer's value at every hit it colours (one batch through the exact evaluator), and its range.
+    std::optional<influence::Layer> colorLayer;
+    std::vector<float> layerValues;
+    double layerLo = 0, layerRangeV = 1;
+    if (!options.colorLayer.empty()) {
+        colorLayer = influence::Layer::byName(scene.grid(), options.colorLayer);
+        layerValues = colorLayerValues(scene, *colorLayer, options, f, rays.isWater);
+        f.colorLayer = options.colorLayer;
+        const auto [lo, hi] = layerRange(scene.grid(), *colorLayer);
+        layerLo = lo, layerRangeV = std::max(hi - lo, 1e-12);
+    }
+    const bool layerOnWater = colorLayer && colorLayer->kind == influence::Layer::WaterCells;
     std::vector<uint64_t> hits(resolveThreads(options.threads), 0);
     parallelFor(size_t(H), 16, options.threads, [&](size_t b, size_t e, unsigned worker) {
         for (size_t py = b; py < e; ++py)
@@ -533,6 +596,10 @@ void shadePixels(const Scene& scene, const RenderOptions& options, const CameraB
                     const bool wall = f.wall[i] != 0;
                     if (wall) {
                         base = {gpu::kWallColor[0], gpu::kWallColor[1], gpu::kWallColor[2]};
+                    } else if (colorLayer && !std::isnan(layerValues[i])) {
+                        base = ramp(kLayerRamp, (layerValues[i] - layerLo) / layerRangeV);
+                    } else if (layerOnWater && !rays.isWater[i]) {
+                        base = {gpu::kDryColor[0], gpu::kDryColor[1], gpu::kDryColor[2]};
                     } else if (rays.isWater[i]) {
                         base = ramp(kDepth, f.waterDepthM[i] / dRange);
                     } else if (options.color == ColorMode::WaterDepth) {
@@ -560,6 +627,7 @@ void shadePixels(const Scene& scene, const RenderOptions& options, const CameraB
     });
     for (uint64_t h : hits) timings.hits += h;
     drawLegend(f, detail::legendLayout(scene, options, W, H));
+    f.colorLayerValue = std::move(layerValues);
     timings.shadingMs = clock.milliseconds();
 }
 
@@ -577,6 +645,10 @@ void keepCascades(CascadeCache::Impl& kept, const Scene& scene, const RenderOpti
 Frame renderFrame(const Scene& scene, const Camera& camera, const RenderOptions& options, Timings& timings, CascadeCache* cache) {
     camera.validate();
     if (std::string why = options.validate(); !why.empty()) throw Error(why);
+    if (!options.colorLayer.empty()) {  // before any work: the layer exists, and the evaluator can be had
+        influence::Layer::byName(scene.grid(), options.colorLayer);
+        scene.evaluator();
+    }
     const Stopwatch total;
     timings = Timings{};
     const detail::FrameSetup setup = detail::setUpFrame(scene, camera);

@@ -102,6 +102,7 @@ CascadeStats statsOf(const Cascade& c);
 struct LegendLayout {
     bool shown = false;
     bool depth = false;  // the water-depth ramp, else the elevation ramp
+    bool layer = false;  // RenderOptions::colorLayer's ramp (before `depth`)
     int x0 = 0, y0 = 0, barW = 0, barH = 0, scale = 1;  // bar's top-left pixel (row 0 at the top) and size
     std::string hi, lo;  // labels at the bar's top and bottom
 };

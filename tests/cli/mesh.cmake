@@ -62,3 +62,32 @@ hc_cli_test(mesh.face_layers_need_a_mesh nonzero [[^hc-ingest: error: --terrain-
 hc_cli_test(mesh.export_options_refused nonzero [[^hc-export: error: --resolution: a \.nc mesh holds the cells themselves]]
   --setup ${HEF_STEPS} --absent m.nc
   -- ${EXPORT} f.hcg -o m.nc --resolution 30)
+
+# A further face variable (a depth-shaped speed sqrt(g d), made by add_step_layer and written into the mesh by
+# hc-export) read with --face-layers: probed out of core over every step it is its wet cells' field (within 0.5 % of
+# sqrt(g d) of the probed depth in the deep valley, where the smoothing of a square root is nearly the square root
+# of the smoothing), undefined on dry land; hc-render --color-by draws it on the water with its legend.
+set(SPEED_MESH "${HEF_STEPS} && '${ADD_STEP_LAYER}' f.hcg fs.hcg speed && $HC_EXPORT fs.hcg -o fs.nc >/dev/null")
+hc_cli_test(mesh.face_layers 0 [[cells +[0-9]+ \(one per face\), 3 layers: elevation .m. water_depth .m. speed .m s-1.]]
+  --setup ${SPEED_MESH} --exists s.hcg --no-match [[error|warning]]
+  --check [["$HC_PROBE" s.hcg --xy 622800,5170600 --layer speed --all-steps 2>/dev/null > v.csv
+            "$HC_PROBE" s.hcg --xy 622800,5170600 --layer water_depth --all-steps 2>/dev/null > d.csv
+            paste -d, v.csv d.csv | awk -F, 'NR > 1 { want = sqrt(9.81 * $10)
+                                                     e = ($5 - want) / want
+                                                     if (e < 0) e = -e
+                                                     print $3, $5, want
+                                                     if (!(e < 0.005)) bad = 1
+                                                     n++ }
+                                               END { exit bad || n != 3 }']]
+  --check [["$HC_PROBE" s.hcg --xy 633759,5184153 --layer speed --step 2 2>/dev/null | tail -n 1 | grep -x '633759,5184153,']]
+  --check "'$<TARGET_FILE:hc-render>' s.hcg -o c.png --color-by speed --step 2 --size 320x180 --texels 128 --backend cpu > r.txt 2>&1 && '${PNG_CHECK}' c.png"
+  -- ${INGEST} fs.nc -o s.hcg --face-layers speed)
+hc_cli_test(render.color_by_unknown_layer nonzero [[^hc-render: error: no layer 'speed' in the grid \(it has: elevation, water_depth, water_surface\)]]
+  --setup ${HEF_STEPS} --absent c.png --absent f.hci
+  -- ${RENDER} f.hcg -o c.png --color-by speed --backend cpu)
+hc_cli_test(render.color_by_elevation_refused nonzero [[^hc-render: error: --color-by elevation: use --color elevation or water_depth for those]]
+  --absent c.png
+  -- ${RENDER} f.hcg -o c.png --color-by elevation)
+hc_cli_test(render.color_by_out_of_core_refused nonzero [[^hc-render: error: --color-by needs the grid in memory with its influence lists: leave out --out-of-core]]
+  --absent c.png
+  -- ${RENDER} f.hcg -o c.png --color-by speed --out-of-core)

@@ -427,6 +427,8 @@ struct GlRenderer::Impl {
     CascadeFit runFrame(const Camera& camera, const RenderOptions& options, Timings& timings) {
         camera.validate();
         if (std::string why = options.validate(); !why.empty()) throw Error(why);
+        if (!options.colorLayer.empty())  // the tools choose the CPU backend for it (backend_choice.h)
+            throw Error("colouring by a layer (" + options.colorLayer + ") is the CPU backend's: use --backend cpu");
         if (headless) headless->makeCurrent();
         const Stopwatch frameClock;
         timings = Timings{};

@@ -31,9 +31,15 @@ namespace hc::influence {
 //   - the level lies above the smooth terrain z(p) (section 4's elevation).
 // WaterSurface is level(p) there and undefined elsewhere; WaterDepth is level(p) - z(p) there and 0 on
 // dry land (undefined only in holes and outside the grid, like the elevation).
+// A further step layer (after water_depth: velocity magnitude, ..., DESIGN.md section 11) has values on wet cells
+// only, so it is a WaterCells field: the wet cells' values normalised over the wet weights, as the level is,
+//
+//   u(p) = sum_{wet i} w_i(p) u_i / sum_{wet i} w_i(p)
+//
+// defined where water is drawn (the two conditions above) and undefined elsewhere (dry cells bring no zeros in).
 struct Layer {
-    enum Kind { Cells, WaterSurface, WaterDepth } kind = Cells;
-    size_t index = 0;  // grid layer, for Cells
+    enum Kind { Cells, WaterSurface, WaterDepth, WaterCells } kind = Cells;
+    size_t index = 0;  // grid layer, for Cells and WaterCells
 
     // "elevation", any other layer name, or "water_surface" / "water_depth" (the water level field
     // above; a grid without a water_depth layer has neither). Throws hc::Error naming the layers the grid
@@ -68,12 +74,14 @@ public:
     const Grid& grid() const { return grid_; }
 
 private:
-    // Weighted sums at p over cell k's list of v_i - base: v the grid layer `l`; or, with `depth`, the
-    // water level z_i + d_i of the wet cells only (d_i > 0). Also the gradient sums if asked.
-    void sums(size_t k, double x, double y, size_t l, const float* depth, double base, double& num, double& den, double* dnum,
-              double* dden) const;
-    // The level of cell k if it is wet, else of the first wet cell of its list; NaN if none is wet.
-    double levelBase(size_t k) const;
+    // Weighted sums at p over cell k's list of v_i - base: v the grid layer `l`; or, with `depth`, over the wet
+    // cells only (d_i > 0), of the water level z_i + d_i (l = 0, addDepth) or of layer l's values. Also the gradient
+    // sums if asked.
+    void sums(size_t k, double x, double y, size_t l, const float* depth, bool addDepth, double base, double& num, double& den,
+              double* dnum, double* dden) const;
+    // The level (or, with l > 0, layer l's value) of cell k if it is wet, else of the first wet cell of its list;
+    // NaN if none is wet.
+    double levelBase(size_t k, size_t l = 0) const;
     std::optional<ValueGradient> evaluate(double x, double y, const Layer& layer, bool gradient) const;
 
     const Grid& grid_;

@@ -176,6 +176,17 @@ constexpr uint glyphBits(char ch) {
         case '.': rows = "000000000000010"; break;
         case '-': rows = "000000111000000"; break;
         case 'm': rows = "000000111111101"; break;
+        // Enough letters for the units of a --color-by layer ("m s-1", "m/s", "%", "kg m-3", "degC", ...).
+        case 's': rows = "011100010001110"; break;
+        case '/': rows = "001001010100100"; break;
+        case '%': rows = "101001010100101"; break;
+        case 'k': case 'K': rows = "100101110101101"; break;
+        case 'g': rows = "011101011001110"; break;
+        case 'h': rows = "100100111101101"; break;
+        case 'e': rows = "000111101110011"; break;
+        case 'C': rows = "111100100100111"; break;
+        case 'd': rows = "001001111101111"; break;
+        case 'a': rows = "000110011101111"; break;
         default: break;
     }
     uint bits = 0;

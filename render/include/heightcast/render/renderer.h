@@ -9,6 +9,7 @@
 
 #include <cstdint>
 #include <memory>
+#include <mutex>
 #include <optional>
 #include <string>
 #include <vector>
@@ -17,6 +18,7 @@
 #include "heightcast/grid/grid_file.h"
 #include "heightcast/influence/influence.h"
 #include "heightcast/influence/pyramid.h"
+#include "heightcast/influence/surface.h"
 #include "heightcast/render/camera.h"
 
 namespace hc::render {
@@ -36,6 +38,11 @@ struct RenderOptions {
     // no worse); true: the smallest not below it, N texels (up to 2x coarser: faster, more texels copied, larger
     // rendered error). BENCHMARKS.md measures both.
     bool pyramidCoarseTexels = false;
+    // Colour by this grid layer instead ("" = by `color`): a further step layer (velocity, ...: a field of the wet
+    // cells, influence::Layer::WaterCells) colours the water and leaves dry terrain grey; a static layer colours the
+    // terrain. Each hit's value is the exact evaluator's at the hit (in memory only: the scene needs its lists), on
+    // a ramp over the layer's range in every step, with a legend in the layer's units. CPU backend only.
+    std::string colorLayer;
     std::string validate() const; // "" or what is wrong
 };
 
@@ -54,6 +61,10 @@ struct Frame {
     // to the grid's lowest elevation, and a flat bottom there. Wall normals are horizontal, the bottom's points
     // down; walls are coloured kWallColor (gpu_layout.h).
     std::vector<float> wall;
+    // With RenderOptions::colorLayer: the layer's value at each hit it coloured, NaN elsewhere (EXR channel
+    // "layer.NAME"); empty without.
+    std::string colorLayer;
+    std::vector<float> colorLayerValue;
     double originWorldX = 0, originWorldY = 0;
 };
 
@@ -138,6 +149,9 @@ public:
     std::optional<double> terrainAt(double xLocal, double yLocal) const;
     // The square of the cell containing a local point, or nullopt (holes, outside the domain).
     std::optional<Grid::Square> cellSquareAt(double xLocal, double yLocal) const;
+    // The exact evaluator over the grid and its lists, made on first use (in memory only: throws hc::Error out of
+    // core): what RenderOptions::colorLayer's values come from.
+    const influence::SurfaceEvaluator& evaluator() const;
 
 private:
     const Grid& grid_;
@@ -148,6 +162,8 @@ private:
     uint64_t cellCount_ = 0;
     int waterLayer_ = -1;
     std::vector<CellKernel> kernels_;
+    mutable std::once_flag evaluatorMade_;
+    mutable std::unique_ptr<influence::SurfaceEvaluator> evaluator_;
 };
 
 // Cascade textures kept from one frame to the next (DESIGN.md section 6, incremental cascades). Stable fitting
