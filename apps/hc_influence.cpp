@@ -41,7 +41,9 @@ bool parseOptions(int argc, char** argv, InfluenceArgs& a) {
     p.option("--truncation", "R", "kernel cut-off in sigmas; a cell reaches R * sigma cell sizes (default 3.5)", a.params.truncation);
     p.option("-p", "OUT.hcp", "surface pyramid file (default: the grid's path with .hcp; with several water steps one per step,\n"
              "      GRID.step0007.hcp for step 7; -p then needs --step)", a.pyramidOut);
-    p.option("--step", "K", "build the pyramid of water step K only, 0-based (default: every step; the lists serve all steps)", a.step);
+    p.option("--step", "K", "build the pyramid of water step K only, 0-based (default: every step; the lists serve all steps);\n"
+             "      the first step's pyramid is whole, a later step's holds its water only, where it is drawn: the renderers\n"
+             "      take the terrain from the first step's", a.step);
     p.option("--threads", "N", "worker threads (default 0 = all cores)", a.threads);
     p.flag("--no-lists", "build the surface pyramid only (no .hci)", noLists);
     p.flag("--no-pyramid", "build the influence lists only (no .hcp)", noPyramid);
@@ -91,14 +93,16 @@ void printPyramidSummary(const std::string& path, const hc::Grid& grid, const hc
     if (grid.steps.size() > 1) std::printf("  step %zu       at %.9g s, %llu wet cells\n", grid.step, grid.stepTimeS(), (unsigned long long)grid.steps[grid.step].wetCells);
     std::printf("  pyramid      -> %s\n", path.c_str());
     std::printf("    levels     0..%d (spacing %g .. %g m), %d channel%s\n", p.topLevel(), p.spacingM(0), p.spacingM(p.topLevel()), p.channels,
-                p.channels == 1 ? " (elevation)" : "s (elevation, water level, wet share)");
+                p.channels == 1   ? " (elevation)"
+                : p.waterOnly() ? "s (water level, wet share; the terrain is step 0's), in the tiles where water is drawn"
+                                : "s (elevation, water level, wet share)");
     std::printf("    samples    %llu (%.2f per cell per channel)\n", (unsigned long long)p.sampleCount(),
                 double(p.sampleCount()) / double(p.channels) / double(std::max<size_t>(1, grid.cellCount())));
     std::printf("    bytes      %.1f MB (%.1f per cell)\n", double(p.bytes()) / 1e6, double(p.bytes()) / double(std::max<size_t>(1, grid.cellCount())));
     std::printf("    level  spacing m    tiles   max error vs next level m\n");
     for (const auto& L : p.levels) {
         float worst = 0;
-        for (size_t i = 0; i < L.parentErrorM.size(); i += size_t(p.channels)) worst = std::max(worst, L.parentErrorM[i]);
+        for (size_t i = 0; i < L.parentErrorM.size(); i += size_t(p.channels)) worst = std::max(worst, L.parentErrorM[i]);  // the first channel's
         std::printf("    %5d %10g %8zu   %.4g\n", L.level, p.spacingM(L.level), L.tileCount(), double(worst));
     }
     std::printf("    time       %.3f s build (%.2f M samples/s) + %.3f s write\n", buildS, double(p.sampleCount()) / buildS / 1e6, writeS);
@@ -126,7 +130,9 @@ int main(int argc, char** argv) {
             // One pyramid per water step; the grid switches steps reading only the next step's section.
             if (a.step < 0 && i > 0) hc::readGridStep(a.gridPath, grid, i);
             clock.lap();
-            const hc::influence::SurfacePyramid pyramid = hc::influence::buildSurfacePyramid(grid, a.params, a.threads, !a.quiet);
+            hc::influence::SurfacePyramid pyramid = hc::influence::buildSurfacePyramid(grid, a.params, a.threads, !a.quiet);
+            // A scenario's later steps keep their water only: the first step's pyramid holds the terrain for all.
+            if (grid.steps.size() > 1 && grid.step > 0) pyramid = hc::influence::waterPyramidOf(pyramid);
             const double buildS = clock.lap();
             hc::influence::writeSurfacePyramid(pyramid, a.pyramidPaths[i]);
             printPyramidSummary(a.pyramidPaths[i], grid, pyramid, buildS, clock.lap());

@@ -100,6 +100,7 @@ namespace {
 void attachScene(const char* program, LoadedScene& s, const std::string& gridPath, const RenderSetup& setup, size_t step, bool quiet) {
     s.scene.reset();
     s.pyramid.reset();
+    s.basePyramid.reset();
     const size_t stepCount = s.file ? s.file->shape().stepCount() : s.grid.stepCount();
     const std::string pyramidPath =
         setup.pyramidPath.empty() ? influence::defaultPyramidPath(gridPath, step, stepCount) : setup.pyramidPath;
@@ -115,15 +116,34 @@ void attachScene(const char* program, LoadedScene& s, const std::string& gridPat
         try {
             s.pyramid = s.file ? influence::readSurfacePyramid(pyramidPath, s.file->info(), setup.params)
                                : influence::readSurfacePyramid(pyramidPath, s.grid, setup.params);
-            if (!quiet) std::fprintf(stderr, "%s: using surface pyramid %s\n", program, pyramidPath.c_str());
+            // A later step's water pyramid: the terrain comes from the first step's (influence/pyramid.h).
+            std::string basePath;
+            if (s.pyramid->waterOnly()) {
+                const Grid& shape = s.file ? s.file->shape() : s.grid;
+                const uint64_t structure = s.file ? s.file->info().structureHash : s.grid.structureHash();
+                basePath = influence::defaultPyramidPath(gridPath, 0, stepCount);
+                if (shape.steps.empty()) throw Error(pyramidPath + ": a water pyramid, but the grid has no water steps");
+                try {
+                    s.basePyramid = influence::readSurfacePyramid(basePath, shape, structure, shape.steps[0].contentHash, setup.params);
+                } catch (const Error& e) {
+                    s.pyramid.reset();
+                    throw Error(pyramidPath + " holds this step's water only and its base, the first step's pyramid, is not usable (" +
+                                e.what() + ")");
+                }
+            }
+            if (!quiet)
+                std::fprintf(stderr, "%s: using surface pyramid %s%s\n", program, pyramidPath.c_str(),
+                             basePath.empty() ? "" : (" (water; terrain from " + basePath + ")").c_str());
         } catch (const Error& e) {
             if (!setup.pyramidPath.empty()) throw;
+            s.pyramid.reset();
             std::fprintf(stderr, "%s: %s: not used, every texel summed from the kernels (hc-influence rebuilds it)\n", program, e.what());
         }
     }
-    const influence::SurfacePyramid* pyramid = s.pyramid ? &*s.pyramid : nullptr;
-    s.scene = s.file ? std::make_unique<render::Scene>(*s.file, setup.params, pyramid)
-                     : std::make_unique<render::Scene>(s.grid, s.lists, pyramid);
+    const influence::SurfacePyramid* base = s.basePyramid ? &*s.basePyramid : s.pyramid ? &*s.pyramid : nullptr;
+    const influence::SurfacePyramid* water = s.basePyramid && s.pyramid ? &*s.pyramid : nullptr;
+    s.scene = s.file ? std::make_unique<render::Scene>(*s.file, setup.params, base, water)
+                     : std::make_unique<render::Scene>(s.grid, s.lists, base, water);
 }
 
 }  // namespace

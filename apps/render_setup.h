@@ -48,6 +48,7 @@ struct LoadedScene {
     influence::InfluenceLists lists;
     std::unique_ptr<GridRegionReader> file;  // out of core; then grid and lists stay empty
     std::optional<influence::SurfacePyramid> pyramid;
+    std::optional<influence::SurfacePyramid> basePyramid;  // where `pyramid` is a later step's water pyramid: the first step's
     std::unique_ptr<render::Scene> scene;
 };
 // In memory (a cache named with --cache, one beside the grid, or none and not `outOfCoreWithoutCache`): reads the
@@ -55,7 +56,8 @@ struct LoadedScene {
 // cache beside the grid, none named and `outOfCoreWithoutCache`): opens the grid file for region reads
 // (render::Scene), saying so. Then reads the surface pyramid (default: the grid's path with .hcp) when there is a valid one
 // (saying which, or why none is used: missing, stale or damaged ones are not rebuilt here: hc-influence does),
-// and prepares the scene, all for water step setup.step (the step's own pyramid: influence::defaultPyramidPath).
+// and prepares the scene, all for water step setup.step (the step's own pyramid: influence::defaultPyramidPath; a later
+// step's water pyramid with the first step's as its base).
 // Throws hc::Error.
 std::unique_ptr<LoadedScene> loadScene(const char* program, const std::string& gridPath, const RenderSetup& setup,
                                        bool outOfCoreWithoutCache = false);

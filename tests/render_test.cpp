@@ -4,6 +4,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <random>
@@ -1331,6 +1332,70 @@ TEST(RenderWater, TexelsDrawTheExactLevelField) {
     EXPECT_GT(wet, 10000u);
     EXPECT_LE(differ * 1000, wet);
     EXPECT_LE(worst, 1e-3);
+}
+
+}  // namespace
+
+namespace {
+
+// A later water step renders from the first step's pyramid (its terrain) and its own water pyramid exactly as from
+// its own whole pyramid: the same bits in every layer of the frame. The water pyramid keeps exactly the whole one's
+// tiles where water is drawn, with their water samples; and a water pyramid over the wrong base is refused.
+TEST(RenderWater, WaterPyramidOfALaterStepRendersAsItsWholePyramid) {
+    HC_REQUIRE_DATA(dem, "hef_srtm.tif");
+    const std::string path = (std::filesystem::temp_directory_path() / ("hc_render_steps_" + std::to_string(::getpid()) + ".hcg")).string();
+    hc::ingest::Options o;
+    o.input = dem;
+    o.toleranceM = 1;
+    o.maxCellM = 512;
+    o.water = hc::ingest::WaterSource::Level;
+    o.waterLevelsM = {1900, 2000, 2100};
+    hc::ingest::LoadReport rep;
+    hc::ingest::ingestToFile(o, path, rep);
+    const hc::Grid g0 = hc::readGrid(path, nullptr, 0), g2 = hc::readGrid(path, nullptr, 2);
+    std::filesystem::remove(path);
+    const auto lists = hc::influence::buildInfluenceLists(g2, hc::influence::KernelParams{}, 0, false);
+    const auto base = hc::influence::buildSurfacePyramid(g0, lists.params()), whole = hc::influence::buildSurfacePyramid(g2, lists.params());
+    const auto water = hc::influence::waterPyramidOf(whole);
+    ASSERT_EQ(water.channels, 2);
+    size_t kept = 0, dropped = 0;
+    for (size_t t = 0; t < whole.levels.size(); ++t) {
+        const auto& W = whole.levels[t];
+        const auto& P = water.levels[t];
+        const size_t plane = size_t(W.tileSide) * size_t(W.tileSide);
+        for (size_t tile = 0; tile < W.tileCount(); ++tile) {
+            const float* z = &W.samples[tile * 3 * plane];
+            bool drawn = false;
+            for (size_t s = 0; s < plane; ++s) drawn = drawn || (z[2 * plane + s] >= 0.5f && z[plane + s] > z[s]);
+            const long at = P.findTile(W.keys[tile]);
+            ASSERT_EQ(at >= 0, drawn) << "level " << t << " tile " << tile;
+            if (at < 0) {
+                ++dropped;
+                continue;
+            }
+            ++kept;
+            EXPECT_EQ(0, std::memcmp(&P.samples[size_t(at) * 2 * plane], z + plane, 2 * plane * sizeof(float)));
+        }
+    }
+    EXPECT_GT(kept, 10u);
+    EXPECT_GT(dropped, kept) << "most of an alpine domain is dry at 2100 m";
+    EXPECT_LT(water.bytes(), whole.bytes() / 2);
+
+    const Scene a(g2, lists, &whole), b(g2, lists, &base, &water);
+    const Camera c = overviewCamera(a, 320, 200);
+    RenderOptions opt;
+    opt.texelsPerSide = 128;
+    Timings ta, tb;
+    const Frame fa = renderFrame(a, c, opt, ta), fb = renderFrame(b, c, opt, tb);
+    EXPECT_GT(ta.cascades.at(0).pyramidTexels, 1000u);
+    EXPECT_EQ(fa.rgb, fb.rgb);
+    EXPECT_EQ(0, std::memcmp(fa.distanceM.data(), fb.distanceM.data(), fa.distanceM.size() * sizeof(float)));
+    EXPECT_EQ(fa.waterDepthM, fb.waterDepthM);
+    size_t wet = 0;
+    for (float d : fa.waterDepthM) wet += d > 0;
+    EXPECT_GT(wet, 500u) << "the flood must be in view for the comparison to mean anything";
+    EXPECT_THROW(Scene(g2, lists, &whole, &water), hc::Error) << "the base must be the first step's";
+    EXPECT_THROW(Scene(g2, lists, &water), hc::Error) << "a water pyramid is no base";
 }
 
 }  // namespace

@@ -8,12 +8,12 @@
 #   hc-ingest TERRAIN -o dry.hcg                        the terrain alone (the static part's size without water)
 #   hc-ingest TERRAIN --water-surface run.nc -o f.hcg   the scenario: one structure, STEPS steps
 #   hc-influence f.hcg --no-pyramid                     the lists (shared by every step)
-#   hc-influence f.hcg --no-lists                       every step's pyramid (f.step0000.hcp ...)
+#   hc-influence f.hcg --no-lists                       every step's pyramid (f.step0000.hcp whole, the later ones water)
 #   hc-render f.hcg --steps 0:STEPS-1 --backend cpu     one 1280x720 image per step from one camera: the per-step
 #                                                       switch (read the step, its pyramid, a new scene) and frame
 #   hc-view f.hcg --play --frames 21 --backend cpu      (under xvfb-run, where installed) the viewer's last switch
 # and prints a markdown table (also WORKDIR/steps.csv; logs WORKDIR/<stage>.log and .time). HC_BIN (default
-# build/bin) is where the tools are. Flat levels are a bathtub-like flood, not a simulation: the figures measure the
+# build/bin) is where the tools are; HC_STEPS_TOLERANCE (default 1) the ingest tolerance in metres. Flat levels are a bathtub-like flood, not a simulation: the figures measure the
 # file layout, I/O and per-step work, which depend on the wet cells per step, not on how the water got there.
 set -uo pipefail
 
@@ -63,8 +63,9 @@ run() {  # run NAME COMMAND...: timed, logged, one CSV row
   rss=$(awk -F': ' '/Maximum resident/ { printf "%.0f", $2 / 1024 }' "$name.time")
   echo "$name,$s,$rss,$rc" >> steps.csv
 }
-run ingest_dry "$bin/hc-ingest" terrain.tif -o dry.hcg --quiet
-run ingest_steps "$bin/hc-ingest" terrain.tif -o f.hcg --water-surface run.nc
+tol=${HC_STEPS_TOLERANCE:-1}
+run ingest_dry "$bin/hc-ingest" terrain.tif -o dry.hcg --tolerance "$tol" --quiet
+run ingest_steps "$bin/hc-ingest" terrain.tif -o f.hcg --tolerance "$tol" --water-surface run.nc
 run lists "$bin/hc-influence" f.hcg --no-pyramid --quiet
 run pyramids "$bin/hc-influence" f.hcg --no-lists
 run render_steps "$bin/hc-render" f.hcg -o img.png --steps "0:$((steps - 1))" --size 1280x720 --backend cpu --texels 1024
@@ -79,22 +80,24 @@ dry_cells=$("$bin/hc-info" dry.hcg --json | python3 -c 'import json, sys; print(
 fsize=$(stat -c %s f.hcg)
 dsize=$(stat -c %s dry.hcg)
 psize=$(cat f.step*.hcp | wc -c)
+base=$(stat -c %s f.step0000.hcp)
 echo
-echo "Terrain: ${side}^2 px of 20 m (South Glacier, mirrored); $steps steps, water levels 1700..2200 m, one NetCDF variable over time."
+echo "Terrain: ${side}^2 px of 20 m (South Glacier, mirrored), tolerance $tol m; $steps steps, water levels 1700..2200 m, one NetCDF variable over time."
 echo
 echo "| stage | wall s | peak RSS MiB | exit |"
 echo "|---|---|---|---|"
 tail -n +2 steps.csv | while IFS=, read -r n s r rc; do echo "| $n | $s | $r | $rc |"; done
 echo
-python3 - "$cells" "$wet" "$dry_cells" "$fsize" "$dsize" "$psize" "$steps" <<'PY'
+python3 - "$cells" "$wet" "$dry_cells" "$fsize" "$dsize" "$psize" "$steps" "$base" <<'PY'
 import sys
-cells, wet, dcells, fsize, dsize, psize, steps = map(int, sys.argv[1:])
+cells, wet, dcells, fsize, dsize, psize, steps, base = map(int, sys.argv[1:])
 static = 12 * cells
 print(f"- cells: {cells:,} with water steps ({dcells:,} for the dry terrain alone: wet/dry edges of every step keep cells apart)")
 print(f"- grid file: {fsize / 1e6:.1f} MB = static part {static / 1e6:.1f} MB (12 B a cell) + steps {(fsize - static) / 1e6:.1f} MB")
 print(f"- per step: {wet / steps:,.0f} wet cells on average, {(fsize - static) / steps / 1e3:.1f} kB a step "
       f"(8 B a wet cell: {8 * wet / steps / 1e3:.1f} kB; the rest is the step table, hashes, block checksums and alignment)")
-print(f"- pyramids: {psize / 1e6:.1f} MB for {steps} steps, {psize / steps / 1e6:.2f} MB a step")
+print(f"- pyramids: {psize / 1e6:.1f} MB for {steps} steps: the first step's whole {base / 1e6:.2f} MB, each later step's water "
+      f"{(psize - base) / (steps - 1) / 1e6:.2f} MB on average")
 PY
 python3 - <<'PY'
 import re, statistics

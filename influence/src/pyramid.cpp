@@ -37,12 +37,19 @@ long SurfacePyramid::tileAt(int t, uint64_t i, uint64_t j) const {
     return L.findTile(key);
 }
 
+int SurfacePyramid::channelIndex(PyramidChannel c) const {
+    const int k = int(c);
+    if (channels == 2) return c == PyramidChannel::Elevation ? -1 : k - 1;
+    return k < channels ? k : -1;
+}
+
 std::optional<float> SurfacePyramid::sample(int t, uint64_t i, uint64_t j, PyramidChannel c) const {
     const long tile = tileAt(t, i, j);
-    if (tile < 0) return std::nullopt;
+    const int k = channelIndex(c);
+    if (tile < 0 || k < 0) return std::nullopt;
     const Level& L = levels[size_t(t)];
     const size_t side = size_t(L.tileSide);
-    return L.samples[(size_t(tile) * size_t(channels) + size_t(c)) * side * side + (j % side) * side + (i % side)];
+    return L.samples[(size_t(tile) * size_t(channels) + size_t(k)) * side * side + (j % side) * side + (i % side)];
 }
 
 SurfacePyramid::Cursor::Cursor(const SurfacePyramid& p, int t) : p_(p), t_(t), side_(size_t(p.levels[size_t(t)].tileSide)) {}
@@ -248,6 +255,36 @@ SurfacePyramid buildSurfacePyramid(const Grid& g, const KernelParams& params, un
         L.parentErrorM = owned->errors[size_t(t)];
     }
     measureParentErrors(p, owned->errors, threads);
+    p.storage = std::move(owned);
+    return p;
+}
+
+SurfacePyramid waterPyramidOf(const SurfacePyramid& whole) {
+    if (whole.channels != 3) throw Error("a water pyramid is made from a pyramid with water channels");
+    SurfacePyramid p = whole;
+    p.channels = 2;
+    auto owned = std::make_shared<SurfacePyramid::Storage>();
+    owned->keys.resize(whole.levels.size());
+    owned->samples.resize(whole.levels.size());
+    owned->errors.resize(whole.levels.size());
+    for (size_t t = 0; t < whole.levels.size(); ++t) {
+        const SurfacePyramid::Level& L = whole.levels[t];
+        const size_t plane = size_t(L.tileSide) * size_t(L.tileSide);
+        for (size_t tile = 0; tile < L.tileCount(); ++tile) {
+            const float* z = &L.samples[tile * 3 * plane];
+            const float* level = z + plane;
+            const float* share = z + 2 * plane;
+            bool drawn = false;  // the water rule at some sample (surface.h; NaN compares false)
+            for (size_t s = 0; s < plane && !drawn; ++s) drawn = double(share[s]) >= kWetShareMin && level[s] > z[s];
+            if (!drawn) continue;
+            owned->keys[t].push_back(L.keys[tile]);
+            owned->samples[t].insert(owned->samples[t].end(), level, level + 2 * plane);
+            owned->errors[t].insert(owned->errors[t].end(), &L.parentErrorM[tile * 3 + 1], &L.parentErrorM[tile * 3 + 3]);
+        }
+        p.levels[t].keys = owned->keys[t];
+        p.levels[t].samples = owned->samples[t];
+        p.levels[t].parentErrorM = owned->errors[t];
+    }
     p.storage = std::move(owned);
     return p;
 }

@@ -7,7 +7,8 @@
 //   32      8     grid content hash (Grid::contentHash): samples depend on the values too, so it must match
 //   40      8     finest cell size [m], double
 //   48      1     root level
-//   49      1     channels (1: elevation; 3: elevation, water level, wet share: pyramid.h)
+//   49      1     channels (1: elevation; 3: elevation, water level, wet share; 2: water level, wet share, a step's
+//                 water pyramid: pyramid.h)
 //   50      1     tile side log2
 //   51      1     level count (top level + 1)
 //   52      4     kernel id (kernel.h)
@@ -110,8 +111,9 @@ SurfacePyramid readSurfacePyramid(const std::string& path, const Grid& grid, uin
     if (p.rootLevel != grid.rootLevel) file.fail(off::rootLevel, "root level " + std::to_string(p.rootLevel) + ", the grid's is " + std::to_string(grid.rootLevel));
     if (p.finestCellM != grid.finestCellM) file.fail(off::finestCellM, "finest cell size differs from the grid's");
     // The rest of the shape must be what this reader builds.
-    const int wantChannels = grid.findLayer("water_depth") >= 0 ? 3 : 1;
-    if (p.channels != wantChannels) file.fail(off::channels, "declares " + std::to_string(p.channels) + " channels, expected " + std::to_string(wantChannels));
+    const bool water = grid.findLayer("water_depth") >= 0;
+    if (water ? p.channels != 3 && p.channels != 2 : p.channels != 1)
+        file.fail(off::channels, "declares " + std::to_string(p.channels) + " channels, expected " + (water ? "3 (or 2: water only)" : "1"));
     if (tileLog2 != kPyramidTileLog2) file.fail(off::tileLog2, "tile side 2^" + std::to_string(tileLog2) + ", this reader uses 2^" + std::to_string(kPyramidTileLog2));
     if (levelCount != std::max(0, p.rootLevel - kPyramidTileLog2) + 1)
         file.fail(off::levelCount, "declares " + std::to_string(levelCount) + " levels, a root level of " + std::to_string(p.rootLevel) +

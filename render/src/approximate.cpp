@@ -109,11 +109,16 @@ uint64_t copyPyramidTexels(const Scene& scene, const Cascade& c, CascadeTextures
     if (t < 0 || t > p->topLevel() || std::abs(p->spacingM(int(t)) - c.texelM) > 1e-9 * c.texelM) return 0;
     *level = int(t);
     const size_t channels = size_t(p->channels);
+    // A later step of a scenario: the base's elevation, the step's water pyramid's water (pyramid.h); where the
+    // water pyramid holds no tile the step draws no water.
+    const influence::SurfacePyramid* wp = scene.waterPyramid();
     const double i0 = std::round(c.x0 / c.texelM), j0 = std::round(c.y0 / c.texelM);
     const float minDepth = float(waterMinDepthM);
     std::vector<uint64_t> copied(resolveThreads(threads), 0);
     parallelFor(todo.size(), 16, threads, [&](size_t b, size_t e, unsigned worker) {
         influence::SurfacePyramid::Cursor samples(*p, int(t));  // neighbouring rows share tiles
+        std::optional<influence::SurfacePyramid::Cursor> waterSamples;
+        if (wp) waterSamples.emplace(*wp, int(t));
         const size_t plane = samples.plane();
         for (size_t j = b; j < e; ++j) {
             Todo& span = todo[j];
@@ -127,8 +132,9 @@ uint64_t copyPyramidTexels(const Scene& scene, const Cascade& c, CascadeTextures
                 const size_t at = j * size_t(c.n) + size_t(i);
                 if (std::isnan(s[0])) return true;  // outside every cell: no surface, as the kernel path leaves it
                 tex.terrain.h[at] = s[0];
-                if (channels == 3) {
-                    const float lvl = s[plane], share = s[2 * plane];
+                const float* w = wp ? waterSamples->find(uint64_t(gi), uint64_t(gj)) : channels == 3 ? s + plane : nullptr;
+                if (w) {
+                    const float lvl = w[0], share = w[plane];
                     if (!std::isnan(lvl) && double(share) >= influence::kWetShareMin) {
                         const float d = lvl - s[0];
                         if (d > 0) tex.depth[at] = d;

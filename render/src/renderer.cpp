@@ -31,13 +31,25 @@ std::string RenderOptions::validate() const {
 
 namespace {
 
-void checkPyramid(const influence::SurfacePyramid* pyramid, uint64_t structureHash, uint64_t contentHash, const influence::KernelParams& params,
-                  const char* kernelOf) {
+void checkOnePyramid(const influence::SurfacePyramid* pyramid, uint64_t structureHash, uint64_t contentHash, const influence::KernelParams& params,
+                     const char* kernelOf) {
     if (pyramid && (pyramid->structureHash != structureHash || pyramid->contentHash != contentHash))
         throw Error("the surface pyramid does not belong to this grid");
     if (pyramid && (pyramid->params.sigma != params.sigma || pyramid->params.truncation != params.truncation ||
                     pyramid->params.kernelId != params.kernelId))
         throw Error(std::string("the surface pyramid was built for another kernel than ") + kernelOf);
+}
+
+// A whole pyramid of the shown values; or a base (the first step's) and the shown step's water pyramid (pyramid.h).
+void checkPyramid(const influence::SurfacePyramid* pyramid, const influence::SurfacePyramid* water, const Grid& shape,
+                  uint64_t structureHash, uint64_t contentHash, const influence::KernelParams& params, const char* kernelOf) {
+    if (pyramid && pyramid->waterOnly()) throw Error("a water pyramid is not a base pyramid: the terrain comes from the first step's");
+    if (!water) return checkOnePyramid(pyramid, structureHash, contentHash, params, kernelOf);
+    if (!water->waterOnly()) throw Error("the water pyramid holds more than water");
+    if (!pyramid || pyramid->channels != 3 || shape.steps.empty())
+        throw Error("a water pyramid needs the base pyramid of the scenario's first step");
+    checkOnePyramid(water, structureHash, contentHash, params, kernelOf);
+    checkOnePyramid(pyramid, structureHash, shape.steps[0].contentHash, params, kernelOf);
 }
 
 // The sum of DESIGN.md section 4 over the list of cell k, in double, as the approximation evaluates it.
@@ -83,12 +95,13 @@ double scenarioDepthMax(const Grid& grid, double shown) {
 
 }  // namespace
 
-Scene::Scene(const Grid& grid, const influence::InfluenceLists& lists, const influence::SurfacePyramid* pyramid)
-    : grid_(grid), lists_(&lists), pyramid_(pyramid), params_(lists.params()), cellCount_(grid.cellCount()) {
+Scene::Scene(const Grid& grid, const influence::InfluenceLists& lists, const influence::SurfacePyramid* pyramid,
+             const influence::SurfacePyramid* waterPyramid)
+    : grid_(grid), lists_(&lists), pyramid_(pyramid), waterPyramid_(waterPyramid), params_(lists.params()), cellCount_(grid.cellCount()) {
     if (grid.cellCount() == 0) throw Error("the grid has no cells: nothing to render");
     if (lists.cellCount() != grid.cellCount() || lists.gridStructureHash() != grid.structureHash())
         throw Error("the influence lists do not belong to this grid");
-    checkPyramid(pyramid, grid.structureHash(), grid.contentHash(), lists.params(), "the influence lists");
+    checkPyramid(pyramid, waterPyramid, grid, grid.structureHash(), grid.contentHash(), lists.params(), "the influence lists");
     waterLayer_ = grid.findLayer("water_depth");
     grid.boundsLocal(xMin, yMin, xMax, yMax);
     elevationMin = HUGE_VAL, elevationMax = -HUGE_VAL, depthMax = 0;
@@ -112,11 +125,13 @@ Scene::Scene(const Grid& grid, const influence::InfluenceLists& lists, const inf
     depthColorMaxM = scenarioDepthMax(grid, depthMax);
 }
 
-Scene::Scene(const GridRegionReader& file, const influence::KernelParams& params, const influence::SurfacePyramid* pyramid)
-    : grid_(file.shape()), file_(&file), pyramid_(pyramid), params_(params), cellCount_(file.cellCount()) {
+Scene::Scene(const GridRegionReader& file, const influence::KernelParams& params, const influence::SurfacePyramid* pyramid,
+             const influence::SurfacePyramid* waterPyramid)
+    : grid_(file.shape()), file_(&file), pyramid_(pyramid), waterPyramid_(waterPyramid), params_(params), cellCount_(file.cellCount()) {
     if (cellCount_ == 0) throw Error(file.path() + ": the grid has no cells: nothing to render");
     if (std::string why = params.validate(); !why.empty()) throw Error("kernel parameters: " + why);
-    checkPyramid(pyramid, file.info().structureHash, file.info().contentHash, params, "this render's --sigma/--truncation");
+    checkPyramid(pyramid, waterPyramid, file.shape(), file.info().structureHash, file.info().contentHash, params,
+                 "this render's --sigma/--truncation");
     const GridSummary& sum = file.info().summary;
     waterLayer_ = grid_.findLayer("water_depth");
     const double f = grid_.finestCellM;

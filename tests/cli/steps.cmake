@@ -76,8 +76,13 @@ mk 0,1.5,3 'hours since 2024-06-01 00:00:00' run.nc && mk 0,1,2 'months since 20
 endif()
 
 # One pyramid per step, each built from the lists that serve all steps.
+# The first step's pyramid is whole; the later steps' hold their water only, in the tiles where it is drawn (smaller).
 hc_cli_test(influence.steps 0 [[step 2 +at 7200 s, [0-9]+ wet cells.*pyramid +-> f\.step0002\.hcp]]
   --setup ${HEF_STEPS} --exists f.hci --exists f.step0000.hcp --exists f.step0001.hcp --exists f.step0002.hcp --absent f.hcp
+  --match [[2 channels \(water level, wet share. the terrain is step 0's\), in the tiles where water is drawn]]
+  --check [[for k in 1 2
+do test "$(stat -c %s f.step000$k.hcp)" -lt "$(stat -c %s f.step0000.hcp)" || exit 1
+done]]
   --no-match [[error:|warning]]
   -- ${INFLUENCE} f.hcg --quiet)
 hc_cli_test(influence.steps_named_pyramid nonzero [[^hc-influence: error: -p names one pyramid file but f\.hcg has 3 water steps: add --step K]]
@@ -90,6 +95,11 @@ hc_cli_test(render.steps_sequence 0 [[steps 0\.\.2 -> f_0000\.png.*  +2 +7200 +[
   --exists f_0000.png --exists f_0001.png --exists f_0002.png --absent f.png --no-match [[error|not used]]
   --check "'${PNG_CHECK}' f_0000.png && '${PNG_CHECK}' f_0002.png && ! cmp -s f_0000.png f_0002.png"
   -- ${RENDER} f.hcg -o f.png --steps 0:2 --size 320x180 --texels 128 --backend cpu)
+# A later step's water pyramid takes the terrain from the first step's: used together, or, without the first, not at all.
+hc_cli_test(render.step_water_pyramid 0 [[using surface pyramid f\.step0002\.hcp \(water. terrain from f\.step0000\.hcp\)]]
+  --setup ${HEF_STEPS} --setup [[$HC_INFLUENCE f.hcg --quiet >/dev/null]] --exists f.png
+  --check "mkdir -p alone && cp f.hcg f.hci f.step0002.hcp alone/ && cd alone && '${RENDER}' f.hcg -o a.png --step 2 --size 160x90 --texels 64 --backend cpu 2>&1 | grep -F \"f.step0002.hcp holds this step's water only and its base, the first step's pyramid, is not usable (f.step0000.hcp: no such file): not used\""
+  -- ${RENDER} f.hcg -o f.png --step 2 --size 320x180 --texels 128 --backend cpu)
 hc_cli_test(render.step_out_of_range nonzero [[^hc-render: error: f\.hcg: has no step 3: it holds 3 water steps \(0\.\.2\)]]
   --setup ${HEF_STEPS} --absent f.png
   -- ${RENDER} f.hcg -o f.png --step 3 --size 320x180 --backend cpu)

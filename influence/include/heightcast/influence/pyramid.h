@@ -19,6 +19,12 @@
 //               kWetShareMin and WaterLevel > Elevation (surface.h)
 // The water channels exist only for a grid with a water_depth layer.
 //
+// Water pyramids (a scenario of several water steps, DESIGN.md section 11): the terrain and the tree are the same in
+// every step, so only the first step's pyramid is whole (the base, 3 channels); each later step's holds its two water
+// channels (WaterLevel, WetShare, in that order) in the tiles where its water is drawn at some sample (waterPyramidOf).
+// A reader takes the elevation from the base and the water from the step's pyramid; a tile of the base that the
+// step's pyramid lacks draws no water in that step. Every tile of a water pyramid is a tile of its base.
+//
 // Bound: each tile records, per channel, parentErrorM: the largest |sample - bilinear interpolation of the
 // parent level's samples| over the tile's samples where all are defined. It is what a reader gives up at
 // this tile's points by reading the coarser level instead (measured, not estimated); 0 on the top level.
@@ -62,15 +68,18 @@ public:
 
     double finestCellM = 1;
     int rootLevel = 0;
-    int channels = 1;  // 1 (elevation) or 3 (with water)
+    int channels = 1;  // 1 (elevation), 3 (with water), or 2: a water pyramid (water level, wet share; above)
     KernelParams params;
     uint64_t structureHash = 0, contentHash = 0;  // of the grid it samples
     std::vector<Level> levels;                    // index t = level t, 0 .. top
 
     int topLevel() const { return int(levels.size()) - 1; }
     double spacingM(int t) const { return finestCellM * double(uint64_t{1} << t); }
-    // The sample at lattice point (i, j) of level t, or nullopt where no tile of level t is stored there
-    // (a stored NaN, undefined surface, comes back as NaN).
+    bool waterOnly() const { return channels == 2; }
+    // Where channel c lies in a tile (its plane index), or -1 when this pyramid does not hold it.
+    int channelIndex(PyramidChannel c) const;
+    // The sample at lattice point (i, j) of level t, or nullopt where no tile of level t is stored there or the
+    // pyramid has no such channel (a stored NaN, undefined surface, comes back as NaN).
     std::optional<float> sample(int t, uint64_t i, uint64_t j, PyramidChannel c) const;
     // The tile of level t holding lattice point (i, j), or -1.
     long tileAt(int t, uint64_t i, uint64_t j) const;
@@ -83,8 +92,8 @@ public:
     class Cursor {
     public:
         Cursor(const SurfacePyramid& p, int t);
-        // The elevation sample at lattice point (i, j), with channel c at [c * plane()], or nullptr where no tile
-        // of this level is stored there.
+        // The first channel's sample at lattice point (i, j), with channel index c (channelIndex) at [c * plane()],
+        // or nullptr where no tile of this level is stored there.
         const float* find(uint64_t i, uint64_t j);
         size_t plane() const { return side_ * side_; }
 
@@ -106,9 +115,14 @@ public:
 // reach it (gathered once per tile, narrowed per block of 4 x 4 samples), in double, without influence lists.
 // Throws hc::Error for invalid parameters.
 SurfacePyramid buildSurfacePyramid(const Grid& grid, const KernelParams& params, unsigned threads = 0, bool progress = false);
+// The water pyramid of a whole one (3 channels; above): its water channels and their parent errors, in the tiles with
+// a sample where water is drawn (the water rule of surface.h: wet share >= kWetShareMin, level above the elevation).
+// Throws hc::Error for a pyramid without water channels.
+SurfacePyramid waterPyramidOf(const SurfacePyramid& whole);
 
 // The .hcp file: written atomically; read memory-mapped, validated (checksums, sizes, keys ascending and
-// inside the domain) and checked to belong to `grid` with `params` (like the .hci cache). Throws hc::Error.
+// inside the domain) and checked to belong to `grid` with `params` (like the .hci cache); a water pyramid (2 channels)
+// is read for a grid with water. Throws hc::Error.
 void writeSurfacePyramid(const SurfacePyramid& pyramid, const std::string& path);
 SurfacePyramid readSurfacePyramid(const std::string& path, const Grid& grid, const KernelParams& params);
 // The same for a grid file not read whole (GridRegionReader): its geometry and the hashes its header stores.

@@ -107,16 +107,22 @@ struct Timings {
 //   texels that need the kernels read the cells around them, build their lists and drop them, a block of texels
 //   at a time (influence/region.h), so memory follows the cascades, not the grid. The frames are the same bits.
 // With a surface pyramid (influence/pyramid.h) cascade texel sizes are the pyramid's spacings (powers of two of the
-// finest cell) and texels where the pyramid holds that level are copied from it instead of summed.
+// finest cell) and texels where the pyramid holds that level are copied from it instead of summed. In a scenario's
+// later water steps the pyramid is the base (the first step's, whose elevation every step shares) and a water
+// pyramid (the shown step's water channels) gives the water.
 class Scene {
 public:
     // All must outlive the scene. Throws hc::Error if the lists or the pyramid are not the grid's, or the
     // pyramid's kernel is not the lists'.
-    Scene(const Grid& grid, const influence::InfluenceLists& lists, const influence::SurfacePyramid* pyramid = nullptr);
+    // A water pyramid (channels 2) must be the grid's shown step's, and `pyramid` then the base: whole (3 channels),
+    // built for the scenario's first step (Grid::steps[0]).
+    Scene(const Grid& grid, const influence::InfluenceLists& lists, const influence::SurfacePyramid* pyramid = nullptr,
+          const influence::SurfacePyramid* waterPyramid = nullptr);
     // Out of core: `file` and `pyramid` must outlive the scene. The bounds come from the file's stored summary
     // (format 1.2; older files are read whole once by GridRegionReader). Throws hc::Error if the pyramid is not the
     // file's grid's or was built for another kernel.
-    Scene(const GridRegionReader& file, const influence::KernelParams& params, const influence::SurfacePyramid* pyramid = nullptr);
+    Scene(const GridRegionReader& file, const influence::KernelParams& params, const influence::SurfacePyramid* pyramid = nullptr,
+          const influence::SurfacePyramid* waterPyramid = nullptr);
 
     bool outOfCore() const { return file_ != nullptr; }
     // The grid: in memory its cells; out of core its shape only (geometry, CRS, layers; no cells).
@@ -127,6 +133,7 @@ public:
     // In memory only (throws hc::Error out of core).
     const influence::InfluenceLists& lists() const;
     const influence::SurfacePyramid* pyramid() const { return pyramid_; }
+    const influence::SurfacePyramid* waterPyramid() const { return waterPyramid_; }  // nullptr: the pyramid's own water
     bool hasWater() const { return waterLayer_ >= 0; }
     int waterLayer() const { return waterLayer_; }  // grid layer of water_depth, or -1
     // Per cell, computed once for every frame (in memory; out of core per region): centre [m local] and the
@@ -158,6 +165,7 @@ private:
     const influence::InfluenceLists* lists_ = nullptr;
     const GridRegionReader* file_ = nullptr;
     const influence::SurfacePyramid* pyramid_ = nullptr;
+    const influence::SurfacePyramid* waterPyramid_ = nullptr;
     influence::KernelParams params_;
     uint64_t cellCount_ = 0;
     int waterLayer_ = -1;
