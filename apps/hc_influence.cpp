@@ -1,6 +1,7 @@
 // hc-influence: grid -> influencing-cell lists (.hci cache) and the surface pyramid (.hcp).
 #include <algorithm>
 #include <cstdio>
+#include <optional>
 
 #include "cli.h"
 #include "heightcast/core/error.h"
@@ -126,9 +127,13 @@ int main(int argc, char** argv) {
             hc::influence::writeInfluenceCache(lists, a.out);
             printListsSummary(a, lists, buildS, clock.lap());
         }
+        std::optional<hc::StaticDigests> digests;
         for (size_t i = 0; a.pyramid && i < a.pyramidPaths.size(); ++i) {
             // One pyramid per water step; the grid switches steps reading only the next step's section.
-            if (a.step < 0 && i > 0) hc::readGridStep(a.gridPath, grid, i);
+            if (a.step < 0 && i > 0) {
+                if (!digests) digests = hc::staticDigestsOf(grid);  // hashed once, not per step
+                hc::readGridStep(a.gridPath, grid, i, &*digests);
+            }
             clock.lap();
             hc::influence::SurfacePyramid pyramid = hc::influence::buildSurfacePyramid(grid, a.params, a.threads, !a.quiet);
             // A scenario's later steps keep their water only: the first step's pyramid holds the terrain for all.

@@ -99,8 +99,7 @@ namespace {
 // the grid or the file. `quiet`: say only what went wrong (the later steps of a sequence).
 void attachScene(const char* program, LoadedScene& s, const std::string& gridPath, const RenderSetup& setup, size_t step, bool quiet) {
     s.scene.reset();
-    s.pyramid.reset();
-    s.basePyramid.reset();
+    s.pyramid.reset();  // the base pyramid (the first step's) serves every later step: kept
     const size_t stepCount = s.file ? s.file->shape().stepCount() : s.grid.stepCount();
     const std::string pyramidPath =
         setup.pyramidPath.empty() ? influence::defaultPyramidPath(gridPath, step, stepCount) : setup.pyramidPath;
@@ -114,17 +113,19 @@ void attachScene(const char* program, LoadedScene& s, const std::string& gridPat
                          pyramidPath.c_str());
     } else {
         try {
-            s.pyramid = s.file ? influence::readSurfacePyramid(pyramidPath, s.file->info(), setup.params)
-                               : influence::readSurfacePyramid(pyramidPath, s.grid, setup.params);
+            s.pyramid = s.file     ? influence::readSurfacePyramid(pyramidPath, s.file->info(), setup.params)
+                        : s.hashes ? influence::readSurfacePyramid(pyramidPath, s.grid, s.hashes->structure, s.hashes->content, setup.params)
+                                   : influence::readSurfacePyramid(pyramidPath, s.grid, setup.params);
             // A later step's water pyramid: the terrain comes from the first step's (influence/pyramid.h).
             std::string basePath;
             if (s.pyramid->waterOnly()) {
                 const Grid& shape = s.file ? s.file->shape() : s.grid;
-                const uint64_t structure = s.file ? s.file->info().structureHash : s.grid.structureHash();
+                const uint64_t structure = s.file ? s.file->info().structureHash : s.hashes ? s.hashes->structure : s.grid.structureHash();
                 basePath = influence::defaultPyramidPath(gridPath, 0, stepCount);
                 if (shape.steps.empty()) throw Error(pyramidPath + ": a water pyramid, but the grid has no water steps");
                 try {
-                    s.basePyramid = influence::readSurfacePyramid(basePath, shape, structure, shape.steps[0].contentHash, setup.params);
+                    if (!s.basePyramid)
+                        s.basePyramid = influence::readSurfacePyramid(basePath, shape, structure, shape.steps[0].contentHash, setup.params);
                 } catch (const Error& e) {
                     s.pyramid.reset();
                     throw Error(pyramidPath + " holds this step's water only and its base, the first step's pyramid, is not usable (" +
@@ -140,10 +141,11 @@ void attachScene(const char* program, LoadedScene& s, const std::string& gridPat
             std::fprintf(stderr, "%s: %s: not used, every texel summed from the kernels (hc-influence rebuilds it)\n", program, e.what());
         }
     }
-    const influence::SurfacePyramid* base = s.basePyramid ? &*s.basePyramid : s.pyramid ? &*s.pyramid : nullptr;
-    const influence::SurfacePyramid* water = s.basePyramid && s.pyramid ? &*s.pyramid : nullptr;
+    const bool waterOnly = s.pyramid && s.pyramid->waterOnly();
+    const influence::SurfacePyramid* base = waterOnly ? &*s.basePyramid : s.pyramid ? &*s.pyramid : nullptr;
+    const influence::SurfacePyramid* water = waterOnly ? &*s.pyramid : nullptr;
     s.scene = s.file ? std::make_unique<render::Scene>(*s.file, setup.params, base, water)
-                     : std::make_unique<render::Scene>(s.grid, s.lists, base, water);
+                     : std::make_unique<render::Scene>(s.grid, s.lists, base, water, s.hashes);
 }
 
 }  // namespace
@@ -174,6 +176,10 @@ std::unique_ptr<LoadedScene> loadScene(const char* program, const std::string& g
         std::string note;
         s->lists = influence::loadOrBuildCache(s->grid, setup.params, cachePath, setup.options.threads, true, note);
         std::fprintf(stderr, "%s: %s\n", program, note.c_str());
+        if (s->grid.steps.size() > 1) {  // steps to switch: hash the cells and static values once (readGridStep)
+            s->digests = staticDigestsOf(s->grid);
+            s->hashes = GridHashes{s->digests->structureHash, s->grid.steps[setup.step].contentHash};
+        }
     }
     attachScene(program, *s, gridPath, setup, setup.step, false);
     return s;
@@ -182,7 +188,8 @@ std::unique_ptr<LoadedScene> loadScene(const char* program, const std::string& g
 void switchStep(const char* program, LoadedScene& s, const std::string& gridPath, const RenderSetup& setup, size_t step) {
     s.scene.reset();  // it refers to the grid or file replaced here
     if (s.file) s.file = std::make_unique<GridRegionReader>(gridPath, step);
-    else readGridStep(gridPath, s.grid, step);
+    else readGridStep(gridPath, s.grid, step, s.digests ? &*s.digests : nullptr);
+    if (s.digests) s.hashes = GridHashes{s.digests->structureHash, s.grid.steps.at(step).contentHash};
     attachScene(program, s, gridPath, setup, step, true);
 }
 

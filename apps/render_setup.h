@@ -49,6 +49,10 @@ struct LoadedScene {
     std::unique_ptr<GridRegionReader> file;  // out of core; then grid and lists stay empty
     std::optional<influence::SurfacePyramid> pyramid;
     std::optional<influence::SurfacePyramid> basePyramid;  // where `pyramid` is a later step's water pyramid: the first step's
+    // In memory, a grid of several water steps: its digests (hashed once at load) and the shown step's hashes (from the
+    // file's step table, checked as the step was read): a step switch hashes the step's values only.
+    std::optional<StaticDigests> digests;
+    std::optional<GridHashes> hashes;
     std::unique_ptr<render::Scene> scene;
 };
 // In memory (a cache named with --cache, one beside the grid, or none and not `outOfCoreWithoutCache`): reads the

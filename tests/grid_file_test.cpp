@@ -763,6 +763,29 @@ TEST_F(GridFile, SwitchingStepsReadsThatStepOnly) {
     expectEqualGrids(before, other);
 }
 
+// Digests known from an earlier pass (staticDigestsOf) switch steps to the same grids without hashing the cells again;
+// digests of another grid are refused like that grid, and the grid is left as it was.
+TEST_F(GridFile, SwitchingStepsWithKnownDigests) {
+    const Scenario s = tinyScenario();
+    writeScenario(s, path("flood.hcg"));
+    Grid g = hc::readGrid(path("flood.hcg"), nullptr, 0);
+    const hc::StaticDigests known = hc::staticDigestsOf(g);
+    EXPECT_EQ(known.structureHash, g.structureHash());
+    for (size_t k : {2u, 1u, 0u, 2u}) {
+        hc::readGridStep(path("flood.hcg"), g, k, &known);
+        expectEqualGrids(scenarioAt(s, k), g);
+        EXPECT_EQ(g.contentHash(), g.steps[k].contentHash) << "the table's hash is the grid's: what a Scene may be given";
+    }
+    hc::StaticDigests wrong = known;
+    ++wrong.structureHash;
+    const Grid before = g;
+    EXPECT_THROW(hc::readGridStep(path("flood.hcg"), g, 1, &wrong), hc::Error);
+    wrong = known;
+    wrong.layers.at(0).second ^= 1;  // the elevation's digest of other values
+    EXPECT_THROW(hc::readGridStep(path("flood.hcg"), g, 1, &wrong), hc::Error);
+    expectEqualGrids(before, g);
+}
+
 // Rendering step k reads step k: a damaged section of another step goes unnoticed by readGrid(k) (it is never read)
 // and is caught by every read of that step and by a full verification.
 TEST_F(GridFile, StepsAreReadLazilyAndCheckedWhenRead) {

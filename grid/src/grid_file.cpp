@@ -489,12 +489,13 @@ std::vector<std::pair<std::string, uint64_t>> staticDigests(const Grid& g) {
 // Grid::contentHash of the grid's static layers alone.
 uint64_t staticContentHash(const Grid& g) { return combineContentHash(g.structureHash(), staticDigests(g)); }
 
-// Grid::contentHash of the grid with `data` as its step, without filling its step layers.
-uint64_t stepContentHash(const Grid& g, const WaterStepData& data) {
-    auto parts = staticDigests(g);
+// Grid::contentHash of the grid with `data` as its step, without filling its step layers; from `known` digests
+// of the grid when given.
+uint64_t stepContentHash(const Grid& g, const WaterStepData& data, const StaticDigests* known = nullptr) {
+    auto parts = known ? known->layers : staticDigests(g);
     for (size_t l = 0; l < data.values.size(); ++l)
         parts.emplace_back(g.layers[g.firstStepLayer() + l].name, sparseLayerDigest(g.cellCount(), data.wet, data.values[l]));
-    return combineContentHash(g.structureHash(), parts);
+    return combineContentHash(known ? known->structureHash : g.structureHash(), parts);
 }
 
 // Fails unless `step` is one of the file's steps (a grid without `steps` has only step 0).
@@ -759,14 +760,17 @@ Grid readGrid(const std::string& path, uint16_t* fileMinor, size_t step) {
     return parseGrid(reader, step);
 }
 
-void readGridStep(const std::string& path, Grid& grid, size_t step) {
+StaticDigests staticDigestsOf(const Grid& grid) { return {grid.structureHash(), staticDigests(grid)}; }
+
+void readGridStep(const std::string& path, Grid& grid, size_t step, const StaticDigests* known) {
     const SectionedFileReader reader(path, kFormat);
     Grid g;
     Located at = parseHeader(reader, g);
     parseMeta(reader, *at.meta, g, at.cellCount, nullptr);
     parseSteps(reader, at, g);
     checkStepIndex(reader, g, step);
-    if (at.cellCount != grid.cellCount() || bytes::load<uint64_t>(reader.header() + off::structureHash) != grid.structureHash() ||
+    if (at.cellCount != grid.cellCount() ||
+        bytes::load<uint64_t>(reader.header() + off::structureHash) != (known ? known->structureHash : grid.structureHash()) ||
         g.layers.size() != grid.layers.size())
         reader.failFile("is not the grid in memory (its cells or layers differ): cannot switch its step");
     if (g.steps.empty()) {  // one step only: the grid already holds it
@@ -774,7 +778,7 @@ void readGridStep(const std::string& path, Grid& grid, size_t step) {
         return;
     }
     const WaterStepData data = loadStep(reader, at, g, step);
-    if (stepContentHash(grid, data) != g.steps[step].contentHash)  // checked before `grid` changes
+    if (stepContentHash(grid, data, known) != g.steps[step].contentHash)  // checked before `grid` changes
         reader.fail(at.steps[step]->offset, "step " + std::to_string(step) + ": content hash does not match the cells and values");
     grid.steps = g.steps;
     selectStep(grid, data, step);

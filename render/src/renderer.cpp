@@ -96,12 +96,14 @@ double scenarioDepthMax(const Grid& grid, double shown) {
 }  // namespace
 
 Scene::Scene(const Grid& grid, const influence::InfluenceLists& lists, const influence::SurfacePyramid* pyramid,
-             const influence::SurfacePyramid* waterPyramid)
+             const influence::SurfacePyramid* waterPyramid, std::optional<GridHashes> known)
     : grid_(grid), lists_(&lists), pyramid_(pyramid), waterPyramid_(waterPyramid), params_(lists.params()), cellCount_(grid.cellCount()) {
     if (grid.cellCount() == 0) throw Error("the grid has no cells: nothing to render");
-    if (lists.cellCount() != grid.cellCount() || lists.gridStructureHash() != grid.structureHash())
+    const uint64_t structure = known ? known->structure : grid.structureHash();
+    if (lists.cellCount() != grid.cellCount() || lists.gridStructureHash() != structure)
         throw Error("the influence lists do not belong to this grid");
-    checkPyramid(pyramid, waterPyramid, grid, grid.structureHash(), grid.contentHash(), lists.params(), "the influence lists");
+    if (pyramid || waterPyramid)
+        checkPyramid(pyramid, waterPyramid, grid, structure, known ? known->content : grid.contentHash(), lists.params(), "the influence lists");
     waterLayer_ = grid.findLayer("water_depth");
     grid.boundsLocal(xMin, yMin, xMax, yMax);
     elevationMin = HUGE_VAL, elevationMax = -HUGE_VAL, depthMax = 0;

@@ -174,6 +174,12 @@ private:
     uint64_t count_ = 0;
 };
 
+// A grid's two hashes (Grid::structureHash, Grid::contentHash) as known without hashing its cells again (each costs a
+// pass over every cell): from a file that checked them when it was read, or computed once for many uses.
+struct GridHashes {
+    uint64_t structure = 0, content = 0;
+};
+
 // Grid::structureHash and Grid::contentHash, computed incrementally: codes in order, and each
 // layer's values in order (layers may interleave).
 class GridHasher {

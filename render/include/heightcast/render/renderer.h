@@ -115,9 +115,10 @@ public:
     // All must outlive the scene. Throws hc::Error if the lists or the pyramid are not the grid's, or the
     // pyramid's kernel is not the lists'.
     // A water pyramid (channels 2) must be the grid's shown step's, and `pyramid` then the base: whole (3 channels),
-    // built for the scenario's first step (Grid::steps[0]).
+    // built for the scenario's first step (Grid::steps[0]). `known`: the grid's hashes as its file checked them (else
+    // computed here: a pass over every cell each, which a step switch of a large grid need not pay).
     Scene(const Grid& grid, const influence::InfluenceLists& lists, const influence::SurfacePyramid* pyramid = nullptr,
-          const influence::SurfacePyramid* waterPyramid = nullptr);
+          const influence::SurfacePyramid* waterPyramid = nullptr, std::optional<GridHashes> known = std::nullopt);
     // Out of core: `file` and `pyramid` must outlive the scene. The bounds come from the file's stored summary
     // (format 1.2; older files are read whole once by GridRegionReader). Throws hc::Error if the pyramid is not the
     // file's grid's or was built for another kernel.
