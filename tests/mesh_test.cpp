@@ -5,6 +5,7 @@
 
 #include <cmath>
 #include <filesystem>
+#include <optional>
 
 #include <gdal_priv.h>
 
@@ -229,6 +230,7 @@ struct HandMesh {
     std::vector<double> x, y;
     std::vector<std::array<int, 4>> faces;  // -1: no node (a triangle)
     std::vector<double> zb;
+    std::optional<double> zbFill;  // zb's _FillValue
     std::vector<double> times;
     std::vector<std::vector<double>> zs;  // per time, per face
     std::vector<std::vector<double>> vel; // per time, per face: a further face variable "vel" [m/s] (empty: none)
@@ -266,6 +268,7 @@ void writeHandMesh(const HandMesh& m, const std::string& path) {
     for (const auto& f : m.faces) flat.insert(flat.end(), f.begin(), f.end());
     writeAll(fn, flat.data(), GDT_Int32);
     auto zb = root->CreateMDArray("zb", {faces}, GDALExtendedDataType::Create(GDT_Float64));
+    if (m.zbFill) zb->SetNoDataValue(*m.zbFill);
     writeAll(zb, m.zb.data(), GDT_Float64);
     if (!m.times.empty()) {
         auto time = root->CreateDimension("time", "", "", m.times.size());
@@ -463,6 +466,31 @@ TEST_F(Mesh, ColorByAStepLayerShowsItsExactValuesOnTheWater) {
     EXPECT_GT(dry, 200u);
     opt.colorLayer = "nosuch";
     EXPECT_THROW(hc::render::renderFrame(scene, cam, opt, t), hc::Error);
+}
+
+// A face whose terrain is a fill value (or NaN) is a hole: no cell there, its neighbours as they are.
+TEST_F(Mesh, FacesWithoutTerrainAreHoles) {
+    HandMesh m = goodMesh();
+    m.zb[0] = std::nan("");  // the large face
+    m.zb[3] = -99999;        // one small face: the terrain's fill value
+    m.zbFill = -99999;
+    writeHandMesh(m, path("holes.nc"));
+    hc::ingest::Options o;
+    o.input = path("holes.nc");
+    hc::ingest::LoadReport rep;
+    hc::ingest::ingestUgridToFile(o, path("h.hcg"), rep);
+    const Grid g = hc::readGrid(path("h.hcg"), nullptr, 1);
+    auto at = [&](double wx, double wy) {  // the cell at a world point (the origin follows the faces kept)
+        double x = 0, y = 0;
+        g.worldToLocal(wx, wy, x, y);
+        return g.locate(x, y);
+    };
+    EXPECT_EQ(g.cellCount(), 3u);
+    EXPECT_FALSE(at(1001.0, 2001.0)) << "the NaN face is a hole";
+    EXPECT_FALSE(at(1002.5, 2001.5)) << "the fill-value face is a hole";
+    ASSERT_TRUE(at(1003.5, 2001.5));
+    EXPECT_EQ(g.values[0][*at(1003.5, 2001.5)], 14.0f);
+    EXPECT_EQ(g.steps[1].wetCells, 3u) << "the holes' water is not counted";
 }
 
 TEST_F(Mesh, MeshesThatAreNoQuadtreeAreRefused) {
