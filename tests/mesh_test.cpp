@@ -3,6 +3,7 @@
 // grid probed and rendered as the same grid unrotated seen from a turned camera.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <filesystem>
 #include <optional>
@@ -466,6 +467,27 @@ TEST_F(Mesh, ColorByAStepLayerShowsItsExactValuesOnTheWater) {
     EXPECT_GT(dry, 200u);
     opt.colorLayer = "nosuch";
     EXPECT_THROW(hc::render::renderFrame(scene, cam, opt, t), hc::Error);
+}
+
+// A simulation's first time is often dry: a step with no wet cell reads (readGrid, readGridStep) as every cell dry.
+// Regression: fuzz_ugrid's first finding (fuzz/corpus/ugrid/finding_dry_step), a memcpy from an empty step's section
+// into an empty vector's null data() (undefined behaviour that UBSan reports).
+TEST_F(Mesh, DryStepsRead) {
+    HandMesh m = goodMesh();
+    m.zs[0].assign(m.zs[0].size(), -99999);  // step 0: every level a fill value
+    writeHandMesh(m, path("dry.nc"));
+    hc::ingest::Options o;
+    o.input = path("dry.nc");
+    hc::ingest::LoadReport rep;
+    hc::ingest::ingestUgridToFile(o, path("d.hcg"), rep);
+    Grid g = hc::readGrid(path("d.hcg"), nullptr, 0);
+    ASSERT_EQ(g.steps.size(), 2u);
+    EXPECT_EQ(g.steps[0].wetCells, 0u);
+    EXPECT_EQ(std::count(g.values[1].begin(), g.values[1].end(), 0.0f), long(g.cellCount()));
+    hc::readGridStep(path("d.hcg"), g, 1);
+    EXPECT_EQ(g.steps[1].wetCells, 5u);
+    hc::readGridStep(path("d.hcg"), g, 0);
+    EXPECT_EQ(std::count(g.values[1].begin(), g.values[1].end(), 0.0f), long(g.cellCount()));
 }
 
 // A face whose terrain is a fill value (or NaN) is a hole: no cell there, its neighbours as they are.

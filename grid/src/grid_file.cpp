@@ -425,9 +425,11 @@ WaterStepData loadStep(const SectionedFileReader& file, const Located& at, const
     WaterStepData out;
     out.timeS = info.timeS;
     out.wet.resize(w);
-    std::memcpy(out.wet.data(), d, 4 * w);
     out.values.assign(L, std::vector<float>(w));
-    for (size_t l = 0; l < L; ++l) std::memcpy(out.values[l].data(), d + 4 * w * (1 + l), 4 * w);
+    if (w > 0) {  // a dry step (none wet: a simulation's first time) has empty vectors, whose data() memcpy must not see
+        std::memcpy(out.wet.data(), d, 4 * w);
+        for (size_t l = 0; l < L; ++l) std::memcpy(out.values[l].data(), d + 4 * w * (1 + l), 4 * w);
+    }
     const std::string name = "step " + std::to_string(k);
     for (uint64_t j = 0; j < w; ++j)
         if (out.wet[j] >= at.cellCount || (j > 0 && out.wet[j] <= out.wet[j - 1]))

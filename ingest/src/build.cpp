@@ -286,7 +286,8 @@ Stats Builder::run(CellSink& sink) {
         std::vector<std::vector<Node>> coarse{roots};
         std::vector<std::pair<size_t, size_t>> dims{{ntx_, nty_}};
         for (int l = tileLevel_ + 1; l <= rootLevel_; ++l) {
-            auto [cw, chh] = dims.back();
+            const size_t cw = dims.back().first, chh = dims.back().second;  // not a structured binding: the lambda below
+                                                                             // captures them (clang 14 cannot)
             size_t nw = (cw + 1) / 2, nh = (chh + 1) / 2;
             const auto& ch = coarse.back();
             std::vector<Node> cur(nw * nh);
