@@ -91,3 +91,11 @@ hc_cli_test(render.color_by_elevation_refused nonzero [[^hc-render: error: --col
 hc_cli_test(render.color_by_out_of_core_refused nonzero [[^hc-render: error: --color-by needs the grid in memory with its influence lists: leave out --out-of-core]]
   --absent c.png
   -- ${RENDER} f.hcg -o c.png --color-by speed --out-of-core)
+
+# The viewer colours by the layer as hc-render does (its CPU backend), the legend in the layer's units.
+if(HC_WITH_GL AND HC_XVFB_RUN)
+  hc_cli_test(view.color_by 0 [[backend CPU]]
+    --setup ${SPEED_MESH} --setup [[$HC_INGEST --quiet fs.nc -o s.hcg --face-layers speed]] --exists shot.png --no-match [[error]]
+    --check "'${PNG_CHECK}' shot.png"
+    -- ${HC_XVFB_RUN} -a -s "-screen 0 1280x1024x24" $<TARGET_FILE:hc-view> s.hcg --color-by speed --step 2 --frames 2 --screenshot shot.png --size 480x300 --texels 128)
+endif()
