@@ -2,6 +2,8 @@
 // content validation behind valid checksums, and atomic writes that leave nothing on failure.
 #include <gtest/gtest.h>
 
+#include "temp_dir.h"
+
 #include <algorithm>
 #include <cstring>
 #include <filesystem>
@@ -61,17 +63,9 @@ void writeBytes(const std::string& path, const std::vector<char>& bytes, size_t 
     out.write(bytes.data(), static_cast<std::streamsize>(n));
 }
 
-class GridFile : public ::testing::Test {
+class GridFile : public hc::test::TempDirTest {
 protected:
-    void SetUp() override {
-        dir_ = fs::temp_directory_path() / ("hc_grid_file_" + std::to_string(::getpid()) + "_" +
-                                            ::testing::UnitTest::GetInstance()->current_test_info()->name());
-        fs::remove_all(dir_);
-        fs::create_directories(dir_);
-    }
-    void TearDown() override { fs::remove_all(dir_); }
-    std::string path(const std::string& name) const { return (dir_ / name).string(); }
-    fs::path dir_;
+    GridFile() : TempDirTest("hc_grid_file_") {}
 };
 
 void expectEqualGrids(const Grid& a, const Grid& b) {

@@ -19,6 +19,7 @@
 #include "heightcast/ingest/build.h"
 #include "heightcast/ingest/ingest.h"
 #include "hostile_files.h"
+#include "temp_dir.h"
 #include "test_data.h"
 #include "test_grids.h"
 
@@ -478,17 +479,9 @@ TEST(Surface, BatchEqualsPointByPointOnEveryLayer) {
 
 // ---- the .hci format ----
 
-class CacheFile : public ::testing::Test {
+class CacheFile : public hc::test::TempDirTest {
 protected:
-    void SetUp() override {
-        dir_ = fs::temp_directory_path() / ("hc_cache_" + std::to_string(::getpid()) + "_" +
-                                            ::testing::UnitTest::GetInstance()->current_test_info()->name());
-        fs::remove_all(dir_);
-        fs::create_directories(dir_);
-    }
-    void TearDown() override { fs::remove_all(dir_); }
-    std::string path(const std::string& n) const { return (dir_ / n).string(); }
-    fs::path dir_;
+    CacheFile() : TempDirTest("hc_cache_") {}
 };
 
 std::vector<char> readBytes(const std::string& p) {

@@ -18,6 +18,7 @@
 #include "heightcast/ingest/ingest.h"
 #include "heightcast/ingest/ugrid.h"
 #include "heightcast/render/renderer.h"
+#include "temp_dir.h"
 #include "test_data.h"
 
 namespace {
@@ -25,17 +26,9 @@ namespace {
 namespace fs = std::filesystem;
 using hc::Grid;
 
-class Mesh : public ::testing::Test {
+class Mesh : public hc::test::TempDirTest {
 protected:
-    void SetUp() override {
-        dir_ = fs::temp_directory_path() / ("hc_mesh_" + std::to_string(::getpid()) + "_" +
-                                            ::testing::UnitTest::GetInstance()->current_test_info()->name());
-        fs::remove_all(dir_);
-        fs::create_directories(dir_);
-    }
-    void TearDown() override { fs::remove_all(dir_); }
-    std::string path(const std::string& name) const { return (dir_ / name).string(); }
-    fs::path dir_;
+    Mesh() : TempDirTest("hc_mesh_") {}
 };
 
 // A real scenario: the 1 m LiDAR tile flooded at 394.5, 395.5 and 396.5 m at 0, 10 and 20 minutes.

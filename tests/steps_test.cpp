@@ -18,6 +18,7 @@
 #include "heightcast/grid/grid_file.h"
 #include "heightcast/ingest/build.h"
 #include "heightcast/ingest/ingest.h"
+#include "temp_dir.h"
 #include "test_data.h"
 
 namespace {
@@ -26,17 +27,9 @@ namespace fs = std::filesystem;
 using hc::Grid;
 using hc::ingest::Raster;
 
-class Steps : public ::testing::Test {
+class Steps : public hc::test::TempDirTest {
 protected:
-    void SetUp() override {
-        dir_ = fs::temp_directory_path() / ("hc_steps_" + std::to_string(::getpid()) + "_" +
-                                            ::testing::UnitTest::GetInstance()->current_test_info()->name());
-        fs::remove_all(dir_);
-        fs::create_directories(dir_);
-    }
-    void TearDown() override { fs::remove_all(dir_); }
-    std::string path(const std::string& name) const { return (dir_ / name).string(); }
-    fs::path dir_;
+    Steps() : TempDirTest("hc_steps_") {}
 };
 
 // A valley with a hole, sloping so that merges depend on the tolerance: 37 x 29 pixels of 2 m (not a power of two).
