@@ -135,9 +135,10 @@ int main(int argc, char** argv) {
                 hc::readGridStep(a.gridPath, grid, i, &*digests);
             }
             clock.lap();
-            hc::influence::SurfacePyramid pyramid = hc::influence::buildSurfacePyramid(grid, a.params, a.threads, !a.quiet);
             // A scenario's later steps keep their water only: the first step's pyramid holds the terrain for all.
-            if (grid.steps.size() > 1 && grid.step > 0) pyramid = hc::influence::waterPyramidOf(pyramid);
+            const hc::influence::SurfacePyramid pyramid = grid.steps.size() > 1 && grid.step > 0
+                                                              ? hc::influence::buildWaterPyramid(grid, a.params, a.threads, !a.quiet)
+                                                              : hc::influence::buildSurfacePyramid(grid, a.params, a.threads, !a.quiet);
             const double buildS = clock.lap();
             hc::influence::writeSurfacePyramid(pyramid, a.pyramidPaths[i]);
             printPyramidSummary(a.pyramidPaths[i], grid, pyramid, buildS, clock.lap());

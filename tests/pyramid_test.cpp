@@ -176,6 +176,46 @@ TEST(SurfacePyramid, WaterChannelsFollowTheExactWaterRule) {
     EXPECT_LT(undecidable, (wet + dry) / 1000) << "more samples on the thresholds than float rounding explains";
 }
 
+// A later step's water pyramid built over the tiles its wet cells reach is the whole pyramid's water pyramid, bit for
+// bit (keys, samples, parent errors), on real LiDAR with a sloping river and on a flood that reaches one corner only;
+// and it samples fewer tiles.
+TEST(SurfacePyramid, WaterPyramidBuiltWhereWaterReachesEqualsTheWholeOnesWater) {
+    HC_REQUIRE_DATA(lidar, "lidar1m_minnesota_utm15.tif");
+    Grid g = hc::test::ingestFile(lidar, 0.25, 397.0);
+    const int depth = g.findLayer("water_depth");
+    double x0, y0, x1, y1;
+    g.boundsLocal(x0, y0, x1, y1);
+    for (const double corner : {0.0, 1.0}) {  // a river sloping along x; then water in the south-west corner only
+        SCOPED_TRACE(corner ? "corner" : "river");
+        for (size_t i = 0; i < g.cellCount(); ++i) {
+            double cx, cy;
+            g.cellCenterLocal(i, cx, cy);
+            const double level = corner ? (cx - x0 < 40 && cy - y0 < 40 ? 415.0 : 0.0) : 395.0 + 4.0 * (cx - x0) / (x1 - x0);
+            g.values[size_t(depth)][i] = static_cast<float>(std::max(0.0, level - double(g.values[0][i])));
+        }
+        const SurfacePyramid whole = hc::influence::buildSurfacePyramid(g, KernelParams{});
+        const SurfacePyramid want = hc::influence::waterPyramidOf(whole), got = hc::influence::buildWaterPyramid(g, KernelParams{});
+        ASSERT_EQ(got.channels, 2);
+        ASSERT_EQ(got.levels.size(), want.levels.size());
+        uint64_t tiles = 0, wholeTiles = 0;
+        for (size_t t = 0; t < want.levels.size(); ++t) {
+            const auto& a = want.levels[t];
+            const auto& b = got.levels[t];
+            ASSERT_TRUE(std::equal(a.keys.begin(), a.keys.end(), b.keys.begin(), b.keys.end())) << "level " << t;
+            ASSERT_EQ(a.samples.size(), b.samples.size());
+            EXPECT_EQ(0, std::memcmp(a.samples.data(), b.samples.data(), a.samples.size_bytes())) << "level " << t;
+            EXPECT_EQ(0, std::memcmp(a.parentErrorM.data(), b.parentErrorM.data(), a.parentErrorM.size_bytes())) << "level " << t;
+            tiles += b.tileCount(), wholeTiles += whole.levels[t].tileCount();
+        }
+        EXPECT_GT(tiles, 0u);
+        if (corner) {
+            EXPECT_LT(tiles * 4, wholeTiles) << "water in one corner: a small part of the tiles";
+        }
+    }
+    Grid dry = hc::test::ingestFile(lidar, 0.25);
+    EXPECT_THROW(hc::influence::buildWaterPyramid(dry, KernelParams{}), hc::Error);
+}
+
 class PyramidFile : public ::testing::Test {
 protected:
     fs::path dir = fs::temp_directory_path() / ("hc_pyramid_test_" + std::to_string(::getpid()));

@@ -11,6 +11,7 @@
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
+#include <iterator>
 #include <limits>
 
 #include "heightcast/core/error.h"
@@ -205,7 +206,43 @@ void measureParentErrors(const SurfacePyramid& p, std::vector<std::vector<float>
 
 }  // namespace
 
-SurfacePyramid buildSurfacePyramid(const Grid& g, const KernelParams& params, unsigned threads, bool progress) {
+namespace {
+
+// The tiles of `keys` (per level) that a wet cell's kernel reaches, each dilated by one tile: only these can hold a
+// sample with any wet weight, so every other tile draws no water; the dilation keeps beside each kept tile the
+// parent-level tiles whose samples measureParentErrors reads at its far edges (a kept tile's parent is kept: its node
+// holds the child's).
+std::vector<std::vector<uint64_t>> wetReachedKeys(const Grid& g, const KernelParams& params, const std::vector<std::vector<uint64_t>>& keys,
+                                                  const std::vector<int>& sides, int depthLayer) {
+    const float* depth = g.values[size_t(depthLayer)].data();
+    std::vector<std::vector<uint64_t>> out(keys.size());
+    for (size_t t = 0; t < keys.size(); ++t) {
+        const uint64_t span = uint64_t(sides[t]) << t;  // a tile's side in finest cells
+        const long perSide = long(((uint64_t{1} << g.rootLevel) + span - 1) / span);
+        const double tileM = g.finestCellM * double(span);
+        std::vector<uint64_t> marked;
+        long last[4] = {-1, -1, -1, -1};
+        for (size_t i = 0; i < g.cellCount(); ++i) {
+            if (!(depth[i] > 0)) continue;
+            double cx = 0, cy = 0;
+            g.cellCenterLocal(i, cx, cy);
+            const double r = params.radiusM(g.cellSizeM(i));
+            const long tx0 = std::max(0L, long(std::floor((cx - r) / tileM)) - 1), tx1 = std::min(perSide - 1, long(std::floor((cx + r) / tileM)) + 1);
+            const long ty0 = std::max(0L, long(std::floor((cy - r) / tileM)) - 1), ty1 = std::min(perSide - 1, long(std::floor((cy + r) / tileM)) + 1);
+            if (tx0 == last[0] && tx1 == last[1] && ty0 == last[2] && ty1 == last[3]) continue;  // neighbours in Morton order
+            last[0] = tx0, last[1] = tx1, last[2] = ty0, last[3] = ty1;
+            for (long ty = ty0; ty <= ty1; ++ty)
+                for (long tx = tx0; tx <= tx1; ++tx) marked.push_back(mortonEncode(uint32_t(uint64_t(tx) * span), uint32_t(uint64_t(ty) * span)));
+        }
+        std::sort(marked.begin(), marked.end());
+        marked.erase(std::unique(marked.begin(), marked.end()), marked.end());
+        std::set_intersection(keys[t].begin(), keys[t].end(), marked.begin(), marked.end(), std::back_inserter(out[t]));
+    }
+    return out;
+}
+
+// The tiles of every level of `g` (tileKeys), or only those a wet cell's kernel reaches (wetReachedKeys), sampled.
+SurfacePyramid buildPyramid(const Grid& g, const KernelParams& params, unsigned threads, bool progress, bool wetReachedOnly) {
     if (std::string why = params.validate(); !why.empty()) throw Error("influence parameters: " + why);
     if (g.cellCount() >= std::numeric_limits<uint32_t>::max()) throw Error("grid has too many cells for 32-bit cell indices");
     threads = resolveThreads(threads);
@@ -223,6 +260,7 @@ SurfacePyramid buildSurfacePyramid(const Grid& g, const KernelParams& params, un
 
     auto owned = std::make_shared<SurfacePyramid::Storage>();
     owned->keys = g.cellCount() ? tileKeys(g, top, sides) : std::vector<std::vector<uint64_t>>(size_t(top) + 1);
+    if (wetReachedOnly) owned->keys = wetReachedKeys(g, params, owned->keys, sides, depthLayer);
     uint64_t tiles = 0;
     for (const auto& k : owned->keys) tiles += k.size();
     owned->samples.resize(size_t(top) + 1);
@@ -257,6 +295,17 @@ SurfacePyramid buildSurfacePyramid(const Grid& g, const KernelParams& params, un
     measureParentErrors(p, owned->errors, threads);
     p.storage = std::move(owned);
     return p;
+}
+
+}  // namespace
+
+SurfacePyramid buildSurfacePyramid(const Grid& g, const KernelParams& params, unsigned threads, bool progress) {
+    return buildPyramid(g, params, threads, progress, false);
+}
+
+SurfacePyramid buildWaterPyramid(const Grid& g, const KernelParams& params, unsigned threads, bool progress) {
+    if (g.findLayer("water_depth") < 0) throw Error("a water pyramid is built for a grid with water");
+    return waterPyramidOf(buildPyramid(g, params, threads, progress, true));
 }
 
 SurfacePyramid waterPyramidOf(const SurfacePyramid& whole) {

@@ -119,6 +119,11 @@ SurfacePyramid buildSurfacePyramid(const Grid& grid, const KernelParams& params,
 // a sample where water is drawn (the water rule of surface.h: wet share >= kWetShareMin, level above the elevation).
 // Throws hc::Error for a pyramid without water channels.
 SurfacePyramid waterPyramidOf(const SurfacePyramid& whole);
+// The same as waterPyramidOf(buildSurfacePyramid(grid, ...)), bit for bit, for a grid with water, sampling only the
+// tiles a wet cell's kernel reaches (and one tile around them): the others hold no wet weight, so no water. What
+// hc-influence builds for a scenario's later steps: the cost follows the water, not the grid. Throws hc::Error for a
+// grid without water.
+SurfacePyramid buildWaterPyramid(const Grid& grid, const KernelParams& params, unsigned threads = 0, bool progress = false);
 
 // The .hcp file: written atomically; read memory-mapped, validated (checksums, sizes, keys ascending and
 // inside the domain) and checked to belong to `grid` with `params` (like the .hci cache); a water pyramid (2 channels)
