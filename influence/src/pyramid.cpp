@@ -320,7 +320,7 @@ SurfacePyramid waterPyramidOf(const SurfacePyramid& whole) {
         const SurfacePyramid::Level& L = whole.levels[t];
         const size_t plane = size_t(L.tileSide) * size_t(L.tileSide);
         for (size_t tile = 0; tile < L.tileCount(); ++tile) {
-            const float* z = &L.samples[tile * 3 * plane];
+            const float* z = L.samples.data() + tile * 3 * plane;
             const float* level = z + plane;
             const float* share = z + 2 * plane;
             bool drawn = false;  // the water rule at some sample (surface.h; NaN compares false)
@@ -328,7 +328,8 @@ SurfacePyramid waterPyramidOf(const SurfacePyramid& whole) {
             if (!drawn) continue;
             owned->keys[t].push_back(L.keys[tile]);
             owned->samples[t].insert(owned->samples[t].end(), level, level + 2 * plane);
-            owned->errors[t].insert(owned->errors[t].end(), &L.parentErrorM[tile * 3 + 1], &L.parentErrorM[tile * 3 + 3]);
+            const float* errors = L.parentErrorM.data() + tile * 3;  // pointers: [tile * 3 + 3] is one past the last tile's
+            owned->errors[t].insert(owned->errors[t].end(), errors + 1, errors + 3);
         }
         p.levels[t].keys = owned->keys[t];
         p.levels[t].samples = owned->samples[t];
