@@ -4,6 +4,7 @@
 #include <algorithm>
 #include <cmath>
 #include <numeric>
+#include <optional>
 #include <sstream>
 
 #include <fmt/format.h>
@@ -73,7 +74,7 @@ struct Reader {
     }
 };
 
-std::string fmtNum(double v) { return fmt::format("{:.9g}", v); }
+std::string fmtNum(double v) { return detail::fmt(v, 9); }
 
 // A face as read: its corners in order around it.
 struct Face {
@@ -176,32 +177,20 @@ Quadtree quadtreeOf(const Reader& r, const std::vector<Face>& faces, const std::
     return q;
 }
 
-// The CRS from the variables' grid_mapping (crs_wkt, spatial_ref, or an EPSG code), as WKT; "" when none.
-std::string crsOf(const Reader& r, const ArrayPtr& terrain) {
-    if (auto srs = terrain->GetSpatialRef(); srs && !srs->IsEmpty()) {
-        char* wkt = nullptr;
-        const char* const opts[] = {"FORMAT=WKT2_2019", nullptr};
-        srs->exportToWkt(&wkt, opts);
-        std::string out = wkt ? wkt : "";
-        CPLFree(wkt);
-        if (!out.empty()) return out;
-    }
+// The CRS from the variables' grid_mapping (crs_wkt, spatial_ref, or an EPSG code); nullopt when none.
+std::optional<OGRSpatialReference> crsOf(const Reader& r, const ArrayPtr& terrain) {
+    if (auto srs = terrain->GetSpatialRef(); srs && !srs->IsEmpty()) return *srs;
     const std::string mapping = textAttr(terrain, "grid_mapping");
     ArrayPtr m = mapping.empty() ? nullptr : r.root->OpenMDArray(mapping);
-    if (!m) return "";
+    if (!m) return std::nullopt;
     for (const char* key : {"crs_wkt", "spatial_ref", "epsg_code", "EPSG_code"}) {
         std::string v = textAttr(m, key);
         if (v.empty()) continue;
         OGRSpatialReference srs;
         if (srs.SetFromUserInput(v.c_str()) != OGRERR_NONE) r.fail("the CRS in " + mapping + ":" + key + " is not one GDAL reads: " + v.substr(0, 80));
-        char* wkt = nullptr;
-        const char* const opts[] = {"FORMAT=WKT2_2019", nullptr};
-        srs.exportToWkt(&wkt, opts);
-        std::string out = wkt ? wkt : "";
-        CPLFree(wkt);
-        return out;
+        return srs;
     }
-    return "";
+    return std::nullopt;
 }
 
 }  // namespace
@@ -334,21 +323,16 @@ BuildSummary ingestUgridToFile(const Options& opt, const std::string& path, Load
     shape.originWorldX = q.originX, shape.originWorldY = q.originY;
     shape.finestCellM = q.finest, shape.rotationDeg = q.rotationDeg;
     shape.rootLevel = q.rootLevel, shape.minLevel = 0, shape.maxLevel = q.maxLevel;
+    std::optional<OGRSpatialReference> srs;
     if (!opt.sourceSrs.empty() && opt.sourceSrs != "local") {
-        OGRSpatialReference srs;
-        if (srs.SetFromUserInput(opt.sourceSrs.c_str()) != OGRERR_NONE) throw Error("--s_srs " + opt.sourceSrs + ": not a CRS GDAL reads");
-        char* wkt = nullptr;
-        const char* const opts[] = {"FORMAT=WKT2_2019", nullptr};
-        srs.exportToWkt(&wkt, opts);
-        shape.crsWkt = wkt ? wkt : "";
-        CPLFree(wkt);
+        srs.emplace();
+        if (srs->SetFromUserInput(opt.sourceSrs.c_str()) != OGRERR_NONE) throw Error("--s_srs " + opt.sourceSrs + ": not a CRS GDAL reads");
     } else if (opt.sourceSrs.empty()) {
-        shape.crsWkt = crsOf(r, terrainVar);
+        srs = crsOf(r, terrainVar);
     }
-    if (!shape.crsWkt.empty()) {
-        OGRSpatialReference srs;
-        srs.importFromWkt(shape.crsWkt.c_str());
-        shape.crsName = detail::crsName(&srs);
+    if (srs) {
+        shape.crsWkt = detail::toWkt(*srs);
+        shape.crsName = detail::crsName(&*srs);
     } else if (opt.sourceSrs.empty()) {
         report.warnings.push_back(opt.input + ": the mesh names no CRS: coordinates taken as metres in a local frame (name the CRS with --s_srs)");
     }
