@@ -3,12 +3,17 @@
 #include <cstdio>
 #include <optional>
 
+#include <fmt/format.h>
+
 #include "cli.h"
+#include "on_ranks.h"
+#include "heightcast/core/ranks.h"
 #include "heightcast/core/error.h"
 #include "heightcast/core/progress.h"
 #include "heightcast/core/timer.h"
 #include "heightcast/grid/grid_file.h"
 #include "heightcast/influence/influence.h"
+#include "heightcast/influence/on_ranks.h"
 #include "heightcast/influence/pyramid.h"
 
 namespace {
@@ -112,38 +117,66 @@ void printPyramidSummary(const std::string& path, const hc::Grid& grid, const hc
 }  // namespace
 
 int main(int argc, char** argv) {
-    return hc::cli::run("hc-influence", [&] {
+    return hc::cli::runOnRanks("hc-influence", argc, argv, [&] {
+        namespace ranks = hc::ranks;
+        namespace inf = hc::influence;
         InfluenceArgs a;
-        if (!parseOptions(argc, argv, a)) return 0;
-        hc::Grid grid = hc::readGrid(a.gridPath, nullptr, a.step < 0 ? 0 : size_t(a.step));
+        bool go = true;
+        ranks::together([&] { go = parseOptions(argc, argv, a); });
+        if (!go) return 0;
+        const bool root = ranks::rank() == 0, progress = !a.quiet && root;  // under mpirun rank 0 writes, and shows progress
+        hc::Grid grid;
+        ranks::together([&] { grid = hc::readGrid(a.gridPath, nullptr, a.step < 0 ? 0 : size_t(a.step)); });
         std::printf("hc-influence: %s\n", a.gridPath.c_str());
         std::printf("  kernel       truncated Gaussian, sigma %g, R %g (reach %g cell sizes)\n", a.params.sigma, a.params.truncation,
                     a.params.truncation * a.params.sigma);
         std::printf("  cells        %zu\n", grid.cellCount());
-        hc::Stopwatch clock;
+        if (ranks::distributed())
+            std::printf("  ranks        %d (mpirun): each builds the lists and pyramid tiles of its share of the cells, rank 1 writes\n",
+                        ranks::count());
+        hc::Stopwatch clock, all;
+        inf::RankShare listShare, pyramidShare;
         if (a.lists) {
-            const hc::influence::InfluenceLists lists = hc::influence::buildInfluenceLists(grid, a.params, a.threads, !a.quiet);
+            inf::InfluenceLists lists;
+            ranks::together([&] { lists = inf::buildInfluenceListsOnRanks(grid, a.params, a.threads, progress, &listShare); });
             const double buildS = clock.lap();
-            hc::influence::writeInfluenceCache(lists, a.out);
-            printListsSummary(a, lists, buildS, clock.lap());
+            ranks::together([&] {
+                if (root) hc::influence::writeInfluenceCache(lists, a.out);
+            });
+            if (root) printListsSummary(a, lists, buildS, clock.lap());
         }
         std::optional<hc::StaticDigests> digests;
         for (size_t i = 0; a.pyramid && i < a.pyramidPaths.size(); ++i) {
             // One pyramid per water step; the grid switches steps reading only the next step's section.
             if (a.step < 0 && i > 0) {
-                if (!digests) digests = hc::staticDigestsOf(grid);  // hashed once, not per step
-                hc::readGridStep(a.gridPath, grid, i, &*digests);
+                ranks::together([&] {
+                    if (!digests) digests = hc::staticDigestsOf(grid);  // hashed once, not per step
+                    hc::readGridStep(a.gridPath, grid, i, &*digests);
+                });
             }
             clock.lap();
             // A scenario's later steps keep their water only: the first step's pyramid holds the terrain for all.
-            const hc::influence::SurfacePyramid pyramid = grid.steps.size() > 1 && grid.step > 0
-                                                              ? hc::influence::buildWaterPyramid(grid, a.params, a.threads, !a.quiet)
-                                                              : hc::influence::buildSurfacePyramid(grid, a.params, a.threads, !a.quiet);
+            const bool waterOnly = grid.steps.size() > 1 && grid.step > 0;
+            inf::SurfacePyramid pyramid;
+            inf::RankShare stepShare;
+            ranks::together([&] { pyramid = inf::buildPyramidOnRanks(grid, a.params, a.threads, progress, waterOnly, &stepShare); });
+            pyramidShare.tiles += stepShare.tiles, pyramidShare.seconds += stepShare.seconds, pyramidShare.cells = stepShare.cells;
             const double buildS = clock.lap();
-            hc::influence::writeSurfacePyramid(pyramid, a.pyramidPaths[i]);
-            printPyramidSummary(a.pyramidPaths[i], grid, pyramid, buildS, clock.lap());
+            ranks::together([&] {
+                if (root) hc::influence::writeSurfacePyramid(pyramid, a.pyramidPaths[i]);
+            });
+            if (root) printPyramidSummary(a.pyramidPaths[i], grid, pyramid, buildS, clock.lap());
         }
         std::printf("  memory       peak %.1f MB resident\n", double(hc::peakRssBytes()) / 1e6);
+        if (ranks::distributed()) {
+            std::string line;
+            if (a.lists) line += fmt::format("lists of {} cells in {:.3f} s", listShare.cells, listShare.seconds);
+            if (a.pyramid)
+                line += fmt::format("{}{} pyramid tiles (share of {} cells) in {:.3f} s", a.lists ? ", " : "", pyramidShare.tiles,
+                                        pyramidShare.cells, pyramidShare.seconds);
+            line += fmt::format("; {:.3f} s in all, peak {:.1f} MB resident", all.seconds(), double(hc::peakRssBytes()) / 1e6);
+            ranks::log("hc-influence", line);
+        }
         return 0;
     });
 }

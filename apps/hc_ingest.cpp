@@ -8,6 +8,9 @@
 #include <fmt/format.h>
 
 #include "cli.h"
+#include "on_ranks.h"
+#include "heightcast/core/ranks.h"
+#include "heightcast/core/timer.h"
 #include "heightcast/core/error.h"
 #include "heightcast/grid/grid_file.h"
 #include "heightcast/core/progress.h"
@@ -164,6 +167,7 @@ bool parseOptions(int argc, char** argv, hc::ingest::Options& o, std::string& ou
 // before the failure, degrees or units, often explains it).
 hc::ingest::BuildSummary buildGrid(const hc::ingest::Options& o, const std::string& out, hc::ingest::LoadReport& report, bool mesh) {
     auto printWarnings = [&] {
+        if (hc::ranks::rank() != 0) return;  // under mpirun every rank reads the same input: rank 0 says what it found
         std::vector<std::string> said;  // a series read twice repeats its warnings: each is said once
         for (const auto& w : report.warnings)
             if (std::find(said.begin(), said.end(), w) == said.end()) {
@@ -185,16 +189,33 @@ hc::ingest::BuildSummary buildGrid(const hc::ingest::Options& o, const std::stri
 }  // namespace
 
 int main(int argc, char** argv) {
-    return hc::cli::run("hc-ingest", [&] {
+    return hc::cli::runOnRanks("hc-ingest", argc, argv, [&] {
+        namespace ranks = hc::ranks;
         hc::ingest::Options o;
         std::string out;
-        bool quiet = false, mesh = false;
-        if (!parseOptions(argc, argv, o, out, quiet, mesh)) return 0;
+        bool quiet = false, mesh = false, go = true;
+        ranks::together([&] { go = parseOptions(argc, argv, o, out, quiet, mesh); });
+        if (!go) return 0;
+        o.progress = o.progress && ranks::rank() == 0;  // one progress line: rank 0's (its bar counts every rank's share)
+        const hc::Stopwatch clock;
         hc::ingest::LoadReport report;
-        // A NetCDF water variable over time is a series in one file: one step per time, times from the file.
-        if (!mesh && hc::ingest::expandWaterTimeSeries(o, report) > 0) hc::ingest::validateOptions(o);
-        const hc::ingest::BuildSummary summary = buildGrid(o, out, report, mesh);
-        if (!quiet) printSummary(summary, report, out, o.timesS.empty() && !mesh, mesh);
+        hc::ingest::BuildSummary summary;
+        if (mesh) {
+            // A mesh is taken as it is, one cell per face: no build to share, rank 0 reads and writes it.
+            ranks::together([&] {
+                if (ranks::rank() == 0) summary = buildGrid(o, out, report, mesh);
+            });
+            ranks::log("hc-ingest", ranks::rank() == 0 ? "the mesh read and written whole (one cell per face: nothing to share)" : "idle: a mesh is read by rank 1");
+        } else {
+            // A NetCDF water variable over time is a series in one file: one step per time, times from the file.
+            ranks::together([&] {
+                if (hc::ingest::expandWaterTimeSeries(o, report) > 0) hc::ingest::validateOptions(o);
+            });
+            ranks::together([&] { summary = buildGrid(o, out, report, mesh); });
+        }
+        if (!quiet && ranks::rank() == 0) printSummary(summary, report, out, o.timesS.empty() && !mesh, mesh);
+        if (ranks::distributed() && ranks::rank() == 0)
+            ranks::log("hc-ingest", fmt::format("{} ranks, {:.3f} s in all", ranks::count(), clock.seconds()));
         return 0;
     });
 }

@@ -1,7 +1,7 @@
 # Every third-party dependency of heightcast, found here and nowhere else, each with the oldest version we build
 # against (all from Debian 12 / Ubuntu 22.04+ packages: scripts/deps.sh installs them). Which folder may use which
 # is a rule of the layout (CONTRIBUTING.md); a folder links its dependencies PRIVATE, so none leaks upward:
-#   core/      Threads; core/exr/ (hc_exr, the one OpenEXR writer): OpenEXR
+#   core/      Threads; core/exr/ (hc_exr, the one OpenEXR writer): OpenEXR; core/ranks/ (hc_ranks): MPI (HC_WITH_MPI)
 #   grid/      -
 #   ingest/    GDAL (and its PROJ), GeographicLib, fmt
 #   influence/ -
@@ -43,6 +43,16 @@ if(HC_WITH_VDB)
   find_package(OpenVDB 9 REQUIRED)
 endif()
 
+if(HC_WITH_MPI)
+  # core/ranks/ (hc-ingest and hc-influence under mpirun; Debian: libopenmpi-dev openmpi-bin). Optional: without it
+  # the build goes on as one process (a normal variable shadows the option for this configure run).
+  find_package(MPI 3.0 COMPONENTS CXX)
+  if(NOT MPI_CXX_FOUND)
+    message(WARNING "HC_WITH_MPI: no MPI found (Debian: libopenmpi-dev): hc-ingest and hc-influence run as one process")
+    set(HC_WITH_MPI OFF)
+  endif()
+endif()
+
 if(HC_WITH_GL)
   # render/gl/: libglvnd's OpenGL and EGL (headless through the EGL surfaceless platform; libOpenGL exports the core
   # functions, so no loader), and glslangValidator to check the compute shaders at build time (Debian: libegl-dev
@@ -64,4 +74,7 @@ if(HC_BUILD_TESTS)
   # is installed and the refusal where it is not. gdal_create (gdal-bin) makes the water rasters of the series tests.
   find_program(HC_FFMPEG ffmpeg)
   find_program(HC_GDAL_CREATE gdal_create)
+  # mpirun (openmpi-bin) for the MPI tests (tests/cli/mpi.cmake): byte-identical outputs from 1, 2 and 3 ranks where the
+  # build has MPI, the refusal of several ranks where it has not.
+  find_program(HC_MPIEXEC NAMES mpirun mpiexec)
 endif()

@@ -5,11 +5,12 @@ set -euo pipefail
 # The GL backend and viewer: EGL + GL headers and Mesa's drivers (llvmpipe runs the GL tests headless; the DRI
 # drivers must be named, nothing pulls them in), GLFW, glslangValidator (shaders are checked at build time),
 # and Xvfb for the viewer's test on machines with no display. ffmpeg makes hc-render's videos of flood scenarios
-# (--steps A:B --video OUT.mp4).
+# (--steps A:B --video OUT.mp4). OpenMPI runs hc-ingest and hc-influence on several processes (mpirun -np N).
 packages=(build-essential cmake pkg-config libgdal-dev gdal-bin libgtest-dev libopenexr-dev libopenvdb-dev
           libboost-iostreams-dev libtbb-dev libblosc-dev
           nlohmann-json3-dev libfmt-dev libglm-dev libproj-dev
-          libegl-dev libopengl-dev libgl-dev libegl1 libegl-mesa0 libgl1-mesa-dri libglfw3-dev glslang-tools xvfb xauth ffmpeg)
+          libegl-dev libopengl-dev libgl-dev libegl1 libegl-mesa0 libgl1-mesa-dri libglfw3-dev glslang-tools xvfb xauth ffmpeg
+          libopenmpi-dev openmpi-bin)
 installed() { dpkg-query -W -f='${Status}' "$1" 2>/dev/null | grep -q "install ok installed"; }
 
 missing=()

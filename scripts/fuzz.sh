@@ -28,7 +28,7 @@ cc=$(command -v clang-14 || command -v clang)
 launcher=()
 command -v ccache >/dev/null && launcher=(-DCMAKE_CXX_COMPILER_LAUNCHER=ccache)
 cmake -S . -B build-fuzz -DCMAKE_C_COMPILER="$cc" -DCMAKE_CXX_COMPILER="$cxx" -DCMAKE_BUILD_TYPE=RelWithDebInfo \
-      -DHC_FUZZ=ON -DHC_BUILD_TESTS=OFF "${launcher[@]}" >/dev/null
+      -DHC_FUZZ=ON -DHC_BUILD_TESTS=OFF -DHC_WITH_MPI=OFF "${launcher[@]}" >/dev/null
 cmake --build build-fuzz -j "$(nproc)" --target fuzz
 
 mkdir -p build-fuzz/findings

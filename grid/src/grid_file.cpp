@@ -93,7 +93,8 @@ std::vector<std::byte> encodeMeta(const Grid& g, const GridSummary& summary) {
     kv.emplace_back("ingest.tolerance_m", fmtDouble(s.toleranceM));
     kv.emplace_back("ingest.max_dev_m", fmtDouble(s.maxDevM));
     kv.emplace_back("ingest.rms_dev_m", fmtDouble(s.rmsDevM));
-    kv.emplace_back("ingest.seconds", fmtDouble(s.seconds));
+    // No wall time (ingest.seconds, written up to this change, still read): a grid's bytes depend on its inputs only,
+    // so a run under mpirun, or a rerun, gives the same file (DESIGN.md section 13).
     std::vector<std::byte> out;
     for (auto& [k, v] : kv) {
         appendString(out, k);

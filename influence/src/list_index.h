@@ -9,7 +9,10 @@
 
 #include <cstddef>
 #include <cstdint>
+#include <memory>
 #include <vector>
+
+#include "heightcast/core/progress.h"
 
 #include "heightcast/grid/grid.h"
 #include "heightcast/influence/kernel.h"
@@ -29,6 +32,9 @@ std::vector<NodeRange> splitNodes(const Grid& g, NodeRange start, size_t maxCell
 
 // The node of `level` with corner key `key` (a multiple of 4^level) and the range of cells inside it.
 NodeRange nodeCells(const Grid& g, uint64_t key, int level);
+
+// Cells a super-block of the list builder holds at most (one range query per level serves them all).
+constexpr size_t kSuperBlockCells = 256;
 
 class ListIndex {
 public:
@@ -57,5 +63,19 @@ private:
     std::vector<Grid> byLevel_;                   // one query index per level: that level's codes only
     std::vector<std::vector<uint32_t>> levelIndex_;  // their cell indices in g
 };
+
+// The lists of the cells of super-blocks [s0, s1) of `superBlocks` (splitNodes of the whole grid): offsets from the first
+// of those cells (firstCell; offsets.size() = their cell count + 1) into `entries` indices. A whole-grid build is the
+// part of every super-block; a rank of mpirun builds its share (influence/src/on_ranks.cpp).
+struct ListPart {
+    size_t firstCell = 0;
+    std::vector<uint64_t> offsets;
+    std::unique_ptr<uint32_t[]> indices;
+    size_t entries = 0;
+};
+ListPart buildListPart(const ListIndex& index, const std::vector<NodeRange>& superBlocks, size_t s0, size_t s1,
+                       unsigned threads, Progress& bar);
+// Throws hc::Error for invalid parameters or a grid of 2^32 cells or more.
+void checkListInputs(const Grid& g, const KernelParams& params);
 
 }  // namespace hc::influence::detail

@@ -20,6 +20,7 @@
 #include "heightcast/influence/surface.h"
 #include "kernel_sums.h"
 #include "list_index.h"
+#include "pyramid_build.h"
 #include "pyramid_storage.h"
 
 namespace hc::influence {
@@ -167,7 +168,7 @@ void buildTile(const Grid& g, const detail::ListIndex& index, const KernelParams
 }
 
 // parentErrorM of every tile below the top (pyramid.h).
-void measureParentErrors(const SurfacePyramid& p, std::vector<std::vector<float>>& errors, unsigned threads) {
+void measureParentErrorsInto(const SurfacePyramid& p, std::vector<std::vector<float>>& errors, unsigned threads) {
     for (int t = 0; t < p.topLevel(); ++t) {
         const SurfacePyramid::Level& L = p.levels[size_t(t)];
         const size_t side = size_t(L.tileSide), plane = side * side;
@@ -241,8 +242,12 @@ std::vector<std::vector<uint64_t>> wetReachedKeys(const Grid& g, const KernelPar
     return out;
 }
 
-// The tiles of every level of `g` (tileKeys), or only those a wet cell's kernel reaches (wetReachedKeys), sampled.
-SurfacePyramid buildPyramid(const Grid& g, const KernelParams& params, unsigned threads, bool progress, bool wetReachedOnly) {
+}  // namespace
+
+namespace detail {
+
+SurfacePyramid samplePyramid(const Grid& g, const KernelParams& params, unsigned threads, bool progress, bool wetReachedOnly,
+                             const TileFilter* owns) {
     if (std::string why = params.validate(); !why.empty()) throw Error("influence parameters: " + why);
     if (g.cellCount() >= std::numeric_limits<uint32_t>::max()) throw Error("grid has too many cells for 32-bit cell indices");
     threads = resolveThreads(threads);
@@ -277,8 +282,9 @@ SurfacePyramid buildPyramid(const Grid& g, const KernelParams& params, unsigned 
         owned->errors[size_t(t)].assign(keys.size() * size_t(p.channels), 0.0f);
         parallelFor(keys.size(), 8, threads, [&](size_t b, size_t e, unsigned worker) {
             for (size_t tile = b; tile < e; ++tile)
-                buildTile(g, index, params, t, sides[size_t(t)], keys[tile], p.channels, depthLayer,
-                          &samples[tile * size_t(p.channels) * plane], scratch[worker]);
+                if (!owns || (*owns)(t, keys[tile]))
+                    buildTile(g, index, params, t, sides[size_t(t)], keys[tile], p.channels, depthLayer,
+                              &samples[tile * size_t(p.channels) * plane], scratch[worker]);
             bar.advance(e - b);
         });
     }
@@ -292,8 +298,22 @@ SurfacePyramid buildPyramid(const Grid& g, const KernelParams& params, unsigned 
         L.samples = owned->samples[size_t(t)];
         L.parentErrorM = owned->errors[size_t(t)];
     }
-    measureParentErrors(p, owned->errors, threads);
     p.storage = std::move(owned);
+    return p;
+}
+
+void measureParentErrors(SurfacePyramid& p, unsigned threads) {
+    auto& storage = const_cast<SurfacePyramid::Storage&>(*p.storage);  // built here (samplePyramid): its own vectors
+    measureParentErrorsInto(p, storage.errors, resolveThreads(threads));
+}
+
+}  // namespace detail
+
+namespace {
+
+SurfacePyramid buildPyramid(const Grid& g, const KernelParams& params, unsigned threads, bool progress, bool wetReachedOnly) {
+    SurfacePyramid p = detail::samplePyramid(g, params, threads, progress, wetReachedOnly, nullptr);
+    detail::measureParentErrors(p, threads);
     return p;
 }
 

@@ -26,6 +26,7 @@
 #include "heightcast/core/error.h"
 #include "heightcast/core/parallel.h"
 #include "heightcast/core/progress.h"
+#include "heightcast/core/ranks.h"
 #include "heightcast/core/timer.h"
 
 namespace hc::ingest {
@@ -253,7 +254,9 @@ private:
 
     // The guarantee, measured: every valid pixel under cells [begin, end) of the batch against the
     // stored value of its cell; also counts cells per level and wet cells.
-    void measure(const Batch& b, size_t begin, size_t end, Stats& acc) const;
+    void measure(const Batch& b, size_t begin, size_t end, Stats& acc, bool paintElevations) const;
+    // Fills BuildOptions::cellElevations under cells [begin, end) of the batch (rank 0 does it for every rank's cells).
+    void paint(const Batch& b, size_t begin, size_t end) const;
 
     const Raster& t_;
     const MergeMask* mask_;
@@ -266,21 +269,38 @@ private:
 Stats Builder::run(CellSink& sink) {
     const unsigned threads = resolveThreads(opt_.threads);
     const size_t tiles = ntx_ * nty_;
+    // Under mpirun (ranks.h) each rank builds a contiguous share of the tiles, then of the cells; rank 0 receives the
+    // others' cells in order and alone feeds the sink. One process is rank 0 of 1: all of it.
+    const int rank = ranks::rank(), rankCount = ranks::count();
+    const bool root = rank == 0;
+    const auto rankStart = Stopwatch();
 
     // Pass A: tile roots and leaf counts.
     std::vector<Node> roots(tiles);
     std::vector<uint32_t> leafCount(tiles);
     {
-        Progress progress("building quadtree", 2 * tiles, opt_.progress);
+        Progress progress("building quadtree", 2 * tiles, opt_.progress && root);
         std::vector<std::vector<std::vector<Node>>> scratch(threads);
-        parallelFor(tiles, 16, threads, [&](size_t b, size_t e, unsigned worker) {
-            for (size_t i = b; i < e; ++i) {
-                size_t tx = i % ntx_, ty = i / ntx_;
-                roots[i] = buildTile(tx, ty, scratch[worker]);
-                leafCount[i] = static_cast<uint32_t>(emitTile(tx, ty, scratch[worker], nullptr, 0));
-            }
-            progress.advance(e - b);
+        const size_t a0 = ranks::shareBegin(tiles, rank, rankCount), a1 = ranks::shareBegin(tiles, rank + 1, rankCount);
+        ranks::together([&] {
+            parallelFor(a1 - a0, 16, threads, [&](size_t b, size_t e, unsigned worker) {
+                for (size_t i = a0 + b; i < a0 + e; ++i) {
+                    size_t tx = i % ntx_, ty = i / ntx_;
+                    roots[i] = buildTile(tx, ty, scratch[worker]);
+                    leafCount[i] = static_cast<uint32_t>(emitTile(tx, ty, scratch[worker], nullptr, 0));
+                }
+                progress.advance((e - b) * size_t(rankCount));
+            });
         });
+        if (rankCount > 1) {  // every rank needs every root for the coarse levels and the walk
+            const auto allRoots = ranks::allGatherVectors(std::vector<Node>(roots.begin() + ptrdiff_t(a0), roots.begin() + ptrdiff_t(a1)));
+            const auto allCounts = ranks::allGatherVectors(std::vector<uint32_t>(leafCount.begin() + ptrdiff_t(a0), leafCount.begin() + ptrdiff_t(a1)));
+            for (int r = 0; r < rankCount; ++r) {
+                const size_t at = ranks::shareBegin(tiles, r, rankCount);
+                std::copy(allRoots[size_t(r)].begin(), allRoots[size_t(r)].end(), roots.begin() + ptrdiff_t(at));
+                std::copy(allCounts[size_t(r)].begin(), allCounts[size_t(r)].end(), leafCount.begin() + ptrdiff_t(at));
+            }
+        }
 
         // Pass B: coarse levels over tile roots, level tileLevel+1 .. rootLevel.
         std::vector<std::vector<Node>> coarse{roots};
@@ -328,63 +348,133 @@ Stats Builder::run(CellSink& sink) {
         };
         walk(walk, rootLevel_, 0, 0);
 
-        sink.begin(total);
+        // This rank's units: those whose first cell lies in its share of the cells.
+        auto firstUnit = [&](int r) {
+            const uint64_t cell = ranks::shareBegin(total, r, rankCount);
+            return size_t(std::lower_bound(units.begin(), units.end(), cell, [](const Unit& u, uint64_t c) { return u.offset < c; }) - units.begin());
+        };
+        const size_t myU0 = firstUnit(rank), myU1 = rank + 1 == rankCount ? units.size() : firstUnit(rank + 1);
 
-        // Pass C, write: batches of consecutive units (about 64 k cells, a few MB), filled in
-        // parallel, measured, and handed to the sink in order.
+        if (root) sink.begin(total);
+
+        // Pass C, write: batches of consecutive units (about 64 k cells, a few MB), filled in parallel, measured, and
+        // handed to the sink in order (another rank keeps its share's cells, then sends them to rank 0). The squared
+        // deviations are summed per unit, then over the units in order: the same figure (bits) on any number of
+        // threads and ranks.
         std::vector<Stats> acc(threads);
         for (auto& a : acc) a.perLevel.assign(static_cast<size_t>(maxLevel_) + 1, 0);
-        Batch batch;
+        std::vector<double> unitSumSq(myU1 - myU0, 0.0);
+        Batch batch, share;
         batch.values.resize(static_cast<size_t>(layers_));
-        size_t u0 = 0;
-        while (u0 < units.size()) {
-            size_t u1 = u0;
-            const size_t first = units[u0].offset;
-            while (u1 < units.size() && (u1 == u0 || units[u1].offset - first < (size_t{1} << 16))) ++u1;
-            const size_t last = u1 < units.size() ? units[u1].offset : total;
-            batch.codes.resize(last - first);
-            for (auto& v : batch.values) v.resize(last - first);
-            parallelFor(u1 - u0, 1, threads, [&](size_t b, size_t e, unsigned worker) {
-                size_t tilesDone = 0;
-                for (size_t k = u0 + b; k < u0 + e; ++k) {
-                    const Unit& unit = units[k];
-                    const size_t at = unit.offset - first;
-                    size_t written = 1;
-                    if (unit.level > tileLevel_) {
-                        auto lk = static_cast<size_t>(unit.level - tileLevel_);
-                        const Node& n = coarse[lk][unit.y * dims[lk].first + unit.x];
-                        size_t span = size_t{1} << unit.level;
-                        writeCell(batch, at, unit.x * span, unit.y * span, unit.level, n);
-                    } else {
-                        buildTile(unit.x, unit.y, scratch[worker]);
-                        written = emitTile(unit.x, unit.y, scratch[worker], &batch, at);
-                        assert(written == leafCount[unit.y * ntx_ + unit.x]);
-                        ++tilesDone;
+        share.values.resize(static_cast<size_t>(layers_));
+        ranks::together([&] {
+            size_t u0 = myU0;
+            while (u0 < myU1) {
+                size_t u1 = u0;
+                const size_t first = units[u0].offset;
+                while (u1 < myU1 && (u1 == u0 || units[u1].offset - first < (size_t{1} << 16))) ++u1;
+                const size_t last = u1 < units.size() ? units[u1].offset : total;
+                batch.codes.resize(last - first);
+                for (auto& v : batch.values) v.resize(last - first);
+                parallelFor(u1 - u0, 1, threads, [&](size_t b, size_t e, unsigned worker) {
+                    size_t tilesDone = 0;
+                    for (size_t k = u0 + b; k < u0 + e; ++k) {
+                        const Unit& unit = units[k];
+                        const size_t at = unit.offset - first;
+                        size_t written = 1;
+                        if (unit.level > tileLevel_) {
+                            auto lk = static_cast<size_t>(unit.level - tileLevel_);
+                            const Node& n = coarse[lk][unit.y * dims[lk].first + unit.x];
+                            size_t span = size_t{1} << unit.level;
+                            writeCell(batch, at, unit.x * span, unit.y * span, unit.level, n);
+                        } else {
+                            buildTile(unit.x, unit.y, scratch[worker]);
+                            written = emitTile(unit.x, unit.y, scratch[worker], &batch, at);
+                            assert(written == leafCount[unit.y * ntx_ + unit.x]);
+                            ++tilesDone;
+                        }
+                        Stats& a = acc[worker];
+                        const double before = a.sumSq;
+                        a.sumSq = 0;
+                        measure(batch, at, at + written, a, root);
+                        unitSumSq[k - myU0] = a.sumSq;
+                        a.sumSq = before;
                     }
-                    measure(batch, at, at + written, acc[worker]);
+                    progress.advance(tilesDone * size_t(rankCount));
+                });
+                if (root) {
+                    std::vector<std::span<const float>> values(batch.values.begin(), batch.values.end());
+                    sink.append(batch.codes, values);
+                } else {
+                    share.codes.insert(share.codes.end(), batch.codes.begin(), batch.codes.end());
+                    for (size_t l = 0; l < batch.values.size(); ++l)
+                        share.values[l].insert(share.values[l].end(), batch.values[l].begin(), batch.values[l].end());
                 }
-                progress.advance(tilesDone);
-            });
-            std::vector<std::span<const float>> values(batch.values.begin(), batch.values.end());
-            sink.append(batch.codes, values);
-            u0 = u1;
-        }
-        progress.advance(2 * tiles);  // units cover fewer than all tiles; fill the bar
-        progress.finish();
+                u0 = u1;
+            }
+        });
         Stats sum;
         sum.perLevel.assign(static_cast<size_t>(maxLevel_) + 1, 0);
         for (const Stats& a : acc) {
             sum.maxDev = std::max(sum.maxDev, a.maxDev);
-            sum.sumSq += a.sumSq;
             sum.pixels += a.pixels;
             sum.wetCells += a.wetCells;
             for (size_t l = 0; l < a.perLevel.size(); ++l) sum.perLevel[l] += a.perLevel[l];
         }
+        const uint64_t myTiles = a1 - a0, myCells = (myU1 < units.size() ? units[myU1].offset : total) - (myU0 < units.size() ? units[myU0].offset : total);
+        ranks::log("hc-ingest", std::to_string(myTiles) + " tiles of " + std::to_string(1u << tileLevel_) + "^2 px built, " +
+                                    std::to_string(myU1 - myU0) + " units, " + std::to_string(myCells) + " cells written, " +
+                                    std::to_string(rankStart.seconds()) + " s");
+        if (!root) {
+            // The share's cells, then its statistics (a table: max, pixels, cells per level, then the unit sums).
+            ranks::sendToRoot(share.codes);
+            for (const auto& v : share.values) ranks::sendToRoot(v);
+            std::vector<double> table{sum.maxDev, double(sum.pixels), double(sum.wetCells)};
+            for (uint64_t c : sum.perLevel) table.push_back(double(c));
+            table.insert(table.end(), unitSumSq.begin(), unitSumSq.end());
+            ranks::sendToRoot(table);
+            return sum;
+        }
+        std::vector<double> allSumSq = std::move(unitSumSq);
+        for (int r = 1; r < rankCount; ++r) {
+            Batch in;
+            in.codes = ranks::receiveVectorFrom<uint64_t>(r);
+            for (int l = 0; l < layers_; ++l) in.values.push_back(ranks::receiveVectorFrom<float>(r));
+            const std::vector<double> table = ranks::receiveVectorFrom<double>(r);
+            const size_t levels = sum.perLevel.size();
+            if (table.size() < 3 + levels) throw Error("rank " + std::to_string(r + 1) + ": a short statistics table");
+            sum.maxDev = std::max(sum.maxDev, table[0]);
+            sum.pixels += uint64_t(table[1]);
+            sum.wetCells += uint64_t(table[2]);
+            for (size_t l = 0; l < levels; ++l) sum.perLevel[l] += uint64_t(table[3 + l]);
+            allSumSq.insert(allSumSq.end(), table.begin() + ptrdiff_t(3 + levels), table.end());
+            if (opt_.cellElevations) paint(in, 0, in.codes.size());
+            for (size_t at = 0; at < in.codes.size(); at += size_t{1} << 16) {
+                const size_t n = std::min(in.codes.size() - at, size_t{1} << 16);
+                std::vector<std::span<const float>> values;
+                for (const auto& v : in.values) values.emplace_back(v.data() + at, n);
+                sink.append(std::span<const uint64_t>(in.codes.data() + at, n), values);
+            }
+        }
+        if (allSumSq.size() != units.size()) throw Error("ranks sent statistics of " + std::to_string(allSumSq.size()) + " units, not " + std::to_string(units.size()));
+        for (double u : allSumSq) sum.sumSq += u;
+        progress.advance(2 * tiles);  // units cover fewer than all tiles; fill the bar
+        progress.finish();
         return sum;
     }
 }
 
-void Builder::measure(const Batch& b, size_t begin, size_t end, Stats& a) const {
+void Builder::paint(const Batch& b, size_t begin, size_t end) const {
+    for (size_t i = begin; i < end; ++i) {
+        const uint64_t key = codeKey(b.codes[i]);
+        const size_t span = size_t{1} << codeLevel(b.codes[i]);
+        const size_t ix0 = mortonX(key), iy0 = mortonY(key);
+        for (size_t iy = iy0; iy < iy0 + span; ++iy)
+            for (size_t ix = ix0; ix < ix0 + span; ++ix) (*opt_.cellElevations)[(t_.height - 1 - iy) * t_.width + ix] = b.values[0][i];
+    }
+}
+
+void Builder::measure(const Batch& b, size_t begin, size_t end, Stats& a, bool paintElevations) const {
     for (size_t i = begin; i < end; ++i) {
         const uint64_t key = codeKey(b.codes[i]);
         const int level = codeLevel(b.codes[i]);
@@ -398,7 +488,7 @@ void Builder::measure(const Batch& b, size_t begin, size_t end, Stats& a) const 
                 const size_t idx = row * t_.width + ix;
                 const double exact = static_cast<double>(t_.values[idx]) + (t_.roundingM.empty() ? 0.0 : t_.roundingM[idx]);
                 const double dz = exact - z;
-                if (opt_.cellElevations) (*opt_.cellElevations)[idx] = b.values[0][i];
+                if (paintElevations && opt_.cellElevations) (*opt_.cellElevations)[idx] = b.values[0][i];
                 a.sumSq += dz * dz;
                 a.maxDev = std::max(a.maxDev, std::abs(dz));
                 ++a.pixels;
@@ -590,8 +680,13 @@ BuildSummary buildGridFile(const Raster& terrain, const WaterSteps* steps, const
     out.shape = shapeFor(terrain, stepCount > 0, options, rootLevel, maxLevel);
     const std::optional<MergeMask> mask = maskOf(terrain, steps, options, maxLevel);
     FileSink sink(path, out.shape, stepCount);
-    if (options.cellElevations) options.cellElevations->assign(terrain.values.size(), std::numeric_limits<float>::quiet_NaN());
+    const bool root = ranks::rank() == 0;  // under mpirun, rank 0 alone writes (Builder::run)
+    if (options.cellElevations && root) options.cellElevations->assign(terrain.values.size(), std::numeric_limits<float>::quiet_NaN());
     Stats st = Builder(terrain, mask ? &*mask : nullptr, options, rootLevel, maxLevel).run(sink);
+    if (!root) {
+        for (uint64_t c : st.perLevel) out.cellCount += c;  // this rank's share
+        return out;
+    }
     {
         Progress progress("water steps: depth per cell", stepCount, options.progress && stepCount > 0);
         for (size_t k = 0; k < stepCount; ++k) {

@@ -8,6 +8,7 @@
 #include "heightcast/core/error.h"
 #include "heightcast/ingest/build.h"
 #include "heightcast/core/parallel.h"
+#include "heightcast/core/ranks.h"
 #include "heightcast/core/timer.h"
 #include "resample.h"
 
@@ -182,7 +183,7 @@ BuildSummary ingestToFile(const Options& opt, const std::string& path, LoadRepor
     extra.sourceCrsName = report.sourceCrsName;
     extra.seconds = clock.seconds();
     BuildSummary b = buildGridFile(p.terrain, p.water.count ? &p.water : nullptr, p.build, path, extra);
-    afterBuild(p, b.shape.stats, opt, report);
+    if (ranks::rank() == 0) afterBuild(p, b.shape.stats, opt, report);  // under mpirun, rank 0 holds every cell
     return b;
 }
 

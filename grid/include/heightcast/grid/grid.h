@@ -57,7 +57,7 @@ struct IngestStats {
     double toleranceM = 0;       // requested: max |pixel - cell| in every layer
     double maxDevM = 0;          // achieved max |pixel - covering cell value| over every layer
     double rmsDevM = 0;          // achieved RMS of the same, over elevation
-    double seconds = 0;          // ingest wall time
+    double seconds = 0;          // ingest wall time (printed by hc-ingest; no longer written to the file: its bytes depend on its inputs only)
 };
 
 class Grid {

@@ -1,0 +1,93 @@
+# tests/cli/mpi.cmake: preprocessing on the ranks of mpirun (issue 15, DESIGN.md section 13). `mpirun -np N` with
+# N = 1, 2, 3 on this one machine (oversubscribed: more ranks than cores) must write the very bytes one process
+# writes, for hc-ingest and hc-influence (lists and every step's pyramid), on three kinds of grid: a raster with
+# holes (interior nodata burnt into the bundled DEM, and the rotated footprint's edges), water steps (a rising flood
+# over it), and a rotated quadtree mesh. Each rank logs its share once ("rank K/N"); a failure is reported once, by
+# rank 1, and leaves nothing behind. A build without MPI refuses mpirun with several processes.
+#
+# mpirun refuses to run as root unless told (CI runs as root): OMPI_ALLOW_RUN_AS_ROOT=1 and
+# OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1 say so, for these tests only.
+if(NOT HC_MPIEXEC)
+  message(STATUS "tests/cli: no mpirun (Debian: openmpi-bin): the MPI tests are left out")
+  return()
+endif()
+
+if(NOT HC_WITH_MPI)
+  # Built without MPI: several ranks would each do all the work and race for the output. Refused, nothing written.
+  hc_cli_test(mpi.refused_without_mpi nonzero [[this build has no MPI \(HC_WITH_MPI=OFF or no MPI found\)]]
+    --absent g.hcg
+    -- env OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1 OMPI_MCA_rmaps_base_oversubscribe=1 ${HC_MPIEXEC} -np 2 ${INGEST} ${D}/hef_srtm.tif -o g.hcg)
+  return()
+endif()
+
+function(hc_mpi_test name)
+  hc_cli_test(${name} ${ARGN})
+  set_property(TEST cli.${name} APPEND PROPERTY ENVIRONMENT
+               "OMPI_ALLOW_RUN_AS_ROOT=1;OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1;OMPI_MCA_rmaps_base_oversubscribe=1;HC_MPIRUN=${HC_MPIEXEC}")
+  if(HC_SANITIZE)  # OpenMPI's own allocations outlive MPI_Finalize: LeakSanitizer would fail every rank
+    set_property(TEST cli.${name} APPEND PROPERTY ENVIRONMENT ASAN_OPTIONS=detect_leaks=0)
+  endif()
+  set_property(TEST cli.${name} PROPERTY TIMEOUT 300)
+  set_property(TEST cli.${name} PROPERTY LABELS "cli;mpi")
+  # Three ranks and their threads on a 2-core machine: run these alone, not beside the rest of the suite.
+  set_property(TEST cli.${name} PROPERTY RUN_SERIAL TRUE)
+endfunction()
+
+# The fixture: the bundled DEM with two interior holes burnt in (the nodata value inside two WGS 84 boxes), flooded at
+# 2500 and 2700 m (two water steps), with a tolerance that makes cells of three sizes. The reference is one process.
+set(HOLES_INPUT [[gdal_translate -q -a_nodata -32768 "$HC_DATA_DIR/hef_srtm.tif" holes.tif &&
+printf 'id,WKT\n1,"POLYGON((10.70 46.75,10.78 46.75,10.78 46.82,10.70 46.82,10.70 46.75))"\n2,"POLYGON((10.80 46.85,10.83 46.85,10.83 46.88,10.80 46.88,10.80 46.85))"\n' > holes.csv &&
+gdal_rasterize -q -burn -32768 holes.csv holes.tif 2>/dev/null]])
+set(HOLES_ARGS "holes.tif --tolerance 15 --max-cell 1024 --water-level 2500,2700")
+
+if(HC_GDAL_CREATE)  # gdal-bin's gdal_rasterize makes the holes
+  # hc-ingest: the same bytes from 1, 2 and 3 ranks (and the interior holes are there: fewer valid pixels than the
+  # working raster has, and holes.tif's own count of nodata pixels is not 0).
+  hc_mpi_test(mpi.ingest_holes_steps 0 [[rank 3/3: [0-9]+ tiles of [0-9]+\^2 px built, [0-9]+ units, [0-9]+ cells written]]
+    --setup "${HOLES_INPUT} && $HC_INGEST --quiet ${HOLES_ARGS} -o one.hcg"
+    --match [[rank 1/2: ]] --match [[rank 2/2: ]] --no-match [[rank 4/3|error:|warning]]
+    --check [[for n in 1 2 3
+do cmp one.hcg g$n.hcg || exit 1
+done
+"$HC_INFO" one.hcg | grep -E 'steps +2 water steps'
+gdalinfo -stats holes.tif | grep -E 'STATISTICS_VALID_PERCENT=([0-8][0-9]|9[0-8])\.']]
+    -- ${HC_BASH} -c [[for n in 1 2 3
+do "$HC_MPIRUN" -np $n "$HC_INGEST" --quiet holes.tif --tolerance 15 --max-cell 1024 --water-level 2500,2700 -o g$n.hcg || exit 1
+done]])
+
+  # hc-influence: lists and both steps' pyramids, the same bytes from 1, 2 and 3 ranks; each rank says its share once.
+  hc_mpi_test(mpi.influence_holes_steps 0 [[rank 3/3: lists of [0-9]+ cells in [0-9.]+ s, [0-9]+ pyramid tiles]]
+    --setup "${HOLES_INPUT} && $HC_INGEST --quiet ${HOLES_ARGS} -o one.hcg && $HC_INFLUENCE --quiet one.hcg > /dev/null"
+    --match [[ranks +3 \(mpirun\)]] --no-match [[error:|warning]]
+    --check [[for n in 1 2 3
+do for f in hci step0000.hcp step0001.hcp
+do cmp one.$f g$n.$f || exit 1
+done
+done
+test "$(grep -c 'rank 2/3:' "$OUTPUT")" = 1]]
+    -- ${HC_BASH} -c [[for n in 1 2 3
+do cp one.hcg g$n.hcg && "$HC_MPIRUN" -np $n "$HC_INFLUENCE" --quiet g$n.hcg || exit 1
+done]])
+endif()
+
+# A rotated quadtree mesh (mesh.cmake's fixture, turned 30 degrees): rank 1 reads the mesh whole (one cell per face:
+# nothing to share), the others say so; the influence cache and every step's pyramid are the same bytes from 3 ranks.
+hc_mpi_test(mpi.mesh_rotated 0 [[rank 2/3: idle: a mesh is read by rank 1]]
+  --setup "${TURNED} && $HC_INGEST --quiet t.nc -o one.hcg && $HC_INFLUENCE --quiet one.hcg > /dev/null"
+  --no-match [[error:|warning]]
+  --check [[cmp one.hcg m.hcg && for f in hci step0000.hcp step0001.hcp step0002.hcp
+do cmp one.$f m.$f || exit 1
+done
+"$HC_INFO" m.hcg | grep -E '^  rotation +30\.0000000']]
+  -- ${HC_BASH} -c [["$HC_MPIRUN" -np 3 "$HC_INGEST" --quiet t.nc -o m.hcg && "$HC_MPIRUN" -np 3 "$HC_INFLUENCE" --quiet m.hcg]])
+
+# A failure under mpirun: every rank stops, rank 1 says it once, no rank waits forever, and no file is left.
+hc_mpi_test(mpi.failure_reported_once nonzero [[hc-ingest: error: rank 1/3: nope\.tif: no such file \(terrain raster\)]]
+  --absent g.hcg --no-match [[rank 2/3: nope]]
+  --check [[test "$(grep -c 'error: ' "$OUTPUT")" = 1]]
+  -- ${HC_MPIEXEC} -np 3 ${INGEST} nope.tif -o g.hcg)
+# A grid file that is not one, read by every rank of hc-influence: the reader's own message, once.
+hc_mpi_test(mpi.influence_bad_grid nonzero [[hc-influence: error: rank 1/3: g\.hcg: ]]
+  --setup [[echo 'not a grid' > g.hcg]] --absent g.hci --absent g.hcp
+  --check [[test "$(grep -c 'error: ' "$OUTPUT")" = 1]]
+  -- ${HC_MPIEXEC} -np 3 ${INFLUENCE} g.hcg)
