@@ -1,6 +1,7 @@
 // hc-influence: grid -> influencing-cell lists (.hci cache) and the surface pyramid (.hcp).
 #include <algorithm>
 #include <cstdio>
+#include <memory>
 #include <optional>
 
 #include <fmt/format.h>
@@ -95,7 +96,8 @@ void printListsSummary(const InfluenceArgs& a, const hc::influence::InfluenceLis
                 writeS);
 }
 
-void printPyramidSummary(const std::string& path, const hc::Grid& grid, const hc::influence::SurfacePyramid& p, double buildS, double writeS) {
+void printPyramidSummary(const std::string& path, const hc::Grid& grid, uint64_t cells, const hc::influence::SurfacePyramid& p, double buildS,
+                         double writeS) {
     if (grid.steps.size() > 1) std::printf("  step %zu       at %.9g s, %llu wet cells\n", grid.step, grid.stepTimeS(), (unsigned long long)grid.steps[grid.step].wetCells);
     std::printf("  pyramid      -> %s\n", path.c_str());
     std::printf("    levels     0..%d (spacing %g .. %g m), %d channel%s\n", p.topLevel(), p.spacingM(0), p.spacingM(p.topLevel()), p.channels,
@@ -103,8 +105,8 @@ void printPyramidSummary(const std::string& path, const hc::Grid& grid, const hc
                 : p.waterOnly() ? "s (water level, wet share; the terrain is step 0's), in the tiles where water is drawn"
                                 : "s (elevation, water level, wet share)");
     std::printf("    samples    %llu (%.2f per cell per channel)\n", (unsigned long long)p.sampleCount(),
-                double(p.sampleCount()) / double(p.channels) / double(std::max<size_t>(1, grid.cellCount())));
-    std::printf("    bytes      %.1f MB (%.1f per cell)\n", double(p.bytes()) / 1e6, double(p.bytes()) / double(std::max<size_t>(1, grid.cellCount())));
+                double(p.sampleCount()) / double(p.channels) / double(std::max<uint64_t>(1, cells)));
+    std::printf("    bytes      %.1f MB (%.1f per cell)\n", double(p.bytes()) / 1e6, double(p.bytes()) / double(std::max<uint64_t>(1, cells)));
     std::printf("    level  spacing m    tiles   max error vs next level m\n");
     for (const auto& L : p.levels) {
         float worst = 0;
@@ -114,69 +116,107 @@ void printPyramidSummary(const std::string& path, const hc::Grid& grid, const hc
     std::printf("    time       %.3f s build (%.2f M samples/s) + %.3f s write\n", buildS, double(p.sampleCount()) / buildS / 1e6, writeS);
 }
 
+
+void printHeader(const InfluenceArgs& a, uint64_t cells) {
+    std::printf("hc-influence: %s\n", a.gridPath.c_str());
+    std::printf("  kernel       truncated Gaussian, sigma %g, R %g (reach %g cell sizes)\n", a.params.sigma, a.params.truncation,
+                a.params.truncation * a.params.sigma);
+    std::printf("  cells        %llu\n", (unsigned long long)cells);
+}
+
+// One process: the grid read whole, every list and tile built here.
+void runAlone(const InfluenceArgs& a) {
+    namespace inf = hc::influence;
+    hc::Grid grid = hc::readGrid(a.gridPath, nullptr, a.step < 0 ? 0 : size_t(a.step));
+    printHeader(a, grid.cellCount());
+    hc::Stopwatch clock;
+    if (a.lists) {
+        const inf::InfluenceLists lists = inf::buildInfluenceLists(grid, a.params, a.threads, !a.quiet);
+        const double buildS = clock.lap();
+        inf::writeInfluenceCache(lists, a.out);
+        printListsSummary(a, lists, buildS, clock.lap());
+    }
+    std::optional<hc::StaticDigests> digests;
+    for (size_t i = 0; a.pyramid && i < a.pyramidPaths.size(); ++i) {
+        // One pyramid per water step; the grid switches steps reading only the next step's section.
+        if (a.step < 0 && i > 0) {
+            if (!digests) digests = hc::staticDigestsOf(grid);  // hashed once, not per step
+            hc::readGridStep(a.gridPath, grid, i, &*digests);
+        }
+        clock.lap();
+        // A scenario's later steps keep their water only: the first step's pyramid holds the terrain for all.
+        const inf::SurfacePyramid pyramid = grid.steps.size() > 1 && grid.step > 0 ? inf::buildWaterPyramid(grid, a.params, a.threads, !a.quiet)
+                                                                                   : inf::buildSurfacePyramid(grid, a.params, a.threads, !a.quiet);
+        const double buildS = clock.lap();
+        inf::writeSurfacePyramid(pyramid, a.pyramidPaths[i]);
+        printPyramidSummary(a.pyramidPaths[i], grid, grid.cellCount(), pyramid, buildS, clock.lap());
+    }
+}
+
+// The ranks of mpirun (on_ranks.h): no rank reads the grid whole; each builds its nodes from regions of the file, rank 0
+// assembles and writes. Every collective step runs in ranks::together, so a failure anywhere stops every rank there.
+void runDistributed(const InfluenceArgs& a) {
+    namespace inf = hc::influence;
+    namespace ranks = hc::ranks;
+    const bool root = ranks::rank() == 0, progress = !a.quiet && root;
+    const hc::Stopwatch all;
+    std::unique_ptr<hc::GridRegionReader> file;
+    ranks::together([&] { file = std::make_unique<hc::GridRegionReader>(a.gridPath, a.step < 0 ? 0 : size_t(a.step)); });
+    printHeader(a, file->cellCount());
+    const inf::RankPartition part = inf::partitionOf(*file, ranks::count());
+    uint64_t myNodes = 0, myCells = 0;
+    for (size_t j = 0; j < part.keys.size(); ++j)
+        if (part.rank[j] == ranks::rank()) ++myNodes, myCells += part.cells[j];
+    std::printf("  ranks        %d (mpirun): %zu nodes of %g m holding cells, shared out in Morton order by cell count; each rank reads\n"
+                "               its nodes' cells and their halo, rank 1 assembles and writes\n",
+                ranks::count(), part.keys.size(), file->shape().levelSizeM(part.level));
+    hc::Stopwatch clock;
+    inf::RankShare listShare, pyramidShare;
+    if (a.lists) {
+        inf::InfluenceLists lists;
+        ranks::together([&] { lists = inf::buildInfluenceListsOnRanks(*file, a.params, a.threads, progress, &listShare); });
+        const double buildS = clock.lap();
+        ranks::together([&] {
+            if (root) inf::writeInfluenceCache(lists, a.out);
+        });
+        if (root) printListsSummary(a, lists, buildS, clock.lap());
+    }
+    for (size_t i = 0; a.pyramid && i < a.pyramidPaths.size(); ++i) {
+        if (a.step < 0 && i > 0) ranks::together([&] { file = std::make_unique<hc::GridRegionReader>(a.gridPath, i); });
+        const hc::Grid& shape = file->shape();
+        clock.lap();
+        const bool waterOnly = shape.steps.size() > 1 && shape.step > 0;
+        inf::SurfacePyramid pyramid;
+        inf::RankShare stepShare;
+        ranks::together([&] { pyramid = inf::buildPyramidOnRanks(*file, a.params, a.threads, progress, waterOnly, &stepShare); });
+        pyramidShare.tiles += stepShare.tiles, pyramidShare.seconds += stepShare.seconds;
+        pyramidShare.cellsRead = std::max(pyramidShare.cellsRead, stepShare.cellsRead);
+        const double buildS = clock.lap();
+        ranks::together([&] {
+            if (root) inf::writeSurfacePyramid(pyramid, a.pyramidPaths[i]);
+        });
+        if (root) printPyramidSummary(a.pyramidPaths[i], shape, file->cellCount(), pyramid, buildS, clock.lap());
+    }
+    std::string line = fmt::format("{} nodes, {} cells", myNodes, myCells);
+    if (a.lists) line += fmt::format("; lists in {:.3f} s ({} cells read with their halo)", listShare.seconds, listShare.cellsRead);
+    if (a.pyramid)
+        line += fmt::format("; {} pyramid tiles in {:.3f} s (at most {} cells read for a step)", pyramidShare.tiles, pyramidShare.seconds,
+                            pyramidShare.cellsRead);
+    line += fmt::format("; {:.3f} s in all, peak {:.1f} MB resident", all.seconds(), double(hc::peakRssBytes()) / 1e6);
+    ranks::log("hc-influence", line);
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
     return hc::cli::runOnRanks("hc-influence", argc, argv, [&] {
-        namespace ranks = hc::ranks;
-        namespace inf = hc::influence;
         InfluenceArgs a;
         bool go = true;
-        ranks::together([&] { go = parseOptions(argc, argv, a); });
+        hc::ranks::together([&] { go = parseOptions(argc, argv, a); });
         if (!go) return 0;
-        const bool root = ranks::rank() == 0, progress = !a.quiet && root;  // under mpirun rank 0 writes, and shows progress
-        hc::Grid grid;
-        ranks::together([&] { grid = hc::readGrid(a.gridPath, nullptr, a.step < 0 ? 0 : size_t(a.step)); });
-        std::printf("hc-influence: %s\n", a.gridPath.c_str());
-        std::printf("  kernel       truncated Gaussian, sigma %g, R %g (reach %g cell sizes)\n", a.params.sigma, a.params.truncation,
-                    a.params.truncation * a.params.sigma);
-        std::printf("  cells        %zu\n", grid.cellCount());
-        if (ranks::distributed())
-            std::printf("  ranks        %d (mpirun): each builds the lists and pyramid tiles of its share of the cells, rank 1 writes\n",
-                        ranks::count());
-        hc::Stopwatch clock, all;
-        inf::RankShare listShare, pyramidShare;
-        if (a.lists) {
-            inf::InfluenceLists lists;
-            ranks::together([&] { lists = inf::buildInfluenceListsOnRanks(grid, a.params, a.threads, progress, &listShare); });
-            const double buildS = clock.lap();
-            ranks::together([&] {
-                if (root) hc::influence::writeInfluenceCache(lists, a.out);
-            });
-            if (root) printListsSummary(a, lists, buildS, clock.lap());
-        }
-        std::optional<hc::StaticDigests> digests;
-        for (size_t i = 0; a.pyramid && i < a.pyramidPaths.size(); ++i) {
-            // One pyramid per water step; the grid switches steps reading only the next step's section.
-            if (a.step < 0 && i > 0) {
-                ranks::together([&] {
-                    if (!digests) digests = hc::staticDigestsOf(grid);  // hashed once, not per step
-                    hc::readGridStep(a.gridPath, grid, i, &*digests);
-                });
-            }
-            clock.lap();
-            // A scenario's later steps keep their water only: the first step's pyramid holds the terrain for all.
-            const bool waterOnly = grid.steps.size() > 1 && grid.step > 0;
-            inf::SurfacePyramid pyramid;
-            inf::RankShare stepShare;
-            ranks::together([&] { pyramid = inf::buildPyramidOnRanks(grid, a.params, a.threads, progress, waterOnly, &stepShare); });
-            pyramidShare.tiles += stepShare.tiles, pyramidShare.seconds += stepShare.seconds, pyramidShare.cells = stepShare.cells;
-            const double buildS = clock.lap();
-            ranks::together([&] {
-                if (root) hc::influence::writeSurfacePyramid(pyramid, a.pyramidPaths[i]);
-            });
-            if (root) printPyramidSummary(a.pyramidPaths[i], grid, pyramid, buildS, clock.lap());
-        }
+        if (hc::ranks::distributed()) runDistributed(a);
+        else runAlone(a);
         std::printf("  memory       peak %.1f MB resident\n", double(hc::peakRssBytes()) / 1e6);
-        if (ranks::distributed()) {
-            std::string line;
-            if (a.lists) line += fmt::format("lists of {} cells in {:.3f} s", listShare.cells, listShare.seconds);
-            if (a.pyramid)
-                line += fmt::format("{}{} pyramid tiles (share of {} cells) in {:.3f} s", a.lists ? ", " : "", pyramidShare.tiles,
-                                        pyramidShare.cells, pyramidShare.seconds);
-            line += fmt::format("; {:.3f} s in all, peak {:.1f} MB resident", all.seconds(), double(hc::peakRssBytes()) / 1e6);
-            ranks::log("hc-influence", line);
-        }
         return 0;
     });
 }

@@ -922,10 +922,11 @@ uint64_t GridRegionReader::cellsInNode(uint64_t key, int level) const {
     return hi - lo;
 }
 
-Grid GridRegionReader::region(const Grid::Square& box, std::span<const double> marginM) const {
+Grid GridRegionReader::region(const Grid::Square& box, std::span<const double> marginM, std::vector<std::pair<uint64_t, uint64_t>>* runsOut) const {
     const Impl& r = *impl_;
     const Grid& shape = r.info.shape;
     Grid g = shapeOf(shape);
+    if (runsOut) runsOut->clear();
     if (!(box.x0 <= box.x1 && box.y0 <= box.y1)) return g;
     // A node of level L holds cells of levels <= L: it is searched with the largest margin of those levels.
     const int levels = shape.rootLevel + 1;
@@ -985,6 +986,7 @@ Grid GridRegionReader::region(const Grid::Square& box, std::span<const double> m
             [&](size_t a, size_t b, uint64_t code) { return size_t(r.lowerBound(code, a, b)); },
             [&](uint64_t k, int level) { return meets(square(k, level), upTo[size_t(level)]); }, take, takeCell);
     }
+    if (runsOut) *runsOut = runs;
     uint64_t total = 0;
     for (auto [lo, hi] : runs) total += hi - lo;
     g.codes.reserve(total);

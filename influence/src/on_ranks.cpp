@@ -1,161 +1,351 @@
-// The lists and the pyramid on the ranks of mpirun (on_ranks.h): each rank its share, rank 0 all of it.
+// The lists and the pyramid on the ranks of mpirun (on_ranks.h): each rank its nodes, each node from a region of the
+// grid file around it; rank 0 assembles all of it.
 #include "heightcast/influence/on_ranks.h"
 
 #include <algorithm>
+#include <bit>
+#include <numeric>
 
 #include "heightcast/core/error.h"
+#include "heightcast/core/parallel.h"
 #include "heightcast/core/progress.h"
 #include "heightcast/core/ranks.h"
 #include "heightcast/core/timer.h"
+#include "heightcast/influence/region.h"
 #include "list_index.h"
 #include "pyramid_build.h"
 #include "pyramid_storage.h"
 
 namespace hc::influence {
 
-std::vector<size_t> rankCellCuts(const Grid& g, int ranks) {
-    const size_t n = g.cellCount();
-    const uint64_t nodeMask = ~(mortonSpan(std::clamp(g.maxLevel, 0, g.rootLevel)) - 1);
-    std::vector<size_t> cuts(size_t(ranks) + 1, n);
-    cuts[0] = 0;
-    for (int r = 1; r < ranks; ++r) {
-        size_t i = std::max<size_t>(cuts[size_t(r) - 1], size_t(ranks::shareBegin(n, r, ranks)));
-        // Forward to the first cell of a coarsest-level node.
-        while (i > 0 && i < n && (codeKey(g.codes[i]) & nodeMask) == (codeKey(g.codes[i - 1]) & nodeMask)) ++i;
-        cuts[size_t(r)] = i;
-    }
-    return cuts;
-}
-
 namespace {
 
-// The rank whose share holds cell i.
-int rankOfCell(const std::vector<size_t>& cuts, size_t i) { return int(std::upper_bound(cuts.begin(), cuts.end(), i) - cuts.begin()) - 1; }
+constexpr int kNodesPerRank = 16;   // enough nodes to balance cell counts between ranks
+constexpr int kMaxPartitionDepth = 6;  // at most 4^6 nodes looked at
 
-// The rank that samples the pyramid tile with corner key `key`: the owner of its first cell (a kept tile's node holds a cell).
-int rankOfTile(const Grid& g, const std::vector<size_t>& cuts, uint64_t key) {
-    const size_t i = size_t(std::lower_bound(g.codes.begin(), g.codes.end(), makeCellCode(key, 0)) - g.codes.begin());
-    return rankOfCell(cuts, std::min(i, g.cellCount() ? g.cellCount() - 1 : 0));
+Grid::Square nodeSquare(const Grid& shape, uint64_t key, int level) {
+    const double x0 = double(mortonX(key)) * shape.finestCellM, y0 = double(mortonY(key)) * shape.finestCellM;
+    const double side = shape.levelSizeM(level);
+    return {x0, y0, x0 + side, y0 + side};
+}
+
+// A region of the file with each of its cells' index in the file.
+struct IndexedRegion {
+    Grid grid;
+    std::vector<uint32_t> fileIndex;  // per region cell
+    size_t lo = 0, hi = 0;            // the region cells inside the node it was read for
+};
+
+IndexedRegion readIndexed(const GridRegionReader& file, const Grid::Square& box, const std::vector<double>& margins, uint64_t key, int level,
+                          bool wantIndex) {
+    IndexedRegion r;
+    std::vector<std::pair<uint64_t, uint64_t>> runs;
+    r.grid = file.region(box, margins, &runs);
+    if (wantIndex) {
+        r.fileIndex.reserve(r.grid.cellCount());
+        for (auto [lo, hi] : runs)
+            for (uint64_t i = lo; i < hi; ++i) r.fileIndex.push_back(uint32_t(i));
+    }
+    const auto& c = r.grid.codes;
+    r.lo = size_t(std::lower_bound(c.begin(), c.end(), makeCellCode(key, 0)) - c.begin());
+    r.hi = size_t(std::lower_bound(c.begin(), c.end(), makeCellCode(key + mortonSpan(level), 0)) - c.begin());
+    return r;
+}
+
+std::vector<size_t> myNodes(const RankPartition& part) {
+    std::vector<size_t> out;
+    for (size_t j = 0; j < part.keys.size(); ++j)
+        if (part.rank[j] == ranks::rank()) out.push_back(j);
+    return out;
 }
 
 }  // namespace
 
-InfluenceLists buildInfluenceListsOnRanks(const Grid& g, const KernelParams& params, unsigned threads, bool progress, RankShare* share) {
-    const int rank = ranks::rank(), count = ranks::count();
-    if (count == 1) {
-        const Stopwatch clock;
-        InfluenceLists lists = buildInfluenceLists(g, params, threads, progress);
-        if (share) *share = {g.cellCount(), 0, clock.seconds()};
-        return lists;
+RankPartition partitionOf(const GridRegionReader& file, int ranks) {
+    const Grid& shape = file.shape();
+    const int root = shape.rootLevel;
+    // No node finer than the coarsest cell (each cell lies in one node) or than the node of a finest pyramid tile.
+    const int lowest = std::min(root, std::max(shape.maxLevel, kPyramidTileLog2));
+    RankPartition p;
+    for (int level = root;; --level) {
+        p = {};
+        p.level = level;
+        const uint64_t nodes = uint64_t{1} << (2 * (root - level));
+        for (uint64_t k = 0; k < nodes; ++k)
+            if (const uint64_t n = file.cellsInNode(k * mortonSpan(level), level); n > 0) {
+                p.keys.push_back(k * mortonSpan(level));
+                p.cells.push_back(n);
+            }
+        if (p.keys.size() >= size_t(kNodesPerRank) * size_t(ranks) || level <= lowest || root - level >= kMaxPartitionDepth) break;
     }
-    detail::checkListInputs(g, params);
+    const uint64_t total = std::accumulate(p.cells.begin(), p.cells.end(), uint64_t{0});
+    uint64_t before = 0;
+    for (uint64_t n : p.cells) {
+        // The rank whose equal share holds the node's middle cell.
+        const long double mid = (long double)before + (long double)n / 2;
+        p.rank.push_back(std::min(ranks - 1, int(mid * ranks / (long double)std::max<uint64_t>(total, 1))));
+        before += n;
+    }
+    return p;
+}
+
+InfluenceLists buildInfluenceListsOnRanks(const GridRegionReader& file, const KernelParams& params, unsigned threads, bool progress,
+                                          RankShare* share) {
+    if (std::string why = params.validate(); !why.empty()) throw Error("influence parameters: " + why);
+    if (file.cellCount() >= std::numeric_limits<uint32_t>::max()) throw Error("grid has too many cells for 32-bit influence indices");
     const Stopwatch clock;
-    const std::vector<size_t> cuts = rankCellCuts(g, count);
-    const auto superBlocks = detail::splitNodes(g, {0, g.rootLevel, 0, g.cellCount()}, detail::kSuperBlockCells);
-    // A super-block is built whole by the rank of its first cell.
-    auto firstBlock = [&](int r) {
-        return size_t(std::lower_bound(superBlocks.begin(), superBlocks.end(), cuts[size_t(r)],
-                                       [](const detail::NodeRange& b, size_t c) { return b.lo < c; }) - superBlocks.begin());
-    };
-    const size_t s0 = firstBlock(rank), s1 = rank + 1 == count ? superBlocks.size() : firstBlock(rank + 1);
-    detail::ListPart part;
+    const int rank = ranks::rank(), count = ranks::count();
+    const RankPartition part = partitionOf(file, count);
+    const std::vector<double> margins = kernelReachM(file.shape(), params);
+    const std::vector<size_t> mine = myNodes(part);
+    RankShare s;
+    uint64_t myCells = 0;
+    for (size_t j : mine) myCells += part.cells[j];
+    std::vector<uint32_t> lengths, entries;
     {
-        const detail::ListIndex index(g, params);
-        Progress bar("influence lists", s0 < s1 ? superBlocks[s1 - 1].hi - superBlocks[s0].lo : 0, progress && rank == 0);
-        part = detail::buildListPart(index, superBlocks, s0, s1, threads, bar);
+        Progress bar("influence lists", myCells, progress && rank == 0);
+        for (size_t j : mine) {
+            const IndexedRegion r = readIndexed(file, nodeSquare(file.shape(), part.keys[j], part.level), margins, part.keys[j], part.level, true);
+            const detail::ListIndex index(r.grid, params);
+            const auto blocks = detail::splitNodes(r.grid, {part.keys[j], part.level, r.lo, r.hi}, detail::kSuperBlockCells);
+            const detail::ListPart lists = detail::buildListPart(index, blocks, 0, blocks.size(), threads, bar);
+            for (size_t k = 0; k + 1 < lists.offsets.size(); ++k) lengths.push_back(uint32_t(lists.offsets[k + 1] - lists.offsets[k]));
+            const size_t at = entries.size();
+            entries.resize(at + lists.entries);
+            for (size_t e = 0; e < lists.entries; ++e) entries[at + e] = r.fileIndex[lists.indices[e]];  // region -> file index
+            s.nodes += 1, s.cells += r.hi - r.lo, s.cellsRead += r.grid.cellCount();
+        }
         bar.finish();
     }
-    const size_t myCells = part.offsets.size() - 1;
-    if (share) *share = {myCells, 0, clock.seconds()};
+    s.seconds = clock.seconds();
+    if (share) *share = s;
     if (rank != 0) {
-        // Lengths (4 bytes a cell, not the 8 of an offset), then the entries.
-        std::vector<uint32_t> lengths(myCells);
-        for (size_t k = 0; k < myCells; ++k) lengths[k] = uint32_t(part.offsets[k + 1] - part.offsets[k]);
         ranks::sendToRoot(lengths);
-        ranks::sendToRoot(std::as_bytes(std::span<const uint32_t>(part.indices.get(), part.entries)));
+        ranks::sendToRoot(entries);
         return {};
     }
-    // Rank 0: its own part first (the lowest cells), then every other rank's, in order.
-    const size_t n = g.cellCount();
-    std::vector<uint64_t> offsets = std::move(part.offsets);
-    offsets.resize(n + 1);
-    size_t used = part.entries, capacity = used;
-    std::unique_ptr<uint32_t[]> indices = std::move(part.indices);
-    size_t cell = myCells;
-    for (int r = 1; r < count; ++r) {
-        const std::vector<uint32_t> lengths = ranks::receiveVectorFrom<uint32_t>(r);
-        const std::vector<uint32_t> entries = ranks::receiveVectorFrom<uint32_t>(r);
-        if (cell + lengths.size() > n) throw Error("rank " + std::to_string(r + 1) + " sent lists of more cells than the grid has");
+    // Rank 0: its own lists first (the lowest cells: ranks follow Morton order), then every other rank's, in order.
+    const size_t n = file.cellCount();
+    std::vector<uint64_t> offsets(n + 1, 0);
+    size_t cell = 0, used = 0;
+    auto indices = std::unique_ptr<uint32_t[]>(new uint32_t[std::max<size_t>(entries.size(), 1)]);
+    size_t capacity = std::max<size_t>(entries.size(), 1);
+    auto append = [&](const std::vector<uint32_t>& len, const std::vector<uint32_t>& ent, int from) {
+        if (cell + len.size() > n) throw Error("rank " + std::to_string(from + 1) + " sent lists of more cells than the grid has");
         uint64_t sum = 0;
-        for (size_t k = 0; k < lengths.size(); ++k) {
-            offsets[cell + k + 1] = offsets[cell + k] + lengths[k];
-            sum += lengths[k];
-        }
-        if (sum != entries.size()) throw Error("rank " + std::to_string(r + 1) + " sent list lengths that do not add up to its entries");
-        if (used + entries.size() > capacity) {
-            capacity = std::max(used + entries.size(), capacity + capacity / 2);
+        for (size_t k = 0; k < len.size(); ++k) offsets[cell + k + 1] = offsets[cell + k] + len[k], sum += len[k];
+        if (sum != ent.size()) throw Error("rank " + std::to_string(from + 1) + " sent list lengths that do not add up to its entries");
+        if (used + ent.size() > capacity) {
+            capacity = std::max(used + ent.size(), capacity + capacity / 2);
             auto bigger = std::unique_ptr<uint32_t[]>(new uint32_t[capacity]);
             std::copy(indices.get(), indices.get() + used, bigger.get());
             indices = std::move(bigger);
         }
-        std::copy(entries.begin(), entries.end(), indices.get() + used);
-        used += entries.size();
-        cell += lengths.size();
+        std::copy(ent.begin(), ent.end(), indices.get() + used);
+        used += ent.size(), cell += len.size();
+    };
+    append(lengths, entries, 0);
+    std::vector<uint32_t>().swap(entries);
+    for (int r = 1; r < count; ++r) {
+        const auto len = ranks::receiveVectorFrom<uint32_t>(r);
+        const auto ent = ranks::receiveVectorFrom<uint32_t>(r);
+        append(len, ent, r);
     }
     if (cell != n) throw Error("the ranks sent lists of " + std::to_string(cell) + " cells, not " + std::to_string(n));
-    return InfluenceLists(params, g.structureHash(), g.contentHash(), std::move(offsets), std::move(indices), used);
+    return InfluenceLists(params, file.info().structureHash, file.info().contentHash, std::move(offsets), std::move(indices), used);
 }
 
-SurfacePyramid buildPyramidOnRanks(const Grid& g, const KernelParams& params, unsigned threads, bool progress, bool waterOnly,
-                                   RankShare* share) {
-    const int rank = ranks::rank(), count = ranks::count();
+SurfacePyramid buildPyramidOnRanks(const GridRegionReader& file, const KernelParams& params, unsigned threads, bool progress,
+                                   bool waterOnly, RankShare* share) {
+    if (std::string why = params.validate(); !why.empty()) throw Error("influence parameters: " + why);
+    const Grid& shape = file.shape();
+    const int depthLayer = shape.findLayer("water_depth");
+    if (waterOnly && depthLayer < 0) throw Error("a water pyramid is built for a grid with water");
     const Stopwatch clock;
-    if (count == 1) {
-        SurfacePyramid p = waterOnly ? buildWaterPyramid(g, params, threads, progress) : buildSurfacePyramid(g, params, threads, progress);
-        if (share) {
-            share->tiles = 0;
-            for (const auto& L : p.levels) share->tiles += L.tileCount();
-            share->cells = g.cellCount(), share->seconds = clock.seconds();
+    const int rank = ranks::rank(), count = ranks::count();
+    threads = resolveThreads(threads);
+    const RankPartition part = partitionOf(file, count);
+    const int top = std::max(0, shape.rootLevel - kPyramidTileLog2);
+    const int channels = depthLayer >= 0 ? 3 : 1;
+    std::vector<int> sides(size_t(top) + 1);
+    for (int t = 0; t <= top; ++t) sides[size_t(t)] = std::min(kPyramidTileSide, 1 << (shape.rootLevel - t));
+    auto nodeLevelOf = [&](int t) { return t + std::countr_zero(unsigned(sides[size_t(t)])); };
+    auto planeOf = [&](int t) { return size_t(sides[size_t(t)]) * size_t(sides[size_t(t)]); };
+    // Margins: every cell whose kernel reaches the node; for a water pyramid also those one tile further (the tiles a wet
+    // cell marks are grown by one: wetMarkedTiles), a tile of a level inside the node being at most the node's side.
+    std::vector<double> margins = kernelReachM(shape, params);
+    if (waterOnly)
+        for (double& m : margins) m += shape.levelSizeM(part.level);
+    const std::vector<double> reach = kernelReachM(shape, params);
+
+    RankShare s;
+    // What this rank sends: per level, its tiles' keys and samples.
+    std::vector<std::vector<uint64_t>> keys(size_t(top) + 1);
+    std::vector<std::vector<float>> samples(size_t(top) + 1);
+    // Coarse levels (tiles larger than a node): the tiles this rank's nodes keep, and (water) mark.
+    std::vector<std::vector<uint64_t>> coarseKept(size_t(top) + 1), coarseMarked(size_t(top) + 1);
+    const std::vector<size_t> mine = myNodes(part);
+    {
+        Progress bar("surface pyramid", mine.size(), progress && rank == 0);
+        std::vector<detail::PyramidWorkspace> scratch(threads);
+        for (size_t j : mine) {
+            const uint64_t nodeKey = part.keys[j];
+            const IndexedRegion r = readIndexed(file, nodeSquare(shape, nodeKey, part.level), margins, nodeKey, part.level, false);
+            const detail::ListIndex index(r.grid, params);
+            for (int t = 0; t <= top; ++t) {
+                const int side = sides[size_t(t)];
+                std::vector<uint64_t> k;
+                detail::tileKeysOfCells(r.grid, r.lo, r.hi, t, top, side, k);
+                if (nodeLevelOf(t) > part.level) {  // a coarse tile: decided once every node has spoken
+                    coarseKept[size_t(t)].insert(coarseKept[size_t(t)].end(), k.begin(), k.end());
+                    if (waterOnly) detail::wetMarkedTiles(r.grid, params, depthLayer, r.lo, r.hi, t, side, coarseMarked[size_t(t)]);
+                    continue;
+                }
+                if (waterOnly) {
+                    std::vector<uint64_t> marked, kept;
+                    detail::wetMarkedTiles(r.grid, params, depthLayer, 0, r.grid.cellCount(), t, side, marked);
+                    std::sort(marked.begin(), marked.end());
+                    std::set_intersection(k.begin(), k.end(), marked.begin(), marked.end(), std::back_inserter(kept));
+                    k = std::move(kept);
+                }
+                const size_t floats = size_t(channels) * planeOf(t), at = samples[size_t(t)].size();
+                samples[size_t(t)].resize(at + k.size() * floats);
+                parallelFor(k.size(), 4, threads, [&](size_t b, size_t e, unsigned worker) {
+                    for (size_t i = b; i < e; ++i)
+                        detail::buildTile(r.grid, index, params, t, side, k[i], channels, depthLayer, &samples[size_t(t)][at + i * floats],
+                                          scratch[worker], -1);
+                });
+                keys[size_t(t)].insert(keys[size_t(t)].end(), k.begin(), k.end());
+                s.tiles += k.size();
+            }
+            s.nodes += 1, s.cells += r.hi - r.lo, s.cellsRead += r.grid.cellCount();
+            bar.advance(1);
         }
-        return p;
+        bar.finish();
     }
-    if (waterOnly && g.findLayer("water_depth") < 0) throw Error("a water pyramid is built for a grid with water");
-    const std::vector<size_t> cuts = rankCellCuts(g, count);
-    const detail::TileFilter mine = [&](int, uint64_t key) { return rankOfTile(g, cuts, key) == rank; };
-    SurfacePyramid p = detail::samplePyramid(g, params, threads, progress && rank == 0, waterOnly, &mine);
-    auto& storage = const_cast<SurfacePyramid::Storage&>(*p.storage);  // samplePyramid's own vectors
-    const size_t channels = size_t(p.channels);
-    uint64_t myTiles = 0;
-    for (const auto& L : p.levels)
-        for (uint64_t key : L.keys) myTiles += rankOfTile(g, cuts, key) == rank;
-    if (share) *share = {cuts[size_t(rank) + 1] - cuts[size_t(rank)], myTiles, clock.seconds()};
+
+    // The coarse tiles: kept where some node keeps them (and, for water, some wet cell marks them), then shared out one by
+    // one; each of their blocks is sampled from a region read around the block.
+    struct CoarseTile {
+        int t;
+        uint64_t key;
+    };
+    std::vector<CoarseTile> coarse;
+    for (int t = 0; t <= top; ++t) {
+        if (nodeLevelOf(t) <= part.level) continue;
+        auto unite = [](const std::vector<uint64_t>& v) {
+            std::vector<uint64_t> all;
+            for (const auto& from : ranks::allGatherVectors(v)) all.insert(all.end(), from.begin(), from.end());
+            std::sort(all.begin(), all.end());
+            all.erase(std::unique(all.begin(), all.end()), all.end());
+            return all;
+        };
+        std::vector<uint64_t> kept = unite(coarseKept[size_t(t)]);
+        if (waterOnly) {
+            const std::vector<uint64_t> marked = unite(coarseMarked[size_t(t)]);
+            std::vector<uint64_t> both;
+            std::set_intersection(kept.begin(), kept.end(), marked.begin(), marked.end(), std::back_inserter(both));
+            kept = std::move(both);
+        }
+        for (uint64_t key : kept) coarse.push_back({t, key});
+    }
+    {
+        std::vector<CoarseTile> ours;
+        for (size_t i = 0; i < coarse.size(); ++i)
+            if (int(i % size_t(count)) == rank) ours.push_back(coarse[i]);
+        struct Job {
+            size_t tile;
+            int block;
+        };
+        std::vector<Job> jobs;
+        std::vector<size_t> at(ours.size());
+        for (size_t i = 0; i < ours.size(); ++i) {
+            const int t = ours[i].t, blocks = (sides[size_t(t)] + detail::kPyramidBlock - 1) / detail::kPyramidBlock;
+            at[i] = samples[size_t(t)].size();
+            samples[size_t(t)].resize(at[i] + size_t(channels) * planeOf(t));
+            keys[size_t(t)].push_back(ours[i].key);
+            for (int b = 0; b < blocks * blocks; ++b) jobs.push_back({i, b});
+        }
+        s.tiles += ours.size();
+        std::vector<uint64_t> readPerWorker(threads, 0);
+        std::vector<detail::PyramidWorkspace> scratch(threads);
+        parallelFor(jobs.size(), 1, threads, [&](size_t b, size_t e, unsigned worker) {
+            for (size_t q = b; q < e; ++q) {
+                const CoarseTile& c = ours[jobs[q].tile];
+                const int side = sides[size_t(c.t)], blocks = (side + detail::kPyramidBlock - 1) / detail::kPyramidBlock;
+                const int bi = (jobs[q].block % blocks) * detail::kPyramidBlock, bj = (jobs[q].block / blocks) * detail::kPyramidBlock;
+                const int bi1 = std::min(side, bi + detail::kPyramidBlock), bj1 = std::min(side, bj + detail::kPyramidBlock);
+                const double h = shape.levelSizeM(c.t);
+                const double x0 = double(mortonX(c.key)) * shape.finestCellM, y0 = double(mortonY(c.key)) * shape.finestCellM;
+                const Grid::Square box{x0 + bi * h, y0 + bj * h, x0 + (bi1 - 1) * h, y0 + (bj1 - 1) * h};
+                const Grid region = file.region(box, reach);
+                readPerWorker[worker] += region.cellCount();
+                const detail::ListIndex index(region, params);
+                detail::buildTile(region, index, params, c.t, side, c.key, channels, depthLayer, &samples[size_t(c.t)][at[jobs[q].tile]],
+                                  scratch[worker], jobs[q].block);
+            }
+        });
+        for (uint64_t n : readPerWorker) s.cellsRead += n;
+    }
+    s.seconds = clock.seconds();
+    if (share) *share = s;
+
     if (rank != 0) {
-        // Per level, the samples of this rank's tiles in key order (rank 0 knows which tiles they are).
-        for (size_t t = 0; t < p.levels.size(); ++t) {
-            const auto& L = p.levels[t];
-            const size_t tileFloats = channels * size_t(L.tileSide) * size_t(L.tileSide);
-            std::vector<float> out;
-            for (size_t tile = 0; tile < L.tileCount(); ++tile)
-                if (rankOfTile(g, cuts, L.keys[tile]) == rank)
-                    out.insert(out.end(), L.samples.begin() + ptrdiff_t(tile * tileFloats), L.samples.begin() + ptrdiff_t((tile + 1) * tileFloats));
-            ranks::sendToRoot(out);
+        for (int t = 0; t <= top; ++t) {
+            ranks::sendToRoot(keys[size_t(t)]);
+            ranks::sendToRoot(samples[size_t(t)]);
         }
         return {};
     }
-    for (int r = 1; r < count; ++r)
-        for (size_t t = 0; t < p.levels.size(); ++t) {
-            const auto& L = p.levels[t];
-            const size_t tileFloats = channels * size_t(L.tileSide) * size_t(L.tileSide);
-            const std::vector<float> in = ranks::receiveVectorFrom<float>(r);
-            size_t at = 0;
-            for (size_t tile = 0; tile < L.tileCount(); ++tile) {
-                if (rankOfTile(g, cuts, L.keys[tile]) != r) continue;
-                if (at + tileFloats > in.size()) throw Error("rank " + std::to_string(r + 1) + " sent fewer pyramid samples than its tiles hold");
-                std::copy(in.begin() + ptrdiff_t(at), in.begin() + ptrdiff_t(at + tileFloats), storage.samples[t].begin() + ptrdiff_t(tile * tileFloats));
-                at += tileFloats;
-            }
-            if (at != in.size()) throw Error("rank " + std::to_string(r + 1) + " sent more pyramid samples than its tiles hold");
+    // Rank 0: every rank's tiles of each level, in key order.
+    SurfacePyramid p;
+    p.finestCellM = shape.finestCellM;
+    p.rootLevel = shape.rootLevel;
+    p.params = params;
+    p.structureHash = file.info().structureHash;
+    p.contentHash = file.info().contentHash;
+    p.channels = channels;
+    auto owned = std::make_shared<SurfacePyramid::Storage>();
+    owned->keys.resize(size_t(top) + 1);
+    owned->samples.resize(size_t(top) + 1);
+    owned->errors.resize(size_t(top) + 1);
+    for (int t = 0; t <= top; ++t) {
+        const size_t floats = size_t(channels) * planeOf(t);
+        std::vector<std::vector<uint64_t>> k{std::move(keys[size_t(t)])};
+        std::vector<std::vector<float>> v{std::move(samples[size_t(t)])};
+        for (int r = 1; r < count; ++r) {
+            k.push_back(ranks::receiveVectorFrom<uint64_t>(r));
+            v.push_back(ranks::receiveVectorFrom<float>(r));
+            if (v.back().size() != k.back().size() * floats)
+                throw Error("rank " + std::to_string(r + 1) + " sent " + std::to_string(v.back().size()) + " samples for " +
+                            std::to_string(k.back().size()) + " tiles of level " + std::to_string(t));
         }
+        std::vector<std::pair<uint64_t, std::pair<size_t, size_t>>> order;  // key, (rank, tile)
+        for (size_t r = 0; r < k.size(); ++r)
+            for (size_t i = 0; i < k[r].size(); ++i) order.push_back({k[r][i], {r, i}});
+        std::sort(order.begin(), order.end());
+        for (size_t i = 1; i < order.size(); ++i)
+            if (order[i].first == order[i - 1].first) throw Error("two ranks sampled the same pyramid tile of level " + std::to_string(t));
+        auto& outKeys = owned->keys[size_t(t)];
+        auto& outSamples = owned->samples[size_t(t)];
+        outSamples.resize(order.size() * floats);
+        for (size_t i = 0; i < order.size(); ++i) {
+            outKeys.push_back(order[i].first);
+            const auto [r, tile] = order[i].second;
+            std::copy_n(v[r].begin() + ptrdiff_t(tile * floats), floats, outSamples.begin() + ptrdiff_t(i * floats));
+        }
+        owned->errors[size_t(t)].assign(outKeys.size() * size_t(channels), 0.0f);
+    }
+    p.levels.resize(size_t(top) + 1);
+    for (int t = 0; t <= top; ++t) {
+        SurfacePyramid::Level& L = p.levels[size_t(t)];
+        L.level = t;
+        L.tileSide = sides[size_t(t)];
+        L.keys = owned->keys[size_t(t)];
+        L.samples = owned->samples[size_t(t)];
+        L.parentErrorM = owned->errors[size_t(t)];
+    }
+    p.storage = std::move(owned);
     detail::measureParentErrors(p, threads);
     return waterOnly ? waterPyramidOf(p) : p;
 }

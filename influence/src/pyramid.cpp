@@ -92,40 +92,42 @@ std::string defaultPyramidPath(const std::string& gridPath, size_t step, size_t 
 namespace {
 
 constexpr float kNaN = std::numeric_limits<float>::quiet_NaN();
-constexpr int kBlock = 4;  // samples per side of a candidate-gathering block
+constexpr int kBlock = detail::kPyramidBlock;  // samples per side of a candidate-gathering block
 
 // The tiles of each level: nodes of level t + log2(side) holding a cell of level <= t (any cell at the top).
 std::vector<std::vector<uint64_t>> tileKeys(const Grid& g, int top, const std::vector<int>& sides) {
     std::vector<std::vector<uint64_t>> keys(size_t(top) + 1);
-    for (int t = 0; t <= top; ++t) {
-        const int nodeLevel = t + std::countr_zero(unsigned(sides[size_t(t)]));
-        const uint64_t mask = ~(mortonSpan(nodeLevel) - 1);
-        auto& out = keys[size_t(t)];
-        for (uint64_t code : g.codes) {
-            if (t < top && codeLevel(code) > t) continue;
-            const uint64_t key = codeKey(code) & mask;
-            if (out.empty() || out.back() != key) out.push_back(key);
-        }
-    }
+    for (int t = 0; t <= top; ++t) detail::tileKeysOfCells(g, 0, g.cellCount(), t, top, sides[size_t(t)], keys[size_t(t)]);
     return keys;
 }
 
-struct Workspace {
-    detail::ListIndex::Scratch wide;
-    detail::Gathered block;  // one block's candidates, in the local frame
-};
+}  // namespace
 
-// Fills the samples of one tile (all channels) of level t.
-void buildTile(const Grid& g, const detail::ListIndex& index, const KernelParams& params, int t, int side, uint64_t key, int channels,
-               int depthLayer, float* out, Workspace& w) {
+namespace detail {
+
+void tileKeysOfCells(const Grid& g, size_t lo, size_t hi, int t, int top, int side, std::vector<uint64_t>& out) {
+    const int nodeLevel = t + std::countr_zero(unsigned(side));
+    const uint64_t mask = ~(mortonSpan(nodeLevel) - 1);
+    for (size_t i = lo; i < hi; ++i) {
+        const uint64_t code = g.codes[i];
+        if (t < top && codeLevel(code) > t) continue;
+        const uint64_t key = codeKey(code) & mask;
+        if (out.empty() || out.back() != key) out.push_back(key);
+    }
+}
+
+void buildTile(const Grid& g, const ListIndex& index, const KernelParams& params, int t, int side, uint64_t key, int channels,
+               int depthLayer, float* out, PyramidWorkspace& w, int onlyBlock) {
     const double h = g.levelSizeM(t);
     const double x0 = double(mortonX(key)) * g.finestCellM, y0 = double(mortonY(key)) * g.finestCellM;
     const double tail = params.tail(), halfR2 = 0.5 * params.truncation * params.truncation;
     const float* z = g.values[0].data();
     const float* depth = depthLayer >= 0 ? g.values[size_t(depthLayer)].data() : nullptr;
     const size_t plane = size_t(side) * size_t(side);
+    const int blocksPerSide = (side + kBlock - 1) / kBlock;
     for (int bj = 0; bj < side; bj += kBlock)
         for (int bi = 0; bi < side; bi += kBlock) {
+            if (onlyBlock >= 0 && onlyBlock != (bj / kBlock) * blocksPerSide + bi / kBlock) continue;
             const int bi1 = std::min(side, bi + kBlock), bj1 = std::min(side, bj + kBlock);
             const Grid::Square box{x0 + bi * h, y0 + bj * h, x0 + (bi1 - 1) * h, y0 + (bj1 - 1) * h};
             index.candidatesFor(box, w.wide);
@@ -205,7 +207,28 @@ void measureParentErrorsInto(const SurfacePyramid& p, std::vector<std::vector<fl
     }
 }
 
-}  // namespace
+void wetMarkedTiles(const Grid& g, const KernelParams& params, int depthLayer, size_t lo, size_t hi, int t, int side,
+                    std::vector<uint64_t>& marked) {
+    const float* depth = g.values[size_t(depthLayer)].data();
+    const uint64_t span = uint64_t(side) << t;  // a tile's side in finest cells
+    const long perSide = long(((uint64_t{1} << g.rootLevel) + span - 1) / span);
+    const double tileM = g.finestCellM * double(span);
+    long last[4] = {-1, -1, -1, -1};
+    for (size_t i = lo; i < hi; ++i) {
+        if (!(depth[i] > 0)) continue;
+        double cx = 0, cy = 0;
+        g.cellCenterLocal(i, cx, cy);
+        const double r = params.radiusM(g.cellSizeM(i));
+        const long tx0 = std::max(0L, long(std::floor((cx - r) / tileM)) - 1), tx1 = std::min(perSide - 1, long(std::floor((cx + r) / tileM)) + 1);
+        const long ty0 = std::max(0L, long(std::floor((cy - r) / tileM)) - 1), ty1 = std::min(perSide - 1, long(std::floor((cy + r) / tileM)) + 1);
+        if (tx0 == last[0] && tx1 == last[1] && ty0 == last[2] && ty1 == last[3]) continue;  // neighbours in Morton order
+        last[0] = tx0, last[1] = tx1, last[2] = ty0, last[3] = ty1;
+        for (long ty = ty0; ty <= ty1; ++ty)
+            for (long tx = tx0; tx <= tx1; ++tx) marked.push_back(mortonEncode(uint32_t(uint64_t(tx) * span), uint32_t(uint64_t(ty) * span)));
+    }
+}
+
+}  // namespace detail
 
 namespace {
 
@@ -215,26 +238,10 @@ namespace {
 // holds the child's).
 std::vector<std::vector<uint64_t>> wetReachedKeys(const Grid& g, const KernelParams& params, const std::vector<std::vector<uint64_t>>& keys,
                                                   const std::vector<int>& sides, int depthLayer) {
-    const float* depth = g.values[size_t(depthLayer)].data();
     std::vector<std::vector<uint64_t>> out(keys.size());
     for (size_t t = 0; t < keys.size(); ++t) {
-        const uint64_t span = uint64_t(sides[t]) << t;  // a tile's side in finest cells
-        const long perSide = long(((uint64_t{1} << g.rootLevel) + span - 1) / span);
-        const double tileM = g.finestCellM * double(span);
         std::vector<uint64_t> marked;
-        long last[4] = {-1, -1, -1, -1};
-        for (size_t i = 0; i < g.cellCount(); ++i) {
-            if (!(depth[i] > 0)) continue;
-            double cx = 0, cy = 0;
-            g.cellCenterLocal(i, cx, cy);
-            const double r = params.radiusM(g.cellSizeM(i));
-            const long tx0 = std::max(0L, long(std::floor((cx - r) / tileM)) - 1), tx1 = std::min(perSide - 1, long(std::floor((cx + r) / tileM)) + 1);
-            const long ty0 = std::max(0L, long(std::floor((cy - r) / tileM)) - 1), ty1 = std::min(perSide - 1, long(std::floor((cy + r) / tileM)) + 1);
-            if (tx0 == last[0] && tx1 == last[1] && ty0 == last[2] && ty1 == last[3]) continue;  // neighbours in Morton order
-            last[0] = tx0, last[1] = tx1, last[2] = ty0, last[3] = ty1;
-            for (long ty = ty0; ty <= ty1; ++ty)
-                for (long tx = tx0; tx <= tx1; ++tx) marked.push_back(mortonEncode(uint32_t(uint64_t(tx) * span), uint32_t(uint64_t(ty) * span)));
-        }
+        detail::wetMarkedTiles(g, params, depthLayer, 0, g.cellCount(), int(t), sides[t], marked);
         std::sort(marked.begin(), marked.end());
         marked.erase(std::unique(marked.begin(), marked.end()), marked.end());
         std::set_intersection(keys[t].begin(), keys[t].end(), marked.begin(), marked.end(), std::back_inserter(out[t]));
@@ -272,7 +279,7 @@ SurfacePyramid samplePyramid(const Grid& g, const KernelParams& params, unsigned
     owned->errors.resize(size_t(top) + 1);
 
     const detail::ListIndex index(g, params);
-    std::vector<Workspace> scratch(threads);
+    std::vector<detail::PyramidWorkspace> scratch(threads);
     Progress bar("surface pyramid", tiles, progress);
     for (int t = top; t >= 0; --t) {
         const auto& keys = owned->keys[size_t(t)];
@@ -284,7 +291,7 @@ SurfacePyramid samplePyramid(const Grid& g, const KernelParams& params, unsigned
             for (size_t tile = b; tile < e; ++tile)
                 if (!owns || (*owns)(t, keys[tile]))
                     buildTile(g, index, params, t, sides[size_t(t)], keys[tile], p.channels, depthLayer,
-                              &samples[tile * size_t(p.channels) * plane], scratch[worker]);
+                              &samples[tile * size_t(p.channels) * plane], scratch[worker], -1);
             bar.advance(e - b);
         });
     }

@@ -60,6 +60,7 @@
 #include <optional>
 #include <span>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "heightcast/grid/grid.h"
@@ -187,7 +188,10 @@ public:
     // span's end: the last margin; an empty span: 0), as a grid of the file's geometry, CRS and layers (its hashes
     // are the region's own, not the file's). Cells come in file order. Throws hc::Error naming the file and
     // the byte offset if a block read is damaged or the cells break an invariant.
-    Grid region(const Grid::Square& box, std::span<const double> marginM = {}) const;
+    // `runs` (optional) gets the file's cell index ranges [lo, hi) the region's cells came from, ascending: region cell
+    // k is file cell lo + k - (cells of the runs before), for builders that name cells by their index in the file.
+    Grid region(const Grid::Square& box, std::span<const double> marginM = {},
+                std::vector<std::pair<uint64_t, uint64_t>>* runs = nullptr) const;
     // The square of the cell containing a local point (Grid::locate's rule), or nullopt: one binary search.
     std::optional<Grid::Square> cellSquareAt(double xLocal, double yLocal) const;
     // How many cells meet the quadtree node of `level` with corner key `key`: those inside it, and the one coarser
