@@ -41,7 +41,9 @@ bool parseOptions(int argc, char** argv, InfluenceArgs& a) {
                       "lattices (spacing finest cell * 2^t) in 16 x 16 tiles kept where cells are as fine as the\n"
                       "spacing, each tile with its measured error against the next coarser level. The lists take\n"
                       "about 220 bytes per cell; the pyramid about 4-20 per channel and needs no lists: for grids whose\n"
-                      "lists do not fit in memory (100 M cells), use --no-lists.");
+                      "lists do not fit in memory (100 M cells), use --no-lists. Under `mpirun -np N` the ranks share the\n"
+                      "nodes of the grid, each reading its nodes and their halo, and rank 1 writes the same bytes as one\n"
+                      "process (README, \"Preprocessing on several processes\").");
     p.positional("GRID.hcg", "grid file (hc-ingest)", a.gridPath);
     p.option("-o", "OUT.hci", "cache file (default: the grid's path with .hci)", a.out);
     p.option("--sigma", "S", "Gaussian width in cell sizes (default 1.0, the report's)", a.params.sigma);
@@ -51,7 +53,7 @@ bool parseOptions(int argc, char** argv, InfluenceArgs& a) {
     p.option("--step", "K", "build the pyramid of water step K only, 0-based (default: every step; the lists serve all steps);\n"
              "      the first step's pyramid is whole, a later step's holds its water only, where it is drawn: the renderers\n"
              "      take the terrain from the first step's", a.step);
-    p.option("--threads", "N", "worker threads (default 0 = all cores)", a.threads);
+    p.option("--threads", "N", "worker threads (default 0 = all cores; under mpirun: per rank)", a.threads);
     p.flag("--no-lists", "build the surface pyramid only (no .hci)", noLists);
     p.flag("--no-pyramid", "build the influence lists only (no .hcp)", noPyramid);
     p.flag("--quiet", "no progress output", a.quiet);

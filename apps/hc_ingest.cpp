@@ -85,7 +85,9 @@ bool parseOptions(int argc, char** argv, hc::ingest::Options& o, std::string& ou
     hc::cli::Parser p("hc-ingest", "INPUT -o OUT.hcg [options]",
                       "Converts a raster DEM (any format GDAL reads, any CRS) into an adaptive quadtree grid file.\n"
                       "Four cells merge into one while their mean stays within --tolerance of every pixel they\n"
-                      "cover (in every layer); the achieved max and RMS deviation is measured and reported.");
+                      "cover (in every layer); the achieved max and RMS deviation is measured and reported.\n"
+                      "Under `mpirun -np N` the ranks share the build and rank 1 writes the same bytes as one process\n"
+                      "(each rank reads the whole raster; README, \"Preprocessing on several processes\").");
     p.positional("INPUT", "terrain raster: GeoTIFF, SRTM .hgt / .hgt.zip, ESRI ASCII, NetCDF, PNG, ... (GDAL)", o.input);
     p.option("-o", "OUT.hcg", "output grid file (required; written atomically)", out);
     p.option("--tolerance", "M", "max |pixel - cell value| in every layer, metres (default 0.25)", o.toleranceM);
@@ -120,7 +122,7 @@ bool parseOptions(int argc, char** argv, hc::ingest::Options& o, std::string& ou
              "      fill values and levels not above the terrain are dry (default zs)", o.waterSurfaceVar);
     p.option("--face-layers", "NAME[,NAME...]", "UGRID mesh input: further face variables over time (velocity magnitude, ...), each\n"
              "      stored per step on the wet faces as a layer of that name and the variable's units (default none)", faceLayers);
-    p.option("--threads", "N", "worker threads (default 0 = all cores)", o.threads);
+    p.option("--threads", "N", "worker threads (default 0 = all cores; under mpirun: per rank)", o.threads);
     p.flag("--quiet", "print only warnings and failures (no progress, no summary)", quiet);
     p.exclusive({"--water", "--water-surface", "--water-level"});
     if (!p.parse(argc, argv)) return false;

@@ -119,39 +119,38 @@ InfluenceLists buildInfluenceListsOnRanks(const GridRegionReader& file, const Ke
     }
     s.seconds = clock.seconds();
     if (share) *share = s;
+    // Every rank's cell and entry counts first (a small table), so rank 0 places each rank's lists straight into the one
+    // buffer of the whole cache: its peak is the cache plus its own share, not a cache grown by copies.
+    const auto counts = ranks::allGatherVectors(std::vector<uint64_t>{lengths.size(), entries.size()});
     if (rank != 0) {
         ranks::sendToRoot(lengths);
         ranks::sendToRoot(entries);
         return {};
     }
-    // Rank 0: its own lists first (the lowest cells: ranks follow Morton order), then every other rank's, in order.
     const size_t n = file.cellCount();
+    uint64_t totalCells = 0, totalEntries = 0;
+    for (const auto& c : counts) totalCells += c[0], totalEntries += c[1];
+    if (totalCells != n) throw Error("the ranks built lists of " + std::to_string(totalCells) + " cells, not " + std::to_string(n));
     std::vector<uint64_t> offsets(n + 1, 0);
+    auto indices = std::unique_ptr<uint32_t[]>(new uint32_t[std::max<uint64_t>(totalEntries, 1)]);
     size_t cell = 0, used = 0;
-    auto indices = std::unique_ptr<uint32_t[]>(new uint32_t[std::max<size_t>(entries.size(), 1)]);
-    size_t capacity = std::max<size_t>(entries.size(), 1);
-    auto append = [&](const std::vector<uint32_t>& len, const std::vector<uint32_t>& ent, int from) {
-        if (cell + len.size() > n) throw Error("rank " + std::to_string(from + 1) + " sent lists of more cells than the grid has");
-        uint64_t sum = 0;
-        for (size_t k = 0; k < len.size(); ++k) offsets[cell + k + 1] = offsets[cell + k] + len[k], sum += len[k];
-        if (sum != ent.size()) throw Error("rank " + std::to_string(from + 1) + " sent list lengths that do not add up to its entries");
-        if (used + ent.size() > capacity) {
-            capacity = std::max(used + ent.size(), capacity + capacity / 2);
-            auto bigger = std::unique_ptr<uint32_t[]>(new uint32_t[capacity]);
-            std::copy(indices.get(), indices.get() + used, bigger.get());
-            indices = std::move(bigger);
+    std::vector<uint32_t> len;
+    for (int r = 0; r < count; ++r) {
+        const uint64_t cells = counts[size_t(r)][0], ent = counts[size_t(r)][1];
+        if (r == 0) {
+            len = std::move(lengths);
+            std::copy(entries.begin(), entries.end(), indices.get());
+            std::vector<uint32_t>().swap(entries);
+        } else {
+            len.resize(cells);
+            ranks::receiveInto(r, std::as_writable_bytes(std::span<uint32_t>(len)));
+            ranks::receiveInto(r, std::as_writable_bytes(std::span<uint32_t>(indices.get() + used, ent)));
         }
-        std::copy(ent.begin(), ent.end(), indices.get() + used);
-        used += ent.size(), cell += len.size();
-    };
-    append(lengths, entries, 0);
-    std::vector<uint32_t>().swap(entries);
-    for (int r = 1; r < count; ++r) {
-        const auto len = ranks::receiveVectorFrom<uint32_t>(r);
-        const auto ent = ranks::receiveVectorFrom<uint32_t>(r);
-        append(len, ent, r);
+        uint64_t sum = 0;
+        for (size_t k = 0; k < cells; ++k) offsets[cell + k + 1] = offsets[cell + k] + len[k], sum += len[k];
+        if (sum != ent) throw Error("rank " + std::to_string(r + 1) + " sent list lengths that do not add up to its entries");
+        cell += cells, used += ent;
     }
-    if (cell != n) throw Error("the ranks sent lists of " + std::to_string(cell) + " cells, not " + std::to_string(n));
     return InfluenceLists(params, file.info().structureHash, file.info().contentHash, std::move(offsets), std::move(indices), used);
 }
 

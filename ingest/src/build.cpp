@@ -21,6 +21,8 @@
 #include <memory>
 #include <optional>
 
+#include <fmt/format.h>
+
 #include "heightcast/grid/grid_file.h"
 
 #include "heightcast/core/error.h"
@@ -422,9 +424,8 @@ Stats Builder::run(CellSink& sink) {
             for (size_t l = 0; l < a.perLevel.size(); ++l) sum.perLevel[l] += a.perLevel[l];
         }
         const uint64_t myTiles = a1 - a0, myCells = (myU1 < units.size() ? units[myU1].offset : total) - (myU0 < units.size() ? units[myU0].offset : total);
-        ranks::log("hc-ingest", std::to_string(myTiles) + " tiles of " + std::to_string(1u << tileLevel_) + "^2 px built, " +
-                                    std::to_string(myU1 - myU0) + " units, " + std::to_string(myCells) + " cells written, " +
-                                    std::to_string(rankStart.seconds()) + " s");
+        ranks::log("hc-ingest", fmt::format("{} tiles of {}^2 px built, {} units, {} cells written, {:.3f} s, peak {:.1f} MB resident", myTiles,
+                                            1u << tileLevel_, myU1 - myU0, myCells, rankStart.seconds(), double(peakRssBytes()) / 1e6));
         if (!root) {
             // The share's cells, then its statistics (a table: max, pixels, cells per level, then the unit sums).
             ranks::sendToRoot(share.codes);

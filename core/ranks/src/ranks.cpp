@@ -152,6 +152,24 @@ std::vector<std::byte> receiveFrom(int from) {
 #endif
 }
 
+void receiveInto(int from, std::span<std::byte> out) {
+#if HC_WITH_MPI
+    if (gRank != 0 || from <= 0 || from >= gCount) throw Error("receiveInto: rank 0 receives from another rank");
+    uint64_t size = 0;
+    check(MPI_Recv(&size, 1, MPI_UINT64_T, from, kTagSize, MPI_COMM_WORLD, MPI_STATUS_IGNORE), "MPI_Recv");
+    if (size != out.size())
+        throw Error("rank " + std::to_string(from + 1) + " sent " + std::to_string(size) + " bytes where " + std::to_string(out.size()) +
+                    " were agreed");
+    for (size_t at = 0; at < out.size(); at += kChunk) {
+        const size_t n = std::min(kChunk, out.size() - at);
+        check(MPI_Recv(out.data() + at, int(n), MPI_BYTE, from, kTagData, MPI_COMM_WORLD, MPI_STATUS_IGNORE), "MPI_Recv");
+    }
+#else
+    (void)from, (void)out;
+    throw Error("receiveInto: this build has no MPI");
+#endif
+}
+
 std::vector<std::vector<std::byte>> allGather(std::span<const std::byte> bytes) {
     if (gCount == 1) return {std::vector<std::byte>(bytes.begin(), bytes.end())};
 #if HC_WITH_MPI

@@ -62,6 +62,8 @@ void abortAll(int status);
 // `from`, in the order the sender sent.
 void sendToRoot(std::span<const std::byte> bytes);
 std::vector<std::byte> receiveFrom(int from);
+// The same into memory the caller holds (no copy): the message must be exactly out.size() bytes (hc::Error otherwise).
+void receiveInto(int from, std::span<std::byte> out);
 
 // Every rank's bytes, on every rank, index = rank (meant for small tables: per-tile summaries, counts).
 std::vector<std::vector<std::byte>> allGather(std::span<const std::byte> bytes);
