@@ -3,6 +3,7 @@
 // (render::Scene over a file), each against the in-memory path on real rasters.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstring>
 #include <filesystem>
@@ -14,6 +15,7 @@
 
 #include "heightcast/core/error.h"
 #include "heightcast/grid/grid_file.h"
+#include "heightcast/influence/on_ranks.h"
 #include "heightcast/influence/pyramid.h"
 #include "heightcast/influence/region.h"
 #include "heightcast/render/renderer.h"
@@ -239,6 +241,98 @@ TEST(Region, OutOfCoreFramesEqualInMemoryOnes) {
             }
             EXPECT_GT(hits, 10000u);
             EXPECT_LE(differ, hits / 1000) << (p ? "with" : "without") << " the pyramid, view " << view;
+        }
+    }
+}
+
+// The file index runs of a region name, for each of its cells, the cell of the file it is.
+TEST(GridRegionReader, RunsNameEachRegionCellsIndexInTheFile) {
+    if (hc::test::dataFile("lidar1m_minnesota_utm15.tif").empty()) GTEST_SKIP() << "no LiDAR raster";
+    const GridOnDisk& d = lidar();
+    const GridRegionReader file(d.path.string());
+    double x0, y0, x1, y1;
+    d.grid.boundsLocal(x0, y0, x1, y1);
+    std::vector<std::pair<uint64_t, uint64_t>> runs;
+    const Grid r = file.region({x0 + 100, y0 + 50, x0 + 180, y0 + 260}, inf::kernelReachM(d.grid, {}), &runs);
+    ASSERT_GT(r.cellCount(), 100u);
+    ASSERT_GT(runs.size(), 1u);  // a box is several Morton runs
+    size_t k = 0;
+    for (size_t run = 0; run < runs.size(); ++run) {
+        if (run > 0) {
+            EXPECT_GT(runs[run].first, runs[run - 1].second);  // ascending, apart (touching runs are joined)
+        }
+        for (uint64_t i = runs[run].first; i < runs[run].second; ++i, ++k) ASSERT_EQ(r.codes[k], d.grid.codes[i]);
+    }
+    EXPECT_EQ(k, r.cellCount());
+}
+
+// The nodes the ranks of an MPI run share out (on_ranks.h): every cell in exactly one node, no node finer than the
+// coarsest cell, the ranks in Morton runs of about equal cell count (off by at most one node's cells).
+TEST(Ranks, PartitionPutsEveryCellInOneNodeAndBalancesTheRanks) {
+    if (hc::test::dataFile("lidar1m_minnesota_utm15.tif").empty()) GTEST_SKIP() << "no LiDAR raster";
+    for (GridOnDisk* d : {&lidar(), &hef()}) {
+        const Grid& g = d->grid;
+        const GridRegionReader file(d->path.string());
+        for (int ranks = 1; ranks <= 5; ++ranks) {
+            const inf::RankPartition p = inf::partitionOf(file, ranks);
+            ASSERT_GE(p.level, g.maxLevel);
+            ASSERT_EQ(p.keys.size(), p.cells.size());
+            ASSERT_EQ(p.keys.size(), p.rank.size());
+            std::vector<uint64_t> seen(p.keys.size(), 0), perRank(size_t(ranks), 0);
+            for (uint64_t code : g.codes) {
+                const uint64_t key = hc::codeKey(code) & ~(hc::mortonSpan(p.level) - 1);
+                const auto it = std::lower_bound(p.keys.begin(), p.keys.end(), key);
+                ASSERT_TRUE(it != p.keys.end() && *it == key) << "a cell in no node";
+                ++seen[size_t(it - p.keys.begin())];
+            }
+            uint64_t largest = 0;
+            for (size_t j = 0; j < p.keys.size(); ++j) {
+                EXPECT_EQ(seen[j], p.cells[j]) << "node " << j;
+                if (j > 0) {
+                    EXPECT_LE(p.rank[j - 1], p.rank[j]);
+                }
+                ASSERT_TRUE(p.rank[j] >= 0 && p.rank[j] < ranks);
+                perRank[size_t(p.rank[j])] += p.cells[j];
+                largest = std::max(largest, p.cells[j]);
+            }
+            for (int r = 0; r < ranks; ++r)
+                EXPECT_LE(double(perRank[size_t(r)]), double(g.cellCount()) / ranks + double(largest)) << ranks << " ranks, rank " << r;
+        }
+    }
+}
+
+// One rank's build from regions of the file (the path every rank of mpirun takes) gives the lists and pyramids of the
+// whole grid bit for bit: the terrain with water (3 channels) and a later step's water pyramid. The CLI tests
+// (tests/cli/mpi.cmake) compare the files 1, 2 and 3 ranks write.
+TEST(Ranks, BuildFromRegionsEqualsTheWholeGridsBitForBit) {
+    if (hc::test::dataFile("lidar1m_minnesota_utm15.tif").empty()) GTEST_SKIP() << "no LiDAR raster";
+    for (GridOnDisk* d : {&lidar(), &hef()}) {
+        const Grid& g = d->grid;
+        const GridRegionReader file(d->path.string());
+        const inf::KernelParams params;
+        const inf::InfluenceLists want = inf::buildInfluenceLists(g, params), got = inf::buildInfluenceListsOnRanks(file, params, 2, false);
+        ASSERT_EQ(got.cellCount(), want.cellCount());
+        ASSERT_EQ(got.entryCount(), want.entryCount());
+        EXPECT_TRUE(std::equal(want.offsets().begin(), want.offsets().end(), got.offsets().begin()));
+        EXPECT_TRUE(std::equal(want.indices().begin(), want.indices().end(), got.indices().begin()));
+        EXPECT_EQ(got.gridStructureHash(), g.structureHash());
+        for (bool waterOnly : {false, true}) {
+            const inf::SurfacePyramid a = waterOnly ? inf::buildWaterPyramid(g, params) : inf::buildSurfacePyramid(g, params);
+            const inf::SurfacePyramid b = inf::buildPyramidOnRanks(file, params, 2, false, waterOnly);
+            ASSERT_EQ(a.channels, b.channels);
+            ASSERT_EQ(a.levels.size(), b.levels.size());
+            EXPECT_EQ(a.contentHash, b.contentHash);
+            uint64_t tiles = 0;
+            for (size_t t = 0; t < a.levels.size(); ++t) {
+                const auto &x = a.levels[t], &y = b.levels[t];
+                ASSERT_EQ(x.tileCount(), y.tileCount()) << "level " << t;
+                tiles += x.tileCount();
+                if (x.keys.empty()) continue;  // empty spans' data() may be null: no memcmp
+                EXPECT_TRUE(std::equal(x.keys.begin(), x.keys.end(), y.keys.begin())) << "level " << t;
+                EXPECT_EQ(0, std::memcmp(x.samples.data(), y.samples.data(), x.samples.size_bytes())) << "level " << t;
+                EXPECT_EQ(0, std::memcmp(x.parentErrorM.data(), y.parentErrorM.data(), x.parentErrorM.size_bytes())) << "level " << t;
+            }
+            EXPECT_GT(tiles, 10u);
         }
     }
 }

@@ -44,15 +44,15 @@ influenceRank() { grep -E 'rank [0-9]+/[0-9]+: [0-9]+ nodes' "$1" | awk '{ s = 0
 
 echo "| tool | run | wall s | slowest rank's building s | peak RSS of a rank MB | same bytes |"
 echo "|---|---|---|---|---|---|"
-t=$(timed ingest1.log "$bin/hc-ingest" "$raster" -o one.hcg)
-echo "| hc-ingest | one process, all cores | $t | - | $(peak ingest1.log) | (reference) |"
+t=$(timed ingest_one.log "$bin/hc-ingest" "$raster" -o one.hcg)
+echo "| hc-ingest | one process, all cores | $t | - | $(peak ingest_one.log) | (reference) |"
 for n in "${rankCounts[@]}"; do
   t=$(timed "ingest$n.log" mpirun -np "$n" "$bin/hc-ingest" "$raster" -o "g$n.hcg" --threads 1)
   cmp one.hcg "g$n.hcg"
   echo "| hc-ingest | mpirun -np $n, 1 thread a rank | $t | $(ingestRank "ingest$n.log") | $(peak "ingest$n.log") | yes |"
 done
-t=$(timed influence1.log "$bin/hc-influence" one.hcg "${lists[@]}")
-echo "| hc-influence ${lists[*]} | one process, all cores | $t | - | $(peak influence1.log) | (reference) |"
+t=$(timed influence_one.log "$bin/hc-influence" one.hcg "${lists[@]}")
+echo "| hc-influence ${lists[*]} | one process, all cores | $t | - | $(peak influence_one.log) | (reference) |"
 for n in "${rankCounts[@]}"; do
   cp one.hcg "g$n.hcg"
   t=$(timed "influence$n.log" mpirun -np "$n" "$bin/hc-influence" "g$n.hcg" --threads 1 "${lists[@]}")
