@@ -259,7 +259,7 @@ SurfacePyramid buildPyramidOnRanks(const GridRegionReader& file, const KernelPar
         std::vector<Job> jobs;
         std::vector<size_t> at(ours.size());
         for (size_t i = 0; i < ours.size(); ++i) {
-            const int t = ours[i].t, blocks = (sides[size_t(t)] + detail::kPyramidBlock - 1) / detail::kPyramidBlock;
+            const int t = ours[i].t, block = detail::pyramidBlockSide(shape, params, t), blocks = (sides[size_t(t)] + block - 1) / block;
             at[i] = samples[size_t(t)].size();
             samples[size_t(t)].resize(at[i] + size_t(channels) * planeOf(t));
             keys[size_t(t)].push_back(ours[i].key);
@@ -271,9 +271,9 @@ SurfacePyramid buildPyramidOnRanks(const GridRegionReader& file, const KernelPar
         parallelFor(jobs.size(), 1, threads, [&](size_t b, size_t e, unsigned worker) {
             for (size_t q = b; q < e; ++q) {
                 const CoarseTile& c = ours[jobs[q].tile];
-                const int side = sides[size_t(c.t)], blocks = (side + detail::kPyramidBlock - 1) / detail::kPyramidBlock;
-                const int bi = (jobs[q].block % blocks) * detail::kPyramidBlock, bj = (jobs[q].block / blocks) * detail::kPyramidBlock;
-                const int bi1 = std::min(side, bi + detail::kPyramidBlock), bj1 = std::min(side, bj + detail::kPyramidBlock);
+                const int side = sides[size_t(c.t)], block = detail::pyramidBlockSide(shape, params, c.t), blocks = (side + block - 1) / block;
+                const int bi = (jobs[q].block % blocks) * block, bj = (jobs[q].block / blocks) * block;
+                const int bi1 = std::min(side, bi + block), bj1 = std::min(side, bj + block);
                 const double h = shape.levelSizeM(c.t);
                 const double x0 = double(mortonX(c.key)) * shape.finestCellM, y0 = double(mortonY(c.key)) * shape.finestCellM;
                 const Grid::Square box{x0 + bi * h, y0 + bj * h, x0 + (bi1 - 1) * h, y0 + (bj1 - 1) * h};

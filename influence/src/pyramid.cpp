@@ -92,7 +92,6 @@ std::string defaultPyramidPath(const std::string& gridPath, size_t step, size_t 
 namespace {
 
 constexpr float kNaN = std::numeric_limits<float>::quiet_NaN();
-constexpr int kBlock = detail::kPyramidBlock;  // samples per side of a candidate-gathering block
 
 // The tiles of each level: nodes of level t + log2(side) holding a cell of level <= t (any cell at the top).
 std::vector<std::vector<uint64_t>> tileKeys(const Grid& g, int top, const std::vector<int>& sides) {
@@ -116,19 +115,24 @@ void tileKeysOfCells(const Grid& g, size_t lo, size_t hi, int t, int top, int si
     }
 }
 
+int pyramidBlockSide(const Grid& shape, const KernelParams& params, int t) {
+    return shape.levelSizeM(t) >= params.radiusM(shape.levelSizeM(std::clamp(shape.maxLevel, 0, shape.rootLevel))) ? 1 : kPyramidBlock;
+}
+
 void buildTile(const Grid& g, const ListIndex& index, const KernelParams& params, int t, int side, uint64_t key, int channels,
                int depthLayer, float* out, PyramidWorkspace& w, int onlyBlock) {
+    const int block = pyramidBlockSide(g, params, t);
     const double h = g.levelSizeM(t);
     const double x0 = double(mortonX(key)) * g.finestCellM, y0 = double(mortonY(key)) * g.finestCellM;
     const double tail = params.tail(), halfR2 = 0.5 * params.truncation * params.truncation;
     const float* z = g.values[0].data();
     const float* depth = depthLayer >= 0 ? g.values[size_t(depthLayer)].data() : nullptr;
     const size_t plane = size_t(side) * size_t(side);
-    const int blocksPerSide = (side + kBlock - 1) / kBlock;
-    for (int bj = 0; bj < side; bj += kBlock)
-        for (int bi = 0; bi < side; bi += kBlock) {
-            if (onlyBlock >= 0 && onlyBlock != (bj / kBlock) * blocksPerSide + bi / kBlock) continue;
-            const int bi1 = std::min(side, bi + kBlock), bj1 = std::min(side, bj + kBlock);
+    const int blocksPerSide = (side + block - 1) / block;
+    for (int bj = 0; bj < side; bj += block)
+        for (int bi = 0; bi < side; bi += block) {
+            if (onlyBlock >= 0 && onlyBlock != (bj / block) * blocksPerSide + bi / block) continue;
+            const int bi1 = std::min(side, bi + block), bj1 = std::min(side, bj + block);
             const Grid::Square box{x0 + bi * h, y0 + bj * h, x0 + (bi1 - 1) * h, y0 + (bj1 - 1) * h};
             index.candidatesFor(box, w.wide);
             const size_t m = w.wide.index.size();

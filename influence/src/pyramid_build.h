@@ -39,12 +39,17 @@ struct PyramidWorkspace {
     ListIndex::Scratch wide;
     Gathered block;  // one block's candidates, in the local frame
 };
+// Samples per side of a block that gathers its candidates once (pyramid.cpp): kPyramidBlock where the spacing of level t
+// is below the kernel reach of the coarsest cells, where a block's candidates are mostly shared by its samples; 1 (each
+// sample its own candidates) from the level where the spacing reaches it: a block of 3 spacings there would gather every
+// cell in its box while each cell reaches a few samples at most (at the top level, 3/16 of the domain a block).
+constexpr int kPyramidBlock = 4;
+int pyramidBlockSide(const Grid& shape, const KernelParams& params, int t);
 // Fills the samples of one tile (all `channels` planes at `out`) of level t with corner key `key`, from the cells of g
-// through `index` (a ListIndex of g); onlyBlock >= 0: only that block of 4 x 4 samples (row-major in the tile),
-// whose candidates g must then hold (a region around the block). The samples are the same bits whatever part of the
-// grid g is, if it holds every cell whose kernel reaches the block (region.h's argument).
+// through `index` (a ListIndex of g); onlyBlock >= 0: only that block (pyramidBlockSide samples a side, row-major in
+// the tile), whose candidates g must then hold (a region around the block). The samples are the same bits whatever
+// part of the grid g is, if it holds every cell whose kernel reaches the block (region.h's argument).
 void buildTile(const Grid& g, const ListIndex& index, const KernelParams& params, int t, int side, uint64_t key, int channels,
                int depthLayer, float* out, PyramidWorkspace& w, int onlyBlock);
-constexpr int kPyramidBlock = 4;  // samples per side of a candidate-gathering block
 
 }  // namespace hc::influence::detail

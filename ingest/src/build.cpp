@@ -6,6 +6,11 @@
 // each tile's pyramid (cheap, cache-resident) and writes its cells straight into the final arrays:
 // no sort, no reallocation, and memory beyond the raster and the grid stays at a few hundred kB.
 //
+// Under mpirun (core/ranks/ranks.h; DESIGN.md section 13) every rank holds the raster and takes an equal run of pass
+// A's tiles and of pass C's cells; the roots are exchanged between the two, and the ranks other than 0 send their
+// cells and statistics to rank 0, which alone writes. The file is the same bytes for any number of ranks and threads:
+// the squared deviations are summed per unit, then over the units in Morton order.
+//
 // Water (DESIGN.md section 11): every step's depth raster is read once before the build, one at a time, into a merge
 // mask (a byte per quadtree node: may these four cells merge, for every step?), so the terrain build keeps every
 // step's wet/dry edges and depth tolerance. After the cells are written, each step is read again and its depth per
@@ -254,9 +259,13 @@ private:
         for (int l = 0; l < layers_; ++l) b.values[static_cast<size_t>(l)][at] = n.mean[static_cast<size_t>(l)];
     }
 
-    // The guarantee, measured: every valid pixel under cells [begin, end) of the batch against the
-    // stored value of its cell; also counts cells per level and wet cells.
-    void measure(const Batch& b, size_t begin, size_t end, Stats& acc, bool paintElevations) const;
+    // The guarantee, measured: every valid pixel under cells [begin, end) of the batch against the stored value of its
+    // cell (largest deviation, pixels and cells per level into acc); returns the sum of the squared deviations.
+    double measure(const Batch& b, size_t begin, size_t end, Stats& acc, bool paintElevations) const;
+    // Under mpirun: a rank other than 0 sends its share (cells, statistics, per-unit sums of squares) to rank 0; rank 0
+    // receives every other rank's in order, feeds their cells to the sink and adds their statistics into `sum`.
+    void sendShare(const Batch& share, const Stats& sum, const std::vector<double>& unitSumSq) const;
+    void receiveShares(CellSink& sink, Stats& sum, std::vector<double>& unitSumSq) const;
     // Fills BuildOptions::cellElevations under cells [begin, end) of the batch (rank 0 does it for every rank's cells).
     void paint(const Batch& b, size_t begin, size_t end) const;
 
@@ -395,12 +404,7 @@ Stats Builder::run(CellSink& sink) {
                             assert(written == leafCount[unit.y * ntx_ + unit.x]);
                             ++tilesDone;
                         }
-                        Stats& a = acc[worker];
-                        const double before = a.sumSq;
-                        a.sumSq = 0;
-                        measure(batch, at, at + written, a, root);
-                        unitSumSq[k - myU0] = a.sumSq;
-                        a.sumSq = before;
+                        unitSumSq[k - myU0] = measure(batch, at, at + written, acc[worker], root);
                     }
                     progress.advance(tilesDone * size_t(rankCount));
                 });
@@ -427,41 +431,48 @@ Stats Builder::run(CellSink& sink) {
         ranks::log("hc-ingest", fmt::format("{} tiles of {}^2 px built, {} units, {} cells written, {:.3f} s, peak {:.1f} MB resident", myTiles,
                                             1u << tileLevel_, myU1 - myU0, myCells, rankStart.seconds(), double(peakRssBytes()) / 1e6));
         if (!root) {
-            // The share's cells, then its statistics (a table: max, pixels, cells per level, then the unit sums).
-            ranks::sendToRoot(share.codes);
-            for (const auto& v : share.values) ranks::sendToRoot(v);
-            std::vector<double> table{sum.maxDev, double(sum.pixels), double(sum.wetCells)};
-            for (uint64_t c : sum.perLevel) table.push_back(double(c));
-            table.insert(table.end(), unitSumSq.begin(), unitSumSq.end());
-            ranks::sendToRoot(table);
+            sendShare(share, sum, unitSumSq);
             return sum;
         }
-        std::vector<double> allSumSq = std::move(unitSumSq);
-        for (int r = 1; r < rankCount; ++r) {
-            Batch in;
-            in.codes = ranks::receiveVectorFrom<uint64_t>(r);
-            for (int l = 0; l < layers_; ++l) in.values.push_back(ranks::receiveVectorFrom<float>(r));
-            const std::vector<double> table = ranks::receiveVectorFrom<double>(r);
-            const size_t levels = sum.perLevel.size();
-            if (table.size() < 3 + levels) throw Error("rank " + std::to_string(r + 1) + ": a short statistics table");
-            sum.maxDev = std::max(sum.maxDev, table[0]);
-            sum.pixels += uint64_t(table[1]);
-            sum.wetCells += uint64_t(table[2]);
-            for (size_t l = 0; l < levels; ++l) sum.perLevel[l] += uint64_t(table[3 + l]);
-            allSumSq.insert(allSumSq.end(), table.begin() + ptrdiff_t(3 + levels), table.end());
-            if (opt_.cellElevations) paint(in, 0, in.codes.size());
-            for (size_t at = 0; at < in.codes.size(); at += size_t{1} << 16) {
-                const size_t n = std::min(in.codes.size() - at, size_t{1} << 16);
-                std::vector<std::span<const float>> values;
-                for (const auto& v : in.values) values.emplace_back(v.data() + at, n);
-                sink.append(std::span<const uint64_t>(in.codes.data() + at, n), values);
-            }
-        }
-        if (allSumSq.size() != units.size()) throw Error("ranks sent statistics of " + std::to_string(allSumSq.size()) + " units, not " + std::to_string(units.size()));
-        for (double u : allSumSq) sum.sumSq += u;
+        receiveShares(sink, sum, unitSumSq);
+        if (unitSumSq.size() != units.size())
+            throw Error("ranks sent statistics of " + std::to_string(unitSumSq.size()) + " units, not " + std::to_string(units.size()));
+        for (double u : unitSumSq) sum.sumSq += u;
         progress.advance(2 * tiles);  // units cover fewer than all tiles; fill the bar
         progress.finish();
         return sum;
+    }
+}
+
+void Builder::sendShare(const Batch& share, const Stats& sum, const std::vector<double>& unitSumSq) const {
+    ranks::sendToRoot(share.codes);
+    for (const auto& v : share.values) ranks::sendToRoot(v);
+    std::vector<double> table{sum.maxDev, double(sum.pixels), double(sum.wetCells)};  // then cells per level, then the unit sums
+    for (uint64_t c : sum.perLevel) table.push_back(double(c));
+    table.insert(table.end(), unitSumSq.begin(), unitSumSq.end());
+    ranks::sendToRoot(table);
+}
+
+void Builder::receiveShares(CellSink& sink, Stats& sum, std::vector<double>& unitSumSq) const {
+    for (int r = 1; r < ranks::count(); ++r) {
+        Batch in;
+        in.codes = ranks::receiveVectorFrom<uint64_t>(r);
+        for (int l = 0; l < layers_; ++l) in.values.push_back(ranks::receiveVectorFrom<float>(r));
+        const std::vector<double> table = ranks::receiveVectorFrom<double>(r);
+        const size_t levels = sum.perLevel.size();
+        if (table.size() < 3 + levels) throw Error("rank " + std::to_string(r + 1) + ": a short statistics table");
+        sum.maxDev = std::max(sum.maxDev, table[0]);
+        sum.pixels += uint64_t(table[1]);
+        sum.wetCells += uint64_t(table[2]);
+        for (size_t l = 0; l < levels; ++l) sum.perLevel[l] += uint64_t(table[3 + l]);
+        unitSumSq.insert(unitSumSq.end(), table.begin() + ptrdiff_t(3 + levels), table.end());
+        if (opt_.cellElevations) paint(in, 0, in.codes.size());
+        for (size_t at = 0; at < in.codes.size(); at += size_t{1} << 16) {
+            const size_t n = std::min(in.codes.size() - at, size_t{1} << 16);
+            std::vector<std::span<const float>> values;
+            for (const auto& v : in.values) values.emplace_back(v.data() + at, n);
+            sink.append(std::span<const uint64_t>(in.codes.data() + at, n), values);
+        }
     }
 }
 
@@ -475,7 +486,8 @@ void Builder::paint(const Batch& b, size_t begin, size_t end) const {
     }
 }
 
-void Builder::measure(const Batch& b, size_t begin, size_t end, Stats& a, bool paintElevations) const {
+double Builder::measure(const Batch& b, size_t begin, size_t end, Stats& a, bool paintElevations) const {
+    double sumSq = 0;
     for (size_t i = begin; i < end; ++i) {
         const uint64_t key = codeKey(b.codes[i]);
         const int level = codeLevel(b.codes[i]);
@@ -490,12 +502,13 @@ void Builder::measure(const Batch& b, size_t begin, size_t end, Stats& a, bool p
                 const double exact = static_cast<double>(t_.values[idx]) + (t_.roundingM.empty() ? 0.0 : t_.roundingM[idx]);
                 const double dz = exact - z;
                 if (paintElevations && opt_.cellElevations) (*opt_.cellElevations)[idx] = b.values[0][i];
-                a.sumSq += dz * dz;
+                sumSq += dz * dz;
                 a.maxDev = std::max(a.maxDev, std::abs(dz));
                 ++a.pixels;
             }
         }
     }
+    return sumSq;
 }
 
 }  // namespace
