@@ -85,6 +85,21 @@ done
 "$HC_INFO" m.hcg | grep -E '^  rotation +30\.0000000']]
   -- ${HC_BASH} -c [["$HC_MPIRUN" -np 3 "$HC_INGEST" --quiet t.nc -o m.hcg && "$HC_MPIRUN" -np 3 "$HC_INFLUENCE" --quiet m.hcg]])
 
+# The ranks' agreement (core/ranks, apps/on_ranks.h) with a failure on one rank only: inside ranks::together every rank
+# stops at the same point and rank 1 reports the failing rank's error once; outside it (nobody waits for that rank) the
+# failing rank reports and stops every rank. Without a failure the ranks reach the collective after it together.
+add_executable(hc_ranks_check ranks_check.cpp)
+target_link_libraries(hc_ranks_check PRIVATE hc_cli hc_ranks)
+target_include_directories(hc_ranks_check PRIVATE ${PROJECT_SOURCE_DIR}/apps)
+hc_target_defaults(hc_ranks_check)
+set(RANKS_CHECK $<TARGET_FILE:hc_ranks_check>)
+hc_mpi_test(mpi.ranks_agree 0 [[ranks_check: 3 ranks agreed]] --no-match [[error]] -- ${HC_MPIEXEC} -np 3 ${RANKS_CHECK} 0)
+hc_mpi_test(mpi.ranks_fail_together nonzero [[^ranks_check: error: rank 2/3: failed inside together]]
+  --no-match [[agreed]] --check [[test "$(grep -c 'error: ' "$OUTPUT")" = 1]]
+  -- ${HC_MPIEXEC} -np 3 ${RANKS_CHECK} 2)
+hc_mpi_test(mpi.ranks_fail_alone nonzero [[ranks_check: error: rank 3/3: failed alone, outside together]]
+  --no-match [[agreed]] -- ${HC_MPIEXEC} -np 3 ${RANKS_CHECK} 3 outside)
+
 # A failure under mpirun: every rank stops, rank 1 says it once, no rank waits forever, and no file is left.
 hc_mpi_test(mpi.failure_reported_once nonzero [[hc-ingest: error: rank 1/3: nope\.tif: no such file \(terrain raster\)]]
   --absent g.hcg --no-match [[rank 2/3: nope]]
