@@ -164,10 +164,9 @@ SurfacePyramid buildPyramidOnRanks(const GridRegionReader& file, const KernelPar
     const int rank = ranks::rank(), count = ranks::count();
     threads = resolveThreads(threads);
     const RankPartition part = partitionOf(file, count);
-    const int top = std::max(0, shape.rootLevel - kPyramidTileLog2);
     const int channels = depthLayer >= 0 ? 3 : 1;
-    std::vector<int> sides(size_t(top) + 1);
-    for (int t = 0; t <= top; ++t) sides[size_t(t)] = std::min(kPyramidTileSide, 1 << (shape.rootLevel - t));
+    const std::vector<int> sides = detail::pyramidTileSides(shape);
+    const int top = int(sides.size()) - 1;
     auto nodeLevelOf = [&](int t) { return t + std::countr_zero(unsigned(sides[size_t(t)])); };
     auto planeOf = [&](int t) { return size_t(sides[size_t(t)]) * size_t(sides[size_t(t)]); };
     // Margins: every cell whose kernel reaches the node; for a water pyramid also those one tile further (the tiles a wet
@@ -307,7 +306,6 @@ SurfacePyramid buildPyramidOnRanks(const GridRegionReader& file, const KernelPar
     auto owned = std::make_shared<SurfacePyramid::Storage>();
     owned->keys.resize(size_t(top) + 1);
     owned->samples.resize(size_t(top) + 1);
-    owned->errors.resize(size_t(top) + 1);
     for (int t = 0; t <= top; ++t) {
         const size_t floats = size_t(channels) * planeOf(t);
         std::vector<std::vector<uint64_t>> k{std::move(keys[size_t(t)])};
@@ -333,20 +331,9 @@ SurfacePyramid buildPyramidOnRanks(const GridRegionReader& file, const KernelPar
             const auto [r, tile] = order[i].second;
             std::copy_n(v[r].begin() + ptrdiff_t(tile * floats), floats, outSamples.begin() + ptrdiff_t(i * floats));
         }
-        owned->errors[size_t(t)].assign(outKeys.size() * size_t(channels), 0.0f);
     }
-    p.levels.resize(size_t(top) + 1);
-    for (int t = 0; t <= top; ++t) {
-        SurfacePyramid::Level& L = p.levels[size_t(t)];
-        L.level = t;
-        L.tileSide = sides[size_t(t)];
-        L.keys = owned->keys[size_t(t)];
-        L.samples = owned->samples[size_t(t)];
-        L.parentErrorM = owned->errors[size_t(t)];
-    }
-    p.storage = std::move(owned);
-    detail::measureParentErrors(p, threads);
-    return waterOnly ? waterPyramidOf(p) : p;
+    const SurfacePyramid done = detail::finishPyramid(std::move(p), std::move(owned), sides, threads);
+    return waterOnly ? waterPyramidOf(done) : done;
 }
 
 }  // namespace hc::influence

@@ -238,8 +238,8 @@ namespace {
 
 // The tiles of `keys` (per level) that a wet cell's kernel reaches, each dilated by one tile: only these can hold a
 // sample with any wet weight, so every other tile draws no water; the dilation keeps beside each kept tile the
-// parent-level tiles whose samples measureParentErrors reads at its far edges (a kept tile's parent is kept: its node
-// holds the child's).
+// parent-level tiles whose samples the parent-error pass (measureParentErrorsInto) reads at its far edges (a kept
+// tile's parent is kept: its node holds the child's).
 std::vector<std::vector<uint64_t>> wetReachedKeys(const Grid& g, const KernelParams& params, const std::vector<std::vector<uint64_t>>& keys,
                                                   const std::vector<int>& sides, int depthLayer) {
     std::vector<std::vector<uint64_t>> out(keys.size());
@@ -257,8 +257,38 @@ std::vector<std::vector<uint64_t>> wetReachedKeys(const Grid& g, const KernelPar
 
 namespace detail {
 
-SurfacePyramid samplePyramid(const Grid& g, const KernelParams& params, unsigned threads, bool progress, bool wetReachedOnly,
-                             const TileFilter* owns) {
+std::vector<int> pyramidTileSides(const Grid& shape) {
+    const int top = std::max(0, shape.rootLevel - kPyramidTileLog2);
+    std::vector<int> sides(size_t(top) + 1);
+    for (int t = 0; t <= top; ++t) sides[size_t(t)] = std::min(kPyramidTileSide, 1 << (shape.rootLevel - t));
+    return sides;
+}
+
+SurfacePyramid finishPyramid(SurfacePyramid p, std::shared_ptr<SurfacePyramid::Storage> owned, const std::vector<int>& sides,
+                             unsigned threads) {
+    const size_t levels = sides.size();
+    owned->errors.resize(levels);
+    p.levels.resize(levels);
+    for (size_t t = 0; t < levels; ++t) {
+        owned->errors[t].assign(owned->keys[t].size() * size_t(p.channels), 0.0f);
+        SurfacePyramid::Level& L = p.levels[t];
+        L.level = int(t);
+        L.tileSide = sides[t];
+        L.keys = owned->keys[t];
+        L.samples = owned->samples[t];
+        L.parentErrorM = owned->errors[t];
+    }
+    measureParentErrorsInto(p, owned->errors, resolveThreads(threads));
+    p.storage = std::move(owned);
+    return p;
+}
+
+}  // namespace detail
+
+namespace {
+
+// The tiles of every level of `g` (tileKeys), or only those a wet cell's kernel reaches (wetReachedKeys), sampled.
+SurfacePyramid buildPyramid(const Grid& g, const KernelParams& params, unsigned threads, bool progress, bool wetReachedOnly) {
     if (std::string why = params.validate(); !why.empty()) throw Error("influence parameters: " + why);
     if (g.cellCount() >= std::numeric_limits<uint32_t>::max()) throw Error("grid has too many cells for 32-bit cell indices");
     threads = resolveThreads(threads);
@@ -270,9 +300,8 @@ SurfacePyramid samplePyramid(const Grid& g, const KernelParams& params, unsigned
     p.contentHash = g.contentHash();
     const int depthLayer = g.findLayer("water_depth");
     p.channels = depthLayer >= 0 ? 3 : 1;
-    const int top = std::max(0, g.rootLevel - kPyramidTileLog2);
-    std::vector<int> sides(size_t(top) + 1);
-    for (int t = 0; t <= top; ++t) sides[size_t(t)] = std::min(kPyramidTileSide, 1 << (g.rootLevel - t));
+    const std::vector<int> sides = detail::pyramidTileSides(g);
+    const int top = int(sides.size()) - 1;
 
     auto owned = std::make_shared<SurfacePyramid::Storage>();
     owned->keys = g.cellCount() ? tileKeys(g, top, sides) : std::vector<std::vector<uint64_t>>(size_t(top) + 1);
@@ -280,7 +309,6 @@ SurfacePyramid samplePyramid(const Grid& g, const KernelParams& params, unsigned
     uint64_t tiles = 0;
     for (const auto& k : owned->keys) tiles += k.size();
     owned->samples.resize(size_t(top) + 1);
-    owned->errors.resize(size_t(top) + 1);
 
     const detail::ListIndex index(g, params);
     std::vector<detail::PyramidWorkspace> scratch(threads);
@@ -290,42 +318,15 @@ SurfacePyramid samplePyramid(const Grid& g, const KernelParams& params, unsigned
         const size_t plane = size_t(sides[size_t(t)]) * size_t(sides[size_t(t)]);
         auto& samples = owned->samples[size_t(t)];
         samples.resize(keys.size() * size_t(p.channels) * plane);
-        owned->errors[size_t(t)].assign(keys.size() * size_t(p.channels), 0.0f);
         parallelFor(keys.size(), 8, threads, [&](size_t b, size_t e, unsigned worker) {
             for (size_t tile = b; tile < e; ++tile)
-                if (!owns || (*owns)(t, keys[tile]))
-                    buildTile(g, index, params, t, sides[size_t(t)], keys[tile], p.channels, depthLayer,
-                              &samples[tile * size_t(p.channels) * plane], scratch[worker], -1);
+                detail::buildTile(g, index, params, t, sides[size_t(t)], keys[tile], p.channels, depthLayer,
+                                  &samples[tile * size_t(p.channels) * plane], scratch[worker], -1);
             bar.advance(e - b);
         });
     }
     bar.finish();
-    p.levels.resize(size_t(top) + 1);
-    for (int t = 0; t <= top; ++t) {
-        SurfacePyramid::Level& L = p.levels[size_t(t)];
-        L.level = t;
-        L.tileSide = sides[size_t(t)];
-        L.keys = owned->keys[size_t(t)];
-        L.samples = owned->samples[size_t(t)];
-        L.parentErrorM = owned->errors[size_t(t)];
-    }
-    p.storage = std::move(owned);
-    return p;
-}
-
-void measureParentErrors(SurfacePyramid& p, unsigned threads) {
-    auto& storage = const_cast<SurfacePyramid::Storage&>(*p.storage);  // built here (samplePyramid): its own vectors
-    measureParentErrorsInto(p, storage.errors, resolveThreads(threads));
-}
-
-}  // namespace detail
-
-namespace {
-
-SurfacePyramid buildPyramid(const Grid& g, const KernelParams& params, unsigned threads, bool progress, bool wetReachedOnly) {
-    SurfacePyramid p = detail::samplePyramid(g, params, threads, progress, wetReachedOnly, nullptr);
-    detail::measureParentErrors(p, threads);
-    return p;
+    return detail::finishPyramid(std::move(p), std::move(owned), sides, threads);
 }
 
 }  // namespace

@@ -1,27 +1,26 @@
-// influence/src/pyramid_build.h: the surface pyramid's build in its two passes, for builders that share the tiles
-// out (the ranks of mpirun, on_ranks.cpp): sampling the tiles, then each tile's bound against its parent level.
+// influence/src/pyramid_build.h: the surface pyramid's build in pieces, for builders that sample the tiles from parts of
+// a grid and assemble them (the ranks of mpirun, on_ranks.cpp): the tiles kept, one tile's samples, then the pyramid
+// over them with each tile's bound against its parent level.
 #pragma once
 
 #include <cstdint>
-#include <functional>
+#include <memory>
+#include <vector>
 
 #include "heightcast/influence/pyramid.h"
 #include "kernel_sums.h"
 #include "list_index.h"
+#include "pyramid_storage.h"
 
 namespace hc::influence::detail {
 
-// Which tiles a process samples: those of level t and key `key` for which it returns true.
-using TileFilter = std::function<bool(int t, uint64_t key)>;
-
-// Every tile of the pyramid (its keys: pyramid.h's rule, or only those a wet cell's kernel reaches), sampled where
-// `owns` (nullptr: everywhere) says, the others left 0; parent errors 0 until measureParentErrors. Throws hc::Error
-// for invalid parameters.
-SurfacePyramid samplePyramid(const Grid& g, const KernelParams& params, unsigned threads, bool progress, bool wetReachedOnly,
-                             const TileFilter* owns);
-// Fills parentErrorM of every tile below the top from the samples (every tile must be sampled): a pyramid of
-// samplePyramid only (its storage is its own).
-void measureParentErrors(SurfacePyramid& p, unsigned threads);
+// Tile sides per level 0..top of a grid of this shape (kPyramidTileSide; less where the domain is smaller than a tile).
+std::vector<int> pyramidTileSides(const Grid& shape);
+// The pyramid p (its fields but levels and storage set) over `owned` (per level its tile keys, ascending, and their
+// samples; errors are filled here): the levels pointed at the storage and every tile's parent error measured from the
+// samples (pyramid.h).
+SurfacePyramid finishPyramid(SurfacePyramid p, std::shared_ptr<SurfacePyramid::Storage> owned, const std::vector<int>& sides,
+                             unsigned threads);
 
 // The pieces, for builders that sample tiles from parts of a grid (a region read around them, on_ranks.cpp):
 
