@@ -6,10 +6,13 @@
 // each tile's pyramid (cheap, cache-resident) and writes its cells straight into the final arrays:
 // no sort, no reallocation, and memory beyond the raster and the grid stays at a few hundred kB.
 //
-// Under mpirun (core/ranks/ranks.h; DESIGN.md section 13) every rank holds the raster and takes an equal run of pass
-// A's tiles and of pass C's cells; the roots are exchanged between the two, and the ranks other than 0 send their
-// cells and statistics to rank 0, which alone writes. The file is the same bytes for any number of ranks and threads:
-// the squared deviations are summed per unit, then over the units in Morton order.
+// Shares (core/ranks/ranks.h; DESIGN.md section 13): the raster is cut into share nodes (quadtree nodes no finer than a
+// tile or the coarsest cell), and under mpirun each rank takes a run of them in Morton order, about equal in area: the
+// tiles of pass A and the units of pass C inside its nodes. The roots are exchanged between the two passes, and the
+// ranks other than 0 send their cells and statistics to rank 0, which alone writes. A raster read window by window
+// (RasterWindows) is read by each rank only over its own nodes, in maximal aligned squares: no rank holds it whole. The
+// file is the same bytes for any number of ranks and threads: the squared deviations are summed per unit, then over
+// the units in Morton order.
 //
 // Water (DESIGN.md section 11): every step's depth raster is read once before the build, one at a time, into a merge
 // mask (a byte per quadtree node: may these four cells merge, for every step?), so the terrain build keeps every
@@ -161,33 +164,70 @@ struct Stats {
     std::vector<uint64_t> perLevel;
 };
 
+// A rectangle of the working raster's pixels that the build reads: the whole raster, or under mpirun with a raster
+// read window by window (RasterWindows), one of the windows of this rank's share. (x0, y0): its south-west pixel in
+// finest coordinates (x east, y north of the raster's south-west corner); rows stored north-up, like Raster's.
+struct Block {
+    size_t x0 = 0, y0 = 0, w = 0, h = 0;
+    const float* values = nullptr;
+    const float* rounding = nullptr;  // Raster::roundingM, or nullptr
+    size_t index(size_t ix, size_t iy) const { return (y0 + h - 1 - iy) * w + (ix - x0); }
+};
+
 class Builder {
 public:
-    Builder(const Raster& terrain, const MergeMask* mask, const BuildOptions& opt, int rootLevel, int maxLevel)
-        : t_(terrain), mask_(mask), opt_(opt), layers_(1), rootLevel_(rootLevel), maxLevel_(maxLevel),
+    // `terrain` gives the geometry, and the pixels unless `windows` reads them (RasterWindows: each rank then reads
+    // only the windows of its share).
+    Builder(const Raster& terrain, const RasterWindows* windows, const MergeMask* mask, const BuildOptions& opt, int rootLevel,
+            int maxLevel)
+        : t_(terrain), windows_(windows), mask_(mask), opt_(opt), layers_(1), rootLevel_(rootLevel), maxLevel_(maxLevel),
           tileLevel_(std::min(rootLevel, kTileLevelMax)), tile_(size_t{1} << tileLevel_),
-          ntx_((terrain.width + tile_ - 1) / tile_), nty_((terrain.height + tile_ - 1) / tile_) {}
+          ntx_((terrain.width + tile_ - 1) / tile_), nty_((terrain.height + tile_ - 1) / tile_) {
+        // Share nodes: never finer than a tile or the coarsest cell (so every unit of pass C lies in one), and at most
+        // 4^11 of them over the root square (the share table stays small).
+        shareLevel_ = std::min(rootLevel_, std::max({tileLevel_, maxLevel_, rootLevel_ - 11}));
+        const size_t side = size_t{1} << shareLevel_;
+        nbx_ = (terrain.width + side - 1) / side;
+        nby_ = (terrain.height + side - 1) / side;
+    }
 
     // Builds the tree and hands its cells, in Morton order, to the sink. Returns the measurements.
     Stats run(CellSink& sink);
 
 private:
-    // Pixel at finest coordinates (ix east, iy north) from the SW corner; false if none.
-    bool pixel(size_t ix, size_t iy, Node& n) const {
+    // The block holding pixel (ix, iy) of the raster.
+    const Block& blockAt(size_t ix, size_t iy) const {
+        const int32_t b = blockOf_[(iy >> shareLevel_) * nbx_ + (ix >> shareLevel_)];
+        if (b < 0) throw Error("internal: pixel " + std::to_string(ix) + ", " + std::to_string(iy) + " lies outside this rank's share");
+        return blocks_[size_t(b)];
+    }
+
+    // Pixel at finest coordinates (ix east, iy north) from the SW corner, of block b (which holds it if it is inside
+    // the raster); false if none.
+    bool pixel(const Block& b, size_t ix, size_t iy, Node& n) const {
         if (ix >= t_.width || iy >= t_.height) return false;
-        size_t idx = (t_.height - 1 - iy) * t_.width + ix;
-        float z = t_.values[idx];
+        const size_t idx = b.index(ix, iy);
+        float z = b.values[idx];
         if (std::isnan(z)) return false;
         n.mean[0] = n.lo[0] = n.hi[0] = z;
-        if (!t_.roundingM.empty() && t_.roundingM[idx] != 0) {
+        if (b.rounding && b.rounding[idx] != 0) {
             // The source's own value lies between lo and hi (float32 neighbours of it), so merges
             // checked against lo and hi keep the tolerance against the source, not only its rounding.
-            const double exact = static_cast<double>(z) + t_.roundingM[idx];
+            const double exact = static_cast<double>(z) + b.rounding[idx];
             (exact > z ? n.hi[0] : n.lo[0]) = std::nextafter(z, exact > z ? HUGE_VALF : -HUGE_VALF);
         }
         n.leaf = true;
         return true;
     }
+
+    // The share nodes (quadtree nodes of shareLevel_, in Morton order over the root square) of ranks 0 .. N - 1:
+    // rank r takes codes [cut[r], cut[r + 1]), runs of about equal area inside the raster.
+    std::vector<uint64_t> shareCuts(int rankCount) const;
+    // Pass A's tiles (index ty * ntx + tx) inside share nodes [c0, c1).
+    std::vector<size_t> tilesOf(uint64_t c0, uint64_t c1) const;
+    // This rank's pixels: the whole raster, or (windows_) the windows of share nodes [c0, c1), read in maximal
+    // aligned squares. Returns the pixels read.
+    uint64_t holdPixels(uint64_t c0, uint64_t c1);
 
     // The merge rule (build.h); (x, y) is the parent node at `level`, for the water steps' mask.
     Node merge(const Node& a, const Node& b, const Node& c, const Node& d, int level, size_t x, size_t y) const {
@@ -214,8 +254,9 @@ private:
         scratch.resize(static_cast<size_t>(tileLevel_) + 1);
         size_t side = tile_;
         scratch[0].assign(side * side, Node{});
+        const Block& b = blockAt(tx * tile_, ty * tile_);  // a tile lies in one share node, so in one block
         for (size_t y = 0; y < side; ++y)
-            for (size_t x = 0; x < side; ++x) pixel(tx * tile_ + x, ty * tile_ + y, scratch[0][y * side + x]);
+            for (size_t x = 0; x < side; ++x) pixel(b, tx * tile_ + x, ty * tile_ + y, scratch[0][y * side + x]);
         for (int l = 1; l <= tileLevel_; ++l) {
             size_t childSide = side;
             side /= 2;
@@ -270,12 +311,89 @@ private:
     void paint(const Batch& b, size_t begin, size_t end) const;
 
     const Raster& t_;
+    const RasterWindows* windows_;
     const MergeMask* mask_;
     const BuildOptions& opt_;
     int layers_;
     int rootLevel_, maxLevel_, tileLevel_;
     size_t tile_, ntx_, nty_;
+    int shareLevel_ = 0;
+    size_t nbx_ = 0, nby_ = 0;        // share nodes over the raster
+    std::vector<Block> blocks_;       // the pixels this rank holds
+    std::vector<int32_t> blockOf_;    // per share node (y * nbx + x): its block, or -1
+    std::vector<std::vector<float>> windowValues_, windowRounding_;  // the windows' pixels (windows_ only)
 };
+
+std::vector<uint64_t> Builder::shareCuts(int rankCount) const {
+    const uint64_t codes = uint64_t{1} << (2 * (rootLevel_ - shareLevel_));
+    const size_t side = size_t{1} << shareLevel_;
+    const uint64_t total = uint64_t(t_.width) * t_.height;
+    std::vector<uint64_t> cut(size_t(rankCount) + 1, codes);
+    cut[0] = 0;
+    uint64_t before = 0;  // pixels of the raster in the nodes before code m
+    int r = 1;
+    for (uint64_t m = 0; m < codes && r < rankCount; ++m) {
+        while (r < rankCount && before >= ranks::shareBegin(total, r, rankCount)) cut[size_t(r++)] = m;
+        const size_t x = mortonX(m), y = mortonY(m);
+        if (x < nbx_ && y < nby_) before += uint64_t(std::min(side, t_.width - x * side)) * std::min(side, t_.height - y * side);
+    }
+    return cut;
+}
+
+std::vector<size_t> Builder::tilesOf(uint64_t c0, uint64_t c1) const {
+    std::vector<size_t> out;
+    const size_t per = size_t{1} << (shareLevel_ - tileLevel_);  // tiles per share node side
+    for (uint64_t m = c0; m < c1; ++m) {
+        const size_t x = mortonX(m), y = mortonY(m);
+        if (x >= nbx_ || y >= nby_) continue;
+        for (size_t ty = y * per; ty < std::min(nty_, (y + 1) * per); ++ty)
+            for (size_t tx = x * per; tx < std::min(ntx_, (x + 1) * per); ++tx) out.push_back(ty * ntx_ + tx);
+    }
+    return out;
+}
+
+uint64_t Builder::holdPixels(uint64_t c0, uint64_t c1) {
+    blockOf_.assign(nbx_ * nby_, -1);
+    blocks_.clear();
+    if (!windows_) {
+        blocks_.push_back({0, 0, t_.width, t_.height, t_.values.data(), t_.roundingM.empty() ? nullptr : t_.roundingM.data()});
+        std::fill(blockOf_.begin(), blockOf_.end(), 0);
+        return 0;
+    }
+    // Maximal aligned squares: from code m, the largest 4^k nodes that start at m and end by c1.
+    struct Square {
+        uint64_t m;
+        int k;
+    };
+    std::vector<Square> squares;
+    for (uint64_t m = c0; m < c1;) {
+        int k = 0;
+        while (shareLevel_ + k < rootLevel_ && m % (uint64_t{4} << (2 * k)) == 0 && m + (uint64_t{4} << (2 * k)) <= c1) ++k;
+        squares.push_back({m, k});
+        m += uint64_t{1} << (2 * k);
+    }
+    uint64_t read = 0;
+    Progress progress("reading the raster's windows", squares.size(), opt_.progress && ranks::rank() == 0);
+    for (const Square& q : squares) {
+        const size_t x0 = size_t(mortonX(q.m)) << shareLevel_, y0 = size_t(mortonY(q.m)) << shareLevel_;
+        const size_t side = size_t{1} << (shareLevel_ + q.k);
+        progress.advance(1);
+        if (x0 >= t_.width || y0 >= t_.height) continue;
+        Block b{x0, y0, std::min(side, t_.width - x0), std::min(side, t_.height - y0), nullptr, nullptr};
+        windowValues_.emplace_back();
+        windowRounding_.emplace_back();
+        windows_->read(b.x0, t_.height - (b.y0 + b.h), b.w, b.h, windowValues_.back(), windowRounding_.back());
+        if (windowValues_.back().size() != b.w * b.h) throw Error("internal: a window read the wrong number of pixels");
+        b.values = windowValues_.back().data();
+        b.rounding = windowRounding_.back().empty() ? nullptr : windowRounding_.back().data();
+        read += uint64_t(b.w) * b.h;
+        for (size_t y = y0 >> shareLevel_; y < std::min(nby_, (y0 + side) >> shareLevel_); ++y)
+            for (size_t x = x0 >> shareLevel_; x < std::min(nbx_, (x0 + side) >> shareLevel_); ++x) blockOf_[y * nbx_ + x] = int32_t(blocks_.size());
+        blocks_.push_back(b);
+    }
+    progress.finish();
+    return read;
+}
 
 Stats Builder::run(CellSink& sink) {
     const unsigned threads = resolveThreads(opt_.threads);
@@ -286,17 +404,23 @@ Stats Builder::run(CellSink& sink) {
     const bool root = rank == 0;
     const auto rankStart = Stopwatch();
 
+    // The shares: runs of share nodes in Morton order, about equal in area. A rank builds the tiles (pass A) and writes
+    // the cells (pass C) inside its own nodes, so it reads (windows_) or touches only their pixels.
+    const std::vector<uint64_t> cuts = shareCuts(rankCount);
+    const std::vector<size_t> myTiles = tilesOf(cuts[size_t(rank)], cuts[size_t(rank) + 1]);
+    uint64_t pixelsRead = 0;
+    ranks::together([&] { pixelsRead = holdPixels(cuts[size_t(rank)], cuts[size_t(rank) + 1]); });
+
     // Pass A: tile roots and leaf counts.
     std::vector<Node> roots(tiles);
     std::vector<uint32_t> leafCount(tiles);
     {
         Progress progress("building quadtree", 2 * tiles, opt_.progress && root);
         std::vector<std::vector<std::vector<Node>>> scratch(threads);
-        const size_t a0 = ranks::shareBegin(tiles, rank, rankCount), a1 = ranks::shareBegin(tiles, rank + 1, rankCount);
         ranks::together([&] {
-            parallelFor(a1 - a0, 16, threads, [&](size_t b, size_t e, unsigned worker) {
-                for (size_t i = a0 + b; i < a0 + e; ++i) {
-                    size_t tx = i % ntx_, ty = i / ntx_;
+            parallelFor(myTiles.size(), 16, threads, [&](size_t b, size_t e, unsigned worker) {
+                for (size_t k = b; k < e; ++k) {
+                    const size_t i = myTiles[k], tx = i % ntx_, ty = i / ntx_;
                     roots[i] = buildTile(tx, ty, scratch[worker]);
                     leafCount[i] = static_cast<uint32_t>(emitTile(tx, ty, scratch[worker], nullptr, 0));
                 }
@@ -304,12 +428,18 @@ Stats Builder::run(CellSink& sink) {
             });
         });
         if (rankCount > 1) {  // every rank needs every root for the coarse levels and the walk
-            const auto allRoots = ranks::allGatherVectors(std::vector<Node>(roots.begin() + ptrdiff_t(a0), roots.begin() + ptrdiff_t(a1)));
-            const auto allCounts = ranks::allGatherVectors(std::vector<uint32_t>(leafCount.begin() + ptrdiff_t(a0), leafCount.begin() + ptrdiff_t(a1)));
+            std::vector<Node> myRoots;
+            std::vector<uint32_t> myCounts;
+            for (size_t i : myTiles) myRoots.push_back(roots[i]), myCounts.push_back(leafCount[i]);
+            const auto allRoots = ranks::allGatherVectors(myRoots);
+            const auto allCounts = ranks::allGatherVectors(myCounts);
             for (int r = 0; r < rankCount; ++r) {
-                const size_t at = ranks::shareBegin(tiles, r, rankCount);
-                std::copy(allRoots[size_t(r)].begin(), allRoots[size_t(r)].end(), roots.begin() + ptrdiff_t(at));
-                std::copy(allCounts[size_t(r)].begin(), allCounts[size_t(r)].end(), leafCount.begin() + ptrdiff_t(at));
+                if (r == rank) continue;
+                const std::vector<size_t> theirs = tilesOf(cuts[size_t(r)], cuts[size_t(r) + 1]);
+                if (allRoots[size_t(r)].size() != theirs.size() || allCounts[size_t(r)].size() != theirs.size())
+                    throw Error("rank " + std::to_string(r + 1) + " sent " + std::to_string(allRoots[size_t(r)].size()) + " tile roots, not " +
+                                std::to_string(theirs.size()));
+                for (size_t k = 0; k < theirs.size(); ++k) roots[theirs[k]] = allRoots[size_t(r)][k], leafCount[theirs[k]] = allCounts[size_t(r)][k];
             }
         }
 
@@ -359,14 +489,20 @@ Stats Builder::run(CellSink& sink) {
         };
         walk(walk, rootLevel_, 0, 0);
 
-        // This rank's units: those whose first cell lies in its share of the cells.
+        // This rank's units: those inside its share nodes (a unit, no larger than a share node, lies in one; the
+        // units' nodes ascend in Morton order as the units do).
+        const int shareLevel = shareLevel_;  // not the member: clang 14's lambdas below
         auto firstUnit = [&](int r) {
-            const uint64_t cell = ranks::shareBegin(total, r, rankCount);
-            return size_t(std::lower_bound(units.begin(), units.end(), cell, [](const Unit& u, uint64_t c) { return u.offset < c; }) - units.begin());
+            return size_t(std::lower_bound(units.begin(), units.end(), cuts[size_t(r)], [shareLevel](const Unit& u, uint64_t c) {
+                              return mortonEncode(uint32_t((u.x << u.level) >> shareLevel), uint32_t((u.y << u.level) >> shareLevel)) < c;
+                          }) - units.begin());
         };
         const size_t myU0 = firstUnit(rank), myU1 = rank + 1 == rankCount ? units.size() : firstUnit(rank + 1);
 
-        if (root) sink.begin(total);
+        ranks::together([&] {
+            if (total == 0) throw Error("the raster holds no valid pixel (all nodata): nothing to build");
+            if (root) sink.begin(total);
+        });
 
         // Pass C, write: batches of consecutive units (about 64 k cells, a few MB), filled in parallel, measured, and
         // handed to the sink in order (another rank keeps its share's cells, then sends them to rank 0). The squared
@@ -427,9 +563,12 @@ Stats Builder::run(CellSink& sink) {
             sum.wetCells += a.wetCells;
             for (size_t l = 0; l < a.perLevel.size(); ++l) sum.perLevel[l] += a.perLevel[l];
         }
-        const uint64_t myTiles = a1 - a0, myCells = (myU1 < units.size() ? units[myU1].offset : total) - (myU0 < units.size() ? units[myU0].offset : total);
-        ranks::log("hc-ingest", fmt::format("{} tiles of {}^2 px built, {} units, {} cells written, {:.3f} s, peak {:.1f} MB resident", myTiles,
-                                            1u << tileLevel_, myU1 - myU0, myCells, rankStart.seconds(), double(peakRssBytes()) / 1e6));
+        const uint64_t myCells = (myU1 < units.size() ? units[myU1].offset : total) - (myU0 < units.size() ? units[myU0].offset : total);
+        const std::string reads = windows_ ? fmt::format("{} window{} read, {} px ({:.1f} % of the raster), ", blocks_.size(), blocks_.size() == 1 ? "" : "s", pixelsRead,
+                                                         100.0 * double(pixelsRead) / double(t_.width * t_.height))
+                                           : std::string("the whole raster held, ");
+        ranks::log("hc-ingest", fmt::format("{}{} tiles of {}^2 px built, {} units, {} cells written, {:.3f} s, peak {:.1f} MB resident", reads,
+                                            myTiles.size(), 1u << tileLevel_, myU1 - myU0, myCells, rankStart.seconds(), double(peakRssBytes()) / 1e6));
         if (!root) {
             sendShare(share, sum, unitSumSq);
             return sum;
@@ -495,13 +634,13 @@ double Builder::measure(const Batch& b, size_t begin, size_t end, Stats& a, bool
         const size_t span = size_t{1} << level;
         const size_t ix0 = mortonX(key), iy0 = mortonY(key);
         const double z = b.values[0][i];
+        const Block& px = blockAt(ix0, iy0);  // a cell lies in one share node
         for (size_t iy = iy0; iy < iy0 + span; ++iy) {
-            const size_t row = t_.height - 1 - iy;
             for (size_t ix = ix0; ix < ix0 + span; ++ix) {
-                const size_t idx = row * t_.width + ix;
-                const double exact = static_cast<double>(t_.values[idx]) + (t_.roundingM.empty() ? 0.0 : t_.roundingM[idx]);
+                const size_t idx = px.index(ix, iy);
+                const double exact = static_cast<double>(px.values[idx]) + (px.rounding ? px.rounding[idx] : 0.0);
                 const double dz = exact - z;
-                if (paintElevations && opt_.cellElevations) (*opt_.cellElevations)[idx] = b.values[0][i];
+                if (paintElevations && opt_.cellElevations) (*opt_.cellElevations)[(t_.height - 1 - iy) * t_.width + ix] = b.values[0][i];
                 sumSq += dz * dz;
                 a.maxDev = std::max(a.maxDev, std::abs(dz));
                 ++a.pixels;
@@ -516,8 +655,9 @@ double Builder::measure(const Batch& b, size_t begin, size_t end, Stats& a, bool
 namespace {
 
 // The grid's geometry for a raster: origin at its south-west corner, finest cell = its pixel.
-Grid shapeFor(const Raster& terrain, bool water, const BuildOptions& options, int& rootLevel, int& maxLevel) {
-    if (terrain.width == 0 || terrain.height == 0 || terrain.values.size() != terrain.width * terrain.height)
+// `windowed`: the raster's values are read window by window (RasterWindows), not held in terrain.values.
+Grid shapeFor(const Raster& terrain, bool water, const BuildOptions& options, int& rootLevel, int& maxLevel, bool windowed = false) {
+    if (terrain.width == 0 || terrain.height == 0 || (!windowed && terrain.values.size() != terrain.width * terrain.height))
         throw Error("raster is empty or inconsistent");
     if (!(options.toleranceM >= 0) || !std::isfinite(options.toleranceM)) throw Error("tolerance must be a finite number >= 0");
     if (!(terrain.pixelSizeM > 0)) throw Error("pixel size must be positive");
@@ -668,7 +808,7 @@ Grid buildGrid(const Raster& terrain, const Raster* waterDepth, const BuildOptio
     const std::optional<MergeMask> mask = maskOf(terrain, waterDepth ? &one : nullptr, options, maxLevel);
     GridSink sink(g);
     if (options.cellElevations) options.cellElevations->assign(terrain.values.size(), std::numeric_limits<float>::quiet_NaN());
-    Stats st = Builder(terrain, mask ? &*mask : nullptr, options, rootLevel, maxLevel).run(sink);
+    Stats st = Builder(terrain, nullptr, mask ? &*mask : nullptr, options, rootLevel, maxLevel).run(sink);
     if (g.cellCount() == 0) throw Error("the raster holds no valid pixel (all nodata): nothing to build");
     if (waterDepth) {
         g.values[1].clear();
@@ -680,8 +820,11 @@ Grid buildGrid(const Raster& terrain, const Raster* waterDepth, const BuildOptio
     return g;
 }
 
-BuildSummary buildGridFile(const Raster& terrain, const WaterSteps* steps, const BuildOptions& options, const std::string& path,
-                           const IngestStats& extraStats) {
+namespace {
+
+// buildGridFile, its pixels from terrain.values or read window by window (`windows`; without water steps).
+BuildSummary buildFile(const Raster& terrain, const RasterWindows* windows, const WaterSteps* steps, const BuildOptions& options,
+                       const std::string& path, const IngestStats& extraStats) {
     const Stopwatch clock;
     int rootLevel = 0, maxLevel = 0;
     const size_t stepCount = steps ? steps->count : 0;
@@ -691,12 +834,13 @@ BuildSummary buildGridFile(const Raster& terrain, const WaterSteps* steps, const
             throw Error("water step times must increase strictly: step " + std::to_string(k) + " at " + std::to_string(steps->timesS[k]) +
                         " s follows " + std::to_string(steps->timesS[k - 1]) + " s");
     BuildSummary out;
-    out.shape = shapeFor(terrain, stepCount > 0, options, rootLevel, maxLevel);
+    if (windows && (stepCount > 0 || options.cellElevations)) throw Error("internal: a raster read by windows is built without water steps or traces");
+    out.shape = shapeFor(terrain, stepCount > 0, options, rootLevel, maxLevel, windows != nullptr);
     const std::optional<MergeMask> mask = maskOf(terrain, steps, options, maxLevel);
     FileSink sink(path, out.shape, stepCount);
     const bool root = ranks::rank() == 0;  // under mpirun, rank 0 alone writes (Builder::run)
     if (options.cellElevations && root) options.cellElevations->assign(terrain.values.size(), std::numeric_limits<float>::quiet_NaN());
-    Stats st = Builder(terrain, mask ? &*mask : nullptr, options, rootLevel, maxLevel).run(sink);
+    Stats st = Builder(terrain, windows, mask ? &*mask : nullptr, options, rootLevel, maxLevel).run(sink);
     if (!root) {
         for (uint64_t c : st.perLevel) out.cellCount += c;  // this rank's share
         return out;
@@ -730,6 +874,18 @@ BuildSummary buildGridFile(const Raster& terrain, const WaterSteps* steps, const
     out.wetCells = out.steps.empty() ? 0 : out.steps.back().wetCells;
     for (uint64_t c : st.perLevel) out.cellCount += c;
     return out;
+}
+
+}  // namespace
+
+BuildSummary buildGridFile(const Raster& terrain, const WaterSteps* steps, const BuildOptions& options, const std::string& path,
+                           const IngestStats& extraStats) {
+    return buildFile(terrain, nullptr, steps, options, path, extraStats);
+}
+
+BuildSummary buildGridFile(const RasterWindows& terrain, const BuildOptions& options, const std::string& path, const IngestStats& extraStats) {
+    if (!terrain.read) throw Error("internal: raster windows without a reader");
+    return buildFile(terrain.shape, &terrain, nullptr, options, path, extraStats);
 }
 
 }  // namespace hc::ingest

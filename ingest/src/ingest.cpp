@@ -2,6 +2,8 @@
 
 #include <cmath>
 #include <cstdio>
+#include <memory>
+#include <optional>
 
 #include <fmt/format.h>
 
@@ -134,8 +136,9 @@ void checkAgainstSource(const detail::SourceTrace& trace, const Raster& working,
 }
 
 // The build's own figure, said plainly when float32 storage cannot hold the tolerance.
-void noteStorage(const IngestStats& s, const Raster& terrain, LoadReport& report) {
-    if (s.maxDevM > s.toleranceM && !terrain.roundingM.empty())
+// `rounded`: float32 lost part of some source values (Raster::roundingM).
+void noteStorage(const IngestStats& s, bool rounded, LoadReport& report) {
+    if (s.maxDevM > s.toleranceM && rounded)
         report.warnings.push_back("cells differ from the source's own (Float64 or integer) values by up to " +
                                   fmtM(s.maxDevM) + " m, more than --tolerance " + fmtM(s.toleranceM) +
                                   " m: the grid stores float32, which cannot hold these values closer");
@@ -150,7 +153,7 @@ void traceBuild(Prepared& p) {
 // What is checked once the grid is built: the source pixels against their cells, the tolerance in float32.
 void afterBuild(const Prepared& p, const IngestStats& stats, const Options& opt, LoadReport& report) {
     if (p.build.cellElevations) checkAgainstSource(p.trace, p.terrain, p.cellElevations, opt.threads, report);
-    noteStorage(stats, p.terrain, report);
+    noteStorage(stats, !p.terrain.roundingM.empty(), report);
 }
 
 }  // namespace
@@ -172,8 +175,54 @@ Grid ingest(const Options& opt, LoadReport& report) {
     return g;
 }
 
+namespace {
+
+// Under mpirun, a terrain without water whose working raster is its own pixels: every rank reads only the windows of
+// its share (buildGridFile over RasterWindows), the readers' counts are added over the ranks, and rank 0 reports them.
+// nullopt where the source must be read whole (a projection, a warp, a resampling), with the reason in the rank log.
+std::optional<BuildSummary> ingestByWindows(const Options& opt, const std::string& path, LoadReport& report, const Stopwatch& clock) {
+    std::string why;
+    std::unique_ptr<detail::TerrainWindows> windows = detail::openTerrainWindows(opt, report, why);
+    if (!windows) {
+        ranks::log("hc-ingest", "every rank reads the whole raster: " + why);
+        report = LoadReport{};  // loadTerrain reports again
+        return std::nullopt;
+    }
+    RasterWindows w;
+    w.shape = windows->shape();
+    w.read = [&](size_t c0, size_t r0, size_t width, size_t height, std::vector<float>& values, std::vector<float>& rounding) {
+        windows->read(c0, r0, width, height, values, rounding);
+    };
+    BuildOptions build;
+    build.toleranceM = opt.toleranceM;
+    build.maxLevel = chooseMaxLevel(opt, w.shape.pixelSizeM, report);
+    build.threads = opt.threads;
+    build.progress = opt.progress;
+    IngestStats extra;
+    extra.sourcePath = opt.input;
+    extra.sourceCrsName = report.sourceCrsName;
+    extra.seconds = clock.seconds();
+    BuildSummary b = buildGridFile(w, build, path, extra);
+    // The whole raster's counts (valid pixels, +-inf, sentinels): every rank's windows added.
+    detail::SourceTally all;
+    for (const auto& t : ranks::allGatherVectors(std::vector<detail::SourceTally>{windows->tally()})) {
+        if (t.size() != 1) throw Error("a rank sent no reading tally");
+        all.add(t[0]);
+    }
+    windows->finish(all, report);
+    if (ranks::rank() == 0) noteStorage(b.shape.stats, report.sourcePrecisionDouble, report);
+    return b;
+}
+
+}  // namespace
+
 BuildSummary ingestToFile(const Options& opt, const std::string& path, LoadReport& report) {
     const Stopwatch clock;
+    if (ranks::distributed() && waterStepCount(opt) == 0) {
+        if (std::optional<BuildSummary> b = ingestByWindows(opt, path, report, clock)) return std::move(*b);
+    } else if (ranks::distributed()) {
+        ranks::log("hc-ingest", "every rank reads the whole raster: water steps are read (warped, flood-filled) whole");
+    }
     Prepared p = prepare(opt, report);
     setBuild(p, opt, report);
     bindWater(p, opt, report);

@@ -32,7 +32,6 @@ constexpr float kNaN = std::numeric_limits<float>::quiet_NaN();
 
 using detail::fmt;
 using detail::lower;
-using detail::readSource;
 
 // Geotransform of the source in metres (or in degrees for geographic sources).
 struct GeoTransform {
@@ -58,32 +57,47 @@ void checkWorkingSize(double width, double height, double pixelM, const Options&
                     " GB with its grid, more than this machine's " + fmt(ram / 1e9, 3) + " GB");
 }
 
+// Whether the working raster is the source's pixels as they are (at most flipped): not rotated, square pixels, no
+// --min-cell other than the pixel size.
+bool keptAsIs(const GeoTransform& gt, const Options& opt) {
+    const double* g = gt.g;
+    const bool square = std::abs(std::abs(g[1]) - std::abs(g[5])) <= kSquareTolerance * std::max(std::abs(g[1]), std::abs(g[5]));
+    const bool sameSize = !opt.minCellM || std::abs(*opt.minCellM - std::abs(g[1])) <= 1e-9 * std::abs(g[1]);
+    return !gt.rotated() && square && sameSize;
+}
+
+// The geometry of a source kept as is (keptAsIs), flipped so that row 0 is north and column 0 west: r's size,
+// pixel and corner, the report's method and the warning of snapped pixels. Values are not touched.
+void keptGeometry(const GeoTransform& gt, size_t width, size_t height, Raster& r, bool& flipX, bool& flipY, LoadReport& report) {
+    const double* g = gt.g;
+    r.width = width;
+    r.height = height;
+    r.pixelSizeM = std::abs(g[1]);
+    flipX = g[1] < 0, flipY = g[5] > 0;
+    r.westWorld = flipX ? g[0] + g[1] * static_cast<double>(width) : g[0];
+    r.northWorld = flipY ? g[3] + g[5] * static_cast<double>(height) : g[3];
+    if (std::abs(g[1]) != std::abs(g[5])) {
+        double shift = std::abs(std::abs(g[5]) - std::abs(g[1])) * static_cast<double>(height);
+        report.warnings.push_back("pixels of " + fmt(std::abs(g[1])) + " x " + fmt(std::abs(g[5])) +
+                                  " m are within 0.1 % of square: snapped (not resampled) to " + fmt(r.pixelSizeM) +
+                                  " m squares, which moves the south edge by " + fmt(shift, 3) + " m");
+    }
+    if (flipX || flipY)
+        report.method += std::string(report.method.empty() ? "" : "; ") + (flipY ? "south-up rows flipped north-up" : "") +
+                         (flipX && flipY ? ", " : "") + (flipX ? "east-to-west columns flipped" : "");
+    if (report.method.empty()) report.method = "kept as is";
+}
+
 // `trace`, when given, receives the source and its pixel-to-world map if the source is resampled.
 Raster fromSourceAffine(SourceBand&& src, const GeoTransform& gt, double pixelM, const std::string& wkt,
                         const Options& opt, LoadReport& report, detail::SourceTrace* trace) {
     Raster r;
     r.crsWkt = wkt;
     r.crsName = report.gridCrsName;  // each caller names the grid CRS in the report before it comes here
-    const double* g = gt.g;
-    bool square = std::abs(std::abs(g[1]) - std::abs(g[5])) <= kSquareTolerance * std::max(std::abs(g[1]), std::abs(g[5]));
-    bool sameSize = !opt.minCellM || std::abs(*opt.minCellM - std::abs(g[1])) <= 1e-9 * std::abs(g[1]);
-    if (!gt.rotated() && square && sameSize) {
-        // Kept as is; flip rows (south-up) or columns (east-to-west) so row 0 is north, column 0 west.
-        r.width = src.width;
-        r.height = src.height;
-        r.pixelSizeM = std::abs(g[1]);
-        bool flipX = g[1] < 0, flipY = g[5] > 0;
-        r.westWorld = flipX ? g[0] + g[1] * static_cast<double>(src.width) : g[0];
-        r.northWorld = flipY ? g[3] + g[5] * static_cast<double>(src.height) : g[3];
-        if (std::abs(g[1]) != std::abs(g[5])) {
-            double shift = std::abs(std::abs(g[5]) - std::abs(g[1])) * static_cast<double>(src.height);
-            report.warnings.push_back("pixels of " + fmt(std::abs(g[1])) + " x " + fmt(std::abs(g[5])) +
-                                      " m are within 0.1 % of square: snapped (not resampled) to " + fmt(r.pixelSizeM) +
-                                      " m squares, which moves the south edge by " + fmt(shift, 3) + " m");
-        }
+    if (keptAsIs(gt, opt)) {
+        bool flipX = false, flipY = false;
+        keptGeometry(gt, src.width, src.height, r, flipX, flipY, report);
         if (flipX || flipY) {
-            report.method += std::string(report.method.empty() ? "" : "; ") + (flipY ? "south-up rows flipped north-up" : "") +
-                             (flipX && flipY ? ", " : "") + (flipX ? "east-to-west columns flipped" : "");
             auto flipped = [&](const std::vector<float>& v) {
                 std::vector<float> out(v.size());
                 for (size_t row = 0; row < src.height; ++row)
@@ -98,10 +112,11 @@ Raster fromSourceAffine(SourceBand&& src, const GeoTransform& gt, double pixelM,
             r.values = std::move(src.values);
             r.roundingM = std::move(src.residual);
         }
-        if (report.method.empty()) report.method = "kept as is";
         return r;
     }
     // Resample: rotated, non-square, or a finest cell other than the pixel size.
+    const double* g = gt.g;
+    const bool square = std::abs(std::abs(g[1]) - std::abs(g[5])) <= kSquareTolerance * std::max(std::abs(g[1]), std::abs(g[5]));
     double inv[6];
     if (!gt.invert(inv)) throw Error(opt.input + ": geotransform cannot be inverted (degenerate pixel size)");
     double xs[4], ys[4];
@@ -584,85 +599,101 @@ bool metadataSaysDegrees(GDALDataset& ds) {
 
 }  // namespace
 
-Raster loadTerrain(const Options& opt, LoadReport& report) { return detail::loadTerrainTraced(opt, report, nullptr); }
+namespace {
 
-Raster detail::loadTerrainTraced(const Options& opt, LoadReport& report, SourceTrace* trace) {
-    validateOptions(opt);
-    DatasetPtr ds = detail::openRaster(opt.input, "terrain raster");
-    report.sourceWidth = static_cast<size_t>(ds->GetRasterXSize());
-    report.sourceHeight = static_cast<size_t>(ds->GetRasterYSize());
-
-    const bool localFrame = lower(opt.sourceSrs) == "local";
+// The terrain file opened and its georeferencing settled, no pixel read: loadTerrain's first half, shared with the
+// window-by-window reading (TerrainWindows).
+struct Opened {
+    DatasetPtr ds;
+    std::unique_ptr<detail::BandReader> band;  // reads ds's band; its constructor checked the bands and units
     OGRSpatialReference srs;
+    bool hasSrs = false, hasGt = false, localFrame = false;
+    GeoTransform gt;
+    // How the working raster comes from the source.
+    enum class Route { Warp, Utm, Affine } route = Route::Affine;
+    OGRSpatialReference target;  // Route::Warp: --t_srs
+    double pixelM = 1;           // Route::Affine: the source's pixel size [m]
+    std::string wkt;             // Route::Affine: the grid CRS ("" for none)
+};
+
+Opened openTerrain(const Options& opt, LoadReport& report) {
+    validateOptions(opt);
+    Opened o;
+    o.ds = detail::openRaster(opt.input, "terrain raster");
+    report.sourceWidth = static_cast<size_t>(o.ds->GetRasterXSize());
+    report.sourceHeight = static_cast<size_t>(o.ds->GetRasterYSize());
+    const size_t width = report.sourceWidth, height = report.sourceHeight;
+
+    o.localFrame = lower(opt.sourceSrs) == "local";
+    OGRSpatialReference& srs = o.srs;
     srs.SetAxisMappingStrategy(OAMS_TRADITIONAL_GIS_ORDER);
-    bool hasSrs = false;
-    if (localFrame) {
+    if (o.localFrame) {
         report.warnings.push_back("--s_srs local: coordinates taken as metres in a local frame, the file's own CRS (if any) ignored");
     } else if (!opt.sourceSrs.empty()) {
         if (srs.SetFromUserInput(opt.sourceSrs.c_str()) != OGRERR_NONE)
             throw Error("--s_srs " + opt.sourceSrs + ": not a CRS that GDAL/PROJ knows (or 'local' for metres in a local frame)");
-        hasSrs = true;
-    } else if (const OGRSpatialReference* own = ds->GetSpatialRef(); own && !own->IsEmpty()) {
+        o.hasSrs = true;
+    } else if (const OGRSpatialReference* own = o.ds->GetSpatialRef(); own && !own->IsEmpty()) {
         srs = *own;
         srs.SetAxisMappingStrategy(OAMS_TRADITIONAL_GIS_ORDER);
-        hasSrs = true;
+        o.hasSrs = true;
     }
-    report.sourceCrsName = hasSrs ? detail::crsName(&srs) : "";
+    report.sourceCrsName = o.hasSrs ? detail::crsName(&srs) : "";
 
-    GeoTransform gt;
-    bool hasGt = ds->GetGeoTransform(gt.g) == CE_None;
-    if (hasGt && (gt.g[1] == 0 || gt.g[5] == 0) && !gt.rotated())
+    GeoTransform& gt = o.gt;
+    o.hasGt = o.ds->GetGeoTransform(gt.g) == CE_None;
+    if (o.hasGt && (gt.g[1] == 0 || gt.g[5] == 0) && !gt.rotated())
         throw Error(opt.input + ": geotransform has a zero pixel size");
     // Elevation units a compound CRS declares (its vertical part), for bands that declare none.
     double zCrs = 1.0;
     std::string zCrsUnit;
-    if (hasSrs && srs.IsCompound()) {
+    if (o.hasSrs && srs.IsCompound()) {
         const char* name = nullptr;
         double u = srs.GetTargetLinearUnits("VERT_CS", &name);
         if (u > 0 && std::abs(u - 1.0) > 1e-12) zCrs = u, zCrsUnit = name ? name : "?";
     }
-    const bool unitsSayDegrees = metadataSaysDegrees(*ds);
-    SourceBand src = readSource(*ds, opt, report, zCrs, zCrsUnit);
-    ds.reset();  // releases GDAL's cached blocks of the file before the working raster is made
-    if (!hasGt) {
+    const bool unitsSayDegrees = metadataSaysDegrees(*o.ds);
+    o.band = std::make_unique<detail::BandReader>(*o.ds, opt, report, zCrs, zCrsUnit);
+    if (!o.hasGt) {
         // No georeferencing: pixel (c, r) -> (c, -r) metres; the file itself can't say more.
         gt = GeoTransform{};
-        gt.g[3] = static_cast<double>(src.height);
+        gt.g[3] = static_cast<double>(height);
         report.warnings.push_back("no georeferencing: pixels taken as 1 m squares in a local frame (assign one with gdal_translate -a_ullr / -a_srs)");
     }
-    if (!hasSrs && !localFrame && hasGt && looksLikeDegrees(gt, src.width, src.height, unitsSayDegrees)) {
+    if (!o.hasSrs && !o.localFrame && o.hasGt && looksLikeDegrees(gt, width, height, unitsSayDegrees)) {
         srs.SetWellKnownGeogCS("WGS84");
-        hasSrs = true;
+        o.hasSrs = true;
         report.sourceCrsName = "none; taken as WGS 84";
         const double* g = gt.g;
         report.warnings.push_back("no CRS, and the coordinates look like degrees (" +
                                   std::string(unitsSayDegrees ? "the file's units say degrees_east, " : "") + "x " + fmt(g[0]) + ".." +
-                                  fmt(g[0] + g[1] * double(src.width)) + ", y " + fmt(g[3] + g[5] * double(src.height)) + ".." + fmt(g[3]) +
+                                  fmt(g[0] + g[1] * double(width)) + ", y " + fmt(g[3] + g[5] * double(height)) + ".." + fmt(g[3]) +
                                   "): taken as geographic WGS 84; name the CRS with --s_srs, or take them as metres with --s_srs local");
     }
 
     if (!opt.targetSrs.empty()) {
-        OGRSpatialReference target;
-        if (target.SetFromUserInput(opt.targetSrs.c_str()) != OGRERR_NONE)
+        if (o.target.SetFromUserInput(opt.targetSrs.c_str()) != OGRERR_NONE)
             throw Error("--t_srs " + opt.targetSrs + ": not a CRS that GDAL/PROJ knows");
-        if (!target.IsProjected()) throw Error("--t_srs " + opt.targetSrs + ": not a projected CRS (the grid needs metres)");
-        if (!hasSrs) throw Error(opt.input + ": has no CRS to project from; name it with --s_srs");
-        return warpToTarget(std::move(src), gt, srs, target, opt, report, trace);
+        if (!o.target.IsProjected()) throw Error("--t_srs " + opt.targetSrs + ": not a projected CRS (the grid needs metres)");
+        if (!o.hasSrs) throw Error(opt.input + ": has no CRS to project from; name it with --s_srs");
+        o.route = Opened::Route::Warp;
+        return o;
     }
-
-    if (!hasSrs) {
-        if (hasGt && !localFrame) {
+    if (!o.hasSrs) {
+        if (o.hasGt && !o.localFrame) {
             // Degrees by their range, but neither fine nor global enough to say so with confidence.
-            const bool couldBeDegrees = looksLikeDegrees(gt, src.width, src.height, true);
+            const bool couldBeDegrees = looksLikeDegrees(gt, width, height, true);
             report.warnings.push_back(std::string("no CRS: coordinates taken as metres in a local frame (name the CRS with --s_srs") +
                                       (couldBeDegrees ? "; they would fit degrees too: if they are, --s_srs EPSG:4326)" : ")"));
         }
         report.gridCrsName = "";
-        return fromSourceAffine(std::move(src), gt, std::min(std::abs(gt.g[1]), std::abs(gt.g[5])), "", opt, report, trace);
+        o.pixelM = std::min(std::abs(gt.g[1]), std::abs(gt.g[5]));
+        return o;
     }
     if (srs.IsGeographic()) {
         if (gt.rotated()) throw Error(opt.input + ": rotated geotransform on a geographic CRS is not supported; warp it with gdalwarp first");
-        return projectToUtm(std::move(src), gt, srs, opt, report, trace);
+        o.route = Opened::Route::Utm;
+        return o;
     }
     if (!srs.IsProjected()) {
         const std::string name = "'" + report.sourceCrsName + "'";
@@ -688,9 +719,94 @@ Raster detail::loadTerrainTraced(const Options& opt, LoadReport& report, SourceT
                                       " they are often in the same unit: if so, add --z-scale " + fmt(unit, 10));
     }
     report.gridCrsName = detail::crsName(&srs);
-    double pixel = std::min(std::abs(gt.g[1]), std::abs(gt.g[5]));
-    if (gt.rotated()) pixel = std::min(std::hypot(gt.g[1], gt.g[4]), std::hypot(gt.g[2], gt.g[5]));
-    return fromSourceAffine(std::move(src), gt, pixel, detail::toWkt(srs), opt, report, trace);
+    o.pixelM = std::min(std::abs(gt.g[1]), std::abs(gt.g[5]));
+    if (gt.rotated()) o.pixelM = std::min(std::hypot(gt.g[1], gt.g[4]), std::hypot(gt.g[2], gt.g[5]));
+    o.wkt = detail::toWkt(srs);
+    return o;
+}
+
+// TerrainWindows over a source kept as is: a working window is the same window of the source, mirrored where the
+// source runs south-up or east-to-west.
+class KeptWindows final : public detail::TerrainWindows {
+public:
+    KeptWindows(Opened&& o, const Options& opt, LoadReport& report) : o_(std::move(o)) {
+        shape_.crsWkt = o_.wkt;
+        shape_.crsName = report.gridCrsName;
+        keptGeometry(o_.gt, o_.band->width(), o_.band->height(), shape_, flipX_, flipY_, report);
+        (void)opt;
+    }
+    const Raster& shape() const override { return shape_; }
+    void read(size_t col0, size_t row0, size_t w, size_t h, std::vector<float>& values, std::vector<float>& rounding) override {
+        if (col0 + w > shape_.width || row0 + h > shape_.height) throw Error("window outside the working raster");
+        const size_t c0 = flipX_ ? shape_.width - col0 - w : col0, r0 = flipY_ ? shape_.height - row0 - h : row0;
+        values.assign(w * h, kNaN);
+        rounding.clear();
+        o_.band->read(c0, r0, w, h, values.data(), rounding, 0, w * h, tally_);
+        if (flipX_ || flipY_) {
+            auto mirror = [&](std::vector<float>& v) {
+                if (v.empty()) return;
+                std::vector<float> m(v.size());
+                for (size_t r = 0; r < h; ++r)
+                    for (size_t c = 0; c < w; ++c) m[r * w + c] = v[(flipY_ ? h - 1 - r : r) * w + (flipX_ ? w - 1 - c : c)];
+                v.swap(m);
+            };
+            mirror(values);
+            mirror(rounding);
+        }
+        pixelsRead_ += w * h;
+    }
+    const detail::SourceTally& tally() const override { return tally_; }
+    uint64_t pixelsRead() const override { return pixelsRead_; }
+    void finish(const detail::SourceTally& all, LoadReport& report) const override { o_.band->finish(all, report); }
+
+private:
+    Opened o_;
+    Raster shape_;
+    bool flipX_ = false, flipY_ = false;
+    detail::SourceTally tally_;
+    uint64_t pixelsRead_ = 0;
+};
+
+}  // namespace
+
+Raster loadTerrain(const Options& opt, LoadReport& report) { return detail::loadTerrainTraced(opt, report, nullptr); }
+
+Raster detail::loadTerrainTraced(const Options& opt, LoadReport& report, SourceTrace* trace) {
+    Opened o = openTerrain(opt, report);
+    SourceBand src;
+    {
+        src.width = o.band->width();
+        src.height = o.band->height();
+        src.values.assign(src.width * src.height, kNaN);
+        const size_t strip = std::max<size_t>(1, (size_t{1} << 20) / (src.width * 8 + 1));  // ~1 MB buffers
+        SourceTally tally;
+        Progress progress("reading " + opt.input, src.height, opt.progress);
+        for (size_t r0 = 0; r0 < src.height; r0 += strip) {
+            const size_t rows = std::min(strip, src.height - r0);
+            o.band->read(0, r0, src.width, rows, src.values.data() + r0 * src.width, src.residual, r0 * src.width, src.values.size(), tally);
+            o.band->dropCache();
+            progress.advance(rows);
+        }
+        progress.finish();
+        o.band->finish(tally, report);
+    }
+    o.band.reset();
+    o.ds.reset();  // releases GDAL's cached blocks of the file before the working raster is made
+    switch (o.route) {
+    case Opened::Route::Warp: return warpToTarget(std::move(src), o.gt, o.srs, o.target, opt, report, trace);
+    case Opened::Route::Utm: return projectToUtm(std::move(src), o.gt, o.srs, opt, report, trace);
+    case Opened::Route::Affine: break;
+    }
+    return fromSourceAffine(std::move(src), o.gt, o.pixelM, o.wkt, opt, report, trace);
+}
+
+std::unique_ptr<detail::TerrainWindows> detail::openTerrainWindows(const Options& opt, LoadReport& report, std::string& why) {
+    Opened o = openTerrain(opt, report);
+    if (o.route == Opened::Route::Warp) why = "--t_srs warps the whole source";
+    else if (o.route == Opened::Route::Utm) why = "a geographic source is projected to UTM as a whole";
+    else if (!keptAsIs(o.gt, opt)) why = "the source is resampled (rotated, non-square pixels or --min-cell)";
+    if (!why.empty()) return nullptr;
+    return std::make_unique<KeptWindows>(std::move(o), opt, report);
 }
 
 }  // namespace hc::ingest

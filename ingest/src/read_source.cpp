@@ -1,4 +1,4 @@
-// readSource: one band of a raster file -> floats, every kind of nodata as NaN (loadTerrain's first step).
+// BandReader: one band of a raster file -> floats, every kind of nodata as NaN, window by window (loadTerrain's first step).
 // Also where the file's silent conventions are caught: +-inf pixels, undeclared nodata sentinels (-9999,
 // -32768, ...), RGB images read as elevations, elevation units, and what float32 loses of a Float64 source.
 #include <algorithm>
@@ -47,17 +47,17 @@ size_t sentinelIndex(double v) {
 
 }  // namespace
 
-SourceBand readSource(GDALDataset& ds, const Options& opt, LoadReport& report, double zCrs, const std::string& zCrsUnit) {
-    SourceBand out;
-    out.width = static_cast<size_t>(ds.GetRasterXSize());
-    out.height = static_cast<size_t>(ds.GetRasterYSize());
+BandReader::BandReader(GDALDataset& ds, const Options& opt, LoadReport& report, double zCrs, const std::string& zCrsUnit)
+    : ds_(ds), opt_(opt) {
+    width_ = static_cast<size_t>(ds.GetRasterXSize());
+    height_ = static_cast<size_t>(ds.GetRasterYSize());
     const int bandCount = ds.GetRasterCount();
     if (opt.terrainRgb && bandCount < 3)
         throw Error(opt.input + ": --terrain-rgb needs 3 bands (R, G, B), the raster has " + std::to_string(bandCount));
     if (!opt.terrainRgb && opt.band > bandCount)
         throw Error(opt.input + ": --band " + std::to_string(opt.band) + " is out of range: the raster has " +
                     std::to_string(bandCount) + " band" + (bandCount == 1 ? "" : "s"));
-    GDALRasterBand* band = ds.GetRasterBand(opt.terrainRgb ? 1 : opt.band);
+    band_ = ds.GetRasterBand(opt.terrainRgb ? 1 : opt.band);
     auto isByte = [&](int b) { return ds.GetRasterBand(b)->GetRasterDataType() == GDT_Byte; };
     if (!opt.terrainRgb && !opt.bandGiven && bandCount >= 3 && isByte(1) && isByte(2) && isByte(3))
         throw Error(opt.input + ": has " + std::to_string(bandCount) + " 8-bit bands, an RGB" + (bandCount > 3 ? "A" : "") +
@@ -69,15 +69,16 @@ SourceBand readSource(GDALDataset& ds, const Options& opt, LoadReport& report, d
                 throw Error(opt.input + ": --terrain-rgb needs 8-bit bands; band " + std::to_string(b) + " is " +
                             GDALGetDataTypeName(ds.GetRasterBand(b)->GetRasterDataType()));
 
-    report.sourceDescription = std::to_string(out.width) + " x " + std::to_string(out.height) + " px, " +
-                               GDALGetDataTypeName(band->GetRasterDataType()) + ", " + std::to_string(bandCount) +
+    report.sourceDescription = std::to_string(width_) + " x " + std::to_string(height_) + " px, " +
+                               GDALGetDataTypeName(band_->GetRasterDataType()) + ", " + std::to_string(bandCount) +
                                " band" + (bandCount == 1 ? "" : "s") + ", " + ds.GetDriver()->GetDescription();
     int hasNodata = 0;
-    double nodata = band->GetNoDataValue(&hasNodata);  // used only when the band declares one
-    int maskFlags = band->GetMaskFlags();
-    bool useMask = !(maskFlags & GMF_ALL_VALID) && !(maskFlags & GMF_NODATA) && (maskFlags & (GMF_PER_DATASET | GMF_ALPHA));
+    nodata_ = band_->GetNoDataValue(&hasNodata);  // used only when the band declares one
+    hasNodata_ = hasNodata != 0;
+    const int maskFlags = band_->GetMaskFlags();
+    useMask_ = !(maskFlags & GMF_ALL_VALID) && !(maskFlags & GMF_NODATA) && (maskFlags & (GMF_PER_DATASET | GMF_ALPHA));
     std::string unitName;
-    double zUnit = opt.terrainRgb ? 1.0 : verticalUnitScale(band, unitName);
+    double zUnit = opt.terrainRgb ? 1.0 : verticalUnitScale(band_, unitName);
     if (zUnit != 1.0) report.warnings.push_back("elevations are in '" + unitName + "': converted to metres (x" + fmt(zUnit, 10) + ")");
     if (!opt.terrainRgb && unitName.empty() && zCrs != 1.0) {
         zUnit = zCrs;
@@ -85,101 +86,105 @@ SourceBand readSource(GDALDataset& ds, const Options& opt, LoadReport& report, d
                                   ": elevations converted to metres (x" + fmt(zCrs, 10) + "; if they are metres after all, add --z-scale " +
                                   fmt(1.0 / zCrs, 10) + ")");
     }
-    const double zScale = zUnit * opt.zScale;
+    zScale_ = zUnit * opt.zScale;
+    const GDALDataType sampleType = band_->GetRasterDataType();
+    exactInFloat_ = sampleType == GDT_Byte || sampleType == GDT_UInt16 || sampleType == GDT_Int16 || sampleType == GDT_Float32;
+    report.sourcePrecisionDouble = !opt.terrainRgb && !exactInFloat_;
+}
 
-    out.values.assign(out.width * out.height, kNaN);
-    const GDALDataType sampleType = band->GetRasterDataType();
-    const bool exactInFloat = sampleType == GDT_Byte || sampleType == GDT_UInt16 || sampleType == GDT_Int16 || sampleType == GDT_Float32;
-    const size_t strip = std::max<size_t>(1, (size_t{1} << 20) / (out.width * 8 + 1));  // ~1 MB buffers
-    std::vector<double> buf;
-    std::vector<uint8_t> rgb, mask;
-    uint64_t infPixels = 0;
-    uint64_t sentinelCounts[kSentinelCount] = {};
-    double maxOther = -HUGE_VAL;  // highest valid elevation that is no sentinel [m]
-    report.sourcePrecisionDouble = !opt.terrainRgb && !exactInFloat;
-    report.sourceValidPixels = 0;
-    Progress progress("reading " + opt.input, out.height, opt.progress);
-    for (size_t r0 = 0; r0 < out.height; r0 += strip) {
-        const size_t rows = std::min(strip, out.height - r0);
-        const size_t n = rows * out.width;
-        auto rasterIO = [&](GDALRasterBand* b, void* dst, GDALDataType type) {
-            CPLErrorReset();
-            if (b->RasterIO(GF_Read, 0, static_cast<int>(r0), static_cast<int>(out.width), static_cast<int>(rows), dst,
-                            static_cast<int>(out.width), static_cast<int>(rows), type, 0, 0, nullptr) != CE_None)
-                throw Error(opt.input + ": cannot read rows " + std::to_string(r0) + ".." + std::to_string(r0 + rows - 1) +
-                            " (truncated or corrupt file?): " + detail::lastGdalError());
-        };
-        float* dst = out.values.data() + r0 * out.width;
-        if (opt.terrainRgb) {
-            rgb.resize(3 * n);
-            for (int b = 0; b < 3; ++b) rasterIO(ds.GetRasterBand(b + 1), rgb.data() + static_cast<size_t>(b) * n, GDT_Byte);
-            for (size_t i = 0; i < n; ++i) {
-                double h = -10000.0 + 0.1 * (rgb[i] * 65536.0 + rgb[n + i] * 256.0 + rgb[2 * n + i]);
-                dst[i] = static_cast<float>(h * zScale);
-            }
+void SourceTally::add(const SourceTally& o) {
+    validPixels += o.validPixels;
+    infPixels += o.infPixels;
+    for (size_t k = 0; k < kSentinelSlots; ++k) sentinels[k] += o.sentinels[k];
+    maxOther = std::max(maxOther, o.maxOther);
+}
+
+void BandReader::read(size_t c0, size_t r0, size_t w, size_t h, float* dst, std::vector<float>& residual, size_t residualAt,
+                      size_t residualSize, SourceTally& tally) {
+    static_assert(kSentinelCount <= SourceTally::kSentinelSlots);
+    const size_t n = w * h;
+    if (n == 0) return;
+    auto rasterIO = [&](GDALRasterBand* b, void* to, GDALDataType type) {
+        CPLErrorReset();
+        if (b->RasterIO(GF_Read, static_cast<int>(c0), static_cast<int>(r0), static_cast<int>(w), static_cast<int>(h), to,
+                        static_cast<int>(w), static_cast<int>(h), type, 0, 0, nullptr) != CE_None)
+            throw Error(opt_.input + ": cannot read rows " + std::to_string(r0) + ".." + std::to_string(r0 + h - 1) +
+                        (w == width_ ? "" : ", columns " + std::to_string(c0) + ".." + std::to_string(c0 + w - 1)) +
+                        " (truncated or corrupt file?): " + detail::lastGdalError());
+    };
+    if (opt_.terrainRgb) {
+        rgb_.resize(3 * n);
+        for (int b = 0; b < 3; ++b) rasterIO(ds_.GetRasterBand(b + 1), rgb_.data() + static_cast<size_t>(b) * n, GDT_Byte);
+        for (size_t i = 0; i < n; ++i) {
+            double v = -10000.0 + 0.1 * (rgb_[i] * 65536.0 + rgb_[n + i] * 256.0 + rgb_[2 * n + i]);
+            dst[i] = static_cast<float>(v * zScale_);
+        }
+    } else {
+        // Exact types are read straight into place (float32 holds all their values); the others
+        // through doubles, keeping what float32 loses in `residual`.
+        if (exactInFloat_) {
+            rasterIO(band_, dst, GDT_Float32);
         } else {
-            // Exact types are read straight into place (float32 holds all their values); the others
-            // through doubles, keeping what float32 loses in `residual`.
-            if (exactInFloat) {
-                rasterIO(band, dst, GDT_Float32);
-            } else {
-                buf.resize(n);
-                rasterIO(band, buf.data(), GDT_Float64);
+            buf_.resize(n);
+            rasterIO(band_, buf_.data(), GDT_Float64);
+        }
+        for (size_t i = 0; i < n; ++i) {
+            double v = exactInFloat_ ? static_cast<double>(dst[i]) : buf_[i];
+            bool isNodata = std::isnan(v) || (hasNodata_ && (v == nodata_ || static_cast<float>(v) == static_cast<float>(nodata_))) ||
+                            // --nodata: in float32 for float32 data (as the user reads it), exactly otherwise
+                            (opt_.nodata && (v == *opt_.nodata || (exactInFloat_ && static_cast<float>(v) == static_cast<float>(*opt_.nodata))));
+            if (!isNodata && std::isinf(v)) {
+                ++tally.infPixels;
+                isNodata = true;
             }
-            for (size_t i = 0; i < n; ++i) {
-                double v = exactInFloat ? static_cast<double>(dst[i]) : buf[i];
-                bool isNodata = std::isnan(v) || (hasNodata && (v == nodata || static_cast<float>(v) == static_cast<float>(nodata))) ||
-                                // --nodata: in float32 for float32 data (as the user reads it), exactly otherwise
-                                (opt.nodata && (v == *opt.nodata || (exactInFloat && static_cast<float>(v) == static_cast<float>(*opt.nodata))));
-                if (!isNodata && std::isinf(v)) {
-                    ++infPixels;
-                    isNodata = true;
-                }
-                if (isNodata) {
-                    dst[i] = kNaN;
-                    continue;
-                }
-                const double exact = v * zScale;
-                dst[i] = static_cast<float>(exact);
-                if (!std::isfinite(dst[i]))
-                    throw Error(opt.input + ": elevation " + fmt(v) + " x " + fmt(zScale) + " is beyond the float32 range");
-                if (size_t k = sentinelIndex(v); k < kSentinelCount) ++sentinelCounts[k];
-                else maxOther = std::max(maxOther, exact);
-                const float lost = static_cast<float>(exact - static_cast<double>(dst[i]));
-                if (lost != 0.0f) {
-                    if (out.residual.empty()) out.residual.assign(out.values.size(), 0.0f);
-                    out.residual[r0 * out.width + i] = lost;
-                }
+            if (isNodata) {
+                dst[i] = kNaN;
+                continue;
+            }
+            const double exact = v * zScale_;
+            dst[i] = static_cast<float>(exact);
+            if (!std::isfinite(dst[i]))
+                throw Error(opt_.input + ": elevation " + fmt(v) + " x " + fmt(zScale_) + " is beyond the float32 range");
+            if (size_t k = sentinelIndex(v); k < kSentinelCount) ++tally.sentinels[k];
+            else tally.maxOther = std::max(tally.maxOther, exact);
+            const float lost = static_cast<float>(exact - static_cast<double>(dst[i]));
+            if (lost != 0.0f) {
+                if (residual.empty()) residual.assign(residualSize, 0.0f);
+                residual[residualAt + i] = lost;
             }
         }
-        if (useMask) {
-            mask.resize(n);
-            rasterIO(band->GetMaskBand(), mask.data(), GDT_Byte);
-            for (size_t i = 0; i < n; ++i)
-                if (mask[i] == 0) dst[i] = kNaN;
-        }
-        for (size_t i = 0; i < n; ++i) report.sourceValidPixels += !std::isnan(dst[i]);
-        // Drop GDAL's cached blocks of the rows just read: otherwise its block cache holds a second
-        // copy of the whole file at the peak of the read.
-        for (int b = 1; b <= bandCount; ++b) ds.GetRasterBand(b)->FlushCache(false);
-        if (useMask) band->GetMaskBand()->FlushCache(false);
-        progress.advance(rows);
     }
-    progress.finish();
-    report.infPixels = infPixels;
-    if (infPixels > 0)
-        report.warnings.push_back(std::to_string(infPixels) + " pixels hold +-inf: taken as nodata (holes)");
+    if (useMask_) {
+        mask_.resize(n);
+        rasterIO(band_->GetMaskBand(), mask_.data(), GDT_Byte);
+        for (size_t i = 0; i < n; ++i)
+            if (mask_[i] == 0) dst[i] = kNaN;
+    }
+    for (size_t i = 0; i < n; ++i) tally.validPixels += !std::isnan(dst[i]);
+}
+
+void BandReader::dropCache() {
+    // Drop GDAL's cached blocks of the rows just read: otherwise its block cache holds a second
+    // copy of the whole file at the peak of the read.
+    for (int b = 1; b <= ds_.GetRasterCount(); ++b) ds_.GetRasterBand(b)->FlushCache(false);
+    if (useMask_) band_->GetMaskBand()->FlushCache(false);
+}
+
+void BandReader::finish(const SourceTally& tally, LoadReport& report) const {
+    report.sourceValidPixels = tally.validPixels;
+    report.infPixels = tally.infPixels;
+    if (tally.infPixels > 0)
+        report.warnings.push_back(std::to_string(tally.infPixels) + " pixels hold +-inf: taken as nodata (holes)");
     for (size_t k = 0; k < kSentinelCount; ++k) {
-        const uint64_t count = sentinelCounts[k];
-        const double share = report.sourceValidPixels ? double(count) / double(report.sourceValidPixels) : 0.0;
+        const uint64_t count = tally.sentinels[k];
+        const double share = tally.validPixels ? double(count) / double(tally.validPixels) : 0.0;
         if (count == 0 || (!kSentinels[k].impossible && share < 1e-3)) continue;
-        const double z = kSentinels[k].value * zScale;
-        std::string cliff = std::isfinite(maxOther) ? " (cliffs of up to " + fmt(std::abs(maxOther - z) / 1000.0, 3) + " km)" : "";
+        const double z = kSentinels[k].value * zScale_;
+        std::string cliff = std::isfinite(tally.maxOther) ? " (cliffs of up to " + fmt(std::abs(tally.maxOther - z) / 1000.0, 3) + " km)" : "";
         report.warnings.push_back(std::to_string(count) + " pixels (" + fmt(100.0 * share, 3) + " % of the valid ones) hold " +
                                   fmt(kSentinels[k].value, 9) + ", a classic nodata sentinel, but the file declares no such nodata value: " +
                                   "they are taken as elevations" + cliff + "; if they are nodata, add --nodata " + fmt(kSentinels[k].value, 9));
     }
-    return out;
 }
 
 }  // namespace hc::ingest::detail

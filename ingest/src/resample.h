@@ -1,7 +1,10 @@
 // Resampling a source raster onto a north-up, square-pixel target (private to ingest/).
 #pragma once
 
+#include <cmath>
+#include <cstdint>
 #include <functional>
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -9,6 +12,7 @@
 #include "heightcast/ingest/raster.h"
 
 class GDALDataset;
+class GDALRasterBand;
 
 namespace hc::ingest::detail {
 
@@ -36,10 +40,64 @@ struct SourceTrace {
 // pixel (c, r) covers [c, c+1) x [r, r+1). Returns false where the position has no source.
 using TargetToSource = std::function<bool(double x, double y, double& col, double& row)>;
 
-// Reads the band (or decodes Terrain-RGB) into floats with every kind of nodata as NaN; warns about
-// what the file leaves unsaid (read_source.cpp). zCrs: metres per elevation unit that the CRS declares
-// (a compound CRS's vertical part), used when the band declares no unit of its own.
-SourceBand readSource(GDALDataset& ds, const Options& opt, LoadReport& report, double zCrs, const std::string& zCrsUnit);
+// What reading a band found, added over its windows and, under mpirun, over the ranks (plain data: sent as bytes).
+struct SourceTally {
+    static constexpr size_t kSentinelSlots = 8;
+    uint64_t validPixels = 0, infPixels = 0;
+    uint64_t sentinels[kSentinelSlots] = {};  // pixels holding each undeclared nodata sentinel (read_source.cpp)
+    double maxOther = -HUGE_VAL;              // highest valid elevation that is no sentinel [m]
+    void add(const SourceTally& other);
+};
+
+// One band of an open raster, read window by window (read_source.cpp): into floats with every kind of nodata as NaN,
+// in metres (Terrain-RGB decoded). The constructor checks the bands and warns about the units; finish() warns about
+// what the pixels showed (+-inf, undeclared sentinels). zCrs: metres per elevation unit that the CRS declares (a
+// compound CRS's vertical part), used when the band declares no unit of its own. `ds` must outlive the reader.
+class BandReader {
+public:
+    BandReader(GDALDataset& ds, const Options& opt, LoadReport& report, double zCrs, const std::string& zCrsUnit);
+    size_t width() const { return width_; }
+    size_t height() const { return height_; }
+    // Source pixels [c0, c0 + w) x [r0, r0 + h) into values (w h, row-major). What float32 loses of a Float64 source
+    // goes to residual[residualAt + i], the vector sized residualSize (zeros) when the first such pixel comes.
+    void read(size_t c0, size_t r0, size_t w, size_t h, float* values, std::vector<float>& residual, size_t residualAt,
+              size_t residualSize, SourceTally& tally);
+    // Drops GDAL's cached blocks of what was read (a second copy of the file otherwise).
+    void dropCache();
+    // The counts and warnings of a tally (the whole band's, every window and rank added) into report.
+    void finish(const SourceTally& tally, LoadReport& report) const;
+
+private:
+    GDALDataset& ds_;
+    const Options& opt_;
+    GDALRasterBand* band_ = nullptr;
+    size_t width_ = 0, height_ = 0;
+    bool hasNodata_ = false, useMask_ = false, exactInFloat_ = false;
+    double nodata_ = 0, zScale_ = 1;
+    std::vector<double> buf_;
+    std::vector<uint8_t> rgb_, mask_;
+};
+
+// The terrain raster read window by window, for ranks that each read only their share of it (DESIGN.md section 13).
+class TerrainWindows {
+public:
+    virtual ~TerrainWindows() = default;
+    // The working raster's geometry and CRS (values empty).
+    virtual const Raster& shape() const = 0;
+    // Working pixels [col0, col0 + w) x [row0, row0 + h) (row 0 north) into values (w h, NaN = nodata, metres) and
+    // rounding (empty, or w h: Raster::roundingM).
+    virtual void read(size_t col0, size_t row0, size_t w, size_t h, std::vector<float>& values, std::vector<float>& rounding) = 0;
+    // What the reads so far found, and how many working pixels they covered.
+    virtual const SourceTally& tally() const = 0;
+    virtual uint64_t pixelsRead() const = 0;
+    // The counts and warnings of the whole raster's tally (every rank's added) into report.
+    virtual void finish(const SourceTally& all, LoadReport& report) const = 0;
+};
+
+// Opens opt.input and settles its georeferencing as loadTerrain does, reading no pixel. Where the working raster is
+// the source's pixels as they are (at most mirrored), returns their window reader; otherwise (a projection, a warp
+// or a resampling needs the whole source) nullptr, with the reason in `why`.
+std::unique_ptr<TerrainWindows> openTerrainWindows(const Options& opt, LoadReport& report, std::string& why);
 
 // loadTerrain (ingest.h), keeping the source in `trace` (when given) if the working raster is not the
 // source itself; trace->band stays empty otherwise.

@@ -43,9 +43,11 @@ set(HOLES_ARGS "holes.tif --tolerance 15 --max-cell 1024 --water-level 2500,2700
 if(HC_GDAL_CREATE)  # gdal-bin's gdal_rasterize makes the holes
   # hc-ingest: the same bytes from 1, 2 and 3 ranks (and the interior holes are there: fewer valid pixels than the
   # working raster has, and holes.tif's own count of nodata pixels is not 0).
-  hc_mpi_test(mpi.ingest_holes_steps 0 [[rank 3/3: [0-9]+ tiles of [0-9]+\^2 px built, [0-9]+ units, [0-9]+ cells written]]
+  # Water steps are read whole on every rank (the log says so).
+  hc_mpi_test(mpi.ingest_holes_steps 0 [[rank 3/3: the whole raster held, [0-9]+ tiles of [0-9]+\^2 px built, [0-9]+ units, [0-9]+ cells written]]
     --setup "${HOLES_INPUT} && $HC_INGEST --quiet ${HOLES_ARGS} -o one.hcg"
-    --match [[rank 1/2: ]] --match [[rank 2/2: ]] --no-match [[rank 4/3|error:|warning]]
+    --match [[rank 1/2: ]] --match [[rank 2/2: ]] --match [[rank 1/3: every rank reads the whole raster: water steps]]
+    --no-match [[rank 4/3|error:|warning]]
     --check [[for n in 1 2 3
 do cmp one.hcg g$n.hcg || exit 1
 done
@@ -72,6 +74,58 @@ cat read.txt && test "$(wc -l < read.txt)" = 2 && awk -v n="$cells" '$1 >= n / 2
     -- ${HC_BASH} -c [[for n in 1 2 3
 do cp one.hcg g$n.hcg && "$HC_MPIRUN" -np $n "$HC_INFLUENCE" --quiet g$n.hcg || exit 1
 done]])
+endif()
+
+# A mosaic of GeoTIFF tiles (a VRT, as surveys come) in a projected CRS, read window by window: each rank reads only
+# the windows of its own share of the raster (nothing holds it whole), and the file is the same bytes as one process
+# writes. The fixture: the bundled 20 m South Glacier DEM cut into a 2 x 2 mosaic with its south-east tile missing (a
+# hole the VRT fills with the tiles' nodata), and undeclared -32768 sentinels burnt into two tiles (the ranks' counts
+# are added: the warning names the same count as one process's). The summaries (valid pixels, deviations, warnings)
+# are the same text but for time and memory.
+set(MOSAIC_INPUT [[S="$HC_DATA_DIR/south_glacier_utm7.tif" &&
+gdal_translate -q -srcwin 0 0 124 150 "$S" t0_0.tif &&
+gdal_translate -q -srcwin 124 0 124 150 "$S" t124_0.tif &&
+gdal_translate -q -srcwin 0 150 124 150 "$S" t0_150.tif &&
+printf 'id,WKT\n1,"POLYGON((599400 6745500,599800 6745500,599800 6746000,599400 6746000,599400 6745500))"\n2,"POLYGON((600000 6742000,600400 6742000,600400 6742500,600000 6742500,600000 6742000))"\n' > boxes.csv &&
+gdal_rasterize -q -burn -32768 boxes.csv t0_0.tif 2>/dev/null &&
+gdal_rasterize -q -burn -32768 boxes.csv t0_150.tif 2>/dev/null &&
+gdalbuildvrt -q mosaic.vrt t0_0.tif t124_0.tif t0_150.tif]])
+if(HC_GDAL_CREATE)
+  hc_mpi_test(mpi.ingest_mosaic_windows 0 [[rank 3/3: [0-9]+ windows? read, [0-9]+ px \([0-9.]+ % of the raster\)]]
+    --setup "${MOSAIC_INPUT} && $HC_INGEST mosaic.vrt -o one.hcg > one.txt 2>&1"
+    --no-match [[error:|whole raster]]
+    --check [[for n in 2 3
+do cmp one.hcg g$n.hcg || exit 1
+done
+grep -E 'hold -32768, a classic nodata sentinel' one.txt
+grep -E '^  |warning' one.txt | grep -vE '^ +(time|memory) ' > a.txt
+grep -E '^  |warning' g3.txt | grep -vE '^ +(time|memory) ' > b.txt
+diff a.txt b.txt && grep -E 'valid' b.txt
+test "$(grep -cE 'rank [1-3]/3: [0-9]+ windows? read' g3.txt)" = 3
+grep -oE 'rank [1-3]/3: .*\(([0-9.]+) % of the raster' g3.txt | grep -oE '[0-9.]+ % of' | cut -d' ' -f1 > share.txt
+cat share.txt && awk '$1 >= 60 || $1 <= 0 { bad = 1 } END { exit bad }' share.txt]]
+    -- ${HC_BASH} -c [[for n in 2 3
+do if ! "$HC_MPIRUN" -np $n "$HC_INGEST" mosaic.vrt -o g$n.hcg > g$n.txt 2>&1
+then cat g$n.txt
+exit 1
+fi
+done
+cat g3.txt]])
+
+  # South-up rows and east-to-west columns (a geotransform with both signs turned): each rank mirrors its windows as
+  # one process mirrors the whole raster. Same bytes.
+  hc_mpi_test(mpi.ingest_windows_mirrored 0 [[rank 2/3: [0-9]+ windows? read]]
+    --setup [[gdal_translate -q -a_ullr 603960 6741000 599000 6747000 "$HC_DATA_DIR/south_glacier_utm7.tif" flip.tif && "$HC_INGEST" --quiet flip.tif -o one.hcg]]
+    --match [[south-up rows flipped north-up, east-to-west columns flipped]] --no-match [[error:|whole raster]]
+    --check [[cmp one.hcg g.hcg]]
+    -- ${HC_BASH} -c [["$HC_MPIRUN" -np 3 "$HC_INGEST" flip.tif -o g.hcg]])
+
+  # A tile of the mosaic that cannot be read (truncated): the rank whose windows hold it fails inside the read, every
+  # rank stops there, rank 1 reports it once naming the mosaic, and no file is left.
+  hc_mpi_test(mpi.ingest_mosaic_broken_tile nonzero [[hc-ingest: error: rank [1-3]/3: mosaic\.vrt: cannot read rows]]
+    --setup "${MOSAIC_INPUT} && head -c 4000 t124_0.tif > cut.tif && mv cut.tif t124_0.tif"
+    --absent g.hcg --check [[test "$(grep -c 'error: ' "$OUTPUT")" = 1]]
+    -- ${HC_MPIEXEC} -np 3 ${INGEST} --quiet mosaic.vrt -o g.hcg)
 endif()
 
 # A rotated quadtree mesh (mesh.cmake's fixture, turned 30 degrees): rank 1 reads the mesh whole (one cell per face:

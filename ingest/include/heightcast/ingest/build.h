@@ -71,11 +71,23 @@ struct WaterSteps {
 // layer, RMS over elevation) and sourceWidth/Height/validPixels/toleranceM.
 Grid buildGrid(const Raster& terrain, const Raster* waterDepth, const BuildOptions& options);
 
+// A working raster read window by window (hc-ingest under mpirun: each rank reads only the windows of its share, so
+// no rank holds the raster whole; DESIGN.md section 13).
+struct RasterWindows {
+    Raster shape;  // geometry and CRS; values empty
+    // Fills values (and rounding: Raster::roundingM, left empty when float32 holds the source) with the working pixels
+    // [col0, col0 + w) x [row0, row0 + h), row 0 the northern-most, row-major. Throws hc::Error.
+    std::function<void(size_t col0, size_t row0, size_t w, size_t h, std::vector<float>& values, std::vector<float>& rounding)> read;
+};
+
 // Builds the grid straight into a .hcg file (GridFileWriter): the same cells, bytes identical to
 // writeGrid(buildGrid(...)) with the same statistics for one step at time 0, but memory stays at the rasters plus a
 // few MB of batch buffers whatever the cell count (with water: plus 8 bytes a cell, and one step's raster at a time).
 // `extraStats` supplies source path, CRS name and the seconds spent before the build (the build's own time is added).
 BuildSummary buildGridFile(const Raster& terrain, const WaterSteps* steps, const BuildOptions& options,
                            const std::string& path, const IngestStats& extraStats);
+// The same for a terrain read window by window, without water: the same bytes as the raster read whole.
+BuildSummary buildGridFile(const RasterWindows& terrain, const BuildOptions& options, const std::string& path,
+                           const IngestStats& extraStats);
 
 }  // namespace hc::ingest
