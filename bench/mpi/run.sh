@@ -5,6 +5,7 @@
 # 1 2 3) with one thread a rank, so that N ranks use N cores (3 on a 2-core machine: oversubscribed). Every output is
 # compared byte for byte with the one-process run (a difference stops the script). Prints a Markdown table: wall
 # time of the whole command, the slowest rank's own building time, and the largest peak RSS of any rank.
+# HC_MPI_INGEST_ONLY=1 stops after hc-ingest.
 #
 # Needs a build with MPI (scripts/build.sh, HC_WITH_MPI found) and mpirun (openmpi-bin). Run as root, mpirun needs
 # OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1 (set here). Make the raster with bench/scale/make_raster.sh.
@@ -51,6 +52,7 @@ for n in "${rankCounts[@]}"; do
   cmp one.hcg "g$n.hcg"
   echo "| hc-ingest | mpirun -np $n, 1 thread a rank | $t | $(ingestRank "ingest$n.log") | $(peak "ingest$n.log") | yes |"
 done
+[[ ${HC_MPI_INGEST_ONLY:-0} = 1 ]] && exit 0
 t=$(timed influence_one.log "$bin/hc-influence" one.hcg "${lists[@]}")
 echo "| hc-influence ${lists[*]} | one process, all cores | $t | - | $(peak influence_one.log) | (reference) |"
 for n in "${rankCounts[@]}"; do

@@ -514,6 +514,11 @@ Stats Builder::run(CellSink& sink) {
         Batch batch, share;
         batch.values.resize(static_cast<size_t>(layers_));
         share.values.resize(static_cast<size_t>(layers_));
+        if (!root) {  // held until sent: sized once (growing by doubling would hold up to twice the share)
+            const size_t cells = (myU1 < units.size() ? units[myU1].offset : total) - (myU0 < units.size() ? units[myU0].offset : total);
+            share.codes.reserve(cells);
+            for (auto& v : share.values) v.reserve(cells);
+        }
         ranks::together([&] {
             size_t u0 = myU0;
             while (u0 < myU1) {
