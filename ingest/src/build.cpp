@@ -491,7 +491,7 @@ Stats Builder::run(CellSink& sink) {
 
         // This rank's units: those inside its share nodes (a unit, no larger than a share node, lies in one; the
         // units' nodes ascend in Morton order as the units do).
-        const int shareLevel = shareLevel_;  // not the member: clang 14's lambdas below
+        const int shareLevel = shareLevel_;  // captured by value below
         auto firstUnit = [&](int r) {
             return size_t(std::lower_bound(units.begin(), units.end(), cuts[size_t(r)], [shareLevel](const Unit& u, uint64_t c) {
                               return mortonEncode(uint32_t((u.x << u.level) >> shareLevel), uint32_t((u.y << u.level) >> shareLevel)) < c;

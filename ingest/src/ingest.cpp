@@ -202,7 +202,9 @@ std::optional<BuildSummary> ingestByWindows(const Options& opt, const std::strin
     extra.sourcePath = opt.input;
     extra.sourceCrsName = report.sourceCrsName;
     extra.seconds = clock.seconds();
-    BuildSummary b = buildGridFile(w, build, path, extra);
+    // Together: rank 1 writes on after the others returned; a failure there must not leave them waiting below.
+    BuildSummary b;
+    ranks::together([&] { b = buildGridFile(w, build, path, extra); });
     // The whole raster's counts (valid pixels, +-inf, sentinels): every rank's windows added.
     detail::SourceTally all;
     for (const auto& t : ranks::allGatherVectors(std::vector<detail::SourceTally>{windows->tally()})) {
