@@ -440,7 +440,7 @@ Raster warpToTarget(SourceBand&& src, const GeoTransform& gtIn, const OGRSpatial
         // Columns with centres at 180 or beyond go east; those at west + 360 or beyond repeat column 0.
         const auto firstEast = static_cast<size_t>(std::clamp(std::ceil((180.0 - gt.g[0]) / dx - 0.5), 0.0, width));
         const auto end = static_cast<size_t>(std::clamp(std::ceil(360.0 / dx - 1e-6), 0.0, width));
-        pieces = {{0, firstEast, gt}};
+        pieces.assign(1, Piece{0, firstEast, gt});  // not = {{...}}: GCC 12 with ASan detect_stack_use_after_return crashed copying that initializer list
         if (firstEast < end) {
             GeoTransform east = gt;
             east.g[0] = gt.g[0] + static_cast<double>(firstEast) * dx - 360.0;
