@@ -498,6 +498,8 @@ Stats Builder::run(CellSink& sink) {
                           }) - units.begin());
         };
         const size_t myU0 = firstUnit(rank), myU1 = rank + 1 == rankCount ? units.size() : firstUnit(rank + 1);
+        auto offsetOf = [&](size_t u) { return u < units.size() ? units[u].offset : total; };
+        const size_t myCells = offsetOf(myU1) - offsetOf(myU0);
 
         ranks::together([&] {
             if (total == 0) throw Error("the raster holds no valid pixel (all nodata): nothing to build");
@@ -515,9 +517,8 @@ Stats Builder::run(CellSink& sink) {
         batch.values.resize(static_cast<size_t>(layers_));
         share.values.resize(static_cast<size_t>(layers_));
         if (!root) {  // held until sent: sized once (growing by doubling would hold up to twice the share)
-            const size_t cells = (myU1 < units.size() ? units[myU1].offset : total) - (myU0 < units.size() ? units[myU0].offset : total);
-            share.codes.reserve(cells);
-            for (auto& v : share.values) v.reserve(cells);
+            share.codes.reserve(myCells);
+            for (auto& v : share.values) v.reserve(myCells);
         }
         ranks::together([&] {
             size_t u0 = myU0;
@@ -525,7 +526,7 @@ Stats Builder::run(CellSink& sink) {
                 size_t u1 = u0;
                 const size_t first = units[u0].offset;
                 while (u1 < myU1 && (u1 == u0 || units[u1].offset - first < (size_t{1} << 16))) ++u1;
-                const size_t last = u1 < units.size() ? units[u1].offset : total;
+                const size_t last = offsetOf(u1);
                 batch.codes.resize(last - first);
                 for (auto& v : batch.values) v.resize(last - first);
                 parallelFor(u1 - u0, 1, threads, [&](size_t b, size_t e, unsigned worker) {
@@ -568,7 +569,6 @@ Stats Builder::run(CellSink& sink) {
             sum.wetCells += a.wetCells;
             for (size_t l = 0; l < a.perLevel.size(); ++l) sum.perLevel[l] += a.perLevel[l];
         }
-        const uint64_t myCells = (myU1 < units.size() ? units[myU1].offset : total) - (myU0 < units.size() ? units[myU0].offset : total);
         const std::string reads = windows_ ? fmt::format("{} window{} read, {} px ({:.1f} % of the raster), ", blocks_.size(), blocks_.size() == 1 ? "" : "s", pixelsRead,
                                                          100.0 * double(pixelsRead) / double(t_.width * t_.height))
                                            : std::string("the whole raster held, ");

@@ -73,12 +73,17 @@ void bindWater(Prepared& p, const Options& opt, LoadReport& report) {
     };
 }
 
-void setBuild(Prepared& p, const Options& opt, LoadReport& report) {
-    p.build.toleranceM = opt.toleranceM;
-    p.build.maxLevel = chooseMaxLevel(opt, p.terrain.pixelSizeM, report);
-    p.build.threads = opt.threads;
-    p.build.progress = opt.progress;
+// The build's options for a working raster of pixelSizeM.
+BuildOptions buildOptions(const Options& opt, double pixelSizeM, LoadReport& report) {
+    BuildOptions b;
+    b.toleranceM = opt.toleranceM;
+    b.maxLevel = chooseMaxLevel(opt, pixelSizeM, report);
+    b.threads = opt.threads;
+    b.progress = opt.progress;
+    return b;
 }
+
+void setBuild(Prepared& p, const Options& opt, LoadReport& report) { p.build = buildOptions(opt, p.terrain.pixelSizeM, report); }
 
 // Every valid source pixel against the cell covering its centre (LoadReport::sourceCheck): the
 // figure a user means by "the grid differs from my survey by at most ...", and the count of source
@@ -193,11 +198,7 @@ std::optional<BuildSummary> ingestByWindows(const Options& opt, const std::strin
     w.read = [&](size_t c0, size_t r0, size_t width, size_t height, std::vector<float>& values, std::vector<float>& rounding) {
         windows->read(c0, r0, width, height, values, rounding);
     };
-    BuildOptions build;
-    build.toleranceM = opt.toleranceM;
-    build.maxLevel = chooseMaxLevel(opt, w.shape.pixelSizeM, report);
-    build.threads = opt.threads;
-    build.progress = opt.progress;
+    const BuildOptions build = buildOptions(opt, w.shape.pixelSizeM, report);
     IngestStats extra;
     extra.sourcePath = opt.input;
     extra.sourceCrsName = report.sourceCrsName;

@@ -729,11 +729,10 @@ Opened openTerrain(const Options& opt, LoadReport& report) {
 // source runs south-up or east-to-west.
 class KeptWindows final : public detail::TerrainWindows {
 public:
-    KeptWindows(Opened&& o, const Options& opt, LoadReport& report) : o_(std::move(o)) {
+    KeptWindows(Opened&& o, LoadReport& report) : o_(std::move(o)) {
         shape_.crsWkt = o_.wkt;
         shape_.crsName = report.gridCrsName;
         keptGeometry(o_.gt, o_.band->width(), o_.band->height(), shape_, flipX_, flipY_, report);
-        (void)opt;
     }
     const Raster& shape() const override { return shape_; }
     void read(size_t col0, size_t row0, size_t w, size_t h, std::vector<float>& values, std::vector<float>& rounding) override {
@@ -753,10 +752,8 @@ public:
             mirror(values);
             mirror(rounding);
         }
-        pixelsRead_ += w * h;
     }
     const detail::SourceTally& tally() const override { return tally_; }
-    uint64_t pixelsRead() const override { return pixelsRead_; }
     void finish(const detail::SourceTally& all, LoadReport& report) const override { o_.band->finish(all, report); }
 
 private:
@@ -764,7 +761,6 @@ private:
     Raster shape_;
     bool flipX_ = false, flipY_ = false;
     detail::SourceTally tally_;
-    uint64_t pixelsRead_ = 0;
 };
 
 }  // namespace
@@ -806,7 +802,7 @@ std::unique_ptr<detail::TerrainWindows> detail::openTerrainWindows(const Options
     else if (o.route == Opened::Route::Utm) why = "a geographic source is projected to UTM as a whole";
     else if (!keptAsIs(o.gt, opt)) why = "the source is resampled (rotated, non-square pixels or --min-cell)";
     if (!why.empty()) return nullptr;
-    return std::make_unique<KeptWindows>(std::move(o), opt, report);
+    return std::make_unique<KeptWindows>(std::move(o), report);
 }
 
 }  // namespace hc::ingest

@@ -7,7 +7,6 @@
 
 #include "gdal_util.h"
 #include "heightcast/core/error.h"
-#include "heightcast/core/progress.h"
 #include "resample.h"
 
 namespace hc::ingest::detail {

@@ -1,4 +1,5 @@
-// Resampling a source raster onto a north-up, square-pixel target (private to ingest/).
+// Reading a terrain band (whole or window by window) and resampling it onto a north-up, square-pixel target (private to
+// ingest/).
 #pragma once
 
 #include <cmath>
@@ -87,9 +88,8 @@ public:
     // Working pixels [col0, col0 + w) x [row0, row0 + h) (row 0 north) into values (w h, NaN = nodata, metres) and
     // rounding (empty, or w h: Raster::roundingM).
     virtual void read(size_t col0, size_t row0, size_t w, size_t h, std::vector<float>& values, std::vector<float>& rounding) = 0;
-    // What the reads so far found, and how many working pixels they covered.
+    // What the reads so far found.
     virtual const SourceTally& tally() const = 0;
-    virtual uint64_t pixelsRead() const = 0;
     // The counts and warnings of the whole raster's tally (every rank's added) into report.
     virtual void finish(const SourceTally& all, LoadReport& report) const = 0;
 };
