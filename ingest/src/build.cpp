@@ -502,7 +502,9 @@ Stats Builder::run(CellSink& sink) {
         const size_t myCells = offsetOf(myU1) - offsetOf(myU0);
 
         ranks::together([&] {
-            if (total == 0) throw Error("the raster holds no valid pixel (all nodata): nothing to build");
+            if (total == 0)
+                throw Error((windows_ && !windows_->source.empty() ? windows_->source + ": " : std::string()) +
+                            "the raster holds no valid pixel (all nodata): nothing to build");
             if (root) sink.begin(total);
         });
 

@@ -195,6 +195,7 @@ std::optional<BuildSummary> ingestByWindows(const Options& opt, const std::strin
     }
     RasterWindows w;
     w.shape = windows->shape();
+    w.source = opt.input;
     w.read = [&](size_t c0, size_t r0, size_t width, size_t height, std::vector<float>& values, std::vector<float>& rounding) {
         windows->read(c0, r0, width, height, values, rounding);
     };

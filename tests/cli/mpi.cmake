@@ -120,6 +120,12 @@ cat g3.txt]])
     --check [[cmp one.hcg g.hcg]]
     -- ${HC_BASH} -c [["$HC_MPIRUN" -np 3 "$HC_INGEST" flip.tif -o g.hcg]])
 
+  # A raster of nothing but nodata, read by windows: the error names the file, once, and no file is left.
+  hc_mpi_test(mpi.ingest_windows_all_nodata nonzero [[hc-ingest: error: rank 1/3: allnd\.tif: the raster holds no valid pixel \(all nodata\)]]
+    --setup [[gdal_create -q -of GTiff -outsize 100 100 -bands 1 -ot Float32 -burn 5 -a_nodata 5 -a_srs EPSG:32633 -a_ullr 500000 100 500100 0 allnd.tif]]
+    --absent g.hcg --check [[test "$(grep -c 'error: ' "$OUTPUT")" = 1]]
+    -- ${HC_MPIEXEC} -np 3 ${INGEST} --quiet allnd.tif -o g.hcg)
+
   # A tile of the mosaic that cannot be read (truncated): the rank whose windows hold it fails inside the read, every
   # rank stops there, rank 1 reports it once naming the mosaic, and no file is left.
   hc_mpi_test(mpi.ingest_mosaic_broken_tile nonzero [[hc-ingest: error: rank [1-3]/3: mosaic\.vrt: cannot read rows]]

@@ -74,7 +74,8 @@ Grid buildGrid(const Raster& terrain, const Raster* waterDepth, const BuildOptio
 // A working raster read window by window (hc-ingest under mpirun: each rank reads only the windows of its share, so
 // no rank holds the raster whole; DESIGN.md section 13).
 struct RasterWindows {
-    Raster shape;  // geometry and CRS; values empty
+    Raster shape;        // geometry and CRS; values empty
+    std::string source;  // the file, for messages
     // Fills values (and rounding: Raster::roundingM, left empty when float32 holds the source) with the working pixels
     // [col0, col0 + w) x [row0, row0 + h), row 0 the northern-most, row-major. Throws hc::Error.
     std::function<void(size_t col0, size_t row0, size_t w, size_t h, std::vector<float>& values, std::vector<float>& rounding)> read;
