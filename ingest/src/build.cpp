@@ -25,6 +25,7 @@
 #include <array>
 #include <cassert>
 #include <cmath>
+#include <exception>
 #include <limits>
 #include <memory>
 #include <optional>
@@ -590,9 +591,17 @@ Stats Builder::run(CellSink& sink) {
     }
 }
 
+// A share goes in pieces of kSharePiece cells (codes, then each layer), then an empty piece, then the statistics: rank 0
+// holds one piece of another rank's cells at a time, not the whole share.
+constexpr size_t kSharePiece = size_t{1} << 20;
+
 void Builder::sendShare(const Batch& share, const Stats& sum, const std::vector<double>& unitSumSq) const {
-    ranks::sendToRoot(share.codes);
-    for (const auto& v : share.values) ranks::sendToRoot(v);
+    for (size_t at = 0; at < share.codes.size(); at += kSharePiece) {
+        const size_t n = std::min(share.codes.size() - at, kSharePiece);
+        ranks::sendToRoot(std::as_bytes(std::span<const uint64_t>(share.codes.data() + at, n)));
+        for (const auto& v : share.values) ranks::sendToRoot(std::as_bytes(std::span<const float>(v.data() + at, n)));
+    }
+    ranks::sendToRoot(std::vector<uint64_t>{});  // the end of the cells
     std::vector<double> table{sum.maxDev, double(sum.pixels), double(sum.wetCells)};  // then cells per level, then the unit sums
     for (uint64_t c : sum.perLevel) table.push_back(double(c));
     table.insert(table.end(), unitSumSq.begin(), unitSumSq.end());
@@ -600,10 +609,33 @@ void Builder::sendShare(const Batch& share, const Stats& sum, const std::vector<
 }
 
 void Builder::receiveShares(CellSink& sink, Stats& sum, std::vector<double>& unitSumSq) const {
+    // A sink that fails (a full disk) must not leave a sender blocked on its next piece: every piece is still received,
+    // and the first failure thrown at the end.
+    std::exception_ptr failed;
     for (int r = 1; r < ranks::count(); ++r) {
-        Batch in;
-        in.codes = ranks::receiveVectorFrom<uint64_t>(r);
-        for (int l = 0; l < layers_; ++l) in.values.push_back(ranks::receiveVectorFrom<float>(r));
+        for (;;) {
+            Batch in;
+            in.codes = ranks::receiveVectorFrom<uint64_t>(r);
+            if (in.codes.empty()) break;
+            for (int l = 0; l < layers_; ++l) {
+                in.values.push_back(ranks::receiveVectorFrom<float>(r));
+                if (in.values.back().size() != in.codes.size())
+                    throw Error("rank " + std::to_string(r + 1) + " sent " + std::to_string(in.values.back().size()) + " values for " +
+                                std::to_string(in.codes.size()) + " cells");
+            }
+            if (failed) continue;
+            try {
+                if (opt_.cellElevations) paint(in, 0, in.codes.size());
+                for (size_t at = 0; at < in.codes.size(); at += size_t{1} << 16) {
+                    const size_t n = std::min(in.codes.size() - at, size_t{1} << 16);
+                    std::vector<std::span<const float>> values;
+                    for (const auto& v : in.values) values.emplace_back(v.data() + at, n);
+                    sink.append(std::span<const uint64_t>(in.codes.data() + at, n), values);
+                }
+            } catch (...) {
+                failed = std::current_exception();
+            }
+        }
         const std::vector<double> table = ranks::receiveVectorFrom<double>(r);
         const size_t levels = sum.perLevel.size();
         if (table.size() < 3 + levels) throw Error("rank " + std::to_string(r + 1) + ": a short statistics table");
@@ -612,14 +644,8 @@ void Builder::receiveShares(CellSink& sink, Stats& sum, std::vector<double>& uni
         sum.wetCells += uint64_t(table[2]);
         for (size_t l = 0; l < levels; ++l) sum.perLevel[l] += uint64_t(table[3 + l]);
         unitSumSq.insert(unitSumSq.end(), table.begin() + ptrdiff_t(3 + levels), table.end());
-        if (opt_.cellElevations) paint(in, 0, in.codes.size());
-        for (size_t at = 0; at < in.codes.size(); at += size_t{1} << 16) {
-            const size_t n = std::min(in.codes.size() - at, size_t{1} << 16);
-            std::vector<std::span<const float>> values;
-            for (const auto& v : in.values) values.emplace_back(v.data() + at, n);
-            sink.append(std::span<const uint64_t>(in.codes.data() + at, n), values);
-        }
     }
+    if (failed) std::rethrow_exception(failed);
 }
 
 void Builder::paint(const Batch& b, size_t begin, size_t end) const {
