@@ -85,6 +85,7 @@ struct CascadeOut {
     uint64_t visibleTexels, gaussians;
     int pyramidLevel;        // -1: no pyramid level fits the cascade (or none was built)
     uint64_t pyramidTexels;  // texels copied from the pyramid
+    uint64_t pyramidInterpolated;  // texels interpolated from a coarser pyramid level
 };
 
 // What a scenario's child reports. Plain bytes through a pipe, so trivially copyable.
@@ -301,7 +302,8 @@ RunResult runScenario(const Scenario& sc, const Settings& set) {
                     r.gaussians += cs.gaussians;
                     if (c < 4)
                         r.cascades[c] = {cs.nearM,          cs.farM,          cs.texelM,      cs.approximationMs,
-                                         cs.visibleTexels, cs.gaussians,     cs.pyramidLevel, cs.pyramidTexels};
+                                         cs.visibleTexels, cs.gaussians,     cs.pyramidLevel, cs.pyramidTexels,
+                                         cs.pyramidInterpolated};
                 }
             }
             r.rays = tm.rays;
@@ -433,7 +435,8 @@ void writeJson(const std::vector<const Scenario*>& scs, const std::vector<RunRes
             const CascadeOut& cs = r.cascades[c];
             cascades.push_back({{"near_m", ms(cs.nearM)}, {"far_m", ms(cs.farM)}, {"texel_m", sig6(cs.texelM)},
                                 {"visible_texels", cs.visibleTexels}, {"gaussians", cs.gaussians}, {"approximation_ms", ms(cs.approximationMs)},
-                                {"pyramid_level", cs.pyramidLevel}, {"pyramid_texels", cs.pyramidTexels}});
+                                {"pyramid_level", cs.pyramidLevel}, {"pyramid_texels", cs.pyramidTexels},
+                                {"pyramid_interpolated", cs.pyramidInterpolated}});
         }
         o["cascades"] = cascades;
         o["report_gtx1080_approximation_ms"] = sc.gpuApproxMs;
@@ -536,6 +539,9 @@ int main(int argc, char** argv) {
                "      texel sizes on its ladder (powers of two of the finest cell), texels it holds copied (CPU)", set.pyramid);
         p.flag("--pyramid-coarse", "with --pyramid: texels up to 2x coarser than without it (N a side) instead of up to\n"
                "      2x finer (up to 2N a side)", set.options.pyramidCoarseTexels);
+        p.option("--pyramid-interpolate", "L", "with --pyramid: texels finer than every level stored around them interpolated\n"
+                 "      (bicubic) from a coarser stored level, at most L levels up; 0 sums them from the kernels (default 3)",
+                 set.options.pyramidInterpolateLevels);
         p.flag("--out-of-core", "CPU: write each grid to a temporary .hcg and render out of core from it, without lists\n"
                "      (render::Scene over a GridRegionReader; with --pyramid the texels it holds need no cell)", set.outOfCore);
         p.flag("--accuracy", "measure the last frame's terrain hits against the exact surface: max, p99 and RMS of\n"
@@ -670,6 +676,7 @@ int main(int argc, char** argv) {
                 std::printf("  %-14s %d  %8.0f..%-8.0f %8.3g %9llu %11llu %8.1f", chosen[k]->name, c, cs.nearM, cs.farM, cs.texelM,
                             (unsigned long long)cs.visibleTexels, (unsigned long long)cs.gaussians, cs.approximationMs);
                 if (cs.pyramidLevel >= 0) std::printf("   %llu copied from pyramid level %d", (unsigned long long)cs.pyramidTexels, cs.pyramidLevel);
+                if (cs.pyramidInterpolated) std::printf(", %llu interpolated", (unsigned long long)cs.pyramidInterpolated);
                 std::printf("\n");
             }
             if (set.pyramid)

@@ -27,6 +27,7 @@
 #include "heightcast/render/image_io.h"
 #include "heightcast/render/renderer.h"
 #include "test_data.h"
+#include "test_grids.h"
 // White box: the approximation's texel textures (render/src is the library's private part).
 #include "../render/src/textures.h"
 
@@ -67,6 +68,10 @@ World& hef() {  // alpine SRTM with a flood at 2600 m: the bundled demo DEM
 }
 World& lidar() {  // 1 m LiDAR, adaptive cells 1..16 m
     static World w = fromFile("lidar1m_minnesota_utm15.tif", 0.25);
+    return w;
+}
+World& lidarFlood() {  // the 1 m LiDAR tile flooded at 397 m (its range is 379.7 - 410.8 m: shores everywhere)
+    static World w = fromFile("lidar1m_minnesota_utm15.tif", 0.25, 397);
     return w;
 }
 
@@ -317,6 +322,93 @@ TEST(Render, PyramidTexelsAreCopiesOfTheExactSurface) {
     EXPECT_GT(wet, 20u) << "the flood at 2600 m is in view";
     std::printf("%llu texels copied from the pyramid, %llu summed, %llu wet, %llu on the wet share tie\n", (unsigned long long)copiedSeen,
                 (unsigned long long)summed, (unsigned long long)wet, (unsigned long long)ties);
+}
+
+// Texels finer than every pyramid level stored around them are interpolated (bicubic, Catmull-Rom) from the nearest
+// coarser level stored (RenderOptions::pyramidInterpolateLevels). Compared texel by texel with the exact evaluator and
+// with the kernel path (interpolation off, tested above), from an overview and a nearer camera at 64 and 256 texels
+// a side, on the 1 m LiDAR tile flooded at 397 m (shores everywhere; 1 m texels over 2 m cells) and on the grid of
+// cells 0.75-96 m with a hole (test_grids.h: texels up to 3 levels finer than the cells under them).
+//
+// The tolerance: an interpolated texel of a cascade whose texels came from up to `up` levels higher must err no more
+// than a bilinear patch at that level's spacing s = 2^up texels would (s^2 / 8 (|v_xx| + |v_yy|), the bound of the
+// hits test below, from the exact surface's curvature): what the cascade would give with texels that coarse, which
+// --pyramid-coarse accepts; the rendered error (hc-bench --accuracy, BENCHMARKS.md) stays that of the finer texels.
+// A wrong stencil (a sample off by one, a swapped weight) errs by the relief between samples, above that bound. The
+// water depth is level minus terrain, each interpolated: within the two bounds where both this texel and the exact
+// surface hold water; where only one does (the edge moved by the interpolation) it is counted and must be rare.
+// Every other texel is the kernel path's to the bit: holes' and floods' edges are left to the kernels.
+TEST(Render, InterpolatedPyramidTexelsStayWithinACoarserPatchError) {
+    static World ratio = [] {
+        World w;
+        w.grid = hc::test::ratio128Grid();
+        w.init();
+        return w;
+    }();
+    uint64_t interpolated = 0, counted = 0, wet = 0, edge = 0;
+    double worst = 0, worstDepth = 0;
+    int mostUp = 0;
+    for (World* w : {&lidarFlood(), &ratio}) {
+        const hc::influence::SurfacePyramid pyramid = hc::influence::buildSurfacePyramid(w->grid, w->lists.params());
+        const Scene scene(w->grid, w->lists, &pyramid);
+        const auto depthLayer = scene.hasWater() ? hc::influence::Layer::byName(w->grid, "water_depth") : hc::influence::Layer{};
+        const auto surface = scene.hasWater() ? hc::influence::Layer::byName(w->grid, "water_surface") : hc::influence::Layer{};
+        for (int cam = 0; cam < 2; ++cam) {
+            Camera c = overviewCamera(scene, 320, 200);
+            if (cam == 1) {  // 0.35 of the way from the middle of the scene: the near cascade finer than the cells
+                double mx, my;
+                w->grid.localToWorld(0.5 * (scene.xMin + scene.xMax), 0.5 * (scene.yMin + scene.yMax), mx, my);
+                const double mz = 0.5 * (scene.zMin + scene.zMax);
+                c.xWorld = mx + 0.35 * (c.xWorld - mx), c.yWorld = my + 0.35 * (c.yWorld - my), c.zWorld = mz + 0.35 * (c.zWorld - mz);
+            }
+            const detail::FrameSetup setup = detail::setUpFrame(scene, c);
+            for (int texels : {64, 256}) {
+                const CascadeFit fit = fitCascades(setup.view, 3, texels);
+                for (const Cascade& k : fit.cascades) {
+                    detail::CascadeTextures plain, fast;
+                    detail::approximate(scene, k, plain, 0.01, 0);
+                    const detail::ApproximationWork work = detail::approximate(scene, k, fast, 0.01, 0, nullptr, 3);
+                    const double s = std::ldexp(k.texelM, work.pyramidInterpolatedUp);
+                    uint64_t seen = 0;
+                    for (int j = 0; j < k.n; ++j)
+                        for (int i = k.rows[size_t(j)].first; i <= k.rows[size_t(j)].last; ++i) {
+                            const size_t at = size_t(j) * size_t(k.n) + size_t(i);
+                            if (plain.terrain.h[at] == fast.terrain.h[at] && (!scene.hasWater() || plain.depth[at] == fast.depth[at])) continue;
+                            ++seen;
+                            const double x = k.x0 + i * k.texelM, y = k.y0 + j * k.texelM;
+                            const auto z = w->eval->value(x, y, {});
+                            ASSERT_TRUE(z) << "interpolated where there is no surface, at " << x << "," << y;
+                            const double bound = bilinearBound(*w, {}, x, y, s);
+                            const double err = std::abs(double(fast.terrain.h[at]) - *z);
+                            worst = std::max(worst, err / bound);
+                            ASSERT_LE(err, bound) << "terrain at " << x << "," << y << " (texel " << k.texelM << " m, from up to " << s << " m)";
+                            if (!scene.hasWater()) continue;
+                            const double d = std::max(0.0, w->eval->value(x, y, depthLayer).value_or(0.0));
+                            if (d > 0 && fast.depth[at] > 0) {
+                                ++wet;
+                                const double depthErr = std::abs(double(fast.depth[at]) - d);
+                                worstDepth = std::max(worstDepth, depthErr);
+                                EXPECT_LE(depthErr, bound + bilinearBound(*w, surface, x, y, s)) << "water depth at " << x << "," << y;
+                            } else if (d > 0 || fast.depth[at] > 0) {
+                                ++edge;
+                            }
+                        }
+                    // A texel interpolated may still equal the kernel path's value in float (a flat lake).
+                    EXPECT_LE(seen, work.pyramidInterpolated) << "only interpolated texels may differ from the kernel path";
+                    interpolated += seen, counted += work.pyramidInterpolated;
+                    mostUp = std::max(mostUp, work.pyramidInterpolatedUp);
+                }
+            }
+        }
+    }
+    EXPECT_GT(interpolated, 50000u);
+    EXPECT_GE(mostUp, 2) << "texels interpolated from two levels up or more";
+    EXPECT_GT(wet, 10000u) << "the flood is in view";
+    EXPECT_LT(edge, wet / 100) << "texels wet in the exact surface or the interpolation only";
+    std::printf("%llu texels interpolated (%llu counted), up to %d levels up, %llu wet (%llu on an edge moved); worst terrain error "
+                "%.3f of its bound, worst depth error %.4f m\n",
+                (unsigned long long)interpolated, (unsigned long long)counted, mostUp, (unsigned long long)wet, (unsigned long long)edge, worst,
+                worstDepth);
 }
 
 TEST(Render, HitsLieOnTheExactSurfaceFrom200RandomCameras) {
@@ -1200,10 +1292,6 @@ TEST(Render, GoldenImage) {
 // drew water as smoothed terrain + smoothed depth, which rose up to 40 m above a bathtub flood's level near
 // shores. Now the water heightfield holds the wet cells' level: a bathtub flood at L renders flat at L.
 
-World& lidarFlood() {  // the 1 m LiDAR tile flooded at 397 m (its range is 379.7 - 410.8 m: shores everywhere)
-    static World w = fromFile("lidar1m_minnesota_utm15.tif", 0.25, 397);
-    return w;
-}
 
 // P.Z and water_depth of a frame, written with writeFrameExr and read back through OpenEXR (what a user's
 // compositing tool sees).

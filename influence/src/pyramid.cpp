@@ -54,15 +54,15 @@ std::optional<float> SurfacePyramid::sample(int t, uint64_t i, uint64_t j, Pyram
     return L.samples[(size_t(tile) * size_t(channels) + size_t(k)) * side * side + (j % side) * side + (i % side)];
 }
 
-SurfacePyramid::Cursor::Cursor(const SurfacePyramid& p, int t) : p_(p), t_(t), side_(size_t(p.levels[size_t(t)].tileSide)) {}
+SurfacePyramid::Cursor::Cursor(const SurfacePyramid& p, int t)
+    : p_(p), t_(t), side_(size_t(p.levels[size_t(t)].tileSide)), shift_(std::countr_zero(side_)) {
+    if (!std::has_single_bit(side_)) throw Error("surface pyramid: a tile side of " + std::to_string(side_) + " samples is not a power of two");
+}
 
-const float* SurfacePyramid::Cursor::find(uint64_t i, uint64_t j) {
-    if (i / side_ != tileI_ || j / side_ != tileJ_) {
-        tileI_ = i / side_, tileJ_ = j / side_;
-        const long tile = p_.tileAt(t_, i, j);
-        tile_ = tile < 0 ? nullptr : &p_.levels[size_t(t_)].samples[size_t(tile) * size_t(p_.channels) * plane()];
-    }
-    return tile_ ? tile_ + (j % side_) * side_ + (i % side_) : nullptr;
+void SurfacePyramid::Cursor::seek(uint64_t i, uint64_t j) {
+    tileI_ = i >> shift_, tileJ_ = j >> shift_;
+    const long tile = p_.tileAt(t_, i, j);
+    tile_ = tile < 0 ? nullptr : &p_.levels[size_t(t_)].samples[size_t(tile) * size_t(p_.channels) * plane()];
 }
 
 uint64_t SurfacePyramid::sampleCount() const {

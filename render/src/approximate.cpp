@@ -5,6 +5,7 @@
 // every quantity is relative to k's centre and value, so float keeps its precision however far the
 // cascade lies from the grid origin (the exact evaluator does the same in double).
 #include <algorithm>
+#include <array>
 #include <bit>
 #include <cmath>
 #include <cstring>
@@ -53,10 +54,22 @@ struct Todo {
 // evaluate. reuse->tex may be tex itself (renderFrame hands the last frame's storage on, so a moving camera
 // allocates nothing): this frame's row j reads the last frame's row j + dj, so rows are written in the order
 // that reads each of the last frame's rows before overwriting it.
-std::vector<Todo> copyReusedTexels(const Cascade& c, const TexelReuse* reuse, CascadeTextures& tex, uint64_t& copied) {
+std::vector<Todo> copyReusedTexels(const Cascade& c, const TexelReuse* reuse, CascadeTextures& tex, uint64_t& copied, unsigned threads) {
     const int n = c.n;
     const float noSurface = -std::numeric_limits<float>::infinity();
     std::vector<Todo> todo(static_cast<size_t>(n));
+    if (!reuse) {  // a fresh cascade: every texel "no surface", the rows on all workers (up to 3 x 64 MB to write)
+        parallelFor(size_t(n), 64, threads, [&](size_t b, size_t e, unsigned) {
+            for (size_t j = b; j < e; ++j) {
+                const Cascade::RowSpan& r = c.rows[j];
+                todo[j].a0 = r.first, todo[j].a1 = r.last;
+                const size_t row = j * size_t(n);
+                std::fill_n(&tex.terrain.h[row], n, noSurface);
+                if (tex.hasWater) std::fill_n(&tex.water.h[row], n, noSurface), std::fill_n(&tex.depth[row], n, 0.0f);
+            }
+        });
+        return todo;
+    }
     const bool upwards = reuse && reuse->dj < 0;
     for (int step = 0; step < n; ++step) {
         const int j = upwards ? n - 1 - step : step;
@@ -93,62 +106,230 @@ std::vector<Todo> copyReusedTexels(const Cascade& c, const TexelReuse* reuse, Ca
     return todo;
 }
 
+// Catmull-Rom weights of the four samples around a point at fraction f in [0, 1) of their middle interval: the
+// cubic through the samples with slopes from their neighbours. f = 0 gives (0, 1, 0, 0): the sample itself.
+inline void catmullRom(double f, double w[4]) {
+    const double f2 = f * f, f3 = f2 * f;
+    w[0] = 0.5 * (-f3 + 2 * f2 - f);
+    w[1] = 0.5 * (3 * f3 - 5 * f2 + 2);
+    w[2] = 0.5 * (-3 * f3 + 4 * f2 + f);
+    w[3] = 0.5 * (f3 - f2);
+}
+
+// Fills texels finer than every pyramid level stored around them (pyramid.h keeps level t only where a cell is as
+// fine as its spacing) by bicubic (Catmull-Rom) interpolation of the nearest coarser level whose samples around the
+// texel are all stored, at most `maxUp` levels above the cascade's. Such texels lie over cells at least twice their
+// size, where the surface is smooth at the texel's scale (a Gaussian of width one cell, kernel.h). Undefined samples
+// (holes) and a water level defined at some samples only (a flood's edge) are left to the kernels: the answer is
+// nullopt, as it is where no such level is stored.
+//
+// Separably, row by row: a texel row lies at one height between two rows of samples, so each column of 4 samples is
+// blended vertically once per texel row (and kept in a small cache), and a texel blends 4 columns. A texel of level
+// t + up's stencil shares its columns with the 2^up texels beside it. One per worker; rows are asked in any order.
+class PyramidInterpolator {
+public:
+    PyramidInterpolator(const influence::SurfacePyramid& p, const influence::SurfacePyramid* water, int t, int maxUp)
+        : water_(water), channels3_(p.channels == 3) {
+        for (int up = 1; up <= maxUp && t + up <= p.topLevel(); ++up) {
+            Level& L = levels_.emplace_back();
+            for (int k = 0; k < 4; ++k) {
+                L.samples.emplace_back(p, t + up);
+                if (water) L.water.emplace_back(*water, t + up);
+                L.finer.emplace_back(p, t + up - 1);
+            }
+            // A cell of level t + up - 1 or finer weighs up to R sigma of its size (kernel.h) around it: in samples of
+            // this level, at most half of that.
+            L.reach = int64_t(std::ceil(0.5 * p.params.truncation * p.params.sigma));
+            L.side = L.samples[0].side();
+            L.shift = std::countr_zero(L.side);
+            L.plane = L.samples[0].plane();
+            for (uint64_t f = 0; f < (uint64_t{1} << up); ++f) {  // the weights of each fraction a texel can have
+                std::array<double, 4> w;
+                catmullRom(std::ldexp(double(f), -up), w.data());
+                L.weights.push_back(w);
+            }
+        }
+    }
+
+    struct Value {
+        float z, level, share;  // level NaN: dry
+        int up;                 // levels above the cascade's
+    };
+
+    // The interpolated channels at lattice point (gi, gj) of the cascade's level.
+    std::optional<Value> at(uint64_t gi, uint64_t gj) {
+        for (int up = 1; up <= int(levels_.size()); ++up) {
+            Level& L = levels_[size_t(up - 1)];
+            const uint64_t mask = (uint64_t{1} << up) - 1;
+            const uint64_t I = gi >> up, J = gj >> up;
+            if (I == 0 || J == 0) return std::nullopt;  // the stencil would leave the domain
+            if (J != L.rowJ || (gj & mask) != L.rowF) {  // a new texel row at this level: new vertical weights
+                L.rowJ = J, L.rowF = gj & mask, ++L.stamp;
+            }
+            const std::array<double, 4>& wy = L.weights[size_t(L.rowF)];
+            const std::array<double, 4>& wx = L.weights[size_t(gi & mask)];
+            double z = 0, level = 0, share = 0;
+            int wet = 0, dry = 0;
+            bool missing = false;
+            for (int c = 0; c < 4; ++c) {
+                if (wx[c] == 0) continue;
+                const Column& col = column(L, I - 1 + uint64_t(c), wy);
+                if (col.kind == kUndefined) return std::nullopt;  // a hole's edge, or a flood's: the kernels decide
+                if (col.kind == kMissing) {
+                    missing = true;
+                    break;
+                }
+                wet += col.kind == kWet, dry += col.kind == kDry;
+                z += wx[c] * col.z, level += wx[c] * col.level, share += wx[c] * col.share;
+            }
+            if (missing) continue;
+            if (wet && dry) return std::nullopt;  // a flood's edge
+            const float nan = std::numeric_limits<float>::quiet_NaN();
+            return Value{float(z), wet ? float(level) : nan, wet ? float(share) : 0.0f, up};
+        }
+        return std::nullopt;
+    }
+
+private:
+    // A column of samples blended vertically: some not stored at that level (missing), some undefined (a hole) or a
+    // flood's edge (some wet, some dry: undefined too, for the texel's purpose), all dry, or all wet.
+    enum Kind : uint8_t { kMissing, kUndefined, kDry, kWet };
+    struct Column {
+        uint64_t i = ~uint64_t{0}, stamp = 0;
+        Kind kind = kMissing;
+        double z = 0, level = 0, share = 0;
+    };
+    static constexpr size_t kColumns = 8;  // cached columns per level: a texel uses 4 neighbouring ones
+    struct Level {
+        std::vector<influence::SurfacePyramid::Cursor> samples, water;  // by tile parity: a stencil spans up to 2 x 2 tiles
+        std::vector<influence::SurfacePyramid::Cursor> finer;           // the level below, one per tile checked
+        int64_t reach = 2;  // samples of this level a finer cell's kernel reaches beyond it
+        size_t side = 0, plane = 0;
+        int shift = 0;
+        std::vector<std::array<double, 4>> weights;  // [fraction]
+        uint64_t rowJ = ~uint64_t{0}, rowF = 0, stamp = 1;
+        std::array<Column, kColumns> cache;
+    };
+
+    // Column i of the current texel row (samples rowJ - 1 .. rowJ + 2, those of non-zero weight), cached.
+    const Column& column(Level& L, uint64_t i, const std::array<double, 4>& wy) {
+        Column& col = L.cache[i % kColumns];
+        if (col.i == i && col.stamp == L.stamp) return col;
+        col = Column{};
+        col.i = i, col.stamp = L.stamp;
+        // The surface is smooth at this level's spacing only where no finer cell weighs: no tile of the level below
+        // may be stored within a kernel's reach of the column's samples (a stored tile's node holds a cell that fine,
+        // and a tile's parent is always stored, so no finer level is stored there either). Near a cliff of fine cells
+        // the cubic would ring: those texels are left to the kernels.
+        {
+            const int64_t x0 = 2 * (int64_t(i) - L.reach), x1 = 2 * (int64_t(i) + L.reach);
+            const int64_t y0 = 2 * (int64_t(L.rowJ) - 1 - L.reach), y1 = 2 * (int64_t(L.rowJ) + 2 + L.reach);
+            const int shift = std::countr_zero(L.finer[0].side());
+            int k = 0;  // a cursor per tile of the (usually 2 x 2) the box meets, so that the next column finds them again
+            for (int64_t ty = std::max<int64_t>(y0, 0) >> shift; ty <= y1 >> shift; ++ty)
+                for (int64_t tx = std::max<int64_t>(x0, 0) >> shift; tx <= x1 >> shift; ++tx, ++k)
+                    if (L.finer[size_t(k) % L.finer.size()].find(uint64_t(tx) << shift, uint64_t(ty) << shift))
+                        return col.kind = kUndefined, col;
+        }
+        int wet = 0, dry = 0;
+        for (int r = 0; r < 4; ++r) {
+            if (wy[r] == 0) continue;
+            const uint64_t sj = L.rowJ - 1 + uint64_t(r);
+            const size_t cursor = size_t((i >> L.shift) & 1) | size_t((sj >> L.shift) & 1) << 1;
+            const float* s = L.samples[cursor].find(i, sj);
+            if (!s) return col.kind = kMissing, col;
+            if (std::isnan(s[0])) return col.kind = kUndefined, col;
+            col.z += wy[r] * double(s[0]);
+            const float* w = water_ ? L.water[cursor].find(i, sj) : channels3_ ? s + L.plane : nullptr;
+            if (w && !std::isnan(w[0])) {
+                col.level += wy[r] * double(w[0]), col.share += wy[r] * double(w[L.plane]);
+                ++wet;
+            } else {
+                ++dry;
+            }
+        }
+        col.kind = wet && dry ? kUndefined : wet ? kWet : kDry;
+        return col;
+    }
+
+    const influence::SurfacePyramid* water_;
+    bool channels3_;
+    std::vector<Level> levels_;
+};
+
 // Copies into tex the texels of `todo` whose centres are samples of a tile the surface pyramid holds at the
 // cascade's level (texelM is that level's spacing and the corner lies on its lattice: cascades.h), applying the
-// water rule of surface.h to the water channels as the kernel path does. Each span of `todo` shrinks to the
-// texels it could not copy, from the first to the last of them, and `copiedMask` (n^2, zero) marks the copied
-// texels, so that the kernel path skips those left inside a span (a row with holes at both ends keeps its whole span: 23 % of a
-// far cascade's texels at 105 M cells, all of them copies). Returns the texels copied and sets *level to the
-// pyramid level used (-1: none fits the cascade).
-uint64_t copyPyramidTexels(const Scene& scene, const Cascade& c, CascadeTextures& tex, double waterMinDepthM, unsigned threads,
-                           std::vector<Todo>& todo, std::vector<uint8_t>& copiedMask, int* level) {
-    *level = -1;
+// water rule of surface.h to the water channels as the kernel path does; with interpolateLevels > 0, texels finer
+// than the levels stored around them are interpolated from a coarser one (PyramidInterpolator). Each span of `todo`
+// shrinks to the texels it could not fill, from the first to the last of them, and `copiedMask` (n^2, zero) marks
+// the filled texels, so that the kernel path skips those left inside a span (a row with holes at both ends keeps its
+// whole span: 23 % of a far cascade's texels at 105 M cells, all of them copies). Returns the texels copied, adds
+// the texels interpolated to work.pyramidInterpolated (the most levels up to work.pyramidInterpolatedUp) and sets
+// work.pyramidLevel to the pyramid level used (-1: none fits the cascade).
+uint64_t copyPyramidTexels(const Scene& scene, const Cascade& c, CascadeTextures& tex, double waterMinDepthM, int interpolateLevels, unsigned threads,
+                           std::vector<Todo>& todo, std::vector<uint8_t>& copiedMask, ApproximationWork& work) {
+    work.pyramidLevel = -1;
     const influence::SurfacePyramid* p = scene.pyramid();
     if (!p) return 0;
     const double t = std::round(std::log2(c.texelM / p->finestCellM));
     if (t < 0 || t > p->topLevel() || std::abs(p->spacingM(int(t)) - c.texelM) > 1e-9 * c.texelM) return 0;
-    *level = int(t);
+    work.pyramidLevel = int(t);
     const size_t channels = size_t(p->channels);
     // A later step of a scenario: the base's elevation, the step's water pyramid's water (pyramid.h); where the
     // water pyramid holds no tile the step draws no water.
     const influence::SurfacePyramid* wp = scene.waterPyramid();
     const double i0 = std::round(c.x0 / c.texelM), j0 = std::round(c.y0 / c.texelM);
     const float minDepth = float(waterMinDepthM);
-    std::vector<uint64_t> copied(resolveThreads(threads), 0);
+    const unsigned workers = resolveThreads(threads);
+    std::vector<uint64_t> copied(workers, 0), interpolated(workers, 0);
+    std::vector<int> mostUp(workers, 0);
     parallelFor(todo.size(), 16, threads, [&](size_t b, size_t e, unsigned worker) {
         influence::SurfacePyramid::Cursor samples(*p, int(t));  // neighbouring rows share tiles
         std::optional<influence::SurfacePyramid::Cursor> waterSamples;
         if (wp) waterSamples.emplace(*wp, int(t));
+        std::optional<PyramidInterpolator> interpolator;
+        if (interpolateLevels > 0) interpolator.emplace(*p, wp, int(t), interpolateLevels);
         const size_t plane = samples.plane();
+        uint64_t nCopied = 0, nInterpolated = 0;  // counted here, added once: per-worker counters share a cache line
+        int up = 0;
         for (size_t j = b; j < e; ++j) {
             Todo& span = todo[j];
             const double gj = j0 + double(j);
-            // Copies texel i if the pyramid holds its sample; false if it does not.
-            auto copy = [&](int i) {
+            // Writes texel `at` from its channels (NaN level: dry), with the water rule.
+            auto put = [&](size_t at, float z, float lvl, float share) {
+                tex.terrain.h[at] = z;
+                if (!std::isnan(lvl) && double(share) >= influence::kWetShareMin) {
+                    const float d = lvl - z;
+                    if (d > 0) tex.depth[at] = d;
+                    if (d > minDepth) tex.water.h[at] = lvl;
+                }
+            };
+            // Fills texel i if the pyramid holds its sample, or interpolates it; false if neither.
+            auto fill = [&](int i) {
                 const double gi = i0 + double(i);
                 if (gi < 0 || gj < 0) return false;
-                const float* s = samples.find(uint64_t(gi), uint64_t(gj));
-                if (!s) return false;
                 const size_t at = j * size_t(c.n) + size_t(i);
-                if (std::isnan(s[0])) return true;  // outside every cell: no surface, as the kernel path leaves it
-                tex.terrain.h[at] = s[0];
-                const float* w = wp ? waterSamples->find(uint64_t(gi), uint64_t(gj)) : channels == 3 ? s + plane : nullptr;
-                if (w) {
-                    const float lvl = w[0], share = w[plane];
-                    if (!std::isnan(lvl) && double(share) >= influence::kWetShareMin) {
-                        const float d = lvl - s[0];
-                        if (d > 0) tex.depth[at] = d;
-                        if (d > minDepth) tex.water.h[at] = lvl;
-                    }
+                const float nan = std::numeric_limits<float>::quiet_NaN();
+                if (const float* s = samples.find(uint64_t(gi), uint64_t(gj))) {
+                    if (std::isnan(s[0])) return true;  // outside every cell: no surface, as the kernel path leaves it
+                    const float* w = wp ? waterSamples->find(uint64_t(gi), uint64_t(gj)) : channels == 3 ? s + plane : nullptr;
+                    put(at, s[0], w ? w[0] : nan, w ? w[plane] : 0.0f);
+                    ++nCopied;
+                    return true;
                 }
+                if (!interpolator) return false;
+                const std::optional<PyramidInterpolator::Value> v = interpolator->at(uint64_t(gi), uint64_t(gj));
+                if (!v) return false;
+                put(at, v->z, v->level, v->share);
+                ++nInterpolated;
+                up = std::max(up, v->up);
                 return true;
             };
             for (auto [lo, hi] : {std::pair<int*, int*>{&span.a0, &span.a1}, {&span.b0, &span.b1}}) {
                 int first = *hi + 1, last = *lo - 1;
                 for (int i = *lo; i <= *hi; ++i) {
-                    if (copy(i)) {
+                    if (fill(i)) {
                         copiedMask[j * size_t(c.n) + size_t(i)] = 1;
-                        ++copied[worker];
                     } else {
                         first = std::min(first, i), last = i;
                     }
@@ -156,9 +337,11 @@ uint64_t copyPyramidTexels(const Scene& scene, const Cascade& c, CascadeTextures
                 *lo = first, *hi = last;
             }
         }
+        copied[worker] += nCopied, interpolated[worker] += nInterpolated, mostUp[worker] = std::max(mostUp[worker], up);
     });
     uint64_t total = 0;
-    for (uint64_t v : copied) total += v;
+    for (unsigned k = 0; k < workers; ++k)
+        total += copied[k], work.pyramidInterpolated += interpolated[k], work.pyramidInterpolatedUp = std::max(work.pyramidInterpolatedUp, mostUp[k]);
     return total;
 }
 
@@ -302,6 +485,7 @@ void sumTexels(const CellData& data, const Cascade& c, const std::vector<Todo>& 
     std::vector<Candidates> scratch(gaussians.size());
     parallelFor(cells.size(), 64, threads, [&](size_t b, size_t e, unsigned worker) {
         Candidates& cand = scratch[worker];
+        uint64_t evaluated = 0;  // added to gaussians[worker] once: the workers' counters share a cache line
         for (size_t ci = b; ci < e; ++ci) {
             const uint32_t k = cells[ci];
             const Grid::Square q = g.cellSquare(k);
@@ -337,7 +521,7 @@ void sumTexels(const CellData& data, const Cascade& c, const std::vector<Todo>& 
                         const size_t t = size_t(j) * size_t(n) + size_t(i);
                         if (!need[t]) continue;
                         const float fx = static_cast<float>(c.x0 + i * s - kx);
-                        gaussians[worker] += m;
+                        evaluated += m;
                         float num[kLanes] = {}, den[kLanes] = {}, numL[kLanes] = {}, denW[kLanes] = {};
                         const float* __restrict ex = cand.ex.data();
                         const float* __restrict ey = cand.ey.data();
@@ -377,6 +561,7 @@ void sumTexels(const CellData& data, const Cascade& c, const std::vector<Todo>& 
                 }
             }
         }
+        gaussians[worker] += evaluated;
     });
     for (uint64_t v : gaussians) *gaussiansOut += v;
 }
@@ -471,7 +656,7 @@ influence::SurfaceRegion readNeededRegion(const GridRegionReader& file, const in
 }  // namespace
 
 ApproximationWork approximate(const Scene& scene, const Cascade& c, CascadeTextures& tex, double waterMinDepthM, unsigned threads,
-                              const TexelReuse* reuse) {
+                              const TexelReuse* reuse, int interpolateLevels) {
     const int n = c.n;
     tex.hasWater = scene.hasWater();
     tex.terrain.n = tex.water.n = n;
@@ -482,10 +667,10 @@ ApproximationWork approximate(const Scene& scene, const Cascade& c, CascadeTextu
         tex.depth.resize(size_t(n) * size_t(n));
     }
     ApproximationWork work;
-    std::vector<Todo> todo = copyReusedTexels(c, reuse, tex, work.reusedTexels);
+    std::vector<Todo> todo = copyReusedTexels(c, reuse, tex, work.reusedTexels, threads);
     // The texels left to evaluate: `need` (n^2) marks them, the spans of `todo` hold them (and copies between them).
     std::vector<uint8_t> copied(size_t(n) * size_t(n), 0), need(size_t(n) * size_t(n), 0);
-    work.pyramidTexels = copyPyramidTexels(scene, c, tex, waterMinDepthM, threads, todo, copied, &work.pyramidLevel);
+    work.pyramidTexels = copyPyramidTexels(scene, c, tex, waterMinDepthM, interpolateLevels, threads, todo, copied, work);
     int i0 = n, i1 = -1, j0 = n, j1 = -1;
     uint64_t todoTexels = 0;
     for (int j = 0; j < n; ++j) {

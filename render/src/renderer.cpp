@@ -26,6 +26,8 @@ std::string RenderOptions::validate() const {
     if (cascades < 1 || cascades > 4) return "--cascades " + std::to_string(cascades) + " is outside 1..4";
     if (texelsPerSide < 16 || texelsPerSide > 8192) return "--texels " + std::to_string(texelsPerSide) + " is outside 16..8192";
     if (!(waterMinDepthM >= 0)) return "the minimum water depth must be >= 0";
+    if (pyramidInterpolateLevels < 0 || pyramidInterpolateLevels > 8)
+        return "--pyramid-interpolate " + std::to_string(pyramidInterpolateLevels) + " is outside 0..8";
     return {};
 }
 
@@ -502,10 +504,12 @@ std::vector<detail::CascadeTextures> approximateCascades(const Scene& scene, con
         CascadeStats cs = detail::statsOf(c);
         Stopwatch clock;
         if (!c.empty()) {
-            const detail::ApproximationWork work = detail::approximate(scene, c, tex[k], options.waterMinDepthM, options.threads, reuse ? &*reuse : nullptr);
+            const detail::ApproximationWork work = detail::approximate(scene, c, tex[k], options.waterMinDepthM, options.threads, reuse ? &*reuse : nullptr,
+                                                                            options.pyramidInterpolateLevels);
             cs.gaussians = work.gaussians, cs.cellsVisited = work.cellsVisited, cs.reusedTexels = work.reusedTexels;
             cs.cellsRead = work.cellsRead, cs.regionsRead = work.regionsRead;
             cs.pyramidTexels = work.pyramidTexels, cs.pyramidLevel = work.pyramidLevel;
+            cs.pyramidInterpolated = work.pyramidInterpolated, cs.pyramidInterpolatedUp = work.pyramidInterpolatedUp;
         }
         // A copied sample is the exact surface rounded to float once: half an ulp of the largest height.
         if (cs.pyramidTexels) cs.errorBoundM = std::ldexp(std::max(std::abs(scene.zMin), std::abs(scene.zMax)), -24);
@@ -598,6 +602,7 @@ void shadePixels(const Scene& scene, const RenderOptions& options, const CameraB
     const bool layerOnWater = colorLayer && colorLayer->kind == influence::Layer::WaterCells;
     std::vector<uint64_t> hits(resolveThreads(options.threads), 0);
     parallelFor(size_t(H), 16, options.threads, [&](size_t b, size_t e, unsigned worker) {
+        uint64_t hit = 0;  // added to hits[worker] once: the workers' counters share a cache line
         for (size_t py = b; py < e; ++py)
             for (int px = 0; px < W; ++px) {
                 const size_t i = py * size_t(W) + size_t(px);
@@ -607,7 +612,7 @@ void shadePixels(const Scene& scene, const RenderOptions& options, const CameraB
                               skyHorizon.b + up * (skyZenith.b - skyHorizon.b)};
                 Rgb c = sky;
                 if (std::isfinite(f.distanceM[i])) {
-                    ++hits[worker];
+                    ++hit;
                     const double light = 0.3 + 0.7 * std::max(0.0, f.nX[i] * sun[0] + f.nY[i] * sun[1] + f.nZ[i] * sun[2]);
                     Rgb base;
                     const bool wall = f.wall[i] != 0;
@@ -641,6 +646,7 @@ void shadePixels(const Scene& scene, const RenderOptions& options, const CameraB
                 uint8_t* p = &f.rgb[i * 3];
                 p[0] = toSrgb8(c.r), p[1] = toSrgb8(c.g), p[2] = toSrgb8(c.b);
             }
+        hits[worker] += hit;
     });
     for (uint64_t h : hits) timings.hits += h;
     drawLegend(f, detail::legendLayout(scene, options, W, H));
@@ -714,6 +720,8 @@ std::string Timings::toJson() const {
                                  {"reused_texels", c.reusedTexels},
                                  {"pyramid_level", c.pyramidLevel},
                                  {"pyramid_texels", c.pyramidTexels},
+                                 {"pyramid_interpolated", c.pyramidInterpolated},
+                                 {"pyramid_interpolated_levels_up", c.pyramidInterpolatedUp},
                                  {"error_bound_m", rounded(c.errorBoundM, std::chars_format::general, 3)},
                                  {"gaussians", c.gaussians},
                                  {"cells_visited", c.cellsVisited},
@@ -750,6 +758,11 @@ std::string Timings::toTable() const {
         if (c.pyramidLevel >= 0) {
             std::snprintf(b, sizeof b, ", %llu copied from pyramid level %d (within %.2g m)", (unsigned long long)c.pyramidTexels, c.pyramidLevel,
                           c.errorBoundM);
+            s += b;
+        }
+        if (c.pyramidInterpolated) {
+            std::snprintf(b, sizeof b, ", %llu interpolated from up to %d level%s above", (unsigned long long)c.pyramidInterpolated,
+                          c.pyramidInterpolatedUp, c.pyramidInterpolatedUp == 1 ? "" : "s");
             s += b;
         }
         s += "\n";

@@ -44,6 +44,8 @@ struct ApproximationWork {
     uint64_t reusedTexels = 0;  // visible texels copied from `reuse`
     uint64_t pyramidTexels = 0; // visible texels copied from the scene's surface pyramid (and not evaluated again)
     int pyramidLevel = -1;      // the pyramid level whose spacing is the cascade's texel size, -1 when none fits
+    uint64_t pyramidInterpolated = 0;  // visible texels interpolated from a coarser pyramid level (interpolateLevels)
+    int pyramidInterpolatedUp = 0;     // the most levels above the cascade's one of them was interpolated from
     uint64_t regionsRead = 0;   // out of core: blocks of texels whose cells were read from the grid file
     uint64_t cellsRead = 0;     // out of core: the cells those regions held (kernel margins included)
 };
@@ -53,7 +55,7 @@ struct ApproximationWork {
 // are copied from it; the others are evaluated. The cells visited follow the texels evaluated (a few per texel),
 // not the cascade's area.
 ApproximationWork approximate(const Scene& scene, const Cascade& c, CascadeTextures& tex, double waterMinDepthM, unsigned threads,
-                              const TexelReuse* reuse = nullptr);
+                              const TexelReuse* reuse = nullptr, int interpolateLevels = 0);
 
 // One ray through the cascades (raycast.cpp).
 struct Hit {

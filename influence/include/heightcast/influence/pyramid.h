@@ -94,13 +94,19 @@ public:
         Cursor(const SurfacePyramid& p, int t);
         // The first channel's sample at lattice point (i, j), with channel index c (channelIndex) at [c * plane()],
         // or nullptr where no tile of this level is stored there.
-        const float* find(uint64_t i, uint64_t j);
+        const float* find(uint64_t i, uint64_t j) {
+            if ((i >> shift_) != tileI_ || (j >> shift_) != tileJ_) seek(i, j);
+            return tile_ ? tile_ + ((j & (side_ - 1)) << shift_) + (i & (side_ - 1)) : nullptr;
+        }
+        size_t side() const { return side_; }
         size_t plane() const { return side_ * side_; }
 
     private:
+        void seek(uint64_t i, uint64_t j);  // remembers the tile holding (i, j)
         const SurfacePyramid& p_;
         int t_;
-        size_t side_;
+        size_t side_;  // a power of two (the domain's side is one)
+        int shift_;
         uint64_t tileI_ = ~uint64_t{0}, tileJ_ = ~uint64_t{0};
         const float* tile_ = nullptr;  // the remembered tile's first sample, nullptr if not stored
     };

@@ -38,6 +38,10 @@ struct RenderOptions {
     // no worse); true: the smallest not below it, N texels (up to 2x coarser: faster, more texels copied, larger
     // rendered error). BENCHMARKS.md measures both.
     bool pyramidCoarseTexels = false;
+    // With a surface pyramid: texels finer than every level stored around them (over cells at least twice their size,
+    // no finer cell within a kernel's reach) are interpolated (bicubic) from the nearest coarser level stored, at most
+    // this many levels up, 0..8; 0 sums them from the kernels. BENCHMARKS.md measures the trade.
+    int pyramidInterpolateLevels = 3;
     // Colour by this grid layer instead ("" = by `color`): a further step layer (velocity, ...: a field of the wet
     // cells, influence::Layer::WaterCells) colours the water and leaves dry terrain grey; a static layer colours the
     // terrain. Each hit's value is the exact evaluator's at the hit (in memory only: the scene needs its lists), on
@@ -80,9 +84,12 @@ struct CascadeStats {
     uint64_t regionsRead = 0;           // included, in that many blocks of texels (0 in memory and on GL)
     int pyramidLevel = -1;              // the surface pyramid level whose spacing is texelM, -1 without a pyramid
     uint64_t pyramidTexels = 0;         // visible texels copied from the pyramid's samples (the others: Gaussians)
+    uint64_t pyramidInterpolated = 0;   // visible texels interpolated from a coarser level (pyramidInterpolateLevels)
+    int pyramidInterpolatedUp = 0;      // the most levels above pyramidLevel one of them was interpolated from
     // Largest |texel - exact surface| of the texels copied from the pyramid [m]: a sample is the exact surface
     // rounded to float once, so half a float ulp of the largest |height|; 0 when none was copied. The texels
-    // summed from the kernels in float are not bounded here (tests: within 1 mm of the exact surface).
+    // summed from the kernels in float are not bounded here (tests: within 1 mm of the exact surface), nor are the
+    // interpolated ones (tests: within a bilinear patch's error at the spacing they came from).
     double errorBoundM = 0;
     double approximationMs = 0;
 };
