@@ -118,10 +118,11 @@ inline void catmullRom(double f, double w[4]) {
 
 // Fills texels finer than every pyramid level stored around them (pyramid.h keeps level t only where a cell is as
 // fine as its spacing) by bicubic (Catmull-Rom) interpolation of the nearest coarser level whose samples around the
-// texel are all stored, at most `maxUp` levels above the cascade's. Such texels lie over cells at least twice their
-// size, where the surface is smooth at the texel's scale (a Gaussian of width one cell, kernel.h). Undefined samples
-// (holes) and a water level defined at some samples only (a flood's edge) are left to the kernels: the answer is
-// nullopt, as it is where no such level is stored.
+// texel are all stored, at most `maxUp` levels above the cascade's, and where no tile of the level below that one is
+// stored within a kernel's reach of the samples: then no cell finer than the samples' spacing weighs there, and the
+// surface is smooth at that spacing (a sum of Gaussians at least one spacing wide, kernel.h). Undefined samples
+// (holes), a water level defined at some samples only (a flood's edge) and finer cells near are left to the kernels:
+// the answer is nullopt, as it is where no such level is stored.
 //
 // Separably, row by row: a texel row lies at one height between two rows of samples, so each column of 4 samples is
 // blended vertically once per texel row (and kept in a small cache), and a texel blends 4 columns. A texel of level
@@ -202,7 +203,9 @@ private:
     static constexpr size_t kColumns = 8;  // cached columns per level: a texel uses 4 neighbouring ones
     struct Level {
         std::vector<influence::SurfacePyramid::Cursor> samples, water;  // by tile parity: a stencil spans up to 2 x 2 tiles
-        std::vector<influence::SurfacePyramid::Cursor> finer;           // the level below, one per tile checked
+        std::vector<influence::SurfacePyramid::Cursor> finer;           // the level below, by tile parity
+        std::array<int64_t, 4> finerTiles{-1, -1, -1, -1};              // the last tiles of it asked (x0, x1, y0, y1)...
+        bool finerStored = false;                                        // ...and whether one of them is stored
         int64_t reach = 2;  // samples of this level a finer cell's kernel reaches beyond it
         size_t side = 0, plane = 0;
         int shift = 0;
@@ -225,11 +228,14 @@ private:
             const int64_t x0 = 2 * (int64_t(i) - L.reach), x1 = 2 * (int64_t(i) + L.reach);
             const int64_t y0 = 2 * (int64_t(L.rowJ) - 1 - L.reach), y1 = 2 * (int64_t(L.rowJ) + 2 + L.reach);
             const int shift = std::countr_zero(L.finer[0].side());
-            int k = 0;  // a cursor per tile of the (usually 2 x 2) the box meets, so that the next column finds them again
-            for (int64_t ty = std::max<int64_t>(y0, 0) >> shift; ty <= y1 >> shift; ++ty)
-                for (int64_t tx = std::max<int64_t>(x0, 0) >> shift; tx <= x1 >> shift; ++tx, ++k)
-                    if (L.finer[size_t(k) % L.finer.size()].find(uint64_t(tx) << shift, uint64_t(ty) << shift))
-                        return col.kind = kUndefined, col;
+            const std::array<int64_t, 4> tiles{std::max<int64_t>(x0, 0) >> shift, x1 >> shift, std::max<int64_t>(y0, 0) >> shift, y1 >> shift};
+            if (tiles != L.finerTiles) {  // neighbouring columns and rows mostly meet the same tiles: asked once
+                L.finerTiles = tiles, L.finerStored = false;
+                for (int64_t ty = tiles[2]; ty <= tiles[3] && !L.finerStored; ++ty)
+                    for (int64_t tx = tiles[0]; tx <= tiles[1] && !L.finerStored; ++tx)  // a cursor per tile parity
+                        L.finerStored = L.finer[size_t(tx & 1) | size_t(ty & 1) << 1].find(uint64_t(tx) << shift, uint64_t(ty) << shift);
+            }
+            if (L.finerStored) return col.kind = kUndefined, col;
         }
         int wet = 0, dry = 0;
         for (int r = 0; r < 4; ++r) {
