@@ -46,7 +46,7 @@ void RenderSetup::addRenderOptions(Parser& p) {
            "instead of up to 2x finer (up to 2N a side: as accurate as without a pyramid, or more)", options.pyramidCoarseTexels);
     p.option("--pyramid-interpolate", "L", "with a pyramid: texels finer than every level stored around them (over cells at least\n"
              "twice their size, no finer cell within a kernel's reach) are interpolated, bicubic, from a stored level at most\n"
-             "L above; 0..8, 0 sums them from the kernels (default 0: no faster on the report's scenes, BENCHMARKS.md)",
+             "L above; 0..8, 0 sums them from the kernels (default 3)",
              options.pyramidInterpolateLevels);
     p.option("--step", "K", "water step to show, 0-based (default 0; hc-info lists a grid's steps and their times)", step);
     p.option("--sigma", "S", "kernel width in cell sizes (default 1.0)", params.sigma);

@@ -540,7 +540,7 @@ int main(int argc, char** argv) {
         p.flag("--pyramid-coarse", "with --pyramid: texels up to 2x coarser than without it (N a side) instead of up to\n"
                "      2x finer (up to 2N a side)", set.options.pyramidCoarseTexels);
         p.option("--pyramid-interpolate", "L", "with --pyramid: texels finer than every level stored around them interpolated\n"
-                 "      (bicubic) from a coarser stored level, at most L levels up; 0 sums them from the kernels (default 0)",
+                 "      (bicubic) from a coarser stored level, at most L levels up; 0 sums them from the kernels (default 3)",
                  set.options.pyramidInterpolateLevels);
         p.flag("--out-of-core", "CPU: write each grid to a temporary .hcg and render out of core from it, without lists\n"
                "      (render::Scene over a GridRegionReader; with --pyramid the texels it holds need no cell)", set.outOfCore);

@@ -922,6 +922,11 @@ uint64_t GridRegionReader::cellsInNode(uint64_t key, int level) const {
     return hi - lo;
 }
 
+void GridRegionReader::codesInNode(uint64_t key, int level, std::vector<uint64_t>& out) const {
+    const uint64_t lo = impl_->lowerBound(makeCellCode(key, 0)), hi = impl_->lowerBound(makeCellCode(key + mortonSpan(level), 0));
+    for (uint64_t k = lo; k < hi; ++k) out.push_back(impl_->codeAt(k));
+}
+
 Grid GridRegionReader::region(const Grid::Square& box, std::span<const double> marginM, std::vector<std::pair<uint64_t, uint64_t>>* runsOut) const {
     const Impl& r = *impl_;
     const Grid& shape = r.info.shape;

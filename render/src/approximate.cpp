@@ -14,6 +14,8 @@
 #include <unordered_map>
 
 #include "heightcast/core/parallel.h"
+#include "heightcast/grid/grid_file.h"
+#include "heightcast/grid/morton.h"
 #include "heightcast/influence/region.h"
 #include "heightcast/influence/surface.h"
 #include "textures.h"
@@ -118,9 +120,10 @@ inline void catmullRom(double f, double w[4]) {
 
 // Fills texels finer than every pyramid level stored around them (pyramid.h keeps level t only where a cell is as
 // fine as its spacing) by bicubic (Catmull-Rom) interpolation of the nearest coarser level whose samples around the
-// texel are all stored, at most `maxUp` levels above the cascade's, and where no tile of the level below that one is
-// stored within a kernel's reach of the samples: then no cell finer than the samples' spacing weighs there, and the
-// surface is smooth at that spacing (a sum of Gaussians at least one spacing wide, kernel.h). Undefined samples
+// texel are all stored, at most `maxUp` levels above the cascade's, and where no cell finer than that level's spacing
+// lies within a kernel's reach of the samples: then the surface is smooth at that spacing (a sum of Gaussians at least
+// one spacing wide, kernel.h). Such cells lie only in the stored tiles of the level below; their positions come from
+// the grid's codes in those tiles' nodes (in memory or from the file), once per tile and worker. Undefined samples
 // (holes), a water level defined at some samples only (a flood's edge) and finer cells near are left to the kernels:
 // the answer is nullopt, as it is where no such level is stored.
 //
@@ -129,8 +132,8 @@ inline void catmullRom(double f, double w[4]) {
 // t + up's stencil shares its columns with the 2^up texels beside it. One per worker; rows are asked in any order.
 class PyramidInterpolator {
 public:
-    PyramidInterpolator(const influence::SurfacePyramid& p, const influence::SurfacePyramid* water, int t, int maxUp)
-        : water_(water), channels3_(p.channels == 3) {
+    PyramidInterpolator(const Scene& scene, const influence::SurfacePyramid& p, const influence::SurfacePyramid* water, int t, int maxUp)
+        : scene_(scene), water_(water), channels3_(p.channels == 3) {
         for (int up = 1; up <= maxUp && t + up <= p.topLevel(); ++up) {
             Level& L = levels_.emplace_back();
             for (int k = 0; k < 4; ++k) {
@@ -141,6 +144,8 @@ public:
             // A cell of level t + up - 1 or finer weighs up to R sigma of its size (kernel.h) around it: in samples of
             // this level, at most half of that.
             L.reach = int64_t(std::ceil(0.5 * p.params.truncation * p.params.sigma));
+            L.finerLevel = t + up - 1;
+            L.finerShift = std::countr_zero(L.finer[0].side());
             L.side = L.samples[0].side();
             L.shift = std::countr_zero(L.side);
             L.plane = L.samples[0].plane();
@@ -204,8 +209,14 @@ private:
     struct Level {
         std::vector<influence::SurfacePyramid::Cursor> samples, water;  // by tile parity: a stencil spans up to 2 x 2 tiles
         std::vector<influence::SurfacePyramid::Cursor> finer;           // the level below, by tile parity
-        std::array<int64_t, 4> finerTiles{-1, -1, -1, -1};              // the last tiles of it asked (x0, x1, y0, y1)...
-        bool finerStored = false;                                        // ...and whether one of them is stored
+        int finerLevel = 0, finerShift = 0;                              // its level, log2 of its tile side
+        // Per stored tile of the level below (ty << 32 | tx): bit i of row j set when a cell of that level or finer lies
+        // between its samples (i, j) and (i + 1, j + 1).
+        std::unordered_map<uint64_t, std::array<uint16_t, 16>> fineCells;
+        // For the current texel row (maskRowJ): per tile column of the level below, the bits of its cells' columns
+        // over the rows a kernel from the row's samples reaches; -1 not yet asked.
+        uint64_t maskRowJ = ~uint64_t{0};
+        std::unordered_map<int64_t, int32_t> rowMask;
         int64_t reach = 2;  // samples of this level a finer cell's kernel reaches beyond it
         size_t side = 0, plane = 0;
         int shift = 0;
@@ -220,23 +231,9 @@ private:
         if (col.i == i && col.stamp == L.stamp) return col;
         col = Column{};
         col.i = i, col.stamp = L.stamp;
-        // The surface is smooth at this level's spacing only where no finer cell weighs: no tile of the level below
-        // may be stored within a kernel's reach of the column's samples (a stored tile's node holds a cell that fine,
-        // and a tile's parent is always stored, so no finer level is stored there either). Near a cliff of fine cells
-        // the cubic would ring: those texels are left to the kernels.
-        {
-            const int64_t x0 = 2 * (int64_t(i) - L.reach), x1 = 2 * (int64_t(i) + L.reach);
-            const int64_t y0 = 2 * (int64_t(L.rowJ) - 1 - L.reach), y1 = 2 * (int64_t(L.rowJ) + 2 + L.reach);
-            const int shift = std::countr_zero(L.finer[0].side());
-            const std::array<int64_t, 4> tiles{std::max<int64_t>(x0, 0) >> shift, x1 >> shift, std::max<int64_t>(y0, 0) >> shift, y1 >> shift};
-            if (tiles != L.finerTiles) {  // neighbouring columns and rows mostly meet the same tiles: asked once
-                L.finerTiles = tiles, L.finerStored = false;
-                for (int64_t ty = tiles[2]; ty <= tiles[3] && !L.finerStored; ++ty)
-                    for (int64_t tx = tiles[0]; tx <= tiles[1] && !L.finerStored; ++tx)  // a cursor per tile parity
-                        L.finerStored = L.finer[size_t(tx & 1) | size_t(ty & 1) << 1].find(uint64_t(tx) << shift, uint64_t(ty) << shift);
-            }
-            if (L.finerStored) return col.kind = kUndefined, col;
-        }
+        // The surface is smooth at this level's spacing only where no finer cell weighs: near a cliff of fine cells the
+        // cubic would ring (0.135 m beside 0.75 m cells in the tests' grid), so those texels are left to the kernels.
+        if (fineCellNear(L, 2 * (int64_t(i) - L.reach), 2 * (int64_t(i) + L.reach))) return col.kind = kUndefined, col;
         int wet = 0, dry = 0;
         for (int r = 0; r < 4; ++r) {
             if (wy[r] == 0) continue;
@@ -258,6 +255,57 @@ private:
         return col;
     }
 
+    // Whether a cell of the level below L's or finer lies between samples x0 - 1 .. x1 of that level (its lattice) in
+    // the rows of the current texel row's stencil, grown by a kernel's reach.
+    bool fineCellNear(Level& L, int64_t x0, int64_t x1) {
+        const int64_t y0 = 2 * (int64_t(L.rowJ) - 1 - L.reach) - 1, y1 = 2 * (int64_t(L.rowJ) + 2 + L.reach);
+        if (L.maskRowJ != L.rowJ) L.maskRowJ = L.rowJ, L.rowMask.clear();
+        const int shift = L.finerShift;
+        x0 = std::max<int64_t>(x0 - 1, 0);
+        for (int64_t tx = x0 >> shift; tx <= x1 >> shift; ++tx) {
+            auto [it, fresh] = L.rowMask.try_emplace(tx, 0);
+            if (fresh) {
+                for (int64_t ty = std::max<int64_t>(y0, 0) >> shift; ty <= y1 >> shift; ++ty) {
+                    if (!L.finer[size_t(tx & 1) | size_t(ty & 1) << 1].find(uint64_t(tx) << shift, uint64_t(ty) << shift)) continue;
+                    const std::array<uint16_t, 16>& rows = tileCells(L, tx, ty);
+                    for (int64_t y = std::max(y0, ty << shift); y <= std::min(y1, ((ty + 1) << shift) - 1); ++y)
+                        it->second |= rows[size_t(y - (ty << shift))];
+                }
+            }
+            const int64_t lo = std::max(x0, tx << shift) - (tx << shift), hi = std::min(x1, ((tx + 1) << shift) - 1) - (tx << shift);
+            if ((uint32_t(it->second) >> lo) & ((uint32_t{1} << (hi - lo + 1)) - 1)) return true;
+        }
+        return false;
+    }
+
+    // The fine cells of stored tile (tx, ty) of the level below L's (Level::fineCells), from the grid's codes.
+    const std::array<uint16_t, 16>& tileCells(Level& L, int64_t tx, int64_t ty) {
+        auto [it, fresh] = L.fineCells.try_emplace(uint64_t(ty) << 32 | uint64_t(tx));
+        if (!fresh) return it->second;
+        it->second.fill(0);
+        const int level = L.finerLevel, shift = L.finerShift;
+        const uint32_t x0 = uint32_t(tx) << (shift + level), y0 = uint32_t(ty) << (shift + level);
+        codes_.clear();
+        const uint64_t key = mortonEncode(x0, y0);
+        const int nodeLevel = std::min(level + shift, scene_.grid().rootLevel);
+        if (scene_.outOfCore()) {
+            scene_.file()->codesInNode(key, nodeLevel, codes_);
+        } else {
+            const std::vector<uint64_t>& all = scene_.grid().codes;
+            const auto lo = std::lower_bound(all.begin(), all.end(), makeCellCode(key, 0));
+            const auto hi = std::lower_bound(lo, all.end(), makeCellCode(key + mortonSpan(nodeLevel), 0));
+            codes_.assign(lo, hi);
+        }
+        for (uint64_t code : codes_) {
+            if (codeLevel(code) > level) continue;
+            const uint32_t i = (Grid::keyX(code) - x0) >> level, j = (Grid::keyY(code) - y0) >> level;
+            it->second[j] |= uint16_t(1u << i);
+        }
+        return it->second;
+    }
+
+    const Scene& scene_;
+    std::vector<uint64_t> codes_;
     const influence::SurfacePyramid* water_;
     bool channels3_;
     std::vector<Level> levels_;
@@ -289,12 +337,14 @@ uint64_t copyPyramidTexels(const Scene& scene, const Cascade& c, CascadeTextures
     const unsigned workers = resolveThreads(threads);
     std::vector<uint64_t> copied(workers, 0), interpolated(workers, 0);
     std::vector<int> mostUp(workers, 0);
+    std::vector<std::optional<PyramidInterpolator>> interpolators(workers);
     parallelFor(todo.size(), 16, threads, [&](size_t b, size_t e, unsigned worker) {
         influence::SurfacePyramid::Cursor samples(*p, int(t));  // neighbouring rows share tiles
         std::optional<influence::SurfacePyramid::Cursor> waterSamples;
         if (wp) waterSamples.emplace(*wp, int(t));
-        std::optional<PyramidInterpolator> interpolator;
-        if (interpolateLevels > 0) interpolator.emplace(*p, wp, int(t), interpolateLevels);
+        // One per worker for the whole cascade: the fine cells it looked up serve its later rows.
+        std::optional<PyramidInterpolator>& interpolator = interpolators[worker];
+        if (interpolateLevels > 0 && !interpolator) interpolator.emplace(scene, *p, wp, int(t), interpolateLevels);
         const size_t plane = samples.plane();
         uint64_t nCopied = 0, nInterpolated = 0;  // counted here, added once: per-worker counters share a cache line
         int up = 0;
@@ -408,10 +458,11 @@ double gatherCandidates(const CellData& cells, uint32_t k, Candidates& cand) {
 // cascade's edges, whose bounding box is still the whole cascade: listing its cells would examine every cell
 // under the cascade (about 2 M in Wachau's far cascade) for a few thousand texels. Below one texel to evaluate
 // in kSparseTodo of the box, each texel's cell is located instead (Grid::locate, a binary search over the cells),
-// so the work follows the texels. 16 sits between the two cases, not at a measured break-even: fresh cascades
-// (above 1/4) always list the box, as before, and a moving camera's strips (0.1-1 % of the box in hc-bench's
-// fly-through) are always located.
-constexpr uint64_t kSparseTodo = 16;
+// so the work follows the texels. Fresh cascades without a pyramid (above 1/4) always list the box, and a moving
+// camera's strips (0.1-1 % of the box in hc-bench's fly-through) are always located. Between them lie fresh cascades
+// whose texels the pyramid mostly filled: Petzenkirchen's far cascade left 55 k texels to sum in a box of 817 k,
+// whose listing examined 570 k cells in 17-21 ms; 4 (not 16, as first set) has them located.
+constexpr uint64_t kSparseTodo = 4;
 
 // Appends to `cells` (sorted, each once) the cells whose half-open squares hold a texel centre `need`ed in r:
 // the cells the box listing would keep (a cell holding no texel to evaluate is skipped there too).

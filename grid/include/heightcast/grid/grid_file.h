@@ -197,6 +197,8 @@ public:
     // How many cells meet the quadtree node of `level` with corner key `key`: those inside it, and the one coarser
     // cell that may contain it (two binary searches). 0: the node is all hole.
     uint64_t cellsInNode(uint64_t key, int level) const;
+    // Appends to `out` the codes of the cells inside that node (not a coarser one containing it), ascending.
+    void codesInNode(uint64_t key, int level, std::vector<uint64_t>& out) const;
     // Section bytes whose block checksums have been checked so far.
     uint64_t bytesChecked() const;
 

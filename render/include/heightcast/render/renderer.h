@@ -40,9 +40,8 @@ struct RenderOptions {
     bool pyramidCoarseTexels = false;
     // With a surface pyramid: texels finer than every level stored around them (over cells at least twice their size,
     // no finer cell within a kernel's reach) are interpolated (bicubic) from the nearest coarser level stored, at most
-    // this many levels up, 0..8; 0 sums them from the kernels. Off by default: on the report's scenes it is no faster
-    // (BENCHMARKS.md), as most such texels lie near finer cells.
-    int pyramidInterpolateLevels = 0;
+    // this many levels up, 0..8; 0 sums them from the kernels. BENCHMARKS.md measures the trade.
+    int pyramidInterpolateLevels = 3;
     // Colour by this grid layer instead ("" = by `color`): a further step layer (velocity, ...: a field of the wet
     // cells, influence::Layer::WaterCells) colours the water and leaves dry terrain grey; a static layer colours the
     // terrain. Each hit's value is the exact evaluator's at the hit (in memory only: the scene needs its lists), on
