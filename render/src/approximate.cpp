@@ -213,8 +213,8 @@ private:
         // Per stored tile of the level below (ty << 32 | tx): bit i of row j set when a cell of that level or finer lies
         // between its samples (i, j) and (i + 1, j + 1).
         std::unordered_map<uint64_t, std::array<uint16_t, 16>> fineCells;
-        // For the current texel row (maskRowJ): per tile column of the level below, the bits of its cells' columns
-        // over the rows a kernel from the row's samples reaches; -1 not yet asked.
+        // For the current texel row (maskRowJ): per tile column of the level below asked so far, the OR of its
+        // fineCells rows that a kernel from the row's samples reaches.
         uint64_t maskRowJ = ~uint64_t{0};
         std::unordered_map<int64_t, int32_t> rowMask;
         int64_t reach = 2;  // samples of this level a finer cell's kernel reaches beyond it

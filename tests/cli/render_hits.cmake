@@ -19,3 +19,13 @@ hc_cli_test(render.domain_edge_wall 0 [[walls +[1-9][0-9]* of [1-9][0-9]* hits o
   --setup ${KOOTENAI_HCI} --exists k.png --exists k.exr
   --check [[grep -a -q 'water_depth' k.exr && grep -a -q 'wall' k.exr]]
   -- ${RENDER} k.hcg -o k.png --exr k.exr --size 160x90 --texels 128 --camera 556415,5394950,535,90,0,50)
+
+# Texels finer than the stored pyramid levels (1 m texels over the 2-8 m cells; 32 texels a side put the cascades on levels 0-1): interpolated by default,
+# counted in the stage table and the timings JSON; --pyramid-interpolate 0 sums them; out of range is refused.
+hc_cli_test(render.pyramid_interpolated 0 [[interpolated from up to [1-3] levels? above]]
+  --setup ${KOOTENAI_HCI} --exists k.png --exists t.json
+  --check "grep -q '\"pyramid_interpolated\": [1-9]' t.json && '${RENDER}' k.hcg -o z.png --size 160x90 --texels 32 --backend cpu --pyramid-interpolate 0 --camera 556420,5394910,575,45,-30,60 --timings z.json >/dev/null && ! grep -q '\"pyramid_interpolated\": [1-9]' z.json"
+  -- ${RENDER} k.hcg -o k.png --size 160x90 --texels 32 --backend cpu --camera 556420,5394910,575,45,-30,60 --timings t.json)
+hc_cli_test(render.pyramid_interpolate_out_of_range nonzero [[^hc-render: error: --pyramid-interpolate 9 is outside 0\.\.8]]
+  --setup ${KOOTENAI_HCI} --absent k.png
+  -- ${RENDER} k.hcg -o k.png --pyramid-interpolate 9)
