@@ -245,6 +245,48 @@ TEST(Region, OutOfCoreFramesEqualInMemoryOnes) {
     }
 }
 
+// Out of core, the texels finer than the stored pyramid levels are interpolated where the in-memory scene
+// interpolates them: the fine cells that forbid it come from the file's codes (GridRegionReader::codesInNode) instead
+// of the grid's, and give the same masks. The 1 m LiDAR flood from a nearer camera: its near cascades' 1 m texels lie
+// over 2-16 m cells.
+TEST(Region, OutOfCoreInterpolatesThePyramidsTexelsAsInMemory) {
+    if (hc::test::dataFile("lidar1m_minnesota_utm15.tif").empty()) GTEST_SKIP() << "no LiDAR raster";
+    const GridOnDisk& d = lidar();
+    const Grid& g = d.grid;
+    const inf::InfluenceLists lists = inf::buildInfluenceLists(g, {});
+    const inf::SurfacePyramid pyramid = inf::buildSurfacePyramid(g, {});
+    const GridRegionReader file(d.path.string());
+    const hc::render::Scene memory(g, lists, &pyramid);
+    hc::render::Scene outOfCore(file, {}, &pyramid);
+    outOfCore.zMax = memory.zMax;  // the same view box (above)
+    hc::render::Camera c = hc::render::overviewCamera(memory, 320, 200);
+    double mx, my;
+    g.localToWorld(0.5 * (memory.xMin + memory.xMax), 0.5 * (memory.yMin + memory.yMax), mx, my);
+    const double mz = 0.5 * (memory.zMin + memory.zMax);
+    c.xWorld = mx + 0.35 * (c.xWorld - mx), c.yWorld = my + 0.35 * (c.yWorld - my), c.zWorld = mz + 0.35 * (c.zWorld - mz);
+    hc::render::RenderOptions o;
+    o.texelsPerSide = 256;
+    hc::render::Timings tm, to;
+    const hc::render::Frame a = hc::render::renderFrame(memory, c, o, tm);
+    const hc::render::Frame b = hc::render::renderFrame(outOfCore, c, o, to);
+    ASSERT_EQ(tm.cascades.size(), to.cascades.size());
+    uint64_t interpolated = 0;
+    for (size_t k = 0; k < tm.cascades.size(); ++k) {
+        EXPECT_EQ(tm.cascades[k].pyramidInterpolated, to.cascades[k].pyramidInterpolated) << "cascade " << k;
+        EXPECT_EQ(tm.cascades[k].pyramidTexels, to.cascades[k].pyramidTexels) << "cascade " << k;
+        interpolated += tm.cascades[k].pyramidInterpolated;
+    }
+    EXPECT_GT(interpolated, 10000u);
+    size_t hits = 0, differ = 0;
+    for (size_t i = 0; i < a.distanceM.size(); ++i) {
+        const bool ha = std::isfinite(a.distanceM[i]), hb = std::isfinite(b.distanceM[i]);
+        if (ha != hb || (ha && std::abs(a.distanceM[i] - b.distanceM[i]) > 1e-3 * a.distanceM[i])) ++differ;
+        hits += ha;
+    }
+    EXPECT_GT(hits, 10000u);
+    EXPECT_LE(differ, hits / 1000);  // the summed texels' float rounding, as above
+}
+
 // The file index runs of a region name, for each of its cells, the cell of the file it is.
 TEST(GridRegionReader, RunsNameEachRegionCellsIndexInTheFile) {
     if (hc::test::dataFile("lidar1m_minnesota_utm15.tif").empty()) GTEST_SKIP() << "no LiDAR raster";
