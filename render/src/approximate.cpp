@@ -136,16 +136,20 @@ public:
         : scene_(scene), water_(water), channels3_(p.channels == 3) {
         for (int up = 1; up <= maxUp && t + up <= p.topLevel(); ++up) {
             Level& L = levels_.emplace_back();
+            // A cascade finer than the finest cells (t < 0) has no level of its own; its texels interpolate level 0,
+            // below which no cell lies (no finer tiles to ask).
+            L.stored = t + up >= 0;
+            if (!L.stored) continue;
             for (int k = 0; k < 4; ++k) {
                 L.samples.emplace_back(p, t + up);
                 if (water) L.water.emplace_back(*water, t + up);
-                L.finer.emplace_back(p, t + up - 1);
+                if (t + up > 0) L.finer.emplace_back(p, t + up - 1);
             }
             // A cell of level t + up - 1 or finer weighs up to R sigma of its size (kernel.h) around it: in samples of
             // this level, at most half of that.
             L.reach = int64_t(std::ceil(0.5 * p.params.truncation * p.params.sigma));
             L.finerLevel = t + up - 1;
-            L.finerShift = std::countr_zero(L.finer[0].side());
+            L.finerShift = L.finer.empty() ? 0 : std::countr_zero(L.finer[0].side());
             L.side = L.samples[0].side();
             L.shift = std::countr_zero(L.side);
             L.plane = L.samples[0].plane();
@@ -166,6 +170,7 @@ public:
     std::optional<Value> at(uint64_t gi, uint64_t gj) {
         for (int up = 1; up <= int(levels_.size()); ++up) {
             Level& L = levels_[size_t(up - 1)];
+            if (!L.stored) continue;
             const uint64_t mask = (uint64_t{1} << up) - 1;
             const uint64_t I = gi >> up, J = gj >> up;
             if (I == 0 || J == 0) return std::nullopt;  // the stencil would leave the domain
@@ -207,6 +212,7 @@ private:
     };
     static constexpr size_t kColumns = 8;  // cached columns per level: a texel uses 4 neighbouring ones
     struct Level {
+        bool stored = false;                                            // false: below level 0
         std::vector<influence::SurfacePyramid::Cursor> samples, water;  // by tile parity: a stencil spans up to 2 x 2 tiles
         std::vector<influence::SurfacePyramid::Cursor> finer;           // the level below, by tile parity
         int finerLevel = 0, finerShift = 0;                              // its level, log2 of its tile side
@@ -258,6 +264,7 @@ private:
     // Whether a cell of the level below L's or finer lies between samples x0 - 1 .. x1 of that level (its lattice) in
     // the rows of the current texel row's stencil, grown by a kernel's reach.
     bool fineCellNear(Level& L, int64_t x0, int64_t x1) {
+        if (L.finer.empty()) return false;  // level 0: no cell is finer
         const int64_t y0 = 2 * (int64_t(L.rowJ) - 1 - L.reach) - 1, y1 = 2 * (int64_t(L.rowJ) + 2 + L.reach);
         if (L.maskRowJ != L.rowJ) L.maskRowJ = L.rowJ, L.rowMask.clear();
         const int shift = L.finerShift;
@@ -326,8 +333,11 @@ uint64_t copyPyramidTexels(const Scene& scene, const Cascade& c, CascadeTextures
     const influence::SurfacePyramid* p = scene.pyramid();
     if (!p) return 0;
     const double t = std::round(std::log2(c.texelM / p->finestCellM));
-    if (t < 0 || t > p->topLevel() || std::abs(p->spacingM(int(t)) - c.texelM) > 1e-9 * c.texelM) return 0;
-    work.pyramidLevel = int(t);
+    if (t > p->topLevel() || std::abs(std::ldexp(p->finestCellM, int(t)) - c.texelM) > 1e-9 * c.texelM) return 0;
+    // Texels finer than the finest cells (t < 0, on the same ladder) have no level to copy from, but may interpolate
+    // level 0 if it lies within interpolateLevels.
+    if (t < 0 && -t > interpolateLevels) return 0;
+    if (t >= 0) work.pyramidLevel = int(t);
     const size_t channels = size_t(p->channels);
     // A later step of a scenario: the base's elevation, the step's water pyramid's water (pyramid.h); where the
     // water pyramid holds no tile the step draws no water.
@@ -339,13 +349,13 @@ uint64_t copyPyramidTexels(const Scene& scene, const Cascade& c, CascadeTextures
     std::vector<int> mostUp(workers, 0);
     std::vector<std::optional<PyramidInterpolator>> interpolators(workers);
     parallelFor(todo.size(), 16, threads, [&](size_t b, size_t e, unsigned worker) {
-        influence::SurfacePyramid::Cursor samples(*p, int(t));  // neighbouring rows share tiles
-        std::optional<influence::SurfacePyramid::Cursor> waterSamples;
-        if (wp) waterSamples.emplace(*wp, int(t));
+        std::optional<influence::SurfacePyramid::Cursor> samples, waterSamples;  // neighbouring rows share tiles
+        if (t >= 0) samples.emplace(*p, int(t));
+        if (wp && t >= 0) waterSamples.emplace(*wp, int(t));
         // One per worker for the whole cascade: the fine cells it looked up serve its later rows.
         std::optional<PyramidInterpolator>& interpolator = interpolators[worker];
         if (interpolateLevels > 0 && !interpolator) interpolator.emplace(scene, *p, wp, int(t), interpolateLevels);
-        const size_t plane = samples.plane();
+        const size_t plane = samples ? samples->plane() : 0;
         uint64_t nCopied = 0, nInterpolated = 0;  // counted here, added once: per-worker counters share a cache line
         int up = 0;
         for (size_t j = b; j < e; ++j) {
@@ -366,7 +376,7 @@ uint64_t copyPyramidTexels(const Scene& scene, const Cascade& c, CascadeTextures
                 if (gi < 0 || gj < 0) return false;
                 const size_t at = j * size_t(c.n) + size_t(i);
                 const float nan = std::numeric_limits<float>::quiet_NaN();
-                if (const float* s = samples.find(uint64_t(gi), uint64_t(gj))) {
+                if (const float* s = samples ? samples->find(uint64_t(gi), uint64_t(gj)) : nullptr) {
                     if (std::isnan(s[0])) return true;  // outside every cell: no surface, as the kernel path leaves it
                     const float* w = wp ? waterSamples->find(uint64_t(gi), uint64_t(gj)) : channels == 3 ? s + plane : nullptr;
                     put(at, s[0], w ? w[0] : nan, w ? w[plane] : 0.0f);
