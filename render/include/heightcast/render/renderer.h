@@ -85,7 +85,7 @@ struct CascadeStats {
     int pyramidLevel = -1;              // the surface pyramid level whose spacing is texelM, -1 without a pyramid
     uint64_t pyramidTexels = 0;         // visible texels copied from the pyramid's samples (the others: Gaussians)
     uint64_t pyramidInterpolated = 0;   // visible texels interpolated from a coarser level (pyramidInterpolateLevels)
-    int pyramidInterpolatedUp = 0;      // the most levels above pyramidLevel one of them was interpolated from
+    int pyramidInterpolatedUp = 0;      // the most levels above the texels' own one of them was interpolated from
     // Largest |texel - exact surface| of the texels copied from the pyramid [m]: a sample is the exact surface
     // rounded to float once, so half a float ulp of the largest |height|; 0 when none was copied. The texels
     // summed from the kernels in float are not bounded here (tests: within 1 mm of the exact surface), nor are the
