@@ -506,6 +506,15 @@ void cellsUnderTexels(const Grid& g, const Cascade& c, const std::vector<uint8_t
 
 }  // namespace
 
+void CascadeTextures::buildBothMip() {
+    bothMip.resize(terrain.mip.size());
+    for (size_t l = 0; l < terrain.mip.size(); ++l) {
+        const std::vector<float>&a = terrain.mip[l], &b = water.mip[l];
+        bothMip[l].resize(a.size());
+        for (size_t i = 0; i < a.size(); ++i) bothMip[l][i] = std::max(a[i], b[i]);
+    }
+}
+
 void Heightfield::buildMip() {
     // Sides n - 1, then halving to 1. The levels' storage is reused when this heightfield's was (CascadeCache).
     mipSide.clear();

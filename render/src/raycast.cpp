@@ -270,9 +270,11 @@ PatchHit traverse(const CascadeTextures& tex, const Cascade& c, const glm::dvec3
     const double invDu = du != 0 ? 1.0 / du : 0.0, invDv = dv != 0 ? 1.0 / dv : 0.0;
     const int top = int(hf.mip.size()) - 1;
     const int patches = hf.n - 1;
+    const bool both = tex.bothMip.size() == hf.mip.size();  // one load a node (CascadeTextures::bothMip)
     auto maxAt = [&](int level, size_t idx) {
-        const float m = hf.mip[size_t(level)][idx];
-        return walk.water ? std::max(m, tex.water.mip[size_t(level)][idx]) : m;
+        if (!walk.water) return hf.mip[size_t(level)][idx];
+        if (both) return tex.bothMip[size_t(level)][idx];
+        return std::max(hf.mip[size_t(level)][idx], tex.water.mip[size_t(level)][idx]);
     };
     if (!clipToHeights(ray, maxAt(top, 0), zFloor, tIn, tOut)) return PatchHit{};
     // Start three levels below the top (the coarsest nodes are nearly always entered; the walk climbs back

@@ -518,7 +518,7 @@ std::vector<detail::CascadeTextures> approximateCascades(const Scene& scene, con
         clock.restart();
         if (!c.empty()) {
             tex[k].terrain.buildMip();
-            if (tex[k].hasWater) tex[k].water.buildMip();
+            if (tex[k].hasWater) tex[k].water.buildMip(), tex[k].buildBothMip();
         }
         timings.mipmapMs += clock.milliseconds();
         timings.cascades.push_back(cs);

@@ -27,6 +27,10 @@ struct CascadeTextures {
     Heightfield terrain, water;            // water: surface height where wet (depth > min), else -inf
     std::vector<float> depth;              // water depth at texels (0 where dry)
     bool hasWater = false;
+    // With water: the larger of the two max mipmaps, level by level (buildBothMip, after both buildMip): the ray walk
+    // over both surfaces reads one maximum a node instead of two. Empty: the walk reads both.
+    std::vector<std::vector<float>> bothMip;
+    void buildBothMip();
 };
 
 // The last frame's textures of a cascade with the same texel size, side and lattice: this frame's texel (i, j)
