@@ -11,6 +11,7 @@
 #include <cstring>
 #include <limits>
 #include <optional>
+#include <span>
 #include <unordered_map>
 
 #include "heightcast/core/parallel.h"
@@ -292,18 +293,19 @@ private:
         it->second.fill(0);
         const int level = L.finerLevel, shift = L.finerShift;
         const uint32_t x0 = uint32_t(tx) << (shift + level), y0 = uint32_t(ty) << (shift + level);
-        codes_.clear();
         const uint64_t key = mortonEncode(x0, y0);
         const int nodeLevel = std::min(level + shift, scene_.grid().rootLevel);
+        std::span<const uint64_t> codes;  // the node's cells: the grid's own in memory, read into codes_ out of core
         if (scene_.outOfCore()) {
+            codes_.clear();
             scene_.file()->codesInNode(key, nodeLevel, codes_);
+            codes = codes_;
         } else {
             const std::vector<uint64_t>& all = scene_.grid().codes;
             const auto lo = std::lower_bound(all.begin(), all.end(), makeCellCode(key, 0));
-            const auto hi = std::lower_bound(lo, all.end(), makeCellCode(key + mortonSpan(nodeLevel), 0));
-            codes_.assign(lo, hi);
+            codes = {lo, std::lower_bound(lo, all.end(), makeCellCode(key + mortonSpan(nodeLevel), 0))};
         }
-        for (uint64_t code : codes_) {
+        for (uint64_t code : codes) {
             if (codeLevel(code) > level) continue;
             const uint32_t i = (Grid::keyX(code) - x0) >> level, j = (Grid::keyY(code) - y0) >> level;
             it->second[j] |= uint16_t(1u << i);
@@ -312,7 +314,7 @@ private:
     }
 
     const Scene& scene_;
-    std::vector<uint64_t> codes_;
+    std::vector<uint64_t> codes_;  // out of core: a node's codes read from the file
     const influence::SurfacePyramid* water_;
     bool channels3_;
     std::vector<Level> levels_;
