@@ -60,9 +60,17 @@ SurfacePyramid::Cursor::Cursor(const SurfacePyramid& p, int t)
 }
 
 void SurfacePyramid::Cursor::seek(uint64_t i, uint64_t j) {
+    const bool first = tileI_ == ~uint64_t{0};
     tileI_ = i >> shift_, tileJ_ = j >> shift_;
+    if (!first && table_.empty()) table_.resize(kRemembered);
+    Remembered* slot = table_.empty() ? nullptr : &table_[(tileI_ & (kRemembered / 2 - 1)) | (tileJ_ & 1) * (kRemembered / 2)];
+    if (slot && slot->tileI == tileI_ && slot->tileJ == tileJ_) {
+        tile_ = slot->tile;
+        return;
+    }
     const long tile = p_.tileAt(t_, i, j);
     tile_ = tile < 0 ? nullptr : &p_.levels[size_t(t_)].samples[size_t(tile) * size_t(p_.channels) * plane()];
+    if (slot) *slot = {tileI_, tileJ_, tile_};
 }
 
 uint64_t SurfacePyramid::sampleCount() const {

@@ -10,6 +10,7 @@
 #include <cmath>
 #include <cstring>
 #include <limits>
+#include <memory>
 #include <optional>
 #include <span>
 #include <unordered_map>
@@ -212,18 +213,28 @@ private:
         double z = 0, level = 0, share = 0;
     };
     static constexpr size_t kColumns = 8;  // cached columns per level: a texel uses 4 neighbouring ones
+    static constexpr size_t kFineTiles = 512, kRowMasks = 256;  // table sizes (powers of two; a row spans < 128 tiles)
     struct Level {
         bool stored = false;                                            // false: below level 0
         std::vector<influence::SurfacePyramid::Cursor> samples, water;  // by tile parity: a stencil spans up to 2 x 2 tiles
         std::vector<influence::SurfacePyramid::Cursor> finer;           // the level below, by tile parity
         int finerLevel = 0, finerShift = 0;                              // its level, log2 of its tile side
-        // Per stored tile of the level below (ty << 32 | tx): bit i of row j set when a cell of that level or finer lies
-        // between its samples (i, j) and (i + 1, j + 1).
-        std::unordered_map<uint64_t, std::array<uint16_t, 16>> fineCells;
-        // For the current texel row (maskRowJ): per tile column of the level below asked so far, the OR of its
-        // fineCells rows that a kernel from the row's samples reaches.
-        uint64_t maskRowJ = ~uint64_t{0};
-        std::unordered_map<int64_t, int32_t> rowMask;
+        // The last stored tiles of the level below met (a table by tile column and row parity, as the pyramid's
+        // Cursor keeps), each with its fine cells: bit i of row j set when a cell of that level or finer lies between
+        // its samples (i, j) and (i + 1, j + 1). A tile dropped from the table is read again when asked again.
+        struct FineTile {
+            int64_t tx = -1, ty = -1;
+            std::array<uint16_t, 16> rows{};
+        };
+        std::vector<FineTile> fineCells = std::vector<FineTile>(kFineTiles);
+        // For the current row of samples (rowJ): per tile column of the level below (a table by column), the OR of
+        // its fine cells' rows that a kernel from the row's stencil reaches.
+        struct RowMask {
+            int64_t tx = -1;
+            uint64_t rowJ = ~uint64_t{0};
+            uint32_t bits = 0;
+        };
+        std::vector<RowMask> rowMask = std::vector<RowMask>(kRowMasks);
         int64_t reach = 2;  // samples of this level a finer cell's kernel reaches beyond it
         size_t side = 0, plane = 0;
         int shift = 0;
@@ -267,30 +278,31 @@ private:
     bool fineCellNear(Level& L, int64_t x0, int64_t x1) {
         if (L.finer.empty()) return false;  // level 0: no cell is finer
         const int64_t y0 = 2 * (int64_t(L.rowJ) - 1 - L.reach) - 1, y1 = 2 * (int64_t(L.rowJ) + 2 + L.reach);
-        if (L.maskRowJ != L.rowJ) L.maskRowJ = L.rowJ, L.rowMask.clear();
         const int shift = L.finerShift;
         x0 = std::max<int64_t>(x0 - 1, 0);
         for (int64_t tx = x0 >> shift; tx <= x1 >> shift; ++tx) {
-            auto [it, fresh] = L.rowMask.try_emplace(tx, 0);
-            if (fresh) {
+            Level::RowMask& m = L.rowMask[size_t(tx) & (kRowMasks - 1)];
+            if (m.tx != tx || m.rowJ != L.rowJ) {
+                m = {tx, L.rowJ, 0};
                 for (int64_t ty = std::max<int64_t>(y0, 0) >> shift; ty <= y1 >> shift; ++ty) {
                     if (!L.finer[size_t(tx & 1) | size_t(ty & 1) << 1].find(uint64_t(tx) << shift, uint64_t(ty) << shift)) continue;
                     const std::array<uint16_t, 16>& rows = tileCells(L, tx, ty);
                     for (int64_t y = std::max(y0, ty << shift); y <= std::min(y1, ((ty + 1) << shift) - 1); ++y)
-                        it->second |= rows[size_t(y - (ty << shift))];
+                        m.bits |= rows[size_t(y - (ty << shift))];
                 }
             }
             const int64_t lo = std::max(x0, tx << shift) - (tx << shift), hi = std::min(x1, ((tx + 1) << shift) - 1) - (tx << shift);
-            if ((uint32_t(it->second) >> lo) & ((uint32_t{1} << (hi - lo + 1)) - 1)) return true;
+            if ((m.bits >> lo) & ((uint32_t{1} << (hi - lo + 1)) - 1)) return true;
         }
         return false;
     }
 
     // The fine cells of stored tile (tx, ty) of the level below L's (Level::fineCells), from the grid's codes.
     const std::array<uint16_t, 16>& tileCells(Level& L, int64_t tx, int64_t ty) {
-        auto [it, fresh] = L.fineCells.try_emplace(uint64_t(ty) << 32 | uint64_t(tx));
-        if (!fresh) return it->second;
-        it->second.fill(0);
+        Level::FineTile& f = L.fineCells[(size_t(tx) & (kFineTiles / 2 - 1)) | size_t(ty & 1) * (kFineTiles / 2)];
+        if (f.tx == tx && f.ty == ty) return f.rows;
+        f.tx = tx, f.ty = ty;
+        f.rows.fill(0);
         const int level = L.finerLevel, shift = L.finerShift;
         const uint32_t x0 = uint32_t(tx) << (shift + level), y0 = uint32_t(ty) << (shift + level);
         const uint64_t key = mortonEncode(x0, y0);
@@ -308,9 +320,9 @@ private:
         for (uint64_t code : codes) {
             if (codeLevel(code) > level) continue;
             const uint32_t i = (Grid::keyX(code) - x0) >> level, j = (Grid::keyY(code) - y0) >> level;
-            it->second[j] |= uint16_t(1u << i);
+            f.rows[j] |= uint16_t(1u << i);
         }
-        return it->second;
+        return f.rows;
     }
 
     const Scene& scene_;
@@ -349,57 +361,85 @@ uint64_t copyPyramidTexels(const Scene& scene, const Cascade& c, CascadeTextures
     const unsigned workers = resolveThreads(threads);
     std::vector<uint64_t> copied(workers, 0), interpolated(workers, 0);
     std::vector<int> mostUp(workers, 0);
-    std::vector<std::optional<PyramidInterpolator>> interpolators(workers);
+    // Each on its own allocation: side by side in one vector, one worker's writes (out of core, its codes_) would
+    // evict the other's reads of the same cache line.
+    std::vector<std::unique_ptr<PyramidInterpolator>> interpolators(workers);
     parallelFor(todo.size(), 16, threads, [&](size_t b, size_t e, unsigned worker) {
         std::optional<influence::SurfacePyramid::Cursor> samples, waterSamples;  // neighbouring rows share tiles
         if (t >= 0) samples.emplace(*p, int(t));
         if (wp && t >= 0) waterSamples.emplace(*wp, int(t));
         // One per worker for the whole cascade: the fine cells it looked up serve its later rows.
-        std::optional<PyramidInterpolator>& interpolator = interpolators[worker];
-        if (interpolateLevels > 0 && !interpolator) interpolator.emplace(scene, *p, wp, int(t), interpolateLevels);
+        std::unique_ptr<PyramidInterpolator>& interpolator = interpolators[worker];
+        if (interpolateLevels > 0 && !interpolator) interpolator = std::make_unique<PyramidInterpolator>(scene, *p, wp, int(t), interpolateLevels);
         const size_t plane = samples ? samples->plane() : 0;
         uint64_t nCopied = 0, nInterpolated = 0;  // counted here, added once: per-worker counters share a cache line
         int up = 0;
+        const uint64_t sideMask = samples ? samples->side() - 1 : 0;
         for (size_t j = b; j < e; ++j) {
             Todo& span = todo[j];
             const double gj = j0 + double(j);
-            // Writes texel `at` from its channels (NaN level: dry), with the water rule.
-            auto put = [&](size_t at, float z, float lvl, float share) {
-                tex.terrain.h[at] = z;
-                if (!std::isnan(lvl) && double(share) >= influence::kWetShareMin) {
-                    const float d = lvl - z;
-                    if (d > 0) tex.depth[at] = d;
-                    if (d > minDepth) tex.water.h[at] = lvl;
-                }
-            };
-            // Fills texel i if the pyramid holds its sample, or interpolates it; false if neither.
-            auto fill = [&](int i) {
-                const double gi = i0 + double(i);
-                if (gi < 0 || gj < 0) return false;
-                const size_t at = j * size_t(c.n) + size_t(i);
-                const float nan = std::numeric_limits<float>::quiet_NaN();
-                if (const float* s = samples ? samples->find(uint64_t(gi), uint64_t(gj)) : nullptr) {
-                    if (std::isnan(s[0])) return true;  // outside every cell: no surface, as the kernel path leaves it
-                    const float* w = wp ? waterSamples->find(uint64_t(gi), uint64_t(gj)) : channels == 3 ? s + plane : nullptr;
-                    put(at, s[0], w ? w[0] : nan, w ? w[plane] : 0.0f);
-                    ++nCopied;
-                    return true;
-                }
-                if (!interpolator) return false;
-                const std::optional<PyramidInterpolator::Value> v = interpolator->at(uint64_t(gi), uint64_t(gj));
-                if (!v) return false;
-                put(at, v->z, v->level, v->share);
-                ++nInterpolated;
-                up = std::max(up, v->up);
-                return true;
-            };
+            const size_t rowAt = j * size_t(c.n);
             for (auto [lo, hi] : {std::pair<int*, int*>{&span.a0, &span.a1}, {&span.b0, &span.b1}}) {
-                int first = *hi + 1, last = *lo - 1;
-                for (int i = *lo; i <= *hi; ++i) {
-                    if (fill(i)) {
-                        copiedMask[j * size_t(c.n) + size_t(i)] = 1;
-                    } else {
-                        first = std::min(first, i), last = i;
+                int first = *hi + 1, last = *lo - 1;  // the texels left to the kernels
+                auto leave = [&](int i) { first = std::min(first, i), last = i; };
+                for (int i = *lo; i <= *hi;) {
+                    const double gi = i0 + double(i);
+                    if (gi < 0 || gj < 0) {  // outside the domain's lattice
+                        leave(i++);
+                        continue;
+                    }
+                    // The run of texels in one tile of the cascade's level (to the row's end where none is stored).
+                    const int end = samples ? std::min(*hi, i + int(sideMask - (uint64_t(gi) & sideMask))) : *hi;
+                    const float* s = samples ? samples->find(uint64_t(gi), uint64_t(gj)) : nullptr;
+                    if (s) {  // copies: the tile's samples side by side, with the water rule of surface.h
+                        const float* w = wp ? waterSamples->find(uint64_t(gi), uint64_t(gj)) : channels == 3 ? s + plane : nullptr;
+                        // Branch-free over raw pointers, so that it vectorises: a store through the mask's uint8_t may
+                        // alias anything, and through the vectors would have every pointer reloaded per texel.
+                        const int len = end - i + 1;
+                        const size_t at = rowAt + size_t(i);
+                        std::memset(&copiedMask[at], 1, size_t(len));
+                        float* __restrict h = &tex.terrain.h[at];
+                        int defined = 0;
+                        if (!w) {
+                            for (int k = 0; k < len; ++k) {
+                                const bool ok = !std::isnan(s[k]);  // NaN: outside every cell, no surface (as the kernels leave it)
+                                h[k] = ok ? s[k] : h[k];
+                                defined += ok;
+                            }
+                        } else {
+                            float* __restrict depth = &tex.depth[at];
+                            float* __restrict water = &tex.water.h[at];
+                            const float* __restrict share = w + plane;
+                            const float wetShare = float(influence::kWetShareMin);
+                            for (int k = 0; k < len; ++k) {
+                                const float z = s[k], level = w[k], d = level - z;
+                                const bool ok = !std::isnan(z), wet = ok && !std::isnan(level) && share[k] >= wetShare;
+                                h[k] = ok ? z : h[k];
+                                depth[k] = wet && d > 0 ? d : depth[k];
+                                water[k] = wet && d > minDepth ? level : water[k];
+                                defined += ok;
+                            }
+                        }
+                        nCopied += uint64_t(defined);
+                        i = end + 1;
+                        continue;
+                    }
+                    for (; i <= end; ++i) {  // finer than the level stored here: interpolated, or left to the kernels
+                        const std::optional<PyramidInterpolator::Value> v =
+                            interpolator ? interpolator->at(uint64_t(i0 + double(i)), uint64_t(gj)) : std::nullopt;
+                        if (!v) {
+                            leave(i);
+                            continue;
+                        }
+                        const size_t at = rowAt + size_t(i);
+                        copiedMask[at] = 1;
+                        tex.terrain.h[at] = v->z;
+                        ++nInterpolated;
+                        up = std::max(up, v->up);
+                        if (std::isnan(v->level) || double(v->share) < influence::kWetShareMin) continue;
+                        const float d = v->level - v->z;
+                        if (d > 0) tex.depth[at] = d;
+                        if (d > minDepth) tex.water.h[at] = v->level;
                     }
                 }
                 *lo = first, *hi = last;

@@ -87,8 +87,10 @@ public:
     uint64_t sampleCount() const;
     uint64_t bytes() const;
 
-    // Reads the samples of one level at lattice points near each other, remembering the tile of the last read:
-    // a read in that tile costs no search (tileAt is a binary search over the level's tiles). One per thread.
+    // Reads the samples of one level at lattice points near each other, remembering the tile of the last read (a
+    // read in that tile costs no search: tileAt is a binary search over the level's tiles) and the last tiles met
+    // along two rows of tiles (a table of kRemembered, by tile column and row parity): rows of texels walk the same
+    // tiles 16 times, and a stencil alternates between neighbouring tiles. One per thread.
     class Cursor {
     public:
         Cursor(const SurfacePyramid& p, int t);
@@ -103,12 +105,18 @@ public:
 
     private:
         void seek(uint64_t i, uint64_t j);  // remembers the tile holding (i, j)
+        static constexpr size_t kRemembered = 256;  // 128 tile columns (a 1024-texel row spans 64) x 2 row parities
+        struct Remembered {
+            uint64_t tileI = ~uint64_t{0}, tileJ = ~uint64_t{0};
+            const float* tile = nullptr;
+        };
         const SurfacePyramid& p_;
         int t_;
         size_t side_;  // a power of two (the domain's side is one)
         int shift_;
         uint64_t tileI_ = ~uint64_t{0}, tileJ_ = ~uint64_t{0};
         const float* tile_ = nullptr;  // the remembered tile's first sample, nullptr if not stored
+        std::vector<Remembered> table_;  // kRemembered entries once a second tile is sought
     };
 
     // Owned storage (built) or a mapped file (read) behind the spans.
