@@ -6,6 +6,8 @@
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <optional>
+#include <random>
 #include <set>
 #include <unistd.h>
 #include <cstring>
@@ -15,6 +17,7 @@
 #include "heightcast/influence/influence.h"
 #include "heightcast/influence/pyramid.h"
 #include "heightcast/influence/surface.h"
+#include "heightcast/ingest/build.h"
 #include "test_data.h"
 #include "test_grids.h"
 
@@ -95,6 +98,53 @@ TEST(SurfacePyramid, TilesAreStoredExactlyWhereCellsAreAsFineAsTheSpacing) {
     // The grid's 0.75 m cells fill a 16 x 256 px strip: few level-0 tiles, not the whole 640 x 512 raster's 1280.
     EXPECT_GT(finestTiles, 0u);
     EXPECT_LT(finestTiles, 100u);
+}
+
+// SurfacePyramid::Cursor (which remembers the tiles of two tile rows in a table by column and row parity) reads what
+// sample() (a binary search per read) does, at every level. The grid is a strip 2304 px wide whose rough band keeps
+// finest cells along its whole width: 256 tile columns at level 0, so tiles 128 columns apart share a table slot.
+// Rows are walked whole and met again after the table moved on, reads alternate between rows of tiles, and columns
+// are walked too. A stale or aliased entry would return another tile's sample or miss a stored one.
+TEST(SurfacePyramid, CursorReadsWhatSampleReadsWalkingRowsAndColumns) {
+    hc::ingest::Raster r;
+    r.width = 2304;
+    r.height = 64;
+    r.pixelSizeM = 1;
+    r.westWorld = 1000;
+    r.northWorld = 5000;
+    r.values.resize(r.width * r.height);
+    std::mt19937 rng(5);
+    for (size_t row = 0; row < r.height; ++row)
+        for (size_t col = 0; col < r.width; ++col)
+            r.at(col, row) = row >= 16 && row < 32 ? 50.0f + float(rng() % 1000) * 0.01f : 40.0f + 0.002f * float(col);
+    hc::ingest::BuildOptions b;
+    b.toleranceM = 0.5;
+    const Grid g = hc::ingest::buildGrid(r, nullptr, b);
+    const SurfacePyramid p = hc::influence::buildSurfacePyramid(g, KernelParams{});
+    ASSERT_GT(p.levels[0].tileCount(), 128u) << "the table's slots must be shared for this test to mean anything";
+    uint64_t stored = 0, reads = 0;
+    for (int t = 0; t <= p.topLevel(); ++t) {
+        const uint64_t side = uint64_t{1} << (g.rootLevel - t), rows = std::min<uint64_t>(side, 160);  // the data and above
+        SurfacePyramid::Cursor byRow(p, t), byColumn(p, t);
+        auto check = [&](SurfacePyramid::Cursor& c, uint64_t i, uint64_t j) {
+            const float* got = c.find(i, j);
+            const std::optional<float> want = p.sample(t, i, j, PyramidChannel::Elevation);
+            ++reads;
+            ASSERT_EQ(got != nullptr, want.has_value()) << "level " << t << " sample " << i << "," << j;
+            if (!got) return;
+            ++stored;
+            ASSERT_EQ(std::bit_cast<uint32_t>(*got), std::bit_cast<uint32_t>(*want)) << "level " << t << " sample " << i << "," << j;
+        };
+        // Every 3rd row whole, each read followed by one 2 tile rows further (another row parity, then the same);
+        // every 3rd column whole.
+        for (uint64_t j = 0; j < rows; j += 3)
+            for (uint64_t i = 0; i < side; ++i) check(byRow, i, j), check(byRow, i, (j + 32) % rows);
+        for (uint64_t i = 0; i < side; i += 3)
+            for (uint64_t j = 0; j < rows; ++j) check(byColumn, i, j);
+        if (::testing::Test::HasFatalFailure()) return;
+    }
+    EXPECT_GT(stored, p.sampleCount() / 4) << "three passes over a third of the rows or columns each";
+    EXPECT_GT(reads, 2 * stored) << "the walk should also cross tiles that are not stored";
 }
 
 // parentErrorM is the largest |sample - bilinear of the parent's samples| over the tile: recomputed here from
