@@ -176,6 +176,41 @@ size_t expectMissesAreSky(const Frame& f) {
     return misses;
 }
 
+// The max mipmap (Heightfield::buildMip): every node of every level holds the largest height of the texels under its
+// patches, found here by brute force, and the combined mipmap (buildBothMip) the larger of terrain's and water's.
+// Sides with odd levels (patches 1, 7, 8, 9, 16, 17, 99, 256), texels with holes (-inf).
+TEST(Render, MaxMipmapHoldsTheLargestHeightUnderEveryNode) {
+    std::mt19937 rng(11);
+    for (int n : {2, 8, 9, 10, 17, 18, 100, 257}) {
+        detail::CascadeTextures tex;
+        tex.hasWater = true;
+        for (detail::Heightfield* hf : {&tex.terrain, &tex.water}) {
+            hf->n = n;
+            hf->h.resize(size_t(n) * size_t(n));
+            for (float& v : hf->h) v = rng() % 10 == 0 ? -INFINITY : float(rng() % 100000) * 0.01f;
+            hf->buildMip();
+        }
+        tex.buildBothMip();
+        const detail::Heightfield& hf = tex.terrain;
+        ASSERT_EQ(hf.mipSide.front(), n - 1);
+        ASSERT_EQ(hf.mipSide.back(), 1);
+        for (size_t l = 0; l < hf.mip.size(); ++l) {
+            const int side = hf.mipSide[l], span = 1 << l;
+            ASSERT_EQ(hf.mip[l].size(), size_t(side) * size_t(side)) << "level " << l;
+            for (int iv = 0; iv < side; ++iv)
+                for (int iu = 0; iu < side; ++iu) {
+                    const size_t at = size_t(iv) * size_t(side) + size_t(iu);
+                    float want = -INFINITY;  // the texels under patches [iu span, (iu + 1) span) (clipped), likewise v
+                    for (int j = iv * span; j <= std::min((iv + 1) * span, n - 1); ++j)
+                        for (int i = iu * span; i <= std::min((iu + 1) * span, n - 1); ++i)
+                            want = std::max(want, hf.h[size_t(j) * size_t(n) + size_t(i)]);
+                    ASSERT_EQ(hf.mip[l][at], want) << "n " << n << " level " << l << " node " << iu << "," << iv;
+                    ASSERT_EQ(tex.bothMip[l][at], std::max(want, tex.water.mip[l][at])) << "n " << n << " level " << l;
+                }
+        }
+    }
+}
+
 TEST(Render, ApproximationEqualsTheExactSurfaceAtTexels) {
     // One cascade over the LiDAR grid, seen straight down from 1000 m: every ray hits, and every hit lies on the
     // exact surface within the bilinear interpolation bound of the texels around it (checkHits). The texels
