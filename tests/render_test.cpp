@@ -178,19 +178,20 @@ size_t expectMissesAreSky(const Frame& f) {
 
 // The max mipmap (Heightfield::buildMip): every node of every level holds the largest height of the texels under its
 // patches, found here by brute force, and the combined mipmap (buildBothMip) the larger of terrain's and water's.
-// Sides with odd levels (patches 1, 7, 8, 9, 16, 17, 99, 256), texels with holes (-inf).
+// Sides with odd levels (patches 1, 7, 8, 9, 16, 17, 99, 256, 399: the last on several workers), texels with holes
+// (-inf), one worker and all.
 TEST(Render, MaxMipmapHoldsTheLargestHeightUnderEveryNode) {
     std::mt19937 rng(11);
-    for (int n : {2, 8, 9, 10, 17, 18, 100, 257}) {
+    for (auto [n, threads] : {std::pair{2, 0u}, {8, 0u}, {9, 0u}, {10, 0u}, {17, 0u}, {18, 0u}, {100, 0u}, {257, 0u}, {257, 1u}, {400, 0u}}) {
         detail::CascadeTextures tex;
         tex.hasWater = true;
         for (detail::Heightfield* hf : {&tex.terrain, &tex.water}) {
             hf->n = n;
             hf->h.resize(size_t(n) * size_t(n));
             for (float& v : hf->h) v = rng() % 10 == 0 ? -INFINITY : float(rng() % 100000) * 0.01f;
-            hf->buildMip();
+            hf->buildMip(threads);
         }
-        tex.buildBothMip();
+        tex.buildBothMip(threads);
         const detail::Heightfield& hf = tex.terrain;
         ASSERT_EQ(hf.mipSide.front(), n - 1);
         ASSERT_EQ(hf.mipSide.back(), 1);

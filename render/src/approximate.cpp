@@ -548,16 +548,18 @@ void cellsUnderTexels(const Grid& g, const Cascade& c, const std::vector<uint8_t
 
 }  // namespace
 
-void CascadeTextures::buildBothMip() {
+void CascadeTextures::buildBothMip(unsigned threads) {
     bothMip.resize(terrain.mip.size());
     for (size_t l = 0; l < terrain.mip.size(); ++l) {
         const std::vector<float>&a = terrain.mip[l], &b = water.mip[l];
         bothMip[l].resize(a.size());
-        for (size_t i = 0; i < a.size(); ++i) bothMip[l][i] = std::max(a[i], b[i]);
+        parallelFor(a.size(), a.size() < kMipParallelNodes ? a.size() : size_t{1} << 16, threads, [&](size_t begin, size_t end, unsigned) {
+            for (size_t i = begin; i < end; ++i) bothMip[l][i] = std::max(a[i], b[i]);
+        });
     }
 }
 
-void Heightfield::buildMip() {
+void Heightfield::buildMip(unsigned threads) {
     // Sides n - 1, then halving to 1. The levels' storage is reused when this heightfield's was (CascadeCache).
     mipSide.clear();
     for (int side = n - 1;; side = (side + 1) / 2) {
@@ -565,25 +567,35 @@ void Heightfield::buildMip() {
         if (side <= 1) break;
     }
     mip.resize(mipSide.size());
-    const int side0 = mipSide[0];
-    std::vector<float>& level = mip[0];
-    level.resize(size_t(side0) * size_t(side0));
-    for (int j = 0; j < side0; ++j)
-        for (int i = 0; i < side0; ++i) {
-            const float* r0 = &h[size_t(j) * size_t(n) + size_t(i)];
-            const float* r1 = r0 + n;
-            level[size_t(j) * size_t(side0) + size_t(i)] = std::max(std::max(r0[0], r0[1]), std::max(r1[0], r1[1]));
-        }
-    for (size_t l = 1; l < mip.size(); ++l) {
-        const int side = mipSide[l - 1], next = mipSide[l];
-        std::vector<float>& up = mip[l];
-        up.assign(size_t(next) * size_t(next), -std::numeric_limits<float>::infinity());
-        const std::vector<float>& lo = mip[l - 1];
-        for (int j = 0; j < side; ++j)
-            for (int i = 0; i < side; ++i) {
-                float& m = up[size_t(j / 2) * size_t(next) + size_t(i / 2)];
-                m = std::max(m, lo[size_t(j) * size_t(side) + size_t(i)]);
+    // Row by row, each node the largest of the four texels around its patch (level 0) or of its children (a child
+    // past the lower level's side is none); the rows of the large levels on the workers.
+    for (size_t l = 0; l < mip.size(); ++l) {
+        const int side = mipSide[l];
+        std::vector<float>& level = mip[l];
+        level.resize(size_t(side) * size_t(side));
+        const size_t rowsPerChunk = size_t(side) * size_t(side) < kMipParallelNodes ? size_t(side) : 16;
+        parallelFor(size_t(side), rowsPerChunk, threads, [&](size_t b, size_t e, unsigned) {
+            for (size_t j = b; j < e; ++j) {
+                float* out = &level[j * size_t(side)];
+                if (l == 0) {
+                    const float* r0 = &h[j * size_t(n)];
+                    const float* r1 = r0 + n;
+                    for (int i = 0; i < side; ++i) out[i] = std::max(std::max(r0[i], r0[i + 1]), std::max(r1[i], r1[i + 1]));
+                    continue;
+                }
+                const int lower = mipSide[l - 1];
+                const std::vector<float>& lo = mip[l - 1];
+                const float* c0 = &lo[2 * j * size_t(lower)];
+                const float* c1 = 2 * j + 1 < size_t(lower) ? c0 + lower : nullptr;
+                for (int i = 0; i < side; ++i) {
+                    const int a = 2 * i, b1 = 2 * i + 1;
+                    float m = c0[a];
+                    if (b1 < lower) m = std::max(m, c0[b1]);
+                    if (c1) m = std::max(m, b1 < lower ? std::max(c1[a], c1[b1]) : c1[a]);
+                    out[i] = m;
+                }
             }
+        });
     }
 }
 

@@ -517,8 +517,8 @@ std::vector<detail::CascadeTextures> approximateCascades(const Scene& scene, con
         timings.approximationMs += cs.approximationMs;
         clock.restart();
         if (!c.empty()) {
-            tex[k].terrain.buildMip();
-            if (tex[k].hasWater) tex[k].water.buildMip(), tex[k].buildBothMip();
+            tex[k].terrain.buildMip(options.threads);
+            if (tex[k].hasWater) tex[k].water.buildMip(options.threads), tex[k].buildBothMip(options.threads);
         }
         timings.mipmapMs += clock.milliseconds();
         timings.cascades.push_back(cs);

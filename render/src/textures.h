@@ -20,8 +20,11 @@ struct Heightfield {
     std::vector<float> h;                  // n * n [m, local z]
     std::vector<std::vector<float>> mip;   // mip[0]: (n-1)^2 patch maxima, then halving to 1 x 1
     std::vector<int> mipSide;              // side of each mip level
-    void buildMip();
+    void buildMip(unsigned threads);  // the rows of its large levels on `threads` workers (0 = all cores)
 };
+
+// Levels of at least this many nodes are built on several workers (a parallelFor starts its threads each call).
+constexpr size_t kMipParallelNodes = size_t{1} << 16;
 
 struct CascadeTextures {
     Heightfield terrain, water;            // water: surface height where wet (depth > min), else -inf
@@ -30,7 +33,7 @@ struct CascadeTextures {
     // With water: the larger of the two max mipmaps, level by level (buildBothMip, after both buildMip): the ray walk
     // over both surfaces reads one maximum a node instead of two. Empty: the walk reads both.
     std::vector<std::vector<float>> bothMip;
-    void buildBothMip();
+    void buildBothMip(unsigned threads);
 };
 
 // The last frame's textures of a cascade with the same texel size, side and lattice: this frame's texel (i, j)
