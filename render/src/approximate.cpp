@@ -168,39 +168,65 @@ public:
         int up;                 // levels above the cascade's
     };
 
-    // The interpolated channels at lattice point (gi, gj) of the cascade's level.
-    std::optional<Value> at(uint64_t gi, uint64_t gj) {
-        for (int up = 1; up <= int(levels_.size()); ++up) {
+    // Interpolates lattice points gi0 .. gi0 + count - 1 of row gj of the cascade's level: out[k] where filled[k].
+    // Each point takes the first level, going up, where the samples of its stencil's non-zero weights are all stored;
+    // it is refused (left to the kernels) where one of them is undefined, where wet and dry columns meet, where the
+    // stencil would leave the domain, or where no level up to maxUp has them. A level's columns are taken once for the
+    // run, from the column cache.
+    void run(uint64_t gi0, int count, uint64_t gj, Value* out, uint8_t* filled) {
+        enum : uint8_t { kPending, kDone, kRefused };
+        state_.assign(size_t(count), kPending);
+        int pending = count;
+        for (int up = 1; up <= int(levels_.size()) && pending > 0; ++up) {
             Level& L = levels_[size_t(up - 1)];
             if (!L.stored) continue;
-            const uint64_t mask = (uint64_t{1} << up) - 1;
-            const uint64_t I = gi >> up, J = gj >> up;
-            if (I == 0 || J == 0) return std::nullopt;  // the stencil would leave the domain
+            const uint64_t mask = (uint64_t{1} << up) - 1, J = gj >> up;
+            if (J == 0) break;  // the stencil would leave the domain: every point left is refused
             if (J != L.rowJ || (gj & mask) != L.rowF) {  // a new texel row at this level: new vertical weights
                 L.rowJ = J, L.rowF = gj & mask, ++L.stamp;
             }
             const std::array<double, 4>& wy = L.weights[size_t(L.rowF)];
-            const std::array<double, 4>& wx = L.weights[size_t(gi & mask)];
-            double z = 0, level = 0, share = 0;
-            int wet = 0, dry = 0;
-            bool missing = false;
-            for (int c = 0; c < 4; ++c) {
-                if (wx[c] == 0) continue;
-                const Column& col = column(L, I - 1 + uint64_t(c), wy);
-                if (col.kind == kUndefined) return std::nullopt;  // a hole's edge, or a flood's: the kernels decide
-                if (col.kind == kMissing) {
-                    missing = true;
-                    break;
+            int first = count, last = -1;  // the pending points
+            for (int k = 0; k < count; ++k) {
+                if (state_[size_t(k)] != kPending) continue;
+                if (((gi0 + uint64_t(k)) >> up) == 0) {  // the stencil would leave the domain
+                    state_[size_t(k)] = kRefused, --pending;
+                    continue;
                 }
-                wet += col.kind == kWet, dry += col.kind == kDry;
-                z += wx[c] * col.z, level += wx[c] * col.level, share += wx[c] * col.share;
+                first = std::min(first, k), last = k;
             }
-            if (missing) continue;
-            if (wet && dry) return std::nullopt;  // a flood's edge
-            const float nan = std::numeric_limits<float>::quiet_NaN();
-            return Value{float(z), wet ? float(level) : nan, wet ? float(share) : 0.0f, up};
+            if (last < 0) break;
+            // Columns I - 1 .. I + 2 of every pending point, taken once (a copy: the cache holds only kColumns).
+            const uint64_t c0 = ((gi0 + uint64_t(first)) >> up) - 1, c1 = ((gi0 + uint64_t(last)) >> up) + 2;
+            columns_.resize(size_t(c1 - c0 + 1));
+            for (uint64_t i = c0; i <= c1; ++i) columns_[size_t(i - c0)] = column(L, i, wy);
+            for (int k = first; k <= last; ++k) {
+                if (state_[size_t(k)] != kPending) continue;
+                const uint64_t gi = gi0 + uint64_t(k);
+                const Column* col = &columns_[size_t((gi >> up) - 1 - c0)];
+                const std::array<double, 4>& wx = L.weights[size_t(gi & mask)];
+                double z = 0, level = 0, share = 0;
+                int wet = 0, dry = 0;
+                bool missing = false, refused = false;
+                for (int c = 0; c < 4 && !missing && !refused; ++c) {
+                    if (wx[c] == 0) continue;
+                    refused = col[c].kind == kUndefined;  // a hole's edge, or a flood's: the kernels decide
+                    missing = col[c].kind == kMissing;    // not stored at this level: the next one up
+                    wet += col[c].kind == kWet, dry += col[c].kind == kDry;
+                    z += wx[c] * col[c].z, level += wx[c] * col[c].level, share += wx[c] * col[c].share;
+                }
+                if (missing) continue;
+                --pending;
+                if (refused || (wet && dry)) {  // wet and dry: a flood's edge
+                    state_[size_t(k)] = kRefused;
+                    continue;
+                }
+                state_[size_t(k)] = kDone;
+                const float nan = std::numeric_limits<float>::quiet_NaN();
+                out[k] = Value{float(z), wet ? float(level) : nan, wet ? float(share) : 0.0f, up};
+            }
         }
-        return std::nullopt;
+        for (int k = 0; k < count; ++k) filled[k] = state_[size_t(k)] == kDone;
     }
 
 private:
@@ -326,6 +352,8 @@ private:
     }
 
     const Scene& scene_;
+    std::vector<uint8_t> state_;    // run(): per point, pending, done or refused
+    std::vector<Column> columns_;   // run(): the columns of one level for the run
     std::vector<uint64_t> codes_;  // out of core: a node's codes read from the file
     const influence::SurfacePyramid* water_;
     bool channels3_;
@@ -375,6 +403,8 @@ uint64_t copyPyramidTexels(const Scene& scene, const Cascade& c, CascadeTextures
         uint64_t nCopied = 0, nInterpolated = 0;  // counted here, added once: per-worker counters share a cache line
         int up = 0;
         const uint64_t sideMask = samples ? samples->side() - 1 : 0;
+        std::vector<PyramidInterpolator::Value> values;  // a run's interpolated texels
+        std::vector<uint8_t> filled;
         for (size_t j = b; j < e; ++j) {
             Todo& span = todo[j];
             const double gj = j0 + double(j);
@@ -424,22 +454,27 @@ uint64_t copyPyramidTexels(const Scene& scene, const Cascade& c, CascadeTextures
                         i = end + 1;
                         continue;
                     }
-                    for (; i <= end; ++i) {  // finer than the level stored here: interpolated, or left to the kernels
-                        const std::optional<PyramidInterpolator::Value> v =
-                            interpolator ? interpolator->at(uint64_t(i0 + double(i)), uint64_t(gj)) : std::nullopt;
-                        if (!v) {
+                    // Finer than the level stored here: interpolated, or left to the kernels.
+                    const int len = end - i + 1;
+                    if (interpolator) {
+                        values.resize(size_t(len)), filled.resize(size_t(len));
+                        interpolator->run(uint64_t(i0 + double(i)), len, uint64_t(gj), values.data(), filled.data());
+                    }
+                    for (int k = 0; k < len; ++k, ++i) {
+                        if (!interpolator || !filled[size_t(k)]) {
                             leave(i);
                             continue;
                         }
+                        const PyramidInterpolator::Value& v = values[size_t(k)];
                         const size_t at = rowAt + size_t(i);
                         copiedMask[at] = 1;
-                        tex.terrain.h[at] = v->z;
+                        tex.terrain.h[at] = v.z;
                         ++nInterpolated;
-                        up = std::max(up, v->up);
-                        if (std::isnan(v->level) || double(v->share) < influence::kWetShareMin) continue;
-                        const float d = v->level - v->z;
+                        up = std::max(up, v.up);
+                        if (std::isnan(v.level) || double(v.share) < influence::kWetShareMin) continue;
+                        const float d = v.level - v.z;
                         if (d > 0) tex.depth[at] = d;
-                        if (d > minDepth) tex.water.h[at] = v->level;
+                        if (d > minDepth) tex.water.h[at] = v.level;
                     }
                 }
                 *lo = first, *hi = last;
