@@ -127,7 +127,7 @@ inline void catmullRom(double f, double w[4]) {
 // one spacing wide, kernel.h). Such cells lie only in the stored tiles of the level below; their positions come from
 // the grid's codes in those tiles' nodes (in memory or from the file), kept per worker in a table of recent tiles.
 // Undefined samples (holes), a water level defined at some samples only (a flood's edge) and finer cells near are left
-// to the kernels: the answer is nullopt, as it is where no such level is stored.
+// to the kernels: such texels are not filled, as where no such level is stored.
 //
 // Separably, row by row: a texel row lies at one height between two rows of samples, so each column of 4 samples is
 // blended vertically once per texel row (and kept in a small cache), and a texel blends 4 columns. A texel of level
