@@ -106,17 +106,10 @@ TEST(SurfacePyramid, TilesAreStoredExactlyWhereCellsAreAsFineAsTheSpacing) {
 // Rows are walked whole and met again after the table moved on, reads alternate between rows of tiles, and columns
 // are walked too. A stale or aliased entry would return another tile's sample or miss a stored one.
 TEST(SurfacePyramid, CursorReadsWhatSampleReadsWalkingRowsAndColumns) {
-    hc::ingest::Raster r;
-    r.width = 2304;
-    r.height = 64;
-    r.pixelSizeM = 1;
-    r.westWorld = 1000;
-    r.northWorld = 5000;
-    r.values.resize(r.width * r.height);
     std::mt19937 rng(5);
-    for (size_t row = 0; row < r.height; ++row)
-        for (size_t col = 0; col < r.width; ++col)
-            r.at(col, row) = row >= 16 && row < 32 ? 50.0f + float(rng() % 1000) * 0.01f : 40.0f + 0.002f * float(col);
+    const hc::ingest::Raster r = hc::test::makeRaster(2304, 64, 1, 1000, 5000, [&](size_t col, size_t row) {
+        return row >= 16 && row < 32 ? 50.0f + float(rng() % 1000) * 0.01f : 40.0f + 0.002f * float(col);
+    });
     hc::ingest::BuildOptions b;
     b.toleranceM = 0.5;
     const Grid g = hc::ingest::buildGrid(r, nullptr, b);

@@ -804,15 +804,9 @@ TEST(RenderExtremes, ShiftedBy1e7MetresLooksTheSame) {
 }
 
 TEST(RenderExtremes, CellSizeRatio128AndSingleCell) {
-    hc::ingest::Raster r;
-    r.width = 512;
-    r.height = 512;
-    r.pixelSizeM = 0.75;
-    r.northWorld = 384;
-    r.values.resize(r.width * r.height);
-    for (size_t row = 0; row < r.height; ++row)
-        for (size_t col = 0; col < r.width; ++col)
-            r.at(col, row) = (col > 240 && col < 260) ? 20.0f + float((row * 7 + col * 13) % 17) * 0.1f : 10.0f + 0.01f * float(col);
+    const hc::ingest::Raster r = hc::test::makeRaster(512, 512, 0.75, 0, 384, [](size_t col, size_t row) {
+        return (col > 240 && col < 260) ? 20.0f + float((row * 7 + col * 13) % 17) * 0.1f : 10.0f + 0.01f * float(col);
+    });
     hc::ingest::BuildOptions b;
     b.maxLevel = 7;
     World w;
