@@ -277,48 +277,63 @@ PatchHit traverse(const CascadeTextures& tex, const Cascade& c, const glm::dvec3
         return std::max(hf.mip[size_t(level)][idx], tex.water.mip[size_t(level)][idx]);
     };
     if (!clipToHeights(ray, maxAt(top, 0), zFloor, tIn, tOut)) return PatchHit{};
+    // The walk carries its node as integers (level, iu, iv) and steps to the neighbour across the edge the ray
+    // leaves by, as a grid walk does; each node's exit follows from its integers. It used to find each node
+    // again from the ray's point a hair past t, a chain from float to int and back through every visit; now
+    // only a descent reads the ray's point, to pick the child it enters (5-12 % faster, BENCHMARKS.md).
     // Start three levels below the top (the coarsest nodes are nearly always entered; the walk climbs back
     // when it leaves a parent): 1-2 % faster than starting at the top, no more (BENCHMARKS.md).
     int level = std::max(0, top - 3);
-    double t = tIn;
-    const double tiny = 1e-9 * (1.0 + std::abs(tOut)) ;
-    for (int guard = 0; guard < 1 << 20 && t <= tOut; ++guard) {
-        // The node of this level under the ray a hair past t (so a node boundary belongs to the node
-        // the ray moves into).
+    const double tiny = 1e-9 * (1.0 + std::abs(tOut));
+    // The patch under the ray a hair past t (so a node boundary belongs to the node the ray moves into);
+    // false once that is outside the texture.
+    auto patchAfter = [&](double t, int& pu, int& pv) {
         const double tp = std::min(t + tiny, tOut);
-        const double pu = u0 + du * tp, pv = v0 + dv * tp;
-        const int span = 1 << level;
+        const double u = u0 + du * tp, v = v0 + dv * tp;
+        if (!(u >= 0 && v >= 0 && u < patches && v < patches)) return false;
+        pu = int(u), pv = int(v);  // u, v >= 0: truncation is floor
+        return true;
+    };
+    int iu = 0, iv = 0;
+    if (!patchAfter(tIn, iu, iv)) return walk.res;
+    iu >>= level, iv >>= level;
+    const int stepU = du > 0 ? 1 : -1, stepV = dv > 0 ? 1 : -1;
+    const double edgeU = du > 0 ? 1.0 : 0.0, edgeV = dv > 0 ? 1.0 : 0.0;  // the side of a node the ray leaves by, in nodes
+    double t = tIn;
+    for (int guard = 0; guard < 1 << 20; ++guard) {
         const int side = hf.mipSide[size_t(level)];
-        if (!(pu >= 0 && pv >= 0 && pu < patches && pv < patches)) break;  // left the texture
-        const int iu = int(pu) >> level, iv = int(pv) >> level;  // pu, pv >= 0: truncation is floor
-        if (iu >= side || iv >= side) break;
+        if (iu < 0 || iv < 0 || iu >= side || iv >= side) break;  // left the texture
+        const double span = double(1 << level);
         // Where the ray leaves this node.
-        double tExitU = HUGE_VAL, tExitV = HUGE_VAL;
-        if (du > 0) tExitU = ((iu + 1.0) * span - u0) * invDu;
-        if (du < 0) tExitU = (iu * double(span) - u0) * invDu;
-        if (dv > 0) tExitV = ((iv + 1.0) * span - v0) * invDv;
-        if (dv < 0) tExitV = (iv * double(span) - v0) * invDv;
-        double tExit = std::max(std::min({tOut, tExitU, tExitV}), t);
-        // Does the next node have another parent? Only then is a coarser level worth a look.
-        const bool exitU = tExitU <= tExitV;
-        const int idx = exitU ? iu : iv;
-        const bool forward = exitU ? du > 0 : dv > 0;
-        const bool leavesParent = forward ? (idx & 1) == 1 : (idx & 1) == 0;
+        const double tExitU = du != 0 ? ((iu + edgeU) * span - u0) * invDu : HUGE_VAL;
+        const double tExitV = dv != 0 ? ((iv + edgeV) * span - v0) * invDv : HUGE_VAL;
+        const double tExit = std::max(std::min({tOut, tExitU, tExitV}), t);
         const float nodeMax = maxAt(level, size_t(iv) * size_t(side) + size_t(iu));
-        const double zLow = std::min(ray.zAt(t), ray.zAt(tExit));
-        if (zLow > nodeMax) {  // empty space: skip the node, and look at a coarser level next
-            t = tExit + tiny;
-            if (leavesParent) level = std::min(level + 1, top);
-            continue;
+        if (std::min(ray.zAt(t), ray.zAt(tExit)) <= nodeMax) {
+            if (level > 0) {  // the child the ray enters: under its point a hair past t, kept within this node
+                int pu = iu << level, pv = iv << level;
+                patchAfter(t, pu, pv);
+                --level;
+                iu = std::clamp(pu >> level, 2 * iu, 2 * iu + 1);
+                iv = std::clamp(pv >> level, 2 * iv, 2 * iv + 1);
+                continue;
+            }
+            // A patch: exact intersection with its bilinear surfaces.
+            if (walk.endsAt(iu, iv, RaySpan{t, tExit - t})) return walk.res;
         }
-        if (level > 0) {
-            --level;
-            continue;
+        // Past the node (empty space, or a patch the ray misses): on to the neighbour across the edge it leaves
+        // by, and a level up when that neighbour has another parent.
+        if (tExit >= tOut) break;
+        t = tExit;
+        bool leavesParent;
+        if (tExitU <= tExitV) {
+            leavesParent = stepU > 0 ? (iu & 1) == 1 : (iu & 1) == 0;
+            iu += stepU;
+        } else {
+            leavesParent = stepV > 0 ? (iv & 1) == 1 : (iv & 1) == 0;
+            iv += stepV;
         }
-        // A patch: exact intersection with its bilinear surfaces.
-        if (walk.endsAt(iu, iv, RaySpan{t, tExit - t})) return walk.res;
-        t = tExit + tiny;
-        if (leavesParent) level = std::min(level + 1, top);
+        if (leavesParent && level < top) ++level, iu >>= 1, iv >>= 1;  // >> floors: -1 stays outside
     }
     return walk.res;
 }
