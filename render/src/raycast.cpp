@@ -280,7 +280,7 @@ PatchHit traverse(const CascadeTextures& tex, const Cascade& c, const glm::dvec3
     // The walk carries its node as integers (level, iu, iv) and steps to the neighbour across the edge the ray
     // leaves by, as a grid walk does; each node's exit follows from its integers. It used to find each node
     // again from the ray's point a hair past t, a chain from float to int and back through every visit; now
-    // only a descent reads the ray's point, to pick the child it enters (5-12 % faster, BENCHMARKS.md).
+    // only a descent reads the ray's point, to pick the child it enters (4-17 % faster at full scale, BENCHMARKS.md).
     // Start three levels below the top (the coarsest nodes are nearly always entered; the walk climbs back
     // when it leaves a parent): 1-2 % faster than starting at the top, no more (BENCHMARKS.md).
     int level = std::max(0, top - 3);
