@@ -12,6 +12,8 @@
 #include <unistd.h>
 #include <cstring>
 #include <bit>
+#include <array>
+#include <algorithm>
 
 #include "heightcast/core/error.h"
 #include "heightcast/influence/influence.h"
@@ -76,26 +78,68 @@ TEST(SurfacePyramid, EverySampleEqualsTheExactSurfaceAtCellRatio128WithAHole) {
     expectSamplesExact(g, p);
 }
 
-// Which tiles are stored: exactly the nodes holding a cell no larger than the spacing (any cell at the top),
-// by brute force over every cell; and every stored tile's parent is stored.
-TEST(SurfacePyramid, TilesAreStoredExactlyWhereCellsAreAsFineAsTheSpacing) {
+// Which tiles are stored (pyramid.h's rule), checked from what a reader needs rather than from the rule's code:
+// - every lattice point of level t that lies within the kernel reach box of a cell of level <= t (|x - cx| and
+//   |y - cy| both <= R sigma c: where that cell's detail shows) and over some cell has a stored sample, so a
+//   cascade copies it instead of summing kernels there;
+// - every stored tile below the top is met by such a box, and holds a defined sample (no all-NaN tile);
+// - at the top, exactly the tiles holding a cell; and every stored tile's parent is stored.
+TEST(SurfacePyramid, TilesAreStoredWhereAFineEnoughCellsKernelReaches) {
     const Grid g = hc::test::ratio128Grid();
-    const SurfacePyramid p = hc::influence::buildSurfacePyramid(g, KernelParams{});
-    uint64_t finestTiles = 0;
+    const KernelParams params{};
+    const SurfacePyramid p = hc::influence::buildSurfacePyramid(g, params);
+    uint64_t finestTiles = 0, reachedPoints = 0, beyondOwnTile = 0;
     for (const SurfacePyramid::Level& L : p.levels) {
-        const int nodeLevel = L.level + std::countr_zero(unsigned(L.tileSide));
-        std::set<uint64_t> want;
-        for (uint64_t code : g.codes)
-            if (L.level == p.topLevel() || hc::codeLevel(code) <= L.level) want.insert(hc::codeKey(code) & ~(hc::mortonSpan(nodeLevel) - 1));
-        EXPECT_EQ(std::set<uint64_t>(L.keys.begin(), L.keys.end()), want) << "level " << L.level;
-        if (L.level == 0) finestTiles = L.tileCount();
-        for (uint64_t key : L.keys) {
-            if (L.level < p.topLevel()) {
-                EXPECT_GE(p.tileAt(L.level + 1, hc::mortonX(key) >> (L.level + 1), hc::mortonY(key) >> (L.level + 1)), 0);
-            }
+        const int t = L.level, nodeLevel = t + std::countr_zero(unsigned(L.tileSide));
+        const double h = p.spacingM(t), tileM = h * L.tileSide;
+        const uint64_t perSide = uint64_t{1} << (g.rootLevel - t);  // lattice points a side inside the domain
+        if (t == p.topLevel()) {
+            std::set<uint64_t> want;
+            for (uint64_t code : g.codes) want.insert(hc::codeKey(code) & ~(hc::mortonSpan(nodeLevel) - 1));
+            EXPECT_EQ(std::set<uint64_t>(L.keys.begin(), L.keys.end()), want) << "top level " << t;
+            continue;
         }
+        std::vector<std::array<double, 3>> fine;  // centre x, y and reach of every cell of level <= t
+        for (size_t c = 0; c < g.cellCount(); ++c) {
+            if (g.level(c) > t) continue;
+            double cx = 0, cy = 0;
+            g.cellCenterLocal(c, cx, cy);
+            fine.push_back({cx, cy, params.radiusM(g.cellSizeM(c))});
+        }
+        // Completeness: every lattice point in a reach box, over a cell.
+        for (const auto& [cx, cy, r] : fine) {
+            const uint64_t i0 = uint64_t(std::max(0.0, std::ceil((cx - r) / h))), i1 = std::min(perSide - 1, uint64_t(std::floor((cx + r) / h)));
+            const uint64_t j0 = uint64_t(std::max(0.0, std::ceil((cy - r) / h))), j1 = std::min(perSide - 1, uint64_t(std::floor((cy + r) / h)));
+            for (uint64_t j = j0; j <= j1; ++j)
+                for (uint64_t i = i0; i <= i1; ++i) {
+                    if (!g.locate(double(i) * h, double(j) * h)) continue;
+                    ++reachedPoints;
+                    const bool ownTile = uint64_t(cx / tileM) == i / uint64_t(L.tileSide) && uint64_t(cy / tileM) == j / uint64_t(L.tileSide);
+                    beyondOwnTile += !ownTile;
+                    ASSERT_TRUE(p.sample(t, i, j, PyramidChannel::Elevation).has_value())
+                        << "level " << t << ": sample " << i << "," << j << " lies within reach of a fine cell at " << cx << "," << cy << " but is not stored";
+                }
+        }
+        // Minimality: every stored tile is met by a reach box and has a defined sample.
+        const size_t plane = size_t(L.tileSide) * size_t(L.tileSide);
+        for (size_t tile = 0; tile < L.tileCount(); ++tile) {
+            const double x0 = double(hc::mortonX(L.keys[tile])) * g.finestCellM, y0 = double(hc::mortonY(L.keys[tile])) * g.finestCellM;
+            const bool reached = std::any_of(fine.begin(), fine.end(), [&](const auto& f) {
+                return f[0] + f[2] >= x0 && f[0] - f[2] < x0 + tileM && f[1] + f[2] >= y0 && f[1] - f[2] < y0 + tileM;
+            });
+            EXPECT_TRUE(reached) << "level " << t << ": tile at " << x0 << "," << y0 << " is stored, but no cell of level <= " << t << " reaches it";
+            const float* s = &L.samples[tile * size_t(p.channels) * plane];
+            EXPECT_TRUE(std::any_of(s, s + plane, [](float v) { return !std::isnan(v); })) << "level " << t << ": tile at " << x0 << "," << y0 << " is all NaN";
+            EXPECT_GE(p.tileAt(t + 1, hc::mortonX(L.keys[tile]) >> (t + 1), hc::mortonY(L.keys[tile]) >> (t + 1)), 0) << "level " << t << ": a parent missing";
+        }
+        if (t == 0) finestTiles = L.tileCount();
     }
-    // The grid's 0.75 m cells fill a 16 x 256 px strip: few level-0 tiles, not the whole 640 x 512 raster's 1280.
+    // The check must have met points beyond their cell's own tile (the reach crossing a tile edge), else it would not
+    // tell this rule from "the node holds a fine cell".
+    EXPECT_GT(beyondOwnTile, 0u);
+    EXPECT_GT(reachedPoints, beyondOwnTile);
+    // The grid's 0.75 m cells fill a 16 x 256 px strip: a few dozen level-0 tiles with their reach, not the whole 640 x
+    // 512 raster's 1280.
     EXPECT_GT(finestTiles, 0u);
     EXPECT_LT(finestTiles, 100u);
 }

@@ -193,12 +193,19 @@ SurfacePyramid buildPyramidOnRanks(const GridRegionReader& file, const KernelPar
             for (int t = 0; t <= top; ++t) {
                 const int side = sides[size_t(t)];
                 std::vector<uint64_t> k;
-                detail::tileKeysOfCells(r.grid, r.lo, r.hi, t, top, side, k);
-                if (nodeLevelOf(t) > part.level) {  // a coarse tile: decided once every node has spoken
+                if (nodeLevelOf(t) > part.level) {  // a coarse tile: decided once every node has spoken for its own cells
+                    detail::tileKeysOfCells(r.grid, params, r.lo, r.hi, t, top, side, k);
                     coarseKept[size_t(t)].insert(coarseKept[size_t(t)].end(), k.begin(), k.end());
                     if (waterOnly) detail::wetMarkedTiles(r.grid, params, depthLayer, r.lo, r.hi, t, side, coarseMarked[size_t(t)]);
                     continue;
                 }
+                // A tile inside the node: kept by a cell of the node or of its margin, whose kernel may reach into it.
+                detail::tileKeysOfCells(r.grid, params, 0, r.grid.cellCount(), t, top, side, k);
+                const uint64_t nodeMask = ~(mortonSpan(part.level) - 1);
+                std::erase_if(k, [&](uint64_t key) { return (key & nodeMask) != nodeKey; });
+                std::sort(k.begin(), k.end());
+                k.erase(std::unique(k.begin(), k.end()), k.end());
+                std::erase_if(k, [&](uint64_t key) { return file.cellsInNode(key, nodeLevelOf(t)) == 0; });  // all NaN there
                 if (waterOnly) {
                     std::vector<uint64_t> marked, kept;
                     detail::wetMarkedTiles(r.grid, params, depthLayer, 0, r.grid.cellCount(), t, side, marked);
@@ -239,6 +246,7 @@ SurfacePyramid buildPyramidOnRanks(const GridRegionReader& file, const KernelPar
             return all;
         };
         std::vector<uint64_t> kept = unite(coarseKept[size_t(t)]);
+        std::erase_if(kept, [&](uint64_t key) { return file.cellsInNode(key, nodeLevelOf(t)) == 0; });  // all NaN there
         if (waterOnly) {
             const std::vector<uint64_t> marked = unite(coarseMarked[size_t(t)]);
             std::vector<uint64_t> both;

@@ -101,10 +101,28 @@ namespace {
 
 constexpr float kNaN = std::numeric_limits<float>::quiet_NaN();
 
-// The tiles of each level: nodes of level t + log2(side) holding a cell of level <= t (any cell at the top).
-std::vector<std::vector<uint64_t>> tileKeys(const Grid& g, int top, const std::vector<int>& sides) {
+// Whether the node (corner key, level) meets a cell of g: holds one, or lies in a coarser one (as
+// GridRegionReader::cellsInNode counts them in a file).
+bool nodeMeetsCells(const Grid& g, uint64_t key, int level) {
+    const auto lo = std::lower_bound(g.codes.begin(), g.codes.end(), makeCellCode(key, 0));
+    if (lo != g.codes.end() && codeKey(*lo) < key + mortonSpan(level)) return true;
+    if (lo == g.codes.begin()) return false;
+    const uint64_t before = *(lo - 1);
+    return codeKey(before) + mortonSpan(std::min(codeLevel(before), g.rootLevel)) > key;
+}
+
+// The tiles of each level (pyramid.h's rule: tileKeysOfCells over every cell, less those whose node meets no cell:
+// all their samples would be NaN), ascending.
+std::vector<std::vector<uint64_t>> tileKeys(const Grid& g, const KernelParams& params, int top, const std::vector<int>& sides) {
     std::vector<std::vector<uint64_t>> keys(size_t(top) + 1);
-    for (int t = 0; t <= top; ++t) detail::tileKeysOfCells(g, 0, g.cellCount(), t, top, sides[size_t(t)], keys[size_t(t)]);
+    for (int t = 0; t <= top; ++t) {
+        std::vector<uint64_t>& k = keys[size_t(t)];
+        detail::tileKeysOfCells(g, params, 0, g.cellCount(), t, top, sides[size_t(t)], k);
+        std::sort(k.begin(), k.end());
+        k.erase(std::unique(k.begin(), k.end()), k.end());
+        const int nodeLevel = t + std::countr_zero(unsigned(sides[size_t(t)]));
+        std::erase_if(k, [&](uint64_t key) { return !nodeMeetsCells(g, key, nodeLevel); });
+    }
     return keys;
 }
 
@@ -112,14 +130,31 @@ std::vector<std::vector<uint64_t>> tileKeys(const Grid& g, int top, const std::v
 
 namespace detail {
 
-void tileKeysOfCells(const Grid& g, size_t lo, size_t hi, int t, int top, int side, std::vector<uint64_t>& out) {
-    const int nodeLevel = t + std::countr_zero(unsigned(side));
-    const uint64_t mask = ~(mortonSpan(nodeLevel) - 1);
+void tileKeysOfCells(const Grid& g, const KernelParams& params, size_t lo, size_t hi, int t, int top, int side, std::vector<uint64_t>& out) {
+    if (t >= top) {  // the top: the tiles holding any cell
+        const uint64_t mask = ~(mortonSpan(t + std::countr_zero(unsigned(side))) - 1);
+        for (size_t i = lo; i < hi; ++i) {
+            const uint64_t key = codeKey(g.codes[i]) & mask;
+            if (out.empty() || out.back() != key) out.push_back(key);
+        }
+        return;
+    }
+    // Below it: the tiles that the kernel reach box of a cell of level <= t meets (its own tile among them).
+    const uint64_t span = uint64_t(side) << t;  // a tile's side in finest cells
+    const long perSide = long(((uint64_t{1} << g.rootLevel) + span - 1) / span);
+    const double tileM = g.finestCellM * double(span);
+    long last[4] = {-1, -1, -1, -1};
     for (size_t i = lo; i < hi; ++i) {
-        const uint64_t code = g.codes[i];
-        if (t < top && codeLevel(code) > t) continue;
-        const uint64_t key = codeKey(code) & mask;
-        if (out.empty() || out.back() != key) out.push_back(key);
+        if (codeLevel(g.codes[i]) > t) continue;
+        double cx = 0, cy = 0;
+        g.cellCenterLocal(i, cx, cy);
+        const double r = params.radiusM(g.cellSizeM(i));
+        const long tx0 = std::max(0L, long(std::floor((cx - r) / tileM))), tx1 = std::min(perSide - 1, long(std::floor((cx + r) / tileM)));
+        const long ty0 = std::max(0L, long(std::floor((cy - r) / tileM))), ty1 = std::min(perSide - 1, long(std::floor((cy + r) / tileM)));
+        if (tx0 == last[0] && tx1 == last[1] && ty0 == last[2] && ty1 == last[3]) continue;  // neighbours in Morton order
+        last[0] = tx0, last[1] = tx1, last[2] = ty0, last[3] = ty1;
+        for (long ty = ty0; ty <= ty1; ++ty)
+            for (long tx = tx0; tx <= tx1; ++tx) out.push_back(mortonEncode(uint32_t(uint64_t(tx) * span), uint32_t(uint64_t(ty) * span)));
     }
 }
 
@@ -312,7 +347,7 @@ SurfacePyramid buildPyramid(const Grid& g, const KernelParams& params, unsigned 
     const int top = int(sides.size()) - 1;
 
     auto owned = std::make_shared<SurfacePyramid::Storage>();
-    owned->keys = g.cellCount() ? tileKeys(g, top, sides) : std::vector<std::vector<uint64_t>>(size_t(top) + 1);
+    owned->keys = g.cellCount() ? tileKeys(g, params, top, sides) : std::vector<std::vector<uint64_t>>(size_t(top) + 1);
     if (wetReachedOnly) owned->keys = wetReachedKeys(g, params, owned->keys, sides, depthLayer);
     uint64_t tiles = 0;
     for (const auto& k : owned->keys) tiles += k.size();

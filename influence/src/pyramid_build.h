@@ -25,9 +25,10 @@ SurfacePyramid finishPyramid(SurfacePyramid p, std::shared_ptr<SurfacePyramid::S
 // The pieces, for builders that sample tiles from parts of a grid (a region read around them, on_ranks.cpp):
 
 // Appends to `out` the keys of the tiles of level t (side samples a side; top: the pyramid's top level) that cells
-// [lo, hi) of g keep (pyramid.h's rule: the tile's node holds a cell of level <= t; any cell at the top), in their
-// order, each once for consecutive cells.
-void tileKeysOfCells(const Grid& g, size_t lo, size_t hi, int t, int top, int side, std::vector<uint64_t>& out);
+// [lo, hi) of g keep, by pyramid.h's rule: below the top, every tile that the kernel reach box of a cell of level <= t
+// meets (the square of half-side params.radiusM(cell size) about the cell's centre); at the top, the tiles holding a
+// cell. Unsorted, with repeats (consecutive cells reaching the same tiles add them once).
+void tileKeysOfCells(const Grid& g, const KernelParams& params, size_t lo, size_t hi, int t, int top, int side, std::vector<uint64_t>& out);
 // Appends the keys of the tiles of level t that the kernel of a wet cell among [lo, hi) reaches, grown by one tile on
 // each side (buildWaterPyramid's rule; unsorted, with repeats). depthLayer: g's water_depth layer.
 void wetMarkedTiles(const Grid& g, const KernelParams& params, int depthLayer, size_t lo, size_t hi, int t, int side,

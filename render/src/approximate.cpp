@@ -120,8 +120,8 @@ inline void catmullRom(double f, double w[4]) {
     w[3] = 0.5 * (f3 - f2);
 }
 
-// Fills texels finer than every pyramid level stored around them (pyramid.h keeps level t only where a cell is as
-// fine as its spacing) by bicubic (Catmull-Rom) interpolation of the nearest coarser level whose samples around the
+// Fills texels finer than every pyramid level stored around them (pyramid.h keeps level t only where the kernel of a
+// cell as fine as its spacing reaches) by bicubic (Catmull-Rom) interpolation of the nearest coarser level whose samples around the
 // texel are all stored, at most `maxUp` levels above the cascade's, and where no cell finer than that level's spacing
 // lies within a kernel's reach of the samples: then the surface is smooth at that spacing (a sum of Gaussians at least
 // one spacing wide, kernel.h). Such cells lie only in the stored tiles of the level below; their positions come from

@@ -6,11 +6,15 @@
 // i in [ti S, ti S + S), j likewise, and covers the quadtree node of level t + log2(S) whose corner key is
 // mortonEncode(ti S 2^t, tj S 2^t) (the tile's "key"; for a domain smaller than one tile, the whole domain).
 //
-// Stored only where the surface has detail at that scale: a tile of level t is kept when its node holds a
-// cell no larger than h_t (level <= t). The top level (one tile covers the domain) is kept wherever there
-// are cells, so every point over a cell has a coarsest sample; a tile's parent is always kept (the parent's
-// node holds the same small cell). Storage therefore follows the cells (about 4/3 samples per cell where the
-// tiles are full), not the area at the finest spacing.
+// Stored only where the surface has detail at that scale: a tile of level t is kept where the kernel of a cell no
+// larger than h_t (level <= t) reaches it: the square of half-side R sigma c about the cell's centre meets the tile's
+// node (the cell's own tile among them), and the node meets some cell (else every sample would be NaN). A cascade's
+// texels there are copies, where a rule of "the node holds such a cell" would leave those beside it, across a tile
+// edge from a river of fine cells, to the kernels (BENCHMARKS.md, "Tiles where a fine cell's kernel reaches"). The
+// top level (one tile covers the domain) is kept wherever there are cells, so every point over a cell has a coarsest
+// sample; a tile's parent is always kept (the same cell's reach meets the parent's node). Storage therefore follows
+// the cells (about 4/3 samples per cell where the tiles are full, plus the reach's band), not the area at the finest
+// spacing.
 //
 // Channels, per sample (float32; NaN where the surface is undefined: holes and outside the domain):
 //   Elevation   the smooth terrain z (section 4)
