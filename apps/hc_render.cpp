@@ -235,13 +235,12 @@ int main(int argc, char** argv) {
         hc::cli::BackendDecision decision = chooseBackend(a.backend);
         if (!a.setup.colorBy.empty()) hc::cli::requireCpu("--color-by " + a.setup.colorBy, a.backend, decision);
         checkOutputs(a);
-        // Without a cache the CPU backend reads the grid out of core; the GL one needs the grid and a cache in memory,
-        // and so does --color-by (the exact evaluator at every hit).
-        auto loaded = hc::cli::loadScene("hc-render", a.gridPath, a.setup, !decision.useGl && a.setup.colorBy.empty());
-        if (loaded->scene->outOfCore() && decision.useGl && a.backend == hc::cli::Backend::Auto) {
-            decision.useGl = false;
-            decision.note = "--out-of-core: the GL backend needs the whole grid and an influence cache: rendering on the CPU";
-        }
+        // Without a cache either backend reads the grid out of core (the GL one then fills its cascades on the CPU,
+        // gl_renderer.h); --color-by needs the grid and its lists in memory (the exact evaluator at every hit).
+        auto loaded = hc::cli::loadScene("hc-render", a.gridPath, a.setup, a.setup.colorBy.empty());
+        // Cell outlines on the GL backend need the cells on the GPU.
+        if (loaded->scene->outOfCore() && a.setup.options.cellOutlines)
+            hc::cli::requireCpu("--cells on a grid read out of core (no .hci cache)", a.backend, decision);
         const hc::render::Camera camera = hc::cli::initialCamera(a.setup, *loaded->scene);
         refuseCameraBelowTerrain(*loaded->scene, camera);
         if (!a.sequence) {

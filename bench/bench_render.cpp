@@ -283,7 +283,8 @@ RunResult runScenario(const Scenario& sc, const Settings& set) {
             say(fmt::format("rendering, frame {} of {} ...", k + 1, set.repeat).c_str());
             hc::render::Timings tm;
             // GL: the measured frames end in the texture, as the viewer draws them; the picture is read back once below.
-            if (gl) gl->renderToTexture(cam, set.options, tm);
+            // Each from scratch: out of core the renderer would keep the last frame's texels (the same camera: all).
+            if (gl) gl->forgetCascades(), gl->renderToTexture(cam, set.options, tm);
             else frame = hc::render::renderFrame(scene, cam, set.options, tm);
             r.gpuMs = std::min(r.gpuMs, tm.gpuMs);
             r.fittingMs = std::min(r.fittingMs, tm.fittingMs);
@@ -542,8 +543,9 @@ int main(int argc, char** argv) {
         p.option("--pyramid-interpolate", "L", "with --pyramid: texels finer than every level stored around them interpolated\n"
                  "      (bicubic) from a coarser stored level, at most L levels up; 0 sums them from the kernels (default 3)",
                  set.options.pyramidInterpolateLevels);
-        p.flag("--out-of-core", "CPU: write each grid to a temporary .hcg and render out of core from it, without lists\n"
-               "      (render::Scene over a GridRegionReader; with --pyramid the texels it holds need no cell)", set.outOfCore);
+        p.flag("--out-of-core", "write each grid to a temporary .hcg and render out of core from it, without lists\n"
+               "      (render::Scene over a GridRegionReader; with --pyramid the texels it holds need no cell; GL: the\n"
+               "      cascades filled on the CPU, the mipmaps, ray casting and shading on the GPU)", set.outOfCore);
         p.flag("--accuracy", "measure the last frame's terrain hits against the exact surface: max, p99 and RMS of\n"
                "      |hit height - exact height| [m] (walls and water aside)", set.accuracy);
         p.option("--plot", "OUT.svg", "also draw each scenario's best stage times as stacked bars with the targets, SVG\n"
@@ -558,7 +560,6 @@ int main(int argc, char** argv) {
         if (set.backend == hc::cli::Backend::Auto) throw hc::Error("--backend auto: a benchmark names its backend, cpu or gl");
         if (set.flyFrames < 0 || set.flyFrames == 1) throw hc::Error("--fly-frames " + std::to_string(set.flyFrames) + ": 0 (off) or at least 2");
         if (set.flyFrames > 0 && set.backend != hc::cli::Backend::Cpu) throw hc::Error("--fly-frames: the CPU backend's (incremental cascades)");
-        if (set.outOfCore && set.backend != hc::cli::Backend::Cpu) throw hc::Error("--out-of-core: the CPU backend's (GL needs the lists)");
         if (!(set.flyStepM >= 0) || !std::isfinite(set.flyStepM)) throw hc::Error("--fly-step " + fmt::format("{:g}", set.flyStepM) + ": metres >= 0");
         if (std::string why = set.options.validate(); !why.empty()) throw hc::Error(why);
         {

@@ -16,9 +16,12 @@
 #include <memory>
 #include <random>
 #include <tuple>
+#include <unistd.h>
 
 #include "heightcast/core/error.h"
+#include "heightcast/grid/grid_file.h"
 #include "heightcast/influence/influence.h"
+#include "heightcast/influence/pyramid.h"
 #include "heightcast/influence/surface.h"
 #include "heightcast/render/gl/gl_renderer.h"
 #include "heightcast/render/gpu_layout.h"
@@ -194,10 +197,8 @@ Comparison compare(const Frame& cpu, const Frame& gl, const std::string& name) {
     return c;
 }
 
-void expectSame(World& w, const Camera& cam, const std::string& name, const RenderOptions& o = {}, bool mustSeeTerrain = true) {
-    Timings tc, tg;
-    const Frame cpu = renderFrame(*w.scene, cam, o, tc);
-    const Frame gl = w.gl->render(cam, o, tg);
+// The CPU's frame `cpu` and the GL backend's `gl` of the same scene, camera and options show the same picture.
+void expectSameFrames(const Frame& cpu, const Frame& gl, const Timings& tc, const Timings& tg, const std::string& name, bool mustSeeTerrain = true) {
     const Comparison c = compare(cpu, gl, name);
     const double agree = double(c.agree) / double(c.pixels), depthOk = c.bothHit ? double(c.depthOk) / double(c.bothHit) : 1.0;
     std::printf("[ %s ] hit/miss agree %.4f%%, depth within tolerance %.4f%% of %zu (median |dt|/t %.2e, worst %.1fx tolerance), PSNR %.2f dB\n",
@@ -218,6 +219,13 @@ void expectSame(World& w, const Camera& cam, const std::string& name, const Rend
     for (size_t k = 0; k < tc.cascades.size(); ++k) EXPECT_EQ(tc.cascades[k].gaussians, tg.cascades[k].gaussians) << name << " cascade " << k;
     const uint64_t hitsGl = uint64_t(std::count_if(gl.distanceM.begin(), gl.distanceM.end(), [](float d) { return std::isfinite(d); }));
     EXPECT_EQ(tg.hits, hitsGl) << "the hit counter counts the hits read back";
+}
+
+void expectSame(World& w, const Camera& cam, const std::string& name, const RenderOptions& o = {}, bool mustSeeTerrain = true) {
+    Timings tc, tg;
+    const Frame cpu = renderFrame(*w.scene, cam, o, tc);
+    const Frame gl = w.gl->render(cam, o, tg);
+    expectSameFrames(cpu, gl, tc, tg, name, mustSeeTerrain);
 }
 
 Camera lowOblique(const Scene& s, int w, int h) {
@@ -271,6 +279,82 @@ TEST(RenderGl, SameAsCpuOnTheAlpineDemFromFourCameras) {
     const Frame f = w.gl->render(water, o, t);
     const size_t wet = size_t(std::count_if(f.waterDepthM.begin(), f.waterDepthM.end(), [](float d) { return d > 0; }));
     EXPECT_GT(wet, f.waterDepthM.size() / 10) << "the water camera sees water";
+}
+
+// Out of core (a Scene over the grid file: no cells or lists in memory, as for 100 M cells) the GL backend fills the
+// cascades on the CPU as renderFrame() does and casts and shades on the GPU: the same picture as the CPU backend on the
+// same scene, the same texels copied from the pyramid, interpolated and summed (the Gaussians counted exactly), with and
+// without a pyramid; a moving camera keeps texels from its last frame; cell outlines, which need the cells on the GPU,
+// are refused with the file named.
+TEST(RenderGl, OutOfCoreFillsTheCascadesOnTheCpuAndCastsOnTheGpu) {
+    World& w = hef();
+    HC_REQUIRE_GL(w);
+    const std::filesystem::path path = std::filesystem::temp_directory_path() / ("hc_gl_out_of_core_" + std::to_string(::getpid()) + ".hcg");
+    hc::writeGrid(w.grid, path.string());
+    const hc::influence::SurfacePyramid pyramid = hc::influence::buildSurfacePyramid(w.grid, {});
+    {
+        const hc::GridRegionReader file(path.string());
+        for (const hc::influence::SurfacePyramid* p : {static_cast<const hc::influence::SurfacePyramid*>(nullptr), &pyramid}) {
+            const std::string tag = p ? "with the pyramid" : "without a pyramid";
+            const Scene scene(file, {}, p);
+            ASSERT_TRUE(scene.outOfCore());
+            const std::unique_ptr<GlRenderer> gl = GlRenderer::headless(scene);
+            const RenderOptions o = smallOptions();
+            RenderOptions coarse = o;
+            coarse.texelsPerSide = 128;  // texels as large as the cells (hef's are 64-254 m): copies where a pyramid is
+            Camera moving = lowOblique(scene, 320, 200);
+            uint64_t copied = 0, interpolated = 0, read = 0;
+            for (const auto& [cam, opt] : {std::pair{overviewCamera(scene, 320, 200), o}, {lowOblique(scene, 320, 200), o},
+                                           {overviewCamera(scene, 320, 200), coarse}}) {
+                Timings tc, tg;
+                const Frame cpu = renderFrame(scene, cam, opt, tc);
+                const Frame g = gl->render(cam, opt, tg);
+                expectSameFrames(cpu, g, tc, tg, "hef_out_of_core " + tag);
+                for (size_t k = 0; k < tc.cascades.size(); ++k) {
+                    EXPECT_EQ(tc.cascades[k].visibleTexels, tg.cascades[k].visibleTexels) << tag << " cascade " << k;
+                    EXPECT_EQ(tc.cascades[k].pyramidTexels, tg.cascades[k].pyramidTexels) << tag << " cascade " << k;
+                    EXPECT_EQ(tc.cascades[k].pyramidInterpolated, tg.cascades[k].pyramidInterpolated) << tag << " cascade " << k;
+                    EXPECT_EQ(tc.cascades[k].texelM, tg.cascades[k].texelM) << tag << " cascade " << k << ": the pyramid's ladder";
+                    copied += tg.cascades[k].pyramidTexels, interpolated += tg.cascades[k].pyramidInterpolated, read += tg.cascades[k].cellsRead;
+                }
+                EXPECT_GT(tg.approximationMs, 0.0);
+            }
+            if (p) {
+                EXPECT_GT(copied, 0u) << "the GL backend's cascades copy the pyramid's samples";
+                EXPECT_GT(interpolated, 0u) << "and interpolate them where texels are finer";
+            } else {
+                EXPECT_GT(read, 0u) << "without a pyramid the texels are summed from cells read from the file";
+            }
+            // The camera moves 20 m between two frames: the second keeps most texels (the first frame after the
+            // overview starts afresh) and shows what a fresh CPU frame shows.
+            Timings t0, t1, tc;
+            (void)gl->render(moving, o, t0);
+            moving.xWorld += 20;
+            const Frame g = gl->render(moving, o, t1);
+            const Frame cpu = renderFrame(scene, moving, o, tc);
+            uint64_t kept = 0;
+            for (const CascadeStats& cs : t1.cascades) kept += cs.reusedTexels;
+            EXPECT_GT(kept, 0u) << tag << ": a moving camera keeps texels from its last frame";
+            gl->forgetCascades();
+            Timings t2;
+            (void)gl->render(moving, o, t2);
+            for (const CascadeStats& cs : t2.cascades) EXPECT_EQ(cs.reusedTexels, 0u) << tag << ": forgetCascades() starts afresh";
+            const Comparison c = compare(cpu, g, "hef_out_of_core_moved " + tag);
+            EXPECT_GE(double(c.agree) / double(c.pixels), 0.995) << tag;
+            EXPECT_GE(c.psnr, 35.0) << tag;
+            RenderOptions cells = o;
+            cells.cellOutlines = true;
+            try {
+                Timings t;
+                (void)gl->render(moving, cells, t);
+                ADD_FAILURE() << "cell outlines out of core were not refused";
+            } catch (const hc::Error& e) {
+                EXPECT_NE(std::string(e.what()).find(path.string()), std::string::npos) << e.what();
+                EXPECT_NE(std::string(e.what()).find("--backend cpu"), std::string::npos) << e.what();
+            }
+        }
+    }
+    std::filesystem::remove(path);
 }
 
 // Given near and far planes reach the GL backend through the shared frame set-up: the same picture as the CPU's

@@ -140,7 +140,7 @@ private:
 // tinted and uploaded like CPU frames. Renders synchronously in submit(): never busy.
 class GlBackend final : public ViewBackend {
 public:
-    explicit GlBackend(std::unique_ptr<render::GlRenderer> r) : r_(std::move(r)), tintTexture_(makeTexture()) {}
+    GlBackend(std::unique_ptr<render::GlRenderer> r, bool outOfCore) : r_(std::move(r)), tintTexture_(makeTexture()), outOfCore_(outOfCore) {}
     bool busy() const override { return false; }
     void submit(const Camera& c, const RenderOptions& o, bool full, bool cascadeTint) override {
         Shown s;
@@ -168,10 +168,12 @@ public:
     void wait() override {}
     std::string name() const override { return "GL"; }
     std::string device() const override { return r_->deviceName(); }
+    bool drawsCellOutlines() const override { return !outOfCore_; }
 
 private:
     std::unique_ptr<render::GlRenderer> r_;
     GLuint tintTexture_;
+    bool outOfCore_;
     std::optional<Shown> next_;
 };
 
@@ -182,7 +184,7 @@ std::unique_ptr<ViewBackend> makeCpuBackend(const render::Scene& scene, unsigned
 }
 
 std::unique_ptr<ViewBackend> makeGlBackend(const render::Scene& scene) {
-    return std::make_unique<GlBackend>(render::GlRenderer::inCurrentContext(scene));
+    return std::make_unique<GlBackend>(render::GlRenderer::inCurrentContext(scene), scene.outOfCore());
 }
 
 }  // namespace hc::view

@@ -37,6 +37,8 @@ public:
     virtual void wait() = 0;
     virtual std::string name() const = 0;    // "CPU" | "GL"
     virtual std::string device() const = 0;  // "CPU, 16 threads" | the GL renderer and version
+    // Whether it can outline the cells (the GL backend out of core has no cells on the GPU).
+    virtual bool drawsCellOutlines() const { return true; }
 };
 
 // The CPU backend (renderFrame) with `threads` workers (0: all cores) on a thread of its own, so the window

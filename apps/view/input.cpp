@@ -35,7 +35,13 @@ void Viewer::onKey(int key, int action, int mods) {
     switch (key) {
         case GLFW_KEY_ESCAPE: window_.close(); break;
         case GLFW_KEY_F: toggles_.water = !toggles_.water, changed(), flash(toggles_.water ? "water on" : "water off"); break;
-        case GLFW_KEY_C: toggles_.cells = !toggles_.cells, changed(), flash(toggles_.cells ? "cell outlines on" : "cell outlines off"); break;
+        case GLFW_KEY_C:
+            if (!backend_->drawsCellOutlines()) {
+                flash("cell outlines need the cells: not on the GL backend out of core (--backend cpu, or an .hci cache)");
+                break;
+            }
+            toggles_.cells = !toggles_.cells, changed(), flash(toggles_.cells ? "cell outlines on" : "cell outlines off");
+            break;
         case GLFW_KEY_K:
             toggles_.cascadeTint = !toggles_.cascadeTint, changed();
             flash(toggles_.cascadeTint ? "cascade colouring on (near red, then green, blue, yellow)" : "cascade colouring off");

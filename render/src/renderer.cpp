@@ -486,7 +486,7 @@ std::optional<Reusable> reusableCascade(const CascadeCache::Impl& kept, const st
 // Stages 2 and 3: each cascade's textures (copying what `kept` holds of the last frame) and max mipmaps, with
 // their statistics in timings.cascades.
 std::vector<detail::CascadeTextures> approximateCascades(const Scene& scene, const CascadeFit& fit, const RenderOptions& options,
-                                                         CascadeCache::Impl* kept, Timings& timings) {
+                                                         CascadeCache::Impl* kept, Timings& timings, bool mipmaps = true) {
     std::vector<detail::CascadeTextures> tex(fit.cascades.size());
     std::vector<bool> taken(kept ? kept->entries.size() : 0, false);
     for (size_t k = 0; k < fit.cascades.size(); ++k) {
@@ -516,7 +516,7 @@ std::vector<detail::CascadeTextures> approximateCascades(const Scene& scene, con
         cs.approximationMs = clock.milliseconds();
         timings.approximationMs += cs.approximationMs;
         clock.restart();
-        if (!c.empty()) {
+        if (!c.empty() && mipmaps) {
             tex[k].terrain.buildMip(options.threads);
             if (tex[k].hasWater) tex[k].water.buildMip(options.threads), tex[k].buildBothMip(options.threads);
         }
@@ -664,6 +664,19 @@ void keepCascades(CascadeCache::Impl& kept, const Scene& scene, const RenderOpti
 }
 
 }  // namespace
+
+struct detail::CacheAccess {
+    static CascadeCache::Impl& of(CascadeCache& cache) { return *cache.impl_; }
+};
+
+void detail::approximateOnCpu(const Scene& scene, const CascadeFit& fit, const RenderOptions& options, CascadeCache* cache, Timings& timings,
+                              const std::function<void(size_t, const CascadeTextures&)>& use) {
+    CascadeCache::Impl* kept = cache ? keptFor(CacheAccess::of(*cache), scene, options) : nullptr;
+    std::vector<CascadeTextures> tex = approximateCascades(scene, fit, options, kept, timings, false);
+    for (size_t k = 0; k < fit.cascades.size(); ++k)
+        if (!fit.cascades[k].empty()) use(k, tex[k]);
+    if (kept) keepCascades(*kept, scene, options, fit, tex);
+}
 
 Frame renderFrame(const Scene& scene, const Camera& camera, const RenderOptions& options, Timings& timings, CascadeCache* cache) {
     camera.validate();

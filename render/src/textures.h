@@ -2,6 +2,7 @@
 // backend (private to render/).
 #pragma once
 
+#include <functional>
 #include <string>
 #include <vector>
 
@@ -85,6 +86,14 @@ struct RayContext {
 
 // dir: unit direction of the ray.
 Hit castRay(const RayContext& ctx, const glm::dvec3& dir);
+
+// Stage 2 on the CPU for a backend that runs the later stages elsewhere (the GL backend over an out-of-core scene,
+// which has no cells or lists to upload): every cascade's textures filled as renderFrame() fills them (from the
+// pyramid, the grid file and, with a cache, the last frame's texels), without max mipmaps, their statistics appended
+// to timings.cascades and their time to timings.approximationMs. Then use(k, textures) for each non-empty cascade,
+// after which the textures go into the cache for the next frame.
+void approximateOnCpu(const Scene& scene, const CascadeFit& fit, const RenderOptions& options, CascadeCache* cache, Timings& timings,
+                      const std::function<void(size_t, const CascadeTextures&)>& use);
 
 // Per-frame set-up both backends share (renderer.cpp): the eye in the local frame, near and far along the
 // ray (the camera's, else from the scene's bounds), and the view volume cascade fitting takes.

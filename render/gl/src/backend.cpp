@@ -6,6 +6,12 @@
 // drawLegend). The scene (cells, sorted Morton keys, influence lists) is uploaded once; per frame only
 // the FrameBlock (gpu_layout.h) and the cascades' visible row spans go up. GPU stage times come from
 // GL_TIMESTAMP queries between the dispatches.
+//
+// Out of core (a Scene over a GridRegionReader: no cells or lists in memory, the grid may hold 100 M cells) the
+// approximation runs on the CPU instead, exactly as renderFrame() runs it (from the surface pyramid, the cells
+// around the texels it does not hold, and the last frame's texels: detail::approximateOnCpu), and the filled
+// textures go up into the heights buffer; the mipmaps, ray casting and shading stay on the GPU. Nothing of the
+// grid is uploaded.
 #include <algorithm>
 #include <array>
 #include <bit>
@@ -89,8 +95,11 @@ struct GlRenderer::Impl {
     GLint64 maxStorageBlock = 0;
     std::string device;
     detail::FrameSetup setup;  // of the last frame, for readback
+    // Out of core: the cascades are filled on the CPU (the file comment), keeping their texels for the next frame.
+    const bool cpuCascades;
+    CascadeCache cascadeCache;
 
-    Impl(const Scene& s, std::unique_ptr<gl::HeadlessContext> context) : scene(s), headless(std::move(context)) {
+    Impl(const Scene& s, std::unique_ptr<gl::HeadlessContext> context) : scene(s), headless(std::move(context)), cpuCascades(s.outOfCore()) {
         gl::requireGl43("the GL backend");
         device = gl::currentDeviceName();
         software = isSoftwareRenderer(device);
@@ -133,8 +142,19 @@ struct GlRenderer::Impl {
                         (std::strcmp(what, "the cascade textures") == 0 ? " (use fewer --texels or --cascades)" : ""));
     }
 
-    // Cells (plus a sentinel), their sorted Morton keys and the influence lists: once per renderer.
+    // Cells (plus a sentinel), their sorted Morton keys and the influence lists: once per renderer. Out of core
+    // none: every binding gets a small buffer (the shaders that would read them are not run, and cellCount is 0).
     void uploadScene() {
+        frameBuf.reserve(sizeof(gpu::FrameBlock));
+        countersBuf.reserve(sizeof(uint32_t) * gpu::kCounterSlots * (gpu::kMaxCascades + 1));
+        if (cpuCascades) {
+            const gpu::GpuCell sentinel{};
+            cellsBuf.reserve(sizeof sentinel);
+            cellsBuf.upload(&sentinel, sizeof sentinel);
+            keysBuf.reserve(16);
+            for (Buffer& b : indexBufs) b.reserve(16);
+            return;
+        }
         const Grid& g = scene.grid();
         const auto& lists = scene.lists();
         const size_t count = g.cellCount();
@@ -183,8 +203,6 @@ struct GlRenderer::Impl {
             indexBufs[c].reserve(n * 4);  // empty chunks get a small buffer: every binding is valid
             if (n) indexBufs[c].upload(entries.data() + begin, n * 4);
         }
-        frameBuf.reserve(sizeof(gpu::FrameBlock));
-        countersBuf.reserve(sizeof(uint32_t) * gpu::kCounterSlots * (gpu::kMaxCascades + 1));
     }
 
     // The frame's constants (GpuFrame) for the shaders.
@@ -197,7 +215,7 @@ struct GlRenderer::Impl {
         f.tanHalfX = float(setup.basis.tanHalfX), f.tanHalfY = float(setup.basis.tanHalfY);
         f.nearM = float(setup.nearM), f.farM = float(setup.farM);
         f.dirX = float(fit.dir.x), f.dirY = float(fit.dir.y);
-        f.tail = float(scene.lists().params().tail());
+        f.tail = float(scene.params().tail());
         copyFloats(f.forward, setup.basis.forward);
         copyFloats(f.right, setup.basis.right);
         copyFloats(f.up, setup.basis.up);
@@ -206,7 +224,7 @@ struct GlRenderer::Impl {
         f.width = camera.width, f.height = camera.height;
         f.cascades = fit.hull.size() < 3 ? 0 : int(fit.cascades.size());  // no hull: every ray misses (as renderFrame)
         f.hasWater = scene.hasWater() ? 1 : 0;
-        f.cellCount = uint32_t(g.cellCount());
+        f.cellCount = cpuCascades ? 0u : uint32_t(g.cellCount());  // out of core no cell is on the GPU
         f.rootLevel = uint32_t(g.rootLevel);
         f.indexChunkShift = indexChunkShift;
         f.minDepthM = float(options.waterMinDepthM);
@@ -340,11 +358,28 @@ struct GlRenderer::Impl {
     // Work groups covering `size` invocations along one axis.
     static GLuint groups(int size) { return GLuint((size + HC_GROUP_2D - 1) / HC_GROUP_2D); }
 
-    // Stage 2: the approximation, one dispatch per cascade, each followed by a time stamp.
+    // Stage 2 out of core, on the CPU (the file comment): the textures filled and uploaded; their statistics and
+    // times replace the ones layOutCascades and the time stamps give.
+    void approximateOnCpu(const CascadeFit& fit, const gpu::FrameBlock& block, const RenderOptions& options, Timings& timings) {
+        Timings cpu;
+        detail::approximateOnCpu(scene, fit, options, &cascadeCache, cpu, [&](size_t k, const detail::CascadeTextures& tex) {
+            const gpu::GpuCascade& gc = block.cascades[k];
+            const size_t bytes = tex.terrain.h.size() * sizeof(float);
+            heightsBuf.upload(tex.terrain.h.data(), bytes, size_t(gc.terrainOffset) * 4);
+            if (!scene.hasWater()) return;
+            heightsBuf.upload(tex.water.h.data(), bytes, size_t(gc.waterOffset) * 4);
+            heightsBuf.upload(tex.depth.data(), bytes, size_t(gc.depthOffset) * 4);
+        });
+        timings.cascades = cpu.cascades;
+        timings.approximationMs = cpu.approximationMs;
+    }
+
+    // Stage 2: the approximation, one dispatch per cascade, each followed by a time stamp (out of core the stamps
+    // only: the textures are filled already).
     void dispatchApproximation(const CascadeFit& fit, const Stopwatch& frameClock, int& stamp) {
         glUseProgram(approximate);
         for (size_t k = 0; k < fit.cascades.size(); ++k) {
-            if (!fit.cascades[k].empty()) {
+            if (!fit.cascades[k].empty() && !cpuCascades) {
                 glUniform1i(glGetUniformLocation(approximate, "uCascade"), int(k));
                 glDispatchCompute(groups(fit.cascades[k].n), groups(fit.cascades[k].n), 1);
             }
@@ -395,7 +430,7 @@ struct GlRenderer::Impl {
             ms[size_t(i)] = double(v - first) * 1e-6;
         }
         const size_t nc = cascadeCount;
-        for (size_t k = 0; k < nc; ++k) {
+        for (size_t k = 0; k < nc && !cpuCascades; ++k) {  // out of core the CPU's times stand
             timings.cascades[k].approximationMs = ms[k + 1] - ms[k];
             timings.approximationMs += timings.cascades[k].approximationMs;
         }
@@ -429,14 +464,20 @@ struct GlRenderer::Impl {
         if (std::string why = options.validate(); !why.empty()) throw Error(why);
         if (!options.colorLayer.empty())  // the tools choose the CPU backend for it (backend_choice.h)
             throw Error("colouring by a layer (" + options.colorLayer + ") is the CPU backend's: use --backend cpu");
+        if (cpuCascades && options.cellOutlines)
+            throw Error("cell outlines with the GL backend need the grid's cells on the GPU; this scene is read out of core (" +
+                        scene.file()->path() + "): use --backend cpu, or give the grid an influence cache (hc-influence) to keep it in memory");
         if (headless) headless->makeCurrent();
         const Stopwatch frameClock;
         timings = Timings{};
         setup = detail::setUpFrame(scene, camera);
-        setup.view.ladderStepsPerOctave = 8;  // this backend does not read the surface pyramid (yet): its textures are N^2
+        // In memory the shaders sum the kernels of every texel: textures of N^2, not the pyramid's ladder (up to 2N a
+        // side, renderer.cpp). Out of core the CPU fills them as renderFrame() does, from the pyramid where there is one.
+        if (!cpuCascades) setup.view.ladderStepsPerOctave = 8;
         const CascadeFit fit = detail::fitFrame(scene, camera, setup, options, timings);  // stage 1, on the CPU
         gpu::FrameBlock block{};
         uploadFrame(block, fit, camera, options, timings);
+        if (cpuCascades) approximateOnCpu(fit, block, options, timings);
         bindFrame();
         int stamp = 0;
         timeStamp(stamp++, frameClock);
@@ -525,22 +566,11 @@ struct GlRenderer::Impl {
 GlRenderer::GlRenderer(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {}
 GlRenderer::~GlRenderer() = default;
 
-namespace {
-// The GL backend uploads every cell and list once (gpu_layout.h): an out-of-core scene has neither.
-void requireInMemory(const Scene& scene) {
-    if (scene.outOfCore())
-        throw Error("the GL backend needs the grid in memory with its influence lists (an .hci cache); this scene is read out of "
-                    "core (" + scene.file()->path() + "): render it on the CPU backend (--backend cpu)");
-}
-}  // namespace
-
 std::unique_ptr<GlRenderer> GlRenderer::inCurrentContext(const Scene& scene) {
-    requireInMemory(scene);
     return std::unique_ptr<GlRenderer>(new GlRenderer(std::make_unique<Impl>(scene, nullptr)));
 }
 
 std::unique_ptr<GlRenderer> GlRenderer::headless(const Scene& scene) {
-    requireInMemory(scene);
     auto context = gl::HeadlessContext::create();
     return std::unique_ptr<GlRenderer>(new GlRenderer(std::make_unique<Impl>(scene, std::move(context))));
 }
@@ -556,6 +586,8 @@ unsigned GlRenderer::renderToTexture(const Camera& camera, const RenderOptions& 
 }
 
 std::string GlRenderer::deviceName() const { return impl_->device; }
+
+void GlRenderer::forgetCascades() { impl_->cascadeCache.clear(); }
 
 void GlRenderer::limitIndexChunksForTest(uint64_t entries) { gIndexChunkLimitForTest = entries ? entries : uint64_t{1} << 31; }
 

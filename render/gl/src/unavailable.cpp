@@ -19,6 +19,7 @@ std::unique_ptr<GlRenderer> GlRenderer::headless(const Scene&) { throw Error(kBu
 Frame GlRenderer::render(const Camera&, const RenderOptions&, Timings&) { throw Error(kBuiltOut); }
 unsigned GlRenderer::renderToTexture(const Camera&, const RenderOptions&, Timings&) { throw Error(kBuiltOut); }
 std::string GlRenderer::deviceName() const { return ""; }
+void GlRenderer::forgetCascades() {}
 void GlRenderer::limitIndexChunksForTest(uint64_t) {}
 void GlRenderer::compileForTest(const std::string&, const std::string&) const { throw Error(kBuiltOut); }
 GlRenderer::VariableLayout GlRenderer::bufferVariableLayout(const std::string&, const std::string&) const { return {}; }

@@ -187,6 +187,10 @@ private:
 // were visible in the last one: renderFrame() copies those and evaluates only the newly exposed ones. A cascade
 // is reused only with the same scene, texel size, texture side and water threshold; anything else starts afresh.
 // One cache per stream of frames (the viewer's worker); not for two threads at once.
+namespace detail {
+struct CacheAccess;
+}
+
 class CascadeCache {
 public:
     CascadeCache();
@@ -198,6 +202,7 @@ public:
 
 private:
     friend Frame renderFrame(const Scene&, const Camera&, const RenderOptions&, Timings&, CascadeCache*);
+    friend struct detail::CacheAccess;  // the GL backend's cascades filled on the CPU (out of core) keep theirs here too
     std::unique_ptr<Impl> impl_;
 };
 

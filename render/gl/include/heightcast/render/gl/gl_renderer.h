@@ -5,6 +5,12 @@
 // ray/bilinear-patch intersection and cascade blending, and shading, as compute shaders. It fills the
 // same Frame and Timings as renderFrame(); GPU stage times come from GL timer queries.
 //
+// Out of core (Scene::outOfCore(): the grid read a region at a time, no cells or lists in memory, 100 M cells and
+// more) nothing of the grid goes to the GPU: the cascades are filled on the CPU exactly as renderFrame() fills them
+// (copies and interpolations from the surface pyramid, kernel sums from the cells around the rest, texels kept from
+// the renderer's last frame), uploaded, and the mipmaps, ray casting and shading run as compute shaders. Cell
+// outlines (RenderOptions::cellOutlines) need the cells on the GPU and are refused there.
+//
 // No GL type appears here: the GL state lives behind the pimpl in render/gl/src/. A build without OpenGL
 // (-DHC_WITH_GL=OFF) has this API too, from src/unavailable.cpp: headlessGlUnavailable() says the backend was
 // built out, and making a renderer throws hc::Error saying so; no GL, EGL or GLFW library is linked.
@@ -42,6 +48,10 @@ public:
     // (row 0 at the bottom, GL's convention) holding the shaded image, for a viewer to draw. Valid until
     // the next call.
     unsigned renderToTexture(const Camera& camera, const RenderOptions& options, Timings& timings);
+    // Out of core the renderer keeps each frame's cascade texels for the next (a moving camera fills only what it
+    // newly sees, as CascadeCache does for renderFrame()); after this call the next frame fills every texel afresh
+    // (benchmarks of from-scratch frames). In memory there is nothing kept.
+    void forgetCascades();
     // "llvmpipe (LLVM 15.0.6, 256 bits), OpenGL 4.5 (Core Profile) Mesa 22.3.6", say.
     std::string deviceName() const;
 
