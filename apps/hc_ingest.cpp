@@ -60,6 +60,10 @@ void printSummary(const hc::ingest::BuildSummary& b, const hc::ingest::LoadRepor
     const auto& c = r.sourceCheck;
     if (mesh) {
         std::printf("  values       each face's own, as float32 (no merging, no resampling)\n");
+    } else if (!c.notDone.empty()) {
+        std::printf("  deviation    max %.4g m, RMS %.4g m against the %llu valid pixels of the resampled working raster (tolerance %.4g m)\n",
+                    s.maxDevM, s.rmsDevM, (unsigned long long)s.validPixels, s.toleranceM);
+        std::printf("  vs source    not checked: %s\n", c.notDone.c_str());
     } else if (!c.done) {
         std::printf("  deviation    max %.4g m, RMS %.4g m (tolerance %.4g m; every valid source pixel checked%s)\n", s.maxDevM,
                     s.rmsDevM, s.toleranceM, r.sourcePrecisionDouble ? ", in the source's own precision" : "");
@@ -87,7 +91,8 @@ bool parseOptions(int argc, char** argv, hc::ingest::Options& o, std::string& ou
                       "Four cells merge into one while their mean stays within --tolerance of every pixel they\n"
                       "cover (in every layer); the achieved max and RMS deviation is measured and reported.\n"
                       "Under `mpirun -np N` the ranks share the build and rank 1 writes the same bytes as one process\n"
-                      "(each rank reads the whole raster; README, \"Preprocessing on several processes\").");
+                      "(each rank reads only its windows of the raster, except through --t_srs or with water steps; README,\n"
+                      "\"Preprocessing on several processes\").");
     p.positional("INPUT", "terrain raster: GeoTIFF, SRTM .hgt / .hgt.zip, ESRI ASCII, NetCDF, PNG, ... (GDAL)", o.input);
     p.option("-o", "OUT.hcg", "output grid file (required; written atomically)", out);
     p.option("--tolerance", "M", "max |pixel - cell value| in every layer, metres (default 0.25)", o.toleranceM);

@@ -7,6 +7,8 @@
 # valid (nodata -9999 declared, none present). Chosen because it is the only raster in /work/shared/data that is in a
 # projected CRS with an EPSG identity, in metres, at 10-30 m and without nodata, so every output pixel is valid
 # (kilauea_utm.nc, 30 m, has 3 % nodata ocean and a CRS without identity; the 1 m LiDAR has 31 m of relief).
+# Another source (HC_SCALE_SOURCE) keeps its own CRS and pixel size: a geographic mosaic of the two SRTM tiles
+# (gdalbuildvrt of N00E010.hgt and N00E011.hgt) makes the geographic raster of the MPI benchmark (BENCHMARKS.md).
 #
 # Mirroring keeps the terrain continuous: the source A and its mirror images (flipped in x, in y, in both) make a
 # 2 x 2 block M = [A fx(A); fy(A) fxy(A)] whose opposite edges match, so copies of M side by side are continuous
@@ -75,4 +77,4 @@ gdal_translate "${q[@]}" -srcwin 0 0 "$side" "$side" -a_nodata -9999 \
     -co TILED=YES -co BLOCKXSIZE=256 -co BLOCKYSIZE=256 -co COMPRESS=NONE -co BIGTIFF=IF_SAFER \
     "$work/b$k.vrt" "$tmp"
 mv -f "$tmp" "$out"
-echo "$out: ${side} x ${side} px ($(python3 -c "print(f'{$side * $side / 1e6:.1f}')") M), 20 m, from $(basename "$src") mirrored"
+echo "$out: ${side} x ${side} px ($(python3 -c "print(f'{$side * $side / 1e6:.1f}')") M), pixels of $px x ${py#-} (the source's CRS units), from $(basename "$src") mirrored"

@@ -17,6 +17,7 @@
 #include "gdal_util.h"
 #include "heightcast/core/error.h"
 #include "heightcast/core/progress.h"
+#include "heightcast/core/ranks.h"
 #include "heightcast/ingest/ingest.h"
 #include "resample.h"
 
@@ -88,13 +89,68 @@ void keptGeometry(const GeoTransform& gt, size_t width, size_t height, Raster& r
     if (report.method.empty()) report.method = "kept as is";
 }
 
+// How the working raster comes from a source that is resampled (not kept as is, nor warped by GDAL): its geometry
+// and CRS, and the map from target pixel centres to source pixel coordinates (no pixel read). resample() (whole)
+// or latticeStep and resampleWindow (window by window) then fill it.
+struct Resampling {
+    Raster shape;  // geometry and CRS; values empty
+    detail::TargetToSource map;
+    int lattice = 16;
+    double maxErrorPx = 1e-9;
+    bool sayLattice = false;  // UTM: the method names the lattice step (", map exact every N px") and then methodTail
+    std::string methodTail;
+    std::function<void(size_t row, std::vector<double>& x, std::vector<double>& y, std::vector<int>& ok)> rowToWorld;  // SourceTrace's
+};
+
+// A source on an affine geotransform that is rotated, has non-square pixels or is resampled to --min-cell.
+// `whole`: the working raster will be held whole (its size is checked against this machine's memory).
+Resampling planAffine(const GeoTransform& gt, size_t width, size_t height, double pixelM, const std::string& wkt, const Options& opt,
+                      LoadReport& report, bool whole) {
+    Resampling p;
+    Raster& r = p.shape;
+    r.crsWkt = wkt;
+    r.crsName = report.gridCrsName;  // each caller names the grid CRS in the report before it comes here
+    const double* g = gt.g;
+    const bool square = std::abs(std::abs(g[1]) - std::abs(g[5])) <= kSquareTolerance * std::max(std::abs(g[1]), std::abs(g[5]));
+    double inv[6];
+    if (!gt.invert(inv)) throw Error(opt.input + ": geotransform cannot be inverted (degenerate pixel size)");
+    double xs[4], ys[4];
+    double cw = static_cast<double>(width), ch = static_cast<double>(height);
+    const double corners[4][2] = {{0, 0}, {cw, 0}, {0, ch}, {cw, ch}};
+    for (int k = 0; k < 4; ++k) gt.apply(corners[k][0], corners[k][1], xs[k], ys[k]);
+    double xmin = *std::min_element(xs, xs + 4), xmax = *std::max_element(xs, xs + 4);
+    double ymin = *std::min_element(ys, ys + 4), ymax = *std::max_element(ys, ys + 4);
+    r.pixelSizeM = opt.minCellM ? *opt.minCellM : pixelM;
+    if (whole) checkWorkingSize(std::ceil((xmax - xmin) / r.pixelSizeM), std::ceil((ymax - ymin) / r.pixelSizeM), r.pixelSizeM, opt);
+    r.width = static_cast<size_t>(std::ceil((xmax - xmin) / r.pixelSizeM - 1e-9));
+    r.height = static_cast<size_t>(std::ceil((ymax - ymin) / r.pixelSizeM - 1e-9));
+    r.westWorld = xmin;
+    r.northWorld = ymax;
+    std::string why = gt.rotated() ? "rotated geotransform" : (!square ? "non-square pixels" : "--min-cell");
+    report.method += std::string(report.method.empty() ? "" : "; ") + "resampled north-up onto " + fmt(r.pixelSizeM) +
+                     " m squares (" + why + ", bilinear)";
+    p.map = [i0 = inv[0], i1 = inv[1], i2 = inv[2], i3 = inv[3], i4 = inv[4], i5 = inv[5]](double x, double y, double& col, double& row) {
+        col = i0 + x * i1 + y * i2;
+        row = i3 + x * i4 + y * i5;
+        return true;
+    };
+    p.lattice = 16, p.maxErrorPx = 1e-9;  // affine: the lattice interpolation is exact (the check confirms it)
+    p.rowToWorld = [gt](size_t row, std::vector<double>& x, std::vector<double>& y, std::vector<int>& ok) {
+        for (size_t c = 0; c < x.size(); ++c) {
+            gt.apply(static_cast<double>(c) + 0.5, static_cast<double>(row) + 0.5, x[c], y[c]);
+            ok[c] = 1;
+        }
+    };
+    return p;
+}
+
 // `trace`, when given, receives the source and its pixel-to-world map if the source is resampled.
 Raster fromSourceAffine(SourceBand&& src, const GeoTransform& gt, double pixelM, const std::string& wkt,
                         const Options& opt, LoadReport& report, detail::SourceTrace* trace) {
-    Raster r;
-    r.crsWkt = wkt;
-    r.crsName = report.gridCrsName;  // each caller names the grid CRS in the report before it comes here
     if (keptAsIs(gt, opt)) {
+        Raster r;
+        r.crsWkt = wkt;
+        r.crsName = report.gridCrsName;  // each caller names the grid CRS in the report before it comes here
         bool flipX = false, flipY = false;
         keptGeometry(gt, src.width, src.height, r, flipX, flipY, report);
         if (flipX || flipY) {
@@ -115,39 +171,12 @@ Raster fromSourceAffine(SourceBand&& src, const GeoTransform& gt, double pixelM,
         return r;
     }
     // Resample: rotated, non-square, or a finest cell other than the pixel size.
-    const double* g = gt.g;
-    const bool square = std::abs(std::abs(g[1]) - std::abs(g[5])) <= kSquareTolerance * std::max(std::abs(g[1]), std::abs(g[5]));
-    double inv[6];
-    if (!gt.invert(inv)) throw Error(opt.input + ": geotransform cannot be inverted (degenerate pixel size)");
-    double xs[4], ys[4];
-    double cw = static_cast<double>(src.width), ch = static_cast<double>(src.height);
-    const double corners[4][2] = {{0, 0}, {cw, 0}, {0, ch}, {cw, ch}};
-    for (int k = 0; k < 4; ++k) gt.apply(corners[k][0], corners[k][1], xs[k], ys[k]);
-    double xmin = *std::min_element(xs, xs + 4), xmax = *std::max_element(xs, xs + 4);
-    double ymin = *std::min_element(ys, ys + 4), ymax = *std::max_element(ys, ys + 4);
-    r.pixelSizeM = opt.minCellM ? *opt.minCellM : pixelM;
-    checkWorkingSize(std::ceil((xmax - xmin) / r.pixelSizeM), std::ceil((ymax - ymin) / r.pixelSizeM), r.pixelSizeM, opt);
-    r.width = static_cast<size_t>(std::ceil((xmax - xmin) / r.pixelSizeM - 1e-9));
-    r.height = static_cast<size_t>(std::ceil((ymax - ymin) / r.pixelSizeM - 1e-9));
-    r.westWorld = xmin;
-    r.northWorld = ymax;
-    std::string why = gt.rotated() ? "rotated geotransform" : (!square ? "non-square pixels" : "--min-cell");
-    report.method += std::string(report.method.empty() ? "" : "; ") + "resampled north-up onto " + fmt(r.pixelSizeM) +
-                     " m squares (" + why + ", bilinear)";
-    detail::SourceBand source = std::move(src);
-    resample(source, [&](double x, double y, double& col, double& row) {
-        col = inv[0] + x * inv[1] + y * inv[2];
-        row = inv[3] + x * inv[4] + y * inv[5];
-        return true;
-    }, r, 16, 1e-9, opt.threads);  // affine: the lattice interpolation is exact (the check confirms it)
+    Resampling p = planAffine(gt, src.width, src.height, pixelM, wkt, opt, report, true);
+    Raster r = std::move(p.shape);
+    resample(src, p.map, r, p.lattice, p.maxErrorPx, opt.threads);
     if (trace) {
-        trace->band = std::move(source);
-        trace->rowToWorld = [gt](size_t row, std::vector<double>& x, std::vector<double>& y, std::vector<int>& ok) {
-            for (size_t c = 0; c < x.size(); ++c) {
-                gt.apply(static_cast<double>(c) + 0.5, static_cast<double>(row) + 0.5, x[c], y[c]);
-                ok[c] = 1;
-            }
-        };
+        trace->band = std::move(src);
+        trace->rowToWorld = std::move(p.rowToWorld);
     }
     return r;
 }
@@ -157,8 +186,8 @@ Raster fromSourceAffine(SourceBand&& src, const GeoTransform& gt, double pixelM,
 // Longitudes may run 0..360 or anywhere past 180: every longitude below is taken on the circle,
 // relative to the raster's centre, so 234..238 E is the same as 126..122 W, and a raster across the
 // antimeridian stays whole (its UTM zone sits across 180).
-Raster projectToUtm(SourceBand&& src, const GeoTransform& gt, const OGRSpatialReference& geo, const Options& opt,
-                    LoadReport& report, detail::SourceTrace* trace) {
+Resampling planUtm(const GeoTransform& gt, size_t width, size_t height, const OGRSpatialReference& geo, const Options& opt,
+                   LoadReport& report, bool whole) {
     using GeographicLib::Math;
     const double degPerUnit = geo.GetAngularUnits() * 180.0 / M_PI;
     const double pm = geo.GetPrimeMeridian();  // degrees east of Greenwich
@@ -168,7 +197,7 @@ Raster projectToUtm(SourceBand&& src, const GeoTransform& gt, const OGRSpatialRe
         lat *= degPerUnit;
     };
     // The outline, sampled along every edge; longitudes as offsets from the centre's.
-    const double cw = static_cast<double>(src.width), ch = static_cast<double>(src.height);
+    const double cw = static_cast<double>(width), ch = static_cast<double>(height);
     double lonC, latC;
     lonLat(cw / 2, ch / 2, lonC, latC);
     double lonMin = HUGE_VAL, lonMax = -HUGE_VAL, latMin = HUGE_VAL, latMax = -HUGE_VAL;
@@ -218,7 +247,8 @@ Raster projectToUtm(SourceBand&& src, const GeoTransform& gt, const OGRSpatialRe
     forward(lo, la, x2, y2);
     double dx = std::hypot(x1 - x0, y1 - y0), dy = std::hypot(x2 - x0, y2 - y0);
 
-    Raster r;
+    Resampling p;
+    Raster& r = p.shape;
     r.pixelSizeM = opt.minCellM ? *opt.minCellM : std::min(dx, dy);
     double xmin = HUGE_VAL, xmax = -HUGE_VAL, ymin = HUGE_VAL, ymax = -HUGE_VAL;
     for (auto [lon, lat] : outline) {
@@ -229,7 +259,7 @@ Raster projectToUtm(SourceBand&& src, const GeoTransform& gt, const OGRSpatialRe
         ymin = std::min(ymin, y);
         ymax = std::max(ymax, y);
     }
-    checkWorkingSize(std::ceil((xmax - xmin) / r.pixelSizeM), std::ceil((ymax - ymin) / r.pixelSizeM), r.pixelSizeM, opt);
+    if (whole) checkWorkingSize(std::ceil((xmax - xmin) / r.pixelSizeM), std::ceil((ymax - ymin) / r.pixelSizeM), r.pixelSizeM, opt);
     r.width = static_cast<size_t>(std::ceil((xmax - xmin) / r.pixelSizeM - 1e-9));
     r.height = static_cast<size_t>(std::ceil((ymax - ymin) / r.pixelSizeM - 1e-9));
     r.westWorld = xmin;
@@ -251,30 +281,31 @@ Raster projectToUtm(SourceBand&& src, const GeoTransform& gt, const OGRSpatialRe
 
     double inv[6];
     if (!gt.invert(inv)) throw Error(opt.input + ": geotransform cannot be inverted (degenerate pixel size)");
-    // 1e-5 pixel: at slopes of 100 m per pixel (alpine SRTM) that is 1 mm of elevation.
-    int lattice = resample(src, [&](double x, double y, double& col, double& row) {
+    // Everything by value: the map outlives this function (window by window).
+    p.map = [tm, lon0, fe, fn, lonC, pm, degPerUnit, i0 = inv[0], i1 = inv[1], i2 = inv[2], i3 = inv[3], i4 = inv[4], i5 = inv[5]](
+                double x, double y, double& col, double& row) {
         double lat, lon;
         tm.Reverse(lon0, x - fe, y - fn, lat, lon);
         lon = lonC + Math::AngDiff(lonC, lon);  // back into the source's own longitude range
         double gx = (lon - pm) / degPerUnit, gy = lat / degPerUnit;
-        col = inv[0] + gx * inv[1] + gy * inv[2];
-        row = inv[3] + gx * inv[4] + gy * inv[5];
+        col = i0 + gx * i1 + gy * i2;
+        row = i3 + gx * i4 + gy * i5;
         return std::isfinite(col) && std::isfinite(row);
-    }, r, 16, 1e-5, opt.threads);
-    report.method += ", map exact every " + std::to_string(lattice) + " px";
+    };
+    // 1e-5 pixel: at slopes of 100 m per pixel (alpine SRTM) that is 1 mm of elevation.
+    p.lattice = 16, p.maxErrorPx = 1e-5, p.sayLattice = true;
     if (std::abs(lonC - Math::AngNormalize(lonC)) > 1e-9)
-        report.method += "; longitudes " + fmt(lonMin) + ".." + fmt(lonMax) + " read as " + fmt(Math::AngNormalize(lonMin)) + ".." +
-                         fmt(Math::AngNormalize(lonMin) + (lonMax - lonMin));
-    if (trace) {
-        trace->band = std::move(src);
+        p.methodTail = "; longitudes " + fmt(lonMin) + ".." + fmt(lonMax) + " read as " + fmt(Math::AngNormalize(lonMin)) + ".." +
+                       fmt(Math::AngNormalize(lonMin) + (lonMax - lonMin));
+    {
         // Outlives this function: everything by value. The projection of every source pixel centre was most of
         // the check's time (geographic SRTM ingest 2.8-3.2x slower, BENCHMARKS.md): along a row the map is
         // smooth, so it is projected exactly at every 8th column and interpolated by the parabola through three
         // such nodes in between, checked against an exact projection in each 16-column span: kept where the
         // check is within 1e-6 m (the residual, cubic between the nodes, peaks at most 1.2x the check point's),
         // else that span is projected exactly, column by column.
-        trace->rowToWorld = [gt, degPerUnit, pm, tm, lon0, fe, fn](size_t row, std::vector<double>& x, std::vector<double>& y,
-                                                                   std::vector<int>& ok) {
+        p.rowToWorld = [gt, degPerUnit, pm, tm, lon0, fe, fn](size_t row, std::vector<double>& x, std::vector<double>& y,
+                                                              std::vector<int>& ok) {
             const double rc = static_cast<double>(row) + 0.5;
             auto exact = [&](size_t c, double& ox, double& oy) {
                 double lon, lat;
@@ -307,6 +338,19 @@ Raster projectToUtm(SourceBand&& src, const GeoTransform& gt, const OGRSpatialRe
             }
             for (size_t c = c0; c < w; ++c) ok[c] = exact(c, x[c], y[c]);
         };
+    }
+    return p;
+}
+
+Raster projectToUtm(SourceBand&& src, const GeoTransform& gt, const OGRSpatialReference& geo, const Options& opt,
+                    LoadReport& report, detail::SourceTrace* trace) {
+    Resampling p = planUtm(gt, src.width, src.height, geo, opt, report, true);
+    Raster r = std::move(p.shape);
+    const int lattice = resample(src, p.map, r, p.lattice, p.maxErrorPx, opt.threads);
+    report.method += ", map exact every " + std::to_string(lattice) + " px" + p.methodTail;
+    if (trace) {
+        trace->band = std::move(src);
+        trace->rowToWorld = std::move(p.rowToWorld);
     }
     return r;
 }
@@ -763,6 +807,70 @@ private:
     detail::SourceTally tally_;
 };
 
+// TerrainWindows over a source that is resampled (projected to UTM, rotated, non-square pixels or --min-cell): a working
+// window reads the source pixels its map reaches (resampleWindow asks for them) and resamples them on the whole target's lattice, so
+// its pixels are the same bits as the whole raster's (resample.h). The reading tally counts every source pixel once:
+// each rank reads its share of the source's row strips for it (one more pass over the source, spread over the ranks).
+// The check of every source pixel against its cell (LoadReport::sourceCheck) needs every cell's value under every
+// source pixel, which no rank holds: it is not made, and the report says so.
+class ResampledWindows final : public detail::TerrainWindows {
+public:
+    ResampledWindows(Opened&& o, Resampling&& plan, const Options& opt, LoadReport& report)
+        : o_(std::move(o)), plan_(std::move(plan)), threads_(opt.threads), progress_(opt.progress) {
+        step_ = detail::latticeStep(plan_.shape, plan_.map, plan_.lattice, plan_.maxErrorPx, threads_);
+        if (plan_.sayLattice) report.method += ", map exact every " + std::to_string(step_) + " px" + plan_.methodTail;
+        report.sourceCheck.notDone = "under mpirun each rank reads only its windows of the resampled raster (run hc-ingest without "
+                                     "mpirun for the check of every source pixel against its cell)";
+    }
+    const Raster& shape() const override { return plan_.shape; }
+    void read(size_t col0, size_t row0, size_t w, size_t h, std::vector<float>& values, std::vector<float>& rounding) override {
+        if (col0 + w > plan_.shape.width || row0 + h > plan_.shape.height) throw Error("window outside the working raster");
+        values.assign(w * h, kNaN);
+        rounding.clear();  // a resampled raster keeps float32 values only (as read whole)
+        const size_t width = o_.band->width(), height = o_.band->height();
+        auto readSource = [&](size_t c0, size_t r0, size_t c1, size_t r1) {
+            const size_t sw = c1 - c0 + 1, sh = r1 - r0 + 1;
+            source_.assign(sw * sh, kNaN);
+            residual_.clear();
+            detail::SourceTally uncounted;  // counted once by tally()
+            o_.band->read(c0, r0, sw, sh, source_.data(), residual_, 0, sw * sh, uncounted);
+            o_.band->dropCache();
+            return detail::SourceView{source_.data(), c0, r0, sw, width, height};
+        };
+        detail::resampleWindow(plan_.map, plan_.shape, step_, col0, row0, w, h, width, height, readSource, values.data(), threads_);
+    }
+    const detail::SourceTally& tally() const override {
+        if (counted_) return tally_;
+        const size_t width = o_.band->width(), height = o_.band->height();
+        const size_t strip = std::max<size_t>(1, (size_t{1} << 20) / (width * 8 + 1));  // ~1 MB buffers, as read whole
+        const size_t strips = (height + strip - 1) / strip, rank = size_t(ranks::rank()), count = size_t(ranks::count());
+        Progress progress("counting the source's pixels", (strips + count - 1 - rank) / count, progress_ && rank == 0);
+        std::vector<float> values, residual;
+        for (size_t s = rank; s < strips; s += count) {
+            const size_t r0 = s * strip, rows = std::min(strip, height - r0);
+            values.assign(width * rows, kNaN);
+            residual.clear();
+            o_.band->read(0, r0, width, rows, values.data(), residual, 0, values.size(), tally_);
+            o_.band->dropCache();
+            progress.advance(1);
+        }
+        progress.finish();
+        counted_ = true;
+        return tally_;
+    }
+    void finish(const detail::SourceTally& all, LoadReport& report) const override { o_.band->finish(all, report); }
+
+private:
+    Opened o_;
+    Resampling plan_;
+    unsigned threads_;
+    bool progress_;
+    int step_ = 1;
+    std::vector<float> source_, residual_;
+    mutable detail::SourceTally tally_;
+    mutable bool counted_ = false;
+};
+
 }  // namespace
 
 Raster loadTerrain(const Options& opt, LoadReport& report) { return detail::loadTerrainTraced(opt, report, nullptr); }
@@ -798,10 +906,19 @@ Raster detail::loadTerrainTraced(const Options& opt, LoadReport& report, SourceT
 
 std::unique_ptr<detail::TerrainWindows> detail::openTerrainWindows(const Options& opt, LoadReport& report, std::string& why) {
     Opened o = openTerrain(opt, report);
-    if (o.route == Opened::Route::Warp) why = "--t_srs warps the whole source";
-    else if (o.route == Opened::Route::Utm) why = "a geographic source is projected to UTM as a whole";
-    else if (!keptAsIs(o.gt, opt)) why = "the source is resampled (rotated, non-square pixels or --min-cell)";
-    if (!why.empty()) return nullptr;
+    const size_t width = o.band->width(), height = o.band->height();
+    switch (o.route) {
+    case Opened::Route::Warp: why = "--t_srs warps the whole source (GDAL's warper)"; return nullptr;
+    case Opened::Route::Utm: {
+        Resampling plan = planUtm(o.gt, width, height, o.srs, opt, report, false);
+        return std::make_unique<ResampledWindows>(std::move(o), std::move(plan), opt, report);
+    }
+    case Opened::Route::Affine: break;
+    }
+    if (!keptAsIs(o.gt, opt)) {
+        Resampling plan = planAffine(o.gt, width, height, o.pixelM, o.wkt, opt, report, false);
+        return std::make_unique<ResampledWindows>(std::move(o), std::move(plan), opt, report);
+    }
     return std::make_unique<KeptWindows>(std::move(o), report);
 }
 

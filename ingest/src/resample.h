@@ -94,9 +94,11 @@ public:
     virtual void finish(const SourceTally& all, LoadReport& report) const = 0;
 };
 
-// Opens opt.input and settles its georeferencing as loadTerrain does, reading no pixel. Where the working raster is
-// the source's pixels as they are (at most mirrored), returns their window reader; otherwise (a projection, a warp
-// or a resampling needs the whole source) nullptr, with the reason in `why`.
+// Opens opt.input and settles its georeferencing as loadTerrain does, reading no pixel, and returns its window reader:
+// the source's own pixels where the working raster is the source as it is (at most mirrored), else the source pixels
+// a window's map reaches, resampled on the whole raster's lattice (projected to UTM, rotated, non-square pixels,
+// --min-cell). Either way a window holds the same bits as loadTerrain's raster there (tests/ingest_windows_test.cpp).
+// nullptr where GDAL's warper (--t_srs) must see the whole source, with the reason in `why`.
 std::unique_ptr<TerrainWindows> openTerrainWindows(const Options& opt, LoadReport& report, std::string& why);
 
 // loadTerrain (ingest.h), keeping the source in `trace` (when given) if the working raster is not the
@@ -108,7 +110,29 @@ Raster loadTerrainTraced(const Options& opt, LoadReport& report, SourceTrace* tr
 // nearest pixel puts it. The map is evaluated exactly every `lattice` pixels and bilinearly in
 // between; the lattice is refined (halved) until that interpolation is within maxErrorPx of the
 // exact map at every lattice-cell centre. Returns the lattice step used.
+//
+// The same in pieces, for a target filled window by window (each rank its own, DESIGN.md section 13): latticeStep over
+// the whole target (the map only, no pixel; two rows of nodes held at a time), then resampleWindow per window, which
+// asks for the source pixels it reads. The lattice is the whole target's, so a window's pixels are the same bits as
+// resample() gives them (resample() is latticeStep and one window over the whole target).
 int resample(const SourceBand& source, const TargetToSource& map, Raster& target, int lattice, double maxErrorPx,
              unsigned threads);
+
+// A source raster or a window of it: source pixel (col, row) at values[(row - r0) * w + (col - c0)]; width x height is the
+// whole source's size (the bounds and edge clamps are the whole source's).
+struct SourceView {
+    const float* values = nullptr;
+    size_t c0 = 0, r0 = 0, w = 0;
+    size_t width = 0, height = 0;
+    float at(size_t col, size_t row) const { return values[(row - r0) * w + (col - c0)]; }
+};
+// resample()'s lattice step for this target geometry and map.
+int latticeStep(const Raster& target, const TargetToSource& map, int lattice, double maxErrorPx, unsigned threads);
+// Target pixels [col0, col0 + w) x [row0, row0 + h) into out (w h, row-major, NaN = nodata). read(c0, r0, c1, r1) is
+// asked once, for the source pixels [c0, c1] x [r0, r1] the window's map reaches (not at all when it reaches none:
+// every pixel is then nodata), and returns a view holding at least those; sourceWidth x sourceHeight: the whole source.
+void resampleWindow(const TargetToSource& map, const Raster& target, int step, size_t col0, size_t row0, size_t w, size_t h, size_t sourceWidth,
+                    size_t sourceHeight, const std::function<SourceView(size_t c0, size_t r0, size_t c1, size_t r1)>& read, float* out,
+                    unsigned threads);
 
 }  // namespace hc::ingest::detail

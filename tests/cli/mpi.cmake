@@ -112,6 +112,50 @@ fi
 done
 cat g3.txt]])
 
+  # A geographic mosaic (the bundled WGS 84 DEM cut into a 2 x 2 VRT, its south-east tile missing, -32768 sentinels burnt
+  # into one tile), projected to UTM window by window: each rank reads the source pixels its own windows' map reaches
+  # and resamples them on the whole raster's lattice, so the file is the same bytes as one process writes. The
+  # summaries agree but for the check against the source, which the windows cannot make and which the log says is not
+  # made; the sentinels' count is the same (every source pixel counted once, by strips shared over the ranks).
+  set(GEO_MOSAIC [[S="$HC_DATA_DIR/hef_srtm.tif" &&
+gdal_translate -q -srcwin 0 0 192 142 "$S" g0_0.tif &&
+gdal_translate -q -srcwin 192 0 192 142 "$S" g192_0.tif &&
+gdal_translate -q -srcwin 0 142 192 142 "$S" g0_142.tif &&
+printf 'id,WKT\n1,"POLYGON((10.70 46.86,10.74 46.86,10.74 46.89,10.70 46.89,10.70 46.86))"\n' > box.csv &&
+gdal_rasterize -q -burn -32768 box.csv g0_0.tif 2>/dev/null &&
+gdalbuildvrt -q geo.vrt g0_0.tif g192_0.tif g0_142.tif && "$HC_INGEST" geo.vrt -o one.hcg > one.txt 2>&1]])
+  hc_mpi_test(mpi.ingest_geographic_windows 0 [[rank 3/3: [0-9]+ windows? read, [0-9]+ px \([0-9.]+ % of the raster\)]]
+    --setup "${GEO_MOSAIC}" --no-match [[error:|whole raster]]
+    --check [[for n in 2 3
+do cmp one.hcg g$n.hcg || exit 1
+done
+grep -E 'projected to UTM zone 32N .*map exact every [0-9]+ px' g3.txt
+grep -E 'vs source +not checked: under mpirun each rank reads only its windows' g3.txt
+grep -E 'vs source +max' one.txt
+grep -E 'hold -32768, a classic nodata sentinel' one.txt
+grep -E '^  |warning' one.txt | grep -vE '^ +(time|memory|deviation|vs source|lost) ' > a.txt
+grep -E '^  |warning' g3.txt | grep -vE '^ +(time|memory|deviation|vs source|lost) ' > b.txt
+diff a.txt b.txt
+test "$(grep -cE 'rank [1-3]/3: [0-9]+ windows? read' g3.txt)" = 3]]
+    -- ${HC_BASH} -c [[for n in 2 3
+do if ! "$HC_MPIRUN" -np $n "$HC_INGEST" geo.vrt -o g$n.hcg > g$n.txt 2>&1
+then cat g$n.txt
+exit 1
+fi
+done
+cat g3.txt]])
+
+  # Resampled on an affine map, window by window: a rotated geotransform (a VRT over the bundled LiDAR tile) and
+  # --min-cell coarser than the pixels. The same bytes as one process.
+  hc_mpi_test(mpi.ingest_rotated_and_min_cell_windows 0 [[rank 3/3: [0-9]+ windows? read]]
+    --setup [[gdal_translate -q -of VRT "$HC_DATA_DIR/lidar1m_minnesota_utm15.tif" rot.vrt &&
+sed -i 's|<GeoTransform>.*</GeoTransform>|<GeoTransform>429252.313370022, 0.9396926207859084, 0.3420201433256687, 5150885.424942633, 0.3420201433256687, -0.9396926207859084</GeoTransform>|' rot.vrt &&
+"$HC_INGEST" --quiet rot.vrt -o rot1.hcg && "$HC_INGEST" --quiet "$HC_DATA_DIR/lidar1m_minnesota_utm15.tif" --min-cell 3 -o min1.hcg]]
+    --match [[resampled north-up onto 1 m squares \(rotated geotransform]] --match [[resampled north-up onto 3 m squares \(--min-cell]]
+    --no-match [[error:|whole raster]]
+    --check [[cmp rot1.hcg rot3.hcg && cmp min1.hcg min3.hcg]]
+    -- ${HC_BASH} -c [["$HC_MPIRUN" -np 3 "$HC_INGEST" rot.vrt -o rot3.hcg && "$HC_MPIRUN" -np 3 "$HC_INGEST" "$HC_DATA_DIR/lidar1m_minnesota_utm15.tif" --min-cell 3 -o min3.hcg]])
+
   # South-up rows and east-to-west columns (a geotransform with both signs turned): each rank mirrors its windows as
   # one process mirrors the whole raster. Same bytes.
   hc_mpi_test(mpi.ingest_windows_mirrored 0 [[rank 2/3: [0-9]+ windows? read]]

@@ -1,0 +1,170 @@
+// The terrain read window by window (what each rank of `mpirun hc-ingest` reads, DESIGN.md section 13) against the
+// same raster read whole by loadTerrain, the reference: the same geometry, the same bits in every pixel of every
+// window, and the same reading counts. Sources that are kept as is and sources that are resampled (a geographic
+// raster projected to UTM, a rotated geotransform, --min-cell), on real rasters, with holes.
+//
+// "The same bits" is the right tolerance: the ranks' files must be byte-identical to one process's, so a window's
+// pixel must not differ from the whole raster's by even one float ulp.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstring>
+#include <filesystem>
+#include <random>
+
+#include <gdal_priv.h>
+#include <gdal_utils.h>
+
+#include "heightcast/ingest/ingest.h"
+#include "resample.h"
+#include "test_data.h"
+
+namespace {
+
+namespace fs = std::filesystem;
+using hc::ingest::LoadReport;
+using hc::ingest::Options;
+using hc::ingest::Raster;
+namespace detail = hc::ingest::detail;
+
+fs::path tempDir() {
+    fs::path d = fs::temp_directory_path() / ("hc_ingest_windows_test_" + std::to_string(::getpid()));
+    fs::create_directories(d);
+    return d;
+}
+
+bool sameBits(float a, float b) { return std::memcmp(&a, &b, sizeof a) == 0; }
+
+// Reads `o` whole and window by window: windows of awkward sizes tiling the working raster (so every pixel is read
+// once, its edges included) plus random ones overlapping them; every pixel compared bit for bit. Returns the number
+// of valid pixels compared (so a caller can see the comparison was not vacuous).
+size_t compareWindows(const Options& o, const std::string& expectMethod, size_t tileW, size_t tileH) {
+    LoadReport wholeReport;
+    const Raster whole = hc::ingest::loadTerrain(o, wholeReport);
+    EXPECT_NE(wholeReport.method.find(expectMethod), std::string::npos) << wholeReport.method;
+
+    LoadReport rep;
+    std::string why;
+    std::unique_ptr<detail::TerrainWindows> windows = detail::openTerrainWindows(o, rep, why);
+    EXPECT_TRUE(windows) << why;
+    if (!windows) return 0;
+    const Raster& s = windows->shape();
+    EXPECT_EQ(s.width, whole.width);
+    EXPECT_EQ(s.height, whole.height);
+    EXPECT_EQ(s.pixelSizeM, whole.pixelSizeM);
+    EXPECT_EQ(s.westWorld, whole.westWorld);
+    EXPECT_EQ(s.northWorld, whole.northWorld);
+    EXPECT_EQ(s.crsWkt, whole.crsWkt);
+    EXPECT_EQ(rep.method, wholeReport.method);
+    if (s.width != whole.width || s.height != whole.height) return 0;
+
+    size_t valid = 0, mismatches = 0;
+    std::vector<float> values, rounding;
+    auto check = [&](size_t c0, size_t r0, size_t w, size_t h, bool count) {
+        windows->read(c0, r0, w, h, values, rounding);
+        ASSERT_EQ(values.size(), w * h);
+        for (size_t r = 0; r < h; ++r)
+            for (size_t c = 0; c < w; ++c) {
+                const float a = values[r * w + c], b = whole.at(c0 + c, r0 + r);
+                if (!sameBits(a, b) && mismatches++ < 5)
+                    ADD_FAILURE() << "pixel " << c0 + c << "," << r0 + r << " of window " << c0 << "," << r0 << " " << w << "x" << h
+                                  << ": " << a << " read by window, " << b << " read whole";
+                if (count && !std::isnan(b)) ++valid;
+            }
+    };
+    for (size_t r0 = 0; r0 < s.height; r0 += tileH)
+        for (size_t c0 = 0; c0 < s.width; c0 += tileW)
+            check(c0, r0, std::min(tileW, s.width - c0), std::min(tileH, s.height - r0), true);
+    // What the tiling's reads counted (a source kept as is counts what its windows read; a resampled one counts every
+    // source pixel once by strips): the whole read's counts.
+    windows->finish(windows->tally(), rep);
+    EXPECT_EQ(rep.sourceValidPixels, wholeReport.sourceValidPixels);
+    EXPECT_EQ(rep.infPixels, wholeReport.infPixels);
+    EXPECT_EQ(rep.warnings, wholeReport.warnings);
+    std::mt19937 rng(7);
+    for (int k = 0; k < 20; ++k) {
+        const size_t w = 1 + rng() % std::min<size_t>(s.width, 97), h = 1 + rng() % std::min<size_t>(s.height, 61);
+        check(rng() % (s.width - w + 1), rng() % (s.height - h + 1), w, h, false);
+    }
+    EXPECT_EQ(mismatches, 0u);
+    return valid;
+}
+
+// The bundled WGS 84 SRTM tile (384 x 284 px of 1"), a box of it burnt to its declared nodata: projected to UTM 32N.
+TEST(IngestWindows, GeographicSourceProjectedToUtmReadsTheSameBitsByWindow) {
+    HC_REQUIRE_DATA(src, "hef_srtm.tif");
+    GDALAllRegister();
+    const std::string path = (tempDir() / "hef_holes.tif").string();
+    {
+        GDALDatasetUniquePtr in(GDALDataset::Open(src.c_str(), GDAL_OF_RASTER | GDAL_OF_READONLY));
+        ASSERT_TRUE(in);
+        GDALDatasetUniquePtr ds(GetGDALDriverManager()->GetDriverByName("GTiff")->CreateCopy(path.c_str(), in.get(), FALSE, nullptr, nullptr, nullptr));
+        ASSERT_TRUE(ds);
+        GDALRasterBand* b = ds->GetRasterBand(1);
+        ASSERT_EQ(b->SetNoDataValue(-32768), CE_None);
+        std::vector<int16_t> hole(40 * 30, -32768);
+        ASSERT_EQ(b->RasterIO(GF_Write, 100, 120, 40, 30, hole.data(), 40, 30, GDT_Int16, 0, 0, nullptr), CE_None);
+    }
+    Options o;
+    o.input = path;
+    const size_t valid = compareWindows(o, "projected to UTM zone 32N", 37, 23);
+    EXPECT_GT(valid, 50000u);  // most of the ~60 k working pixels, the hole and the skewed footprint's corners aside
+}
+
+// The bundled 1 m LiDAR tile under a geotransform turned by 20 degrees: resampled north-up.
+TEST(IngestWindows, RotatedGeotransformReadsTheSameBitsByWindow) {
+    HC_REQUIRE_DATA(src, "lidar1m_minnesota_utm15.tif");
+    GDALAllRegister();
+    const std::string path = (tempDir() / "lidar_rotated.tif").string();
+    {
+        GDALDatasetUniquePtr in(GDALDataset::Open(src.c_str(), GDAL_OF_RASTER | GDAL_OF_READONLY));
+        ASSERT_TRUE(in);
+        double gt[6];
+        ASSERT_EQ(in->GetGeoTransform(gt), CE_None);
+        GDALDatasetUniquePtr ds(GetGDALDriverManager()->GetDriverByName("GTiff")->CreateCopy(path.c_str(), in.get(), FALSE, nullptr, nullptr, nullptr));
+        ASSERT_TRUE(ds);
+        const double a = 20 * M_PI / 180, px = gt[1];
+        double rot[6] = {gt[0], px * std::cos(a), px * std::sin(a), gt[3], px * std::sin(a), -px * std::cos(a)};
+        ASSERT_EQ(ds->SetGeoTransform(rot), CE_None);
+    }
+    Options o;
+    o.input = path;
+    EXPECT_GT(compareWindows(o, "rotated geotransform", 64, 41), 10000u);
+}
+
+// The same LiDAR tile, kept north-up but resampled to --min-cell 3 (coarser than its 1 m pixels), and to 0.7 m (finer).
+TEST(IngestWindows, MinCellReadsTheSameBitsByWindow) {
+    HC_REQUIRE_DATA(src, "lidar1m_minnesota_utm15.tif");
+    GDALAllRegister();
+    for (double cell : {3.0, 0.7}) {
+        SCOPED_TRACE(cell);
+        Options o;
+        o.input = src;
+        o.minCellM = cell;
+        EXPECT_GT(compareWindows(o, "--min-cell", 50, 29), 1000u);
+    }
+}
+
+// A source kept as is (a projected GeoTIFF): the windows are its own pixels.
+TEST(IngestWindows, KeptSourceReadsTheSameBitsByWindow) {
+    HC_REQUIRE_DATA(src, "south_glacier_utm7.tif");
+    GDALAllRegister();
+    Options o;
+    o.input = src;
+    EXPECT_GT(compareWindows(o, "kept as is", 45, 33), 1000u);
+}
+
+// GDAL's warper (--t_srs) has no window reader: nullptr, with the reason.
+TEST(IngestWindows, WarpedSourceSaysWhyItIsReadWhole) {
+    HC_REQUIRE_DATA(src, "hef_srtm.tif");
+    GDALAllRegister();
+    Options o;
+    o.input = src;
+    o.targetSrs = "EPSG:3857";
+    LoadReport rep;
+    std::string why;
+    EXPECT_FALSE(detail::openTerrainWindows(o, rep, why));
+    EXPECT_NE(why.find("--t_srs"), std::string::npos) << why;
+}
+
+}  // namespace
