@@ -90,9 +90,9 @@ bool parseOptions(int argc, char** argv, hc::ingest::Options& o, std::string& ou
                       "Converts a raster DEM (any format GDAL reads, any CRS) into an adaptive quadtree grid file.\n"
                       "Four cells merge into one while their mean stays within --tolerance of every pixel they\n"
                       "cover (in every layer); the achieved max and RMS deviation is measured and reported.\n"
-                      "Under `mpirun -np N` the ranks share the build and rank 1 writes the same bytes as one process\n"
-                      "(each rank reads only its windows of the raster, except through --t_srs or with water steps; README,\n"
-                      "\"Preprocessing on several processes\").");
+                      "Under `mpirun -np N` the ranks share the build and write the same bytes as one process: each reads\n"
+                      "only its windows of the raster (except through --t_srs or with water steps) and writes its own cells\n"
+                      "into the one output, whose folder every rank must see (README, \"Preprocessing on several processes\").");
     p.positional("INPUT", "terrain raster: GeoTIFF, SRTM .hgt / .hgt.zip, ESRI ASCII, NetCDF, PNG, ... (GDAL)", o.input);
     p.option("-o", "OUT.hcg", "output grid file (required; written atomically)", out);
     p.option("--tolerance", "M", "max |pixel - cell value| in every layer, metres (default 0.25)", o.toleranceM);

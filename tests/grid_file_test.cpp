@@ -824,3 +824,98 @@ TEST_F(GridFile, StepsAreReadLazilyAndCheckedWhenRead) {
     EXPECT_THROW(hc::readGrid(path("bad2.hcg"), nullptr, 2), hc::Error);
     EXPECT_THROW(hc::verifyGridFile(path("bad2.hcg"), 0), hc::Error);
 }
+
+// Writing by parts (under mpirun each rank writes its own run of cells into rank 0's file, DESIGN.md section 13), run
+// here in one process: rank 0's writer appends cells [0, a), two parts write [a, b) and [b, n) straight into its
+// temporary (the second before the first, as ranks race), then check, hash and summarise their cells in turn from the
+// state the run before left. The file must be the very bytes writeGrid() writes: cuts inside checksum blocks, a second
+// static layer, 300 k cells over three 1 MiB blocks of CELLS.
+namespace {
+
+Grid twoLayerThreeBlockGrid() {
+    Grid g = threeBlockGrid();
+    g.layers.push_back({"roughness", "m"});
+    g.values.emplace_back();
+    for (size_t i = 0; i < g.cellCount(); ++i) g.values[1].push_back(static_cast<float>(i % 13) * 0.01f);
+    return g;
+}
+
+std::vector<std::span<const float>> valuesOf(const Grid& g, size_t i, size_t n) {
+    std::vector<std::span<const float>> out;
+    for (const auto& v : g.values) out.emplace_back(std::span<const float>(v).subspan(i, n));
+    return out;
+}
+
+}  // namespace
+
+TEST_F(GridFile, WritingByPartsEqualsWholeWrite) {
+    const Grid g = twoLayerThreeBlockGrid();
+    ASSERT_EQ(g.validate(), "");
+    hc::writeGrid(g, path("whole.hcg"));
+    const size_t n = g.cellCount();
+    for (auto [a, b] : {std::pair<size_t, size_t>{70001, 200003}, {0, 131072}, {n / 2, n}, {1, 2}}) {
+        SCOPED_TRACE(std::to_string(a) + ", " + std::to_string(b));
+        hc::GridFileWriter w(path("parts.hcg"), g, n, 0);
+        w.append(std::span(g.codes).first(a), valuesOf(g, 0, a));
+        const std::vector<std::byte> where = w.placement();
+        hc::GridFilePart p1(where, g, a), p2(where, g, b);
+        for (size_t i = b; i < n; i += 50000) p2.append(std::span(g.codes).subspan(i, std::min<size_t>(50000, n - i)), valuesOf(g, i, std::min<size_t>(50000, n - i)));
+        p1.append(std::span(g.codes).subspan(a, b - a), valuesOf(g, a, b - a));
+        p1.resume(w.streamState());
+        p1.follow(std::span(g.codes).subspan(a, b - a), valuesOf(g, a, b - a));
+        p2.resume(p1.state());
+        p2.follow(std::span(g.codes).subspan(b, n - b), valuesOf(g, b, n - b));
+        w.addPart(p1.finish());
+        w.addPart(p2.finish());
+        w.commit(g.stats);
+        EXPECT_EQ(readBytes(path("parts.hcg")), readBytes(path("whole.hcg")));
+    }
+    expectEqualGrids(g, hc::readGrid(path("parts.hcg")));
+}
+
+TEST_F(GridFile, WritingByPartsRefusesPartsOutOfTurnAndLeavesNothing) {
+    const Grid g = twoLayerThreeBlockGrid();
+    const size_t n = g.cellCount(), a = 1000, b = 150000;
+    {
+        hc::GridFileWriter w(path("t.hcg"), g, n, 0);
+        w.append(std::span(g.codes).first(a), valuesOf(g, 0, a));
+        const std::vector<std::byte> where = w.placement();
+        hc::GridFilePart p1(where, g, a), p2(where, g, b);
+        p1.append(std::span(g.codes).subspan(a, b - a), valuesOf(g, a, b - a));
+        p2.append(std::span(g.codes).subspan(b, n - b), valuesOf(g, b, n - b));
+        // A part must go on from the state of exactly the cells before it.
+        EXPECT_THROW(p2.resume(w.streamState()), hc::Error);
+        // A part finished before its cells were checked is refused.
+        EXPECT_THROW(p1.finish(), hc::Error);
+        p1.resume(w.streamState());
+        // Cells that overlap the ones before the part (its first cell again the writer's last one) are refused.
+        EXPECT_THROW(p1.follow(std::span(g.codes).subspan(a - 1, 2), valuesOf(g, a - 1, 2)), hc::Error);
+    }
+    EXPECT_TRUE(fs::is_empty(dir_)) << "an abandoned write by parts left a file or temporary behind";
+    {
+        hc::GridFileWriter w(path("t.hcg"), g, n, 0);
+        w.append(std::span(g.codes).first(a), valuesOf(g, 0, a));
+        const std::vector<std::byte> where = w.placement();
+        hc::GridFilePart p1(where, g, a), p2(where, g, b);
+        p1.append(std::span(g.codes).subspan(a, b - a), valuesOf(g, a, b - a));
+        p2.append(std::span(g.codes).subspan(b, n - b), valuesOf(g, b, n - b));
+        p1.resume(w.streamState());
+        p1.follow(std::span(g.codes).subspan(a, b - a), valuesOf(g, a, b - a));
+        p2.resume(p1.state());
+        p2.follow(std::span(g.codes).subspan(b, n - b), valuesOf(g, b, n - b));
+        const std::vector<std::byte> r1 = p1.finish(), r2 = p2.finish();
+        EXPECT_THROW(w.addPart(r2), hc::Error);  // out of turn: the writer needs cell a next
+        EXPECT_THROW(w.commit(g.stats), hc::Error);  // cells missing
+        // A state from another grid (one layer fewer) is refused.
+        hc::GridFilePart other(where, g, a);
+        EXPECT_THROW(other.resume(std::vector<std::byte>(64)), hc::Error);
+    }
+    EXPECT_TRUE(fs::is_empty(dir_)) << "an abandoned write by parts left a file or temporary behind";
+    // A part cannot write into a temporary that is gone.
+    std::vector<std::byte> stale;
+    {
+        hc::GridFileWriter w(path("t.hcg"), g, n, 0);
+        stale = w.placement();
+    }
+    EXPECT_THROW(hc::GridFilePart(stale, g, 0), hc::Error);
+}

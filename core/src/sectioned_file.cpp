@@ -311,6 +311,139 @@ void SectionedFileWriter::addSection(uint32_t kind, uint32_t index, std::span<co
     append(w.sections.size() - 1, bytes);
 }
 
+FilePlacement SectionedFileWriter::placement() const {
+    return {impl_->out.path(), impl_->out.temporaryPath(), impl_->sections};
+}
+
+void SectionedFileWriter::addPieces(std::span<const FilePiece> pieces) {
+    Impl& w = *impl_;
+    for (const FilePiece& p : pieces) {
+        if (p.section >= w.sections.size()) throw Error(path() + ": a part names section " + std::to_string(p.section) + ", which it does not have");
+        const size_t s = p.section;
+        const FileSection& sec = w.sections[s];
+        if (p.offset != w.written[s])
+            throw Error(path() + ": a part of section " + std::to_string(s) + " starts at byte " + std::to_string(p.offset) + ", where " +
+                        std::to_string(w.written[s]) + " bytes are written so far");
+        if (p.bytes > sec.bytes - w.written[s]) throw Error(path() + ": section " + std::to_string(s) + " overflows its declared size");
+        if (p.bytes == 0 || p.offset % kFileBlockBytes + p.bytes > kFileBlockBytes || p.crc > UINT32_MAX)
+            throw Error(path() + ": a part's piece of section " + std::to_string(s) + " at byte " + std::to_string(p.offset) +
+                        " is empty, crosses a checksum block or has no CRC-32");
+        // As append() does with the bytes themselves.
+        w.partialCrc[s] = crc32Combine(w.partialCrc[s], uint32_t(p.crc), p.bytes);
+        w.written[s] += p.bytes;
+        if (w.written[s] % kFileBlockBytes == 0) {
+            w.blockCrcs[s].push_back(w.partialCrc[s]);
+            w.partialCrc[s] = 0;
+        }
+    }
+}
+
+std::vector<std::byte> FilePlacement::encode() const {
+    std::vector<std::byte> out(24 + path.size() + temporaryPath.size() + 32 * sections.size());
+    size_t at = 0;
+    auto put = [&](uint64_t v) { bytes::store(out, at, v), at += 8; };
+    auto putText = [&](const std::string& t) {
+        put(t.size());
+        std::memcpy(out.data() + at, t.data(), t.size());
+        at += t.size();
+    };
+    putText(path);
+    putText(temporaryPath);
+    put(sections.size());
+    for (const FileSection& e : sections) {
+        bytes::store(out, at, e.kind), bytes::store(out, at + 4, e.index);
+        bytes::store(out, at + 8, e.offset), bytes::store(out, at + 16, e.bytes);
+        bytes::store(out, at + 24, uint64_t{e.crc});
+        at += 32;
+    }
+    return out;
+}
+
+FilePlacement FilePlacement::decode(std::span<const std::byte> in) {
+    FilePlacement p;
+    size_t at = 0;
+    auto need = [&](uint64_t n) {
+        if (n > in.size() - at) throw Error("a file placement of " + std::to_string(in.size()) + " bytes is cut short");
+    };
+    auto get = [&] {
+        need(8);
+        const uint64_t v = bytes::load<uint64_t>(in.data() + at);
+        at += 8;
+        return v;
+    };
+    auto getText = [&] {
+        const uint64_t n = get();
+        need(n);
+        std::string t(reinterpret_cast<const char*>(in.data() + at), n);
+        at += n;
+        return t;
+    };
+    p.path = getText();
+    p.temporaryPath = getText();
+    const uint64_t n = get();
+    need(n * 32);
+    for (uint64_t k = 0; k < n; ++k, at += 32) {
+        FileSection e;
+        e.kind = bytes::load<uint32_t>(in.data() + at), e.index = bytes::load<uint32_t>(in.data() + at + 4);
+        e.offset = bytes::load<uint64_t>(in.data() + at + 8), e.bytes = bytes::load<uint64_t>(in.data() + at + 16);
+        e.crc = uint32_t(bytes::load<uint64_t>(in.data() + at + 24));
+        p.sections.push_back(e);
+    }
+    if (at != in.size()) throw Error("a file placement has " + std::to_string(in.size() - at) + " bytes too many");
+    return p;
+}
+
+SectionedFilePart::SectionedFilePart(FilePlacement placement) : placement_(std::move(placement)) {
+    fd_ = ::open(placement_.temporaryPath.c_str(), O_WRONLY | O_CLOEXEC);
+    if (fd_ < 0)
+        throw Error(placement_.path + ": cannot open the temporary " + placement_.temporaryPath + " that rank 1 writes (" + std::strerror(errno) +
+                    "): under mpirun the output's folder must be one that every rank sees");
+}
+
+SectionedFilePart::~SectionedFilePart() {
+    if (fd_ >= 0) ::close(fd_);  // the temporary is the writer's: it removes it unless it commits
+}
+
+void SectionedFilePart::writeAt(size_t s, uint64_t at, std::span<const std::byte> bytes) {
+    if (fd_ < 0) throw Error(placement_.path + ": a part written after it was finished");
+    if (s >= placement_.sections.size()) throw Error(placement_.path + ": a part of section " + std::to_string(s) + ", which is not placed");
+    const FileSection& sec = placement_.sections[s];
+    if (at > sec.bytes || bytes.size() > sec.bytes - at) throw Error(placement_.path + ": a part overflows section " + std::to_string(s));
+    uint64_t offset = sec.offset + at;
+    for (std::span<const std::byte> left = bytes; !left.empty();) {
+        const ssize_t n = ::pwrite(fd_, left.data(), left.size(), static_cast<off_t>(offset));
+        if (n < 0 && errno == EINTR) continue;
+        if (n <= 0) throw Error(placement_.path + ": write failed (" + placement_.temporaryPath + "): " + std::strerror(errno));
+        left = left.subspan(size_t(n));
+        offset += uint64_t(n);
+    }
+    // The CRC of each block's piece; a run that continues the last piece within its block extends it.
+    while (!bytes.empty()) {
+        const uint64_t inBlock = at % kFileBlockBytes;
+        const size_t take = static_cast<size_t>(std::min<uint64_t>(bytes.size(), kFileBlockBytes - inBlock));
+        FilePiece* last = pieces_.empty() ? nullptr : &pieces_.back();
+        if (last && last->section == s && last->offset + last->bytes == at && inBlock != 0) {
+            last->crc = crc32(bytes.first(take), uint32_t(last->crc));
+            last->bytes += take;
+        } else {
+            pieces_.push_back({uint32_t(s), 0, at, take, crc32(bytes.first(take))});
+        }
+        at += take;
+        bytes = bytes.subspan(take);
+    }
+}
+
+std::vector<FilePiece> SectionedFilePart::finish() {
+    if (fd_ < 0) throw Error(placement_.path + ": a part finished twice");
+    const int fd = fd_;
+    fd_ = -1;
+    const bool synced = ::fsync(fd) == 0;
+    const int err = errno;
+    if (::close(fd) != 0 || !synced)
+        throw Error(placement_.path + ": cannot flush " + placement_.temporaryPath + ": " + std::strerror(synced ? errno : err));
+    return std::move(pieces_);
+}
+
 void SectionedFileWriter::commit(std::vector<std::byte> header) {
     Impl& w = *impl_;
     const size_t dataSections = w.tableEntries - w.blockTable;

@@ -6,6 +6,7 @@
 #include <sstream>
 
 #include "heightcast/core/checksum.h"
+#include "heightcast/core/error.h"
 #include "quadtree_walk.h"
 
 namespace hc {
@@ -224,6 +225,19 @@ GridHasher::GridHasher(const Grid& shape, uint64_t cellCount) : shape_(shape), l
 void GridHasher::addCodes(std::span<const uint64_t> c) { structure_.update(std::as_bytes(c)); }
 void GridHasher::addValues(size_t layer, std::span<const float> v) { layers_[layer].update(std::as_bytes(v)); }
 uint64_t GridHasher::structureHash() const { return structure_.digest(); }
+
+std::vector<Hash64::State> GridHasher::save() const {
+    std::vector<Hash64::State> out{structure_.save()};
+    for (const Hash64& h : layers_) out.push_back(h.save());
+    return out;
+}
+
+void GridHasher::resume(const std::vector<Hash64::State>& states) {
+    if (states.size() != 1 + layers_.size())
+        throw Error("grid hashes: " + std::to_string(states.size()) + " states for " + std::to_string(layers_.size()) + " layers");
+    structure_ = Hash64::resume(states[0]);
+    for (size_t l = 0; l < layers_.size(); ++l) layers_[l] = Hash64::resume(states[1 + l]);
+}
 
 uint64_t GridHasher::contentHash() const {
     std::vector<std::pair<std::string, uint64_t>> parts;

@@ -1,6 +1,7 @@
 #include "heightcast/grid/grid_file.h"
 
 #include <algorithm>
+#include <bit>
 #include <charconv>
 #include <cmath>
 #include <cstring>
@@ -244,11 +245,69 @@ public:
     }
     const GridSummary& summary() const { return s_; }
 
+    // The summary so far as words, and back (a rank's run goes on from the runs before it: GridFilePart).
+    void save(std::vector<uint64_t>& out) const {
+        out.push_back(first_);
+        out.insert(out.end(), s_.cellsPerLevel.begin(), s_.cellsPerLevel.end());
+        out.insert(out.end(), s_.boundsFinest.begin(), s_.boundsFinest.end());
+        out.push_back(!s_.layerMin.empty());
+        for (size_t l = 0; l < layers_; ++l) {
+            out.push_back(s_.layerMin.empty() ? 0 : std::bit_cast<uint32_t>(s_.layerMin[l]));
+            out.push_back(s_.layerMax.empty() ? 0 : std::bit_cast<uint32_t>(s_.layerMax[l]));
+        }
+    }
+    // Words [at, ...) as save() wrote them; returns the index after them, or 0 where the words run short.
+    size_t resume(std::span<const uint64_t> in, size_t at) {
+        const size_t levels = s_.cellsPerLevel.size();
+        if (in.size() < at + 1 + levels + 4 + 1 + 2 * layers_) return 0;
+        first_ = in[at++] != 0;
+        for (size_t l = 0; l < levels; ++l) s_.cellsPerLevel[l] = in[at++];
+        for (size_t k = 0; k < 4; ++k) s_.boundsFinest[k] = in[at++];
+        const bool ranges = in[at++] != 0;
+        s_.layerMin.clear(), s_.layerMax.clear();
+        for (size_t l = 0; l < layers_; ++l, at += 2)
+            if (ranges) {
+                s_.layerMin.push_back(std::bit_cast<float>(uint32_t(in[at])));
+                s_.layerMax.push_back(std::bit_cast<float>(uint32_t(in[at + 1])));
+            }
+        return at;
+    }
+
 private:
     size_t layers_;
     bool first_ = true;
     GridSummary s_;
 };
+
+// The cells' running checks, hashes and summary as one run of cells leaves them for the next (GridFileWriter::streamState,
+// GridFilePart::state): 64-bit words, little-endian: a tag, the static layers L, the levels, the order check (2), the
+// hashes ((1 + L) x 4), the summary (SummaryBuilder::save).
+constexpr uint64_t kStreamStateTag = 0x4554415453474348ull;  // "HCGSTATE"
+
+std::vector<std::byte> saveStream(const CellStreamCheck& check, const GridHasher& hasher, const SummaryBuilder& summary, size_t layers,
+                                  size_t levels) {
+    std::vector<uint64_t> w{kStreamStateTag, layers, levels, check.save().nextFree, check.save().count};
+    for (const Hash64::State& h : hasher.save()) w.insert(w.end(), {h.state, h.length, h.pending, h.pendingBytes});
+    summary.save(w);
+    std::vector<std::byte> out(w.size() * 8);
+    std::memcpy(out.data(), w.data(), out.size());
+    return out;
+}
+
+void resumeStream(std::span<const std::byte> bytes, CellStreamCheck& check, GridHasher& hasher, SummaryBuilder& summary, size_t layers,
+                  size_t levels, const std::string& what) {
+    auto bad = [&](const std::string& why) { throw Error(what + ": the cells' running state from the rank before is " + why); };
+    if (bytes.size() % 8 != 0) bad("no whole number of words");
+    std::vector<uint64_t> w(bytes.size() / 8);
+    if (!w.empty()) std::memcpy(w.data(), bytes.data(), bytes.size());
+    const size_t hashes = 4 * (1 + layers);
+    if (w.size() < 5 + hashes || w[0] != kStreamStateTag || w[1] != layers || w[2] != levels) bad("not of this grid");
+    check.resume({w[3], w[4]});
+    std::vector<Hash64::State> h(1 + layers);
+    for (size_t k = 0; k < h.size(); ++k) h[k] = {w[5 + 4 * k], w[6 + 4 * k], w[7 + 4 * k], w[8 + 4 * k]};
+    hasher.resume(h);
+    if (summary.resume(w, 5 + hashes) != w.size()) bad("cut short or too long");
+}
 
 GridSummary summarise(const Grid& g) {
     SummaryBuilder b(g.maxLevel, g.layers.size());
@@ -631,29 +690,157 @@ GridFileWriter::GridFileWriter(const std::string& path, const Grid& shape, uint6
 
 GridFileWriter::~GridFileWriter() = default;
 
-void GridFileWriter::append(std::span<const uint64_t> codes, const std::vector<std::span<const float>>& layerValues) {
-    Impl& w = *impl_;
-    const size_t layers = w.staticShape.layers.size();
-    const std::string& path = w.out.path();
+namespace {
+
+// The shape of a batch of cells: a value array per static layer, each as long as the codes.
+void checkBatchShape(const std::string& path, std::span<const uint64_t> codes, const std::vector<std::span<const float>>& layerValues, size_t layers) {
     if (layerValues.size() != layers)
         throw Error(path + ": " + std::to_string(layerValues.size()) + " value arrays for " + std::to_string(layers) + " static layers");
     for (const auto& v : layerValues)
         if (v.size() != codes.size()) throw Error(path + ": layer values and cells differ in number");
-    if (codes.size() > w.cellCount - w.written) throw Error(path + ": more cells than the " + std::to_string(w.cellCount) + " announced");
+}
+
+// Every cell's rules (CellStreamCheck), then the cells into the hashes and the summary.
+void followCells(const std::string& path, std::span<const uint64_t> codes, const std::vector<std::span<const float>>& layerValues,
+                 CellStreamCheck& check, GridHasher& hasher, SummaryBuilder& summary) {
+    const size_t layers = layerValues.size();
     float v[256];
     for (size_t i = 0; i < codes.size(); ++i) {
         for (size_t l = 0; l < layers; ++l) v[l] = layerValues[l][i];
-        std::string problem = w.check.next(codes[i], v);
+        std::string problem = check.next(codes[i], v);
         if (!problem.empty()) throw Error(path + ": refusing to write an invalid grid: " + problem);
     }
-    w.summary.add(codes, layerValues);
+    summary.add(codes, layerValues);
+    hasher.addCodes(codes);
+    for (size_t l = 0; l < layers; ++l) hasher.addValues(l, layerValues[l]);
+}
+
+}  // namespace
+
+void GridFileWriter::append(std::span<const uint64_t> codes, const std::vector<std::span<const float>>& layerValues) {
+    Impl& w = *impl_;
+    const size_t layers = w.staticShape.layers.size();
+    const std::string& path = w.out.path();
+    checkBatchShape(path, codes, layerValues, layers);
+    if (codes.size() > w.cellCount - w.written) throw Error(path + ": more cells than the " + std::to_string(w.cellCount) + " announced");
+    followCells(path, codes, layerValues, w.check, w.hasher, w.summary);
     w.out.append(0, std::as_bytes(codes));
-    w.hasher.addCodes(codes);
-    for (size_t l = 0; l < layers; ++l) {
-        w.out.append(1 + l, std::as_bytes(layerValues[l]));
-        w.hasher.addValues(l, layerValues[l]);
-    }
+    for (size_t l = 0; l < layers; ++l) w.out.append(1 + l, std::as_bytes(layerValues[l]));
     w.written += codes.size();
+}
+
+// A part for addPart: 64-bit words: first cell, cells, the state's bytes, the pieces' count; then the state, then the
+// pieces (FilePiece, 32 bytes each).
+std::vector<std::byte> GridFileWriter::placement() const {
+    const Impl& w = *impl_;
+    std::vector<std::byte> out(8);
+    bytes::store(out, 0, w.cellCount);
+    const std::vector<std::byte> p = w.out.placement().encode();
+    out.insert(out.end(), p.begin(), p.end());
+    return out;
+}
+
+std::vector<std::byte> GridFileWriter::streamState() const {
+    const Impl& w = *impl_;
+    return saveStream(w.check, w.hasher, w.summary, w.staticShape.layers.size(), size_t(w.staticShape.maxLevel) + 1);
+}
+
+void GridFileWriter::addPart(std::span<const std::byte> part) {
+    Impl& w = *impl_;
+    const std::string& path = w.out.path();
+    if (part.size() < 32) throw Error(path + ": a rank's part of " + std::to_string(part.size()) + " bytes is cut short");
+    const uint64_t first = bytes::load<uint64_t>(part.data()), cells = bytes::load<uint64_t>(part.data() + 8);
+    const uint64_t stateBytes = bytes::load<uint64_t>(part.data() + 16), pieces = bytes::load<uint64_t>(part.data() + 24);
+    if (stateBytes > part.size() - 32 || pieces > (part.size() - 32 - stateBytes) / sizeof(FilePiece) ||
+        32 + stateBytes + pieces * sizeof(FilePiece) != part.size())
+        throw Error(path + ": a rank's part is malformed");
+    if (first != w.written || cells > w.cellCount - w.written)
+        throw Error(path + ": a rank's part holds cells " + std::to_string(first) + ".." + std::to_string(first + cells) + " where cell " +
+                    std::to_string(w.written) + " comes next of " + std::to_string(w.cellCount));
+    std::vector<FilePiece> table(pieces);
+    if (pieces) std::memcpy(table.data(), part.data() + 32 + stateBytes, pieces * sizeof(FilePiece));
+    w.out.addPieces(table);
+    resumeStream(part.subspan(32, stateBytes), w.check, w.hasher, w.summary, w.staticShape.layers.size(), size_t(w.staticShape.maxLevel) + 1, path);
+    w.written += cells;
+    if (w.check.count() != w.written)
+        throw Error(path + ": a rank's part checked " + std::to_string(w.check.count()) + " cells, not the " + std::to_string(w.written) + " written");
+}
+
+struct GridFilePart::Impl {
+    Impl(FilePlacement placement, const Grid& gridShape, uint64_t cells, uint64_t firstCell)
+        : out(std::move(placement)), staticShape(staticShapeOf(gridShape)), cellCount(cells), first(firstCell), check(staticShape),
+          hasher(staticShape, cells), summary(staticShape.maxLevel, staticShape.layers.size()) {}
+    SectionedFilePart out;
+    Grid staticShape;
+    uint64_t cellCount, first;
+    CellStreamCheck check;
+    GridHasher hasher;
+    SummaryBuilder summary;
+    uint64_t written = 0;  // cells of this part written so far
+    bool resumed = false;
+    std::string path;
+};
+
+GridFilePart::GridFilePart(std::span<const std::byte> placement, const Grid& shape, uint64_t firstCell) {
+    if (placement.size() < 8) throw Error("a grid file's placement is cut short");
+    const uint64_t cells = bytes::load<uint64_t>(placement.data());
+    FilePlacement p = FilePlacement::decode(placement.subspan(8));
+    const std::string path = p.path;
+    if (p.sections.size() < 1 + shape.firstStepLayer() || p.sections[0].bytes != 8 * cells || firstCell > cells)
+        throw Error(path + ": the placement does not match this grid (" + std::to_string(cells) + " cells)");
+    impl_ = std::make_unique<Impl>(std::move(p), shape, cells, firstCell);
+    impl_->path = path;
+}
+
+GridFilePart::~GridFilePart() = default;
+
+void GridFilePart::append(std::span<const uint64_t> codes, const std::vector<std::span<const float>>& layerValues) {
+    Impl& w = *impl_;
+    const size_t layers = w.staticShape.layers.size();
+    checkBatchShape(w.path, codes, layerValues, layers);
+    const uint64_t at = w.first + w.written;
+    if (codes.size() > w.cellCount - at) throw Error(w.path + ": more cells than the " + std::to_string(w.cellCount) + " announced");
+    w.out.writeAt(0, 8 * at, std::as_bytes(codes));
+    for (size_t l = 0; l < layers; ++l) w.out.writeAt(1 + l, 4 * at, std::as_bytes(layerValues[l]));
+    w.written += codes.size();
+}
+
+void GridFilePart::resume(std::span<const std::byte> state) {
+    Impl& w = *impl_;
+    resumeStream(state, w.check, w.hasher, w.summary, w.staticShape.layers.size(), size_t(w.staticShape.maxLevel) + 1, w.path);
+    if (w.check.count() != w.first)
+        throw Error(w.path + ": the ranks before this one checked " + std::to_string(w.check.count()) + " cells, but its own begin at cell " +
+                    std::to_string(w.first));
+    w.resumed = true;
+}
+
+void GridFilePart::follow(std::span<const uint64_t> codes, const std::vector<std::span<const float>>& layerValues) {
+    Impl& w = *impl_;
+    if (!w.resumed) throw Error(w.path + ": a rank's cells checked before the state of the ranks before it arrived");
+    checkBatchShape(w.path, codes, layerValues, w.staticShape.layers.size());
+    followCells(w.path, codes, layerValues, w.check, w.hasher, w.summary);
+}
+
+std::vector<std::byte> GridFilePart::state() const {
+    const Impl& w = *impl_;
+    return saveStream(w.check, w.hasher, w.summary, w.staticShape.layers.size(), size_t(w.staticShape.maxLevel) + 1);
+}
+
+std::vector<std::byte> GridFilePart::finish() {
+    Impl& w = *impl_;
+    if (!w.resumed || w.check.count() != w.first + w.written)
+        throw Error(w.path + ": a rank's part finished with " + std::to_string(w.written) + " cells written and " +
+                    std::to_string(w.check.count() - std::min(w.check.count(), w.first)) + " checked");
+    const std::vector<FilePiece> pieces = w.out.finish();
+    const std::vector<std::byte> s = state();
+    std::vector<std::byte> out(32 + s.size() + pieces.size() * sizeof(FilePiece));
+    bytes::store(out, 0, w.first);
+    bytes::store(out, 8, w.written);
+    bytes::store(out, 16, uint64_t(s.size()));
+    bytes::store(out, 24, uint64_t(pieces.size()));
+    std::memcpy(out.data() + 32, s.data(), s.size());
+    if (!pieces.empty()) std::memcpy(out.data() + 32 + s.size(), pieces.data(), pieces.size() * sizeof(FilePiece));
+    return out;
 }
 
 void GridFileWriter::appendStep(const WaterStepData& step) {

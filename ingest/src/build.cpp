@@ -8,8 +8,10 @@
 //
 // Shares (core/ranks/ranks.h; DESIGN.md section 13): the raster is cut into share nodes (quadtree nodes no finer than a
 // tile or the coarsest cell), and under mpirun each rank takes a run of them in Morton order, about equal in area: the
-// tiles of pass A and the units of pass C inside its nodes. The roots are exchanged between the two passes, and the
-// ranks other than 0 send their cells and statistics to rank 0, which alone writes. A raster read window by window
+// tiles of pass A and the units of pass C inside its nodes. The roots are exchanged between the two passes. Rank 0 opens
+// the file; the other ranks write their cells into it at their place (GridFilePart), check and hash them in turn, and
+// send rank 0 their block checksums and statistics; with water steps (whose depths need every cell on rank 0) or a
+// trace to paint, they send rank 0 their cells instead, which it writes. A raster read window by window
 // (RasterWindows) is read by each rank only over its own nodes, in maximal aligned squares: no rank holds it whole. The
 // file is the same bytes for any number of ranks and threads: the squared deviations are summed per unit, then over
 // the units in Morton order.
@@ -306,8 +308,10 @@ private:
     double measure(const Batch& b, size_t begin, size_t end, Stats& acc, bool paintElevations) const;
     // Under mpirun: a rank other than 0 sends its share (cells, statistics, per-unit sums of squares) to rank 0; rank 0
     // receives every other rank's in order, feeds their cells to the sink and adds their statistics into `sum`.
-    void sendShare(const Batch& share, const Stats& sum, const std::vector<double>& unitSumSq) const;
-    void receiveShares(CellSink& sink, Stats& sum, std::vector<double>& unitSumSq) const;
+    // With `parts` (every rank wrote its own cells into rank 0's file: GridFilePart), a rank sends its part's result
+    // (GridFilePart::finish) instead of its cells, and rank 0 hands each to its writer (GridFileWriter::addPart).
+    void sendShare(const Batch& share, const Stats& sum, const std::vector<double>& unitSumSq, const std::vector<std::byte>* part) const;
+    void receiveShares(CellSink& sink, Stats& sum, std::vector<double>& unitSumSq, bool parts) const;
     // Fills BuildOptions::cellElevations under cells [begin, end) of the batch (rank 0 does it for every rank's cells).
     void paint(const Batch& b, size_t begin, size_t end) const;
 
@@ -508,9 +512,28 @@ Stats Builder::run(CellSink& sink) {
                             "the raster holds no valid pixel (all nodata): nothing to build");
             if (root) sink.begin(total);
         });
+        // Under mpirun, where rank 0's file lets them (no water steps, no trace for rank 0 to paint), every rank writes its
+        // own cells into it in place (GridFilePart): rank 0 says where, the others open their parts. Else they send their
+        // cells to rank 0, which writes them.
+        std::unique_ptr<GridFilePart> part;
+        bool parts = false;
+        if (rankCount > 1) {
+            std::vector<std::byte> where;
+            if (root && !opt_.cellElevations)
+                if (GridFileWriter* w = sink.sharedWriter()) where = w->placement();
+            where = std::move(ranks::allGather(where)[0]);
+            parts = !where.empty();
+            ranks::together([&] {
+                if (parts && !root) {
+                    if (!sink.fileShape()) throw Error("internal: a sink without a file shape for this rank's part");
+                    part = std::make_unique<GridFilePart>(where, *sink.fileShape(), offsetOf(myU0));
+                }
+            });
+        }
 
         // Pass C, write: batches of consecutive units (about 64 k cells, a few MB), filled in parallel, measured, and
-        // handed to the sink in order (another rank keeps its share's cells, then sends them to rank 0). The squared
+        // handed to the sink in order (another rank writes them into the file at their place and keeps them for its turn
+        // of the checks, or keeps them and then sends them to rank 0). The squared
         // deviations are summed per unit, then over the units in order: the same figure (bits) on any number of
         // threads and ranks.
         std::vector<Stats> acc(threads);
@@ -557,6 +580,7 @@ Stats Builder::run(CellSink& sink) {
                     std::vector<std::span<const float>> values(batch.values.begin(), batch.values.end());
                     sink.append(batch.codes, values);
                 } else {
+                    if (part) part->append(batch.codes, std::vector<std::span<const float>>(batch.values.begin(), batch.values.end()));
                     share.codes.insert(share.codes.end(), batch.codes.begin(), batch.codes.end());
                     for (size_t l = 0; l < batch.values.size(); ++l)
                         share.values[l].insert(share.values[l].end(), batch.values[l].begin(), batch.values[l].end());
@@ -577,11 +601,38 @@ Stats Builder::run(CellSink& sink) {
                                            : std::string("the whole raster held, ");
         ranks::log("hc-ingest", fmt::format("{}{} tiles of {}^2 px built, {} units, {} cells written, {:.3f} s, peak {:.1f} MB resident", reads,
                                             myTiles.size(), 1u << tileLevel_, myU1 - myU0, myCells, rankStart.seconds(), double(peakRssBytes()) / 1e6));
+        std::vector<std::byte> partResult;
+        if (parts) {
+            // The cells' checks, hashes and summary go on from rank to rank in Morton order (the writing above went on in
+            // parallel): each rank in turn takes the state the ranks before it left, follows its own cells from it and
+            // passes it on. Then each flushes its part.
+            const Stopwatch chain;
+            std::vector<std::byte> state;
+            if (root) state = sink.sharedWriter()->streamState();
+            state = std::move(ranks::allGather(state)[0]);
+            for (int r = 1; r < rankCount; ++r) {
+                std::vector<std::byte> next;
+                ranks::together([&] {
+                    if (rank != r) return;
+                    part->resume(state);
+                    part->follow(share.codes, std::vector<std::span<const float>>(share.values.begin(), share.values.end()));
+                    next = part->state();
+                });
+                state = std::move(ranks::allGather(next)[size_t(r)]);
+            }
+            share = Batch{};
+            ranks::together([&] {
+                if (part) partResult = part->finish();
+            });
+            if (!root)
+                ranks::log("hc-ingest", fmt::format("its {} cells ({:.1f} MB) written into the output in place; the ranks' checks in turn and the flush {:.3f} s",
+                                                    myCells, double(myCells) * double(8 + 4 * layers_) / 1e6, chain.seconds()));
+        }
         if (!root) {
-            sendShare(share, sum, unitSumSq);
+            sendShare(share, sum, unitSumSq, parts ? &partResult : nullptr);
             return sum;
         }
-        receiveShares(sink, sum, unitSumSq);
+        receiveShares(sink, sum, unitSumSq, parts);
         if (unitSumSq.size() != units.size())
             throw Error("ranks sent statistics of " + std::to_string(unitSumSq.size()) + " units, not " + std::to_string(units.size()));
         for (double u : unitSumSq) sum.sumSq += u;
@@ -595,25 +646,37 @@ Stats Builder::run(CellSink& sink) {
 // holds one piece of another rank's cells at a time, not the whole share.
 constexpr size_t kSharePiece = size_t{1} << 20;
 
-void Builder::sendShare(const Batch& share, const Stats& sum, const std::vector<double>& unitSumSq) const {
-    for (size_t at = 0; at < share.codes.size(); at += kSharePiece) {
-        const size_t n = std::min(share.codes.size() - at, kSharePiece);
-        ranks::sendToRoot(std::as_bytes(std::span<const uint64_t>(share.codes.data() + at, n)));
-        for (const auto& v : share.values) ranks::sendToRoot(std::as_bytes(std::span<const float>(v.data() + at, n)));
+void Builder::sendShare(const Batch& share, const Stats& sum, const std::vector<double>& unitSumSq, const std::vector<std::byte>* part) const {
+    if (part) {
+        ranks::sendToRoot(*part);
+    } else {
+        for (size_t at = 0; at < share.codes.size(); at += kSharePiece) {
+            const size_t n = std::min(share.codes.size() - at, kSharePiece);
+            ranks::sendToRoot(std::as_bytes(std::span<const uint64_t>(share.codes.data() + at, n)));
+            for (const auto& v : share.values) ranks::sendToRoot(std::as_bytes(std::span<const float>(v.data() + at, n)));
+        }
+        ranks::sendToRoot(std::vector<uint64_t>{});  // the end of the cells
     }
-    ranks::sendToRoot(std::vector<uint64_t>{});  // the end of the cells
     std::vector<double> table{sum.maxDev, double(sum.pixels), double(sum.wetCells)};  // then cells per level, then the unit sums
     for (uint64_t c : sum.perLevel) table.push_back(double(c));
     table.insert(table.end(), unitSumSq.begin(), unitSumSq.end());
     ranks::sendToRoot(table);
 }
 
-void Builder::receiveShares(CellSink& sink, Stats& sum, std::vector<double>& unitSumSq) const {
+void Builder::receiveShares(CellSink& sink, Stats& sum, std::vector<double>& unitSumSq, bool parts) const {
     // A sink that fails (a full disk) must not leave a sender blocked on its next piece: every piece is still received,
     // and the first failure thrown at the end.
     std::exception_ptr failed;
     for (int r = 1; r < ranks::count(); ++r) {
-        for (;;) {
+        if (parts) {
+            const std::vector<std::byte> part = ranks::receiveFrom(r);
+            try {
+                if (!failed) sink.sharedWriter()->addPart(part);
+            } catch (...) {
+                failed = std::current_exception();
+            }
+        }
+        while (!parts) {
             Batch in;
             in.codes = ranks::receiveVectorFrom<uint64_t>(r);
             if (in.codes.empty()) break;
@@ -817,6 +880,9 @@ public:
         if (steps_ > 0) codes.insert(codes.end(), c.begin(), c.end());
     }
     GridFileWriter& writer() { return *writer_; }
+    // Water steps need every cell's code on rank 0: then the ranks send their cells there.
+    GridFileWriter* sharedWriter() override { return steps_ == 0 ? writer_.get() : nullptr; }
+    const Grid* fileShape() const override { return &shape_; }
     std::vector<uint64_t> codes;
 
 private:
@@ -871,7 +937,7 @@ BuildSummary buildFile(const Raster& terrain, const RasterWindows* windows, cons
     out.shape = shapeFor(terrain, stepCount > 0, options, rootLevel, maxLevel, windows != nullptr);
     const std::optional<MergeMask> mask = maskOf(terrain, steps, options, maxLevel);
     FileSink sink(path, out.shape, stepCount);
-    const bool root = ranks::rank() == 0;  // under mpirun, rank 0 alone writes (Builder::run)
+    const bool root = ranks::rank() == 0;  // under mpirun, rank 0 commits the file (Builder::run)
     if (options.cellElevations && root) options.cellElevations->assign(terrain.values.size(), std::numeric_limits<float>::quiet_NaN());
     Stats st = Builder(terrain, windows, mask ? &*mask : nullptr, options, rootLevel, maxLevel).run(sink);
     if (!root) {

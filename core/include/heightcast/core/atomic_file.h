@@ -27,6 +27,9 @@ public:
     void commit();  // throws hc::Error on any I/O failure; the target is then untouched
 
     const std::string& path() const { return path_; }
+    // The temporary being written (TARGET.tmp.XXXXXX): under mpirun other ranks write their parts into it
+    // (SectionedFilePart) before this writer's commit().
+    const std::string& temporaryPath() const { return tempPath_; }
 
 private:
     void fail(const std::string& what);

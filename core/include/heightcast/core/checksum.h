@@ -27,6 +27,18 @@ public:
     void updateValue(const T& v) { update(std::as_bytes(std::span<const T>(&v, 1))); }
     uint64_t digest() const;
 
+    // The running state, so that another process can go on with the same stream (under mpirun each rank hashes its own
+    // run of a file's cells, in order: GridFilePart). resume(save()) continues exactly where save() was taken.
+    struct State {
+        uint64_t state = 0, length = 0, pending = 0, pendingBytes = 0;
+    };
+    State save() const { return {state_, length_, pending_, uint64_t(pendingBytes_)}; }
+    static Hash64 resume(const State& s) {
+        Hash64 h(s.state);
+        h.length_ = s.length, h.pending_ = s.pending, h.pendingBytes_ = int(s.pendingBytes & 7);
+        return h;
+    }
+
 private:
     void mixWord(uint64_t w);
     uint64_t state_;

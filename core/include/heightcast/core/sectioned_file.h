@@ -126,6 +126,23 @@ private:
     std::unique_ptr<Checks> checks_;
 };
 
+// A piece of a placed section that another process wrote (SectionedFilePart): bytes [offset, offset + bytes) of section
+// `section` (an index into the writer's layout), all inside one checksum block, and their CRC-32.
+struct FilePiece {
+    uint32_t section = 0, zero = 0;
+    uint64_t offset = 0, bytes = 0;
+    uint64_t crc = 0;
+};
+
+// Where a SectionedFileWriter's placed sections lie in its temporary, for the processes that write parts of them.
+struct FilePlacement {
+    std::string path;           // the target (for messages)
+    std::string temporaryPath;  // what the parts are written into
+    std::vector<FileSection> sections;
+    std::vector<std::byte> encode() const;
+    static FilePlacement decode(std::span<const std::byte> bytes);  // throws hc::Error on a malformed table
+};
+
 // Writes a container atomically. Sections are placed up front (their sizes known), written in
 // pieces as data arrives (each section front to back, sections may interleave), and the header,
 // table and CRCs go in at commit(). Block CRCs are computed as data is appended (each section's CRC is
@@ -148,9 +165,37 @@ public:
     void commit(std::vector<std::byte> header);
     const std::string& path() const;
 
+    // Under mpirun (DESIGN.md section 13) other processes write parts of the placed sections straight into this
+    // writer's temporary (SectionedFilePart over placement()); addPieces() then takes their pieces' CRCs as if their
+    // bytes had been append()ed: each piece must start where its section holds bytes up to so far.
+    FilePlacement placement() const;
+    void addPieces(std::span<const FilePiece> pieces);
+
 private:
     struct Impl;
     std::unique_ptr<Impl> impl_;
+};
+
+// A part of a container that another process's SectionedFileWriter writes (under mpirun, each rank its own run of a
+// section's bytes): bytes written straight into that writer's temporary, which must lie on a file system both
+// processes see, and the CRC-32 of every piece of a checksum block they cover, for that writer's addPieces(). Writes
+// nothing else; the writer's commit() (or its removal of the temporary) ends the file.
+class SectionedFilePart {
+public:
+    explicit SectionedFilePart(FilePlacement placement);  // throws hc::Error if the temporary cannot be opened
+    ~SectionedFilePart();
+    SectionedFilePart(const SectionedFilePart&) = delete;
+    SectionedFilePart& operator=(const SectionedFilePart&) = delete;
+    // Bytes [at, at + bytes.size()) of placed section s.
+    void writeAt(size_t s, uint64_t at, std::span<const std::byte> bytes);
+    // Flushes (fsync) and closes the temporary; the pieces written, in the order written (runs that continue one
+    // another within a block are one piece).
+    std::vector<FilePiece> finish();
+
+private:
+    FilePlacement placement_;
+    int fd_ = -1;
+    std::vector<FilePiece> pieces_;
 };
 
 }  // namespace hc

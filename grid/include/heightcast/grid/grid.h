@@ -167,6 +167,12 @@ public:
     // "" if the cell may follow the ones before it, else what is wrong with it.
     std::string next(uint64_t code, const float* layerValues);
     uint64_t count() const { return count_; }
+    // Where the cells so far leave the check, so that another process can check the cells after them (GridFilePart).
+    struct State {
+        uint64_t nextFree = 0, count = 0;
+    };
+    State save() const { return {nextFree_, count_}; }
+    void resume(const State& s) { nextFree_ = s.nextFree, count_ = s.count; }
 
 private:
     const Grid& shape_;
@@ -190,6 +196,9 @@ public:
     uint64_t structureHash() const;
     uint64_t contentHash() const;
     uint64_t layerDigest(size_t layer) const { return layers_[layer].digest(); }
+    // The running hashes (structure, then each layer), for another process to go on with (GridFilePart).
+    std::vector<Hash64::State> save() const;
+    void resume(const std::vector<Hash64::State>& states);  // throws hc::Error unless 1 + layers states
 
 private:
     const Grid& shape_;
