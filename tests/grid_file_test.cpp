@@ -885,11 +885,19 @@ TEST_F(GridFile, WritingByPartsRefusesPartsOutOfTurnAndLeavesNothing) {
         p2.append(std::span(g.codes).subspan(b, n - b), valuesOf(g, b, n - b));
         // A part must go on from the state of exactly the cells before it.
         EXPECT_THROW(p2.resume(w.streamState()), hc::Error);
-        // A part finished before its cells were checked is refused.
+        // A part finished before its cells were hashed is refused, and so is hashing more cells than it wrote.
         EXPECT_THROW(p1.finish(), hc::Error);
         p1.resume(w.streamState());
-        // Cells that overlap the ones before the part (its first cell again the writer's last one) are refused.
-        EXPECT_THROW(p1.follow(std::span(g.codes).subspan(a - 1, 2), valuesOf(g, a - 1, 2)), hc::Error);
+        EXPECT_THROW(p1.follow(std::span(g.codes).subspan(a, b - a + 1), valuesOf(g, a, b - a + 1)), hc::Error);
+        // Cells out of order within a part are refused as they are appended.
+        hc::GridFilePart p3(where, g, b);
+        const uint64_t backwards[2] = {g.codes[b + 1], g.codes[b]};
+        const float zeros[2] = {0, 0};
+        EXPECT_THROW(p3.append(backwards, {std::span<const float>(zeros), std::span<const float>(zeros)}), hc::Error);
+        // A part whose first cell overlaps the last cell before it (the writer's cell a - 1 again) is refused at the seam.
+        hc::GridFilePart seam(where, g, a);
+        seam.append(std::span(g.codes).subspan(a - 1, 2), valuesOf(g, a - 1, 2));
+        EXPECT_THROW(seam.resume(w.streamState()), hc::Error);
     }
     EXPECT_TRUE(fs::is_empty(dir_)) << "an abandoned write by parts left a file or temporary behind";
     {

@@ -7,6 +7,7 @@
 #include <cstring>
 #include <map>
 #include <memory>
+#include <optional>
 #include <sstream>
 #include <vector>
 
@@ -256,6 +257,21 @@ public:
             out.push_back(s_.layerMax.empty() ? 0 : std::bit_cast<uint32_t>(s_.layerMax[l]));
         }
     }
+    // Adds the summary of the cells after these (another rank's run, GridFilePart).
+    void merge(const SummaryBuilder& o) {
+        if (o.first_) return;
+        if (first_) {
+            *this = o;
+            return;
+        }
+        for (size_t l = 0; l < s_.cellsPerLevel.size(); ++l) s_.cellsPerLevel[l] += o.s_.cellsPerLevel[l];
+        const auto &a = s_.boundsFinest, &b = o.s_.boundsFinest;
+        s_.boundsFinest = {std::min(a[0], b[0]), std::min(a[1], b[1]), std::max(a[2], b[2]), std::max(a[3], b[3])};
+        for (size_t l = 0; l < layers_; ++l) {
+            s_.layerMin[l] = std::min(s_.layerMin[l], o.s_.layerMin[l]);
+            s_.layerMax[l] = std::max(s_.layerMax[l], o.s_.layerMax[l]);
+        }
+    }
     // Words [at, ...) as save() wrote them; returns the index after them, or 0 where the words run short.
     size_t resume(std::span<const uint64_t> in, size_t at) {
         const size_t levels = s_.cellsPerLevel.size();
@@ -279,34 +295,34 @@ private:
     GridSummary s_;
 };
 
-// The cells' running checks, hashes and summary as one run of cells leaves them for the next (GridFileWriter::streamState,
-// GridFilePart::state): 64-bit words, little-endian: a tag, the static layers L, the levels, the order check (2), the
-// hashes ((1 + L) x 4), the summary (SummaryBuilder::save).
+// Where one run of cells leaves the order check and the hashes for the next (GridFileWriter::streamState,
+// GridFilePart::state): 64-bit words, little-endian: a tag, the static layers L, the order check (the first key not
+// covered, the cells so far), the hashes ((1 + L) x 4 words: Hash64::State).
 constexpr uint64_t kStreamStateTag = 0x4554415453474348ull;  // "HCGSTATE"
 
-std::vector<std::byte> saveStream(const CellStreamCheck& check, const GridHasher& hasher, const SummaryBuilder& summary, size_t layers,
-                                  size_t levels) {
-    std::vector<uint64_t> w{kStreamStateTag, layers, levels, check.save().nextFree, check.save().count};
+std::vector<std::byte> saveStream(CellStreamCheck::State check, const GridHasher& hasher, size_t layers) {
+    std::vector<uint64_t> w{kStreamStateTag, layers, check.nextFree, check.count};
     for (const Hash64::State& h : hasher.save()) w.insert(w.end(), {h.state, h.length, h.pending, h.pendingBytes});
-    summary.save(w);
     std::vector<std::byte> out(w.size() * 8);
     std::memcpy(out.data(), w.data(), out.size());
     return out;
 }
 
-void resumeStream(std::span<const std::byte> bytes, CellStreamCheck& check, GridHasher& hasher, SummaryBuilder& summary, size_t layers,
-                  size_t levels, const std::string& what) {
-    auto bad = [&](const std::string& why) { throw Error(what + ": the cells' running state from the rank before is " + why); };
-    if (bytes.size() % 8 != 0) bad("no whole number of words");
+std::vector<uint64_t> words(std::span<const std::byte> bytes, const std::string& what) {
+    if (bytes.size() % 8 != 0) throw Error(what + " is no whole number of words");
     std::vector<uint64_t> w(bytes.size() / 8);
     if (!w.empty()) std::memcpy(w.data(), bytes.data(), bytes.size());
-    const size_t hashes = 4 * (1 + layers);
-    if (w.size() < 5 + hashes || w[0] != kStreamStateTag || w[1] != layers || w[2] != levels) bad("not of this grid");
-    check.resume({w[3], w[4]});
+    return w;
+}
+
+CellStreamCheck::State resumeStream(std::span<const std::byte> bytes, GridHasher& hasher, size_t layers, const std::string& what) {
+    const std::vector<uint64_t> w = words(bytes, what + ": the cells' running state from the ranks before");
+    if (w.size() != 4 + 4 * (1 + layers) || w[0] != kStreamStateTag || w[1] != layers)
+        throw Error(what + ": the cells' running state from the ranks before is not one of this grid");
     std::vector<Hash64::State> h(1 + layers);
-    for (size_t k = 0; k < h.size(); ++k) h[k] = {w[5 + 4 * k], w[6 + 4 * k], w[7 + 4 * k], w[8 + 4 * k]};
+    for (size_t k = 0; k < h.size(); ++k) h[k] = {w[4 + 4 * k], w[5 + 4 * k], w[6 + 4 * k], w[7 + 4 * k]};
     hasher.resume(h);
-    if (summary.resume(w, 5 + hashes) != w.size()) bad("cut short or too long");
+    return {w[2], w[3]};
 }
 
 GridSummary summarise(const Grid& g) {
@@ -700,9 +716,9 @@ void checkBatchShape(const std::string& path, std::span<const uint64_t> codes, c
         if (v.size() != codes.size()) throw Error(path + ": layer values and cells differ in number");
 }
 
-// Every cell's rules (CellStreamCheck), then the cells into the hashes and the summary.
-void followCells(const std::string& path, std::span<const uint64_t> codes, const std::vector<std::span<const float>>& layerValues,
-                 CellStreamCheck& check, GridHasher& hasher, SummaryBuilder& summary) {
+// Every cell's rules (CellStreamCheck), then the cells into the summary.
+void checkCells(const std::string& path, std::span<const uint64_t> codes, const std::vector<std::span<const float>>& layerValues,
+                CellStreamCheck& check, SummaryBuilder& summary) {
     const size_t layers = layerValues.size();
     float v[256];
     for (size_t i = 0; i < codes.size(); ++i) {
@@ -711,8 +727,11 @@ void followCells(const std::string& path, std::span<const uint64_t> codes, const
         if (!problem.empty()) throw Error(path + ": refusing to write an invalid grid: " + problem);
     }
     summary.add(codes, layerValues);
+}
+
+void hashCells(std::span<const uint64_t> codes, const std::vector<std::span<const float>>& layerValues, GridHasher& hasher) {
     hasher.addCodes(codes);
-    for (size_t l = 0; l < layers; ++l) hasher.addValues(l, layerValues[l]);
+    for (size_t l = 0; l < layerValues.size(); ++l) hasher.addValues(l, layerValues[l]);
 }
 
 }  // namespace
@@ -723,7 +742,8 @@ void GridFileWriter::append(std::span<const uint64_t> codes, const std::vector<s
     const std::string& path = w.out.path();
     checkBatchShape(path, codes, layerValues, layers);
     if (codes.size() > w.cellCount - w.written) throw Error(path + ": more cells than the " + std::to_string(w.cellCount) + " announced");
-    followCells(path, codes, layerValues, w.check, w.hasher, w.summary);
+    checkCells(path, codes, layerValues, w.check, w.summary);
+    hashCells(codes, layerValues, w.hasher);
     w.out.append(0, std::as_bytes(codes));
     for (size_t l = 0; l < layers; ++l) w.out.append(1 + l, std::as_bytes(layerValues[l]));
     w.written += codes.size();
@@ -742,43 +762,63 @@ std::vector<std::byte> GridFileWriter::placement() const {
 
 std::vector<std::byte> GridFileWriter::streamState() const {
     const Impl& w = *impl_;
-    return saveStream(w.check, w.hasher, w.summary, w.staticShape.layers.size(), size_t(w.staticShape.maxLevel) + 1);
+    return saveStream(w.check.save(), w.hasher, w.staticShape.layers.size());
 }
 
+// A part for addPart: five 64-bit words (first cell, cells, the bytes of its state, of its summary, the pieces' count),
+// then the state after its cells (saveStream), its cells' summary (SummaryBuilder::save), the pieces (FilePiece, 32 bytes
+// each).
 void GridFileWriter::addPart(std::span<const std::byte> part) {
     Impl& w = *impl_;
     const std::string& path = w.out.path();
-    if (part.size() < 32) throw Error(path + ": a rank's part of " + std::to_string(part.size()) + " bytes is cut short");
-    const uint64_t first = bytes::load<uint64_t>(part.data()), cells = bytes::load<uint64_t>(part.data() + 8);
-    const uint64_t stateBytes = bytes::load<uint64_t>(part.data() + 16), pieces = bytes::load<uint64_t>(part.data() + 24);
-    if (stateBytes > part.size() - 32 || pieces > (part.size() - 32 - stateBytes) / sizeof(FilePiece) ||
-        32 + stateBytes + pieces * sizeof(FilePiece) != part.size())
+    if (part.size() < 40) throw Error(path + ": a rank's part of " + std::to_string(part.size()) + " bytes is cut short");
+    uint64_t head[5];
+    std::memcpy(head, part.data(), sizeof head);
+    const auto [first, cells, stateBytes, summaryBytes, pieces] = head;
+    if (stateBytes > part.size() - 40 || summaryBytes > part.size() - 40 - stateBytes ||
+        pieces > (part.size() - 40 - stateBytes - summaryBytes) / sizeof(FilePiece) ||
+        40 + stateBytes + summaryBytes + pieces * sizeof(FilePiece) != part.size())
         throw Error(path + ": a rank's part is malformed");
     if (first != w.written || cells > w.cellCount - w.written)
         throw Error(path + ": a rank's part holds cells " + std::to_string(first) + ".." + std::to_string(first + cells) + " where cell " +
                     std::to_string(w.written) + " comes next of " + std::to_string(w.cellCount));
     std::vector<FilePiece> table(pieces);
-    if (pieces) std::memcpy(table.data(), part.data() + 32 + stateBytes, pieces * sizeof(FilePiece));
+    if (pieces) std::memcpy(table.data(), part.data() + 40 + stateBytes + summaryBytes, pieces * sizeof(FilePiece));
     w.out.addPieces(table);
-    resumeStream(part.subspan(32, stateBytes), w.check, w.hasher, w.summary, w.staticShape.layers.size(), size_t(w.staticShape.maxLevel) + 1, path);
+    const CellStreamCheck::State after = resumeStream(part.subspan(40, stateBytes), w.hasher, w.staticShape.layers.size(), path);
+    w.check.resume(after);
+    SummaryBuilder theirs(w.staticShape.maxLevel, w.staticShape.layers.size());
+    const std::vector<uint64_t> sw = words(part.subspan(40 + stateBytes, summaryBytes), path + ": a rank's summary");
+    if (theirs.resume(sw, 0) != sw.size() || sw.empty()) throw Error(path + ": a rank's summary is malformed");
+    w.summary.merge(theirs);
     w.written += cells;
-    if (w.check.count() != w.written)
-        throw Error(path + ": a rank's part checked " + std::to_string(w.check.count()) + " cells, not the " + std::to_string(w.written) + " written");
+    if (after.count != w.written)
+        throw Error(path + ": a rank's part ends at cell " + std::to_string(after.count) + ", not at the " + std::to_string(w.written) + " written");
 }
 
 struct GridFilePart::Impl {
     Impl(FilePlacement placement, const Grid& gridShape, uint64_t cells, uint64_t firstCell)
         : out(std::move(placement)), staticShape(staticShapeOf(gridShape)), cellCount(cells), first(firstCell), check(staticShape),
-          hasher(staticShape, cells), summary(staticShape.maxLevel, staticShape.layers.size()) {}
+          hasher(staticShape, cells), summary(staticShape.maxLevel, staticShape.layers.size()) {
+        check.resume({0, first});  // cells are numbered as in the file; the first one's order is checked by resume()
+    }
     SectionedFilePart out;
     Grid staticShape;
     uint64_t cellCount, first;
-    CellStreamCheck check;
+    CellStreamCheck check;  // this run's cells among themselves, as they are appended
     GridHasher hasher;
     SummaryBuilder summary;
-    uint64_t written = 0;  // cells of this part written so far
-    bool resumed = false;
+    uint64_t written = 0, followed = 0;  // cells of this run written, and hashed
+    uint64_t firstKey = 0;               // of the run's first cell
+    std::optional<CellStreamCheck::State> before;  // where the runs before leave the order check (resume)
     std::string path;
+
+    // The run's first cell after the cells before it (CellStreamCheck's rule across the seam).
+    void checkSeam() const {
+        if (before && written > 0 && first > 0 && firstKey < before->nextFree)
+            throw Error(path + ": refusing to write an invalid grid: cell " + std::to_string(first) + " overlaps or precedes cell " +
+                        std::to_string(first - 1));
+    }
 };
 
 GridFilePart::GridFilePart(std::span<const std::byte> placement, const Grid& shape, uint64_t firstCell) {
@@ -800,46 +840,57 @@ void GridFilePart::append(std::span<const uint64_t> codes, const std::vector<std
     checkBatchShape(w.path, codes, layerValues, layers);
     const uint64_t at = w.first + w.written;
     if (codes.size() > w.cellCount - at) throw Error(w.path + ": more cells than the " + std::to_string(w.cellCount) + " announced");
+    if (codes.empty()) return;
+    // Checked and summarised here, each rank its own run at once; only the seam and the hashes wait for the ranks before.
+    checkCells(w.path, codes, layerValues, w.check, w.summary);
+    if (w.written == 0) w.firstKey = codeKey(codes[0]);
     w.out.writeAt(0, 8 * at, std::as_bytes(codes));
     for (size_t l = 0; l < layers; ++l) w.out.writeAt(1 + l, 4 * at, std::as_bytes(layerValues[l]));
     w.written += codes.size();
+    w.checkSeam();
 }
 
 void GridFilePart::resume(std::span<const std::byte> state) {
     Impl& w = *impl_;
-    resumeStream(state, w.check, w.hasher, w.summary, w.staticShape.layers.size(), size_t(w.staticShape.maxLevel) + 1, w.path);
-    if (w.check.count() != w.first)
-        throw Error(w.path + ": the ranks before this one checked " + std::to_string(w.check.count()) + " cells, but its own begin at cell " +
+    const CellStreamCheck::State before = resumeStream(state, w.hasher, w.staticShape.layers.size(), w.path);
+    if (before.count != w.first)
+        throw Error(w.path + ": the ranks before this one wrote " + std::to_string(before.count) + " cells, but its own begin at cell " +
                     std::to_string(w.first));
-    w.resumed = true;
+    w.before = before;
+    w.checkSeam();
 }
 
 void GridFilePart::follow(std::span<const uint64_t> codes, const std::vector<std::span<const float>>& layerValues) {
     Impl& w = *impl_;
-    if (!w.resumed) throw Error(w.path + ": a rank's cells checked before the state of the ranks before it arrived");
+    if (!w.before) throw Error(w.path + ": a rank's cells hashed before the state of the ranks before it arrived");
     checkBatchShape(w.path, codes, layerValues, w.staticShape.layers.size());
-    followCells(w.path, codes, layerValues, w.check, w.hasher, w.summary);
+    if (codes.size() > w.written - w.followed) throw Error(w.path + ": more cells hashed than this rank wrote");
+    hashCells(codes, layerValues, w.hasher);
+    w.followed += codes.size();
 }
 
 std::vector<std::byte> GridFilePart::state() const {
     const Impl& w = *impl_;
-    return saveStream(w.check, w.hasher, w.summary, w.staticShape.layers.size(), size_t(w.staticShape.maxLevel) + 1);
+    if (!w.before || w.followed != w.written)
+        throw Error(w.path + ": a rank's state asked for with " + std::to_string(w.followed) + " of its " + std::to_string(w.written) + " cells hashed");
+    // The order check goes on from this run's last cell, or from the runs before where this one is empty.
+    const CellStreamCheck::State after{w.written > 0 ? w.check.save().nextFree : w.before->nextFree, w.first + w.written};
+    return saveStream(after, w.hasher, w.staticShape.layers.size());
 }
 
 std::vector<std::byte> GridFilePart::finish() {
     Impl& w = *impl_;
-    if (!w.resumed || w.check.count() != w.first + w.written)
-        throw Error(w.path + ": a rank's part finished with " + std::to_string(w.written) + " cells written and " +
-                    std::to_string(w.check.count() - std::min(w.check.count(), w.first)) + " checked");
-    const std::vector<FilePiece> pieces = w.out.finish();
     const std::vector<std::byte> s = state();
-    std::vector<std::byte> out(32 + s.size() + pieces.size() * sizeof(FilePiece));
-    bytes::store(out, 0, w.first);
-    bytes::store(out, 8, w.written);
-    bytes::store(out, 16, uint64_t(s.size()));
-    bytes::store(out, 24, uint64_t(pieces.size()));
-    std::memcpy(out.data() + 32, s.data(), s.size());
-    if (!pieces.empty()) std::memcpy(out.data() + 32 + s.size(), pieces.data(), pieces.size() * sizeof(FilePiece));
+    const std::vector<FilePiece> pieces = w.out.finish();
+    std::vector<uint64_t> summary;
+    w.summary.save(summary);
+    const size_t summaryBytes = 8 * summary.size();
+    std::vector<std::byte> out(40 + s.size() + summaryBytes + pieces.size() * sizeof(FilePiece));
+    const uint64_t head[5] = {w.first, w.written, s.size(), summaryBytes, pieces.size()};
+    std::memcpy(out.data(), head, sizeof head);
+    std::memcpy(out.data() + 40, s.data(), s.size());
+    std::memcpy(out.data() + 40 + s.size(), summary.data(), summaryBytes);
+    if (!pieces.empty()) std::memcpy(out.data() + 40 + s.size() + summaryBytes, pieces.data(), pieces.size() * sizeof(FilePiece));
     return out;
 }
 

@@ -603,9 +603,9 @@ Stats Builder::run(CellSink& sink) {
                                             myTiles.size(), 1u << tileLevel_, myU1 - myU0, myCells, rankStart.seconds(), double(peakRssBytes()) / 1e6));
         std::vector<std::byte> partResult;
         if (parts) {
-            // The cells' checks, hashes and summary go on from rank to rank in Morton order (the writing above went on in
-            // parallel): each rank in turn takes the state the ranks before it left, follows its own cells from it and
-            // passes it on. Then each flushes its part.
+            // The hashes (one stream over the whole file) and the order check's seam go on from rank to rank in Morton
+            // order (the checks, summaries and writing above went on in parallel): each rank in turn takes the state the
+            // ranks before it left, hashes its own cells from it and passes it on. Then each flushes its part.
             const Stopwatch chain;
             std::vector<std::byte> state;
             if (root) state = sink.sharedWriter()->streamState();
@@ -621,12 +621,13 @@ Stats Builder::run(CellSink& sink) {
                 state = std::move(ranks::allGather(next)[size_t(r)]);
             }
             share = Batch{};
+            const double inTurn = chain.seconds();
             ranks::together([&] {
                 if (part) partResult = part->finish();
             });
             if (!root)
-                ranks::log("hc-ingest", fmt::format("its {} cells ({:.1f} MB) written into the output in place; the ranks' checks in turn and the flush {:.3f} s",
-                                                    myCells, double(myCells) * double(8 + 4 * layers_) / 1e6, chain.seconds()));
+                ranks::log("hc-ingest", fmt::format("its {} cells ({:.1f} MB) written into the output in place; hashes in turn {:.3f} s (all ranks), flush {:.3f} s",
+                                                    myCells, double(myCells) * double(8 + 4 * layers_) / 1e6, inTurn, chain.seconds() - inTurn));
         }
         if (!root) {
             sendShare(share, sum, unitSumSq, parts ? &partResult : nullptr);

@@ -110,9 +110,10 @@ public:
 
     // Under mpirun (DESIGN.md section 13) the other ranks write their own runs of cells, after this writer's own
     // append()ed ones and in rank order, straight into its temporary (GridFilePart over placement(), which must lie on
-    // a file system every rank sees). The cells' checks, hashes and summary run on from run to run: streamState() is
-    // theirs after the cells appended here, for the first part to go on from; addPart() takes each part's result in
-    // order (its block checksums and the state after its cells). A part's cells count for commit() as appended ones.
+    // a file system every rank sees). The hashes and the order check's seam run on from run to run: streamState() is
+    // where the cells appended here leave them, for the first part to go on from; addPart() takes each part's result in
+    // order (its block checksums, its cells' summary, the state after them). A part's cells count for commit() as
+    // appended ones.
     std::vector<std::byte> placement() const;
     std::vector<std::byte> streamState() const;
     void addPart(std::span<const std::byte> part);
@@ -123,10 +124,11 @@ private:
 };
 
 // One rank's run of cells in a grid file that rank 0's GridFileWriter writes (under mpirun; GridFileWriter::placement).
-// append() writes cells at their place in the file; resume() and follow() check, hash and summarise them in order after
-// the cells before this run (which may happen before or after they are written: rank by rank, while writing goes on
-// in parallel); finish() flushes them and returns what the writer's addPart() takes. Nothing of it is a file until
-// the writer commits; the writer removes the temporary if it does not.
+// append() checks, summarises and writes the run's cells at their place in the file (every rank at once); then, rank
+// by rank, resume() takes the state the runs before left (the hashes, the last cell's end), follow() hashes the run's
+// cells from it, and state() passes it on (the only part that runs in turn: the hashes are one stream over the whole
+// file); finish() flushes the run and returns what the writer's addPart() takes. Nothing of it is a file until the
+// writer commits; the writer removes the temporary if it does not.
 class GridFilePart {
 public:
     // `shape`: the one the writer was given (geometry, layers; no cells); this run's first cell is `firstCell`.
@@ -135,16 +137,17 @@ public:
     GridFilePart(const GridFilePart&) = delete;
     GridFilePart& operator=(const GridFilePart&) = delete;
 
-    // The run's next cells, written (not checked yet).
+    // The run's next cells: checked as GridFileWriter::append checks them (throws hc::Error naming the cell), summarised,
+    // written.
     void append(std::span<const uint64_t> codes, const std::vector<std::span<const float>>& layerValues);
-    // The running checks, hashes and summary after the cells before this run (the writer's streamState() or the
-    // previous part's state()); they must count exactly firstCell cells.
+    // The state after the cells before this run (the writer's streamState() or the previous part's state()): it must
+    // count exactly firstCell cells, and this run's first cell must not overlap the last of them.
     void resume(std::span<const std::byte> state);
-    // The run's cells again, in order (all of them over one or more calls): checked as the writer checks appended
-    // cells (throws hc::Error naming the cell), hashed and summarised.
+    // The run's cells again, in order (all of them over one or more calls, after append()): hashed.
     void follow(std::span<const uint64_t> codes, const std::vector<std::span<const float>>& layerValues);
+    // The state after this run's cells, for the next; throws unless every cell appended was followed.
     std::vector<std::byte> state() const;
-    // After every cell was appended and followed: flushes (fsync) and returns the part for GridFileWriter::addPart.
+    // After state() was reached: flushes (fsync) and returns the part for GridFileWriter::addPart.
     std::vector<std::byte> finish();
 
 private:
