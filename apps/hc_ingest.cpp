@@ -60,10 +60,6 @@ void printSummary(const hc::ingest::BuildSummary& b, const hc::ingest::LoadRepor
     const auto& c = r.sourceCheck;
     if (mesh) {
         std::printf("  values       each face's own, as float32 (no merging, no resampling)\n");
-    } else if (!c.notDone.empty()) {
-        std::printf("  deviation    max %.4g m, RMS %.4g m against the %llu valid pixels of the resampled working raster (tolerance %.4g m)\n",
-                    s.maxDevM, s.rmsDevM, (unsigned long long)s.validPixels, s.toleranceM);
-        std::printf("  vs source    not checked: %s\n", c.notDone.c_str());
     } else if (!c.done) {
         std::printf("  deviation    max %.4g m, RMS %.4g m (tolerance %.4g m; every valid source pixel checked%s)\n", s.maxDevM,
                     s.rmsDevM, s.toleranceM, r.sourcePrecisionDouble ? ", in the source's own precision" : "");

@@ -87,6 +87,25 @@ size_t compareWindows(const Options& o, const std::string& expectMethod, size_t 
         check(rng() % (s.width - w + 1), rng() % (s.height - h + 1), w, h, false);
     }
     EXPECT_EQ(mismatches, 0u);
+
+    // The check of every source pixel against the cell under its centre, as the ranks make it (strip by strip, against
+    // the written file's regions), equals the one-process check (against the painted cells of the whole build): the
+    // same counts and largest deviation exactly, the RMS to 1e-12 (its sum of squares is added in another order).
+    const std::string grid = (tempDir() / "windows_check.hcg").string();
+    LoadReport fileReport;
+    hc::ingest::ingestToFile(o, grid, fileReport);
+    const std::optional<detail::SourceCheckSums> sums = windows->checkAgainst(grid);
+    EXPECT_EQ(sums.has_value(), fileReport.sourceCheck.done);
+    if (sums && fileReport.sourceCheck.done) {
+        const auto& one = fileReport.sourceCheck;
+        EXPECT_GT(sums->checked, 0u);
+        EXPECT_EQ(sums->checked, one.checked);
+        EXPECT_EQ(sums->missed, one.missed);
+        EXPECT_EQ(sums->maxDev, one.maxDevM);
+        EXPECT_NEAR(std::sqrt(sums->sumSq / double(sums->checked)), one.rmsDevM, 1e-12 * (1 + one.rmsDevM));
+        // And the tally of that pass is still every source pixel once.
+        EXPECT_EQ(windows->tally().validPixels, wholeReport.sourceValidPixels);
+    }
     return valid;
 }
 

@@ -85,6 +85,8 @@ BuildOptions buildOptions(const Options& opt, double pixelSizeM, LoadReport& rep
 
 void setBuild(Prepared& p, const Options& opt, LoadReport& report) { p.build = buildOptions(opt, p.terrain.pixelSizeM, report); }
 
+void finishSourceCheck(const detail::SourceCheckSums& sums, LoadReport& report);
+
 // Every valid source pixel against the cell covering its centre (LoadReport::sourceCheck): the
 // figure a user means by "the grid differs from my survey by at most ...", and the count of source
 // pixels that reached no cell (lost at a projection's edge, a split, a hole's resampled edge).
@@ -121,17 +123,21 @@ void checkAgainstSource(const detail::SourceTrace& trace, const Raster& working,
             }
         }
     });
+    detail::SourceCheckSums sums;
+    for (const Acc& a : acc) sums.add({a.checked, a.missed, a.maxDev, a.sumSq});
+    finishSourceCheck(sums, report);
+}
+
+// The check's figures from its sums (one process's workers, or every rank's strips added), and the warning when
+// data was lost.
+void finishSourceCheck(const detail::SourceCheckSums& sums, LoadReport& report) {
     LoadReport::SourceCheck& out = report.sourceCheck;
     out = {};
     out.done = true;
-    double sumSq = 0;
-    for (const Acc& a : acc) {
-        out.checked += a.checked;
-        out.missed += a.missed;
-        out.maxDevM = std::max(out.maxDevM, a.maxDev);
-        sumSq += a.sumSq;
-    }
-    out.rmsDevM = out.checked ? std::sqrt(sumSq / double(out.checked)) : 0.0;
+    out.checked = sums.checked;
+    out.missed = sums.missed;
+    out.maxDevM = sums.maxDev;
+    out.rmsDevM = out.checked ? std::sqrt(sums.sumSq / double(out.checked)) : 0.0;
     const uint64_t valid = out.checked + out.missed;
     // Resampling loses a few pixels at the edges of holes and of the raster; more is lost data.
     if (valid > 0 && double(out.missed) > 0.005 * double(valid))
@@ -207,6 +213,14 @@ std::optional<BuildSummary> ingestByWindows(const Options& opt, const std::strin
     // Together: rank 1 writes on after the others returned; a failure there must not leave them waiting below.
     BuildSummary b;
     ranks::together([&] { b = buildGridFile(w, build, path, extra); });
+    // A resampled source: every rank checks its share of the source pixels against the cells under them (the same pass
+    // over the source as its tally), from the file rank 0 just committed (together() above waited for it).
+    std::optional<detail::SourceCheckSums> mine;
+    const Stopwatch checking;
+    ranks::together([&] { mine = windows->checkAgainst(path); });
+    if (mine)
+        ranks::log("hc-ingest", fmt::format("{} source pixels of its rows checked against the cells under them (and counted), {:.3f} s",
+                                            mine->checked + mine->missed, checking.seconds()));
     // The whole raster's counts (valid pixels, +-inf, sentinels): every rank's windows added.
     detail::SourceTally all;
     for (const auto& t : ranks::allGatherVectors(std::vector<detail::SourceTally>{windows->tally()})) {
@@ -214,6 +228,15 @@ std::optional<BuildSummary> ingestByWindows(const Options& opt, const std::strin
         all.add(t[0]);
     }
     windows->finish(all, report);
+    if (mine) {  // the check's sums added in rank order; its report (and warning) after the reading's, as in one process
+        const std::vector<double> row{double(mine->checked), double(mine->missed), mine->maxDev, mine->sumSq};
+        detail::SourceCheckSums sums;
+        for (const auto& r : ranks::allGatherVectors(row)) {
+            if (r.size() != 4) throw Error("a rank sent no source check");
+            sums.add({uint64_t(r[0]), uint64_t(r[1]), r[2], r[3]});
+        }
+        finishSourceCheck(sums, report);
+    }
     if (ranks::rank() == 0) noteStorage(b.shape.stats, report.sourcePrecisionDouble, report);
     return b;
 }

@@ -16,8 +16,10 @@
 
 #include "gdal_util.h"
 #include "heightcast/core/error.h"
+#include "heightcast/core/parallel.h"
 #include "heightcast/core/progress.h"
 #include "heightcast/core/ranks.h"
+#include "heightcast/grid/grid_file.h"
 #include "heightcast/ingest/ingest.h"
 #include "resample.h"
 
@@ -810,17 +812,15 @@ private:
 // TerrainWindows over a source that is resampled (projected to UTM, rotated, non-square pixels or --min-cell): a working
 // window reads the source pixels its map reaches (resampleWindow asks for them) and resamples them on the whole target's lattice, so
 // its pixels are the same bits as the whole raster's (resample.h). The reading tally counts every source pixel once:
-// each rank reads its share of the source's row strips for it (one more pass over the source, spread over the ranks).
-// The check of every source pixel against its cell (LoadReport::sourceCheck) needs every cell's value under every
-// source pixel, which no rank holds: it is not made, and the report says so.
+// each rank reads its share of the source's row strips for it (one more pass over the source, spread over the ranks),
+// and in the same pass, once the grid file is written, checks those pixels against the cells under their centres
+// (LoadReport::sourceCheck), each strip against the file's region under it.
 class ResampledWindows final : public detail::TerrainWindows {
 public:
     ResampledWindows(Opened&& o, Resampling&& plan, const Options& opt, LoadReport& report)
         : o_(std::move(o)), plan_(std::move(plan)), threads_(opt.threads), progress_(opt.progress) {
         step_ = detail::latticeStep(plan_.shape, plan_.map, plan_.lattice, plan_.maxErrorPx, threads_);
         if (plan_.sayLattice) report.method += ", map exact every " + std::to_string(step_) + " px" + plan_.methodTail;
-        report.sourceCheck.notDone = "under mpirun each rank reads only its windows of the resampled raster (run hc-ingest without "
-                                     "mpirun for the check of every source pixel against its cell)";
     }
     const Raster& shape() const override { return plan_.shape; }
     void read(size_t col0, size_t row0, size_t w, size_t h, std::vector<float>& values, std::vector<float>& rounding) override {
@@ -840,27 +840,116 @@ public:
         detail::resampleWindow(plan_.map, plan_.shape, step_, col0, row0, w, h, width, height, readSource, values.data(), threads_);
     }
     const detail::SourceTally& tally() const override {
-        if (counted_) return tally_;
-        const size_t width = o_.band->width(), height = o_.band->height();
-        const size_t strip = std::max<size_t>(1, (size_t{1} << 20) / (width * 8 + 1));  // ~1 MB buffers, as read whole
-        const size_t strips = (height + strip - 1) / strip, rank = size_t(ranks::rank()), count = size_t(ranks::count());
-        Progress progress("counting the source's pixels", (strips + count - 1 - rank) / count, progress_ && rank == 0);
-        std::vector<float> values, residual;
-        for (size_t s = rank; s < strips; s += count) {
-            const size_t r0 = s * strip, rows = std::min(strip, height - r0);
-            values.assign(width * rows, kNaN);
-            residual.clear();
-            o_.band->read(0, r0, width, rows, values.data(), residual, 0, values.size(), tally_);
-            o_.band->dropCache();
-            progress.advance(1);
-        }
-        progress.finish();
-        counted_ = true;
+        if (!counted_) stripPass(nullptr, nullptr);
         return tally_;
+    }
+    std::optional<detail::SourceCheckSums> checkAgainst(const std::string& gridPath) override {
+        const GridRegionReader grid(gridPath);
+        detail::SourceCheckSums sums;
+        stripPass(&grid, &sums);
+        return sums;
     }
     void finish(const detail::SourceTally& all, LoadReport& report) const override { o_.band->finish(all, report); }
 
 private:
+    // One pass over this rank's share of the source's row strips (every source pixel once over the ranks): the tally,
+    // and with `grid` the check of each valid pixel against the cell under its centre, as checkAgainstSource
+    // (ingest.cpp) makes it in one process: the pixel's centre mapped to the working raster's pixel, whose cell is
+    // read from the file (the region under the strip, painted onto that strip's pixels).
+    void stripPass(const GridRegionReader* grid, detail::SourceCheckSums* sums) const {
+        const size_t width = o_.band->width(), height = o_.band->height();
+        const size_t strip = std::max<size_t>(1, (size_t{1} << 20) / (width * 8 + 1));  // ~1 MB buffers, as read whole
+        // A rank takes a run of strips: its rows' footprint is then one band of the working raster, and the file's
+        // regions under them about its share of the file (every rank's strips spread over the height would each touch
+        // nearly every page of the file, the cells of a band being spread over it in Morton order).
+        const uint64_t strips = (height + strip - 1) / strip;
+        const uint64_t s0 = ranks::shareBegin(strips, ranks::rank(), ranks::count()), s1 = ranks::shareBegin(strips, ranks::rank() + 1, ranks::count());
+        Progress progress(grid ? "checking the source's pixels against their cells" : "counting the source's pixels", s1 - s0,
+                          progress_ && ranks::rank() == 0);
+        std::vector<float> values, residual, painted;
+        std::vector<int64_t> at;  // per strip pixel: its working pixel (row * width + col), or -1 where none
+        tally_ = {};
+        for (uint64_t s = s0; s < s1; ++s) {
+            const size_t r0 = size_t(s) * strip, rows = std::min(strip, height - r0);
+            values.assign(width * rows, kNaN);
+            residual.clear();
+            o_.band->read(0, r0, width, rows, values.data(), residual, 0, values.size(), tally_);
+            o_.band->dropCache();
+            if (grid) checkStrip(*grid, r0, rows, values, residual, at, painted, *sums);
+            progress.advance(1);
+        }
+        progress.finish();
+        counted_ = true;
+    }
+
+    // Rows [r0, r0 + rows) of the source (values, residual as read) against the file's cells, on every worker.
+    void checkStrip(const GridRegionReader& grid, size_t r0, size_t rows, const std::vector<float>& values, const std::vector<float>& residual,
+                    std::vector<int64_t>& at, std::vector<float>& painted, detail::SourceCheckSums& sums) const {
+        const Raster& t = plan_.shape;
+        const size_t width = o_.band->width(), workers = resolveThreads(threads_);
+        at.assign(width * rows, -1);
+        struct Box {
+            size_t c0 = SIZE_MAX, c1 = 0, w0 = SIZE_MAX, w1 = 0;  // the working pixels the centres reach
+        };
+        std::vector<Box> boxes(workers);
+        parallelFor(rows, 4, threads_, [&](size_t b, size_t e, unsigned worker) {
+            std::vector<double> x(width), y(width);
+            std::vector<int> ok(width);
+            Box& box = boxes[worker];
+            for (size_t j = b; j < e; ++j) {
+                plan_.rowToWorld(r0 + j, x, y, ok);
+                for (size_t c = 0; c < width; ++c) {
+                    if (std::isnan(values[j * width + c])) continue;
+                    const double col = std::floor((x[c] - t.westWorld) / t.pixelSizeM);
+                    const double r = std::floor((t.northWorld - y[c]) / t.pixelSizeM);
+                    if (!(ok[c] && col >= 0 && r >= 0 && col < double(t.width) && r < double(t.height))) continue;
+                    const size_t ic = size_t(col), ir = size_t(r);
+                    at[j * width + c] = int64_t(ir * t.width + ic);
+                    box.c0 = std::min(box.c0, ic), box.c1 = std::max(box.c1, ic), box.w0 = std::min(box.w0, ir), box.w1 = std::max(box.w1, ir);
+                }
+            }
+        });
+        Box all;
+        for (const Box& box : boxes)
+            all.c0 = std::min(all.c0, box.c0), all.c1 = std::max(all.c1, box.c1), all.w0 = std::min(all.w0, box.w0), all.w1 = std::max(all.w1, box.w1);
+        const size_t c0 = all.c0, c1 = all.c1, w0 = all.w0, w1 = all.w1;
+        const size_t bw = c0 <= c1 ? c1 - c0 + 1 : 0, bh = w0 <= w1 ? w1 - w0 + 1 : 0;
+        painted.assign(bw * bh, kNaN);
+        if (bw > 0) {
+            // The cells under working pixels [c0, c1] x [w0, w1] (the grid's local frame: origin at the working raster's
+            // south-west corner, y north, one finest cell a pixel), painted onto them.
+            const double px = t.pixelSizeM;
+            const Grid cells = grid.region({double(c0) * px, double(t.height - 1 - w1) * px, double(c1 + 1) * px, double(t.height - w0) * px});
+            for (size_t i = 0; i < cells.cellCount(); ++i) {
+                const uint64_t key = codeKey(cells.codes[i]);
+                const size_t span = size_t{1} << codeLevel(cells.codes[i]), ix0 = mortonX(key), iy0 = mortonY(key);
+                for (size_t iy = iy0; iy < iy0 + span; ++iy) {
+                    if (iy >= t.height) break;
+                    const size_t row = t.height - 1 - iy;
+                    if (row < w0 || row > w1) continue;
+                    for (size_t ix = std::max(ix0, c0); ix < std::min(ix0 + span, c1 + 1); ++ix) painted[(row - w0) * bw + (ix - c0)] = cells.values[0][i];
+                }
+            }
+        }
+        std::vector<detail::SourceCheckSums> parts(workers);
+        parallelFor(rows, 4, threads_, [&](size_t b, size_t e, unsigned worker) {
+            detail::SourceCheckSums& p = parts[worker];
+            for (size_t i = b * width; i < e * width; ++i) {
+                if (std::isnan(values[i])) continue;
+                const float z = at[i] < 0 ? kNaN : painted[(size_t(at[i]) / t.width - w0) * bw + (size_t(at[i]) % t.width - c0)];
+                if (std::isnan(z)) {
+                    ++p.missed;
+                    continue;
+                }
+                const double d = double(values[i]) + (residual.empty() ? 0.0 : double(residual[i])) - z;
+                p.maxDev = std::max(p.maxDev, std::abs(d));
+                p.sumSq += d * d;
+                ++p.checked;
+            }
+        });
+        for (const auto& p : parts) sums.add(p);
+    }
+
     Opened o_;
     Resampling plan_;
     unsigned threads_;

@@ -2,10 +2,12 @@
 // ingest/).
 #pragma once
 
+#include <algorithm>
 #include <cmath>
 #include <cstdint>
 #include <functional>
 #include <memory>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -79,6 +81,17 @@ private:
     std::vector<uint8_t> rgb_, mask_;
 };
 
+// The sums of the check of source pixels against the cells under their centres (LoadReport::sourceCheck), over a part
+// of the source: added over the ranks, then finishSourceCheck (ingest.cpp) makes the report's figures.
+struct SourceCheckSums {
+    uint64_t checked = 0, missed = 0;
+    double maxDev = 0, sumSq = 0;
+    void add(const SourceCheckSums& o) {
+        checked += o.checked, missed += o.missed, sumSq += o.sumSq;
+        maxDev = std::max(maxDev, o.maxDev);
+    }
+};
+
 // The terrain raster read window by window, for ranks that each read only their share of it (DESIGN.md section 13).
 class TerrainWindows {
 public:
@@ -92,6 +105,13 @@ public:
     virtual const SourceTally& tally() const = 0;
     // The counts and warnings of the whole raster's tally (every rank's added) into report.
     virtual void finish(const SourceTally& all, LoadReport& report) const = 0;
+    // Where the working raster is resampled: after the grid file `gridPath` is written, the check of this rank's share
+    // of the source pixels (those tally() counts) against the cells under their centres, read from the file's regions
+    // under them; nullopt where the working raster is the source itself (the build's own check is then the one).
+    virtual std::optional<SourceCheckSums> checkAgainst(const std::string& gridPath) {
+        (void)gridPath;
+        return std::nullopt;
+    }
 };
 
 // Opens opt.input and settles its georeferencing as loadTerrain does, reading no pixel, and returns its window reader:

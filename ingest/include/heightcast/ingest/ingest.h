@@ -78,7 +78,6 @@ struct LoadReport {
         uint64_t checked = 0;           // valid source pixels whose centre fell on a cell
         uint64_t missed = 0;            // valid source pixels whose centre reached no cell (lost data)
         double maxDevM = 0, rmsDevM = 0;  // |source pixel - covering cell value| over `checked`
-        std::string notDone;              // the working raster is resampled but the check was not made: why
     } sourceCheck;
 };
 
