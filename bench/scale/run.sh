@@ -9,6 +9,9 @@
 #   hc-probe WORKDIR/grid.hcg --xy X,Y            (the raster's centre; out of core: the cells around the point)
 #   hc-render WORKDIR/grid.hcg --size 1920x1080 --backend cpu   (one frame, the default overview camera; out of core,
 #                                                 texels from the pyramid)
+#   hc-render ... --backend gl                    (the same frame on the OpenGL backend: the cascades filled on the CPU
+#                                                 from the pyramid, mipmaps, ray casting and shading as compute shaders;
+#                                                 on a machine without a GPU, Mesa's llvmpipe, headless EGL)
 # and prints markdown tables, also written with the raw figures to WORKDIR/scale.csv and WORKDIR/files.csv (logs: WORKDIR/<tool>.log,
 # WORKDIR/<tool>.time). A tool that fails (out of memory, killed, timed out) is a row saying so, with the last
 # line of its error output; the script goes on. HC_SCALE_COLD=1 (root only) drops the page cache before each tool,
@@ -40,7 +43,7 @@ for t in hc-ingest hc-info hc-influence hc-probe hc-render; do
 done
 mkdir -p "$work"
 grid=$work/grid.hcg cache=$work/grid.hci pyramid=$work/grid.hcp
-rm -f "$grid" "$cache" "$pyramid" "$work/frame.png"
+rm -f "$grid" "$cache" "$pyramid" "$work/frame.png" "$work/frame_gl.png"
 
 # The raster's size and centre (the probe point).
 read -r width height cx cy < <(gdalinfo -json "$raster" | python3 -c '
@@ -86,6 +89,7 @@ measure hc-info 1 "$bin/hc-info" "$grid" --json
 measure hc-influence 300 "$bin/hc-influence" "$grid" --no-lists -p "$pyramid"
 measure hc-probe 1 "$bin/hc-probe" "$grid" --xy "$cx,$cy"
 measure hc-render 5 "$bin/hc-render" "$grid" -o "$work/frame.png" --size 1920x1080 --backend cpu
+measure hc-render-gl 5 "$bin/hc-render" "$grid" -o "$work/frame_gl.png" --size 1920x1080 --backend gl
 
 # Cells from hc-info's JSON (or, if hc-info failed, from hc-ingest's summary).
 cells=$(python3 -c 'import json, sys; print(json.load(open(sys.argv[1]))["cells"])' "$work/hc-info.log" 2>/dev/null ||
