@@ -321,10 +321,16 @@ Resampling planUtm(const GeoTransform& gt, size_t width, size_t height, const OG
             constexpr double kMaxErrM = 1e-6;
             const size_t w = x.size();
             size_t c0 = 0;
+            // A span's last node is the next span's first: projected once (3 exact projections a span, not 4).
+            double lastX = 0, lastY = 0;
+            bool lastOk = false, haveLast = false;
             for (; c0 + kSpan < w; c0 += kSpan) {
                 // Nodes at c0, c0 + 8, c0 + 16; the check at c0 + 5 (no node, not the span's symmetric point).
                 double nx[3], ny[3], qx, qy;
-                bool good = exact(c0, nx[0], ny[0]) && exact(c0 + kHalf, nx[1], ny[1]) && exact(c0 + kSpan, nx[2], ny[2]);
+                const bool first = haveLast ? (nx[0] = lastX, ny[0] = lastY, lastOk) : exact(c0, nx[0], ny[0]);
+                const bool end = exact(c0 + kSpan, nx[2], ny[2]);
+                lastX = nx[2], lastY = ny[2], lastOk = end, haveLast = true;
+                bool good = first && exact(c0 + kHalf, nx[1], ny[1]) && end;
                 auto para = [&](const double* n, size_t c) {
                     const double s = (static_cast<double>(c - c0) - double(kHalf)) / double(kHalf);  // -1, 0, 1 at the nodes
                     return n[1] + 0.5 * s * (n[2] - n[0]) + 0.5 * s * s * (n[2] - 2 * n[1] + n[0]);
