@@ -394,7 +394,7 @@ FilePlacement FilePlacement::decode(std::span<const std::byte> in) {
 }
 
 SectionedFilePart::SectionedFilePart(FilePlacement placement) : placement_(std::move(placement)) {
-    fd_ = ::open(placement_.temporaryPath.c_str(), O_WRONLY | O_CLOEXEC);
+    fd_ = ::open(placement_.temporaryPath.c_str(), O_RDWR | O_CLOEXEC);
     if (fd_ < 0)
         throw Error(placement_.path + ": cannot open the temporary " + placement_.temporaryPath + " that rank 1 writes (" + std::strerror(errno) +
                     "): under mpirun the output's folder must be one that every rank sees");
@@ -430,6 +430,21 @@ void SectionedFilePart::writeAt(size_t s, uint64_t at, std::span<const std::byte
         }
         at += take;
         bytes = bytes.subspan(take);
+    }
+}
+
+void SectionedFilePart::readAt(size_t s, uint64_t at, std::span<std::byte> out) const {
+    if (fd_ < 0) throw Error(placement_.path + ": a part read after it was finished");
+    if (s >= placement_.sections.size()) throw Error(placement_.path + ": a part of section " + std::to_string(s) + ", which is not placed");
+    const FileSection& sec = placement_.sections[s];
+    if (at > sec.bytes || out.size() > sec.bytes - at) throw Error(placement_.path + ": a read past section " + std::to_string(s));
+    uint64_t offset = sec.offset + at;
+    for (std::span<std::byte> left = out; !left.empty();) {
+        const ssize_t n = ::pread(fd_, left.data(), left.size(), static_cast<off_t>(offset));
+        if (n < 0 && errno == EINTR) continue;
+        if (n <= 0) throw Error(placement_.path + ": cannot read back " + placement_.temporaryPath + ": " + (n == 0 ? "it ends early" : std::strerror(errno)));
+        left = left.subspan(size_t(n));
+        offset += uint64_t(n);
     }
 }
 

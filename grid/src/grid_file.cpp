@@ -860,13 +860,24 @@ void GridFilePart::resume(std::span<const std::byte> state) {
     w.checkSeam();
 }
 
-void GridFilePart::follow(std::span<const uint64_t> codes, const std::vector<std::span<const float>>& layerValues) {
+void GridFilePart::follow() {
     Impl& w = *impl_;
     if (!w.before) throw Error(w.path + ": a rank's cells hashed before the state of the ranks before it arrived");
-    checkBatchShape(w.path, codes, layerValues, w.staticShape.layers.size());
-    if (codes.size() > w.written - w.followed) throw Error(w.path + ": more cells hashed than this rank wrote");
-    hashCells(codes, layerValues, w.hasher);
-    w.followed += codes.size();
+    const size_t layers = w.staticShape.layers.size();
+    constexpr uint64_t kChunk = uint64_t{1} << 17;  // 1 MiB of codes at a time
+    std::vector<uint64_t> codes;
+    std::vector<std::vector<float>> values(layers);
+    while (w.followed < w.written) {
+        const uint64_t at = w.first + w.followed, n = std::min(kChunk, w.written - w.followed);
+        codes.resize(n);
+        w.out.readAt(0, 8 * at, std::as_writable_bytes(std::span<uint64_t>(codes)));
+        for (size_t l = 0; l < layers; ++l) {
+            values[l].resize(n);
+            w.out.readAt(1 + l, 4 * at, std::as_writable_bytes(std::span<float>(values[l])));
+        }
+        hashCells(codes, std::vector<std::span<const float>>(values.begin(), values.end()), w.hasher);
+        w.followed += n;
+    }
 }
 
 std::vector<std::byte> GridFilePart::state() const {

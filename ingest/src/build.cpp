@@ -542,7 +542,7 @@ Stats Builder::run(CellSink& sink) {
         Batch batch, share;
         batch.values.resize(static_cast<size_t>(layers_));
         share.values.resize(static_cast<size_t>(layers_));
-        if (!root) {  // held until sent: sized once (growing by doubling would hold up to twice the share)
+        if (!root && !parts) {  // held until sent: sized once (growing by doubling would hold up to twice the share)
             share.codes.reserve(myCells);
             for (auto& v : share.values) v.reserve(myCells);
         }
@@ -579,8 +579,9 @@ Stats Builder::run(CellSink& sink) {
                 if (root) {
                     std::vector<std::span<const float>> values(batch.values.begin(), batch.values.end());
                     sink.append(batch.codes, values);
+                } else if (part) {  // into the file at its place; read back for the hashes (nothing held)
+                    part->append(batch.codes, std::vector<std::span<const float>>(batch.values.begin(), batch.values.end()));
                 } else {
-                    if (part) part->append(batch.codes, std::vector<std::span<const float>>(batch.values.begin(), batch.values.end()));
                     share.codes.insert(share.codes.end(), batch.codes.begin(), batch.codes.end());
                     for (size_t l = 0; l < batch.values.size(); ++l)
                         share.values[l].insert(share.values[l].end(), batch.values[l].begin(), batch.values[l].end());
@@ -605,7 +606,8 @@ Stats Builder::run(CellSink& sink) {
         if (parts) {
             // The hashes (one stream over the whole file) and the order check's seam go on from rank to rank in Morton
             // order (the checks, summaries and writing above went on in parallel): each rank in turn takes the state the
-            // ranks before it left, hashes its own cells from it and passes it on. Then each flushes its part.
+            // ranks before it left, hashes its own cells from it (read back from the file: its page cache, as it just
+            // wrote them) and passes it on. Then each flushes its part.
             const Stopwatch chain;
             std::vector<std::byte> state;
             if (root) state = sink.sharedWriter()->streamState();
@@ -615,12 +617,11 @@ Stats Builder::run(CellSink& sink) {
                 ranks::together([&] {
                     if (rank != r) return;
                     part->resume(state);
-                    part->follow(share.codes, std::vector<std::span<const float>>(share.values.begin(), share.values.end()));
+                    part->follow();
                     next = part->state();
                 });
                 state = std::move(ranks::allGather(next)[size_t(r)]);
             }
-            share = Batch{};
             const double inTurn = chain.seconds();
             ranks::together([&] {
                 if (part) partResult = part->finish();

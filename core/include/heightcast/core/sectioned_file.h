@@ -188,6 +188,8 @@ public:
     SectionedFilePart& operator=(const SectionedFilePart&) = delete;
     // Bytes [at, at + bytes.size()) of placed section s.
     void writeAt(size_t s, uint64_t at, std::span<const std::byte> bytes);
+    // Reads back bytes [at, at + out.size()) of placed section s (as this part wrote them; before finish()).
+    void readAt(size_t s, uint64_t at, std::span<std::byte> out) const;
     // Flushes (fsync) and closes the temporary; the pieces written, in the order written (runs that continue one
     // another within a block are one piece).
     std::vector<FilePiece> finish();

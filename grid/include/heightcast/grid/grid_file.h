@@ -126,8 +126,8 @@ private:
 // One rank's run of cells in a grid file that rank 0's GridFileWriter writes (under mpirun; GridFileWriter::placement).
 // append() checks, summarises and writes the run's cells at their place in the file (every rank at once); then, rank
 // by rank, resume() takes the state the runs before left (the hashes, the last cell's end), follow() hashes the run's
-// cells from it, and state() passes it on (the only part that runs in turn: the hashes are one stream over the whole
-// file); finish() flushes the run and returns what the writer's addPart() takes. Nothing of it is a file until the
+// cells from it, read back from the file, and state() passes it on (the only part that runs in turn: the hashes are one
+// stream over the whole file); finish() flushes the run and returns what the writer's addPart() takes. Nothing of it is a file until the
 // writer commits; the writer removes the temporary if it does not.
 class GridFilePart {
 public:
@@ -143,8 +143,9 @@ public:
     // The state after the cells before this run (the writer's streamState() or the previous part's state()): it must
     // count exactly firstCell cells, and this run's first cell must not overlap the last of them.
     void resume(std::span<const std::byte> state);
-    // The run's cells again, in order (all of them over one or more calls, after append()): hashed.
-    void follow(std::span<const uint64_t> codes, const std::vector<std::span<const float>>& layerValues);
+    // Every cell append()ed, read back from the temporary (a run's own writes: in its page cache) and hashed in order, so
+    // that nothing of the run is held between append() and its turn.
+    void follow();
     // The state after this run's cells, for the next; throws unless every cell appended was followed.
     std::vector<std::byte> state() const;
     // After state() was reached: flushes (fsync) and returns the part for GridFileWriter::addPart.
