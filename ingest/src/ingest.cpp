@@ -94,8 +94,7 @@ void checkAgainstSource(const detail::SourceTrace& trace, const Raster& working,
                         unsigned threads, LoadReport& report) {
     const detail::SourceBand& src = trace.band;
     struct Acc {
-        uint64_t checked = 0, missed = 0;
-        double maxDev = 0, sumSq = 0;
+        detail::SourceCheckSums sums;
         std::vector<double> x, y;
         std::vector<int> ok;
     };
@@ -108,23 +107,13 @@ void checkAgainstSource(const detail::SourceTrace& trace, const Raster& working,
             for (size_t c = 0; c < src.width; ++c) {
                 const size_t i = row * src.width + c;
                 if (std::isnan(src.values[i])) continue;
-                const double col = std::floor((a.x[c] - working.westWorld) / working.pixelSizeM);
-                const double r = std::floor((working.northWorld - a.y[c]) / working.pixelSizeM);
-                const bool inside = a.ok[c] && col >= 0 && r >= 0 && col < double(working.width) && r < double(working.height);
-                const float z = inside ? cellZ[static_cast<size_t>(r) * working.width + static_cast<size_t>(col)] : NAN;
-                if (std::isnan(z)) {
-                    ++a.missed;
-                    continue;
-                }
-                const double d = src.exact(i) - z;
-                a.maxDev = std::max(a.maxDev, std::abs(d));
-                a.sumSq += d * d;
-                ++a.checked;
+                const int64_t at = detail::workingPixelAt(working, a.x[c], a.y[c], a.ok[c]);
+                a.sums.addPixel(src.exact(i), at < 0 ? NAN : cellZ[size_t(at)]);
             }
         }
     });
     detail::SourceCheckSums sums;
-    for (const Acc& a : acc) sums.add({a.checked, a.missed, a.maxDev, a.sumSq});
+    for (const Acc& a : acc) sums.add(a.sums);
     finishSourceCheck(sums, report);
 }
 

@@ -906,11 +906,10 @@ private:
                 plan_.rowToWorld(r0 + j, x, y, ok);
                 for (size_t c = 0; c < width; ++c) {
                     if (std::isnan(values[j * width + c])) continue;
-                    const double col = std::floor((x[c] - t.westWorld) / t.pixelSizeM);
-                    const double r = std::floor((t.northWorld - y[c]) / t.pixelSizeM);
-                    if (!(ok[c] && col >= 0 && r >= 0 && col < double(t.width) && r < double(t.height))) continue;
-                    const size_t ic = size_t(col), ir = size_t(r);
-                    at[j * width + c] = int64_t(ir * t.width + ic);
+                    const int64_t p = detail::workingPixelAt(t, x[c], y[c], ok[c]);
+                    if (p < 0) continue;
+                    const size_t ic = size_t(p) % t.width, ir = size_t(p) / t.width;
+                    at[j * width + c] = p;
                     box.c0 = std::min(box.c0, ic), box.c1 = std::max(box.c1, ic), box.w0 = std::min(box.w0, ir), box.w1 = std::max(box.w1, ir);
                 }
             }
@@ -943,14 +942,7 @@ private:
             for (size_t i = b * width; i < e * width; ++i) {
                 if (std::isnan(values[i])) continue;
                 const float z = at[i] < 0 ? kNaN : painted[(size_t(at[i]) / t.width - w0) * bw + (size_t(at[i]) % t.width - c0)];
-                if (std::isnan(z)) {
-                    ++p.missed;
-                    continue;
-                }
-                const double d = double(values[i]) + (residual.empty() ? 0.0 : double(residual[i])) - z;
-                p.maxDev = std::max(p.maxDev, std::abs(d));
-                p.sumSq += d * d;
-                ++p.checked;
+                p.addPixel(double(values[i]) + (residual.empty() ? 0.0 : double(residual[i])), z);
             }
         });
         for (const auto& p : parts) sums.add(p);

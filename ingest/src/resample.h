@@ -90,7 +90,28 @@ struct SourceCheckSums {
         checked += o.checked, missed += o.missed, sumSq += o.sumSq;
         maxDev = std::max(maxDev, o.maxDev);
     }
+    // One valid source pixel (its value in the source's own precision) against the value of the cell under its
+    // centre: NaN where no cell is (a hole, outside the working raster), counted as missed.
+    void addPixel(double source, float cell) {
+        if (std::isnan(cell)) {
+            ++missed;
+            return;
+        }
+        const double d = source - cell;
+        maxDev = std::max(maxDev, std::abs(d));
+        sumSq += d * d;
+        ++checked;
+    }
 };
+
+// The working raster's pixel (row * width + col) whose square holds world position (x, y), or -1 where none (or where
+// the position does not exist: !ok): the rule of the check against the source, in one process and on the ranks.
+inline int64_t workingPixelAt(const Raster& t, double x, double y, bool ok) {
+    const double col = std::floor((x - t.westWorld) / t.pixelSizeM);
+    const double row = std::floor((t.northWorld - y) / t.pixelSizeM);
+    if (!(ok && col >= 0 && row >= 0 && col < double(t.width) && row < double(t.height))) return -1;
+    return int64_t(size_t(row) * t.width + size_t(col));
+}
 
 // The terrain raster read window by window, for ranks that each read only their share of it (DESIGN.md section 13).
 class TerrainWindows {
