@@ -6,7 +6,10 @@
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
+#include <algorithm>
 #include <filesystem>
+#include <memory>
+#include <numbers>
 #include <optional>
 #include <string>
 #include <vector>
@@ -33,7 +36,13 @@ struct RenderArgs {
     hc::cli::RenderSetup setup{"1280x720"};
     bool sequence = false;        // --steps A:B: one image per step
     unsigned firstStep = 0, lastStep = 0;
+    unsigned flyFrames = 0;       // --fly N: one image per frame of a flight (0: no flight)
+    double flyStepM = 10;         // --fly-step M: metres forward per frame
+    bool flyFresh = false;        // --fly-fresh: every frame of the flight from scratch (no texels kept)
     double fps = 4;               // --fps, of the --video
+    // The numbered images' first number and count (a sequence or a flight).
+    unsigned firstImage() const { return sequence ? firstStep : 0; }
+    unsigned imageCount() const { return sequence ? lastStep - firstStep + 1 : flyFrames; }
 };
 
 // OUT.png -> OUT_0007.png for step 7 of a sequence (and likewise the EXR and timings files).
@@ -59,7 +68,7 @@ std::string onPath(const std::string& program) {
     }
 }
 
-// The numbered PNGs of steps first..last as an H.264 MP4 (yuv420p, padded to even sizes) through ffmpeg, written to a
+// The numbered PNGs of a sequence's steps (or a flight's frames) as an H.264 MP4 (yuv420p, padded to even sizes) through ffmpeg, written to a
 // temporary name and renamed into place: no partial video survives a failure. Throws hc::Error.
 void writeVideo(const std::string& ffmpeg, const RenderArgs& a) {
     std::string pattern;
@@ -67,8 +76,8 @@ void writeVideo(const std::string& ffmpeg, const RenderArgs& a) {
     pattern.replace(pattern.rfind("_0000"), 5, "_%04d");
     const std::string tmp = a.video + ".partial";
     std::vector<std::string> args{ffmpeg, "-hide_banner", "-loglevel", "error", "-y", "-framerate", fmt::format("{:g}", a.fps),
-                                  "-start_number", std::to_string(a.firstStep), "-i", pattern, "-frames:v",
-                                  std::to_string(a.lastStep - a.firstStep + 1), "-vf", "pad=ceil(iw/2)*2:ceil(ih/2)*2",
+                                  "-start_number", std::to_string(a.firstImage()), "-i", pattern, "-frames:v",
+                                  std::to_string(a.imageCount()), "-vf", "pad=ceil(iw/2)*2:ceil(ih/2)*2",
                                   "-c:v", "libx264", "-pix_fmt", "yuv420p", "-f", "mp4", tmp};
     std::vector<char*> argv;
     for (auto& s : args) argv.push_back(s.data());
@@ -111,9 +120,16 @@ bool parseOptions(int argc, char** argv, RenderArgs& a) {
     std::string stepsText;
     p.option("--steps", "A:B", "render water steps A..B (0-based, inclusive), one image each: OUT_0007.png for step 7 (likewise\n"
              "      --exr and --timings); the camera is the same for every step, and only the water changes between them", stepsText);
-    p.option("--video", "OUT.mp4", "with --steps: also an H.264 video of the images through ffmpeg (Debian package ffmpeg)", a.video);
+    p.option("--fly", "N", "render a flight of N >= 2 frames, one image each (OUT_0000.png ...; likewise --exr and --timings):\n"
+             "      the camera moves --fly-step metres forward (horizontally, along its yaw) each frame, and each frame\n"
+             "      keeps the texels the last one evaluated that it still sees (incremental cascades); prints each\n"
+             "      frame's stage times", a.flyFrames);
+    p.option("--fly-step", "M", "metres the camera moves forward per --fly frame (default 10)", a.flyStepM);
+    p.flag("--fly-fresh", "with --fly: evaluate every frame from scratch (no texels kept), to compare", a.flyFresh);
+    p.option("--video", "OUT.mp4", "with --steps or --fly: also an H.264 video of the images through ffmpeg (Debian package ffmpeg)", a.video);
     p.option("--fps", "F", "frames (steps) per second of the --video (default 4)", a.fps);
     p.exclusive({"--step", "--steps"});
+    p.exclusive({"--steps", "--fly"});
     p.option("--backend", "B", "gl (OpenGL 4.3 compute shaders; headless, no display needed), cpu, or auto: gl where an\n"
              "OpenGL 4.3 context on a GPU can be had, else cpu with a note saying why (no 4.3 context, or only\n"
              "software OpenGL such as Mesa's llvmpipe, which is slower than cpu) (default auto). --threads\n"
@@ -136,7 +152,11 @@ bool parseOptions(int argc, char** argv, RenderArgs& a) {
         if (!a.setup.pyramidPath.empty())
             throw hc::Error("--pyramid names one step's pyramid but --steps renders several: leave it out (each step's own is used)");
     }
-    if (!a.video.empty() && !a.sequence) throw hc::Error("--video needs --steps A:B (one frame per step)");
+    if (a.flyFrames == 1 || a.flyFrames > 100000) throw hc::Error("--fly " + std::to_string(a.flyFrames) + ": a flight has 2 to 100000 frames");
+    if (!std::isfinite(a.flyStepM) || std::fabs(a.flyStepM) > 1e6)
+        throw hc::Error("--fly-step " + fmt::format("{:g}", a.flyStepM) + ": metres per frame, at most 1e6 either way");
+    if (a.flyFresh && !a.flyFrames) throw hc::Error("--fly-fresh needs --fly N");
+    if (!a.video.empty() && !a.sequence && !a.flyFrames) throw hc::Error("--video needs --steps A:B or --fly N (one image per frame)");
     if (!(a.fps > 0) || a.fps > 240) throw hc::Error("--fps " + fmt::format("{:g}", a.fps) + ": must be in (0, 240]");
     return true;
 }
@@ -226,6 +246,76 @@ void printSummary(const RenderArgs& a, const hc::cli::BackendDecision& decision,
     std::printf("%s", r.timings.toTable().c_str());
 }
 
+// The camera of frame k of a flight: --fly-step metres a frame forward, horizontally along the yaw.
+hc::render::Camera flightCamera(const RenderArgs& a, const hc::render::Camera& start, unsigned k) {
+    hc::render::Camera c = start;
+    const double yaw = start.yawDeg * std::numbers::pi / 180;
+    c.xWorld += std::sin(yaw) * a.flyStepM * k;
+    c.yWorld += std::cos(yaw) * a.flyStepM * k;
+    return c;
+}
+
+// --fly N: one renderer for the whole flight (GL: one context; out of core the CPU-filled cascades keep their texels
+// in it; CPU: a CascadeCache), one image per frame, each frame's stage times printed. The rendering's times exclude
+// writing the images; the GL backend's read-back is its own column.
+int fly(const RenderArgs& a, const hc::cli::BackendDecision& decision, const hc::render::Scene& scene, const hc::render::Camera& start) {
+    for (unsigned k = 1; k < a.flyFrames; ++k) {  // every frame's camera checked before any is rendered
+        try {
+            refuseCameraBelowTerrain(scene, flightCamera(a, start, k));
+        } catch (const hc::Error& e) {
+            throw hc::Error("--fly frame " + std::to_string(k) + ": " + e.what());
+        }
+    }
+    const std::string ffmpeg = a.video.empty() ? "" : onPath("ffmpeg");
+    if (!a.video.empty() && ffmpeg.empty())
+        throw hc::Error("--video: ffmpeg is not installed (Debian: apt install ffmpeg); the images alone need no --video");
+    if (!decision.note.empty()) std::fprintf(stderr, "hc-render: note: %s\n", decision.note.c_str());
+    std::unique_ptr<hc::render::GlRenderer> gl;
+    std::string device = "CPU, " + std::to_string(hc::resolveThreads(a.setup.options.threads)) + " threads";
+    if (decision.useGl) {
+        gl = hc::render::GlRenderer::headless(scene);
+        device = gl->deviceName();
+    }
+    hc::render::CascadeCache cache;
+    std::printf("hc-render: %s, a flight of %u frames, %g m a frame%s -> %s\n", a.gridPath.c_str(), a.flyFrames, a.flyStepM,
+                a.flyFresh ? ", every frame from scratch" : "", numbered(a.out, 0).c_str());
+    std::printf("  backend      %s (%s)\n", decision.useGl ? "gl" : "cpu", device.c_str());
+    std::printf("  frame           x m           y m   approx ms  kept %%     fit ms     mip ms     ray ms   shade ms  render ms%s\n",
+                gl ? "  upload ms     GPU ms  readback ms" : "");
+    hc::Stopwatch total;
+    std::vector<double> renderMs;
+    for (unsigned k = 0; k < a.flyFrames; ++k) {
+        const hc::render::Camera camera = flightCamera(a, start, k);
+        Rendered r;
+        r.device = device;
+        if (a.flyFresh) {
+            if (gl) gl->forgetCascades();
+            cache.clear();
+        }
+        r.frame = gl ? gl->render(camera, a.setup.options, r.timings) : hc::render::renderFrame(scene, camera, a.setup.options, r.timings, &cache);
+        writeOutputs(a, r, k);
+        uint64_t kept = 0, visible = 0;
+        for (const auto& c : r.timings.cascades) kept += c.reusedTexels, visible += c.visibleTexels;
+        const double ms = r.timings.totalMs - r.timings.readbackMs;
+        renderMs.push_back(ms);
+        std::printf("  %5u %13.3f %13.3f %11.2f %6.1f %10.2f %10.2f %10.2f %10.2f %10.2f", k, camera.xWorld, camera.yWorld,
+                    r.timings.approximationMs, visible ? 100.0 * double(kept) / double(visible) : 0.0, r.timings.fittingMs,
+                    r.timings.mipmapMs, r.timings.raycastMs, r.timings.shadingMs, ms);
+        if (gl) std::printf(" %10.2f %10.2f %12.2f", r.timings.uploadMs, r.timings.gpuMs, r.timings.readbackMs);
+        std::printf("\n");
+    }
+    // The frames after the first (which has nothing to keep): their median and slowest.
+    std::vector<double> later(renderMs.begin() + 1, renderMs.end());
+    std::sort(later.begin(), later.end());
+    std::printf("  frames 1..%u  render median %.2f ms, slowest %.2f ms; frame 0 %.2f ms; total %.3f s with the images\n",
+                a.flyFrames - 1, later[later.size() / 2], later.back(), renderMs[0], total.seconds());
+    if (!a.video.empty()) {
+        writeVideo(ffmpeg, a);
+        std::printf("  video        %s (%g frames per second)\n", a.video.c_str(), a.fps);
+    }
+    return 0;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -243,6 +333,7 @@ int main(int argc, char** argv) {
             hc::cli::requireCpu("--cells on a grid read out of core (no .hci cache)", a.backend, decision);
         const hc::render::Camera camera = hc::cli::initialCamera(a.setup, *loaded->scene);
         refuseCameraBelowTerrain(*loaded->scene, camera);
+        if (a.flyFrames) return fly(a, decision, *loaded->scene, camera);
         if (!a.sequence) {
             const Rendered rendered = renderImage(decision, *loaded->scene, camera, a.setup.options);
             writeOutputs(a, rendered, std::nullopt);

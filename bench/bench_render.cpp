@@ -114,7 +114,7 @@ struct RunResult {
     uint64_t baselineRss = 0, gridRss = 0, peakRss = 0;  // bytes: before generating; after the grid; at the end
     char image[512] = {};         // the PNG written, or empty
     char device[256] = {};        // what rendered: "CPU" or the GL renderer and version
-    // --fly-frames (CPU): means over frames 2..N of a camera flying forward, without and with a CascadeCache.
+    // --fly-frames: means over frames 2..N of a camera flying forward, without and with a CascadeCache.
     double flyApproxFreshMs = 0, flyApproxCachedMs = 0, flyTotalFreshMs = 0, flyTotalCachedMs = 0, flyKept = 0;
     double flyCellsFresh = 0, flyCellsCached = 0;  // grid cells the approximation visited per frame (CascadeStats::cellsVisited)
     // --pyramid: the surface pyramid's build time and bytes.
@@ -133,7 +133,7 @@ struct Settings {
     std::string imagesDir;
     bool interactive = false;
     hc::cli::Backend backend = hc::cli::Backend::Cpu;  // Cpu or Gl (Auto is resolved in main)
-    int flyFrames = 0;      // after the timed frames: a fly-through of this many frames, fresh and incremental (CPU)
+    int flyFrames = 0;      // after the timed frames: a fly-through of this many frames, fresh and incremental
     double flyStepM = 10;   // metres forward per fly-through frame
     bool pyramid = false;   // build the surface pyramid and render from it (CPU: copies; texel sizes on its ladder)
     bool accuracy = false;  // measure the last frame's hits against the exact surface
@@ -310,10 +310,11 @@ RunResult runScenario(const Scenario& sc, const Settings& set) {
             r.rays = tm.rays;
             r.hits = tm.hits;
         }
-        if (!gl && set.flyFrames > 1) {
+        if (set.flyFrames > 1) {
             // The camera flies forward (horizontally, along its yaw) flyStepM a frame: every frame evaluated afresh,
             // then the same frames through a CascadeCache (incremental cascades). Means over frames 2..N (the
-            // first has nothing to reuse).
+            // first has nothing to reuse). GL: frames ending in the texture, back to back as a viewer draws them;
+            // out of core the renderer's own cache keeps the texels (in memory the GPU sums every texel each frame).
             for (int cached = 0; cached < 2; ++cached) {
                 hc::render::CascadeCache cache;
                 double approx = 0, total = 0;
@@ -324,7 +325,12 @@ RunResult runScenario(const Scenario& sc, const Settings& set) {
                     const double yaw = cam.yawDeg * std::numbers::pi / 180;
                     c.xWorld += std::sin(yaw) * set.flyStepM * k, c.yWorld += std::cos(yaw) * set.flyStepM * k;
                     hc::render::Timings tm;
-                    (void)hc::render::renderFrame(scene, c, set.options, tm, cached ? &cache : nullptr);
+                    if (gl) {
+                        if (!cached || k == 0) gl->forgetCascades();
+                        gl->renderToTexture(c, set.options, tm);
+                    } else {
+                        (void)hc::render::renderFrame(scene, c, set.options, tm, cached ? &cache : nullptr);
+                    }
                     if (k == 0) continue;
                     approx += tm.approximationMs, total += tm.totalMs;
                     for (const auto& cs : tm.cascades) kept += cs.reusedTexels, visible += cs.visibleTexels, cells += cs.cellsVisited;
@@ -457,7 +463,7 @@ void writeJson(const std::vector<const Scenario*>& scs, const std::vector<RunRes
             o["accuracy_p99_m"] = sig6(r.accuracyP99M);
             o["accuracy_rms_m"] = sig6(r.accuracyRmsM);
         }
-        if (set.flyFrames > 1 && set.backend == hc::cli::Backend::Cpu) {
+        if (set.flyFrames > 1) {
             o["fly_frames"] = set.flyFrames;
             o["fly_step_m"] = set.flyStepM;
             o["fly_approximation_ms_fresh"] = ms(r.flyApproxFreshMs);
@@ -533,8 +539,9 @@ int main(int argc, char** argv) {
         p.option("--csv", "OUT.csv", "also write one row per scenario as CSV with a header line (default: none)", csv);
         p.option("--json", "OUT.json", "also write a JSON array, one object per scenario (scenario, cells, approximation_ms,\n"
                  "      raycast_ms, gaussians_per_s, rays_per_s, peak_rss_mb, and more) (default: none)", json);
-        p.option("--fly-frames", "N", "CPU: after the timed frames, fly the camera forward for N frames, each evaluated afresh and\n"
-                 "      then with incremental cascades (texels kept from the last frame); prints both (default 0: off)", set.flyFrames);
+        p.option("--fly-frames", "N", "after the timed frames, fly the camera forward for N frames, each evaluated afresh and\n"
+                 "      then with incremental cascades (texels kept from the last frame); prints both (default 0: off). GL:\n"
+                 "      frames back to back into the texture; texels are kept out of core only (--out-of-core)", set.flyFrames);
         p.option("--fly-step", "M", "metres the camera moves forward per fly-through frame (default 10)", set.flyStepM);
         p.flag("--pyramid", "also build the surface pyramid (hc-influence's .hcp, DESIGN.md section 10) and render from it:\n"
                "      texel sizes on its ladder (powers of two of the finest cell), texels it holds copied (CPU)", set.pyramid);
@@ -559,7 +566,6 @@ int main(int argc, char** argv) {
         set.backend = hc::cli::parseBackend(backendText);
         if (set.backend == hc::cli::Backend::Auto) throw hc::Error("--backend auto: a benchmark names its backend, cpu or gl");
         if (set.flyFrames < 0 || set.flyFrames == 1) throw hc::Error("--fly-frames " + std::to_string(set.flyFrames) + ": 0 (off) or at least 2");
-        if (set.flyFrames > 0 && set.backend != hc::cli::Backend::Cpu) throw hc::Error("--fly-frames: the CPU backend's (incremental cascades)");
         if (!(set.flyStepM >= 0) || !std::isfinite(set.flyStepM)) throw hc::Error("--fly-step " + fmt::format("{:g}", set.flyStepM) + ": metres >= 0");
         if (std::string why = set.options.validate(); !why.empty()) throw hc::Error(why);
         {
@@ -691,7 +697,7 @@ int main(int argc, char** argv) {
                         r.camera[2], r.camera[3]);
         }
 
-        if (set.flyFrames > 1 && set.backend == hc::cli::Backend::Cpu) {
+        if (set.flyFrames > 1) {
             std::printf("\nincremental cascades: the camera flies forward %g m a frame for %d frames; means over frames 2..%d,\n"
                         "every frame evaluated afresh against frames through a CascadeCache (texels kept from the last frame);\n"
                         "cells = grid cells the approximation visited per frame\n\n",

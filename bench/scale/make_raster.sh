@@ -29,8 +29,15 @@ side=${2:-10240}
 src=${HC_SCALE_SOURCE:-/work/shared/data/south_glacier_utm7.tif}
 [[ -r $src ]] || { echo "make_raster.sh: error: $src: cannot read" >&2; exit 1; }
 
-work=$(mktemp -d "${TMPDIR:-/tmp}/make_raster.XXXXXX")
-trap 'rm -rf "$work"' EXIT
+# OUT.vrt: no 420 MB GeoTIFF but a VRT over the four small mirror images (1.2 MB in all) kept in OUT.parts/ beside
+# it, with relative paths: the same pixels, for carrying to another machine (bench/gpu/pack.sh).
+if [[ $out == *.vrt ]]; then
+    work=$out.parts
+    rm -rf "$work" && mkdir -p "$work"
+else
+    work=$(mktemp -d "${TMPDIR:-/tmp}/make_raster.XXXXXX")
+    trap 'rm -rf "$work"' EXIT
+fi
 export GDAL_PAM_ENABLED=NO  # no .aux.xml side files
 q=(-q)
 
@@ -72,6 +79,14 @@ while ((bw < side || bh < side)); do
     k=$((k + 1)) bw=$((2 * bw)) bh=$((2 * bh))
 done
 
+if [[ $out == *.vrt ]]; then
+    tmp="$work/out.tmp.$$.vrt"
+    gdal_translate "${q[@]}" -of VRT -srcwin 0 0 "$side" "$side" -a_nodata -9999 "$work/b$k.vrt" "$tmp"
+    sed 's#relativeToVRT="1">#relativeToVRT="1">'"$(basename "$work")"'/#' "$tmp" > "$out.tmp.$$" && rm -f "$tmp"
+    mv -f "$out.tmp.$$" "$out"
+    echo "$out: ${side} x ${side} px, a VRT over $(basename "$work")/"
+    exit 0
+fi
 tmp="$out.tmp.$$.tif"
 gdal_translate "${q[@]}" -srcwin 0 0 "$side" "$side" -a_nodata -9999 \
     -co TILED=YES -co BLOCKXSIZE=256 -co BLOCKYSIZE=256 -co COMPRESS=NONE -co BIGTIFF=IF_SAFER \

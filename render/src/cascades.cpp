@@ -119,11 +119,15 @@ void placeTexture(Cascade& c, int texelsPerSide, double finestCellM, int stepsPe
     c.texelM = ladderTexelSize(extent, texelsPerSide, finestCellM);
     if (stepsPerOctave == 1) {
         // The pyramid's spacings: the largest power of two of the finest cell not above the 8-step size (never
-        // coarser texels than without a pyramid), with as many texels as the extent then needs (up to 2N - 3); or
+        // coarser texels than without a pyramid), with as many texels as the extent then needs (up to about 2N); or
         // the smallest not below it, which N texels cover.
         const double t = std::log2(c.texelM / finestCellM);
         c.texelM = finestCellM * std::exp2(coarser ? std::ceil(t - 1e-9) : std::floor(t + 1e-9));
-        if (!coarser) c.n = int(std::ceil(extent / c.texelM)) + 3;
+        // The side is rounded up to a multiple of 64 texels: as the camera moves the extent changes a little every
+        // frame, and a cascade whose side changed keeps none of its texels (CascadeCache). Exact sides changed every
+        // 4-6 frames of a 20 m-a-frame flight at 105 M cells, each time evaluating a far cascade afresh (1.4 M
+        // texels, 15-20 ms on 16 cores; BENCHMARKS.md).
+        if (!coarser) c.n = (int(std::ceil(extent / c.texelM)) + 3 + 63) / 64 * 64;
     }
     // Corner on the lattice, one texel outside the box so every patch of the box is whole.
     c.x0 = (std::floor(bx0 / c.texelM) - 1) * c.texelM;

@@ -720,6 +720,7 @@ std::string Timings::toJson() const {
     j["total_ms"] = threeDecimals(totalMs);
     j["gpu_ms"] = threeDecimals(gpuMs);
     j["readback_ms"] = threeDecimals(readbackMs);
+    j["upload_ms"] = threeDecimals(uploadMs);
     j["rays"] = rays;
     j["hits"] = hits;
     j["cascades"] = Json::array();
@@ -786,6 +787,10 @@ std::string Timings::toTable() const {
     if (gpuMs > 0 || readbackMs > 0) {
         std::snprintf(b, sizeof b, "    GPU span      %9.2f   first stage's start to shading's end\n    read back     %9.2f   the frame to host memory\n",
                       gpuMs, readbackMs);
+        s += b;
+    }
+    if (uploadMs > 0) {
+        std::snprintf(b, sizeof b, "    upload        %9.2f   the cascades the CPU filled, to the GPU\n", uploadMs);
         s += b;
     }
     return s;

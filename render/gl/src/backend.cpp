@@ -51,11 +51,12 @@ uint64_t gIndexChunkLimitForTest = uint64_t{1} << 31;
 struct Buffer {
     GLuint name = 0;
     size_t bytes = 0;
+    GLenum usage = GL_DYNAMIC_DRAW;  // the driver's hint; GL_STREAM_READ for the read-back staging buffer
     void reserve(size_t need) {
         if (name && bytes >= need) return;
         if (!name) glGenBuffers(1, &name);
         glBindBuffer(GL_SHADER_STORAGE_BUFFER, name);
-        glBufferData(GL_SHADER_STORAGE_BUFFER, GLsizeiptr(std::max<size_t>(need, 16)), nullptr, GL_DYNAMIC_DRAW);
+        glBufferData(GL_SHADER_STORAGE_BUFFER, GLsizeiptr(std::max<size_t>(need, 16)), nullptr, usage);
         bytes = std::max<size_t>(need, 16);
     }
     void upload(const void* data, size_t size, size_t offset = 0) const {
@@ -81,6 +82,11 @@ struct GlRenderer::Impl {
     std::unique_ptr<gl::HeadlessContext> headless;  // null when rendering into the caller's context
     GLuint approximate = 0, mipmap = 0, raycast = 0, shade = 0;
     Buffer frameBuf, cellsBuf, keysBuf, visibleBuf, heightsBuf, pixelsBuf, countersBuf;
+    // The rays are copied here on the GPU and read from here. Mapping pixelsBuf itself for reading made NVIDIA's
+    // driver move it to host memory: every later frame's ray casting then wrote its rays over PCIe (H100: 1.2 ms
+    // in the first frame, 12.5-14.5 ms in each after it; BENCHMARKS.md).
+    Buffer readbackBuf{0, 0, GL_STREAM_READ};
+
     std::array<Buffer, gpu::kIndexChunks> indexBufs;  // the lists' entries, in chunks of 2^indexChunkShift
     uint32_t indexChunkShift = 31;
     GLuint colorTex = 0;
@@ -127,7 +133,7 @@ struct GlRenderer::Impl {
         for (GLuint p : {approximate, mipmap, raycast, shade})
             if (p) glDeleteProgram(p);
         approximate = mipmap = raycast = shade = 0;
-        for (Buffer* b : {&frameBuf, &cellsBuf, &keysBuf, &visibleBuf, &heightsBuf, &pixelsBuf, &countersBuf}) b->release();
+        for (Buffer* b : {&frameBuf, &cellsBuf, &keysBuf, &visibleBuf, &heightsBuf, &pixelsBuf, &countersBuf, &readbackBuf}) b->release();
         for (Buffer& b : indexBufs) b.release();
         if (colorTex) glDeleteTextures(1, &colorTex);
         colorTex = 0;
@@ -362,7 +368,14 @@ struct GlRenderer::Impl {
     // times replace the ones layOutCascades and the time stamps give.
     void approximateOnCpu(const CascadeFit& fit, const gpu::FrameBlock& block, const RenderOptions& options, Timings& timings) {
         Timings cpu;
+        double uploadMs = 0;
         detail::approximateOnCpu(scene, fit, options, &cascadeCache, cpu, [&](size_t k, const detail::CascadeTextures& tex) {
+            const Stopwatch clock;
+            struct Lap {  // the upload's time, however the lambda returns
+                const Stopwatch& clock;
+                double& ms;
+                ~Lap() { ms += clock.milliseconds(); }
+            } lap{clock, uploadMs};
             const gpu::GpuCascade& gc = block.cascades[k];
             const size_t bytes = tex.terrain.h.size() * sizeof(float);
             heightsBuf.upload(tex.terrain.h.data(), bytes, size_t(gc.terrainOffset) * 4);
@@ -372,6 +385,7 @@ struct GlRenderer::Impl {
         });
         timings.cascades = cpu.cascades;
         timings.approximationMs = cpu.approximationMs;
+        timings.uploadMs = uploadMs;
     }
 
     // Stage 2: the approximation, one dispatch per cascade, each followed by a time stamp (out of core the stamps
@@ -521,14 +535,17 @@ struct GlRenderer::Impl {
         glBindTexture(GL_TEXTURE_2D, colorTex);
         glPixelStorei(GL_PACK_ALIGNMENT, 1);
         glGetTexImage(GL_TEXTURE_2D, 0, GL_RGBA, GL_UNSIGNED_BYTE, rgba.data());
-        // The rays are read through a mapping (no staging copy in host memory) and spread over the frame's
-        // layers on all cores. On an H100 host (BENCHMARKS.md) the read-back is then texture 11-15 ms, allocating
-        // the layers 36-59 ms (zero pages), mapping 19-39 ms, converting 3-4 ms.
+        // The rays are copied on the GPU into a buffer of their own (readbackBuf), read through a mapping of it (no
+        // staging copy in host memory) and spread over the frame's layers on all cores.
         for (auto* v : {&f.distanceM, &f.posX, &f.posY, &f.posZ, &f.nX, &f.nY, &f.nZ, &f.waterDepthM, &f.cascade, &f.wall}) v->resize(pixels);
         f.rgb.resize(pixels * 3);
-        glBindBuffer(GL_SHADER_STORAGE_BUFFER, pixelsBuf.name);
-        const auto* px = static_cast<const gpu::GpuPixel*>(
-            glMapBufferRange(GL_SHADER_STORAGE_BUFFER, 0, GLsizeiptr(pixels * sizeof(gpu::GpuPixel)), GL_MAP_READ_BIT));
+        const size_t rayBytes = pixels * sizeof(gpu::GpuPixel);
+        readbackBuf.reserve(rayBytes);
+        glBindBuffer(GL_COPY_READ_BUFFER, pixelsBuf.name);
+        glBindBuffer(GL_COPY_WRITE_BUFFER, readbackBuf.name);
+        glCopyBufferSubData(GL_COPY_READ_BUFFER, GL_COPY_WRITE_BUFFER, 0, 0, GLsizeiptr(rayBytes));
+        glBindBuffer(GL_SHADER_STORAGE_BUFFER, readbackBuf.name);
+        const auto* px = static_cast<const gpu::GpuPixel*>(glMapBufferRange(GL_SHADER_STORAGE_BUFFER, 0, GLsizeiptr(rayBytes), GL_MAP_READ_BIT));
         if (!px) throw Error("the GL backend cannot map its rays for reading on " + device);
         const float inf = std::numeric_limits<float>::infinity();
         parallelFor(size_t(H), 16, 0, [&](size_t rowBegin, size_t rowEnd, unsigned) {

@@ -101,6 +101,8 @@ struct Timings {
     // copy of the finished frame to host memory (render(); a viewer drawing the texture has none). totalMs is
     // the wall time of the whole call, both included.
     double gpuMs = 0, readbackMs = 0;
+    // GL backend out of core: handing the cascades the CPU filled to the driver (in totalMs, not in gpuMs).
+    double uploadMs = 0;
     std::vector<CascadeStats> cascades;
     uint64_t rays = 0, hits = 0;
     std::string toJson() const;

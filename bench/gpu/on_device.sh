@@ -1,0 +1,74 @@
+#!/usr/bin/env bash
+# bench/gpu/on_device.sh KIT_DIR OUT_DIR: on a machine with a GPU, runs the GPU benchmarks of BENCHMARKS.md with the
+# tools bench/gpu/pack.sh packed into KIT_DIR, and writes the logs to OUT_DIR. Parts (HC_GPU_PARTS, default all,
+# comma-separated):
+#   scale   bench/scale/run.sh on the 105 M-cell raster (every tool from a cold page cache; the GL row on the GPU)
+#   fly     hc-render --fly on that grid: flights of 1920x1080 frames on the GL backend (texels kept, and every
+#           frame from scratch) and on the CPU backend, from the look-at camera and the overview
+#   report  hc-bench --backend gl on the report's four scenes: in memory, and out of core from the pyramid (with a
+#           fly-through of 20 frames: texels kept against every frame afresh)
+set -uo pipefail
+[[ $# -eq 2 ]] || { echo "usage: $0 KIT_DIR OUT_DIR" >&2; exit 2; }
+kit=$(cd "$1" && pwd) out=$2
+here=$(cd "$(dirname "$0")/../.." && pwd)
+parts=,${HC_GPU_PARTS:-scale,fly,report},
+mkdir -p "$out"
+root=${TMPDIR:-/tmp}/hc-kit
+rm -rf "$root" && mkdir -p "$root"
+xz -dc "$kit/bin/kit.tar.xz" | tar -C "$root" -xf -
+export PATH=$root:$PATH LD_LIBRARY_PATH=$root/lib
+# glvnd finds NVIDIA's EGL driver through its vendor file; on the lent machines that lies under /usr/local/nvidia.
+for f in /usr/share/glvnd/egl_vendor.d/10_nvidia.json /usr/local/nvidia/share/glvnd/egl_vendor.d/10_nvidia.json; do
+    [[ -r $f ]] && { export __EGL_VENDOR_LIBRARY_FILENAMES=$f; break; }
+done
+{
+    date -u
+    nvidia-smi -L 2>&1
+    nvidia-smi --query-gpu=driver_version,clocks.max.sm,memory.total --format=csv 2>&1
+    echo "cpus: $(nproc) x $(grep -m1 'model name' /proc/cpuinfo | cut -d: -f2)"
+    free -g | head -2
+    hc-render --help > /dev/null && echo "tools run"
+} 2>&1 | tee "$out/machine.txt"
+
+work=${TMPDIR:-/tmp}/hc-scale
+look=(--look-at 700000,6640000,4200,710000,6650000,2600)
+if [[ $parts == *,scale,* ]]; then
+    # No address-space cap: the GPU driver reserves far more address space than it uses (peak RSS is the figure).
+    HC_BIN=$root HC_SCALE_COLD=1 HC_SCALE_CAP_MIB=${HC_SCALE_CAP_MIB:-400000} bash "$here/bench/scale/run.sh" "$kit/raster/dem10240.vrt" "$work" \
+        > "$out/scale.txt" 2>&1
+    tail -n 30 "$out/scale.txt"
+    for f in "$work"/*.log; do echo "== $f"; cat "$f"; done > "$out/scale_logs.txt"
+fi
+if [[ $parts == *,fly,* ]]; then
+    [[ -r $work/grid.hcg ]] || { echo "on_device.sh: fly: $work/grid.hcg missing (run the scale part first)" >&2; exit 1; }
+    mkdir -p "$work/fly"
+    # The GPU's clock every 200 ms while the flights run (a GPU idle between frames lowers it).
+    nvidia-smi --query-gpu=timestamp,clocks.sm,utilization.gpu --format=csv -lms 200 > "$out/fly_clocks.csv" 2>&1 &
+    clocks=$!
+    {
+        # An earlier build packed beside it (pack.sh's HC_GPU_BEFORE): its GL flight and this one's, alternated twice.
+        if [[ -x $root/hc-render-before ]]; then
+            for round in 1 2; do
+                for r in hc-render-before hc-render; do
+                    echo "== $r, round $round"
+                    $r "$work/grid.hcg" -o "$work/fly/ab.png" --size 1920x1080 --backend gl "${look[@]}" --fly 40 --fly-step 20
+                done
+            done
+        fi
+        for backend in gl cpu; do
+            hc-render "$work/grid.hcg" -o "$work/fly/$backend.png" --size 1920x1080 --backend $backend "${look[@]}" --fly 40 --fly-step 20
+            hc-render "$work/grid.hcg" -o "$work/fly/$backend.png" --size 1920x1080 --backend $backend "${look[@]}" --fly 10 --fly-step 20 --fly-fresh
+        done
+        hc-render "$work/grid.hcg" -o "$work/fly/over.png" --size 1920x1080 --backend gl --fly 20 --fly-step 50
+    } > "$out/fly.txt" 2>&1
+    kill $clocks 2>/dev/null
+    cp "$work/fly/gl_0009.png" "$out/fly_gl_0009.png" 2>/dev/null
+    grep -E "^== |backend|frames 1\.\." "$out/fly.txt"
+fi
+if [[ $parts == *,report,* ]]; then
+    {
+        hc-bench --backend gl --repeat 10 --json "$out/report_gl.json"
+        hc-bench --backend gl --repeat 10 --out-of-core --pyramid --fly-frames 20 --fly-step 10 --json "$out/report_gl_ooc.json"
+    } > "$out/report.txt" 2>&1
+    grep -E -A6 "^scenario|^incremental" "$out/report.txt"
+fi
