@@ -31,6 +31,7 @@ done
 } 2>&1 | tee "$out/machine.txt"
 
 work=${TMPDIR:-/tmp}/hc-scale
+# shellcheck disable=SC2054  # the commas are the option's
 look=(--look-at 700000,6640000,4200,710000,6650000,2600)
 if [[ $parts == *,scale,* ]]; then
     # No address-space cap: the GPU driver reserves far more address space than it uses (peak RSS is the figure).
