@@ -2,7 +2,7 @@
 # bench/gpu/on_device.sh KIT_DIR OUT_DIR: on a machine with a GPU, runs the GPU benchmarks of BENCHMARKS.md with the
 # tools bench/gpu/pack.sh packed into KIT_DIR, and writes the logs to OUT_DIR. Parts (HC_GPU_PARTS, default all,
 # comma-separated):
-#   scale   bench/scale/run.sh on the 105 M-cell raster (every tool from a cold page cache; the GL row on the GPU)
+#   scale   bench/scale/run.sh on the kit's raster, 105 M cells (every tool from a cold page cache; the GL row on the GPU)
 #   fly     hc-render --fly on that grid: flights of 1920x1080 frames on the GL backend (texels kept, and every
 #           frame from scratch) and on the CPU backend, from the look-at camera and the overview
 #   report  hc-bench --backend gl on the report's four scenes: in memory, and out of core from the pyramid (with a
@@ -31,11 +31,13 @@ done
 } 2>&1 | tee "$out/machine.txt"
 
 work=${TMPDIR:-/tmp}/hc-scale
-# shellcheck disable=SC2054  # the commas are the option's
-look=(--look-at 700000,6640000,4200,710000,6650000,2600)
+rasters=("$kit"/raster/dem*.vrt)
+raster=${rasters[0]}
+# The flights' camera (HC_GPU_LOOK_AT: another, inside a smaller raster of pack.sh's HC_GPU_SIDE).
+look=(--look-at "${HC_GPU_LOOK_AT:-700000,6640000,4200,710000,6650000,2600}")
 if [[ $parts == *,scale,* ]]; then
     # No address-space cap: the GPU driver reserves far more address space than it uses (peak RSS is the figure).
-    HC_BIN=$root HC_SCALE_COLD=1 HC_SCALE_CAP_MIB=${HC_SCALE_CAP_MIB:-400000} bash "$here/bench/scale/run.sh" "$kit/raster/dem10240.vrt" "$work" \
+    HC_BIN=$root HC_SCALE_COLD=1 HC_SCALE_CAP_MIB=${HC_SCALE_CAP_MIB:-400000} bash "$here/bench/scale/run.sh" "$raster" "$work" \
         > "$out/scale.txt" 2>&1
     tail -n 30 "$out/scale.txt"
     for f in "$work"/*.log; do echo "== $f"; cat "$f"; done > "$out/scale_logs.txt"

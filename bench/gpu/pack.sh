@@ -30,6 +30,7 @@ for f in "$kit"/stage/*; do [[ -f $f ]] && ldd "$f"; done | awk '/=> \// { print
     while read -r lib; do cp -L "$lib" "$kit/stage/lib/"; done
 tar -C "$kit/stage" -cf - . | xz -T0 -6 > "$kit/bin/kit.tar.xz"
 rm -rf "$kit/stage"
-# The raster of bench/scale/run.sh's 105 M-cell column, 1.2 MB instead of 420 MB.
-bash "$here/bench/scale/make_raster.sh" "$kit/raster/dem10240.vrt" 10240
+# The raster of bench/scale/run.sh's 105 M-cell column, 1.2 MB instead of 420 MB (HC_GPU_SIDE: another side in px).
+side=${HC_GPU_SIDE:-10240}
+bash "$here/bench/scale/make_raster.sh" "$kit/raster/dem$side.vrt" "$side"
 du -sh "$kit"
