@@ -86,7 +86,6 @@ struct GlRenderer::Impl {
     // driver move it to host memory: every later frame's ray casting then wrote its rays over PCIe (H100: 1.2 ms
     // in the first frame, 12.5-14.5 ms in each after it; BENCHMARKS.md).
     Buffer readbackBuf{0, 0, GL_STREAM_READ};
-
     std::array<Buffer, gpu::kIndexChunks> indexBufs;  // the lists' entries, in chunks of 2^indexChunkShift
     uint32_t indexChunkShift = 31;
     GLuint colorTex = 0;
@@ -371,17 +370,14 @@ struct GlRenderer::Impl {
         double uploadMs = 0;
         detail::approximateOnCpu(scene, fit, options, &cascadeCache, cpu, [&](size_t k, const detail::CascadeTextures& tex) {
             const Stopwatch clock;
-            struct Lap {  // the upload's time, however the lambda returns
-                const Stopwatch& clock;
-                double& ms;
-                ~Lap() { ms += clock.milliseconds(); }
-            } lap{clock, uploadMs};
             const gpu::GpuCascade& gc = block.cascades[k];
             const size_t bytes = tex.terrain.h.size() * sizeof(float);
             heightsBuf.upload(tex.terrain.h.data(), bytes, size_t(gc.terrainOffset) * 4);
-            if (!scene.hasWater()) return;
-            heightsBuf.upload(tex.water.h.data(), bytes, size_t(gc.waterOffset) * 4);
-            heightsBuf.upload(tex.depth.data(), bytes, size_t(gc.depthOffset) * 4);
+            if (scene.hasWater()) {
+                heightsBuf.upload(tex.water.h.data(), bytes, size_t(gc.waterOffset) * 4);
+                heightsBuf.upload(tex.depth.data(), bytes, size_t(gc.depthOffset) * 4);
+            }
+            uploadMs += clock.milliseconds();
         });
         timings.cascades = cpu.cascades;
         timings.approximationMs = cpu.approximationMs;
