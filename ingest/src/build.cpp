@@ -10,8 +10,9 @@
 // tile or the coarsest cell), and under mpirun each rank takes a run of them in Morton order, about equal in area: the
 // tiles of pass A and the units of pass C inside its nodes. The roots are exchanged between the two passes. Rank 0 opens
 // the file; the other ranks write their cells into it at their place (GridFilePart), check and hash them in turn, and
-// send rank 0 their block checksums and statistics; with water steps (whose depths need every cell on rank 0) or a
-// trace to paint, they send rank 0 their cells instead, which it writes. A raster read window by window
+// send rank 0 their block checksums and statistics (with water steps, whose depths need every cell's code, rank 0 then
+// reads the others' codes back from the file); with a trace to paint they send rank 0 their cells instead, which it
+// writes. A raster read window by window
 // (RasterWindows) is read by each rank only over its own nodes, in maximal aligned squares: no rank holds it whole. The
 // file is the same bytes for any number of ranks and threads: the squared deviations are summed per unit, then over
 // the units in Morton order.
@@ -512,9 +513,9 @@ Stats Builder::run(CellSink& sink) {
                             "the raster holds no valid pixel (all nodata): nothing to build");
             if (root) sink.begin(total);
         });
-        // Under mpirun, where rank 0's file lets them (no water steps, no trace for rank 0 to paint), every rank writes its
-        // own cells into it in place (GridFilePart): rank 0 says where, the others open their parts. Else they send their
-        // cells to rank 0, which writes them.
+        // Under mpirun, where rank 0's file lets them (no trace for rank 0 to paint), every rank writes its own cells
+        // into it in place (GridFilePart): rank 0 says where, the others open their parts. Else they send their cells to
+        // rank 0, which writes them. (With water steps rank 0 then reads the others' codes back: FileSink::completeCodes.)
         std::unique_ptr<GridFilePart> part;
         bool parts = false;
         if (rankCount > 1) {
@@ -882,8 +883,15 @@ public:
         if (steps_ > 0) codes.insert(codes.end(), c.begin(), c.end());
     }
     GridFileWriter& writer() { return *writer_; }
-    // Water steps need every cell's code on rank 0: then the ranks send their cells there.
-    GridFileWriter* sharedWriter() override { return steps_ == 0 ? writer_.get() : nullptr; }
+    GridFileWriter* sharedWriter() override { return writer_.get(); }
+    // Water steps need every cell's code on rank 0: under mpirun the other ranks' cells are in their parts of the file,
+    // so their codes are read back from it after the codes rank 0 appended itself.
+    void completeCodes(uint64_t cellCount) {
+        if (steps_ == 0 || codes.size() >= cellCount) return;
+        const size_t have = codes.size();
+        codes.resize(cellCount);
+        writer_->readPartCodes(have, std::span<uint64_t>(codes).subspan(have));
+    }
     const Grid* fileShape() const override { return &shape_; }
     std::vector<uint64_t> codes;
 
@@ -946,6 +954,9 @@ BuildSummary buildFile(const Raster& terrain, const RasterWindows* windows, cons
         for (uint64_t c : st.perLevel) out.cellCount += c;  // this rank's share
         return out;
     }
+    uint64_t cells = 0;
+    for (uint64_t c : st.perLevel) cells += c;
+    sink.completeCodes(cells);
     {
         Progress progress("water steps: depth per cell", stepCount, options.progress && stepCount > 0);
         for (size_t k = 0; k < stepCount; ++k) {

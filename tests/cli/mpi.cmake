@@ -57,6 +57,19 @@ gdalinfo -stats holes.tif | grep -E 'STATISTICS_VALID_PERCENT=([0-8][0-9]|9[0-8]
 do "$HC_MPIRUN" -np $n "$HC_INGEST" --quiet holes.tif --tolerance 15 --max-cell 1024 --water-level 2500,2700 -o g$n.hcg || exit 1
 done]])
 
+  # Water steps over a projected source (no trace of a resampling to paint): every rank writes its own cells into the
+  # file in place, and rank 1 reads the others' codes back from it for the steps' wet cells. The same bytes.
+  hc_mpi_test(mpi.ingest_steps_in_place 0 [[rank 3/3: its [0-9]+ cells \([0-9.]+ MB\) written into the output in place]]
+    --setup "$HC_INGEST --quiet $HC_DATA_DIR/south_glacier_utm7.tif --water-level 2200,2400,2600 -o one.hcg"
+    --match [[rank 2/2: its [0-9]+ cells .* written into the output in place]] --no-match [[error:|warning]]
+    --check [[for n in 2 3
+do cmp one.hcg g$n.hcg || exit 1
+done
+"$HC_INFO" --verify g3.hcg | grep -E 'steps +3 water steps']]
+    -- ${HC_BASH} -c [[for n in 2 3
+do "$HC_MPIRUN" -np $n "$HC_INGEST" "$HC_DATA_DIR/south_glacier_utm7.tif" --water-level 2200,2400,2600 -o g$n.hcg || exit 1
+done]])
+
   # hc-influence: lists and both steps' pyramids, the same bytes from 1, 2 and 3 ranks; each rank says its share once,
   # and no rank read the grid whole for its lists (its nodes' cells and their halo: fewer cells than the grid has).
   hc_mpi_test(mpi.influence_holes_steps 0 [[rank 3/3: [0-9]+ nodes, [0-9]+ cells. lists in [0-9.]+ s \([0-9]+ cells read with their halo\). [0-9]+ pyramid tiles]]

@@ -45,9 +45,9 @@ public:
     virtual ~CellSink() = default;
     virtual void begin(uint64_t cellCount) = 0;
     virtual void append(std::span<const uint64_t> codes, const std::vector<std::span<const float>>& values) = 0;
-    // Under mpirun (DESIGN.md section 13): a sink whose file every rank may write its own cells into (no water steps:
-    // those need every cell on rank 0) gives rank 0's writer after begin(), and every rank the file's shape for its
-    // GridFilePart; other sinks get the other ranks' cells through append() on rank 0.
+    // Under mpirun (DESIGN.md section 13): a sink whose file every rank may write its own cells into gives rank 0's
+    // writer after begin(), and every rank the file's shape for its GridFilePart; other sinks get the other ranks'
+    // cells through append() on rank 0.
     virtual GridFileWriter* sharedWriter() { return nullptr; }
     virtual const Grid* fileShape() const { return nullptr; }
 };
