@@ -876,6 +876,7 @@ public:
         if (steps_ > 0 && cellCount > UINT32_MAX)
             throw Error(std::to_string(cellCount) + " cells: a grid with water steps holds at most 2^32 - 1 cells");
         writer_ = std::make_unique<GridFileWriter>(path_, shape_, cellCount, steps_);
+        cellCount_ = cellCount;
         if (steps_ > 0) codes.reserve(cellCount);
     }
     void append(std::span<const uint64_t> c, const std::vector<std::span<const float>>& values) override {
@@ -886,10 +887,10 @@ public:
     GridFileWriter* sharedWriter() override { return writer_.get(); }
     // Water steps need every cell's code on rank 0: under mpirun the other ranks' cells are in their parts of the file,
     // so their codes are read back from it after the codes rank 0 appended itself.
-    void completeCodes(uint64_t cellCount) {
-        if (steps_ == 0 || codes.size() >= cellCount) return;
+    void completeCodes() {
+        if (steps_ == 0 || codes.size() >= cellCount_) return;
         const size_t have = codes.size();
-        codes.resize(cellCount);
+        codes.resize(cellCount_);
         writer_->readPartCodes(have, std::span<uint64_t>(codes).subspan(have));
     }
     const Grid* fileShape() const override { return &shape_; }
@@ -899,6 +900,7 @@ private:
     std::string path_;
     const Grid& shape_;
     size_t steps_;
+    uint64_t cellCount_ = 0;  // every rank's cells (begin)
     std::unique_ptr<GridFileWriter> writer_;
 };
 
@@ -950,13 +952,9 @@ BuildSummary buildFile(const Raster& terrain, const RasterWindows* windows, cons
     const bool root = ranks::rank() == 0;  // under mpirun, rank 0 commits the file (Builder::run)
     if (options.cellElevations && root) options.cellElevations->assign(terrain.values.size(), std::numeric_limits<float>::quiet_NaN());
     Stats st = Builder(terrain, windows, mask ? &*mask : nullptr, options, rootLevel, maxLevel).run(sink);
-    if (!root) {
-        for (uint64_t c : st.perLevel) out.cellCount += c;  // this rank's share
-        return out;
-    }
-    uint64_t cells = 0;
-    for (uint64_t c : st.perLevel) cells += c;
-    sink.completeCodes(cells);
+    for (uint64_t c : st.perLevel) out.cellCount += c;  // on rank 0 every rank's cells, on another its share
+    if (!root) return out;
+    sink.completeCodes();
     {
         Progress progress("water steps: depth per cell", stepCount, options.progress && stepCount > 0);
         for (size_t k = 0; k < stepCount; ++k) {
@@ -984,7 +982,6 @@ BuildSummary buildFile(const Raster& terrain, const RasterWindows* windows, cons
     out.shape.steps = out.steps;
     out.cellsPerLevel = st.perLevel;
     out.wetCells = out.steps.empty() ? 0 : out.steps.back().wetCells;
-    for (uint64_t c : st.perLevel) out.cellCount += c;
     return out;
 }
 

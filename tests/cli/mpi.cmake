@@ -20,6 +20,15 @@ if(NOT HC_WITH_MPI)
   return()
 endif()
 
+# VAR: a bash script running hc-ingest INPUT on 2 and 3 ranks into g2.hcg and g3.hcg, their logs in g2.txt and g3.txt
+# (printed if a run fails; g3.txt printed in any case, for the test's regexes).
+function(hc_mpi_ingest_runs var input)
+  set(${var} "for n in 2 3\ndo if ! \"$HC_MPIRUN\" -np $n \"$HC_INGEST\" ${input} -o g$n.hcg > g$n.txt 2>&1\nthen cat g$n.txt\nexit 1\nfi\ndone\ncat g3.txt"
+      PARENT_SCOPE)
+endfunction()
+hc_mpi_ingest_runs(MOSAIC_RUNS mosaic.vrt)
+hc_mpi_ingest_runs(GEO_RUNS geo.vrt)
+
 function(hc_mpi_test name)
   hc_cli_test(${name} ${ARGN})
   set_property(TEST cli.${name} APPEND PROPERTY ENVIRONMENT
@@ -118,13 +127,7 @@ test "$(grep -cE 'rank [1-3]/3: [0-9]+ windows? read' g3.txt)" = 3
 test "$(grep -cE 'rank [23]/3: its [0-9]+ cells \([0-9.]+ MB\) written into the output in place' g3.txt)" = 2
 grep -oE 'rank [1-3]/3: .*\(([0-9.]+) % of the raster' g3.txt | grep -oE '[0-9.]+ % of' | cut -d' ' -f1 > share.txt
 cat share.txt && awk '$1 >= 60 || $1 <= 0 { bad = 1 } END { exit bad }' share.txt]]
-    -- ${HC_BASH} -c [[for n in 2 3
-do if ! "$HC_MPIRUN" -np $n "$HC_INGEST" mosaic.vrt -o g$n.hcg > g$n.txt 2>&1
-then cat g$n.txt
-exit 1
-fi
-done
-cat g3.txt]])
+    -- ${HC_BASH} -c "${MOSAIC_RUNS}")
 
   # A geographic mosaic (the bundled WGS 84 DEM cut into a 2 x 2 VRT, its south-east tile missing, -32768 sentinels burnt
   # into one tile), projected to UTM window by window: each rank reads the source pixels its own windows' map reaches
@@ -152,13 +155,7 @@ grep -E '^  |warning' one.txt | grep -vE '^ +(time|memory) ' > a.txt
 grep -E '^  |warning' g3.txt | grep -vE '^ +(time|memory) ' > b.txt
 diff a.txt b.txt
 test "$(grep -cE 'rank [1-3]/3: [0-9]+ windows? read' g3.txt)" = 3]]
-    -- ${HC_BASH} -c [[for n in 2 3
-do if ! "$HC_MPIRUN" -np $n "$HC_INGEST" geo.vrt -o g$n.hcg > g$n.txt 2>&1
-then cat g$n.txt
-exit 1
-fi
-done
-cat g3.txt]])
+    -- ${HC_BASH} -c "${GEO_RUNS}")
 
   # Resampled on an affine map, window by window: a rotated geotransform (a VRT over the bundled LiDAR tile) and
   # --min-cell coarser than the pixels. The same bytes as one process.
