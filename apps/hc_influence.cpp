@@ -42,8 +42,9 @@ bool parseOptions(int argc, char** argv, InfluenceArgs& a) {
                       "spacing, each tile with its measured error against the next coarser level. The lists take\n"
                       "about 220 bytes per cell; the pyramid about 4-20 per channel and needs no lists: for grids whose\n"
                       "lists do not fit in memory (100 M cells), use --no-lists. Under `mpirun -np N` the ranks share the\n"
-                      "nodes of the grid, each reading its nodes and their halo, and rank 1 writes the same bytes as one\n"
-                      "process (README, \"Preprocessing on several processes\").");
+                      "nodes of the grid, each reading its nodes and their halo, and write the same bytes as one process,\n"
+                      "each its lists and tiles into the files rank 1 opens: they must lie on a file system every rank\n"
+                      "sees (README, \"Preprocessing on several processes\").");
     p.positional("GRID.hcg", "grid file (hc-ingest)", a.gridPath);
     p.option("-o", "OUT.hci", "cache file (default: the grid's path with .hci)", a.out);
     p.option("--sigma", "S", "Gaussian width in cell sizes (default 1.0, the report's)", a.params.sigma);
@@ -88,34 +89,65 @@ bool parseOptions(int argc, char** argv, InfluenceArgs& a) {
     return true;
 }
 
-void printListsSummary(const InfluenceArgs& a, const hc::influence::InfluenceLists& lists, double buildS, double writeS) {
-    auto s = lists.stats();
+void printListsSummary(const InfluenceArgs& a, uint64_t cells, uint64_t entries, const hc::influence::InfluenceLists::Stats& s, double buildS,
+                       double writeS) {
     std::printf("  lists        -> %s\n", a.out.c_str());
-    std::printf("    entries    %llu (per cell: mean %.1f, p99 %llu, max %llu)\n", (unsigned long long)lists.entryCount(),
-                s.meanLength, (unsigned long long)s.p99Length, (unsigned long long)s.maxLength);
-    std::printf("    bytes      %.1f MB (%.1f per cell)\n", double(s.bytes) / 1e6, double(s.bytes) / double(std::max<size_t>(1, lists.cellCount())));
-    std::printf("    time       %.3f s build (%.2f M cells/s) + %.3f s write\n", buildS, double(lists.cellCount()) / buildS / 1e6,
-                writeS);
+    std::printf("    entries    %llu (per cell: mean %.1f, p99 %llu, max %llu)\n", (unsigned long long)entries, s.meanLength,
+                (unsigned long long)s.p99Length, (unsigned long long)s.maxLength);
+    std::printf("    bytes      %.1f MB (%.1f per cell)\n", double(s.bytes) / 1e6, double(s.bytes) / double(std::max<uint64_t>(1, cells)));
+    std::printf("    time       %.3f s build (%.2f M cells/s) + %.3f s write\n", buildS, double(cells) / buildS / 1e6, writeS);
 }
 
-void printPyramidSummary(const std::string& path, const hc::Grid& grid, uint64_t cells, const hc::influence::SurfacePyramid& p, double buildS,
-                         double writeS) {
-    if (grid.steps.size() > 1) std::printf("  step %zu       at %.9g s, %llu wet cells\n", grid.step, grid.stepTimeS(), (unsigned long long)grid.steps[grid.step].wetCells);
-    std::printf("  pyramid      -> %s\n", path.c_str());
-    std::printf("    levels     0..%d (spacing %g .. %g m), %d channel%s\n", p.topLevel(), p.spacingM(0), p.spacingM(p.topLevel()), p.channels,
-                p.channels == 1   ? " (elevation)"
-                : p.waterOnly() ? "s (water level, wet share; the terrain is step 0's), in the tiles where water is drawn"
-                                : "s (elevation, water level, wet share)");
-    std::printf("    samples    %llu (%.2f per cell per channel)\n", (unsigned long long)p.sampleCount(),
-                double(p.sampleCount()) / double(p.channels) / double(std::max<uint64_t>(1, cells)));
-    std::printf("    bytes      %.1f MB (%.1f per cell)\n", double(p.bytes()) / 1e6, double(p.bytes()) / double(std::max<uint64_t>(1, cells)));
-    std::printf("    level  spacing m    tiles   max error vs next level m\n");
-    for (const auto& L : p.levels) {
-        float worst = 0;
-        for (size_t i = 0; i < L.parentErrorM.size(); i += size_t(p.channels)) worst = std::max(worst, L.parentErrorM[i]);  // the first channel's
-        std::printf("    %5d %10g %8zu   %.4g\n", L.level, p.spacingM(L.level), L.tileCount(), double(worst));
+// What the summary says of a pyramid: its levels' tiles and largest first-channel parent error, and its totals. Under
+// mpirun each rank has its part; combined() adds them up on every rank.
+struct PyramidSummary {
+    int channels = 1;
+    double finestCellM = 1;
+    std::vector<uint64_t> tiles;
+    std::vector<float> worstM;
+    uint64_t samples = 0, bytes = 0;
+
+    explicit PyramidSummary(const hc::influence::SurfacePyramid& p)
+        : channels(p.channels), finestCellM(p.finestCellM), samples(p.sampleCount()), bytes(p.bytes()) {
+        for (const auto& L : p.levels) {
+            float worst = 0;
+            for (size_t i = 0; i < L.parentErrorM.size(); i += size_t(p.channels)) worst = std::max(worst, L.parentErrorM[i]);
+            tiles.push_back(L.tileCount());
+            worstM.push_back(worst);
+        }
     }
-    std::printf("    time       %.3f s build (%.2f M samples/s) + %.3f s write\n", buildS, double(p.sampleCount()) / buildS / 1e6, writeS);
+    double spacingM(size_t t) const { return finestCellM * double(uint64_t{1} << t); }
+    // The whole pyramid's, from every rank's part (collective; doubles hold the counts exactly below 2^53).
+    PyramidSummary combined() const {
+        std::vector<double> mine{double(samples), double(bytes)};
+        for (size_t t = 0; t < tiles.size(); ++t) mine.push_back(double(tiles[t])), mine.push_back(double(worstM[t]));
+        PyramidSummary all = *this;
+        all.samples = all.bytes = 0;
+        std::fill(all.tiles.begin(), all.tiles.end(), 0);
+        std::fill(all.worstM.begin(), all.worstM.end(), 0.0f);
+        for (const auto& v : hc::ranks::allGatherVectors(mine)) {
+            if (v.size() != mine.size()) throw hc::Error("a rank holds a pyramid of another height");
+            all.samples += uint64_t(v[0]), all.bytes += uint64_t(v[1]);
+            for (size_t t = 0; t < tiles.size(); ++t) all.tiles[t] += uint64_t(v[2 + 2 * t]), all.worstM[t] = std::max(all.worstM[t], float(v[3 + 2 * t]));
+        }
+        return all;
+    }
+};
+
+void printPyramidSummary(const std::string& path, const hc::Grid& grid, uint64_t cells, const PyramidSummary& p, double buildS, double writeS) {
+    if (grid.steps.size() > 1) std::printf("  step %zu       at %.9g s, %llu wet cells\n", grid.step, grid.stepTimeS(), (unsigned long long)grid.steps[grid.step].wetCells);
+    const size_t top = p.tiles.size() - 1;
+    std::printf("  pyramid      -> %s\n", path.c_str());
+    std::printf("    levels     0..%zu (spacing %g .. %g m), %d channel%s\n", top, p.spacingM(0), p.spacingM(top), p.channels,
+                p.channels == 1   ? " (elevation)"
+                : p.channels == 2 ? "s (water level, wet share; the terrain is step 0's), in the tiles where water is drawn"
+                                  : "s (elevation, water level, wet share)");
+    std::printf("    samples    %llu (%.2f per cell per channel)\n", (unsigned long long)p.samples,
+                double(p.samples) / double(p.channels) / double(std::max<uint64_t>(1, cells)));
+    std::printf("    bytes      %.1f MB (%.1f per cell)\n", double(p.bytes) / 1e6, double(p.bytes) / double(std::max<uint64_t>(1, cells)));
+    std::printf("    level  spacing m    tiles   max error vs next level m\n");
+    for (size_t t = 0; t <= top; ++t) std::printf("    %5zu %10g %8llu   %.4g\n", t, p.spacingM(t), (unsigned long long)p.tiles[t], double(p.worstM[t]));
+    std::printf("    time       %.3f s build (%.2f M samples/s) + %.3f s write\n", buildS, double(p.samples) / buildS / 1e6, writeS);
 }
 
 
@@ -136,7 +168,7 @@ void runAlone(const InfluenceArgs& a) {
         const inf::InfluenceLists lists = inf::buildInfluenceLists(grid, a.params, a.threads, !a.quiet);
         const double buildS = clock.lap();
         inf::writeInfluenceCache(lists, a.out);
-        printListsSummary(a, lists, buildS, clock.lap());
+        printListsSummary(a, lists.cellCount(), lists.entryCount(), lists.stats(), buildS, clock.lap());
     }
     std::optional<hc::StaticDigests> digests;
     for (size_t i = 0; a.pyramid && i < a.pyramidPaths.size(); ++i) {
@@ -151,12 +183,12 @@ void runAlone(const InfluenceArgs& a) {
                                                                                    : inf::buildSurfacePyramid(grid, a.params, a.threads, !a.quiet);
         const double buildS = clock.lap();
         inf::writeSurfacePyramid(pyramid, a.pyramidPaths[i]);
-        printPyramidSummary(a.pyramidPaths[i], grid, grid.cellCount(), pyramid, buildS, clock.lap());
+        printPyramidSummary(a.pyramidPaths[i], grid, grid.cellCount(), PyramidSummary(pyramid), buildS, clock.lap());
     }
 }
 
-// The ranks of mpirun (on_ranks.h): no rank reads the grid whole; each builds its nodes from regions of the file, rank 0
-// assembles and writes. Every collective step runs in ranks::together, so a failure anywhere stops every rank there.
+// The ranks of mpirun (on_ranks.h): no rank reads the grid whole; each builds its nodes from regions of the file and
+// writes its lists and pyramid tiles at their place in the files rank 0 opens. Every collective step runs in ranks::together, so a failure anywhere stops every rank there.
 void runDistributed(const InfluenceArgs& a) {
     namespace inf = hc::influence;
     namespace ranks = hc::ranks;
@@ -170,18 +202,16 @@ void runDistributed(const InfluenceArgs& a) {
     for (size_t j = 0; j < part.keys.size(); ++j)
         if (part.rank[j] == ranks::rank()) ++myNodes, myCells += part.cells[j];
     std::printf("  ranks        %d (mpirun): %zu nodes of %g m holding cells, shared out in Morton order by cell count; each rank reads\n"
-                "               its nodes' cells and their halo, rank 1 assembles and writes\n",
+                "               its nodes' cells and their halo, and writes its lists and tiles into the files rank 1 opens\n",
                 ranks::count(), part.keys.size(), file->shape().levelSizeM(part.level));
     hc::Stopwatch clock;
     inf::RankShare listShare, pyramidShare;
     if (a.lists) {
-        inf::InfluenceLists lists;
+        inf::InfluenceListsPart lists;
         ranks::together([&] { lists = inf::buildInfluenceListsOnRanks(*file, a.params, a.threads, progress, &listShare); });
         const double buildS = clock.lap();
-        ranks::together([&] {
-            if (root) inf::writeInfluenceCache(lists, a.out);
-        });
-        if (root) printListsSummary(a, lists, buildS, clock.lap());
+        const inf::InfluenceLists::Stats stats = inf::writeInfluenceCacheOnRanks(lists, a.out);
+        if (root) printListsSummary(a, lists.totalCells, lists.totalEntries, stats, buildS, clock.lap());
     }
     for (size_t i = 0; a.pyramid && i < a.pyramidPaths.size(); ++i) {
         if (a.step < 0 && i > 0) ranks::together([&] { file = std::make_unique<hc::GridRegionReader>(a.gridPath, i); });
@@ -194,10 +224,10 @@ void runDistributed(const InfluenceArgs& a) {
         pyramidShare.tiles += stepShare.tiles, pyramidShare.seconds += stepShare.seconds;
         pyramidShare.cellsRead = std::max(pyramidShare.cellsRead, stepShare.cellsRead);
         const double buildS = clock.lap();
-        ranks::together([&] {
-            if (root) inf::writeSurfacePyramid(pyramid, a.pyramidPaths[i]);
-        });
-        if (root) printPyramidSummary(a.pyramidPaths[i], shape, file->cellCount(), pyramid, buildS, clock.lap());
+        inf::writePyramidOnRanks(pyramid, a.pyramidPaths[i]);
+        const double writeS = clock.lap();
+        const PyramidSummary whole = PyramidSummary(pyramid).combined();
+        if (root) printPyramidSummary(a.pyramidPaths[i], shape, file->cellCount(), whole, buildS, writeS);
     }
     std::string line = fmt::format("{} nodes, {} cells", myNodes, myCells);
     if (a.lists) line += fmt::format("; lists in {:.3f} s ({} cells read with their halo)", listShare.seconds, listShare.cellsRead);

@@ -51,6 +51,11 @@ GridOnDisk& hef() {
     return g;
 }
 
+std::string fileBytes(const fs::path& p) {
+    std::ifstream in(p, std::ios::binary);
+    return {std::istreambuf_iterator<char>(in), {}};
+}
+
 bool meets(const Grid::Square& q, const Grid::Square& box, double m) {
     return !(q.x1 < box.x0 - m || q.x0 > box.x1 + m || q.y1 < box.y0 - m || q.y0 > box.y1 + m);
 }
@@ -352,12 +357,28 @@ TEST(Ranks, BuildFromRegionsEqualsTheWholeGridsBitForBit) {
         const Grid& g = d->grid;
         const GridRegionReader file(d->path.string());
         const inf::KernelParams params;
-        const inf::InfluenceLists want = inf::buildInfluenceLists(g, params), got = inf::buildInfluenceListsOnRanks(file, params, 2, false);
+        const inf::InfluenceLists want = inf::buildInfluenceLists(g, params);
+        const inf::InfluenceListsPart got = inf::buildInfluenceListsOnRanks(file, params, 2, false);
         ASSERT_EQ(got.cellCount(), want.cellCount());
-        ASSERT_EQ(got.entryCount(), want.entryCount());
-        EXPECT_TRUE(std::equal(want.offsets().begin(), want.offsets().end(), got.offsets().begin()));
-        EXPECT_TRUE(std::equal(want.indices().begin(), want.indices().end(), got.indices().begin()));
-        EXPECT_EQ(got.gridStructureHash(), g.structureHash());
+        ASSERT_EQ(got.totalCells, want.cellCount());
+        ASSERT_EQ(got.firstCell, 0u);
+        ASSERT_EQ(got.indices.size(), want.entryCount());
+        ASSERT_EQ(got.totalEntries, want.entryCount());
+        EXPECT_TRUE(std::equal(want.offsets().begin(), want.offsets().end(), got.offsets.begin()));
+        EXPECT_TRUE(std::equal(want.indices().begin(), want.indices().end(), got.indices.begin()));
+        EXPECT_EQ(got.structureHash, g.structureHash());
+        // Written by parts (one process: rank 0's part is the whole): writeInfluenceCache's bytes and the same figures.
+        const fs::path byParts = d->path.string() + ".parts.hci", whole = d->path.string() + ".whole.hci";
+        const inf::InfluenceLists::Stats stats = inf::writeInfluenceCacheOnRanks(got, byParts.string());
+        inf::writeInfluenceCache(want, whole.string());
+        EXPECT_EQ(fileBytes(byParts), fileBytes(whole));
+        EXPECT_GT(fs::file_size(whole), 1000u);
+        const inf::InfluenceLists::Stats wantStats = want.stats();
+        EXPECT_EQ(stats.bytes, wantStats.bytes);
+        EXPECT_EQ(stats.meanLength, wantStats.meanLength);
+        EXPECT_EQ(stats.p99Length, wantStats.p99Length);
+        EXPECT_EQ(stats.maxLength, wantStats.maxLength);
+        fs::remove(byParts), fs::remove(whole);
         for (bool waterOnly : {false, true}) {
             const inf::SurfacePyramid a = waterOnly ? inf::buildWaterPyramid(g, params) : inf::buildSurfacePyramid(g, params);
             const inf::SurfacePyramid b = inf::buildPyramidOnRanks(file, params, 2, false, waterOnly);

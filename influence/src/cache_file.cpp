@@ -23,6 +23,7 @@
 #include "heightcast/core/bytes.h"
 #include "heightcast/core/error.h"
 #include "heightcast/core/sectioned_file.h"
+#include "file_layouts.h"
 #include "heightcast/influence/influence.h"
 
 namespace hc::influence {
@@ -46,22 +47,38 @@ std::string hex(uint64_t v) {
 
 }  // namespace
 
+namespace detail {
+
+const FileFormat& influenceCacheFormat() { return kFormat; }
+
+std::vector<FileSection> influenceCacheLayout(uint64_t cells, uint64_t entries) {
+    return {{kOffsets, 0, 0, (cells + 1) * 8, 0}, {kIndices, 0, 0, entries * 4, 0}};
+}
+
+std::vector<std::byte> influenceCacheHeader(uint64_t cells, uint64_t entries, uint64_t longest, const KernelParams& params,
+                                            uint64_t structureHash, uint64_t contentHash) {
+    std::vector<std::byte> head(kFileHeaderBytes, std::byte{0});
+    bytes::store(head, off::cellCount, cells);
+    bytes::store(head, off::entryCount, entries);
+    bytes::store(head, off::structureHash, structureHash);
+    bytes::store(head, off::contentHash, contentHash);
+    bytes::store(head, off::kernelId, params.kernelId);
+    bytes::store(head, off::sigma, params.sigma);
+    bytes::store(head, off::truncation, params.truncation);
+    bytes::store(head, off::longest, static_cast<uint32_t>(longest));
+    return head;
+}
+
+}  // namespace detail
+
 void writeInfluenceCache(const InfluenceLists& lists, const std::string& path) {
     const auto offsets = lists.offsets();
     const auto indices = lists.indices();
-    SectionedFileWriter out(path, kFormat, {{kOffsets, 0, 0, offsets.size_bytes(), 0}, {kIndices, 0, 0, indices.size_bytes(), 0}});
+    SectionedFileWriter out(path, kFormat, detail::influenceCacheLayout(lists.cellCount(), lists.entryCount()));
     out.append(0, std::as_bytes(offsets));
     out.append(1, std::as_bytes(indices));
-    std::vector<std::byte> head(kFileHeaderBytes, std::byte{0});
-    bytes::store(head, off::cellCount, static_cast<uint64_t>(lists.cellCount()));
-    bytes::store(head, off::entryCount, static_cast<uint64_t>(lists.entryCount()));
-    bytes::store(head, off::structureHash, lists.gridStructureHash());
-    bytes::store(head, off::contentHash, lists.gridContentHash());
-    bytes::store(head, off::kernelId, lists.params().kernelId);
-    bytes::store(head, off::sigma, lists.params().sigma);
-    bytes::store(head, off::truncation, lists.params().truncation);
-    bytes::store(head, off::longest, static_cast<uint32_t>(lists.stats().maxLength));
-    out.commit(std::move(head));
+    out.commit(detail::influenceCacheHeader(lists.cellCount(), lists.entryCount(), lists.stats().maxLength, lists.params(),
+                                            lists.gridStructureHash(), lists.gridContentHash()));
 }
 
 InfluenceLists readInfluenceCache(const std::string& path, const Grid& grid, const KernelParams& params) {

@@ -1,9 +1,11 @@
 // The lists and the pyramid on the ranks of mpirun (on_ranks.h): each rank its nodes, each node from a region of the
-// grid file around it; rank 0 assembles all of it.
+// grid file around it; each rank writes its lists and tiles at their place in the files rank 0 opens.
 #include "heightcast/influence/on_ranks.h"
 
 #include <algorithm>
 #include <bit>
+#include <limits>
+#include <memory>
 #include <numeric>
 
 #include "heightcast/core/error.h"
@@ -12,6 +14,7 @@
 #include "heightcast/core/ranks.h"
 #include "heightcast/core/timer.h"
 #include "heightcast/influence/region.h"
+#include "file_layouts.h"
 #include "list_index.h"
 #include "pyramid_build.h"
 #include "pyramid_storage.h"
@@ -59,6 +62,130 @@ std::vector<size_t> myNodes(const RankPartition& part) {
     return out;
 }
 
+
+// The tiles of fine levels (tiles inside a partition node) that other ranks hold beside this rank's nodes, as the parent
+// level's tiles its own tiles' parent errors read (detail::finishPyramid's halo): each rank shares the first row and
+// column of its tiles on the low x or low y edge of their node (the samples a tile in the node to their -x, -y or -x-y
+// reads as parent samples), and keeps of the others' those beside its own nodes; their other samples are NaN, never read.
+SurfacePyramid haloOf(const RankPartition& part, const Grid& shape, const SurfacePyramid::Storage& owned, const std::vector<int>& sides,
+                      int channels) {
+    const int rank = ranks::rank(), top = int(sides.size()) - 1;
+    const uint64_t nodeSide = uint64_t{1} << part.level;  // in finest cells
+    auto rankOf = [&](uint64_t key) {
+        const uint64_t node = key & ~(mortonSpan(part.level) - 1);
+        const auto it = std::lower_bound(part.keys.begin(), part.keys.end(), node);
+        return it != part.keys.end() && *it == node ? part.rank[size_t(it - part.keys.begin())] : -1;
+    };
+    auto halo = std::make_shared<SurfacePyramid::Storage>();
+    halo->keys.resize(sides.size());
+    halo->samples.resize(sides.size());
+    for (int t = 1; t <= top; ++t) {
+        const size_t side = size_t(sides[size_t(t)]), plane = side * side, ch = size_t(channels);
+        if (t + std::countr_zero(unsigned(side)) > part.level) continue;  // a coarse level: every rank holds it whole
+        std::vector<uint64_t> edgeKeys;
+        std::vector<float> edges;  // per tile, per channel: row 0, then column 0
+        const auto& keys = owned.keys[size_t(t)];
+        for (size_t i = 0; i < keys.size(); ++i) {
+            if (mortonX(keys[i]) % nodeSide != 0 && mortonY(keys[i]) % nodeSide != 0) continue;
+            edgeKeys.push_back(keys[i]);
+            for (size_t c = 0; c < ch; ++c) {
+                const float* s = &owned.samples[size_t(t)][(i * ch + c) * plane];
+                edges.insert(edges.end(), s, s + side);
+                for (size_t j = 0; j < side; ++j) edges.push_back(s[j * side]);
+            }
+        }
+        const auto allKeys = ranks::allGatherVectors(edgeKeys);
+        const auto allEdges = ranks::allGatherVectors(edges);
+        const uint64_t span = uint64_t(side) << t;  // a tile's side in finest cells
+        for (size_t r = 0; r < allKeys.size(); ++r) {
+            if (int(r) == rank) continue;
+            if (allEdges[r].size() != allKeys[r].size() * ch * 2 * side) throw Error("rank " + std::to_string(r + 1) + " sent a halo of another size");
+            for (size_t i = 0; i < allKeys[r].size(); ++i) {
+                const uint64_t key = allKeys[r][i], x = mortonX(key), y = mortonY(key);
+                const bool beside = (x >= span && rankOf(mortonEncode(uint32_t(x - span), uint32_t(y))) == rank) ||
+                                    (y >= span && rankOf(mortonEncode(uint32_t(x), uint32_t(y - span))) == rank) ||
+                                    (x >= span && y >= span && rankOf(mortonEncode(uint32_t(x - span), uint32_t(y - span))) == rank);
+                if (!beside) continue;
+                halo->keys[size_t(t)].push_back(key);
+                auto& out = halo->samples[size_t(t)];
+                const size_t at = out.size();
+                out.resize(at + ch * plane, std::numeric_limits<float>::quiet_NaN());
+                const float* e = &allEdges[r][i * ch * 2 * side];
+                for (size_t c = 0; c < ch; ++c, e += 2 * side) {
+                    float* tile = &out[at + c * plane];
+                    std::copy_n(e, side, tile);
+                    for (size_t j = 0; j < side; ++j) tile[j * side] = e[side + j];
+                }
+            }
+        }
+    }
+    SurfacePyramid p;
+    p.finestCellM = shape.finestCellM;
+    p.rootLevel = shape.rootLevel;
+    p.channels = channels;
+    p.levels.resize(sides.size());
+    for (size_t t = 0; t < sides.size(); ++t) {
+        p.levels[t].level = int(t);
+        p.levels[t].tileSide = sides[t];
+        p.levels[t].keys = halo->keys[t];
+        p.levels[t].samples = halo->samples[t];
+    }
+    p.storage = std::move(halo);
+    return p;
+}
+
+// A run of bytes a rank writes: bytes [at, at + bytes.size()) of section `section` of a placed layout.
+struct Run {
+    size_t section;
+    uint64_t at;
+    std::span<const std::byte> bytes;
+};
+
+// Collective: writes the file at `path` whose sections (`layout`, of `format`) the ranks' runs fill, each rank's runs
+// in order, the ranks' runs of a section in rank order and rank 0's first: rank 0 places the sections in its temporary
+// and appends its runs, the others write theirs into that temporary in place (SectionedFilePart: a file system every
+// rank sees), then rank 0 takes their pieces' CRCs in rank order, as if it had appended their bytes, and commits with
+// `header` (rank 0's). A failure on any rank stops every rank at the next step and leaves no file (rank 0's writer
+// removes its temporary).
+void writeByParts(const std::string& path, const FileFormat& format, std::vector<FileSection> layout, const std::vector<Run>& runs,
+                  std::vector<std::byte> header) {
+    const int rank = ranks::rank(), count = ranks::count();
+    std::unique_ptr<SectionedFileWriter> out;
+    std::vector<std::byte> where;
+    ranks::together([&] {
+        if (rank != 0) return;
+        out = std::make_unique<SectionedFileWriter>(path, format, std::move(layout));
+        if (count > 1) where = out->placement().encode();
+    });
+    if (count > 1) where = std::move(ranks::allGather(where)[0]);
+    std::vector<FilePiece> pieces;
+    ranks::together([&] {
+        if (rank == 0) {
+            for (const Run& r : runs) out->append(r.section, r.bytes);
+            return;
+        }
+        SectionedFilePart mine(FilePlacement::decode(where));
+        for (const Run& r : runs) mine.writeAt(r.section, r.at, r.bytes);
+        pieces = mine.finish();
+    });
+    ranks::together([&] {
+        if (rank != 0) {
+            ranks::sendToRoot(pieces);
+            return;
+        }
+        std::vector<std::vector<FilePiece>> all;
+        for (int r = 1; r < count; ++r) all.push_back(ranks::receiveVectorFrom<FilePiece>(r));
+        for (const auto& from : all) out->addPieces(from);
+        out->commit(std::move(header));
+    });
+}
+
+// Empties the levels whose tiles are larger than a node of partition level `level` (rank 0 writes those).
+void dropCoarseLevels(SurfacePyramid& p, int level) {
+    for (SurfacePyramid::Level& L : p.levels)
+        if (L.level + std::countr_zero(unsigned(L.tileSide)) > level) L.keys = {}, L.samples = {}, L.parentErrorM = {};
+}
+
 }  // namespace
 
 RankPartition partitionOf(const GridRegionReader& file, int ranks) {
@@ -89,8 +216,8 @@ RankPartition partitionOf(const GridRegionReader& file, int ranks) {
     return p;
 }
 
-InfluenceLists buildInfluenceListsOnRanks(const GridRegionReader& file, const KernelParams& params, unsigned threads, bool progress,
-                                          RankShare* share) {
+InfluenceListsPart buildInfluenceListsOnRanks(const GridRegionReader& file, const KernelParams& params, unsigned threads, bool progress,
+                                              RankShare* share) {
     if (std::string why = params.validate(); !why.empty()) throw Error("influence parameters: " + why);
     if (file.cellCount() >= std::numeric_limits<uint32_t>::max()) throw Error("grid has too many cells for 32-bit influence indices");
     const Stopwatch clock;
@@ -102,7 +229,7 @@ InfluenceLists buildInfluenceListsOnRanks(const GridRegionReader& file, const Ke
     uint64_t myCells = 0;
     for (size_t j : mine) myCells += part.cells[j];
     std::vector<uint32_t> lengths, entries;
-    {
+    ranks::together([&] {
         Progress bar("influence lists", myCells, progress && rank == 0);
         for (size_t j : mine) {
             const IndexedRegion r = readIndexed(file, nodeSquare(file.shape(), part.keys[j], part.level), margins, part.keys[j], part.level, true);
@@ -116,42 +243,67 @@ InfluenceLists buildInfluenceListsOnRanks(const GridRegionReader& file, const Ke
             s.nodes += 1, s.cells += r.hi - r.lo, s.cellsRead += r.grid.cellCount();
         }
         bar.finish();
-    }
+    });
     s.seconds = clock.seconds();
     if (share) *share = s;
-    // Every rank's cell and entry counts first (a small table), so rank 0 places each rank's lists straight into the one
-    // buffer of the whole cache: its peak is the cache plus its own share, not a cache grown by copies.
+    // Every rank's cell and entry counts (a small table): where this rank's run of cells and entries starts.
     const auto counts = ranks::allGatherVectors(std::vector<uint64_t>{lengths.size(), entries.size()});
-    if (rank != 0) {
-        ranks::sendToRoot(lengths);
-        ranks::sendToRoot(entries);
-        return {};
-    }
-    const size_t n = file.cellCount();
-    uint64_t totalCells = 0, totalEntries = 0;
-    for (const auto& c : counts) totalCells += c[0], totalEntries += c[1];
-    if (totalCells != n) throw Error("the ranks built lists of " + std::to_string(totalCells) + " cells, not " + std::to_string(n));
-    std::vector<uint64_t> offsets(n + 1, 0);
-    auto indices = std::unique_ptr<uint32_t[]>(new uint32_t[std::max<uint64_t>(totalEntries, 1)]);
-    size_t cell = 0, used = 0;
-    std::vector<uint32_t> len;
+    InfluenceListsPart out;
+    out.params = params;
+    out.structureHash = file.info().structureHash;
+    out.contentHash = file.info().contentHash;
+    uint64_t firstEntry = 0;
     for (int r = 0; r < count; ++r) {
-        const uint64_t cells = counts[size_t(r)][0], ent = counts[size_t(r)][1];
-        if (r == 0) {
-            len = std::move(lengths);
-            std::copy(entries.begin(), entries.end(), indices.get());
-            std::vector<uint32_t>().swap(entries);
-        } else {
-            len.resize(cells);
-            ranks::receiveInto(r, std::as_writable_bytes(std::span<uint32_t>(len)));
-            ranks::receiveInto(r, std::as_writable_bytes(std::span<uint32_t>(indices.get() + used, ent)));
-        }
-        uint64_t sum = 0;
-        for (size_t k = 0; k < cells; ++k) offsets[cell + k + 1] = offsets[cell + k] + len[k], sum += len[k];
-        if (sum != ent) throw Error("rank " + std::to_string(r + 1) + " sent list lengths that do not add up to its entries");
-        cell += cells, used += ent;
+        out.totalCells += counts[size_t(r)][0], out.totalEntries += counts[size_t(r)][1];
+        if (r < rank) out.firstCell += counts[size_t(r)][0], firstEntry += counts[size_t(r)][1];
     }
-    return InfluenceLists(params, file.info().structureHash, file.info().contentHash, std::move(offsets), std::move(indices), used);
+    if (out.totalCells != file.cellCount())
+        throw Error("the ranks built lists of " + std::to_string(out.totalCells) + " cells, not " + std::to_string(file.cellCount()));
+    out.offsets.resize(lengths.size() + 1);
+    out.offsets[0] = firstEntry;
+    for (size_t k = 0; k < lengths.size(); ++k) out.offsets[k + 1] = out.offsets[k] + lengths[k];
+    out.indices = std::move(entries);
+    return out;
+}
+
+InfluenceLists::Stats writeInfluenceCacheOnRanks(const InfluenceListsPart& part, const std::string& path) {
+    // The whole lists' lengths as one histogram (every rank's added up), for the longest list (in the header) and the
+    // summary's percentile: the same figures as InfluenceLists::stats() of the whole.
+    std::vector<uint64_t> histogram;
+    for (size_t k = 0; k < part.cellCount(); ++k) {
+        const uint64_t length = part.offsets[k + 1] - part.offsets[k];
+        if (length >= histogram.size()) histogram.resize(length + 1, 0);
+        ++histogram[length];
+    }
+    std::vector<uint64_t> whole;
+    for (const auto& from : ranks::allGatherVectors(histogram)) {
+        if (from.size() > whole.size()) whole.resize(from.size(), 0);
+        for (size_t l = 0; l < from.size(); ++l) whole[l] += from[l];
+    }
+    InfluenceLists::Stats stats;
+    const uint64_t n = part.totalCells, m = part.totalEntries;
+    stats.bytes = (n + 1) * 8 + m * 4;
+    if (n > 0) {
+        stats.meanLength = double(m) / double(n);
+        stats.maxLength = whole.size() - 1;
+        const uint64_t at = std::min(n - 1, n * 99 / 100);  // the element nth_element puts there (InfluenceLists::stats)
+        uint64_t seen = 0;
+        for (size_t l = 0; l < whole.size(); ++l)
+            if ((seen += whole[l]) > at) {
+                stats.p99Length = l;
+                break;
+            }
+    }
+    std::vector<Run> runs;
+    if (ranks::rank() == 0) {
+        runs.push_back({0, 0, std::as_bytes(std::span(part.offsets))});
+    } else if (part.cellCount() > 0) {
+        runs.push_back({0, (part.firstCell + 1) * 8, std::as_bytes(std::span(part.offsets).subspan(1))});
+    }
+    if (!part.indices.empty()) runs.push_back({1, part.offsets.front() * 4, std::as_bytes(std::span(part.indices))});
+    writeByParts(path, detail::influenceCacheFormat(), detail::influenceCacheLayout(n, m), runs,
+                 detail::influenceCacheHeader(n, m, stats.maxLength, part.params, part.structureHash, part.contentHash));
+    return stats;
 }
 
 SurfacePyramid buildPyramidOnRanks(const GridRegionReader& file, const KernelParams& params, unsigned threads, bool progress,
@@ -183,7 +335,7 @@ SurfacePyramid buildPyramidOnRanks(const GridRegionReader& file, const KernelPar
     // Coarse levels (tiles larger than a node): the tiles this rank's nodes keep, and (water) mark.
     std::vector<std::vector<uint64_t>> coarseKept(size_t(top) + 1), coarseMarked(size_t(top) + 1);
     const std::vector<size_t> mine = myNodes(part);
-    {
+    ranks::together([&] {
         Progress bar("surface pyramid", mine.size(), progress && rank == 0);
         std::vector<detail::PyramidWorkspace> scratch(threads);
         for (size_t j : mine) {
@@ -227,7 +379,7 @@ SurfacePyramid buildPyramidOnRanks(const GridRegionReader& file, const KernelPar
             bar.advance(1);
         }
         bar.finish();
-    }
+    });
 
     // The coarse tiles: kept where some node keeps them (and, for water, some wet cell marks them), then shared out one by
     // one; each of their blocks is sampled from a region read around the block.
@@ -255,7 +407,7 @@ SurfacePyramid buildPyramidOnRanks(const GridRegionReader& file, const KernelPar
         }
         for (uint64_t key : kept) coarse.push_back({t, key});
     }
-    {
+    ranks::together([&] {
         std::vector<CoarseTile> ours;
         for (size_t i = 0; i < coarse.size(); ++i)
             if (int(i % size_t(count)) == rank) ours.push_back(coarse[i]);
@@ -292,39 +444,22 @@ SurfacePyramid buildPyramidOnRanks(const GridRegionReader& file, const KernelPar
             }
         });
         for (uint64_t n : readPerWorker) s.cellsRead += n;
-    }
-    s.seconds = clock.seconds();
-    if (share) *share = s;
+    });
 
-    if (rank != 0) {
-        for (int t = 0; t <= top; ++t) {
-            ranks::sendToRoot(keys[size_t(t)]);
-            ranks::sendToRoot(samples[size_t(t)]);
-        }
-        return {};
-    }
-    // Rank 0: every rank's tiles of each level, in key order.
-    SurfacePyramid p;
-    p.finestCellM = shape.finestCellM;
-    p.rootLevel = shape.rootLevel;
-    p.params = params;
-    p.structureHash = file.info().structureHash;
-    p.contentHash = file.info().contentHash;
-    p.channels = channels;
+    // Every rank gets every tile of the coarse levels (a few thousand at most: one per node of a level coarser than the
+    // partition's), for the parent errors of its own tiles and, on rank 0, to write.
     auto owned = std::make_shared<SurfacePyramid::Storage>();
     owned->keys.resize(size_t(top) + 1);
     owned->samples.resize(size_t(top) + 1);
     for (int t = 0; t <= top; ++t) {
-        const size_t floats = size_t(channels) * planeOf(t);
-        std::vector<std::vector<uint64_t>> k{std::move(keys[size_t(t)])};
-        std::vector<std::vector<float>> v{std::move(samples[size_t(t)])};
-        for (int r = 1; r < count; ++r) {
-            k.push_back(ranks::receiveVectorFrom<uint64_t>(r));
-            v.push_back(ranks::receiveVectorFrom<float>(r));
-            if (v.back().size() != k.back().size() * floats)
-                throw Error("rank " + std::to_string(r + 1) + " sent " + std::to_string(v.back().size()) + " samples for " +
-                            std::to_string(k.back().size()) + " tiles of level " + std::to_string(t));
+        if (nodeLevelOf(t) <= part.level) {
+            owned->keys[size_t(t)] = std::move(keys[size_t(t)]);
+            owned->samples[size_t(t)] = std::move(samples[size_t(t)]);
+            continue;
         }
+        const size_t floats = size_t(channels) * planeOf(t);
+        const auto k = ranks::allGatherVectors(keys[size_t(t)]);
+        const auto v = ranks::allGatherVectors(samples[size_t(t)]);
         std::vector<std::pair<uint64_t, std::pair<size_t, size_t>>> order;  // key, (rank, tile)
         for (size_t r = 0; r < k.size(); ++r)
             for (size_t i = 0; i < k[r].size(); ++i) order.push_back({k[r][i], {r, i}});
@@ -340,8 +475,52 @@ SurfacePyramid buildPyramidOnRanks(const GridRegionReader& file, const KernelPar
             std::copy_n(v[r].begin() + ptrdiff_t(tile * floats), floats, outSamples.begin() + ptrdiff_t(i * floats));
         }
     }
-    const SurfacePyramid done = detail::finishPyramid(std::move(p), std::move(owned), sides, threads);
+    const SurfacePyramid halo = haloOf(part, shape, *owned, sides, channels);
+    s.seconds = clock.seconds();
+    if (share) *share = s;
+
+    SurfacePyramid p;
+    p.finestCellM = shape.finestCellM;
+    p.rootLevel = shape.rootLevel;
+    p.params = params;
+    p.structureHash = file.info().structureHash;
+    p.contentHash = file.info().contentHash;
+    p.channels = channels;
+    SurfacePyramid done = detail::finishPyramid(std::move(p), std::move(owned), sides, threads, &halo);
+    if (rank != 0) dropCoarseLevels(done, part.level);  // rank 0 writes them
     return waterOnly ? waterPyramidOf(done) : done;
+}
+
+void writePyramidOnRanks(const SurfacePyramid& part, const std::string& path) {
+    if (!ranks::distributed()) {
+        writeSurfacePyramid(part, path);
+        return;
+    }
+    const int rank = ranks::rank(), count = ranks::count();
+    const size_t levels = part.levels.size();
+    std::vector<uint64_t> tiles(levels);
+    std::vector<int> sides(levels);
+    for (size_t t = 0; t < levels; ++t) tiles[t] = part.levels[t].tileCount(), sides[t] = part.levels[t].tileSide;
+    // Every rank's tiles per level: where each rank's run of each section starts (rank 0's first; ranks in Morton order).
+    const auto perRank = ranks::allGatherVectors(tiles);
+    std::vector<uint64_t> total(levels, 0), before(levels, 0);
+    for (int r = 0; r < count; ++r)
+        for (size_t t = 0; t < levels; ++t) {
+            if (perRank[size_t(r)].size() != levels) throw Error("rank " + std::to_string(r + 1) + " holds a pyramid of another height");
+            total[t] += perRank[size_t(r)][t];
+            if (r < rank) before[t] += perRank[size_t(r)][t];
+        }
+    std::vector<Run> runs;
+    for (size_t t = 0; t < levels; ++t) {
+        const SurfacePyramid::Level& L = part.levels[t];
+        if (L.tileCount() == 0) continue;
+        const uint64_t ch = uint64_t(part.channels), plane = uint64_t(L.tileSide) * uint64_t(L.tileSide);
+        runs.push_back({3 * t, before[t] * 8, std::as_bytes(L.keys)});
+        runs.push_back({3 * t + 1, before[t] * ch * 4, std::as_bytes(L.parentErrorM)});
+        runs.push_back({3 * t + 2, before[t] * ch * plane * 4, std::as_bytes(L.samples)});
+    }
+    writeByParts(path, detail::pyramidFileFormat(), detail::pyramidFileLayout(total, sides, part.channels), runs,
+                 detail::pyramidFileHeader(part));
 }
 
 }  // namespace hc::influence

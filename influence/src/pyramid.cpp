@@ -216,13 +216,17 @@ void buildTile(const Grid& g, const ListIndex& index, const KernelParams& params
         }
 }
 
-// parentErrorM of every tile below the top (pyramid.h).
-void measureParentErrorsInto(const SurfacePyramid& p, std::vector<std::vector<float>>& errors, unsigned threads) {
+// parentErrorM of every tile below the top (pyramid.h); a parent sample p lacks is looked for in `halo` (its tiles have
+// p's sides and channels), if given.
+void measureParentErrorsInto(const SurfacePyramid& p, std::vector<std::vector<float>>& errors, unsigned threads,
+                             const SurfacePyramid* halo) {
     for (int t = 0; t < p.topLevel(); ++t) {
         const SurfacePyramid::Level& L = p.levels[size_t(t)];
         const size_t side = size_t(L.tileSide), plane = side * side;
         parallelFor(L.tileCount(), 16, threads, [&](size_t b, size_t e, unsigned) {
             SurfacePyramid::Cursor parent(p, t + 1);  // a tile's parent samples lie in one parent tile (the far edges: its neighbours)
+            std::optional<SurfacePyramid::Cursor> beside;
+            if (halo) beside.emplace(*halo, t + 1);
             for (size_t tile = b; tile < e; ++tile) {
                 const uint64_t i0 = mortonX(L.keys[tile]) >> t, j0 = mortonY(L.keys[tile]) >> t;
                 for (int c = 0; c < p.channels; ++c) {
@@ -241,6 +245,7 @@ void measureParentErrorsInto(const SurfacePyramid& p, std::vector<std::vector<fl
                             bool held = true;
                             for (const auto& [qi, qj] : {std::pair{pi, pj}, {pi1, pj}, {pi, pj1}, {pi1, pj1}}) {
                                 const float* q = parent.find(qi, qj);
+                                if (!q && beside) q = beside->find(qi, qj);
                                 held = held && q;
                                 if (q) interp += 0.25 * double(q[channel]);
                             }
@@ -308,7 +313,7 @@ std::vector<int> pyramidTileSides(const Grid& shape) {
 }
 
 SurfacePyramid finishPyramid(SurfacePyramid p, std::shared_ptr<SurfacePyramid::Storage> owned, const std::vector<int>& sides,
-                             unsigned threads) {
+                             unsigned threads, const SurfacePyramid* halo) {
     const size_t levels = sides.size();
     owned->errors.resize(levels);
     p.levels.resize(levels);
@@ -321,7 +326,7 @@ SurfacePyramid finishPyramid(SurfacePyramid p, std::shared_ptr<SurfacePyramid::S
         L.samples = owned->samples[t];
         L.parentErrorM = owned->errors[t];
     }
-    measureParentErrorsInto(p, owned->errors, resolveThreads(threads));
+    measureParentErrorsInto(p, owned->errors, resolveThreads(threads), halo);
     p.storage = std::move(owned);
     return p;
 }

@@ -18,9 +18,11 @@ namespace hc::influence::detail {
 std::vector<int> pyramidTileSides(const Grid& shape);
 // The pyramid p (its fields but levels and storage set) over `owned` (per level its tile keys, ascending, and their
 // samples; errors are filled here): the levels pointed at the storage and every tile's parent error measured from the
-// samples (pyramid.h).
+// samples (pyramid.h). `halo`: where p holds part of each level (a rank's, on_ranks.cpp), the parent-level tiles beside
+// them that others hold (same sides and channels; only their first row and column are read: a tile's parent samples
+// lie in its parent tile and, at its far edges, that tile's first row and column of the neighbours in +x, +y, +x+y).
 SurfacePyramid finishPyramid(SurfacePyramid p, std::shared_ptr<SurfacePyramid::Storage> owned, const std::vector<int>& sides,
-                             unsigned threads);
+                             unsigned threads, const SurfacePyramid* halo = nullptr);
 
 // The pieces, for builders that sample tiles from parts of a grid (a region read around them, on_ranks.cpp):
 

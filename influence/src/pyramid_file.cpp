@@ -27,6 +27,7 @@
 #include "heightcast/core/bytes.h"
 #include "heightcast/core/error.h"
 #include "heightcast/core/sectioned_file.h"
+#include "file_layouts.h"
 #include "pyramid_storage.h"
 
 namespace hc::influence {
@@ -43,20 +44,22 @@ constexpr size_t structureHash = 24, contentHash = 32, finestCellM = 40, rootLev
 
 }  // namespace
 
-void writeSurfacePyramid(const SurfacePyramid& p, const std::string& path) {
+namespace detail {
+
+const FileFormat& pyramidFileFormat() { return kFormat; }
+
+std::vector<FileSection> pyramidFileLayout(const std::vector<uint64_t>& tiles, const std::vector<int>& sides, int channels) {
     std::vector<FileSection> layout;
-    for (const SurfacePyramid::Level& L : p.levels) {
-        const auto t = uint32_t(L.level);
-        layout.push_back({kKeys, t, 0, L.keys.size_bytes(), 0});
-        layout.push_back({kErrors, t, 0, L.parentErrorM.size_bytes(), 0});
-        layout.push_back({kSamples, t, 0, L.samples.size_bytes(), 0});
+    for (size_t t = 0; t < tiles.size(); ++t) {
+        const uint64_t n = tiles[t], plane = uint64_t(sides[t]) * uint64_t(sides[t]);
+        layout.push_back({kKeys, uint32_t(t), 0, n * 8, 0});
+        layout.push_back({kErrors, uint32_t(t), 0, n * uint64_t(channels) * 4, 0});
+        layout.push_back({kSamples, uint32_t(t), 0, n * uint64_t(channels) * plane * 4, 0});
     }
-    SectionedFileWriter out(path, kFormat, layout);
-    for (size_t t = 0; t < p.levels.size(); ++t) {
-        out.append(3 * t, std::as_bytes(p.levels[t].keys));
-        out.append(3 * t + 1, std::as_bytes(p.levels[t].parentErrorM));
-        out.append(3 * t + 2, std::as_bytes(p.levels[t].samples));
-    }
+    return layout;
+}
+
+std::vector<std::byte> pyramidFileHeader(const SurfacePyramid& p) {
     std::vector<std::byte> head(kFileHeaderBytes, std::byte{0});
     bytes::store(head, off::structureHash, p.structureHash);
     bytes::store(head, off::contentHash, p.contentHash);
@@ -68,7 +71,22 @@ void writeSurfacePyramid(const SurfacePyramid& p, const std::string& path) {
     bytes::store(head, off::kernelId, p.params.kernelId);
     bytes::store(head, off::sigma, p.params.sigma);
     bytes::store(head, off::truncation, p.params.truncation);
-    out.commit(std::move(head));
+    return head;
+}
+
+}  // namespace detail
+
+void writeSurfacePyramid(const SurfacePyramid& p, const std::string& path) {
+    std::vector<uint64_t> tiles;
+    std::vector<int> sides;
+    for (const SurfacePyramid::Level& L : p.levels) tiles.push_back(L.tileCount()), sides.push_back(L.tileSide);
+    SectionedFileWriter out(path, kFormat, detail::pyramidFileLayout(tiles, sides, p.channels));
+    for (size_t t = 0; t < p.levels.size(); ++t) {
+        out.append(3 * t, std::as_bytes(p.levels[t].keys));
+        out.append(3 * t + 1, std::as_bytes(p.levels[t].parentErrorM));
+        out.append(3 * t + 2, std::as_bytes(p.levels[t].samples));
+    }
+    out.commit(detail::pyramidFileHeader(p));
 }
 
 SurfacePyramid readSurfacePyramid(const std::string& path, const Grid& grid, const KernelParams& params) {

@@ -8,8 +8,11 @@
 // the lists of the node's cells and the pyramid tiles inside the node, then drops the region. Tiles larger than a
 // node (the few coarsest levels) are shared out one by one, each block of 4 x 4 samples from a region read around it.
 // Every list and sample is then the same bits as from the whole grid (region.h's argument; tests/cli/mpi.cmake
-// compares the files). The ranks send their lists and samples to rank 0, which assembles them in order, measures each
-// tile's parent error and writes: rank 0 alone holds what one process writes (the lists: ~200 bytes a cell).
+// compares the files). Nothing is assembled on one rank: each rank keeps its nodes' lists and tiles and writes them at
+// their place in the file rank 0 opens (writeInfluenceCacheOnRanks, writePyramidOnRanks), so no rank holds more than
+// its share (the lists: ~200 bytes a cell) and the pyramid's few coarse levels. Each rank measures its tiles' parent
+// errors; the ranks share for it the tiles of the coarse levels and the first row and column of their tiles on the
+// low edges of their nodes (what the tiles of the nodes beside them read as parent samples).
 //
 // With one process (no mpirun) hc-influence reads the grid whole and calls buildInfluenceLists and
 // build{Surface,Water}Pyramid, as before.
@@ -43,12 +46,36 @@ struct RankShare {
     double seconds = 0;        // building (not waiting or sending)
 };
 
-// Collective: every rank calls them with the same file (opened at the grid's water step) and arguments; rank 0 gets
-// the whole result, bit for bit that of one process over the grid read whole; the other ranks an empty one.
-InfluenceLists buildInfluenceListsOnRanks(const GridRegionReader& file, const KernelParams& params, unsigned threads, bool progress,
-                                          RankShare* share = nullptr);
-// waterOnly: what buildWaterPyramid builds (a scenario's later step), else buildSurfacePyramid.
+// One rank's share of the influence lists: the lists of the cells [firstCell, firstCell + cellCount()) of the file, in
+// the whole lists' CSR form (offsets count entries from the first cell of the file: offsets.front() is the entries of
+// the cells before the part), with file cell indices.
+struct InfluenceListsPart {
+    KernelParams params;
+    uint64_t structureHash = 0, contentHash = 0;  // of the grid
+    uint64_t totalCells = 0, totalEntries = 0;    // of the whole lists
+    uint64_t firstCell = 0;
+    std::vector<uint64_t> offsets;  // cellCount() + 1
+    std::vector<uint32_t> indices;
+    size_t cellCount() const { return offsets.empty() ? 0 : offsets.size() - 1; }
+};
+
+// Collective: every rank calls them with the same file (opened at the grid's water step) and arguments, and gets its
+// part, bit for bit that of one process over the grid read whole; one process gets the whole.
+// The lists: each rank's nodes' cells (a run of the file's cells; the ranks' runs in rank order).
+InfluenceListsPart buildInfluenceListsOnRanks(const GridRegionReader& file, const KernelParams& params, unsigned threads, bool progress,
+                                              RankShare* share = nullptr);
+// Collective: writes the lists whose parts the ranks hold to `path`, the bytes writeInfluenceCache writes of the whole
+// (rank 0 places the sections and appends its part, the others write theirs into rank 0's temporary in place, which
+// must lie on a file system every rank sees; nothing appears at `path` if any rank fails), and returns the whole lists'
+// Stats on every rank.
+InfluenceLists::Stats writeInfluenceCacheOnRanks(const InfluenceListsPart& part, const std::string& path);
+// The pyramid (waterOnly: what buildWaterPyramid builds, a scenario's later step; else buildSurfacePyramid): the tiles
+// a rank writes, with their parent errors: on the levels whose tiles lie inside a partition node the tiles of its nodes,
+// on the coarser levels every tile on rank 0 and none on the others.
 SurfacePyramid buildPyramidOnRanks(const GridRegionReader& file, const KernelParams& params, unsigned threads, bool progress,
                                    bool waterOnly, RankShare* share = nullptr);
+// Collective: writes the pyramid whose parts the ranks hold to `path`, the bytes writeSurfacePyramid writes of the whole
+// (as writeInfluenceCacheOnRanks does). One process: writeSurfacePyramid.
+void writePyramidOnRanks(const SurfacePyramid& part, const std::string& path);
 
 }  // namespace hc::influence

@@ -1,8 +1,8 @@
 // heightcast/core/ranks.h: the processes of one preprocessing run (DESIGN.md section 13).
 //
-// Started by `mpirun -np N`, hc-ingest and hc-influence run as N ranks that split the work and send their shares to
-// rank 0, which writes the output (the same bytes as one process writes; hc-ingest's ranks write their cells into rank
-// 0's file themselves: GridFilePart). Started without mpirun, a tool is
+// Started by `mpirun -np N`, hc-ingest and hc-influence run as N ranks that split the work; rank 0 opens and commits
+// each output file, and the ranks write their shares into it in place (GridFilePart, on_ranks.h's writers over
+// SectionedFilePart) or send them to rank 0: the same bytes as one process writes. Started without mpirun, a tool is
 // rank 0 of 1 and every call here is a no-op or the identity: nothing changes.
 //
 // Failures: a rank's exception inside together() reaches every rank as the same RanksError (the first failing rank's
