@@ -177,6 +177,17 @@ Grid ingest(const Options& opt, LoadReport& report) {
 
 namespace {
 
+// Every rank's check against the source (its share of the source's rows), added in rank order (collective).
+detail::SourceCheckSums allRanksCheck(const detail::SourceCheckSums& mine) {
+    const std::vector<double> row{double(mine.checked), double(mine.missed), mine.maxDev, mine.sumSq};
+    detail::SourceCheckSums sums;
+    for (const auto& r : ranks::allGatherVectors(row)) {
+        if (r.size() != 4) throw Error("a rank sent no source check");
+        sums.add({uint64_t(r[0]), uint64_t(r[1]), r[2], r[3]});
+    }
+    return sums;
+}
+
 // Under mpirun, a terrain without water whose working raster is its own pixels: every rank reads only the windows of
 // its share (buildGridFile over RasterWindows), the readers' counts are added over the ranks, and rank 0 reports them.
 // nullopt where the source must be read whole (a projection, a warp, a resampling), with the reason in the rank log.
@@ -217,15 +228,7 @@ std::optional<BuildSummary> ingestByWindows(const Options& opt, const std::strin
         all.add(t[0]);
     }
     windows->finish(all, report);
-    if (mine) {  // the check's sums added in rank order; its report (and warning) after the reading's, as in one process
-        const std::vector<double> row{double(mine->checked), double(mine->missed), mine->maxDev, mine->sumSq};
-        detail::SourceCheckSums sums;
-        for (const auto& r : ranks::allGatherVectors(row)) {
-            if (r.size() != 4) throw Error("a rank sent no source check");
-            sums.add({uint64_t(r[0]), uint64_t(r[1]), r[2], r[3]});
-        }
-        finishSourceCheck(sums, report);
-    }
+    if (mine) finishSourceCheck(allRanksCheck(*mine), report);  // its report (and warning) after the reading's, as in one process
     if (ranks::rank() == 0) noteStorage(b.shape.stats, report.sourcePrecisionDouble, report);
     return b;
 }
@@ -242,13 +245,41 @@ BuildSummary ingestToFile(const Options& opt, const std::string& path, LoadRepor
     Prepared p = prepare(opt, report);
     setBuild(p, opt, report);
     bindWater(p, opt, report);
-    traceBuild(p);
+    // Under mpirun over a resampled source (held whole here: water steps), the ranks check their share of the source's
+    // rows against the file once it is written, as ingestByWindows does, instead of rank 0 checking every pixel against
+    // a trace the build paints: no trace, so every rank writes its own cells into the file in place. Through --t_srs
+    // (GDAL's warper: no window reader) rank 0 still checks against the trace, and the ranks send it their cells.
+    std::unique_ptr<detail::TerrainWindows> checker;
+    if (ranks::distributed() && !p.trace.band.values.empty()) {
+        LoadReport unused;  // the source was reported by prepare()
+        std::string why;
+        checker = detail::openTerrainWindows(opt, unused, why);
+    }
+    if (!checker) traceBuild(p);
     IngestStats extra;
     extra.sourcePath = opt.input;
     extra.sourceCrsName = report.sourceCrsName;
     extra.seconds = clock.seconds();
-    BuildSummary b = buildGridFile(p.terrain, p.water.count ? &p.water : nullptr, p.build, path, extra);
-    if (ranks::rank() == 0) afterBuild(p, b.shape.stats, opt, report);  // under mpirun, rank 0 holds every cell
+    if (!checker) {
+        BuildSummary b = buildGridFile(p.terrain, p.water.count ? &p.water : nullptr, p.build, path, extra);
+        if (ranks::rank() == 0) afterBuild(p, b.shape.stats, opt, report);  // under mpirun, rank 0 holds every cell
+        return b;
+    }
+    BuildSummary b;
+    ranks::together([&] { b = buildGridFile(p.terrain, p.water.count ? &p.water : nullptr, p.build, path, extra); });
+    std::optional<detail::SourceCheckSums> mine;
+    const Stopwatch checking;
+    ranks::together([&] {
+        mine = checker->checkAgainst(path);
+        if (!mine) throw Error("internal: a resampled source without a check against it");
+    });
+    ranks::log("hc-ingest", fmt::format("{} source pixels of its rows checked against the cells under them, {:.3f} s", mine->checked + mine->missed,
+                                        checking.seconds()));
+    const detail::SourceCheckSums sums = allRanksCheck(*mine);
+    if (ranks::rank() == 0) {  // afterBuild's report, from every rank's sums
+        finishSourceCheck(sums, report);
+        noteStorage(b.shape.stats, !p.terrain.roundingM.empty(), report);
+    }
     return b;
 }
 
