@@ -24,7 +24,7 @@ struct Heightfield {
     void buildMip(unsigned threads);  // the rows of its large levels on `threads` workers (0 = all cores)
 };
 
-// Levels of at least this many nodes are built on several workers (a parallelFor starts its threads each call).
+// Levels of at least this many nodes are built on several workers (waking parallelFor's threads costs microseconds).
 constexpr size_t kMipParallelNodes = size_t{1} << 16;
 
 struct CascadeTextures {

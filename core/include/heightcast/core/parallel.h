@@ -2,6 +2,11 @@
 //
 // Work is handed out in chunks from an atomic counter, so uneven items balance. The first exception
 // thrown by any worker is rethrown in the caller after all workers stop.
+//
+// The helper threads are kept between calls (one pool per process, grown to the most threads asked for): a frame
+// calls parallelFor some 50 times, and starting and joining threads each time cost milliseconds a frame at 16
+// threads (BENCHMARKS.md). A call made while the pool serves another (from one of its own workers, or from a second
+// thread of the caller's program) starts its own threads, as every call used to.
 #pragma once
 
 #include <algorithm>
@@ -10,9 +15,14 @@
 #include <exception>
 #include <mutex>
 #include <thread>
-#include <vector>
 
 namespace hc {
+
+namespace detail {
+// Runs fn(ctx, w) for every w in [0, threads): w = 0 on the calling thread, the others on the pool's threads (or on
+// threads of their own when the pool is busy); returns when every one has returned. fn must not throw.
+void runOnThreads(unsigned threads, void (*fn)(void*, unsigned), void* ctx);
+}  // namespace detail
 
 // Number of worker threads for `requested` (0 = all hardware threads).
 inline unsigned resolveThreads(unsigned requested) {
@@ -48,10 +58,7 @@ void parallelFor(size_t count, size_t chunk, unsigned threads, Fn&& fn) {
     if (threads <= 1) {
         work(0);
     } else {
-        std::vector<std::thread> pool;
-        for (unsigned t = 1; t < threads; ++t) pool.emplace_back(work, t);
-        work(0);
-        for (auto& t : pool) t.join();
+        detail::runOnThreads(threads, [](void* w, unsigned worker) { (*static_cast<decltype(work)*>(w))(worker); }, &work);
     }
     if (error) std::rethrow_exception(error);
 }
