@@ -228,18 +228,20 @@ InfluenceListsPart buildInfluenceListsOnRanks(const GridRegionReader& file, cons
     RankShare s;
     uint64_t myCells = 0;
     for (size_t j : mine) myCells += part.cells[j];
-    std::vector<uint32_t> lengths, entries;
+    std::vector<uint32_t> lengths;
+    std::vector<InfluenceListsPart::Entries> entries;
+    uint64_t entryCount = 0;
     ranks::together([&] {
         Progress bar("influence lists", myCells, progress && rank == 0);
         for (size_t j : mine) {
             const IndexedRegion r = readIndexed(file, nodeSquare(file.shape(), part.keys[j], part.level), margins, part.keys[j], part.level, true);
             const detail::ListIndex index(r.grid, params);
             const auto blocks = detail::splitNodes(r.grid, {part.keys[j], part.level, r.lo, r.hi}, detail::kSuperBlockCells);
-            const detail::ListPart lists = detail::buildListPart(index, blocks, 0, blocks.size(), threads, bar);
+            detail::ListPart lists = detail::buildListPart(index, blocks, 0, blocks.size(), threads, bar);
             for (size_t k = 0; k + 1 < lists.offsets.size(); ++k) lengths.push_back(uint32_t(lists.offsets[k + 1] - lists.offsets[k]));
-            const size_t at = entries.size();
-            entries.resize(at + lists.entries);
-            for (size_t e = 0; e < lists.entries; ++e) entries[at + e] = r.fileIndex[lists.indices[e]];  // region -> file index
+            for (size_t e = 0; e < lists.entries; ++e) lists.indices[e] = r.fileIndex[lists.indices[e]];  // region -> file index
+            entryCount += lists.entries;
+            entries.push_back({std::move(lists.indices), lists.entries});
             s.nodes += 1, s.cells += r.hi - r.lo, s.cellsRead += r.grid.cellCount();
         }
         bar.finish();
@@ -247,7 +249,7 @@ InfluenceListsPart buildInfluenceListsOnRanks(const GridRegionReader& file, cons
     s.seconds = clock.seconds();
     if (share) *share = s;
     // Every rank's cell and entry counts (a small table): where this rank's run of cells and entries starts.
-    const auto counts = ranks::allGatherVectors(std::vector<uint64_t>{lengths.size(), entries.size()});
+    const auto counts = ranks::allGatherVectors(std::vector<uint64_t>{lengths.size(), entryCount});
     InfluenceListsPart out;
     out.params = params;
     out.structureHash = file.info().structureHash;
@@ -262,7 +264,7 @@ InfluenceListsPart buildInfluenceListsOnRanks(const GridRegionReader& file, cons
     out.offsets.resize(lengths.size() + 1);
     out.offsets[0] = firstEntry;
     for (size_t k = 0; k < lengths.size(); ++k) out.offsets[k + 1] = out.offsets[k] + lengths[k];
-    out.indices = std::move(entries);
+    out.entries = std::move(entries);
     return out;
 }
 
@@ -300,7 +302,12 @@ InfluenceLists::Stats writeInfluenceCacheOnRanks(const InfluenceListsPart& part,
     } else if (part.cellCount() > 0) {
         runs.push_back({0, (part.firstCell + 1) * 8, std::as_bytes(std::span(part.offsets).subspan(1))});
     }
-    if (!part.indices.empty()) runs.push_back({1, part.offsets.front() * 4, std::as_bytes(std::span(part.indices))});
+    uint64_t at = part.offsets.empty() ? 0 : part.offsets.front();
+    for (const InfluenceListsPart::Entries& e : part.entries) {
+        if (e.count == 0) continue;
+        runs.push_back({1, at * 4, std::as_bytes(std::span<const uint32_t>(e.indices.get(), e.count))});
+        at += e.count;
+    }
     writeByParts(path, detail::influenceCacheFormat(), detail::influenceCacheLayout(n, m), runs,
                  detail::influenceCacheHeader(n, m, stats.maxLength, part.params, part.structureHash, part.contentHash));
     return stats;

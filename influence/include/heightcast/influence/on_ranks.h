@@ -19,6 +19,7 @@
 #pragma once
 
 #include <cstdint>
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -55,8 +56,15 @@ struct InfluenceListsPart {
     uint64_t totalCells = 0, totalEntries = 0;    // of the whole lists
     uint64_t firstCell = 0;
     std::vector<uint64_t> offsets;  // cellCount() + 1
-    std::vector<uint32_t> indices;
+    // The entries, node by node in order, each node's as built: not one buffer grown by copies, whose last growth held
+    // the old and the new buffer at once (up to 3 times the entries: 1784 MB against 1088 on the other rank, 9 M cells).
+    struct Entries {
+        std::unique_ptr<uint32_t[]> indices;
+        size_t count = 0;
+    };
+    std::vector<Entries> entries;
     size_t cellCount() const { return offsets.empty() ? 0 : offsets.size() - 1; }
+    uint64_t entryCount() const { return offsets.empty() ? 0 : offsets.back() - offsets.front(); }
 };
 
 // Collective: every rank calls them with the same file (opened at the grid's water step) and arguments, and gets its
