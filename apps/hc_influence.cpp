@@ -188,7 +188,8 @@ void runAlone(const InfluenceArgs& a) {
 }
 
 // The ranks of mpirun (on_ranks.h): no rank reads the grid whole; each builds its nodes from regions of the file and
-// writes its lists and pyramid tiles at their place in the files rank 0 opens. Every collective step runs in ranks::together, so a failure anywhere stops every rank there.
+// writes its lists and pyramid tiles at their place in the files rank 0 opens. Every collective step runs in
+// ranks::together, so a failure anywhere stops every rank there.
 void runDistributed(const InfluenceArgs& a) {
     namespace inf = hc::influence;
     namespace ranks = hc::ranks;
