@@ -9,7 +9,6 @@
 #include <cstdlib>
 #include <filesystem>
 #include <memory>
-#include <numbers>
 #include <optional>
 #include <string>
 #include <vector>
@@ -247,22 +246,13 @@ void printSummary(const RenderArgs& a, const hc::cli::BackendDecision& decision,
     std::printf("%s", r.timings.toTable().c_str());
 }
 
-// The camera of frame k of a flight: --fly-step metres a frame forward, horizontally along the yaw.
-hc::render::Camera flightCamera(const RenderArgs& a, const hc::render::Camera& start, unsigned k) {
-    hc::render::Camera c = start;
-    const double yaw = start.yawDeg * std::numbers::pi / 180;
-    c.xWorld += std::sin(yaw) * a.flyStepM * k;
-    c.yWorld += std::cos(yaw) * a.flyStepM * k;
-    return c;
-}
-
 // --fly N: one renderer for the whole flight (GL: one context; out of core the CPU-filled cascades keep their texels
 // in it; CPU: a CascadeCache), one image per frame, each frame's stage times printed. The rendering's times exclude
 // writing the images; the GL backend's read-back is its own column.
 int fly(const RenderArgs& a, const hc::cli::BackendDecision& decision, const hc::render::Scene& scene, const hc::render::Camera& start) {
     for (unsigned k = 1; k < a.flyFrames; ++k) {  // every frame's camera checked before any is rendered
         try {
-            refuseCameraBelowTerrain(scene, flightCamera(a, start, k));
+            refuseCameraBelowTerrain(scene, hc::render::flightFrame(start, a.flyStepM, k));
         } catch (const hc::Error& e) {
             throw hc::Error("--fly frame " + std::to_string(k) + ": " + e.what());
         }
@@ -286,7 +276,7 @@ int fly(const RenderArgs& a, const hc::cli::BackendDecision& decision, const hc:
     hc::Stopwatch total;
     std::vector<double> renderMs;
     for (unsigned k = 0; k < a.flyFrames; ++k) {
-        const hc::render::Camera camera = flightCamera(a, start, k);
+        const hc::render::Camera camera = hc::render::flightFrame(start, a.flyStepM, k);
         Rendered r;
         r.device = device;
         if (a.flyFresh) {

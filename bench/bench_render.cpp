@@ -25,7 +25,6 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
-#include <numbers>
 #include <string>
 #include <thread>
 #include <vector>
@@ -321,9 +320,7 @@ RunResult runScenario(const Scenario& sc, const Settings& set) {
                 uint64_t kept = 0, visible = 0, cells = 0;
                 for (int k = 0; k < set.flyFrames; ++k) {
                     say(fmt::format("fly-through {}, frame {} of {} ...", cached ? "with the cache" : "fresh", k + 1, set.flyFrames).c_str());
-                    hc::render::Camera c = cam;
-                    const double yaw = cam.yawDeg * std::numbers::pi / 180;
-                    c.xWorld += std::sin(yaw) * set.flyStepM * k, c.yWorld += std::cos(yaw) * set.flyStepM * k;
+                    const hc::render::Camera c = hc::render::flightFrame(cam, set.flyStepM, unsigned(k));
                     hc::render::Timings tm;
                     if (gl) {
                         if (!cached || k == 0) gl->forgetCascades();

@@ -60,4 +60,12 @@ CameraBasis basisOf(const Camera& c) {
     return b;
 }
 
+Camera flightFrame(const Camera& start, double stepM, unsigned k) {
+    Camera c = start;
+    const double yaw = start.yawDeg * kDeg;
+    c.xWorld += std::sin(yaw) * stepM * k;
+    c.yWorld += std::cos(yaw) * stepM * k;
+    return c;
+}
+
 }  // namespace hc::render

@@ -38,4 +38,8 @@ struct CameraBasis {
 };
 CameraBasis basisOf(const Camera& c);
 
+// Frame k of a flight from `start`: stepM metres a frame forward, horizontally along its yaw (height and angles kept).
+// What hc-render --fly and hc-bench --fly-frames render.
+Camera flightFrame(const Camera& start, double stepM, unsigned k);
+
 }  // namespace hc::render
