@@ -399,6 +399,12 @@ TEST(Ranks, BuildFromRegionsEqualsTheWholeGridsBitForBit) {
                 EXPECT_EQ(0, std::memcmp(x.parentErrorM.data(), y.parentErrorM.data(), x.parentErrorM.size_bytes())) << "level " << t;
             }
             EXPECT_GT(tiles, 10u);
+            // Written by parts (one process: the whole), writeSurfacePyramid's bytes.
+            const fs::path pyramidByParts = d->path.string() + ".parts.hcp", pyramidWhole = d->path.string() + ".whole.hcp";
+            inf::writePyramidOnRanks(b, pyramidByParts.string());
+            inf::writeSurfacePyramid(a, pyramidWhole.string());
+            EXPECT_EQ(fileBytes(pyramidByParts), fileBytes(pyramidWhole)) << (waterOnly ? "water pyramid" : "pyramid");
+            fs::remove(pyramidByParts), fs::remove(pyramidWhole);
         }
     }
 }

@@ -499,10 +499,6 @@ SurfacePyramid buildPyramidOnRanks(const GridRegionReader& file, const KernelPar
 }
 
 void writePyramidOnRanks(const SurfacePyramid& part, const std::string& path) {
-    if (!ranks::distributed()) {
-        writeSurfacePyramid(part, path);
-        return;
-    }
     const int rank = ranks::rank(), count = ranks::count();
     const size_t levels = part.levels.size();
     std::vector<uint64_t> tiles(levels);

@@ -83,7 +83,7 @@ InfluenceLists::Stats writeInfluenceCacheOnRanks(const InfluenceListsPart& part,
 SurfacePyramid buildPyramidOnRanks(const GridRegionReader& file, const KernelParams& params, unsigned threads, bool progress,
                                    bool waterOnly, RankShare* share = nullptr);
 // Collective: writes the pyramid whose parts the ranks hold to `path`, the bytes writeSurfacePyramid writes of the whole
-// (as writeInfluenceCacheOnRanks does). One process: writeSurfacePyramid.
+// (as writeInfluenceCacheOnRanks does).
 void writePyramidOnRanks(const SurfacePyramid& part, const std::string& path);
 
 }  // namespace hc::influence
