@@ -12,6 +12,7 @@
 #include <limits>
 #include <optional>
 
+#include <glm/common.hpp>
 #include <glm/geometric.hpp>
 #include <glm/vec2.hpp>
 
@@ -260,8 +261,13 @@ struct PatchWalk {
 // Under the block's bottom it goes on, and hits the bottom where it rises through it under a defined patch.
 // The water surface has no walls: under it at its first contact (a camera in a lake), or come in under it
 // through its edge, a ray does not draw it and goes on to the ground.
+//
+// tFrom > tIn: a bound from the ray's beam (Beam) before which the ray comes down to no node's maximum. The walk then
+// starts at level 0 at the patch under tFrom, entered where the walk from tIn would enter it: every node before it
+// would have been skipped without a contact (a patch's test fails wherever its ancestors' do), so the hit and the
+// ray's state are the same.
 PatchHit traverse(const CascadeTextures& tex, const Cascade& c, const glm::dvec3& o, const glm::dvec3& d, double tIn, double tOut, double zFloor,
-                  RayState& st) {
+                  RayState& st, double tFrom) {
     const Heightfield& hf = tex.terrain;
     if (hf.mip.empty() || !(tIn < tOut)) return PatchHit{};
     const TexelRay ray = texelRay(c, o, d);
@@ -295,11 +301,25 @@ PatchHit traverse(const CascadeTextures& tex, const Cascade& c, const glm::dvec3
         return true;
     };
     int iu = 0, iv = 0;
-    if (!patchAfter(tIn, iu, iv)) return walk.res;
-    iu >>= level, iv >>= level;
+    double t = tIn;
+    if (tFrom > tIn) {
+        if (!(tFrom < tOut)) return walk.res;  // the beam meets nothing of this cascade within the ray's span
+        if (patchAfter(tFrom, iu, iv)) {
+            // Entered across the later of its two edges: the same expression as the exit of the node before it below.
+            const double enterU = du > 0 ? (iu - u0) * invDu : du < 0 ? (iu + 1 - u0) * invDu : -HUGE_VAL;
+            const double enterV = dv > 0 ? (iv - v0) * invDv : dv < 0 ? (iv + 1 - v0) * invDv : -HUGE_VAL;
+            t = std::max({enterU, enterV, tIn});
+            level = 0;
+        } else {
+            tFrom = tIn;  // rounding at the texture's edge: the whole walk
+        }
+    }
+    if (!(tFrom > tIn)) {
+        if (!patchAfter(tIn, iu, iv)) return walk.res;
+        iu >>= level, iv >>= level;
+    }
     const int stepU = du > 0 ? 1 : -1, stepV = dv > 0 ? 1 : -1;
     const double edgeU = du > 0 ? 1.0 : 0.0, edgeV = dv > 0 ? 1.0 : 0.0;  // the side of a node the ray leaves by, in nodes
-    double t = tIn;
     for (int guard = 0; guard < 1 << 20; ++guard) {
         const int side = hf.mipSide[size_t(level)];
         if (iu < 0 || iv < 0 || iu >= side || iv >= side) break;  // left the texture
@@ -354,7 +374,8 @@ void offsetInterval(const glm::dvec3& o, const glm::dvec3& d, const glm::dvec2& 
     t1 = std::min(t1, b);
 }
 
-Hit hitIn(const RayContext& ctx, size_t k, const glm::dvec3& o, const glm::dvec3& d, double lo, double hi, RayState& st, bool& underground) {
+Hit hitIn(const RayContext& ctx, size_t k, const glm::dvec3& o, const glm::dvec3& d, double lo, double hi, RayState& st, bool& underground,
+          double tFrom) {
     Hit h;
     const Cascade& c = ctx.fit->cascades[k];
     const CascadeTextures& tex = (*ctx.tex)[k];
@@ -375,8 +396,8 @@ Hit hitIn(const RayContext& ctx, size_t k, const glm::dvec3& o, const glm::dvec3
         t0 = std::max(t0, a);
         t1 = std::min(t1, b);
     }
-    if (!(t0 < t1)) return h;
-    const PatchHit best = traverse(tex, c, o, d, t0, t1, ctx.zFloor, st);
+    if (!(t0 < t1) || !(tFrom < t1)) return h;  // past tFrom the beam meets nothing of this cascade (traverse())
+    const PatchHit best = traverse(tex, c, o, d, t0, t1, ctx.zFloor, st, tFrom);
     if (best.terrainUnderground) {
         underground = true;
         return h;
@@ -408,13 +429,15 @@ Hit hitIn(const RayContext& ctx, size_t k, const glm::dvec3& o, const glm::dvec3
 
 }  // namespace
 
-Hit castRay(const RayContext& ctx, const glm::dvec3& dir) {
+Hit castRay(const RayContext& ctx, const glm::dvec3& dir, Beam* beam, double dirLength) {
     const auto& cs = ctx.fit->cascades;
     RayState st;
     bool underground = false;
+    // Where the beam lets this ray's walk through cascade k start (t = tau |direction|; a hair early for rounding).
+    auto from = [&](size_t k) { return beam ? beam->startDepth(k) * dirLength * (1 - 1e-12) : 0.0; };
     for (size_t k = 0; k < cs.size(); ++k) {
         const double lo = k == 0 ? -HUGE_VAL : cs[k].splitNear;
-        Hit h = hitIn(ctx, k, ctx.eyeLocal, dir, lo, cs[k].farWithOverlap, st, underground);
+        Hit h = hitIn(ctx, k, ctx.eyeLocal, dir, lo, cs[k].farWithOverlap, st, underground, from(k));
         if (underground) return Hit{};
         if (!h.hit) continue;
         // In the overlap with the next cascade: blend both hits by a convex combination, if they are on the same
@@ -431,7 +454,7 @@ Hit castRay(const RayContext& ctx, const glm::dvec3& dir) {
                 RayState st2 = st;
                 st2.touchedTerrain = st2.touchedWater = true;
                 bool under2 = false;
-                Hit h2 = hitIn(ctx, k + 1, ctx.eyeLocal, dir, cs[k + 1].splitNear, cs[k + 1].farWithOverlap, st2, under2);
+                Hit h2 = hitIn(ctx, k + 1, ctx.eyeLocal, dir, cs[k + 1].splitNear, cs[k + 1].farWithOverlap, st2, under2, from(k + 1));
                 if (h2.hit && h2.water == h.water && !h2.wall && std::abs(h2.t - h.t) <= std::max(cs[k].texelM, cs[k + 1].texelM)) {
                     const double w = std::clamp((off - zoneStart) / (zoneEnd - zoneStart), 0.0, 1.0);
                     h.t = (1 - w) * h.t + w * h2.t;
@@ -445,6 +468,95 @@ Hit castRay(const RayContext& ctx, const glm::dvec3& dir) {
         return h;
     }
     return Hit{};
+}
+
+Beam::Beam(const RayContext& ctx, const CameraBasis& basis, double sx0, double sy0, double sx1, double sy1, Beam* outer)
+    : ctx_(ctx), outer_(outer) {
+    const glm::dvec3 corners[4] = {basis.forward + sx0 * basis.right + sy0 * basis.up, basis.forward + sx1 * basis.right + sy0 * basis.up,
+                                   basis.forward + sx0 * basis.right + sy1 * basis.up, basis.forward + sx1 * basis.right + sy1 * basis.up};
+    lo_ = hi_ = corners[0];
+    minDot_ = maxDot_ = glm::dot(glm::dvec2(corners[0]), ctx.fit->dir);
+    for (const glm::dvec3& c : corners) {  // every quantity below is linear in (sx, sy): its extremes are at corners
+        lo_ = glm::min(lo_, c), hi_ = glm::max(hi_, c);
+        maxLen_ = std::max(maxLen_, glm::length(c));
+        const double rate = glm::dot(glm::dvec2(c), ctx.fit->dir);
+        minDot_ = std::min(minDot_, rate), maxDot_ = std::max(maxDot_, rate);
+    }
+    width_ = std::max(std::abs(sx1 - sx0), std::abs(sy1 - sy0));
+    centreLen_ = glm::length(basis.forward + 0.5 * (sx0 + sx1) * basis.right + 0.5 * (sy0 + sy1) * basis.up);
+    depth_.fill(std::numeric_limits<double>::quiet_NaN());
+}
+
+double Beam::startDepth(size_t k) {
+    if (k >= depth_.size() || k >= ctx_.fit->cascades.size()) return 0;
+    if (std::isnan(depth_[k])) depth_[k] = march(k);
+    return depth_[k];
+}
+
+// The beam's footprint over depths [ta, tb] is inside the box of its corners' at ta and at tb (each ray's point moves
+// on a line), and its lowest point is a corner's at ta or tb. A step is passed when that lowest point lies above the
+// largest maximum of the nodes under the box (at most 2 x 2 of the level where the box spans two nodes): no ray of the
+// beam can come down to a node's maximum there, so each one's walk would skip it. Steps double while they pass and
+// halve when they do not, down to about the beam's width (or half a texel); a step of that size that fails ends the
+// march.
+double Beam::march(size_t k) {
+    const Cascade& c = ctx_.fit->cascades[k];
+    const CascadeTextures& tex = (*ctx_.tex)[k];
+    const Heightfield& hf = tex.terrain;
+    if (c.empty() || hf.mip.empty() || hf.n < 2) return 0;
+    // The depths at which the beam's rays walk this cascade: t >= near (t = tau |direction|), offsets along the fit's
+    // view direction (tau times the rate) within the cascade's slab.
+    double tau = ctx_.nearM / maxLen_;
+    if (k > 0 && c.splitNear > 0 && maxDot_ > 0) tau = std::max(tau, c.splitNear / maxDot_);
+    double tauEnd = ctx_.farM;
+    if (c.farWithOverlap > 0 && minDot_ > 0) tauEnd = std::min(tauEnd, c.farWithOverlap / minDot_);
+    tau *= 1 - 1e-9;
+    if (!(tau < tauEnd)) return 0;
+    if (outer_) tau = std::max(tau, outer_->startDepth(k));  // none of the outer beam's rays meets the cascade before
+    if (!(tau < tauEnd)) return tauEnd;
+    const bool water = tex.hasWater && tex.water.mip.size() == hf.mip.size();
+    const bool both = water && tex.bothMip.size() == hf.mip.size();
+    const int patches = hf.n - 1, top = int(hf.mip.size()) - 1;
+    auto maxAt = [&](int level, size_t i) {
+        if (both) return tex.bothMip[size_t(level)][i];
+        const float m = hf.mip[size_t(level)][i];
+        return water ? std::max(m, tex.water.mip[size_t(level)][i]) : m;
+    };
+    // The largest maximum of the patches under the box [ua, ub] x [va, vb] (texture coordinates): -inf off the texture.
+    auto boxMax = [&](double ua, double ub, double va, double vb) {
+        const double pad = 1e-6;  // a patch whose edge the box touches is under it (rounding)
+        ua -= pad, va -= pad, ub += pad, vb += pad;
+        if (!(ub >= 0 && vb >= 0 && ua < patches && va < patches)) return -std::numeric_limits<float>::infinity();
+        const int i0 = ua > 0 ? int(ua) : 0, j0 = va > 0 ? int(va) : 0;
+        const int i1 = ub < patches - 1 ? int(ub) : patches - 1, j1 = vb < patches - 1 ? int(vb) : patches - 1;
+        int level = 0;
+        while (level < top && ((i1 >> level) - (i0 >> level) > 1 || (j1 >> level) - (j0 >> level) > 1)) ++level;
+        const size_t side = size_t(hf.mipSide[size_t(level)]);
+        float m = -std::numeric_limits<float>::infinity();
+        for (int j = j0 >> level; j <= j1 >> level; ++j)
+            for (int i = i0 >> level; i <= i1 >> level; ++i) m = std::max(m, maxAt(level, size_t(j) * side + size_t(i)));
+        return m;
+    };
+    const glm::dvec3& e = ctx_.eyeLocal;
+    const double s = c.texelM;
+    auto least = [&] { return std::max(tau * width_, 0.5 * s) / centreLen_; };  // [depth]: about the beam's width
+    double step = least();
+    for (int guard = 0; guard < 100000 && tau < tauEnd; ++guard) {
+        const double tb = std::min(tau + step, tauEnd);
+        const double zLow = e.z + std::min(tau * lo_.z, tb * lo_.z);
+        const double ua = (e.x + std::min(tau * lo_.x, tb * lo_.x) - c.x0) / s, ub = (e.x + std::max(tau * hi_.x, tb * hi_.x) - c.x0) / s;
+        const double va = (e.y + std::min(tau * lo_.y, tb * lo_.y) - c.y0) / s, vb = (e.y + std::max(tau * hi_.y, tb * hi_.y) - c.y0) / s;
+        const float m = boxMax(ua, ub, va, vb);  // -inf: nothing under the box
+        if (m == -std::numeric_limits<float>::infinity() || zLow > m + 1e-9 * (1.0 + std::abs(e.z) + std::abs(zLow) + std::abs(m))) {
+            tau = tb;
+            step *= 2;
+            continue;
+        }
+        const double smallest = least();
+        if (step <= smallest) return tau;
+        step = std::max(0.5 * step, smallest);
+    }
+    return std::min(tau, tauEnd);
 }
 
 }  // namespace hc::render::detail

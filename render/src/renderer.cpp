@@ -28,6 +28,7 @@ std::string RenderOptions::validate() const {
     if (!(waterMinDepthM >= 0)) return "the minimum water depth must be >= 0";
     if (pyramidInterpolateLevels < 0 || pyramidInterpolateLevels > 8)
         return "--pyramid-interpolate " + std::to_string(pyramidInterpolateLevels) + " is outside 0..8";
+    if (beamTilePx < 0 || beamTilePx > 64) return "--beam-tile " + std::to_string(beamTilePx) + " is outside 0..64";
     return {};
 }
 
@@ -546,30 +547,53 @@ PixelRays castRays(const Scene& scene, const detail::FrameSetup& setup, const Ca
     const CameraBasis& basis = setup.basis;
     const glm::dvec3& eye = setup.eyeLocal;
     const detail::RayContext ctx{&fit, &tex, eye, setup.nearM, setup.farM, scene.elevationMin};
+    auto sxOf = [&](int px) { return (2.0 * (px + 0.5) / W - 1.0) * basis.tanHalfX; };
+    auto syOf = [&](int py) { return (1.0 - 2.0 * (double(py) + 0.5) / H) * basis.tanHalfY; };
+    auto cast = [&](int px, int py, detail::Beam* beam) {
+        glm::dvec3 d = basis.forward + sxOf(px) * basis.right + syOf(py) * basis.up;
+        const double length = glm::length(d);
+        d /= length;  // each component divided, exact to half an ulp (normalize multiplies by a rounded 1 / length)
+        const size_t i = size_t(py) * size_t(W) + size_t(px);
+        rays.dirs[i] = {float(d.x), float(d.y), float(d.z)};
+        if (fit.hull.size() < 3) return;
+        const detail::Hit h = detail::castRay(ctx, d, beam, length);
+        if (!h.hit) return;
+        f.distanceM[i] = float(h.t);
+        f.posX[i] = float(eye.x + d.x * h.t);
+        f.posY[i] = float(eye.y + d.y * h.t);
+        f.posZ[i] = float(eye.z + d.z * h.t);
+        f.nX[i] = float(h.nx), f.nY[i] = float(h.ny), f.nZ[i] = float(h.nz);
+        f.cascade[i] = float(h.cascade);
+        f.waterDepthM[i] = float(h.depth);
+        f.wall[i] = h.wall ? 1.0f : 0.0f;
+        rays.isWater[i] = h.water;
+    };
     const Stopwatch clock;
-    parallelFor(size_t(H), 4, options.threads, [&](size_t b, size_t e, unsigned) {
-        for (size_t py = b; py < e; ++py)
-            for (int px = 0; px < W; ++px) {
-                const double sx = (2.0 * (px + 0.5) / W - 1.0) * basis.tanHalfX;
-                const double sy = (1.0 - 2.0 * (double(py) + 0.5) / H) * basis.tanHalfY;
-                glm::dvec3 d = basis.forward + sx * basis.right + sy * basis.up;
-                d /= glm::length(d);  // each component divided, exact to half an ulp (normalize multiplies by a rounded 1 / length)
-                const size_t i = py * size_t(W) + size_t(px);
-                rays.dirs[i] = {float(d.x), float(d.y), float(d.z)};
-                if (fit.hull.size() < 3) continue;
-                const detail::Hit h = detail::castRay(ctx, d);
-                if (!h.hit) continue;
-                f.distanceM[i] = float(h.t);
-                f.posX[i] = float(eye.x + d.x * h.t);
-                f.posY[i] = float(eye.y + d.y * h.t);
-                f.posZ[i] = float(eye.z + d.z * h.t);
-                f.nX[i] = float(h.nx), f.nY[i] = float(h.ny), f.nZ[i] = float(h.nz);
-                f.cascade[i] = float(h.cascade);
-                f.waterDepthM[i] = float(h.depth);
-                f.wall[i] = h.wall ? 1.0f : 0.0f;
-                rays.isWater[i] = h.water;
+    const int tile = options.beamTilePx;
+    if (tile <= 1) {
+        parallelFor(size_t(H), 4, options.threads, [&](size_t b, size_t e, unsigned) {
+            for (size_t py = b; py < e; ++py)
+                for (int px = 0; px < W; ++px) cast(px, int(py), nullptr);
+        });
+    } else {  // a row of blocks of 4 x 4 tiles a task; each tile's rays with their beam (detail::Beam), inside its block's
+        const int block = 4 * tile;
+        parallelFor(size_t((H + block - 1) / block), 1, options.threads, [&](size_t b, size_t e, unsigned) {
+            for (size_t by = b; by < e; ++by) {
+                const int qy0 = int(by) * block, qy1 = std::min(H, qy0 + block);
+                for (int qx0 = 0; qx0 < W; qx0 += block) {
+                    const int qx1 = std::min(W, qx0 + block);
+                    detail::Beam outer(ctx, basis, sxOf(qx0), syOf(qy0), sxOf(qx1 - 1), syOf(qy1 - 1));
+                    for (int py0 = qy0; py0 < qy1; py0 += tile)
+                        for (int px0 = qx0; px0 < qx1; px0 += tile) {
+                            const int py1 = std::min(qy1, py0 + tile), px1 = std::min(qx1, px0 + tile);
+                            detail::Beam beam(ctx, basis, sxOf(px0), syOf(py0), sxOf(px1 - 1), syOf(py1 - 1), &outer);
+                            for (int py = py0; py < py1; ++py)
+                                for (int px = px0; px < px1; ++px) cast(px, py, &beam);
+                        }
+                }
             }
-    });
+        });
+    }
     timings.raycastMs = clock.milliseconds();
     timings.rays = pixels;
     return rays;

@@ -2,6 +2,7 @@
 // backend (private to render/).
 #pragma once
 
+#include <array>
 #include <functional>
 #include <string>
 #include <vector>
@@ -84,8 +85,37 @@ struct RayContext {
     double zFloor;                         // the terrain block's bottom: the grid's lowest elevation, local z [m]
 };
 
-// dir: unit direction of the ray.
-Hit castRay(const RayContext& ctx, const glm::dvec3& dir);
+// The rays of a tile of pixels as one beam (raycast.cpp): every ray eye + tau (forward + sx right + sy up) for (sx, sy)
+// in a rectangle of the image plane, tau the depth along the camera's forward axis. A march of the beam over a
+// cascade's max mipmap finds, for the whole tile at once, a depth before which no ray of the tile comes down to any
+// maximum of that cascade; each ray's walk there starts at the patch under that depth instead of at the cascade's
+// start. The walk would have skipped every node before it, so the hit is the same (tests: render_test
+// "Beams"), and a ray makes a few visits near its hit instead of the descent from the top (BENCHMARKS.md).
+class Beam {
+public:
+    // (sx0, sy0) and (sx1, sy1): opposite corners of the rectangle, in CameraBasis image-plane units (the pixels'
+    // centres at the tile's corners).
+    // `outer`: a beam holding this one (its rays a subset), whose start depths this one's marches start from.
+    Beam(const RayContext& ctx, const CameraBasis& basis, double sx0, double sy0, double sx1, double sy1, Beam* outer = nullptr);
+    // The depth tau before which no ray of the beam meets cascade k's surfaces or walls; marched once a tile, when
+    // a ray first walks cascade k.
+    double startDepth(size_t k);
+
+private:
+    double march(size_t k);
+    const RayContext& ctx_;
+    Beam* outer_;
+    glm::dvec3 lo_, hi_;           // the componentwise least and largest of the four corner directions
+    double width_ = 0;             // the rectangle's longer side [image-plane units ~ radians]
+    double maxLen_ = 1;            // the longest corner direction (t = tau |direction|, |direction| >= 1)
+    double minDot_ = 0, maxDot_ = 0;  // the least and largest horizontal rate along the fit's view direction
+    double centreLen_ = 1;         // |the centre's direction|
+    std::array<double, 8> depth_;  // per cascade (RenderOptions: at most 4); NaN until marched
+};
+
+// dir: unit direction of the ray. With a beam holding the ray (its direction before normalising was
+// dirLength times dir), each cascade's walk starts where the beam's march allows.
+Hit castRay(const RayContext& ctx, const glm::dvec3& dir, Beam* beam = nullptr, double dirLength = 1);
 
 // Stage 2 on the CPU for a backend that runs the later stages elsewhere (the GL backend over an out-of-core scene,
 // which has no cells or lists to upload): every cascade's textures filled as renderFrame() fills them (from the
