@@ -482,7 +482,7 @@ TEST(Render, HitsLieOnTheExactSurfaceFrom200RandomCameras) {
 // walked from their cascades' starts: the bound only skips nodes that every walk would skip, and the patch there is
 // entered at the same parameter. Every pixel's every layer is compared, bit for bit, over random cameras (rolled
 // too, some with a near plane) on the flooded alpine DEM, the flooded LiDAR tile (shores everywhere: the water
-// rules), and the gully with holes (walls), and from cameras standing in a hole and outside the domain, for tiles
+// rules), and the gully with holes (walls), and from a camera outside the domain looking across it, for tiles
 // of 2, 5 (the image's edge cuts tiles), 8 and 64 pixels. A ray whose path runs exactly through a patch corner may
 // step across it by the other edge and round its hit differently: allowed in one pixel in 10^4, within 1e-9 of its
 // distance; anything else is a wrong bound.
