@@ -1,7 +1,7 @@
 // The terrain read window by window (what each rank of `mpirun hc-ingest` reads, DESIGN.md section 13) against the
 // same raster read whole by loadTerrain, the reference: the same geometry, the same bits in every pixel of every
-// window, and the same reading counts. Sources that are kept as is and sources that are resampled (a geographic
-// raster projected to UTM, a rotated geotransform, --min-cell), on real rasters, with holes.
+// window, and the same reading counts. Sources that are kept as is, resampled (a geographic raster projected to UTM, a
+// rotated geotransform, --min-cell) and warped by GDAL (--t_srs), on real rasters, with holes.
 //
 // "The same bits" is the right tolerance: the ranks' files must be byte-identical to one process's, so a window's
 // pixel must not differ from the whole raster's by even one float ulp.
@@ -173,17 +173,57 @@ TEST(IngestWindows, KeptSourceReadsTheSameBitsByWindow) {
     EXPECT_GT(compareWindows(o, "kept as is", 45, 33), 1000u);
 }
 
-// GDAL's warper (--t_srs) has no window reader: nullptr, with the reason.
-TEST(IngestWindows, WarpedSourceSaysWhyItIsReadWhole) {
+// --t_srs (GDAL's warper, exact transformer): each window warped on its own from the source blocks it reaches, on the
+// whole output's pixel centres and with the kernel's scale fixed: the same bits as the whole warp. The bundled WGS 84
+// tile with a hole to Austria's Gauss-Krueger zone (EPSG:31254), and the same to ETRS89 LAEA (EPSG:3035) at --min-cell
+// 200 (coarser than the ~30 m pixels: the kernel widens).
+TEST(IngestWindows, WarpedSourceReadsTheSameBitsByWindow) {
     HC_REQUIRE_DATA(src, "hef_srtm.tif");
     GDALAllRegister();
+    const std::string path = (tempDir() / "hef_holes_warp.tif").string();
+    {
+        GDALDatasetUniquePtr in(GDALDataset::Open(src.c_str(), GDAL_OF_RASTER | GDAL_OF_READONLY));
+        ASSERT_TRUE(in);
+        GDALDatasetUniquePtr ds(GetGDALDriverManager()->GetDriverByName("GTiff")->CreateCopy(path.c_str(), in.get(), FALSE, nullptr, nullptr, nullptr));
+        ASSERT_TRUE(ds);
+        GDALRasterBand* b = ds->GetRasterBand(1);
+        ASSERT_EQ(b->SetNoDataValue(-32768), CE_None);
+        std::vector<int16_t> hole(40 * 30, -32768);
+        ASSERT_EQ(b->RasterIO(GF_Write, 100, 120, 40, 30, hole.data(), 40, 30, GDT_Int16, 0, 0, nullptr), CE_None);
+    }
     Options o;
-    o.input = src;
-    o.targetSrs = "EPSG:3857";
+    o.input = path;
+    o.targetSrs = "EPSG:31254";
+    EXPECT_GT(compareWindows(o, "warped to MGI / Austria GK West", 37, 23), 50000u);
+    o.targetSrs = "EPSG:3035";
+    o.minCellM = 200;
+    EXPECT_GT(compareWindows(o, "warped to ETRS89-extended / LAEA Europe", 19, 13), 2000u);
+}
+
+// A geographic source past 180 degrees, which --t_srs warps as two pieces (the east one shifted by -360): whether the
+// halves meet is checked on the whole output, so it is read whole, with the reason. The bundled 1-degree global grid
+// moved 90 degrees east (-90 .. 270).
+TEST(IngestWindows, WarpAcross180SaysWhyItIsReadWhole) {
+    HC_REQUIRE_DATA(src, "etopo1_1deg.tif");
+    GDALAllRegister();
+    const std::string path = (tempDir() / "etopo_east.tif").string();
+    {
+        GDALDatasetUniquePtr in(GDALDataset::Open(src.c_str(), GDAL_OF_RASTER | GDAL_OF_READONLY));
+        ASSERT_TRUE(in);
+        double gt[6];
+        ASSERT_EQ(in->GetGeoTransform(gt), CE_None);
+        GDALDatasetUniquePtr ds(GetGDALDriverManager()->GetDriverByName("GTiff")->CreateCopy(path.c_str(), in.get(), FALSE, nullptr, nullptr, nullptr));
+        ASSERT_TRUE(ds);
+        gt[0] += 90;
+        ASSERT_EQ(ds->SetGeoTransform(gt), CE_None);
+    }
+    Options o;
+    o.input = path;
+    o.targetSrs = "EPSG:3832";
     LoadReport rep;
     std::string why;
     EXPECT_FALSE(detail::openTerrainWindows(o, rep, why));
-    EXPECT_NE(why.find("--t_srs"), std::string::npos) << why;
+    EXPECT_NE(why.find("180 degrees"), std::string::npos) << why;
 }
 
 }  // namespace

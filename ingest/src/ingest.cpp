@@ -245,10 +245,11 @@ BuildSummary ingestToFile(const Options& opt, const std::string& path, LoadRepor
     Prepared p = prepare(opt, report);
     setBuild(p, opt, report);
     bindWater(p, opt, report);
-    // Under mpirun over a resampled source (held whole here: water steps), the ranks check their share of the source's
-    // rows against the file once it is written, as ingestByWindows does, instead of rank 0 checking every pixel against
-    // a trace the build paints: no trace, so every rank writes its own cells into the file in place. Through --t_srs
-    // (GDAL's warper: no window reader) rank 0 still checks against the trace, and the ranks send it their cells.
+    // Under mpirun over a resampled or warped source (held whole here: water steps), the ranks check their share of the
+    // source's rows against the file once it is written, as ingestByWindows does, instead of rank 0 checking every pixel
+    // against a trace the build paints: no trace, so every rank writes its own cells into the file in place. Only a
+    // --t_srs warp of a source split at 180 degrees has no window reader: rank 0 then checks against the trace, and the
+    // ranks send it their cells.
     std::unique_ptr<detail::TerrainWindows> checker;
     if (ranks::distributed() && !p.trace.band.values.empty()) {
         LoadReport unused;  // the source was reported by prepare()

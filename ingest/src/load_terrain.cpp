@@ -3,6 +3,7 @@
 #include <cctype>
 #include <chrono>
 #include <cmath>
+#include <functional>
 #include <limits>
 #include <sstream>
 
@@ -12,6 +13,7 @@
 #include <GeographicLib/TransverseMercator.hpp>
 #include <GeographicLib/UTMUPS.hpp>
 #include <gdal_alg.h>
+#include <gdalwarper.h>
 #include <gdal_utils.h>
 
 #include "gdal_util.h"
@@ -102,6 +104,7 @@ struct Resampling {
     bool sayLattice = false;  // UTM: the method names the lattice step (", map exact every N px") and then methodTail
     std::string methodTail;
     std::function<void(size_t row, std::vector<double>& x, std::vector<double>& y, std::vector<int>& ok)> rowToWorld;  // SourceTrace's
+    bool rowToWorldThreadSafe = true;  // false for PROJ's transformations (--t_srs)
 };
 
 // A source on an affine geotransform that is rotated, has non-square pixels or is resampled to --min-cell.
@@ -363,22 +366,6 @@ Raster projectToUtm(SourceBand&& src, const GeoTransform& gt, const OGRSpatialRe
     return r;
 }
 
-// Wraps columns [c0, c1) of a source band in a GDAL MEM dataset (for GDALWarp); gt is that piece's.
-DatasetPtr memDataset(const SourceBand& src, size_t c0, size_t c1, const GeoTransform& gt, const OGRSpatialReference* srs) {
-    GDALDriver* mem = GetGDALDriverManager()->GetDriverByName("MEM");
-    const int w = static_cast<int>(c1 - c0), h = static_cast<int>(src.height);
-    DatasetPtr ds(mem->Create("", w, h, 1, GDT_Float32, nullptr));
-    if (!ds) throw Error("cannot create an in-memory raster: " + detail::lastGdalError());
-    ds->SetGeoTransform(const_cast<double*>(gt.g));
-    if (srs) ds->SetSpatialRef(srs);
-    GDALRasterBand* b = ds->GetRasterBand(1);
-    b->SetNoDataValue(std::numeric_limits<double>::quiet_NaN());
-    if (b->RasterIO(GF_Write, 0, 0, w, h, const_cast<float*>(src.values.data() + c0), w, h, GDT_Float32, sizeof(float),
-                    static_cast<GSpacing>(src.width * sizeof(float)), nullptr) != CE_None)
-        throw Error("cannot fill an in-memory raster: " + detail::lastGdalError());
-    return ds;
-}
-
 }  // namespace
 
 namespace detail {
@@ -466,6 +453,66 @@ double waterStepTimeS(const Options& o, size_t k) { return o.timesS.empty() ? st
 
 namespace {
 
+// A source band as a GDAL dataset for the warper, of the whole source's size and georeferencing, whose blocks come
+// from `fill` (our reading: every kind of nodata as NaN, metres, Terrain-RGB decoded) when the warper asks for them:
+// a rank warping its windows reads only the source pixels they reach, and the one-process warp reads the band it holds.
+// Columns [c0, c0 + width) of the source: one piece of a source split at 180 degrees.
+class SourceDataset final : public GDALDataset {
+public:
+    using Fill = std::function<void(size_t col0, size_t row0, size_t w, size_t h, float* out)>;  // source columns, row-major
+    SourceDataset(size_t c0, size_t width, size_t height, const GeoTransform& gt, const OGRSpatialReference* srs, Fill fill)
+        : gt_(gt), fill_(std::move(fill)) {
+        nRasterXSize = int(width);
+        nRasterYSize = int(height);
+        if (srs) srs_ = *srs;
+        SetBand(1, new Band(this, c0));
+    }
+    CPLErr GetGeoTransform(double* g) override {
+        std::copy(gt_.g, gt_.g + 6, g);
+        return CE_None;
+    }
+    const OGRSpatialReference* GetSpatialRef() const override { return srs_.IsEmpty() ? nullptr : &srs_; }
+
+private:
+    class Band final : public GDALRasterBand {
+    public:
+        Band(SourceDataset* ds, size_t c0) : c0_(c0) {
+            poDS = ds;
+            nBand = 1;
+            eDataType = GDT_Float32;
+            nRasterXSize = ds->nRasterXSize;
+            nRasterYSize = ds->nRasterYSize;
+            nBlockXSize = std::min(nRasterXSize, 512);
+            nBlockYSize = std::min(nRasterYSize, 128);
+        }
+        double GetNoDataValue(int* has) override {
+            if (has) *has = 1;
+            return std::numeric_limits<double>::quiet_NaN();
+        }
+        CPLErr IReadBlock(int bx, int by, void* image) override {
+            const size_t x0 = size_t(bx) * size_t(nBlockXSize), y0 = size_t(by) * size_t(nBlockYSize);
+            const size_t w = std::min(size_t(nBlockXSize), size_t(nRasterXSize) - x0), h = std::min(size_t(nBlockYSize), size_t(nRasterYSize) - y0);
+            auto* out = static_cast<float*>(image);
+            std::fill(out, out + size_t(nBlockXSize) * size_t(nBlockYSize), kNaN);
+            try {
+                std::vector<float> part(w * h);
+                static_cast<SourceDataset*>(poDS)->fill_(c0_ + x0, y0, w, h, part.data());
+                for (size_t r = 0; r < h; ++r) std::copy_n(part.data() + r * w, w, out + r * size_t(nBlockXSize));
+            } catch (const std::exception& e) {
+                CPLError(CE_Failure, CPLE_AppDefined, "%s", e.what());
+                return CE_Failure;
+            }
+            return CE_None;
+        }
+
+    private:
+        size_t c0_;
+    };
+    GeoTransform gt_;
+    OGRSpatialReference srs_;
+    Fill fill_;
+};
+
 // --t_srs with GDAL's warper and the exact transformer (-et 0): GDAL's default approximates the map
 // linearly to within 0.125 source pixel: 10.9 m of elevation error on hef_srtm spread over 4 x 2
 // degrees (test Issue11.TargetSrsUsesTheExactTransformer; 0.12 mm exact), up to 55 m in issue 11.
@@ -473,14 +520,93 @@ namespace {
 // there and its east part shifted by -360 (both parts warped into the one output): PROJ's inverse
 // gives longitudes in -180..180 only, so without the split every pixel past 180 would be lost.
 // Columns that repeat the first ones (a global grid's closing column at west + 360) are left out.
-Raster warpToTarget(SourceBand&& src, const GeoTransform& gtIn, const OGRSpatialReference& srs, const OGRSpatialReference& target,
-                    const Options& opt, LoadReport& report, detail::SourceTrace* trace) {
+//
+// The output lattice is planned from the source's georeferencing alone (planWarp: no pixel read), and any window of it
+// is warped on its own (WarpPlan::warp): the one-process warp is the whole output as one window, a rank's its windows.
+// A window's pixel centres are the whole output's (the transformer is handed the whole output's pixel coordinates), and
+// the kernel's scale is fixed (GDAL's XSCALE, YSCALE: its own estimate changes from chunk to chunk), so a window holds
+// the same bits as the whole output there (tests/ingest_windows_test.cpp).
+struct WarpPlan {
     struct Piece {
         size_t c0, c1;
         GeoTransform gt;
     };
-    std::vector<Piece> pieces{{0, src.width, gtIn}};
-    std::string note;
+    std::vector<Piece> pieces;
+    std::vector<std::unique_ptr<SourceDataset>> sources;  // one per piece
+    std::string note;                                     // for the report's method
+    std::shared_ptr<OGRCoordinateTransformation> ct;       // source CRS -> target CRS (PROJ, exact)
+    OGRSpatialReference target;
+    std::string targetText, input;
+    double ext[4] = {0, 0, 0, 0};  // west, south, east, north [target units]
+    double cell = 1, scale = 1;    // output pixel [target units]; output pixels per source pixel (the kernel's)
+    size_t width = 0, height = 0;  // output pixels
+    unsigned threads = 0;
+
+    GeoTransform outputGt() const {
+        GeoTransform g;
+        const double gg[6] = {ext[0], cell, 0, ext[3], 0, -cell};
+        std::copy(gg, gg + 6, g.g);
+        return g;
+    }
+
+    // Output pixels [col0, col0 + w) x [row0, row0 + h) into out (w h, row-major, NaN where no source reaches).
+    void warp(size_t col0, size_t row0, size_t w, size_t h, float* out) const {
+        std::fill(out, out + w * h, kNaN);
+        // The whole output as a virtual raster (nothing allocated): the transformer maps its pixel coordinates, so a
+        // window's pixels are computed as in the whole output; WarpRegionToBuffer fills only the window.
+        GDALDriver* vrt = GetGDALDriverManager()->GetDriverByName("VRT");
+        DatasetPtr dst(vrt->Create("", int(width), int(height), 1, GDT_Float32, nullptr));
+        if (!dst) throw Error("cannot create a virtual raster: " + detail::lastGdalError());
+        GeoTransform g = outputGt();
+        dst->SetGeoTransform(g.g);
+        dst->SetSpatialRef(&target);
+        dst->GetRasterBand(1)->SetNoDataValue(std::numeric_limits<double>::quiet_NaN());
+        for (const auto& source : sources) {
+            char** dstOpt = CSLSetNameValue(nullptr, "DST_SRS", targetText.c_str());
+            void* tr = GDALCreateGenImgProjTransformer2(GDALDataset::ToHandle(source.get()), GDALDataset::ToHandle(dst.get()), dstOpt);
+            CSLDestroy(dstOpt);
+            if (!tr) throw Error("--t_srs " + targetText + ": cannot transform " + input + ": " + detail::lastGdalError());
+            std::unique_ptr<void, void (*)(void*)> trOwner(tr, GDALDestroyGenImgProjTransformer);
+            GDALWarpOptions* wo = GDALCreateWarpOptions();
+            std::unique_ptr<GDALWarpOptions, void (*)(GDALWarpOptions*)> woOwner(wo, GDALDestroyWarpOptions);
+            wo->hSrcDS = GDALDataset::ToHandle(source.get());
+            wo->hDstDS = GDALDataset::ToHandle(dst.get());
+            wo->nBandCount = 1;
+            wo->panSrcBands = static_cast<int*>(CPLMalloc(sizeof(int)));
+            wo->panDstBands = static_cast<int*>(CPLMalloc(sizeof(int)));
+            wo->panSrcBands[0] = wo->panDstBands[0] = 1;
+            wo->eResampleAlg = GRA_Bilinear;
+            wo->eWorkingDataType = GDT_Float32;
+            wo->padfSrcNoDataReal = static_cast<double*>(CPLMalloc(sizeof(double)));
+            wo->padfDstNoDataReal = static_cast<double*>(CPLMalloc(sizeof(double)));
+            wo->padfSrcNoDataReal[0] = wo->padfDstNoDataReal[0] = std::numeric_limits<double>::quiet_NaN();
+            wo->pfnTransformer = GDALGenImgProjTransform;  // exact: no approximation (gdalwarp -et 0)
+            wo->pTransformerArg = tr;
+            const std::string sc = fmt(scale, 17);
+            wo->papszWarpOptions = CSLSetNameValue(wo->papszWarpOptions, "XSCALE", sc.c_str());
+            wo->papszWarpOptions = CSLSetNameValue(wo->papszWarpOptions, "YSCALE", sc.c_str());
+            wo->papszWarpOptions = CSLSetNameValue(wo->papszWarpOptions, "NUM_THREADS", std::to_string(resolveThreads(threads)).c_str());
+            GDALWarpOperation op;
+            CPLErrorReset();
+            if (op.Initialize(wo) != CE_None || op.WarpRegionToBuffer(int(col0), int(row0), int(w), int(h), out, GDT_Float32) != CE_None)
+                throw Error(input + ": projecting to " + targetText + ": " + detail::lastGdalError());
+            source->FlushCache(false);  // drops its blocks from GDAL's cache: the next window reads what it reaches
+        }
+    }
+};
+
+// The output lattice of --t_srs for a source of width x height pixels on gtIn (no pixel read: `fill` gives them when a
+// window is warped), the pieces, and the report's method note.
+WarpPlan planWarp(const GeoTransform& gtIn, size_t width, size_t height, const OGRSpatialReference& srs, const OGRSpatialReference& target,
+                  const Options& opt, LoadReport& report, const SourceDataset::Fill& fill) {
+    WarpPlan plan;
+    plan.target = target;
+    plan.targetText = opt.targetSrs;
+    plan.input = opt.input;
+    plan.threads = opt.threads;
+    auto& pieces = plan.pieces;
+    pieces = {{0, width, gtIn}};
+    std::string& note = plan.note;
     const double dx = gtIn.g[1];
     if (srs.IsGeographic() && !gtIn.rotated() && dx > 0 && srs.GetPrimeMeridian() == 0 &&
         std::abs(srs.GetAngularUnits() - M_PI / 180) < 1e-12) {
@@ -488,11 +614,11 @@ Raster warpToTarget(SourceBand&& src, const GeoTransform& gtIn, const OGRSpatial
         // West edge into [-180, 180) give or take half a pixel: a grid whose first pixel centre is at -180
         // (west edge -180.5) stays where it is.
         gt.g[0] -= 360.0 * std::floor((gt.g[0] + dx / 2 + 180.0) / 360.0);
-        const double width = static_cast<double>(src.width);
+        const double w = static_cast<double>(width);
         // Columns with centres at 180 or beyond go east; those at west + 360 or beyond repeat column 0.
-        const auto firstEast = static_cast<size_t>(std::clamp(std::ceil((180.0 - gt.g[0]) / dx - 0.5), 0.0, width));
-        const auto end = static_cast<size_t>(std::clamp(std::ceil(360.0 / dx - 1e-6), 0.0, width));
-        pieces.assign(1, Piece{0, firstEast, gt});  // not = {{...}}: GCC 12 with ASan detect_stack_use_after_return crashed copying that initializer list
+        const auto firstEast = static_cast<size_t>(std::clamp(std::ceil((180.0 - gt.g[0]) / dx - 0.5), 0.0, w));
+        const auto end = static_cast<size_t>(std::clamp(std::ceil(360.0 / dx - 1e-6), 0.0, w));
+        pieces.assign(1, WarpPlan::Piece{0, firstEast, gt});  // not = {{...}}: GCC 12 with ASan detect_stack_use_after_return crashed copying that initializer list
         if (firstEast < end) {
             GeoTransform east = gt;
             east.g[0] = gt.g[0] + static_cast<double>(firstEast) * dx - 360.0;
@@ -500,33 +626,33 @@ Raster warpToTarget(SourceBand&& src, const GeoTransform& gtIn, const OGRSpatial
             note = "; split at 180 degrees (east part shifted by -360)";
         }
         if (gt.g[0] != gtIn.g[0]) note += "; longitudes moved by " + fmt(gt.g[0] - gtIn.g[0]) + " degrees";
-        if (end < src.width) note += "; " + std::to_string(src.width - end) + " closing column(s) repeating the first left out";
+        if (end < width) note += "; " + std::to_string(width - end) + " closing column(s) repeating the first left out";
         if (pieces[0].c1 == 0) pieces.erase(pieces.begin());
     }
-    const std::string targetText = opt.targetSrs;
+    const std::string& targetText = plan.targetText;
     // Source coordinates -> target CRS, exact (PROJ): for the output extent and the source check.
     OGRSpatialReference from = srs, to = target;
     from.SetAxisMappingStrategy(OAMS_TRADITIONAL_GIS_ORDER);
     to.SetAxisMappingStrategy(OAMS_TRADITIONAL_GIS_ORDER);
-    std::shared_ptr<OGRCoordinateTransformation> ct(OGRCreateCoordinateTransformation(&from, &to),
-                                                    [](OGRCoordinateTransformation* t) { OGRCoordinateTransformation::DestroyCT(t); });
-    if (!ct) throw Error("--t_srs " + targetText + ": cannot transform from " + report.sourceCrsName + ": " + detail::lastGdalError());
+    plan.ct.reset(OGRCreateCoordinateTransformation(&from, &to), [](OGRCoordinateTransformation* t) { OGRCoordinateTransformation::DestroyCT(t); });
+    if (!plan.ct) throw Error("--t_srs " + targetText + ": cannot transform from " + report.sourceCrsName + ": " + detail::lastGdalError());
     // The output extent: GDAL's suggestion shrinks to what its edge samples reach, and loses every
     // row beyond a failing edge (a global grid's poles at +-90.5 cut it to +-81 degrees). So: the
     // bounding box of the pixel corners and centres that do transform: all along the outline, and on a
     // lattice of every k-th one inside (at most about 1024 x 1024 points; whatever an extreme between
     // lattice points leaves out is counted by the source check as lost).
-    double ext[4] = {HUGE_VAL, HUGE_VAL, -HUGE_VAL, -HUGE_VAL};
+    double* ext = plan.ext;
+    ext[0] = ext[1] = HUGE_VAL, ext[2] = ext[3] = -HUGE_VAL;
     {
-        const size_t k = std::max<size_t>(1, std::max(src.width, src.height) / 1024);
+        const size_t k = std::max<size_t>(1, std::max(width, height) / 1024);
         std::vector<double> xs, ys;
         auto take = [&](double half) {  // half = 0: corners; 0.5: centres (the last ones clamped to the edge)
-            const size_t n = src.width + 1, m = src.height + 1;
+            const size_t n = width + 1, m = height + 1;
             for (size_t j = 0; j < m; ++j) {
                 const bool edgeRow = j == 0 || j + 2 >= m;
                 for (size_t i = 0; i < n; ++i) {
                     if (!(edgeRow || i == 0 || i + 2 >= n || (i % k == 0 && j % k == 0))) continue;
-                    const double c = std::min(double(i) + half, double(src.width)), r = std::min(double(j) + half, double(src.height));
+                    const double c = std::min(double(i) + half, double(width)), r = std::min(double(j) + half, double(height));
                     double x, y;
                     gtIn.apply(c, r, x, y);
                     xs.push_back(x);
@@ -538,7 +664,7 @@ Raster warpToTarget(SourceBand&& src, const GeoTransform& gtIn, const OGRSpatial
         take(0.5);
         std::vector<int> ok(xs.size());
         CPLErrorReset();
-        ct->Transform(static_cast<int>(xs.size()), xs.data(), ys.data(), nullptr, ok.data());
+        plan.ct->Transform(static_cast<int>(xs.size()), xs.data(), ys.data(), nullptr, ok.data());
         for (size_t i = 0; i < xs.size(); ++i)
             if (ok[i] && std::isfinite(xs[i]) && std::isfinite(ys[i]))
                 ext[0] = std::min(ext[0], xs[i]), ext[1] = std::min(ext[1], ys[i]), ext[2] = std::max(ext[2], xs[i]),
@@ -546,46 +672,87 @@ Raster warpToTarget(SourceBand&& src, const GeoTransform& gtIn, const OGRSpatial
         if (!(ext[0] < ext[2] && ext[1] < ext[3]))
             throw Error(opt.input + ": no part of it has a position in " + targetText + " (PROJ: " + detail::lastGdalError() + ")");
     }
-    std::vector<DatasetPtr> mems;
-    std::vector<GDALDataset*> inputs;
-    double cell = HUGE_VAL;
-    for (const Piece& pc : pieces) {
-        mems.push_back(memDataset(src, pc.c0, pc.c1, pc.gt, &srs));
-        inputs.push_back(mems.back().get());
-        if (opt.minCellM) continue;
+    double suggested = HUGE_VAL;
+    for (const WarpPlan::Piece& pc : pieces) {
+        plan.sources.push_back(std::make_unique<SourceDataset>(pc.c0, pc.c1 - pc.c0, height, pc.gt, &srs, fill));
         // GDAL's suggested output, made square with the smaller side (the finest over the pieces).
         char** dst = CSLSetNameValue(nullptr, "DST_SRS", targetText.c_str());
-        void* tr = GDALCreateGenImgProjTransformer2(GDALDataset::ToHandle(mems.back().get()), nullptr, dst);
+        void* tr = GDALCreateGenImgProjTransformer2(GDALDataset::ToHandle(plan.sources.back().get()), nullptr, dst);
         CSLDestroy(dst);
         if (!tr) throw Error("--t_srs " + targetText + ": cannot transform from " + report.sourceCrsName + ": " + detail::lastGdalError());
         double sg[6];
         int pw = 0, ph = 0;
-        CPLErr e = GDALSuggestedWarpOutput(GDALDataset::ToHandle(mems.back().get()), GDALGenImgProjTransform, tr, sg, &pw, &ph);
+        CPLErr e = GDALSuggestedWarpOutput(GDALDataset::ToHandle(plan.sources.back().get()), GDALGenImgProjTransform, tr, sg, &pw, &ph);
         GDALDestroyGenImgProjTransformer(tr);
         if (e != CE_None) throw Error("--t_srs " + targetText + ": cannot project " + opt.input + ": " + detail::lastGdalError());
-        cell = std::min({cell, std::abs(sg[1]), std::abs(sg[5])});
+        suggested = std::min({suggested, std::abs(sg[1]), std::abs(sg[5])});
     }
-    if (opt.minCellM) cell = *opt.minCellM / target.GetLinearUnits();
+    plan.cell = opt.minCellM ? *opt.minCellM / target.GetLinearUnits() : suggested;
+    plan.scale = std::min(1.0, suggested / plan.cell);  // coarser than the source: the kernel widens (GDAL's downsampling)
     // Half a pixel more on every side: source pixel centres on the extent's edge (a pole, the
     // antimeridian) then fall inside the output rather than on its closing edge.
+    const double cell = plan.cell;
     ext[0] -= cell / 2, ext[1] -= cell / 2, ext[2] += cell / 2, ext[3] += cell / 2;
-    std::vector<std::string> args{"-t_srs", targetText, "-r", "bilinear", "-et", "0", "-of", "MEM", "-ot", "Float32",
-                                  "-srcnodata", "nan", "-dstnodata", "nan", "-wo", "NUM_THREADS=ALL_CPUS",
-                                  "-tr", fmt(cell, 17), fmt(cell, 17),
-                                  "-te", fmt(ext[0], 17), fmt(ext[1], 17), fmt(ext[2], 17), fmt(ext[3], 17)};
-    DatasetPtr warped = detail::warp(inputs, args, opt.input + ": projecting to " + targetText);
-    mems.clear();
-    OGRSpatialReference out = *warped->GetSpatialRef();
+    // gdalwarp's size for -te and -tr.
+    plan.width = size_t((ext[2] - ext[0] + cell / 2) / cell);
+    plan.height = size_t((ext[3] - ext[1] + cell / 2) / cell);
+    if (plan.width == 0 || plan.height == 0) throw Error(opt.input + ": projected to " + targetText + ": an empty raster");
+    checkWorkingSize(double(plan.width), double(plan.height), cell * target.GetLinearUnits(), opt);
+    return plan;
+}
+
+// The working raster's CRS of a warp: the target with its linear unit made metres (the lattice is scaled to match).
+OGRSpatialReference metricTarget(const WarpPlan& plan, double& unit) {
+    OGRSpatialReference out = plan.target;
     out.SetAxisMappingStrategy(OAMS_TRADITIONAL_GIS_ORDER);
-    GeoTransform wgt;
-    warped->GetGeoTransform(wgt.g);
-    SourceBand ws = detail::readFloatBand(*warped, opt.input);
-    warped.reset();
+    unit = out.GetLinearUnits();
+    if (unit != 1.0) out.SetLinearUnitsAndUpdateParameters(SRS_UL_METER, 1.0);
+    return out;
+}
+
+// Where each source pixel centre lands in the working raster's CRS [m]: PROJ, exact, from the source's own coordinates.
+std::function<void(size_t, std::vector<double>&, std::vector<double>&, std::vector<int>&)> warpRowToWorld(const WarpPlan& plan,
+                                                                                                        const GeoTransform& gtIn, double unit) {
+    return [ct = plan.ct, gt = gtIn, unit](size_t row, std::vector<double>& x, std::vector<double>& y, std::vector<int>& ok) {
+        for (size_t c = 0; c < x.size(); ++c) gt.apply(static_cast<double>(c) + 0.5, static_cast<double>(row) + 0.5, x[c], y[c]);
+        CPLErrorReset();
+        ct->Transform(static_cast<int>(x.size()), x.data(), y.data(), nullptr, ok.data());
+        for (size_t c = 0; c < x.size(); ++c) {
+            ok[c] = ok[c] && std::isfinite(x[c]) && std::isfinite(y[c]);
+            x[c] *= unit;
+            y[c] *= unit;
+        }
+    };
+}
+
+Raster warpToTarget(SourceBand&& src, const GeoTransform& gtIn, const OGRSpatialReference& srs, const OGRSpatialReference& target,
+                    const Options& opt, LoadReport& report, detail::SourceTrace* trace) {
+    auto fill = [&src](size_t c0, size_t r0, size_t w, size_t h, float* out) {
+        for (size_t r = 0; r < h; ++r) std::copy_n(src.values.data() + (r0 + r) * src.width + c0, w, out + r * w);
+    };
+    WarpPlan plan = planWarp(gtIn, src.width, src.height, srs, target, opt, report, fill);
+    SourceBand ws;
+    ws.width = plan.width, ws.height = plan.height;
+    ws.values.resize(ws.width * ws.height);
+    {
+        // In strips of rows (each its own window), so the warper's buffers stay small.
+        const size_t strip = std::max<size_t>(1, (size_t{1} << 22) / ws.width);
+        Progress progress("projecting to " + plan.targetText, ws.height, opt.progress);
+        for (size_t r0 = 0; r0 < ws.height; r0 += strip) {
+            const size_t rows = std::min(strip, ws.height - r0);
+            plan.warp(0, r0, ws.width, rows, ws.values.data() + r0 * ws.width);
+            progress.advance(rows);
+        }
+        progress.finish();
+    }
+    const std::string& targetText = plan.targetText;
+    const std::string& note = plan.note;
+    GeoTransform wgt = plan.outputGt();
     if (std::none_of(ws.values.begin(), ws.values.end(), [](float v) { return !std::isnan(v); }))
         throw Error(opt.input + ": projected to " + targetText + " on " + std::to_string(ws.width) + " x " + std::to_string(ws.height) +
                     " pixels of " + fmt(std::abs(wgt.g[1]), 6) + " (CRS units), no pixel centre falls inside the data: " +
                     "the footprint is too thin for that resolution; give a finer one with --min-cell");
-    if (pieces.size() == 2) {
+    if (plan.pieces.size() == 2) {
         // Split at 180, the two halves must meet in the target map; in one whose own edge is at 180
         // (EPSG:3857, say) they land at its opposite edges, a world apart, with nothing between.
         const size_t valid = static_cast<size_t>(std::count_if(ws.values.begin(), ws.values.end(), [](float v) { return !std::isnan(v); }));
@@ -595,28 +762,18 @@ Raster warpToTarget(SourceBand&& src, const GeoTransform& gtIn, const OGRSpatial
                         std::to_string(ws.width) + " px wide raster); choose a --t_srs whose central meridian is near the data (e.g. " +
                         "EPSG:3832, PDC Mercator, or '+proj=laea +lon_0=180 +lat_0=...') or leave --t_srs out for its UTM zone");
     }
-    const double unit = out.GetLinearUnits();
+    double unit = 1;
+    const OGRSpatialReference out = metricTarget(plan, unit);
     for (double& v : wgt.g) v *= unit;
-    if (unit != 1.0) out.SetLinearUnitsAndUpdateParameters(SRS_UL_METER, 1.0);
     report.gridCrsName = detail::crsName(&out);
     report.method = "warped to " + report.gridCrsName + " by GDAL (bilinear, exact transformer)" + note;
     Options keep = opt;
     keep.minCellM.reset();  // -tr already applied it
     Raster r = fromSourceAffine(std::move(ws), wgt, std::abs(wgt.g[1]), detail::toWkt(out), keep, report, nullptr);
     if (trace) {
-        // Where each source pixel centre lands: PROJ, exact, from the source's own coordinates.
         trace->band = std::move(src);
-        trace->rowToWorldThreadSafe = false;
-        trace->rowToWorld = [ct, gt = gtIn, unit](size_t row, std::vector<double>& x, std::vector<double>& y, std::vector<int>& ok) {
-            for (size_t c = 0; c < x.size(); ++c) gt.apply(static_cast<double>(c) + 0.5, static_cast<double>(row) + 0.5, x[c], y[c]);
-            CPLErrorReset();
-            ct->Transform(static_cast<int>(x.size()), x.data(), y.data(), nullptr, ok.data());
-            for (size_t c = 0; c < x.size(); ++c) {
-                ok[c] = ok[c] && std::isfinite(x[c]) && std::isfinite(y[c]);
-                x[c] *= unit;
-                y[c] *= unit;
-            }
-        };
+        trace->rowToWorldThreadSafe = false;  // PROJ's transformations
+        trace->rowToWorld = warpRowToWorld(plan, gtIn, unit);
     }
     return r;
 }
@@ -828,11 +985,40 @@ public:
         step_ = detail::latticeStep(plan_.shape, plan_.map, plan_.lattice, plan_.maxErrorPx, threads_);
         if (plan_.sayLattice) report.method += ", map exact every " + std::to_string(step_) + " px" + plan_.methodTail;
     }
+    // --t_srs: the windows warped by GDAL (WarpPlan::warp), the source's blocks read as the warper asks for them.
+    ResampledWindows(Opened&& o, const Options& opt, LoadReport& report) : o_(std::move(o)), threads_(opt.threads), progress_(opt.progress) {
+        const size_t width = o_.band->width(), height = o_.band->height();
+        auto fill = [this](size_t c0, size_t r0, size_t w, size_t h, float* out) {
+            std::vector<float> residual;  // the warper takes float32 values (as read whole)
+            detail::SourceTally uncounted;  // counted once by tally()
+            o_.band->read(c0, r0, w, h, out, residual, 0, w * h, uncounted);
+        };
+        warp_ = std::make_unique<WarpPlan>(planWarp(o_.gt, width, height, o_.srs, o_.target, opt, report, fill));
+        double unit = 1;
+        const OGRSpatialReference out = metricTarget(*warp_, unit);
+        GeoTransform wgt = warp_->outputGt();
+        for (double& v : wgt.g) v *= unit;
+        report.gridCrsName = detail::crsName(&out);
+        report.method = "warped to " + report.gridCrsName + " by GDAL (bilinear, exact transformer)" + warp_->note;
+        Raster& r = plan_.shape;  // as fromSourceAffine keeps the warped raster (north-up, square: as is)
+        r.crsWkt = detail::toWkt(out);
+        r.crsName = report.gridCrsName;
+        bool flipX = false, flipY = false;
+        keptGeometry(wgt, warp_->width, warp_->height, r, flipX, flipY, report);
+        plan_.rowToWorld = warpRowToWorld(*warp_, o_.gt, unit);
+        plan_.rowToWorldThreadSafe = false;
+    }
     const Raster& shape() const override { return plan_.shape; }
+    bool acrossAntimeridian() const { return warp_ && warp_->pieces.size() > 1; }
     void read(size_t col0, size_t row0, size_t w, size_t h, std::vector<float>& values, std::vector<float>& rounding) override {
         if (col0 + w > plan_.shape.width || row0 + h > plan_.shape.height) throw Error("window outside the working raster");
         values.assign(w * h, kNaN);
         rounding.clear();  // a resampled raster keeps float32 values only (as read whole)
+        if (warp_) {
+            warp_->warp(col0, row0, w, h, values.data());
+            o_.band->dropCache();
+            return;
+        }
         const size_t width = o_.band->width(), height = o_.band->height();
         auto readSource = [&](size_t c0, size_t r0, size_t c1, size_t r1) {
             const size_t sw = c1 - c0 + 1, sh = r1 - r0 + 1;
@@ -898,7 +1084,7 @@ private:
             size_t c0 = SIZE_MAX, c1 = 0, w0 = SIZE_MAX, w1 = 0;  // the working pixels the centres reach
         };
         std::vector<Box> boxes(workers);
-        parallelFor(rows, 4, threads_, [&](size_t b, size_t e, unsigned worker) {
+        parallelFor(rows, 4, plan_.rowToWorldThreadSafe ? threads_ : 1, [&](size_t b, size_t e, unsigned worker) {
             std::vector<double> x(width), y(width);
             std::vector<int> ok(width);
             Box& box = boxes[worker];
@@ -950,6 +1136,7 @@ private:
 
     Opened o_;
     Resampling plan_;
+    std::unique_ptr<WarpPlan> warp_;  // --t_srs
     unsigned threads_;
     bool progress_;
     int step_ = 1;
@@ -995,7 +1182,14 @@ std::unique_ptr<detail::TerrainWindows> detail::openTerrainWindows(const Options
     Opened o = openTerrain(opt, report);
     const size_t width = o.band->width(), height = o.band->height();
     switch (o.route) {
-    case Opened::Route::Warp: why = "--t_srs warps the whole source (GDAL's warper)"; return nullptr;
+    case Opened::Route::Warp: {
+        auto w = std::make_unique<ResampledWindows>(std::move(o), opt, report);
+        if (w->acrossAntimeridian()) {
+            why = "--t_srs over a source split at 180 degrees warps the whole source (its halves' meeting is checked on the whole)";
+            return nullptr;
+        }
+        return w;
+    }
     case Opened::Route::Utm: {
         Resampling plan = planUtm(o.gt, width, height, o.srs, opt, report, false);
         return std::make_unique<ResampledWindows>(std::move(o), std::move(plan), opt, report);

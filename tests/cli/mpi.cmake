@@ -90,6 +90,33 @@ done
 do "$HC_MPIRUN" -np $n "$HC_INGEST" "$HC_DATA_DIR/south_glacier_utm7.tif" --water-level 2200,2400,2600 -o g$n.hcg || exit 1
 done]])
 
+  # --t_srs (GDAL's warper): each rank warps its own windows from the source blocks they reach (the whole output's
+  # pixel centres, the kernel's scale fixed), checks its share of the source's rows against the file, and the file is
+  # the same bytes as one process writes, with the same summary; with water steps too (read whole on every rank, the
+  # cells still written in place). The bundled WGS 84 DEM to Austria's Gauss-Krueger zone.
+  hc_mpi_test(mpi.ingest_warped_windows 0 [[rank 3/3: [0-9]+ windows? read, [0-9]+ px \([0-9.]+ % of the raster\)]]
+    --setup [["$HC_INGEST" "$HC_DATA_DIR/hef_srtm.tif" --t_srs EPSG:31254 -o one.hcg > one.txt 2>&1 &&
+"$HC_INGEST" --quiet "$HC_DATA_DIR/hef_srtm.tif" --t_srs EPSG:31254 --water-level 2600,2900 -o w1.hcg]]
+    --match [[rank 2/3: [0-9]+ source pixels of its rows checked against the cells under them]]
+    --match [[rank 3/3: its [0-9]+ cells \([0-9.]+ MB\) written into the output in place]]
+    --no-match [[error:|warps the whole source]]
+    --check [[cmp one.hcg g2.hcg && cmp one.hcg g3.hcg && cmp w1.hcg w3.hcg
+grep -E 'warped to MGI / Austria GK West' g3.txt
+grep -E '^  |warning' one.txt | grep -vE '^ +(time|memory) ' > a.txt
+grep -E '^  |warning' g3.txt | grep -vE '^ +(time|memory) ' > b.txt
+diff a.txt b.txt]]
+    -- ${HC_BASH} -c [[for n in 2 3
+do if ! "$HC_MPIRUN" -np $n "$HC_INGEST" "$HC_DATA_DIR/hef_srtm.tif" --t_srs EPSG:31254 -o g$n.hcg > g$n.txt 2>&1
+then cat g$n.txt
+exit 1
+fi
+done
+if ! "$HC_MPIRUN" -np 3 "$HC_INGEST" "$HC_DATA_DIR/hef_srtm.tif" --t_srs EPSG:31254 --water-level 2600,2900 -o w3.hcg > w3.txt 2>&1
+then cat w3.txt
+exit 1
+fi
+cat g3.txt w3.txt]])
+
   # hc-influence: lists and both steps' pyramids, the same bytes from 1, 2 and 3 ranks; each rank says its share once,
   # and no rank read the grid whole for its lists (its nodes' cells and their halo: fewer cells than the grid has).
   hc_mpi_test(mpi.influence_holes_steps 0 [[rank 3/3: [0-9]+ nodes, [0-9]+ cells. lists in [0-9.]+ s \([0-9]+ cells read with their halo\). [0-9]+ pyramid tiles]]
