@@ -10,6 +10,7 @@
 #include <cmath>
 #include <cstring>
 #include <filesystem>
+#include <functional>
 #include <random>
 
 #include <gdal_priv.h>
@@ -109,21 +110,36 @@ size_t compareWindows(const Options& o, const std::string& expectMethod, size_t 
     return valid;
 }
 
+// A GeoTIFF copy of `src` at `path` whose geotransform `change` rewrites.
+void copyWithGeoTransform(const std::string& src, const std::string& path, const std::function<void(double*)>& change) {
+    GDALDatasetUniquePtr in(GDALDataset::Open(src.c_str(), GDAL_OF_RASTER | GDAL_OF_READONLY));
+    ASSERT_TRUE(in);
+    double gt[6];
+    ASSERT_EQ(in->GetGeoTransform(gt), CE_None);
+    GDALDatasetUniquePtr ds(GetGDALDriverManager()->GetDriverByName("GTiff")->CreateCopy(path.c_str(), in.get(), FALSE, nullptr, nullptr, nullptr));
+    ASSERT_TRUE(ds);
+    change(gt);
+    ASSERT_EQ(ds->SetGeoTransform(gt), CE_None);
+}
+
+// A copy of the bundled WGS 84 SRTM tile at `path` with a 40 x 30 px box burnt to its declared nodata (-32768).
+void copyWithHole(const std::string& src, const std::string& path) {
+    GDALDatasetUniquePtr in(GDALDataset::Open(src.c_str(), GDAL_OF_RASTER | GDAL_OF_READONLY));
+    ASSERT_TRUE(in);
+    GDALDatasetUniquePtr ds(GetGDALDriverManager()->GetDriverByName("GTiff")->CreateCopy(path.c_str(), in.get(), FALSE, nullptr, nullptr, nullptr));
+    ASSERT_TRUE(ds);
+    GDALRasterBand* b = ds->GetRasterBand(1);
+    ASSERT_EQ(b->SetNoDataValue(-32768), CE_None);
+    std::vector<int16_t> hole(40 * 30, -32768);
+    ASSERT_EQ(b->RasterIO(GF_Write, 100, 120, 40, 30, hole.data(), 40, 30, GDT_Int16, 0, 0, nullptr), CE_None);
+}
+
 // The bundled WGS 84 SRTM tile (384 x 284 px of 1"), a box of it burnt to its declared nodata: projected to UTM 32N.
 TEST(IngestWindows, GeographicSourceProjectedToUtmReadsTheSameBitsByWindow) {
     HC_REQUIRE_DATA(src, "hef_srtm.tif");
     GDALAllRegister();
     const std::string path = (tempDir() / "hef_holes.tif").string();
-    {
-        GDALDatasetUniquePtr in(GDALDataset::Open(src.c_str(), GDAL_OF_RASTER | GDAL_OF_READONLY));
-        ASSERT_TRUE(in);
-        GDALDatasetUniquePtr ds(GetGDALDriverManager()->GetDriverByName("GTiff")->CreateCopy(path.c_str(), in.get(), FALSE, nullptr, nullptr, nullptr));
-        ASSERT_TRUE(ds);
-        GDALRasterBand* b = ds->GetRasterBand(1);
-        ASSERT_EQ(b->SetNoDataValue(-32768), CE_None);
-        std::vector<int16_t> hole(40 * 30, -32768);
-        ASSERT_EQ(b->RasterIO(GF_Write, 100, 120, 40, 30, hole.data(), 40, 30, GDT_Int16, 0, 0, nullptr), CE_None);
-    }
+    ASSERT_NO_FATAL_FAILURE(copyWithHole(src, path));
     Options o;
     o.input = path;
     const size_t valid = compareWindows(o, "projected to UTM zone 32N", 37, 23);
@@ -135,17 +151,11 @@ TEST(IngestWindows, RotatedGeotransformReadsTheSameBitsByWindow) {
     HC_REQUIRE_DATA(src, "lidar1m_minnesota_utm15.tif");
     GDALAllRegister();
     const std::string path = (tempDir() / "lidar_rotated.tif").string();
-    {
-        GDALDatasetUniquePtr in(GDALDataset::Open(src.c_str(), GDAL_OF_RASTER | GDAL_OF_READONLY));
-        ASSERT_TRUE(in);
-        double gt[6];
-        ASSERT_EQ(in->GetGeoTransform(gt), CE_None);
-        GDALDatasetUniquePtr ds(GetGDALDriverManager()->GetDriverByName("GTiff")->CreateCopy(path.c_str(), in.get(), FALSE, nullptr, nullptr, nullptr));
-        ASSERT_TRUE(ds);
+    ASSERT_NO_FATAL_FAILURE(copyWithGeoTransform(src, path, [](double* gt) {
         const double a = 20 * M_PI / 180, px = gt[1];
-        double rot[6] = {gt[0], px * std::cos(a), px * std::sin(a), gt[3], px * std::sin(a), -px * std::cos(a)};
-        ASSERT_EQ(ds->SetGeoTransform(rot), CE_None);
-    }
+        const double rot[6] = {gt[0], px * std::cos(a), px * std::sin(a), gt[3], px * std::sin(a), -px * std::cos(a)};
+        std::copy(rot, rot + 6, gt);
+    }));
     Options o;
     o.input = path;
     EXPECT_GT(compareWindows(o, "rotated geotransform", 64, 41), 10000u);
@@ -181,16 +191,7 @@ TEST(IngestWindows, WarpedSourceReadsTheSameBitsByWindow) {
     HC_REQUIRE_DATA(src, "hef_srtm.tif");
     GDALAllRegister();
     const std::string path = (tempDir() / "hef_holes_warp.tif").string();
-    {
-        GDALDatasetUniquePtr in(GDALDataset::Open(src.c_str(), GDAL_OF_RASTER | GDAL_OF_READONLY));
-        ASSERT_TRUE(in);
-        GDALDatasetUniquePtr ds(GetGDALDriverManager()->GetDriverByName("GTiff")->CreateCopy(path.c_str(), in.get(), FALSE, nullptr, nullptr, nullptr));
-        ASSERT_TRUE(ds);
-        GDALRasterBand* b = ds->GetRasterBand(1);
-        ASSERT_EQ(b->SetNoDataValue(-32768), CE_None);
-        std::vector<int16_t> hole(40 * 30, -32768);
-        ASSERT_EQ(b->RasterIO(GF_Write, 100, 120, 40, 30, hole.data(), 40, 30, GDT_Int16, 0, 0, nullptr), CE_None);
-    }
+    ASSERT_NO_FATAL_FAILURE(copyWithHole(src, path));
     Options o;
     o.input = path;
     o.targetSrs = "EPSG:31254";
@@ -207,16 +208,7 @@ TEST(IngestWindows, WarpAcross180SaysWhyItIsReadWhole) {
     HC_REQUIRE_DATA(src, "etopo1_1deg.tif");
     GDALAllRegister();
     const std::string path = (tempDir() / "etopo_east.tif").string();
-    {
-        GDALDatasetUniquePtr in(GDALDataset::Open(src.c_str(), GDAL_OF_RASTER | GDAL_OF_READONLY));
-        ASSERT_TRUE(in);
-        double gt[6];
-        ASSERT_EQ(in->GetGeoTransform(gt), CE_None);
-        GDALDatasetUniquePtr ds(GetGDALDriverManager()->GetDriverByName("GTiff")->CreateCopy(path.c_str(), in.get(), FALSE, nullptr, nullptr, nullptr));
-        ASSERT_TRUE(ds);
-        gt[0] += 90;
-        ASSERT_EQ(ds->SetGeoTransform(gt), CE_None);
-    }
+    ASSERT_NO_FATAL_FAILURE(copyWithGeoTransform(src, path, [](double* gt) { gt[0] += 90; }));
     Options o;
     o.input = path;
     o.targetSrs = "EPSG:3832";

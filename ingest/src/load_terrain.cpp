@@ -522,10 +522,11 @@ private:
 // Columns that repeat the first ones (a global grid's closing column at west + 360) are left out.
 //
 // The output lattice is planned from the source's georeferencing alone (planWarp: no pixel read), and any window of it
-// is warped on its own (WarpPlan::warp): the one-process warp is the whole output as one window, a rank's its windows.
-// A window's pixel centres are the whole output's (the transformer is handed the whole output's pixel coordinates), and
-// the kernel's scale is fixed (GDAL's XSCALE, YSCALE: its own estimate changes from chunk to chunk), so a window holds
-// the same bits as the whole output there (tests/ingest_windows_test.cpp).
+// is warped on its own (WarpPlan::warp): one process warps the whole output in strips of rows, a rank its windows. A
+// window is warped into the whole output's lattice (WarpRegionToBuffer on a virtual raster of the whole output: the
+// same pixel coordinates, hence the same source positions), with the kernel's scale fixed (GDAL's XSCALE, YSCALE: its
+// own estimate changes from chunk to chunk), so it holds the same bits as the whole output there
+// (tests/ingest_windows_test.cpp).
 struct WarpPlan {
     struct Piece {
         size_t c0, c1;
