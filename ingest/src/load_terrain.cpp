@@ -528,12 +528,7 @@ private:
 // own estimate changes from chunk to chunk), so it holds the same bits as the whole output there
 // (tests/ingest_windows_test.cpp).
 struct WarpPlan {
-    struct Piece {
-        size_t c0, c1;
-        GeoTransform gt;
-    };
-    std::vector<Piece> pieces;
-    std::vector<std::unique_ptr<SourceDataset>> sources;  // one per piece
+    std::vector<std::unique_ptr<SourceDataset>> sources;  // one per piece of the source (two when split at 180 degrees)
     std::string note;                                     // for the report's method
     std::shared_ptr<OGRCoordinateTransformation> ct;       // source CRS -> target CRS (PROJ, exact)
     OGRSpatialReference target;
@@ -605,8 +600,11 @@ WarpPlan planWarp(const GeoTransform& gtIn, size_t width, size_t height, const O
     plan.targetText = opt.targetSrs;
     plan.input = opt.input;
     plan.threads = opt.threads;
-    auto& pieces = plan.pieces;
-    pieces = {{0, width, gtIn}};
+    struct Piece {
+        size_t c0, c1;
+        GeoTransform gt;
+    };
+    std::vector<Piece> pieces{{0, width, gtIn}};
     std::string& note = plan.note;
     const double dx = gtIn.g[1];
     if (srs.IsGeographic() && !gtIn.rotated() && dx > 0 && srs.GetPrimeMeridian() == 0 &&
@@ -619,7 +617,7 @@ WarpPlan planWarp(const GeoTransform& gtIn, size_t width, size_t height, const O
         // Columns with centres at 180 or beyond go east; those at west + 360 or beyond repeat column 0.
         const auto firstEast = static_cast<size_t>(std::clamp(std::ceil((180.0 - gt.g[0]) / dx - 0.5), 0.0, w));
         const auto end = static_cast<size_t>(std::clamp(std::ceil(360.0 / dx - 1e-6), 0.0, w));
-        pieces.assign(1, WarpPlan::Piece{0, firstEast, gt});  // not = {{...}}: GCC 12 with ASan detect_stack_use_after_return crashed copying that initializer list
+        pieces.assign(1, Piece{0, firstEast, gt});  // not = {{...}}: GCC 12 with ASan detect_stack_use_after_return crashed copying that initializer list
         if (firstEast < end) {
             GeoTransform east = gt;
             east.g[0] = gt.g[0] + static_cast<double>(firstEast) * dx - 360.0;
@@ -674,7 +672,7 @@ WarpPlan planWarp(const GeoTransform& gtIn, size_t width, size_t height, const O
             throw Error(opt.input + ": no part of it has a position in " + targetText + " (PROJ: " + detail::lastGdalError() + ")");
     }
     double suggested = HUGE_VAL;
-    for (const WarpPlan::Piece& pc : pieces) {
+    for (const Piece& pc : pieces) {
         plan.sources.push_back(std::make_unique<SourceDataset>(pc.c0, pc.c1 - pc.c0, height, pc.gt, &srs, fill));
         // GDAL's suggested output, made square with the smaller side (the finest over the pieces).
         char** dst = CSLSetNameValue(nullptr, "DST_SRS", targetText.c_str());
@@ -702,13 +700,24 @@ WarpPlan planWarp(const GeoTransform& gtIn, size_t width, size_t height, const O
     return plan;
 }
 
-// The working raster's CRS of a warp: the target with its linear unit made metres (the lattice is scaled to match).
-OGRSpatialReference metricTarget(const WarpPlan& plan, double& unit) {
-    OGRSpatialReference out = plan.target;
-    out.SetAxisMappingStrategy(OAMS_TRADITIONAL_GIS_ORDER);
-    unit = out.GetLinearUnits();
-    if (unit != 1.0) out.SetLinearUnitsAndUpdateParameters(SRS_UL_METER, 1.0);
-    return out;
+// The working raster of a warp in metres: the target CRS with its linear unit made metres, the output lattice scaled
+// to match (unit: metres per target unit); the report names that CRS and the method.
+struct WarpedFrame {
+    OGRSpatialReference crs;
+    GeoTransform gt;
+    double unit = 1;
+};
+WarpedFrame warpedFrame(const WarpPlan& plan, LoadReport& report) {
+    WarpedFrame f;
+    f.crs = plan.target;
+    f.crs.SetAxisMappingStrategy(OAMS_TRADITIONAL_GIS_ORDER);
+    f.unit = f.crs.GetLinearUnits();
+    if (f.unit != 1.0) f.crs.SetLinearUnitsAndUpdateParameters(SRS_UL_METER, 1.0);
+    f.gt = plan.outputGt();
+    for (double& v : f.gt.g) v *= f.unit;
+    report.gridCrsName = detail::crsName(&f.crs);
+    report.method = "warped to " + report.gridCrsName + " by GDAL (bilinear, exact transformer)" + plan.note;
+    return f;
 }
 
 // Where each source pixel centre lands in the working raster's CRS [m]: PROJ, exact, from the source's own coordinates.
@@ -747,13 +756,11 @@ Raster warpToTarget(SourceBand&& src, const GeoTransform& gtIn, const OGRSpatial
         progress.finish();
     }
     const std::string& targetText = plan.targetText;
-    const std::string& note = plan.note;
-    GeoTransform wgt = plan.outputGt();
     if (std::none_of(ws.values.begin(), ws.values.end(), [](float v) { return !std::isnan(v); }))
         throw Error(opt.input + ": projected to " + targetText + " on " + std::to_string(ws.width) + " x " + std::to_string(ws.height) +
-                    " pixels of " + fmt(std::abs(wgt.g[1]), 6) + " (CRS units), no pixel centre falls inside the data: " +
+                    " pixels of " + fmt(plan.cell, 6) + " (CRS units), no pixel centre falls inside the data: " +
                     "the footprint is too thin for that resolution; give a finer one with --min-cell");
-    if (plan.pieces.size() == 2) {
+    if (plan.sources.size() == 2) {
         // Split at 180, the two halves must meet in the target map; in one whose own edge is at 180
         // (EPSG:3857, say) they land at its opposite edges, a world apart, with nothing between.
         const size_t valid = static_cast<size_t>(std::count_if(ws.values.begin(), ws.values.end(), [](float v) { return !std::isnan(v); }));
@@ -763,18 +770,14 @@ Raster warpToTarget(SourceBand&& src, const GeoTransform& gtIn, const OGRSpatial
                         std::to_string(ws.width) + " px wide raster); choose a --t_srs whose central meridian is near the data (e.g. " +
                         "EPSG:3832, PDC Mercator, or '+proj=laea +lon_0=180 +lat_0=...') or leave --t_srs out for its UTM zone");
     }
-    double unit = 1;
-    const OGRSpatialReference out = metricTarget(plan, unit);
-    for (double& v : wgt.g) v *= unit;
-    report.gridCrsName = detail::crsName(&out);
-    report.method = "warped to " + report.gridCrsName + " by GDAL (bilinear, exact transformer)" + note;
+    const WarpedFrame frame = warpedFrame(plan, report);
     Options keep = opt;
     keep.minCellM.reset();  // -tr already applied it
-    Raster r = fromSourceAffine(std::move(ws), wgt, std::abs(wgt.g[1]), detail::toWkt(out), keep, report, nullptr);
+    Raster r = fromSourceAffine(std::move(ws), frame.gt, std::abs(frame.gt.g[1]), detail::toWkt(frame.crs), keep, report, nullptr);
     if (trace) {
         trace->band = std::move(src);
         trace->rowToWorldThreadSafe = false;  // PROJ's transformations
-        trace->rowToWorld = warpRowToWorld(plan, gtIn, unit);
+        trace->rowToWorld = warpRowToWorld(plan, gtIn, frame.unit);
     }
     return r;
 }
@@ -995,22 +998,17 @@ public:
             o_.band->read(c0, r0, w, h, out, residual, 0, w * h, uncounted);
         };
         warp_ = std::make_unique<WarpPlan>(planWarp(o_.gt, width, height, o_.srs, o_.target, opt, report, fill));
-        double unit = 1;
-        const OGRSpatialReference out = metricTarget(*warp_, unit);
-        GeoTransform wgt = warp_->outputGt();
-        for (double& v : wgt.g) v *= unit;
-        report.gridCrsName = detail::crsName(&out);
-        report.method = "warped to " + report.gridCrsName + " by GDAL (bilinear, exact transformer)" + warp_->note;
+        const WarpedFrame frame = warpedFrame(*warp_, report);
         Raster& r = plan_.shape;  // as fromSourceAffine keeps the warped raster (north-up, square: as is)
-        r.crsWkt = detail::toWkt(out);
+        r.crsWkt = detail::toWkt(frame.crs);
         r.crsName = report.gridCrsName;
         bool flipX = false, flipY = false;
-        keptGeometry(wgt, warp_->width, warp_->height, r, flipX, flipY, report);
-        plan_.rowToWorld = warpRowToWorld(*warp_, o_.gt, unit);
+        keptGeometry(frame.gt, warp_->width, warp_->height, r, flipX, flipY, report);
+        plan_.rowToWorld = warpRowToWorld(*warp_, o_.gt, frame.unit);
         plan_.rowToWorldThreadSafe = false;
     }
     const Raster& shape() const override { return plan_.shape; }
-    bool acrossAntimeridian() const { return warp_ && warp_->pieces.size() > 1; }
+    bool acrossAntimeridian() const { return warp_ && warp_->sources.size() > 1; }
     void read(size_t col0, size_t row0, size_t w, size_t h, std::vector<float>& values, std::vector<float>& rounding) override {
         if (col0 + w > plan_.shape.width || row0 + h > plan_.shape.height) throw Error("window outside the working raster");
         values.assign(w * h, kNaN);
