@@ -967,6 +967,12 @@ TEST(Render, BadCameraAndOptionsAreRefused) {
     EXPECT_THROW(renderFrame(*w.scene, c, o, t), hc::Error);
     c.farM = INFINITY;
     EXPECT_THROW(renderFrame(*w.scene, c, o, t), hc::Error);
+    c = above(w, 10, -30);
+    for (int tile : {-1, 65}) {
+        o.beamTilePx = tile;
+        EXPECT_NE(o.validate().find("--beam-tile"), std::string::npos) << tile;
+        EXPECT_THROW(renderFrame(*w.scene, c, o, t), hc::Error) << tile;
+    }
 }
 
 // Incremental cascades (CascadeCache): after a small move the texels copied from the last frame plus the ones

@@ -29,3 +29,6 @@ hc_cli_test(render.pyramid_interpolated 0 [[interpolated from up to [1-3] levels
 hc_cli_test(render.pyramid_interpolate_out_of_range nonzero [[^hc-render: error: --pyramid-interpolate 9 is outside 0\.\.8]]
   --setup ${KOOTENAI_HCI} --absent k.png
   -- ${RENDER} k.hcg -o k.png --pyramid-interpolate 9)
+hc_cli_test(render.beam_tile_out_of_range nonzero [[^hc-render: error: --beam-tile 65 is outside 0\.\.64]]
+  --setup ${KOOTENAI_HCI} --absent k.png
+  -- ${RENDER} k.hcg -o k.png --beam-tile 65)
