@@ -867,17 +867,6 @@ TEST_F(GridFile, WritingByPartsEqualsWholeWrite) {
         p2.follow();
         w.addPart(p1.finish());
         w.addPart(p2.finish());
-        // The parts' codes read back (water steps need every code on rank 0); cells rank 0 appended itself, or not
-        // written yet, are refused.
-        std::vector<uint64_t> back(n - a);
-        w.readPartCodes(a, back);
-        EXPECT_TRUE(std::equal(back.begin(), back.end(), g.codes.begin() + ptrdiff_t(a)));
-        if (a > 0) {
-            std::vector<uint64_t> own(1);
-            EXPECT_THROW(w.readPartCodes(a - 1, own), hc::Error);
-        }
-        std::vector<uint64_t> past(2);
-        EXPECT_THROW(w.readPartCodes(n - 1, past), hc::Error);
         w.commit(g.stats);
         EXPECT_EQ(readBytes(path("parts.hcg")), readBytes(path("whole.hcg")));
     }

@@ -685,7 +685,6 @@ struct GridFileWriter::Impl {
     GridHasher hasher;
     SummaryBuilder summary;
     uint64_t written = 0;
-    uint64_t firstPartCell = UINT64_MAX;  // the first cell that came in a rank's part (addPart), if any did
     std::vector<StepInfo> steps;  // those appended so far
 };
 
@@ -792,20 +791,9 @@ void GridFileWriter::addPart(std::span<const std::byte> part) {
     const std::vector<uint64_t> sw = words(part.subspan(40 + stateBytes, summaryBytes), path + ": a rank's summary");
     if (theirs.resume(sw, 0) != sw.size() || sw.empty()) throw Error(path + ": a rank's summary is malformed");
     w.summary.merge(theirs);
-    w.firstPartCell = std::min(w.firstPartCell, w.written);
     w.written += cells;
     if (after.count != w.written)
         throw Error(path + ": a rank's part ends at cell " + std::to_string(after.count) + ", not at the " + std::to_string(w.written) + " written");
-}
-
-void GridFileWriter::readPartCodes(uint64_t first, std::span<uint64_t> out) const {
-    const Impl& w = *impl_;
-    if (out.empty()) return;
-    if (first < w.firstPartCell || first > w.written || out.size() > w.written - first)
-        throw Error(w.out.path() + ": cells " + std::to_string(first) + ".." + std::to_string(first + out.size()) +
-                    " are not all in the ranks' parts added so far");
-    const SectionedFilePart reader(w.out.placement());  // the ranks flushed their parts before addPart
-    reader.readAt(0, 8 * first, std::as_writable_bytes(out));
 }
 
 struct GridFilePart::Impl {

@@ -10,18 +10,19 @@
 // tile or the coarsest cell), and under mpirun each rank takes a run of them in Morton order, about equal in area: the
 // tiles of pass A and the units of pass C inside its nodes. The roots are exchanged between the two passes. Rank 0 opens
 // the file; the other ranks write their cells into it at their place (GridFilePart), check and hash them in turn, and
-// send rank 0 their block checksums and statistics (with water steps, whose depths need every cell's code, rank 0 then
-// reads the others' codes back from the file); with a trace to paint they send rank 0 their cells instead, which it
-// writes. A raster read window by window
-// (RasterWindows) is read by each rank only over its own nodes, in maximal aligned squares: no rank holds it whole. The
-// file is the same bytes for any number of ranks and threads: the squared deviations are summed per unit, then over
-// the units in Morton order.
+// send rank 0 their block checksums and statistics; with a trace to paint they send rank 0 their cells instead, which it
+// writes. A raster read window by window (RasterWindows) is read by each rank only over its own nodes, in maximal
+// aligned squares: no rank holds it whole. The file is the same bytes for any number of ranks and threads: the squared
+// deviations are summed per unit, then over the units in Morton order.
 //
 // Water (DESIGN.md section 11): every step's depth raster is read once before the build, one at a time, into a merge
 // mask (a byte per quadtree node: may these four cells merge, for every step?), so the terrain build keeps every
 // step's wet/dry edges and depth tolerance. After the cells are written, each step is read again and its depth per
 // cell computed exactly as a merge would (the float mean of the four children's means, bottom up): with one step the
-// cells and depths are those of a build over both layers at once.
+// cells and depths are those of a build over both layers at once. Under mpirun every rank computes the depths of its own
+// cells (their codes kept as it writes them) and sends rank 0 the wet ones, in rank order, which is the cells' order:
+// no rank holds every cell's code. Every rank still reads each step's raster whole (the merge masks and the bathtub's
+// flood fill are whole-raster).
 #include "heightcast/ingest/build.h"
 
 #include <algorithm>
@@ -166,6 +167,7 @@ struct Stats {
     double maxDev = 0, sumSq = 0;
     uint64_t pixels = 0, wetCells = 0;
     std::vector<uint64_t> perLevel;
+    uint64_t firstCell = 0, ownCells = 0;  // this rank's cells: indices [firstCell, firstCell + ownCells) of the file's
 };
 
 // A rectangle of the working raster's pixels that the build reads: the whole raster, or under mpirun with a raster
@@ -515,7 +517,7 @@ Stats Builder::run(CellSink& sink) {
         });
         // Under mpirun, where rank 0's file lets them (no trace for rank 0 to paint), every rank writes its own cells
         // into it in place (GridFilePart): rank 0 says where, the others open their parts. Else they send their cells to
-        // rank 0, which writes them. (With water steps rank 0 then reads the others' codes back: FileSink::completeCodes.)
+        // rank 0, which writes them. (With water steps each rank keeps its own cells' codes: CellSink::keepOwn.)
         std::unique_ptr<GridFilePart> part;
         bool parts = false;
         if (rankCount > 1) {
@@ -582,7 +584,9 @@ Stats Builder::run(CellSink& sink) {
                     sink.append(batch.codes, values);
                 } else if (part) {  // into the file at its place; read back for the hashes (nothing held)
                     part->append(batch.codes, std::vector<std::span<const float>>(batch.values.begin(), batch.values.end()));
+                    sink.keepOwn(batch.codes);
                 } else {
+                    sink.keepOwn(batch.codes);
                     share.codes.insert(share.codes.end(), batch.codes.begin(), batch.codes.end());
                     for (size_t l = 0; l < batch.values.size(); ++l)
                         share.values[l].insert(share.values[l].end(), batch.values[l].begin(), batch.values[l].end());
@@ -592,6 +596,7 @@ Stats Builder::run(CellSink& sink) {
         });
         Stats sum;
         sum.perLevel.assign(static_cast<size_t>(maxLevel_) + 1, 0);
+        sum.firstCell = offsetOf(myU0), sum.ownCells = myCells;
         for (const Stats& a : acc) {
             sum.maxDev = std::max(sum.maxDev, a.maxDev);
             sum.pixels += a.pixels;
@@ -876,31 +881,25 @@ public:
         if (steps_ > 0 && cellCount > UINT32_MAX)
             throw Error(std::to_string(cellCount) + " cells: a grid with water steps holds at most 2^32 - 1 cells");
         writer_ = std::make_unique<GridFileWriter>(path_, shape_, cellCount, steps_);
-        cellCount_ = cellCount;
-        if (steps_ > 0) codes.reserve(cellCount);
+        if (steps_ > 0 && !ranks::distributed()) codes.reserve(cellCount);  // under mpirun rank 0 keeps its own share
     }
     void append(std::span<const uint64_t> c, const std::vector<std::span<const float>>& values) override {
         writer_->append(c, values);
+        keepOwn(c);
+    }
+    // Water steps: each rank computes the depths of its own cells (buildFile), so it keeps their codes.
+    void keepOwn(std::span<const uint64_t> c) override {
         if (steps_ > 0) codes.insert(codes.end(), c.begin(), c.end());
     }
     GridFileWriter& writer() { return *writer_; }
     GridFileWriter* sharedWriter() override { return writer_.get(); }
-    // Water steps need every cell's code on rank 0: under mpirun the other ranks' cells are in their parts of the file,
-    // so their codes are read back from it after the codes rank 0 appended itself.
-    void completeCodes() {
-        if (steps_ == 0 || codes.size() >= cellCount_) return;
-        const size_t have = codes.size();
-        codes.resize(cellCount_);
-        writer_->readPartCodes(have, std::span<uint64_t>(codes).subspan(have));
-    }
     const Grid* fileShape() const override { return &shape_; }
-    std::vector<uint64_t> codes;
+    std::vector<uint64_t> codes;  // with water steps: the cells appended or kept, in order
 
 private:
     std::string path_;
     const Grid& shape_;
     size_t steps_;
-    uint64_t cellCount_ = 0;  // every rank's cells (begin)
     std::unique_ptr<GridFileWriter> writer_;
 };
 
@@ -953,14 +952,43 @@ BuildSummary buildFile(const Raster& terrain, const RasterWindows* windows, cons
     if (options.cellElevations && root) options.cellElevations->assign(terrain.values.size(), std::numeric_limits<float>::quiet_NaN());
     Stats st = Builder(terrain, windows, mask ? &*mask : nullptr, options, rootLevel, maxLevel).run(sink);
     for (uint64_t c : st.perLevel) out.cellCount += c;  // on rank 0 every rank's cells, on another its share
-    if (!root) return out;
-    sink.completeCodes();
-    {
-        Progress progress("water steps: depth per cell", stepCount, options.progress && stepCount > 0);
+    if (stepCount > 0) {
+        // Each step's depth per cell: every rank over its own cells (on rank 0 the first of its codes: without parts it
+        // also appended the others'), the wet ones sent to rank 0 in rank order, which is the cells' order.
+        if (sink.codes.size() < st.ownCells) throw Error("internal: a rank kept fewer codes than it has cells");
+        const std::span<const uint64_t> own = std::span<const uint64_t>(sink.codes).first(st.ownCells);
+        const Stopwatch stepClock;
+        Progress progress("water steps: depth per cell", stepCount, options.progress && root);
         for (size_t k = 0; k < stepCount; ++k) {
-            const Raster d = steps->load(k);
-            checkStepRaster(terrain, d, k);
-            const WaterStepData data = stepValues(d, sink.codes, steps->timesS[k], options.threads, st.maxDev);
+            WaterStepData data;
+            double maxDev = 0;
+            ranks::together([&] {
+                const Raster d = steps->load(k);
+                checkStepRaster(terrain, d, k);
+                data = stepValues(d, own, steps->timesS[k], options.threads, maxDev);
+                for (uint32_t& i : data.wet) i = uint32_t(i + st.firstCell);  // < 2^32: FileSink::begin
+            });
+            if (!root) {  // after the agreement: rank 0 receives every piece
+                ranks::sendToRoot(data.wet);
+                ranks::sendToRoot(data.values[0]);
+                ranks::sendToRoot(std::vector<double>{maxDev});
+                continue;
+            }
+            st.maxDev = std::max(st.maxDev, maxDev);
+            std::string bad;  // said once every rank's pieces are in: a sender is never left blocked
+            for (int r = 1; r < ranks::count(); ++r) {
+                const std::vector<uint32_t> wet = ranks::receiveVectorFrom<uint32_t>(r);
+                const std::vector<float> depth = ranks::receiveVectorFrom<float>(r);
+                const std::vector<double> dev = ranks::receiveVectorFrom<double>(r);
+                if (depth.size() != wet.size() || dev.size() != 1) {
+                    if (bad.empty()) bad = fmt::format("rank {} sent {} depths for {} wet cells of water step {}", r + 1, depth.size(), wet.size(), k);
+                    continue;
+                }
+                data.wet.insert(data.wet.end(), wet.begin(), wet.end());
+                data.values[0].insert(data.values[0].end(), depth.begin(), depth.end());
+                st.maxDev = std::max(st.maxDev, dev[0]);
+            }
+            if (!bad.empty()) throw Error(bad);
             StepInfo info;
             info.timeS = data.timeS;
             info.wetCells = data.wet.size();
@@ -970,7 +998,11 @@ BuildSummary buildFile(const Raster& terrain, const RasterWindows* windows, cons
             progress.advance(1);
         }
         progress.finish();
+        if (ranks::distributed())
+            ranks::log("hc-ingest", fmt::format("water steps: the depths of its {} cells in {} step{}, {:.3f} s", own.size(), stepCount,
+                                                stepCount == 1 ? "" : "s", stepClock.seconds()));
     }
+    if (!root) return out;
     IngestStats stats = extraStats;
     stats.sourceWidth = out.shape.stats.sourceWidth;
     stats.sourceHeight = out.shape.stats.sourceHeight;

@@ -78,10 +78,12 @@ done
 cat g3.txt g2.txt]])
 
   # Water steps over a projected source (no trace of a resampling to paint): every rank writes its own cells into the
-  # file in place, and rank 1 reads the others' codes back from it for the steps' wet cells. The same bytes.
+  # file in place, and computes the steps' depths of its own cells, whose wet ones rank 1 writes. The same bytes.
   hc_mpi_test(mpi.ingest_steps_in_place 0 [[rank 3/3: its [0-9]+ cells \([0-9.]+ MB\) written into the output in place]]
     --setup "$HC_INGEST --quiet $HC_DATA_DIR/south_glacier_utm7.tif --water-level 2200,2400,2600 -o one.hcg"
     --match [[rank 2/2: its [0-9]+ cells .* written into the output in place]] --no-match [[error:|warning]]
+    --match [[rank 1/3: water steps: the depths of its [1-9][0-9]* cells in 3 steps]]
+    --match [[rank 3/3: water steps: the depths of its [1-9][0-9]* cells in 3 steps]]
     --check [[for n in 2 3
 do cmp one.hcg g$n.hcg || exit 1
 done
@@ -89,6 +91,25 @@ done
     -- ${HC_BASH} -c [[for n in 2 3
 do "$HC_MPIRUN" -np $n "$HC_INGEST" "$HC_DATA_DIR/south_glacier_utm7.tif" --water-level 2200,2400,2600 -o g$n.hcg || exit 1
 done]])
+
+  # Water steps where the ranks send rank 1 their cells (it paints the trace it checks the source against): a --t_srs
+  # warp of a geographic source split at 180 degrees (etopo1_1deg moved 90 degrees east, to World Mercator), read
+  # whole. Each rank still computes the steps' depths of its own cells; the same bytes as one process.
+  hc_mpi_test(mpi.ingest_steps_sent_cells 0 [[rank 3/3: water steps: the depths of its [1-9][0-9]* cells in 2 steps]]
+    --setup [[gdal_translate -q -a_ullr -90.5 90.5 270.5 -90.5 "$HC_DATA_DIR/etopo1_1deg.tif" east.tif &&
+"$HC_INGEST" --quiet east.tif --t_srs EPSG:3832 --water-level 0,200 -o one.hcg]]
+    --match [[rank 1/2: water steps: the depths of its [1-9][0-9]* cells in 2 steps]]
+    --match [[rank 2/3: every rank reads the whole raster: water steps]]
+    --no-match [[error:|written into the output in place]]
+    --check [[cmp one.hcg g2.hcg && cmp one.hcg g3.hcg
+"$HC_INFO" --verify g3.hcg | grep -E 'steps +2 water steps']]
+    -- ${HC_BASH} -c [[for n in 2 3
+do if ! "$HC_MPIRUN" -np $n "$HC_INGEST" east.tif --t_srs EPSG:3832 --water-level 0,200 -o g$n.hcg > g$n.txt 2>&1
+then cat g$n.txt
+exit 1
+fi
+done
+cat g2.txt g3.txt]])
 
   # --t_srs (GDAL's warper): each rank warps its own windows from the source blocks they reach (the whole output's
   # pixel centres, the kernel's scale fixed), checks its share of the source's rows against the file, and the file is

@@ -117,9 +117,6 @@ public:
     std::vector<std::byte> placement() const;
     std::vector<std::byte> streamState() const;
     void addPart(std::span<const std::byte> part);
-    // The codes of cells [first, first + out.size()) that added parts hold, read back from the temporary (the water
-    // steps need every cell's code on this rank). Throws hc::Error if those cells are not all in added parts.
-    void readPartCodes(uint64_t first, std::span<uint64_t> out) const;
 
 private:
     struct Impl;

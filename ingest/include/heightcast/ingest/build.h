@@ -50,6 +50,8 @@ public:
     // cells through append() on rank 0.
     virtual GridFileWriter* sharedWriter() { return nullptr; }
     virtual const Grid* fileShape() const { return nullptr; }
+    // Under mpirun, on a rank other than 0: its own cells, in order, as it writes them into its part or sends them.
+    virtual void keepOwn(std::span<const uint64_t> /*codes*/) {}
 };
 
 // What a streamed build produced: the grid's shape (geometry, CRS, layers, statistics; no cells)
