@@ -30,6 +30,7 @@
 #include <cassert>
 #include <cmath>
 #include <exception>
+#include <functional>
 #include <limits>
 #include <memory>
 #include <optional>
@@ -81,15 +82,28 @@ private:
     std::vector<Level> levels_;
 };
 
-// A depth pixel at finest coordinates (ix east, iy north of the south-west corner): NaN outside or on a hole.
-float depthAt(const Raster& d, size_t ix, size_t iy) {
-    if (ix >= d.width || iy >= d.height) return std::numeric_limits<float>::quiet_NaN();
-    return d.values[(d.height - 1 - iy) * d.width + ix];
+// A rectangle of the working raster's pixels that the build reads: the whole raster, or under mpirun with a raster
+// read window by window (RasterWindows), one of the windows of this rank's share. (x0, y0): its south-west pixel in
+// finest coordinates (x east, y north of the raster's south-west corner); rows stored north-up, like Raster's.
+struct Block {
+    size_t x0 = 0, y0 = 0, w = 0, h = 0;
+    const float* values = nullptr;
+    const float* rounding = nullptr;  // Raster::roundingM, or nullptr
+    size_t index(size_t ix, size_t iy) const { return (y0 + h - 1 - iy) * w + (ix - x0); }
+};
+
+// A depth raster, or a window of one, as a Block: the whole raster's pixels at (0, 0).
+Block wholeOf(const Raster& d) { return {0, 0, d.width, d.height, d.values.data(), nullptr}; }
+
+// A depth pixel at finest coordinates (ix east, iy north of the south-west corner): NaN outside the block or on a hole.
+float depthAt(const Block& d, size_t ix, size_t iy) {
+    if (ix < d.x0 || iy < d.y0 || ix - d.x0 >= d.w || iy - d.y0 >= d.h) return std::numeric_limits<float>::quiet_NaN();
+    return d.values[d.index(ix, iy)];
 }
 
 // The depth a merged cell of `level` at (ix, iy) holds: the float mean of its four children's, bottom up, in the order
 // the build merges them (Builder::merge).
-float cellMean(const Raster& d, size_t ix, size_t iy, int level) {
+float cellMean(const Block& d, size_t ix, size_t iy, int level) {
     if (level == 0) return depthAt(d, ix, iy);
     const size_t h = size_t{1} << (level - 1);
     const double sum = static_cast<double>(cellMean(d, ix, iy, level - 1)) + cellMean(d, ix + h, iy, level - 1) +
@@ -98,8 +112,10 @@ float cellMean(const Raster& d, size_t ix, size_t iy, int level) {
 }
 
 // Forbids in `mask` every merge step `d` does not allow: four children that are not all wet or all dry, or whose
-// depths the parent's mean does not hold within the tolerance (build.h's rule for water).
-void restrictByStep(const Raster& d, double tolerance, int maxLevel, unsigned threads, MergeMask& mask) {
+// depths the parent's mean does not hold within the tolerance (build.h's rule for water). `d` is the whole raster, or a
+// window of it whose corner lies on the top level's lattice (a rank's block: share nodes are no finer than the coarsest
+// cell), holding every pixel of the nodes it starts (or the raster's edge).
+void restrictByStep(const Block& d, double tolerance, int maxLevel, unsigned threads, MergeMask& mask) {
     if (maxLevel < 1) return;
     struct Depth {
         float mean = 0, lo = 0, hi = 0;
@@ -107,14 +123,16 @@ void restrictByStep(const Raster& d, double tolerance, int maxLevel, unsigned th
     };
     const int top = maxLevel;  // nodes of the top level are independent: one task each
     const size_t side = size_t{1} << top;
-    const size_t nx = (d.width + side - 1) / side, ny = (d.height + side - 1) / side;
+    if (d.x0 % side != 0 || d.y0 % side != 0) throw Error("internal: a depth window off the coarsest level's lattice");
+    const size_t ox = d.x0 / side, oy = d.y0 / side;  // the window's first top-level node
+    const size_t nx = (d.w + side - 1) / side, ny = (d.h + side - 1) / side;
     std::vector<std::vector<std::vector<Depth>>> scratch(resolveThreads(threads));
     std::vector<std::vector<std::pair<int, std::pair<size_t, size_t>>>> forbidden(scratch.size());
     parallelFor(nx * ny, 4, threads, [&](size_t b, size_t e, unsigned worker) {
         auto& lv = scratch[worker];
         lv.resize(size_t(top) + 1);
         for (size_t t = b; t < e; ++t) {
-            const size_t tx = t % nx, ty = t / nx;
+            const size_t tx = ox + t % nx, ty = oy + t / nx;
             size_t n = side;
             lv[0].resize(n * n);
             for (size_t y = 0; y < n; ++y)
@@ -170,16 +188,6 @@ struct Stats {
     uint64_t firstCell = 0, ownCells = 0;  // this rank's cells: indices [firstCell, firstCell + ownCells) of the file's
 };
 
-// A rectangle of the working raster's pixels that the build reads: the whole raster, or under mpirun with a raster
-// read window by window (RasterWindows), one of the windows of this rank's share. (x0, y0): its south-west pixel in
-// finest coordinates (x east, y north of the raster's south-west corner); rows stored north-up, like Raster's.
-struct Block {
-    size_t x0 = 0, y0 = 0, w = 0, h = 0;
-    const float* values = nullptr;
-    const float* rounding = nullptr;  // Raster::roundingM, or nullptr
-    size_t index(size_t ix, size_t iy) const { return (y0 + h - 1 - iy) * w + (ix - x0); }
-};
-
 class Builder {
 public:
     // `terrain` gives the geometry, and the pixels unless `windows` reads them (RasterWindows: each rank then reads
@@ -199,6 +207,11 @@ public:
 
     // Builds the tree and hands its cells, in Morton order, to the sink. Returns the measurements.
     Stats run(CellSink& sink);
+
+    // After run(), with water steps read window by window (RasterWindows::readStep): step k's depths over each block of
+    // this rank (its windows, as the terrain's), kept in `storage`, and the one holding a pixel.
+    std::vector<Block> stepBlocks(size_t k, std::vector<std::vector<float>>& storage, bool first) const;
+    size_t blockIndexAt(size_t ix, size_t iy) const { return size_t(&blockAt(ix, iy) - blocks_.data()); }
 
 private:
     // The block holding pixel (ix, iy) of the raster.
@@ -321,6 +334,7 @@ private:
     const Raster& t_;
     const RasterWindows* windows_;
     const MergeMask* mask_;
+    std::optional<MergeMask> ownMask_;  // with water steps read by windows: the masks of this rank's nodes (run())
     const BuildOptions& opt_;
     int layers_;
     int rootLevel_, maxLevel_, tileLevel_;
@@ -403,6 +417,19 @@ uint64_t Builder::holdPixels(uint64_t c0, uint64_t c1) {
     return read;
 }
 
+std::vector<Block> Builder::stepBlocks(size_t k, std::vector<std::vector<float>>& storage, bool first) const {
+    if (!windows_ || !windows_->readStep) throw Error("internal: water steps by windows without a reader");
+    std::vector<Block> out;
+    storage.assign(blocks_.size(), {});
+    for (size_t i = 0; i < blocks_.size(); ++i) {
+        const Block& b = blocks_[i];
+        windows_->readStep(k, b.x0, t_.height - (b.y0 + b.h), b.w, b.h, b.values, storage[i], first);
+        if (storage[i].size() != b.w * b.h) throw Error("internal: a water step's window read the wrong number of pixels");
+        out.push_back({b.x0, b.y0, b.w, b.h, storage[i].data(), nullptr});
+    }
+    return out;
+}
+
 Stats Builder::run(CellSink& sink) {
     const unsigned threads = resolveThreads(opt_.threads);
     const size_t tiles = ntx_ * nty_;
@@ -418,6 +445,22 @@ Stats Builder::run(CellSink& sink) {
     const std::vector<size_t> myTiles = tilesOf(cuts[size_t(rank)], cuts[size_t(rank) + 1]);
     uint64_t pixelsRead = 0;
     ranks::together([&] { pixelsRead = holdPixels(cuts[size_t(rank)], cuts[size_t(rank) + 1]); });
+    // Water steps read by windows: each step's merge mask over this rank's own nodes (every merge lies inside a share
+    // node, so in one of its blocks), from the same windows of each step raster.
+    if (windows_ && !windows_->stepTimesS.empty()) {
+        const size_t steps = windows_->stepTimesS.size();
+        Progress progress("water steps: wet/dry edges", steps, opt_.progress && root && steps > 1);
+        ranks::together([&] {
+            ownMask_.emplace(t_.width, t_.height, maxLevel_);
+            for (size_t k = 0; k < steps; ++k) {
+                std::vector<std::vector<float>> storage;
+                for (const Block& b : stepBlocks(k, storage, true)) restrictByStep(b, opt_.toleranceM, maxLevel_, opt_.threads, *ownMask_);
+                progress.advance(1);
+            }
+        });
+        progress.finish();
+        mask_ = &*ownMask_;
+    }
 
     // Pass A: tile roots and leaf counts.
     std::vector<Node> roots(tiles);
@@ -804,7 +847,7 @@ std::optional<MergeMask> maskOf(const Raster& terrain, const WaterSteps* steps, 
     for (size_t k = 0; k < steps->count; ++k) {
         const Raster d = steps->load(k);
         checkStepRaster(terrain, d, k);
-        restrictByStep(d, opt.toleranceM, maxLevel, opt.threads, mask);
+        restrictByStep(wholeOf(d), opt.toleranceM, maxLevel, opt.threads, mask);
         progress.advance(1);
     }
     progress.finish();
@@ -812,8 +855,10 @@ std::optional<MergeMask> maskOf(const Raster& terrain, const WaterSteps* steps, 
 }
 
 // One step's depth per cell (cellMean) for the cells `codes`: the wet ones (> 0) in stored form, and the largest
-// |pixel - cell depth| over the pixels the cells cover.
-WaterStepData stepValues(const Raster& d, std::span<const uint64_t> codes, double timeS, unsigned threads, double& maxDev) {
+// |pixel - cell depth| over the pixels the cells cover. viewOf(ix, iy): the depths (the whole raster, or the rank's
+// block) holding the cell whose south-west pixel is (ix, iy), and so all its pixels.
+WaterStepData stepValues(const std::function<const Block&(size_t ix, size_t iy)>& viewOf, std::span<const uint64_t> codes, double timeS,
+                         unsigned threads, double& maxDev) {
     struct Part {
         std::vector<uint32_t> wet;
         std::vector<float> depth;
@@ -828,6 +873,7 @@ WaterStepData stepValues(const Raster& d, std::span<const uint64_t> codes, doubl
                 const uint64_t key = codeKey(codes[i]);
                 const int level = codeLevel(codes[i]);
                 const size_t ix = mortonX(key), iy = mortonY(key), span = size_t{1} << level;
+                const Block& d = viewOf(ix, iy);
                 const float m = cellMean(d, ix, iy, level);
                 for (size_t y = iy; y < iy + span; ++y)
                     for (size_t x = ix; x < ix + span; ++x)
@@ -922,7 +968,8 @@ Grid buildGrid(const Raster& terrain, const Raster* waterDepth, const BuildOptio
     if (g.cellCount() == 0) throw Error("the raster holds no valid pixel (all nodata): nothing to build");
     if (waterDepth) {
         g.values[1].clear();
-        const WaterStepData data = stepValues(*waterDepth, g.codes, 0.0, options.threads, st.maxDev);
+        const Block whole = wholeOf(*waterDepth);
+        const WaterStepData data = stepValues([&](size_t, size_t) -> const Block& { return whole; }, g.codes, 0.0, options.threads, st.maxDev);
         selectStep(g, data, 0);
     }
     fillStats(st, g.stats);
@@ -944,13 +991,15 @@ BuildSummary buildFile(const Raster& terrain, const RasterWindows* windows, cons
             throw Error("water step times must increase strictly: step " + std::to_string(k) + " at " + std::to_string(steps->timesS[k]) +
                         " s follows " + std::to_string(steps->timesS[k - 1]) + " s");
     BuildSummary out;
-    if (windows && (stepCount > 0 || options.cellElevations)) throw Error("internal: a raster read by windows is built without water steps or traces");
+    if (windows && options.cellElevations) throw Error("internal: a raster read by windows is built without a trace");
     out.shape = shapeFor(terrain, stepCount > 0, options, rootLevel, maxLevel, windows != nullptr);
-    const std::optional<MergeMask> mask = maskOf(terrain, steps, options, maxLevel);
+    // Steps read by windows: each rank makes the masks of its own nodes (Builder::run).
+    const std::optional<MergeMask> mask = windows ? std::nullopt : maskOf(terrain, steps, options, maxLevel);
     FileSink sink(path, out.shape, stepCount);
     const bool root = ranks::rank() == 0;  // under mpirun, rank 0 commits the file (Builder::run)
     if (options.cellElevations && root) options.cellElevations->assign(terrain.values.size(), std::numeric_limits<float>::quiet_NaN());
-    Stats st = Builder(terrain, windows, mask ? &*mask : nullptr, options, rootLevel, maxLevel).run(sink);
+    Builder builder(terrain, windows, mask ? &*mask : nullptr, options, rootLevel, maxLevel);
+    Stats st = builder.run(sink);
     for (uint64_t c : st.perLevel) out.cellCount += c;  // on rank 0 every rank's cells, on another its share
     if (stepCount > 0) {
         // Each step's depth per cell: every rank over its own cells (on rank 0 the first of its codes: without parts it
@@ -963,9 +1012,17 @@ BuildSummary buildFile(const Raster& terrain, const RasterWindows* windows, cons
             WaterStepData data;
             double maxDev = 0;
             ranks::together([&] {
-                const Raster d = steps->load(k);
-                checkStepRaster(terrain, d, k);
-                data = stepValues(d, own, steps->timesS[k], options.threads, maxDev);
+                if (windows) {  // the same windows of the step as of the terrain: every own cell lies in one
+                    std::vector<std::vector<float>> storage;
+                    const std::vector<Block> views = builder.stepBlocks(k, storage, false);
+                    auto viewOf = [&](size_t ix, size_t iy) -> const Block& { return views[builder.blockIndexAt(ix, iy)]; };
+                    data = stepValues(viewOf, own, steps->timesS[k], options.threads, maxDev);
+                } else {
+                    const Raster d = steps->load(k);
+                    checkStepRaster(terrain, d, k);
+                    const Block whole = wholeOf(d);
+                    data = stepValues([&](size_t, size_t) -> const Block& { return whole; }, own, steps->timesS[k], options.threads, maxDev);
+                }
                 for (uint32_t& i : data.wet) i = uint32_t(i + st.firstCell);  // < 2^32: FileSink::begin
             });
             if (!root) {  // after the agreement: rank 0 receives every piece
@@ -1026,7 +1083,10 @@ BuildSummary buildGridFile(const Raster& terrain, const WaterSteps* steps, const
 
 BuildSummary buildGridFile(const RasterWindows& terrain, const BuildOptions& options, const std::string& path, const IngestStats& extraStats) {
     if (!terrain.read) throw Error("internal: raster windows without a reader");
-    return buildFile(terrain.shape, &terrain, nullptr, options, path, extraStats);
+    WaterSteps steps;  // read by the builder through terrain.readStep
+    steps.count = terrain.stepTimesS.size();
+    steps.timesS = terrain.stepTimesS;
+    return buildFile(terrain.shape, &terrain, steps.count ? &steps : nullptr, options, path, extraStats);
 }
 
 }  // namespace hc::ingest

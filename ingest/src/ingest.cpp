@@ -12,6 +12,7 @@
 #include "heightcast/core/parallel.h"
 #include "heightcast/core/ranks.h"
 #include "heightcast/core/timer.h"
+#include "load_water.h"
 #include "resample.h"
 
 namespace hc::ingest {
@@ -188,9 +189,10 @@ detail::SourceCheckSums allRanksCheck(const detail::SourceCheckSums& mine) {
     return sums;
 }
 
-// Under mpirun, a terrain without water whose working raster is its own pixels: every rank reads only the windows of
-// its share (buildGridFile over RasterWindows), the readers' counts are added over the ranks, and rank 0 reports them.
-// nullopt where the source must be read whole (a projection, a warp, a resampling), with the reason in the rank log.
+// Under mpirun, a terrain (and water steps from rasters) read window by window: every rank reads only the windows of
+// its share (buildGridFile over RasterWindows), each step's raster warped onto the same windows, the readers' counts
+// are added over the ranks, and rank 0 reports them. nullopt where the source must be read whole (a warp split at 180
+// degrees), with the reason in the rank log.
 std::optional<BuildSummary> ingestByWindows(const Options& opt, const std::string& path, LoadReport& report, const Stopwatch& clock) {
     std::string why;
     std::unique_ptr<detail::TerrainWindows> windows = detail::openTerrainWindows(opt, report, why);
@@ -205,6 +207,25 @@ std::optional<BuildSummary> ingestByWindows(const Options& opt, const std::strin
     w.read = [&](size_t c0, size_t r0, size_t width, size_t height, std::vector<float>& values, std::vector<float>& rounding) {
         windows->read(c0, r0, width, height, values, rounding);
     };
+    // Water steps from rasters: each window of a step warped onto the working raster as the whole would be
+    // (detail::WaterStepWarp), step by step (the builder reads every window of step k before step k + 1).
+    const size_t stepCount = waterStepCount(opt);
+    std::vector<uint64_t> negative(stepCount, 0);  // this rank's pixels of negative depth, per step (its first reads)
+    std::unique_ptr<detail::WaterStepWarp> stepWarp;
+    size_t warpStep = 0;
+    for (size_t k = 0; k < stepCount; ++k) w.stepTimesS.push_back(waterStepTimeS(opt, k));
+    if (stepCount > 0)
+        w.readStep = [&](size_t k, size_t c0, size_t r0, size_t width, size_t height, const float* terrain, std::vector<float>& depth, bool first) {
+            if (!stepWarp || warpStep != k) {
+                LoadReport again;  // the step's warnings once, from its first reads
+                stepWarp = std::make_unique<detail::WaterStepWarp>(opt, w.shape, k, first ? report : again);
+                warpStep = k;
+            }
+            depth.resize(width * height);
+            uint64_t n = 0;
+            stepWarp->depth(c0, r0, width, height, terrain, depth.data(), n);
+            if (first) negative[k] += n;
+        };
     const BuildOptions build = buildOptions(opt, w.shape.pixelSizeM, report);
     IngestStats extra;
     extra.sourcePath = opt.input;
@@ -228,6 +249,12 @@ std::optional<BuildSummary> ingestByWindows(const Options& opt, const std::strin
         all.add(t[0]);
     }
     windows->finish(all, report);
+    const std::vector<std::vector<uint64_t>> negatives = ranks::allGatherVectors(negative);
+    for (size_t k = 0; k < stepCount; ++k) {  // the steps' warnings, over every rank's pixels, as one process says them
+        uint64_t n = 0;
+        for (const auto& r : negatives) n += k < r.size() ? r[k] : 0;
+        if (n > 0) report.warnings.push_back(detail::negativeDepthWarning(detail::waterStepName(opt, k), n));
+    }
     if (mine) finishSourceCheck(allRanksCheck(*mine), report);  // its report (and warning) after the reading's, as in one process
     if (ranks::rank() == 0) noteStorage(b.shape.stats, report.sourcePrecisionDouble, report);
     return b;
@@ -237,10 +264,10 @@ std::optional<BuildSummary> ingestByWindows(const Options& opt, const std::strin
 
 BuildSummary ingestToFile(const Options& opt, const std::string& path, LoadReport& report) {
     const Stopwatch clock;
-    if (ranks::distributed() && waterStepCount(opt) == 0) {
+    if (ranks::distributed() && opt.water != WaterSource::Level) {
         if (std::optional<BuildSummary> b = ingestByWindows(opt, path, report, clock)) return std::move(*b);
     } else if (ranks::distributed()) {
-        ranks::log("hc-ingest", "every rank reads the whole raster: water steps are read (warped, flood-filled) whole");
+        ranks::log("hc-ingest", "every rank reads the whole raster: water levels are flood-filled over the whole raster (from its edges)");
     }
     Prepared p = prepare(opt, report);
     setBuild(p, opt, report);

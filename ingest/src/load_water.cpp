@@ -8,19 +8,17 @@
 #include <fmt/format.h>
 
 #include <gdal_utils.h>
+#include <gdalwarper.h>
 
 #include "gdal_util.h"
 #include "heightcast/core/error.h"
+#include "heightcast/core/parallel.h"
 #include "heightcast/core/progress.h"
 #include "heightcast/ingest/ingest.h"
+#include "load_water.h"
 #include "resample.h"
 
 namespace hc::ingest {
-namespace detail {
-DatasetPtr warp(GDALDataset& src, const std::vector<std::string>& args, const std::string& what);
-SourceBand readFloatBand(GDALDataset& ds, const std::string& what);
-}  // namespace detail
-
 namespace {
 
 // Bathtub: depth = level - z in the pixels below `level` that water can reach from the domain
@@ -64,57 +62,8 @@ Raster bathtub(const Raster& t, double level) {
     return d;
 }
 
-// Band `band` of `ds` alone, as a virtual dataset (no copy): what the warper reads for one step of a time series.
-detail::DatasetPtr bandOf(GDALDataset& ds, int band, const std::string& what) {
-    const std::string b = std::to_string(band);
-    const char* args[] = {"-of", "VRT", "-b", b.c_str(), nullptr};
-    GDALTranslateOptions* options = GDALTranslateOptionsNew(const_cast<char**>(args), nullptr);
-    int usageError = 0;
-    CPLErrorReset();
-    GDALDatasetH out = GDALTranslate("", GDALDataset::ToHandle(&ds), options, &usageError);
-    GDALTranslateOptionsFree(options);
-    if (!out || usageError) throw Error(what + ": cannot take band " + b + ": " + detail::lastGdalError());
-    return detail::DatasetPtr(GDALDataset::FromHandle(out));
-}
-
-// opt.waterPath's raster (open as `ds`) warped onto exactly the terrain's working raster, as depth [m].
-Raster warpedWater(const Options& opt, GDALDataset& ds, const Raster& terrain, LoadReport& report) {
-    const OGRSpatialReference* srs = ds.GetSpatialRef();
-    bool waterHasCrs = srs && !srs->IsEmpty();
-    if (waterHasCrs != !terrain.crsWkt.empty())
-        report.warnings.push_back(opt.waterPath + ": " + (waterHasCrs ? "the terrain has no CRS" : "has no CRS") +
-                                  "; both taken to be in the same frame");
-    // Warp onto exactly the terrain's working raster: same CRS, extent and pixel size.
-    const double west = terrain.westWorld, north = terrain.northWorld;
-    const double east = west + static_cast<double>(terrain.width) * terrain.pixelSizeM, south = terrain.southWorld();
-    auto num = [](double v) { return fmt::format("{:.17g}", v); };
-    std::vector<std::string> args{"-of", "MEM", "-ot", "Float32", "-r", "bilinear", "-et", "0", "-dstnodata", "nan",
-                                  "-te", num(west), num(south), num(east), num(north),
-                                  "-ts", std::to_string(terrain.width), std::to_string(terrain.height)};
-    if (waterHasCrs && !terrain.crsWkt.empty()) args.insert(args.end(), {"-t_srs", terrain.crsWkt});
-    detail::DatasetPtr warped = detail::warp(ds, args, opt.waterPath + ": resampling onto the terrain");
-    detail::SourceBand band = detail::readFloatBand(*warped, opt.waterPath);
-    Raster d = terrain;
-    size_t negative = 0;
-    for (size_t i = 0; i < d.values.size(); ++i) {
-        float z = terrain.values[i];
-        float v = band.values[i];
-        if (std::isnan(z)) {
-            d.values[i] = std::numeric_limits<float>::quiet_NaN();
-            continue;
-        }
-        if (std::isnan(v)) {  // no water data here: dry
-            d.values[i] = 0;
-            continue;
-        }
-        float depth = opt.water == WaterSource::Depth ? v : v - z;
-        if (opt.water == WaterSource::Depth && depth < 0) ++negative;
-        d.values[i] = depth > 0 ? depth : 0.0f;
-    }
-    if (negative > 0)
-        report.warnings.push_back(opt.waterPath + ": " + std::to_string(negative) + " pixels of negative depth taken as dry");
-    return d;
-}
+// Formats a double exactly, for GDAL's string options.
+std::string exact(double v) { return fmt::format("{:.17g}", v); }
 
 // Steps of one series must be one simulation's output: the same raster size, georeferencing and CRS as the first.
 void checkAgreesWithFirst(GDALDataset& ds, const std::string& path, const std::string& firstPath, const std::string& role) {
@@ -139,20 +88,134 @@ void checkAgreesWithFirst(GDALDataset& ds, const std::string& path, const std::s
 
 }  // namespace
 
+namespace detail {
+
+WaterStepWarp::WaterStepWarp(const Options& opt, const Raster& frame, size_t step, LoadReport& report)
+    : width_(frame.width), height_(frame.height), threads_(opt.threads) {
+    if (opt.water != WaterSource::Depth && opt.water != WaterSource::Surface) throw Error("internal: a water step warp without a water raster");
+    surface_ = opt.water == WaterSource::Surface;
+    const std::string role = surface_ ? "water surface raster" : "water depth raster";
+    const std::string& path = opt.waterPaths.empty() ? opt.waterPath : opt.waterPaths[step];
+    ds_ = openRaster(path, role);
+    if (step > 0 && path != opt.waterPaths[0]) checkAgreesWithFirst(*ds_, path, opt.waterPaths[0], role);
+    what_ = waterStepName(opt, step);
+    band_ = opt.waterBands.empty() ? 1 : opt.waterBands.at(step);
+    if (band_ < 1 || band_ > ds_->GetRasterCount()) throw Error(path + ": has no band " + std::to_string(band_));
+    const OGRSpatialReference* srs = ds_->GetSpatialRef();
+    const bool waterHasCrs = srs && !srs->IsEmpty();
+    if (waterHasCrs != !frame.crsWkt.empty())
+        report.warnings.push_back(what_ + ": " + (waterHasCrs ? "the terrain has no CRS" : "has no CRS") + "; both taken to be in the same frame");
+    if (waterHasCrs && !frame.crsWkt.empty()) dstWkt_ = frame.crsWkt;
+    gt_[0] = frame.westWorld, gt_[1] = frame.pixelSizeM, gt_[2] = 0;
+    gt_[3] = frame.northWorld, gt_[4] = 0, gt_[5] = -frame.pixelSizeM;
+    // The kernel's scale, fixed for the whole raster (GDAL's XSCALE, YSCALE): working pixels per water pixel, at most 1
+    // (a water raster coarser than the working pixel is interpolated, a finer one averaged over the kernel's width).
+    // GDAL estimates it from each chunk it warps, so without this a window could differ from the whole.
+    char** opts = dstWkt_.empty() ? nullptr : CSLSetNameValue(nullptr, "DST_SRS", dstWkt_.c_str());
+    void* tr = GDALCreateGenImgProjTransformer2(GDALDataset::ToHandle(ds_.get()), nullptr, opts);
+    CSLDestroy(opts);
+    if (!tr) throw Error(what_ + ": cannot transform onto the terrain: " + lastGdalError());
+    double sg[6];
+    int pw = 0, ph = 0;
+    const CPLErr e = GDALSuggestedWarpOutput(GDALDataset::ToHandle(ds_.get()), GDALGenImgProjTransform, tr, sg, &pw, &ph);
+    GDALDestroyGenImgProjTransformer(tr);
+    if (e != CE_None) throw Error(what_ + ": cannot resample onto the terrain: " + lastGdalError());
+    scale_ = std::min(1.0, std::min(std::abs(sg[1]), std::abs(sg[5])) / frame.pixelSizeM);
+    int has = 0;
+    const double nd = ds_->GetRasterBand(band_)->GetNoDataValue(&has);
+    if (has) nodata_ = nd;
+}
+
+void WaterStepWarp::warp(size_t c0, size_t r0, size_t w, size_t h, float* out) const {
+    std::fill(out, out + w * h, std::numeric_limits<float>::quiet_NaN());
+    if (w == 0 || h == 0) return;
+    // The whole working raster as a virtual raster (nothing allocated): the transformer maps its pixel coordinates, so a
+    // window's pixels are computed as in the whole raster; WarpRegionToBuffer fills only the window.
+    GDALDriver* vrt = GetGDALDriverManager()->GetDriverByName("VRT");
+    DatasetPtr dst(vrt->Create("", int(width_), int(height_), 1, GDT_Float32, nullptr));
+    if (!dst) throw Error("cannot create a virtual raster: " + lastGdalError());
+    double gt[6];
+    std::copy(gt_, gt_ + 6, gt);
+    dst->SetGeoTransform(gt);
+    if (!dstWkt_.empty()) dst->SetProjection(dstWkt_.c_str());
+    char** opts = dstWkt_.empty() ? nullptr : CSLSetNameValue(nullptr, "DST_SRS", dstWkt_.c_str());
+    void* tr = GDALCreateGenImgProjTransformer2(GDALDataset::ToHandle(ds_.get()), GDALDataset::ToHandle(dst.get()), opts);
+    CSLDestroy(opts);
+    if (!tr) throw Error(what_ + ": cannot transform onto the terrain: " + lastGdalError());
+    std::unique_ptr<void, void (*)(void*)> trOwner(tr, GDALDestroyGenImgProjTransformer);
+    GDALWarpOptions* wo = GDALCreateWarpOptions();
+    std::unique_ptr<GDALWarpOptions, void (*)(GDALWarpOptions*)> woOwner(wo, GDALDestroyWarpOptions);
+    wo->hSrcDS = GDALDataset::ToHandle(ds_.get());
+    wo->hDstDS = GDALDataset::ToHandle(dst.get());
+    wo->nBandCount = 1;
+    wo->panSrcBands = static_cast<int*>(CPLMalloc(sizeof(int)));
+    wo->panDstBands = static_cast<int*>(CPLMalloc(sizeof(int)));
+    wo->panSrcBands[0] = band_;
+    wo->panDstBands[0] = 1;
+    wo->eResampleAlg = GRA_Bilinear;
+    wo->eWorkingDataType = GDT_Float32;
+    if (nodata_) {
+        wo->padfSrcNoDataReal = static_cast<double*>(CPLMalloc(sizeof(double)));
+        wo->padfSrcNoDataReal[0] = *nodata_;
+    }
+    wo->padfDstNoDataReal = static_cast<double*>(CPLMalloc(sizeof(double)));
+    wo->padfDstNoDataReal[0] = std::numeric_limits<double>::quiet_NaN();
+    wo->pfnTransformer = GDALGenImgProjTransform;  // exact: no approximation (gdalwarp -et 0)
+    wo->pTransformerArg = tr;
+    const std::string sc = exact(scale_);
+    wo->papszWarpOptions = CSLSetNameValue(wo->papszWarpOptions, "XSCALE", sc.c_str());
+    wo->papszWarpOptions = CSLSetNameValue(wo->papszWarpOptions, "YSCALE", sc.c_str());
+    wo->papszWarpOptions = CSLSetNameValue(wo->papszWarpOptions, "NUM_THREADS", std::to_string(resolveThreads(threads_)).c_str());
+    GDALWarpOperation op;
+    CPLErrorReset();
+    if (op.Initialize(wo) != CE_None || op.WarpRegionToBuffer(int(c0), int(r0), int(w), int(h), out, GDT_Float32) != CE_None)
+        throw Error(what_ + ": resampling onto the terrain: " + lastGdalError());
+    ds_->FlushCache(false);  // drops its blocks from GDAL's cache: the next window reads what it reaches
+}
+
+void WaterStepWarp::depth(size_t c0, size_t r0, size_t w, size_t h, const float* terrainZ, float* out, uint64_t& negative) const {
+    warp(c0, r0, w, h, out);
+    for (size_t i = 0; i < w * h; ++i) {
+        const float z = terrainZ[i], v = out[i];
+        if (std::isnan(z)) {
+            out[i] = std::numeric_limits<float>::quiet_NaN();
+            continue;
+        }
+        if (std::isnan(v)) {  // no water data here: dry
+            out[i] = 0;
+            continue;
+        }
+        const float d = surface_ ? v - z : v;
+        if (!surface_ && d < 0) ++negative;
+        out[i] = d > 0 ? d : 0.0f;
+    }
+}
+
+std::string waterStepName(const Options& opt, size_t step) {
+    const std::string& path = opt.waterPaths.empty() ? opt.waterPath : opt.waterPaths.at(step);
+    return opt.waterBands.empty() ? path : fmt::format("{} (band {}, step {})", path, opt.waterBands.at(step), step);
+}
+
+std::string negativeDepthWarning(const std::string& what, uint64_t negative) {
+    return what + ": " + std::to_string(negative) + " pixels of negative depth taken as dry";
+}
+
+}  // namespace detail
+
 Raster loadWater(const Options& opt, const Raster& terrain, LoadReport& report, size_t step) {
     if (step >= waterStepCount(opt)) throw Error("water step " + std::to_string(step) + " of " + std::to_string(waterStepCount(opt)));
     if (opt.water == WaterSource::Level) return bathtub(terrain, opt.waterLevelsM.empty() ? opt.waterLevelM : opt.waterLevelsM[step]);
-    const std::string role = opt.water == WaterSource::Depth ? "water depth raster" : "water surface raster";
-    const std::string& path = opt.waterPaths.empty() ? opt.waterPath : opt.waterPaths[step];
-    detail::DatasetPtr ds = detail::openRaster(path, role);
-    if (step > 0 && path != opt.waterPaths[0]) checkAgreesWithFirst(*ds, path, opt.waterPaths[0], role);
-    Options one = opt;
-    one.waterPath = path;
-    if (opt.waterBands.empty()) return warpedWater(one, *ds, terrain, report);
-    const int band = opt.waterBands.at(step);
-    one.waterPath = fmt::format("{} (band {}, step {})", path, band, step);
-    detail::DatasetPtr slice = bandOf(*ds, band, path);
-    return warpedWater(one, *slice, terrain, report);
+    // Warped in strips of rows, as a rank warps its windows (WaterStepWarp): the same bits.
+    const detail::WaterStepWarp warp(opt, terrain, step, report);
+    Raster d = terrain;
+    const size_t w = terrain.width, strip = std::max<size_t>(1, (size_t{1} << 22) / std::max<size_t>(1, w));
+    uint64_t negative = 0;
+    for (size_t r0 = 0; r0 < terrain.height; r0 += strip) {
+        const size_t h = std::min(strip, terrain.height - r0);
+        warp.depth(0, r0, w, h, terrain.values.data() + r0 * w, d.values.data() + r0 * w, negative);
+    }
+    if (negative > 0) report.warnings.push_back(detail::negativeDepthWarning(warp.what(), negative));
+    return d;
 }
 
 size_t expandWaterTimeSeries(Options& o, LoadReport& report) {

@@ -51,12 +51,12 @@ set(HOLES_ARGS "holes.tif --tolerance 15 --max-cell 1024 --water-level 2500,2700
 
 if(HC_GDAL_CREATE)  # gdal-bin's gdal_rasterize makes the holes
   # hc-ingest: the same bytes from 1, 2 and 3 ranks (and the interior holes are there: fewer valid pixels than the
-  # working raster has, and holes.tif's own count of nodata pixels is not 0). Water steps are read whole on every rank
-  # (the log says so); the source is geographic (resampled to UTM), and the ranks still write their own cells into the
+  # working raster has, and holes.tif's own count of nodata pixels is not 0). Water levels are flood-filled over the
+  # whole raster on every rank (the log says so); the source is geographic (resampled to UTM), and the ranks still write their own cells into the
   # file in place, checking their share of the source's rows against it afterwards: the same summary as one process.
   hc_mpi_test(mpi.ingest_holes_steps 0 [[rank 3/3: the whole raster held, [0-9]+ tiles of [0-9]+\^2 px built, [0-9]+ units, [0-9]+ cells written]]
     --setup "${HOLES_INPUT} && $HC_INGEST ${HOLES_ARGS} -o one.hcg > one.txt 2>&1"
-    --match [[rank 1/2: ]] --match [[rank 2/2: ]] --match [[rank 1/3: every rank reads the whole raster: water steps]]
+    --match [[rank 1/2: ]] --match [[rank 2/2: ]] --match [[rank 1/3: every rank reads the whole raster: water levels are flood-filled over the whole raster]]
     --match [[rank 3/3: its [0-9]+ cells \([0-9.]+ MB\) written into the output in place]]
     --match [[rank 2/3: [0-9]+ source pixels of its rows checked against the cells under them]]
     --no-match [[rank 4/3|error:|warning]]
@@ -99,7 +99,7 @@ done]])
     --setup [[gdal_translate -q -a_ullr -90.5 90.5 270.5 -90.5 "$HC_DATA_DIR/etopo1_1deg.tif" east.tif &&
 "$HC_INGEST" --quiet east.tif --t_srs EPSG:3832 --water-level 0,200 -o one.hcg]]
     --match [[rank 1/2: water steps: the depths of its [1-9][0-9]* cells in 2 steps]]
-    --match [[rank 2/3: every rank reads the whole raster: water steps]]
+    --match [[rank 2/3: every rank reads the whole raster: water levels are flood-filled over the whole raster]]
     --no-match [[error:|written into the output in place]]
     --check [[cmp one.hcg g2.hcg && cmp one.hcg g3.hcg
 "$HC_INFO" --verify g3.hcg | grep -E 'steps +2 water steps']]
@@ -110,6 +110,48 @@ exit 1
 fi
 done
 cat g2.txt g3.txt]])
+
+  # Water steps from rasters are read window by window: each rank warps only its windows of every step raster onto the
+  # working raster (the whole raster's pixel coordinates, the kernel's scale fixed), makes the merge masks of its own
+  # nodes and the depths of its own cells. Over the bundled geographic DEM (resampled to UTM): a depth series in UTM at
+  # 30 m with a nodata value and negative depths (a warning, counted over the ranks), the same depths at 21 m (finer
+  # than the working pixel: the kernel widens), and water surfaces as a NetCDF variable over time (bands). The same
+  # bytes and the same summary as one process.
+  set(WATER_WINDOWS_INPUT [[gdalwarp -q -t_srs EPSG:32632 -tr 30 30 -r bilinear "$HC_DATA_DIR/hef_srtm.tif" utm30.tif &&
+gdal_translate -q -scale 2000 3800 300 -1500 -ot Float32 -a_nodata -9999 utm30.tif depth.tif &&
+gdal_translate -q -a_ullr 633000 5190000 650000 5170000 -outsize 800 800 -r bilinear depth.tif fine.tif &&
+for l in 1:2000 2:2100 3:2200
+do gdal_create -q -if "$HC_DATA_DIR/hef_srtm.tif" -ot Float32 -burn ${l#*:} s_${l%%:*}.tif || exit 1
+done
+gdalbuildvrt -q -separate stack.vrt s_1.tif s_2.tif s_3.tif &&
+gdal_translate -q -of netCDF -mo 'NETCDF_DIM_EXTRA={time}' -mo 'NETCDF_DIM_time_DEF={3,6}' -mo 'NETCDF_DIM_time_VALUES={0,1.5,3}' -mo 'time#units=hours since 2024-06-01 00:00:00' stack.vrt run.nc]])
+  hc_mpi_test(mpi.ingest_water_windows 0 [[rank 3/3: water steps: the depths of its [1-9][0-9]* cells in 3 steps]]
+    --setup "${WATER_WINDOWS_INPUT}"
+    --match [[rank 2/3: [0-9]+ windows read, [0-9]+ px \([0-9.]+ % of the raster\)]]
+    --match [[warning: depth.tif: [1-9][0-9]* pixels of negative depth taken as dry]]
+    --no-match [[error:|every rank reads the whole raster]]
+    --check [[for c in depth fine nc
+do cmp $c.1.hcg $c.2.hcg && cmp $c.1.hcg $c.3.hcg || exit 1
+grep -E '^  |warning' $c.1.txt | grep -vE '^ +(time|memory) ' > a.txt
+grep -E '^  |warning' $c.3.txt | grep -vE '^ +(time|memory) ' > b.txt
+diff a.txt b.txt || exit 1
+done
+"$HC_INFO" --verify nc.3.hcg | grep -E 'steps +3 water steps, 0 \.\. 10800 s'
+"$HC_INFO" --json depth.3.hcg | tr -d ' \n' | grep -oE '"wet_cells":[1-9][0-9]*' | head -n 1]]
+    -- ${HC_BASH} -c [[run() { c=$1
+shift
+if ! "$HC_INGEST" "$HC_DATA_DIR/hef_srtm.tif" --tolerance 2 "$@" -o $c.1.hcg > $c.1.txt 2>&1
+then cat $c.1.txt
+exit 1
+fi
+for n in 2 3
+do if ! "$HC_MPIRUN" -np $n "$HC_INGEST" "$HC_DATA_DIR/hef_srtm.tif" --tolerance 2 "$@" -o $c.$n.hcg > $c.$n.txt 2>&1
+then cat $c.$n.txt
+exit 1
+fi
+done
+}
+run depth --water depth.tif,depth.tif --times 0,60 && run fine --water fine.tif && run nc --water-surface run.nc && cat depth.3.txt nc.3.txt]])
 
   # --t_srs (GDAL's warper): each rank warps its own windows from the source blocks they reach (the whole output's
   # pixel centres, the kernel's scale fixed), checks its share of the source's rows against the file, and the file is

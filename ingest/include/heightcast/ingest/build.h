@@ -87,6 +87,13 @@ struct RasterWindows {
     // Fills values (and rounding: Raster::roundingM, left empty when float32 holds the source) with the working pixels
     // [col0, col0 + w) x [row0, row0 + h), row 0 the northern-most, row-major. Throws hc::Error.
     std::function<void(size_t col0, size_t row0, size_t w, size_t h, std::vector<float>& values, std::vector<float>& rounding)> read;
+    // Water steps read window by window too (none without): their times [s], and readStep, which fills `depth` with step
+    // k's depths [m] at the same working pixels as read(), given the terrain's elevations there (`terrain`, as read()
+    // gave them). Each window of each step is read twice: for the merge masks (`first`: count what it reports once),
+    // then for the cells' depths.
+    std::vector<double> stepTimesS;
+    std::function<void(size_t k, size_t col0, size_t row0, size_t w, size_t h, const float* terrain, std::vector<float>& depth, bool first)>
+        readStep;
 };
 
 // Builds the grid straight into a .hcg file (GridFileWriter): the same cells, bytes identical to
@@ -95,7 +102,8 @@ struct RasterWindows {
 // `extraStats` supplies source path, CRS name and the seconds spent before the build (the build's own time is added).
 BuildSummary buildGridFile(const Raster& terrain, const WaterSteps* steps, const BuildOptions& options,
                            const std::string& path, const IngestStats& extraStats);
-// The same for a terrain read window by window, without water: the same bytes as the raster read whole.
+// The same for a terrain read window by window (and its water steps, RasterWindows::readStep): the same bytes as the
+// rasters read whole.
 BuildSummary buildGridFile(const RasterWindows& terrain, const BuildOptions& options, const std::string& path,
                            const IngestStats& extraStats);
 
