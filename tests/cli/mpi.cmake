@@ -153,10 +153,18 @@ done
 }
 run depth --water depth.tif,depth.tif --times 0,60 && run fine --water fine.tif && run nc --water-surface run.nc && cat depth.3.txt nc.3.txt]])
 
+  # A water raster cut short (its header whole, its second half gone): the ranks that read the missing strips fail, and
+  # every rank stops with one error naming the file; no output is left.
+  hc_mpi_test(mpi.ingest_water_windows_broken nonzero [[hc-ingest: error: rank [0-9]/3: broken\.tif: resampling onto the terrain: .*broken\.tif]]
+    --setup [[gdal_translate -q -ot Float32 -co TILED=NO "$HC_DATA_DIR/hef_srtm.tif" w.tif && head -c $(( $(stat -c %s w.tif) / 2 )) w.tif > broken.tif && gdalinfo broken.tif > /dev/null]]
+    --absent g.hcg --no-match [[Segmentation|Abort|internal]]
+    -- ${HC_BASH} -c [["$HC_MPIRUN" -np 3 "$HC_INGEST" "$HC_DATA_DIR/hef_srtm.tif" --water broken.tif -o g.hcg 2>&1 | grep -v 'building quadtree'
+exit ${PIPESTATUS[0]}]])
+
   # --t_srs (GDAL's warper): each rank warps its own windows from the source blocks they reach (the whole output's
   # pixel centres, the kernel's scale fixed), checks its share of the source's rows against the file, and the file is
-  # the same bytes as one process writes, with the same summary; with water steps too (read whole on every rank, the
-  # cells still written in place). The bundled WGS 84 DEM to Austria's Gauss-Krueger zone.
+  # the same bytes as one process writes, with the same summary; with water levels too (the terrain then read whole on
+  # every rank for the flood fill, the cells still written in place). The bundled WGS 84 DEM to Austria's Gauss-Krueger zone.
   hc_mpi_test(mpi.ingest_warped_windows 0 [[rank 3/3: [0-9]+ windows? read, [0-9]+ px \([0-9.]+ % of the raster\)]]
     --setup [["$HC_INGEST" "$HC_DATA_DIR/hef_srtm.tif" --t_srs EPSG:31254 -o one.hcg > one.txt 2>&1 &&
 "$HC_INGEST" --quiet "$HC_DATA_DIR/hef_srtm.tif" --t_srs EPSG:31254 --water-level 2600,2900 -o w1.hcg]]
