@@ -21,8 +21,10 @@
 // cell computed exactly as a merge would (the float mean of the four children's means, bottom up): with one step the
 // cells and depths are those of a build over both layers at once. Under mpirun every rank computes the depths of its own
 // cells (their codes kept as it writes them) and sends rank 0 the wet ones, in rank order, which is the cells' order:
-// no rank holds every cell's code. Every rank still reads each step's raster whole (the merge masks and the bathtub's
-// flood fill are whole-raster).
+// no rank holds every cell's code. With a raster read window by window, each rank reads only its windows of each step
+// (RasterWindows::readStep, or a level's bathtub flooded over its windows and joined across the ranks: bathtubBlocks)
+// and keeps the merge masks of its own windows; the levels above the tiles, where every rank merges every node, are
+// combined over the ranks.
 #include "heightcast/ingest/build.h"
 
 #include <algorithm>
@@ -34,6 +36,9 @@
 #include <limits>
 #include <memory>
 #include <optional>
+#include <span>
+#include <unordered_map>
+#include <unordered_set>
 
 #include <fmt/format.h>
 
@@ -57,29 +62,65 @@ struct Node {
 
 // Which quadtree nodes the water steps let merge: per level 1..maxLevel, a byte per node (node (x, y) of level l covers
 // pixels [x 2^l, (x + 1) 2^l) east and likewise north of the south-west corner). Starts all allowed.
+// Over the whole raster, or (a rank's, under mpirun) over its own windows only up to level fineTop and the whole raster
+// above it: a rank forbids merges in its own nodes, and above the tiles every rank merges every node (Builder::run).
 class MergeMask {
 public:
     MergeMask(size_t width, size_t height, int maxLevel) : levels_(size_t(maxLevel) + 1) {
+        for (int l = 1; l <= maxLevel; ++l) levels_[size_t(l)].push_back(Level::over(0, 0, width, height, l));
+    }
+    // Over `windows` (rectangles of pixels whose corners lie on the lattice of 2^windowLevel) for levels up to fineTop;
+    // windowOf: per node of 2^windowLevel (windowNx a row) the window holding it, or -1.
+    MergeMask(size_t width, size_t height, int maxLevel, int fineTop, const std::vector<std::array<size_t, 4>>& windows, int windowLevel,
+              std::vector<int32_t> windowOf, size_t windowNx)
+        : levels_(size_t(maxLevel) + 1), fineTop_(fineTop), windowLevel_(windowLevel), windowOf_(std::move(windowOf)), windowNx_(windowNx) {
         for (int l = 1; l <= maxLevel; ++l) {
-            const size_t nx = (width + (size_t{1} << l) - 1) >> l, ny = (height + (size_t{1} << l) - 1) >> l;
-            levels_[size_t(l)] = {nx, ny, std::vector<uint8_t>(nx * ny, 1)};
+            if (l > fineTop) {
+                levels_[size_t(l)].push_back(Level::over(0, 0, width, height, l));
+                continue;
+            }
+            for (const auto& [x0, y0, w, h] : windows) levels_[size_t(l)].push_back(Level::over(x0, y0, w, h, l));
         }
     }
     bool allowed(int level, size_t x, size_t y) const {
-        const Level& L = levels_[size_t(level)];
-        return x < L.nx && y < L.ny && L.ok[y * L.nx + x];
+        const Level* L = find(level, x, y);
+        if (!L) return true;  // not this rank's node: never forbidden here
+        return x - L->x0 < L->nx && y - L->y0 < L->ny && L->ok[(y - L->y0) * L->nx + (x - L->x0)];
     }
     void forbid(int level, size_t x, size_t y) {
-        Level& L = levels_[size_t(level)];
-        if (x < L.nx && y < L.ny) L.ok[y * L.nx + x] = 0;
+        Level* L = const_cast<Level*>(find(level, x, y));
+        if (L && x - L->x0 < L->nx && y - L->y0 < L->ny) L->ok[(y - L->y0) * L->nx + (x - L->x0)] = 0;
+    }
+    // A level of the whole raster's bytes, and the merges another mask of the same raster forbids there forbidden here.
+    const std::vector<uint8_t>& level(int l) const { return levels_[size_t(l)].at(0).ok; }
+    void forbidAlso(int l, std::span<const uint8_t> other) {
+        std::vector<uint8_t>& ok = levels_[size_t(l)].at(0).ok;
+        if (other.size() != ok.size()) throw Error("internal: merge masks of different sizes");
+        for (size_t i = 0; i < ok.size(); ++i) ok[i] &= other[i];
     }
 
 private:
     struct Level {
-        size_t nx = 0, ny = 0;
+        size_t x0 = 0, y0 = 0, nx = 0, ny = 0;  // in nodes of its level
         std::vector<uint8_t> ok;
+        static Level over(size_t px0, size_t py0, size_t w, size_t h, int l) {
+            const size_t side = size_t{1} << l;
+            Level L{px0 >> l, py0 >> l, (w + side - 1) >> l, (h + side - 1) >> l, {}};
+            L.ok.assign(L.nx * L.ny, 1);
+            return L;
+        }
     };
-    std::vector<Level> levels_;
+    const Level* find(int level, size_t x, size_t y) const {
+        const std::vector<Level>& ls = levels_[size_t(level)];
+        if (level > fineTop_ || windowOf_.empty()) return &ls[0];
+        const size_t px = x << level, py = y << level, node = (py >> windowLevel_) * windowNx_ + (px >> windowLevel_);
+        if (node >= windowOf_.size() || (px >> windowLevel_) >= windowNx_ || windowOf_[node] < 0) return nullptr;
+        return &ls[size_t(windowOf_[node])];
+    }
+    std::vector<std::vector<Level>> levels_;  // per level: the whole raster, or one per window
+    int fineTop_ = std::numeric_limits<int>::max(), windowLevel_ = 0;
+    std::vector<int32_t> windowOf_;
+    size_t windowNx_ = 0;
 };
 
 // A rectangle of the working raster's pixels that the build reads: the whole raster, or under mpirun with a raster
@@ -211,6 +252,9 @@ public:
     // After run(), with water steps read window by window (RasterWindows::readStep): step k's depths over each block of
     // this rank (its windows, as the terrain's), kept in `storage`, and the one holding a pixel.
     std::vector<Block> stepBlocks(size_t k, std::vector<std::vector<float>>& storage, bool first) const;
+    // The bathtub at `level` over this rank's blocks (collective: every rank calls it, blocks or not): the depths that
+    // load_water.cpp's bathtub gives the whole raster, in `storage`, one vector a block.
+    void bathtubBlocks(double level, std::vector<std::vector<float>>& storage) const;
     size_t blockIndexAt(size_t ix, size_t iy) const { return size_t(&blockAt(ix, iy) - blocks_.data()); }
 
 private:
@@ -418,16 +462,180 @@ uint64_t Builder::holdPixels(uint64_t c0, uint64_t c1) {
 }
 
 std::vector<Block> Builder::stepBlocks(size_t k, std::vector<std::vector<float>>& storage, bool first) const {
-    if (!windows_ || !windows_->readStep) throw Error("internal: water steps by windows without a reader");
+    const bool levels = windows_ && !windows_->stepLevelsM.empty();
+    if (!windows_ || (!windows_->readStep && !levels)) throw Error("internal: water steps by windows without a reader");
     std::vector<Block> out;
     storage.assign(blocks_.size(), {});
+    if (levels) bathtubBlocks(windows_->stepLevelsM.at(k), storage);
     for (size_t i = 0; i < blocks_.size(); ++i) {
         const Block& b = blocks_[i];
-        windows_->readStep(k, b.x0, t_.height - (b.y0 + b.h), b.w, b.h, b.values, storage[i], first);
+        if (!levels) windows_->readStep(k, b.x0, t_.height - (b.y0 + b.h), b.w, b.h, b.values, storage[i], first);
         if (storage[i].size() != b.w * b.h) throw Error("internal: a water step's window read the wrong number of pixels");
         out.push_back({b.x0, b.y0, b.w, b.h, storage[i].data(), nullptr});
     }
     return out;
+}
+
+namespace {
+// Union-find over int64 keys (path halving); the smaller key becomes the root, so every rank joining the same pairs in
+// the same order gets the same roots.
+struct Joins {
+    std::unordered_map<int64_t, int64_t> parent;  // a key not in it is a root
+    int64_t find(int64_t k) {
+        for (;;) {
+            const auto it = parent.find(k);
+            if (it == parent.end()) return k;
+            if (const auto up = parent.find(it->second); up != parent.end()) it->second = up->second;  // halve the path
+            k = it->second;
+        }
+    }
+    void join(int64_t a, int64_t b) {
+        a = find(a), b = find(b);
+        if (a == b) return;
+        if (b < a) std::swap(a, b);
+        parent[b] = a;
+    }
+};
+}  // namespace
+
+// Each block labels the components of its pixels below the level (4-connected, union-find over its pixels) and seeds
+// those that touch the raster's edge or a hole inside it. Its four edges (each pixel: its component's root and seed, a
+// hole, or dry) go to every rank; every rank then joins the components that meet across two blocks' edges, and seeds
+// those that meet a hole there, in the same order: the same answer everywhere. A pixel is wet when its component, so
+// joined, holds a seed: exactly the pixels the whole raster's flood fill reaches.
+void Builder::bathtubBlocks(double level, std::vector<std::vector<float>>& storage) const {
+    constexpr int64_t kHole = -1, kDry = -2;
+    const size_t W = t_.width, H = t_.height;
+    struct Local {
+        std::vector<int32_t> root;  // per pixel: its component's root pixel, -1 when not below the level
+        std::vector<uint8_t> seed;  // per root pixel: the component touches the raster's edge or a hole in the block
+    };
+    std::vector<Local> local(blocks_.size());
+    std::vector<int64_t> edges;  // per block: x0, y0, w, h, then its north, south, west and east edges' states
+    for (size_t i = 0; i < blocks_.size(); ++i) {
+        const Block& b = blocks_[i];
+        Local& L = local[i];
+        const size_t n = b.w * b.h;
+        if (n > size_t(std::numeric_limits<int32_t>::max())) throw Error("internal: a window of more than 2^31 pixels for the bathtub");
+        auto below = [&](size_t p) { return !std::isnan(b.values[p]) && b.values[p] < level; };
+        std::vector<int32_t>& parent = L.root;
+        parent.assign(n, -1);
+        auto find = [&](int32_t p) {
+            while (parent[size_t(p)] != p) p = parent[size_t(p)] = parent[size_t(parent[size_t(p)])];
+            return p;
+        };
+        auto join = [&](int32_t a, int32_t c) {
+            a = find(a), c = find(c);
+            if (a != c) parent[size_t(std::max(a, c))] = std::min(a, c);
+        };
+        for (size_t r = 0; r < b.h; ++r)  // row r of the block (north-up), column c
+            for (size_t c = 0; c < b.w; ++c) {
+                const size_t p = r * b.w + c;
+                if (!below(p)) continue;
+                parent[p] = int32_t(p);
+                if (c > 0 && parent[p - 1] >= 0) join(int32_t(p), int32_t(p - 1));
+                if (r > 0 && parent[p - b.w] >= 0) join(int32_t(p), int32_t(p - b.w));
+            }
+        L.seed.assign(n, 0);
+        for (size_t r = 0; r < b.h; ++r)
+            for (size_t c = 0; c < b.w; ++c) {
+                const size_t p = r * b.w + c;
+                if (parent[p] < 0) continue;
+                parent[p] = find(int32_t(p));
+                const size_t ix = b.x0 + c, iy = b.y0 + b.h - 1 - r;
+                // A neighbour outside the raster, or a hole inside this block: a seed (neighbours in other blocks: below).
+                const bool edge = ix == 0 || iy == 0 || ix + 1 >= W || iy + 1 >= H;
+                const bool hole = (c > 0 && std::isnan(b.values[p - 1])) || (c + 1 < b.w && std::isnan(b.values[p + 1])) ||
+                                  (r > 0 && std::isnan(b.values[p - b.w])) || (r + 1 < b.h && std::isnan(b.values[p + b.w]));
+                if (edge || hole) L.seed[size_t(parent[p])] = 1;
+            }
+        edges.insert(edges.end(), {int64_t(b.x0), int64_t(b.y0), int64_t(b.w), int64_t(b.h)});
+        auto state = [&](size_t r, size_t c) {
+            const size_t p = r * b.w + c;
+            if (std::isnan(b.values[p])) return kHole;
+            if (parent[p] < 0) return kDry;
+            return int64_t(parent[p]) * 2 + L.seed[size_t(parent[p])];
+        };
+        for (size_t c = 0; c < b.w; ++c) edges.push_back(state(0, c));        // north
+        for (size_t c = 0; c < b.w; ++c) edges.push_back(state(b.h - 1, c));  // south
+        for (size_t r = 0; r < b.h; ++r) edges.push_back(state(r, 0));        // west
+        for (size_t r = 0; r < b.h; ++r) edges.push_back(state(r, b.w - 1));  // east
+    }
+    // Every rank's blocks and edges, in rank order: block g's component with root pixel p is key g * 2^40 + p.
+    const std::vector<std::vector<int64_t>> all = ranks::allGatherVectors(edges);
+    struct Edges {
+        size_t x0, y0, w, h;
+        const int64_t* at;  // north (w), south (w), west (h), east (h)
+    };
+    std::vector<Edges> blocks;
+    size_t mine = 0;  // this rank's first block
+    for (size_t r = 0; r < all.size(); ++r) {
+        if (int(r) == ranks::rank()) mine = blocks.size();
+        for (size_t at = 0; at + 4 <= all[r].size();) {
+            const int64_t* q = all[r].data() + at;
+            const Edges e{size_t(q[0]), size_t(q[1]), size_t(q[2]), size_t(q[3]), q + 4};
+            at += 4 + 2 * (e.w + e.h);
+            if (at > all[r].size()) throw Error("internal: a rank sent a block's edges cut short");
+            blocks.push_back(e);
+        }
+    }
+    std::vector<int32_t> owner(nbx_ * nby_, -1);  // share node -> the block holding it
+    for (size_t g = 0; g < blocks.size(); ++g)
+        for (size_t y = blocks[g].y0 >> shareLevel_; y <= (blocks[g].y0 + blocks[g].h - 1) >> shareLevel_; ++y)
+            for (size_t x = blocks[g].x0 >> shareLevel_; x <= (blocks[g].x0 + blocks[g].w - 1) >> shareLevel_; ++x) owner[y * nbx_ + x] = int32_t(g);
+    // The state of pixel (ix, iy), which lies on an edge of its block.
+    auto stateAt = [&](size_t ix, size_t iy) {
+        const int32_t g = owner[(iy >> shareLevel_) * nbx_ + (ix >> shareLevel_)];
+        if (g < 0) throw Error("internal: a pixel of the raster in no rank's block");
+        const Edges& e = blocks[size_t(g)];
+        const size_t c = ix - e.x0, r = e.y0 + e.h - 1 - iy;
+        if (r == 0) return std::pair{size_t(g), e.at[c]};
+        if (r == e.h - 1) return std::pair{size_t(g), e.at[e.w + c]};
+        if (c == 0) return std::pair{size_t(g), e.at[2 * e.w + r]};
+        return std::pair{size_t(g), e.at[2 * e.w + e.h + r]};
+    };
+    auto key = [](size_t g, int64_t s) { return int64_t(g) * (int64_t{1} << 40) + s / 2; };
+    Joins joins;
+    std::vector<int64_t> seeds;
+    auto meet = [&](size_t g, int64_t s, size_t ix, size_t iy) {  // s: a below pixel of block g; (ix, iy) its neighbour
+        if (ix >= W || iy >= H) return;  // outside the raster: seeded in its block already
+        const auto [h, t] = stateAt(ix, iy);
+        if (t == kHole) seeds.push_back(key(g, s));
+        else if (t >= 0) joins.join(key(g, s), key(h, t));
+    };
+    for (size_t g = 0; g < blocks.size(); ++g) {
+        const Edges& e = blocks[g];
+        for (size_t j = 0; j < 2 * (e.w + e.h); ++j)  // the components seeded in their own block
+            if (e.at[j] >= 0 && (e.at[j] & 1)) seeds.push_back(key(g, e.at[j]));
+        for (size_t c = 0; c < e.w; ++c) {
+            const size_t ix = e.x0 + c;
+            if (const int64_t s = e.at[c]; s >= 0) meet(g, s, ix, e.y0 + e.h);  // north of the north edge
+            if (const int64_t s = e.at[e.w + c]; s >= 0 && e.y0 > 0) meet(g, s, ix, e.y0 - 1);
+        }
+        for (size_t r = 0; r < e.h; ++r) {
+            const size_t iy = e.y0 + e.h - 1 - r;
+            if (const int64_t s = e.at[2 * e.w + r]; s >= 0 && e.x0 > 0) meet(g, s, e.x0 - 1, iy);
+            if (const int64_t s = e.at[2 * e.w + e.h + r]; s >= 0) meet(g, s, e.x0 + e.w, iy);
+        }
+    }
+    std::unordered_set<int64_t> wet;  // the roots of seeded components that reach an edge
+    for (int64_t s : seeds) wet.insert(joins.find(s));
+    for (size_t i = 0; i < blocks_.size(); ++i) {
+        const Block& b = blocks_[i];
+        Local& L = local[i];
+        std::vector<float>& d = storage[i];
+        d.assign(b.w * b.h, 0.0f);
+        for (size_t p = 0; p < d.size(); ++p)  // each component's answer once, at its root (its least pixel: first)
+            if (L.root[p] == int32_t(p) && !L.seed[p] && !wet.empty()) L.seed[p] = wet.count(joins.find(key(mine + i, int64_t(p) * 2))) > 0;
+        for (size_t p = 0; p < d.size(); ++p) {
+            if (std::isnan(b.values[p])) {
+                d[p] = std::numeric_limits<float>::quiet_NaN();
+                continue;
+            }
+            const int32_t root = L.root[p];
+            if (root >= 0 && L.seed[size_t(root)]) d[p] = static_cast<float>(level - b.values[p]);
+        }
+    }
 }
 
 Stats Builder::run(CellSink& sink) {
@@ -451,13 +659,19 @@ Stats Builder::run(CellSink& sink) {
         const size_t steps = windows_->stepTimesS.size();
         Progress progress("water steps: wet/dry edges", steps, opt_.progress && root && steps > 1);
         ranks::together([&] {
-            ownMask_.emplace(t_.width, t_.height, maxLevel_);
+            std::vector<std::array<size_t, 4>> windows;  // the mask over this rank's windows only, up to the tiles
+            for (const Block& b : blocks_) windows.push_back({b.x0, b.y0, b.w, b.h});
+            ownMask_.emplace(t_.width, t_.height, maxLevel_, tileLevel_, windows, shareLevel_, blockOf_, nbx_);
             for (size_t k = 0; k < steps; ++k) {
                 std::vector<std::vector<float>> storage;
                 for (const Block& b : stepBlocks(k, storage, true)) restrictByStep(b, opt_.toleranceM, maxLevel_, opt_.threads, *ownMask_);
                 progress.advance(1);
             }
         });
+        // Above the tiles every rank merges every node (pass B): the levels there, a byte per 4^7 pixels or fewer, are
+        // combined over the ranks, each of which forbade merges in its own nodes only.
+        for (int l = tileLevel_ + 1; l <= maxLevel_; ++l)
+            for (const auto& other : ranks::allGatherVectors(ownMask_->level(l))) ownMask_->forbidAlso(l, other);
         progress.finish();
         mask_ = &*ownMask_;
     }

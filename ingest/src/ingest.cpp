@@ -189,9 +189,9 @@ detail::SourceCheckSums allRanksCheck(const detail::SourceCheckSums& mine) {
     return sums;
 }
 
-// Under mpirun, a terrain (and water steps from rasters) read window by window: every rank reads only the windows of
-// its share (buildGridFile over RasterWindows), each step's raster warped onto the same windows, the readers' counts
-// are added over the ranks, and rank 0 reports them. nullopt where the source must be read whole (a warp split at 180
+// Under mpirun, a terrain and its water steps read window by window: every rank reads only the windows of its share
+// (buildGridFile over RasterWindows), each step's raster warped onto the same windows (or a level's bathtub flooded over
+// them by the builder), the readers' counts are added over the ranks, and rank 0 reports them. nullopt where the source must be read whole (a warp split at 180
 // degrees), with the reason in the rank log.
 std::optional<BuildSummary> ingestByWindows(const Options& opt, const std::string& path, LoadReport& report, const Stopwatch& clock) {
     std::string why;
@@ -214,7 +214,9 @@ std::optional<BuildSummary> ingestByWindows(const Options& opt, const std::strin
     std::unique_ptr<detail::WaterStepWarp> stepWarp;
     size_t warpStep = 0;
     for (size_t k = 0; k < stepCount; ++k) w.stepTimesS.push_back(waterStepTimeS(opt, k));
-    if (stepCount > 0)
+    if (opt.water == WaterSource::Level)  // bathtubs: flooded by the builder over the ranks' windows
+        w.stepLevelsM = opt.waterLevelsM.empty() ? std::vector<double>{opt.waterLevelM} : opt.waterLevelsM;
+    else if (stepCount > 0)
         w.readStep = [&](size_t k, size_t c0, size_t r0, size_t width, size_t height, const float* terrain, std::vector<float>& depth, bool first) {
             if (!stepWarp || warpStep != k) {
                 LoadReport again;  // the step's warnings once, from its first reads
@@ -264,50 +266,21 @@ std::optional<BuildSummary> ingestByWindows(const Options& opt, const std::strin
 
 BuildSummary ingestToFile(const Options& opt, const std::string& path, LoadReport& report) {
     const Stopwatch clock;
-    if (ranks::distributed() && opt.water != WaterSource::Level) {
+    if (ranks::distributed())
         if (std::optional<BuildSummary> b = ingestByWindows(opt, path, report, clock)) return std::move(*b);
-    } else if (ranks::distributed()) {
-        ranks::log("hc-ingest", "every rank reads the whole raster: water levels are flood-filled over the whole raster (from its edges)");
-    }
     Prepared p = prepare(opt, report);
     setBuild(p, opt, report);
     bindWater(p, opt, report);
-    // Under mpirun over a resampled or warped source (held whole here: water steps), the ranks check their share of the
-    // source's rows against the file once it is written, as ingestByWindows does, instead of rank 0 checking every pixel
-    // against a trace the build paints: no trace, so every rank writes its own cells into the file in place. Only a
-    // --t_srs warp of a source split at 180 degrees has no window reader: rank 0 then checks against the trace, and the
-    // ranks send it their cells.
-    std::unique_ptr<detail::TerrainWindows> checker;
-    if (ranks::distributed() && !p.trace.band.values.empty()) {
-        LoadReport unused;  // the source was reported by prepare()
-        std::string why;
-        checker = detail::openTerrainWindows(opt, unused, why);
-    }
-    if (!checker) traceBuild(p);
+    // Under mpirun only a --t_srs warp of a source split at 180 degrees comes here (it has no window reader): every rank
+    // holds the whole raster, rank 0 checks every source pixel against the trace the build paints, and the ranks send
+    // it their cells.
+    traceBuild(p);
     IngestStats extra;
     extra.sourcePath = opt.input;
     extra.sourceCrsName = report.sourceCrsName;
     extra.seconds = clock.seconds();
-    if (!checker) {
-        BuildSummary b = buildGridFile(p.terrain, p.water.count ? &p.water : nullptr, p.build, path, extra);
-        if (ranks::rank() == 0) afterBuild(p, b.shape.stats, opt, report);  // under mpirun, rank 0 holds every cell
-        return b;
-    }
-    BuildSummary b;
-    ranks::together([&] { b = buildGridFile(p.terrain, p.water.count ? &p.water : nullptr, p.build, path, extra); });
-    std::optional<detail::SourceCheckSums> mine;
-    const Stopwatch checking;
-    ranks::together([&] {
-        mine = checker->checkAgainst(path);
-        if (!mine) throw Error("internal: a resampled source without a check against it");
-    });
-    ranks::log("hc-ingest", fmt::format("{} source pixels of its rows checked against the cells under them, {:.3f} s", mine->checked + mine->missed,
-                                        checking.seconds()));
-    const detail::SourceCheckSums sums = allRanksCheck(*mine);
-    if (ranks::rank() == 0) {  // afterBuild's report, from every rank's sums
-        finishSourceCheck(sums, report);
-        noteStorage(b.shape.stats, !p.terrain.roundingM.empty(), report);
-    }
+    BuildSummary b = buildGridFile(p.terrain, p.water.count ? &p.water : nullptr, p.build, path, extra);
+    if (ranks::rank() == 0) afterBuild(p, b.shape.stats, opt, report);  // under mpirun, rank 0 holds every cell
     return b;
 }
 

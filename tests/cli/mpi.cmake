@@ -51,15 +51,17 @@ set(HOLES_ARGS "holes.tif --tolerance 15 --max-cell 1024 --water-level 2500,2700
 
 if(HC_GDAL_CREATE)  # gdal-bin's gdal_rasterize makes the holes
   # hc-ingest: the same bytes from 1, 2 and 3 ranks (and the interior holes are there: fewer valid pixels than the
-  # working raster has, and holes.tif's own count of nodata pixels is not 0). Water levels are flood-filled over the
-  # whole raster on every rank (the log says so); the source is geographic (resampled to UTM), and the ranks still write their own cells into the
-  # file in place, checking their share of the source's rows against it afterwards: the same summary as one process.
-  hc_mpi_test(mpi.ingest_holes_steps 0 [[rank 3/3: the whole raster held, [0-9]+ tiles of [0-9]+\^2 px built, [0-9]+ units, [0-9]+ cells written]]
+  # working raster has, and holes.tif's own count of nodata pixels is not 0). Each rank reads only its windows, and
+  # floods them for each level: the components below the level that meet across its windows' edges are joined over
+  # the ranks, and seeded where they meet a hole or the raster's edge (the same flood as the whole raster's). The source
+  # is geographic (resampled to UTM); the ranks write their own cells into the file in place and check their share of
+  # the source's rows against it afterwards: the same summary as one process.
+  hc_mpi_test(mpi.ingest_holes_steps 0 [[rank 3/3: [0-9]+ windows? read, [0-9]+ px \([0-9.]+ % of the raster\), [0-9]+ tiles of [0-9]+\^2 px built, [0-9]+ units, [0-9]+ cells written]]
     --setup "${HOLES_INPUT} && $HC_INGEST ${HOLES_ARGS} -o one.hcg > one.txt 2>&1"
-    --match [[rank 1/2: ]] --match [[rank 2/2: ]] --match [[rank 1/3: every rank reads the whole raster: water levels are flood-filled over the whole raster]]
+    --match [[rank 1/2: ]] --match [[rank 2/2: ]] --match [[rank 1/3: water steps: the depths of its [1-9][0-9]* cells in 2 steps]]
     --match [[rank 3/3: its [0-9]+ cells \([0-9.]+ MB\) written into the output in place]]
     --match [[rank 2/3: [0-9]+ source pixels of its rows checked against the cells under them]]
-    --no-match [[rank 4/3|error:|warning]]
+    --no-match [[rank 4/3|error:|warning|every rank reads the whole raster]]
     --check [[for n in 1 2 3
 do cmp one.hcg g$n.hcg || exit 1
 done
@@ -99,7 +101,7 @@ done]])
     --setup [[gdal_translate -q -a_ullr -90.5 90.5 270.5 -90.5 "$HC_DATA_DIR/etopo1_1deg.tif" east.tif &&
 "$HC_INGEST" --quiet east.tif --t_srs EPSG:3832 --water-level 0,200 -o one.hcg]]
     --match [[rank 1/2: water steps: the depths of its [1-9][0-9]* cells in 2 steps]]
-    --match [[rank 2/3: every rank reads the whole raster: water levels are flood-filled over the whole raster]]
+    --match [[rank 2/3: every rank reads the whole raster: .*180 degrees]]
     --no-match [[error:|written into the output in place]]
     --check [[cmp one.hcg g2.hcg && cmp one.hcg g3.hcg
 "$HC_INFO" --verify g3.hcg | grep -E 'steps +2 water steps']]
@@ -153,6 +155,36 @@ done
 }
 run depth --water depth.tif,depth.tif --times 0,60 && run fine --water fine.tif && run nc --water-surface run.nc && cat depth.3.txt nc.3.txt]])
 
+  # Merges above the 64-pixel tiles: every rank merges every coarse node, so the ranks' masks (each made from its own
+  # windows) are combined there. A flat plain at 100 m with a 448 m square hill at 160 m whose edges lie on the tiles'
+  # edges, flooded at 150 m (--water-level) and by a depth raster dry on the hill (--water): with a tolerance that
+  # lets the terrain merge across the hill's edge, only the wet/dry rule keeps the tiles around it apart. Before the
+  # masks were combined, ranks that did not hold the hill merged those tiles and the file was refused.
+  set(PLAIN_INPUT [[gdal_create -q -outsize 2048 2048 -bands 1 -burn 100 -ot Float32 -a_srs EPSG:32633 -a_ullr 500000 5002048 502048 5000000 plain.tif &&
+printf 'id,WKT\n1,"POLYGON((500896 5001344,501344 5001344,501344 5000896,500896 5000896,500896 5001344))"\n' > hill.csv &&
+gdal_rasterize -q -burn 160 hill.csv plain.tif 2>/dev/null &&
+gdal_create -q -if plain.tif -burn 50 depth.tif && gdal_rasterize -q -burn 0 hill.csv depth.tif 2>/dev/null]])
+  hc_mpi_test(mpi.ingest_water_windows_coarse 0 [[rank 3/3: water steps: the depths of its [0-9]+ cells in 1 step]]
+    --setup "${PLAIN_INPUT}" --no-match [[error:|every rank reads the whole raster]]
+    --check [[for c in level raster
+do cmp $c.1.hcg $c.2.hcg && cmp $c.1.hcg $c.3.hcg || exit 1
+done
+"$HC_INFO" level.1.hcg | grep -E 'level [789] +[0-9.]+ m +[1-9][0-9]* cells']]
+    -- ${HC_BASH} -c [[run() { c=$1
+shift
+if ! "$HC_INGEST" plain.tif --tolerance 100 --max-cell 512 "$@" -o $c.1.hcg > $c.1.txt 2>&1
+then cat $c.1.txt
+exit 1
+fi
+for n in 2 3
+do if ! "$HC_MPIRUN" -np $n "$HC_INGEST" plain.tif --tolerance 100 --max-cell 512 "$@" -o $c.$n.hcg > $c.$n.txt 2>&1
+then cat $c.$n.txt
+exit 1
+fi
+done
+}
+run level --water-level 150 && run raster --water depth.tif && cat level.3.txt raster.3.txt]])
+
   # A water raster cut short (its header whole, its second half gone): the ranks that read the missing strips fail, and
   # every rank stops with one error naming the file; no output is left.
   hc_mpi_test(mpi.ingest_water_windows_broken nonzero [[hc-ingest: error: rank [0-9]/3: broken\.tif: resampling onto the terrain: .*broken\.tif]]
@@ -163,8 +195,8 @@ exit ${PIPESTATUS[0]}]])
 
   # --t_srs (GDAL's warper): each rank warps its own windows from the source blocks they reach (the whole output's
   # pixel centres, the kernel's scale fixed), checks its share of the source's rows against the file, and the file is
-  # the same bytes as one process writes, with the same summary; with water levels too (the terrain then read whole on
-  # every rank for the flood fill, the cells still written in place). The bundled WGS 84 DEM to Austria's Gauss-Krueger zone.
+  # the same bytes as one process writes, with the same summary; with water levels too (each rank floods its own
+  # windows, the cells still written in place). The bundled WGS 84 DEM to Austria's Gauss-Krueger zone.
   hc_mpi_test(mpi.ingest_warped_windows 0 [[rank 3/3: [0-9]+ windows? read, [0-9]+ px \([0-9.]+ % of the raster\)]]
     --setup [["$HC_INGEST" "$HC_DATA_DIR/hef_srtm.tif" --t_srs EPSG:31254 -o one.hcg > one.txt 2>&1 &&
 "$HC_INGEST" --quiet "$HC_DATA_DIR/hef_srtm.tif" --t_srs EPSG:31254 --water-level 2600,2900 -o w1.hcg]]

@@ -94,6 +94,9 @@ struct RasterWindows {
     std::vector<double> stepTimesS;
     std::function<void(size_t k, size_t col0, size_t row0, size_t w, size_t h, const float* terrain, std::vector<float>& depth, bool first)>
         readStep;
+    // Or bathtub levels [m], one a step (--water-level), instead of readStep: the builder floods its windows itself,
+    // joining the ranks' pieces of each flood across their windows' edges.
+    std::vector<double> stepLevelsM;
 };
 
 // Builds the grid straight into a .hcg file (GridFileWriter): the same cells, bytes identical to
