@@ -79,6 +79,19 @@ fi
 done
 cat g3.txt g2.txt]])
 
+  # The ranks' floods against the whole raster's at 21 levels, from below the valley floor to above every summit (closed
+  # depressions that fill from a certain level on, the two holes as seeds): the same bytes from 1 and 3 ranks, and the
+  # wet cells grow with the level.
+  hc_mpi_test(mpi.ingest_levels_windows_many 0 [[steps +21 water steps]]
+    --setup "${HOLES_INPUT}" --no-match [[error:|warning]]
+    --check [[cmp one.hcg g3.hcg
+"$HC_INFO" --json g3.hcg | tr -d ' \n' | grep -oE '"wet_cells":[0-9]+' | cut -d: -f2 > wet.txt
+sort -n -c wet.txt && test "$(sort -u wet.txt | wc -l)" -gt 15]]
+    -- ${HC_BASH} -c [[L=$(seq -s, 2000 75 3500)
+"$HC_INGEST" --quiet holes.tif --tolerance 5 --water-level $L -o one.hcg || exit 1
+"$HC_MPIRUN" -np 3 "$HC_INGEST" --quiet holes.tif --tolerance 5 --water-level $L -o g3.hcg || exit 1
+"$HC_INFO" g3.hcg]])
+
   # Water steps over a projected source (no trace of a resampling to paint): every rank writes its own cells into the
   # file in place, and computes the steps' depths of its own cells, whose wet ones rank 1 writes. The same bytes.
   hc_mpi_test(mpi.ingest_steps_in_place 0 [[rank 3/3: its [0-9]+ cells \([0-9.]+ MB\) written into the output in place]]
