@@ -87,8 +87,7 @@ bool parseOptions(int argc, char** argv, hc::ingest::Options& o, std::string& ou
                       "Four cells merge into one while their mean stays within --tolerance of every pixel they\n"
                       "cover (in every layer); the achieved max and RMS deviation is measured and reported.\n"
                       "Under `mpirun -np N` the ranks share the build and write the same bytes as one process: each reads\n"
-                      "only its windows of the raster and of the water rasters (except for a --t_srs source split at\n"
-                      "180 degrees) and writes its own cells\n"
+                      "only its windows of the raster and of the water rasters and writes its own cells\n"
                       "into the one output, whose folder every rank must see (README, \"Preprocessing on several processes\").");
     p.positional("INPUT", "terrain raster: GeoTIFF, SRTM .hgt / .hgt.zip, ESRI ASCII, NetCDF, PNG, ... (GDAL)", o.input);
     p.option("-o", "OUT.hcg", "output grid file (required; written atomically)", out);

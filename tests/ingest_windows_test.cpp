@@ -7,6 +7,7 @@
 // pixel must not differ from the whole raster's by even one float ulp.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstring>
 #include <filesystem>
@@ -16,6 +17,7 @@
 #include <gdal_priv.h>
 #include <gdal_utils.h>
 
+#include "heightcast/core/error.h"
 #include "heightcast/ingest/ingest.h"
 #include "resample.h"
 #include "test_data.h"
@@ -45,9 +47,8 @@ size_t compareWindows(const Options& o, const std::string& expectMethod, size_t 
     EXPECT_NE(wholeReport.method.find(expectMethod), std::string::npos) << wholeReport.method;
 
     LoadReport rep;
-    std::string why;
-    std::unique_ptr<detail::TerrainWindows> windows = detail::openTerrainWindows(o, rep, why);
-    EXPECT_TRUE(windows) << why;
+    std::unique_ptr<detail::TerrainWindows> windows = detail::openTerrainWindows(o, rep);
+    EXPECT_TRUE(windows);
     if (!windows) return 0;
     const Raster& s = windows->shape();
     EXPECT_EQ(s.width, whole.width);
@@ -201,10 +202,13 @@ TEST(IngestWindows, WarpedSourceReadsTheSameBitsByWindow) {
     EXPECT_GT(compareWindows(o, "warped to ETRS89-extended / LAEA Europe", 19, 13), 2000u);
 }
 
-// A geographic source past 180 degrees, which --t_srs warps as two pieces (the east one shifted by -360): whether the
-// halves meet is checked on the whole output, so it is read whole, with the reason. The bundled 1-degree global grid
-// moved 90 degrees east (-90 .. 270).
-TEST(IngestWindows, WarpAcross180SaysWhyItIsReadWhole) {
+// A geographic source past 180 degrees, which --t_srs warps as two pieces (the east one shifted by -360): each window
+// warps both pieces, the same bits as the whole. The bundled 1-degree global grid moved 90 degrees east (-90 .. 270),
+// to PDC Mercator (EPSG:3832, centred on 150 degrees: the halves meet). Where they would not (the bundled WGS 84 tile
+// moved to 178..182 E, into EPSG:3857, whose edge is at 180 degrees), the whole raster's valid pixels, counted over
+// every window, refuse it with the whole read's message (checkValid); and a count of none says the footprint misses
+// every pixel centre.
+TEST(IngestWindows, WarpAcross180ReadsTheSameBitsByWindow) {
     HC_REQUIRE_DATA(src, "etopo1_1deg.tif");
     GDALAllRegister();
     const std::string path = (tempDir() / "etopo_east.tif").string();
@@ -212,10 +216,47 @@ TEST(IngestWindows, WarpAcross180SaysWhyItIsReadWhole) {
     Options o;
     o.input = path;
     o.targetSrs = "EPSG:3832";
+    EXPECT_GT(compareWindows(o, "split at 180 degrees", 41, 17), 10000u);
+
+    HC_REQUIRE_DATA(hef, "hef_srtm.tif");
+    const std::string across = (tempDir() / "across.tif").string();
+    size_t hw = 0, hh = 0;
+    {
+        GDALDatasetUniquePtr in(GDALDataset::Open(hef.c_str(), GDAL_OF_RASTER | GDAL_OF_READONLY));
+        ASSERT_TRUE(in);
+        hw = size_t(in->GetRasterXSize()), hh = size_t(in->GetRasterYSize());
+    }
+    ASSERT_NO_FATAL_FAILURE(copyWithGeoTransform(hef, across, [&](double* gt) {
+        const double g[6] = {178, 4.0 / double(hw), 0, 46, 0, -2.0 / double(hh)};
+        std::copy(g, g + 6, gt);
+    }));
+    o.input = across;
+    o.targetSrs = "EPSG:3857";
+    LoadReport wholeReport;
+    std::string wholeError;
+    try {
+        hc::ingest::loadTerrain(o, wholeReport);
+    } catch (const hc::Error& e) {
+        wholeError = e.what();
+    }
+    EXPECT_NE(wholeError.find("its two halves would lie at the map's opposite edges"), std::string::npos) << wholeError;
     LoadReport rep;
-    std::string why;
-    EXPECT_FALSE(detail::openTerrainWindows(o, rep, why));
-    EXPECT_NE(why.find("180 degrees"), std::string::npos) << why;
+    const std::unique_ptr<detail::TerrainWindows> windows = detail::openTerrainWindows(o, rep);
+    ASSERT_TRUE(windows);
+    const Raster& s = windows->shape();
+    std::vector<float> values, rounding;
+    uint64_t valid = 0;
+    for (size_t r0 = 0; r0 < s.height; r0 += 64) {
+        windows->read(0, r0, s.width, std::min<size_t>(64, s.height - r0), values, rounding);
+        valid += uint64_t(std::count_if(values.begin(), values.end(), [](float v) { return !std::isnan(v); }));
+    }
+    try {
+        windows->checkValid(valid);
+        ADD_FAILURE() << "EPSG:3857 across 180 degrees accepted by windows";
+    } catch (const hc::Error& e) {
+        EXPECT_EQ(std::string(e.what()), wholeError);
+    }
+    EXPECT_THROW(windows->checkValid(0), hc::Error);
 }
 
 }  // namespace

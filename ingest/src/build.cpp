@@ -653,6 +653,13 @@ Stats Builder::run(CellSink& sink) {
     const std::vector<size_t> myTiles = tilesOf(cuts[size_t(rank)], cuts[size_t(rank) + 1]);
     uint64_t pixelsRead = 0;
     ranks::together([&] { pixelsRead = holdPixels(cuts[size_t(rank)], cuts[size_t(rank) + 1]); });
+    if (windows_ && windows_->checkHeld) {
+        uint64_t valid = 0;
+        for (const Block& b : blocks_) valid += uint64_t(std::count_if(b.values, b.values + b.w * b.h, [](float v) { return !std::isnan(v); }));
+        uint64_t all = 0;
+        for (const auto& v : ranks::allGatherVectors(std::vector<uint64_t>{valid})) all += v.empty() ? 0 : v[0];
+        ranks::together([&] { windows_->checkHeld(all); });
+    }
     // Water steps read by windows: each step's merge mask over this rank's own nodes (every merge lies inside a share
     // node, so in one of its blocks), from the same windows of each step raster.
     if (windows_ && !windows_->stepTimesS.empty()) {

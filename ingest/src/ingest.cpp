@@ -191,22 +191,16 @@ detail::SourceCheckSums allRanksCheck(const detail::SourceCheckSums& mine) {
 
 // Under mpirun, a terrain and its water steps read window by window: every rank reads only the windows of its share
 // (buildGridFile over RasterWindows), each step's raster warped onto the same windows (or a level's bathtub flooded over
-// them by the builder), the readers' counts are added over the ranks, and rank 0 reports them. nullopt where the source must be read whole (a warp split at 180
-// degrees), with the reason in the rank log.
-std::optional<BuildSummary> ingestByWindows(const Options& opt, const std::string& path, LoadReport& report, const Stopwatch& clock) {
-    std::string why;
-    std::unique_ptr<detail::TerrainWindows> windows = detail::openTerrainWindows(opt, report, why);
-    if (!windows) {
-        ranks::log("hc-ingest", "every rank reads the whole raster: " + why);
-        report = LoadReport{};  // loadTerrain reports again
-        return std::nullopt;
-    }
+// them by the builder), the readers' counts are added over the ranks, and rank 0 reports them.
+BuildSummary ingestByWindows(const Options& opt, const std::string& path, LoadReport& report, const Stopwatch& clock) {
+    std::unique_ptr<detail::TerrainWindows> windows = detail::openTerrainWindows(opt, report);
     RasterWindows w;
     w.shape = windows->shape();
     w.source = opt.input;
     w.read = [&](size_t c0, size_t r0, size_t width, size_t height, std::vector<float>& values, std::vector<float>& rounding) {
         windows->read(c0, r0, width, height, values, rounding);
     };
+    w.checkHeld = [&](uint64_t valid) { windows->checkValid(valid); };
     // Water steps from rasters: each window of a step warped onto the working raster as the whole would be
     // (detail::WaterStepWarp), step by step (the builder reads every window of step k before step k + 1).
     const size_t stepCount = waterStepCount(opt);
@@ -266,21 +260,17 @@ std::optional<BuildSummary> ingestByWindows(const Options& opt, const std::strin
 
 BuildSummary ingestToFile(const Options& opt, const std::string& path, LoadReport& report) {
     const Stopwatch clock;
-    if (ranks::distributed())
-        if (std::optional<BuildSummary> b = ingestByWindows(opt, path, report, clock)) return std::move(*b);
+    if (ranks::distributed()) return ingestByWindows(opt, path, report, clock);  // each rank its own windows
     Prepared p = prepare(opt, report);
     setBuild(p, opt, report);
     bindWater(p, opt, report);
-    // Under mpirun only a --t_srs warp of a source split at 180 degrees comes here (it has no window reader): every rank
-    // holds the whole raster, rank 0 checks every source pixel against the trace the build paints, and the ranks send
-    // it their cells.
     traceBuild(p);
     IngestStats extra;
     extra.sourcePath = opt.input;
     extra.sourceCrsName = report.sourceCrsName;
     extra.seconds = clock.seconds();
     BuildSummary b = buildGridFile(p.terrain, p.water.count ? &p.water : nullptr, p.build, path, extra);
-    if (ranks::rank() == 0) afterBuild(p, b.shape.stats, opt, report);  // under mpirun, rank 0 holds every cell
+    afterBuild(p, b.shape.stats, opt, report);
     return b;
 }
 

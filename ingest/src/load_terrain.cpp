@@ -538,6 +538,22 @@ struct WarpPlan {
     size_t width = 0, height = 0;  // output pixels
     unsigned threads = 0;
 
+    // The warped raster's valid pixels, counted over all of it (every window): an error where none is valid, or where the
+    // halves of a source split at 180 degrees do not meet (in a map whose own edge is at 180, EPSG:3857 say, they land
+    // at its opposite edges, a world apart, with nothing between).
+    void checkValid(uint64_t valid) const {
+        const double all = double(width) * double(height);
+        if (valid == 0)
+            throw Error(input + ": projected to " + targetText + " on " + std::to_string(width) + " x " + std::to_string(height) +
+                        " pixels of " + fmt(cell, 6) + " (CRS units), no pixel centre falls inside the data: " +
+                        "the footprint is too thin for that resolution; give a finer one with --min-cell");
+        if (sources.size() == 2 && double(valid) < 0.1 * all)
+            throw Error(input + ": crosses 180 degrees of longitude, which is an edge of " + targetText + ": its two halves would lie at " +
+                        "the map's opposite edges (" + fmt(100.0 * double(valid) / all, 3) + " % of a " + std::to_string(width) +
+                        " px wide raster); choose a --t_srs whose central meridian is near the data (e.g. " +
+                        "EPSG:3832, PDC Mercator, or '+proj=laea +lon_0=180 +lat_0=...') or leave --t_srs out for its UTM zone");
+    }
+
     GeoTransform outputGt() const {
         GeoTransform g;
         const double gg[6] = {ext[0], cell, 0, ext[3], 0, -cell};
@@ -755,21 +771,7 @@ Raster warpToTarget(SourceBand&& src, const GeoTransform& gtIn, const OGRSpatial
         }
         progress.finish();
     }
-    const std::string& targetText = plan.targetText;
-    if (std::none_of(ws.values.begin(), ws.values.end(), [](float v) { return !std::isnan(v); }))
-        throw Error(opt.input + ": projected to " + targetText + " on " + std::to_string(ws.width) + " x " + std::to_string(ws.height) +
-                    " pixels of " + fmt(plan.cell, 6) + " (CRS units), no pixel centre falls inside the data: " +
-                    "the footprint is too thin for that resolution; give a finer one with --min-cell");
-    if (plan.sources.size() == 2) {
-        // Split at 180, the two halves must meet in the target map; in one whose own edge is at 180
-        // (EPSG:3857, say) they land at its opposite edges, a world apart, with nothing between.
-        const size_t valid = static_cast<size_t>(std::count_if(ws.values.begin(), ws.values.end(), [](float v) { return !std::isnan(v); }));
-        if (double(valid) < 0.1 * double(ws.values.size()))
-            throw Error(opt.input + ": crosses 180 degrees of longitude, which is an edge of " + targetText + ": its two halves would lie at " +
-                        "the map's opposite edges (" + fmt(100.0 * double(valid) / double(ws.values.size()), 3) + " % of a " +
-                        std::to_string(ws.width) + " px wide raster); choose a --t_srs whose central meridian is near the data (e.g. " +
-                        "EPSG:3832, PDC Mercator, or '+proj=laea +lon_0=180 +lat_0=...') or leave --t_srs out for its UTM zone");
-    }
+    plan.checkValid(uint64_t(std::count_if(ws.values.begin(), ws.values.end(), [](float v) { return !std::isnan(v); })));
     const WarpedFrame frame = warpedFrame(plan, report);
     Options keep = opt;
     keep.minCellM.reset();  // -tr already applied it
@@ -1008,7 +1010,9 @@ public:
         plan_.rowToWorldThreadSafe = false;
     }
     const Raster& shape() const override { return plan_.shape; }
-    bool acrossAntimeridian() const { return warp_ && warp_->sources.size() > 1; }
+    void checkValid(uint64_t validPixels) const override {
+        if (warp_) warp_->checkValid(validPixels);
+    }
     void read(size_t col0, size_t row0, size_t w, size_t h, std::vector<float>& values, std::vector<float>& rounding) override {
         if (col0 + w > plan_.shape.width || row0 + h > plan_.shape.height) throw Error("window outside the working raster");
         values.assign(w * h, kNaN);
@@ -1177,17 +1181,12 @@ Raster detail::loadTerrainTraced(const Options& opt, LoadReport& report, SourceT
     return fromSourceAffine(std::move(src), o.gt, o.pixelM, o.wkt, opt, report, trace);
 }
 
-std::unique_ptr<detail::TerrainWindows> detail::openTerrainWindows(const Options& opt, LoadReport& report, std::string& why) {
+std::unique_ptr<detail::TerrainWindows> detail::openTerrainWindows(const Options& opt, LoadReport& report) {
     Opened o = openTerrain(opt, report);
     const size_t width = o.band->width(), height = o.band->height();
     switch (o.route) {
     case Opened::Route::Warp: {
-        auto w = std::make_unique<ResampledWindows>(std::move(o), opt, report);
-        if (w->acrossAntimeridian()) {
-            why = "--t_srs over a source split at 180 degrees warps the whole source (its halves' meeting is checked on the whole)";
-            return nullptr;
-        }
-        return w;
+        return std::make_unique<ResampledWindows>(std::move(o), opt, report);
     }
     case Opened::Route::Utm: {
         Resampling plan = planUtm(o.gt, width, height, o.srs, opt, report, false);

@@ -124,6 +124,10 @@ public:
     virtual void read(size_t col0, size_t row0, size_t w, size_t h, std::vector<float>& values, std::vector<float>& rounding) = 0;
     // What the reads so far found.
     virtual const SourceTally& tally() const = 0;
+    // Once every rank has read its windows, before anything is written: the whole working raster's valid pixels (every
+    // rank's windows added). Throws hc::Error where a whole raster's read would have failed on them (a --t_srs warp
+    // whose pixel centres miss the data, or whose halves split at 180 degrees land at the map's opposite edges).
+    virtual void checkValid(uint64_t validPixels) const { (void)validPixels; }
     // The counts and warnings of the whole raster's tally (every rank's added) into report.
     virtual void finish(const SourceTally& all, LoadReport& report) const = 0;
     // Where the working raster is resampled: after the grid file `gridPath` is written, the check of this rank's share
@@ -139,8 +143,8 @@ public:
 // the source's own pixels where the working raster is the source as it is (at most mirrored), else the source pixels
 // a window's map reaches, resampled on the whole raster's lattice (projected to UTM, rotated, non-square pixels,
 // --min-cell). Either way a window holds the same bits as loadTerrain's raster there (tests/ingest_windows_test.cpp).
-// nullptr where GDAL's warper (--t_srs) must see the whole source, with the reason in `why`.
-std::unique_ptr<TerrainWindows> openTerrainWindows(const Options& opt, LoadReport& report, std::string& why);
+// A --t_srs source split at 180 degrees warps both its pieces into each window.
+std::unique_ptr<TerrainWindows> openTerrainWindows(const Options& opt, LoadReport& report);
 
 // loadTerrain (ingest.h), keeping the source in `trace` (when given) if the working raster is not the
 // source itself; trace->band stays empty otherwise.

@@ -107,17 +107,27 @@ done
 do "$HC_MPIRUN" -np $n "$HC_INGEST" "$HC_DATA_DIR/south_glacier_utm7.tif" --water-level 2200,2400,2600 -o g$n.hcg || exit 1
 done]])
 
-  # Water steps where the ranks send rank 1 their cells (it paints the trace it checks the source against): a --t_srs
-  # warp of a geographic source split at 180 degrees (etopo1_1deg moved 90 degrees east, to World Mercator), read
-  # whole. Each rank still computes the steps' depths of its own cells; the same bytes as one process.
-  hc_mpi_test(mpi.ingest_steps_sent_cells 0 [[rank 3/3: water steps: the depths of its [1-9][0-9]* cells in 2 steps]]
+  # A --t_srs warp of a geographic source split at 180 degrees (etopo1_1deg moved 90 degrees east, to PDC Mercator):
+  # each rank warps both pieces into its windows, floods its windows for the levels, and writes its cells in place.
+  # The same bytes and summary as one process. Into EPSG:3857, whose edge is at 180 degrees, the halves would lie at
+  # the map's opposite edges: refused as one process refuses it (the valid pixels counted over every rank's windows,
+  # before anything is written), once, and no file is left.
+  hc_mpi_test(mpi.ingest_across_180_windows 0 [[rank 3/3: water steps: the depths of its [1-9][0-9]* cells in 2 steps]]
     --setup [[gdal_translate -q -a_ullr -90.5 90.5 270.5 -90.5 "$HC_DATA_DIR/etopo1_1deg.tif" east.tif &&
-"$HC_INGEST" --quiet east.tif --t_srs EPSG:3832 --water-level 0,200 -o one.hcg]]
-    --match [[rank 1/2: water steps: the depths of its [1-9][0-9]* cells in 2 steps]]
-    --match [[rank 2/3: every rank reads the whole raster: .*180 degrees]]
-    --no-match [[error:|written into the output in place]]
+"$HC_INGEST" east.tif --t_srs EPSG:3832 --water-level 0,200 -o one.hcg > one.txt 2>&1 &&
+gdal_translate -q -a_srs EPSG:4326 -a_ullr 178 46 182 44 "$HC_DATA_DIR/hef_srtm.tif" across.tif]]
+    --match [[rank 2/3: [0-9]+ windows? read, [0-9]+ px]] --match [[rank 3/3: its [0-9]+ cells .* written into the output in place]]
+    --no-match [[every rank reads the whole raster]]
     --check [[cmp one.hcg g2.hcg && cmp one.hcg g3.hcg
-"$HC_INFO" --verify g3.hcg | grep -E 'steps +2 water steps']]
+grep -E 'split at 180 degrees' g3.txt
+grep -E '^  |warning' one.txt | grep -vE '^ +(time|memory) ' > a.txt
+grep -E '^  |warning' g3.txt | grep -vE '^ +(time|memory) ' > b.txt
+diff a.txt b.txt]]
+    --check [[if "$HC_MPIRUN" -np 3 "$HC_INGEST" across.tif --t_srs EPSG:3857 -o no.hcg > no.txt 2>&1
+then exit 1
+fi
+test ! -e no.hcg && cat no.txt
+test "$(grep -c 'error: .*across.tif: crosses 180 degrees of longitude, which is an edge of EPSG:3857' no.txt)" = 1]]
     -- ${HC_BASH} -c [[for n in 2 3
 do if ! "$HC_MPIRUN" -np $n "$HC_INGEST" east.tif --t_srs EPSG:3832 --water-level 0,200 -o g$n.hcg > g$n.txt 2>&1
 then cat g$n.txt

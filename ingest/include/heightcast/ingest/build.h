@@ -97,6 +97,9 @@ struct RasterWindows {
     // Or bathtub levels [m], one a step (--water-level), instead of readStep: the builder floods its windows itself,
     // joining the ranks' pieces of each flood across their windows' edges.
     std::vector<double> stepLevelsM;
+    // Called on every rank once all have read their windows, before anything is written, with the whole raster's valid
+    // pixels (every rank's windows added): throws where the raster read whole would have been refused. May be empty.
+    std::function<void(uint64_t validPixels)> checkHeld;
 };
 
 // Builds the grid straight into a .hcg file (GridFileWriter): the same cells, bytes identical to
