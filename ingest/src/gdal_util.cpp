@@ -1,13 +1,17 @@
 #include "gdal_util.h"
 
+#include <algorithm>
 #include <cctype>
+#include <limits>
 #include <filesystem>
 #include <mutex>
 #include <sstream>
 
 #include <cpl_error.h>
+#include <gdalwarper.h>
 
 #include "heightcast/core/error.h"
+#include "heightcast/core/parallel.h"
 
 namespace hc::ingest::detail {
 
@@ -146,6 +150,50 @@ std::string toWkt(const OGRSpatialReference& srs) {
     std::string out(wkt);
     CPLFree(wkt);
     return out;
+}
+
+void WindowWarp::into(size_t c0, size_t r0, size_t w, size_t h, float* out) const {
+    if (w == 0 || h == 0) return;
+    GDALDriver* vrt = GetGDALDriverManager()->GetDriverByName("VRT");
+    DatasetPtr dst(vrt->Create("", int(width), int(height), 1, GDT_Float32, nullptr));  // nothing allocated
+    if (!dst) throw Error("cannot create a virtual raster: " + lastGdalError());
+    double g[6];
+    std::copy(gt, gt + 6, g);
+    dst->SetGeoTransform(g);
+    if (!dstWkt.empty()) dst->SetProjection(dstWkt.c_str());
+    dst->GetRasterBand(1)->SetNoDataValue(std::numeric_limits<double>::quiet_NaN());
+    char** opts = dstSrs.empty() ? nullptr : CSLSetNameValue(nullptr, "DST_SRS", dstSrs.c_str());
+    void* tr = GDALCreateGenImgProjTransformer2(GDALDataset::ToHandle(src), GDALDataset::ToHandle(dst.get()), opts);
+    CSLDestroy(opts);
+    if (!tr) throw Error(setupError + ": " + lastGdalError());
+    std::unique_ptr<void, void (*)(void*)> trOwner(tr, GDALDestroyGenImgProjTransformer);
+    GDALWarpOptions* wo = GDALCreateWarpOptions();
+    std::unique_ptr<GDALWarpOptions, void (*)(GDALWarpOptions*)> woOwner(wo, GDALDestroyWarpOptions);
+    wo->hSrcDS = GDALDataset::ToHandle(src);
+    wo->hDstDS = GDALDataset::ToHandle(dst.get());
+    wo->nBandCount = 1;
+    wo->panSrcBands = static_cast<int*>(CPLMalloc(sizeof(int)));
+    wo->panDstBands = static_cast<int*>(CPLMalloc(sizeof(int)));
+    wo->panSrcBands[0] = band;
+    wo->panDstBands[0] = 1;
+    wo->eResampleAlg = GRA_Bilinear;
+    wo->eWorkingDataType = GDT_Float32;
+    if (hasSrcNoData) {
+        wo->padfSrcNoDataReal = static_cast<double*>(CPLMalloc(sizeof(double)));
+        wo->padfSrcNoDataReal[0] = srcNoData;
+    }
+    wo->padfDstNoDataReal = static_cast<double*>(CPLMalloc(sizeof(double)));
+    wo->padfDstNoDataReal[0] = std::numeric_limits<double>::quiet_NaN();
+    wo->pfnTransformer = GDALGenImgProjTransform;  // exact: no approximation (gdalwarp -et 0)
+    wo->pTransformerArg = tr;
+    const std::string sc = fmt(scale, 17);
+    wo->papszWarpOptions = CSLSetNameValue(wo->papszWarpOptions, "XSCALE", sc.c_str());
+    wo->papszWarpOptions = CSLSetNameValue(wo->papszWarpOptions, "YSCALE", sc.c_str());
+    wo->papszWarpOptions = CSLSetNameValue(wo->papszWarpOptions, "NUM_THREADS", std::to_string(resolveThreads(threads)).c_str());
+    GDALWarpOperation op;
+    CPLErrorReset();
+    if (op.Initialize(wo) != CE_None || op.WarpRegionToBuffer(int(c0), int(r0), int(w), int(h), out, GDT_Float32) != CE_None)
+        throw Error(warpError + ": " + lastGdalError());
 }
 
 }  // namespace hc::ingest::detail

@@ -564,44 +564,18 @@ struct WarpPlan {
     // Output pixels [col0, col0 + w) x [row0, row0 + h) into out (w h, row-major, NaN where no source reaches).
     void warp(size_t col0, size_t row0, size_t w, size_t h, float* out) const {
         std::fill(out, out + w * h, kNaN);
-        // The whole output as a virtual raster (nothing allocated): the transformer maps its pixel coordinates, so a
-        // window's pixels are computed as in the whole output; WarpRegionToBuffer fills only the window.
-        GDALDriver* vrt = GetGDALDriverManager()->GetDriverByName("VRT");
-        DatasetPtr dst(vrt->Create("", int(width), int(height), 1, GDT_Float32, nullptr));
-        if (!dst) throw Error("cannot create a virtual raster: " + detail::lastGdalError());
-        GeoTransform g = outputGt();
-        dst->SetGeoTransform(g.g);
-        dst->SetSpatialRef(&target);
-        dst->GetRasterBand(1)->SetNoDataValue(std::numeric_limits<double>::quiet_NaN());
+        const GeoTransform g = outputGt();  // each piece into the window, on the whole output's pixel coordinates
         for (const auto& source : sources) {
-            char** dstOpt = CSLSetNameValue(nullptr, "DST_SRS", targetText.c_str());
-            void* tr = GDALCreateGenImgProjTransformer2(GDALDataset::ToHandle(source.get()), GDALDataset::ToHandle(dst.get()), dstOpt);
-            CSLDestroy(dstOpt);
-            if (!tr) throw Error("--t_srs " + targetText + ": cannot transform " + input + ": " + detail::lastGdalError());
-            std::unique_ptr<void, void (*)(void*)> trOwner(tr, GDALDestroyGenImgProjTransformer);
-            GDALWarpOptions* wo = GDALCreateWarpOptions();
-            std::unique_ptr<GDALWarpOptions, void (*)(GDALWarpOptions*)> woOwner(wo, GDALDestroyWarpOptions);
-            wo->hSrcDS = GDALDataset::ToHandle(source.get());
-            wo->hDstDS = GDALDataset::ToHandle(dst.get());
-            wo->nBandCount = 1;
-            wo->panSrcBands = static_cast<int*>(CPLMalloc(sizeof(int)));
-            wo->panDstBands = static_cast<int*>(CPLMalloc(sizeof(int)));
-            wo->panSrcBands[0] = wo->panDstBands[0] = 1;
-            wo->eResampleAlg = GRA_Bilinear;
-            wo->eWorkingDataType = GDT_Float32;
-            wo->padfSrcNoDataReal = static_cast<double*>(CPLMalloc(sizeof(double)));
-            wo->padfDstNoDataReal = static_cast<double*>(CPLMalloc(sizeof(double)));
-            wo->padfSrcNoDataReal[0] = wo->padfDstNoDataReal[0] = std::numeric_limits<double>::quiet_NaN();
-            wo->pfnTransformer = GDALGenImgProjTransform;  // exact: no approximation (gdalwarp -et 0)
-            wo->pTransformerArg = tr;
-            const std::string sc = fmt(scale, 17);
-            wo->papszWarpOptions = CSLSetNameValue(wo->papszWarpOptions, "XSCALE", sc.c_str());
-            wo->papszWarpOptions = CSLSetNameValue(wo->papszWarpOptions, "YSCALE", sc.c_str());
-            wo->papszWarpOptions = CSLSetNameValue(wo->papszWarpOptions, "NUM_THREADS", std::to_string(resolveThreads(threads)).c_str());
-            GDALWarpOperation op;
-            CPLErrorReset();
-            if (op.Initialize(wo) != CE_None || op.WarpRegionToBuffer(int(col0), int(row0), int(w), int(h), out, GDT_Float32) != CE_None)
-                throw Error(input + ": projecting to " + targetText + ": " + detail::lastGdalError());
+            detail::WindowWarp ww;
+            ww.src = source.get();
+            ww.hasSrcNoData = true, ww.srcNoData = std::numeric_limits<double>::quiet_NaN();
+            std::copy(g.g, g.g + 6, ww.gt);
+            ww.width = width, ww.height = height;
+            ww.dstSrs = targetText, ww.dstWkt = detail::toWkt(target);
+            ww.scale = scale, ww.threads = threads;
+            ww.setupError = "--t_srs " + targetText + ": cannot transform " + input;
+            ww.warpError = input + ": projecting to " + targetText;
+            ww.into(col0, row0, w, h, out);
             source->FlushCache(false);  // drops its blocks from GDAL's cache: the next window reads what it reaches
         }
     }

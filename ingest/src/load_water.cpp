@@ -62,9 +62,6 @@ Raster bathtub(const Raster& t, double level) {
     return d;
 }
 
-// Formats a double exactly, for GDAL's string options.
-std::string exact(double v) { return fmt::format("{:.17g}", v); }
-
 // Steps of one series must be one simulation's output: the same raster size, georeferencing and CRS as the first.
 void checkAgreesWithFirst(GDALDataset& ds, const std::string& path, const std::string& firstPath, const std::string& role) {
     detail::DatasetPtr first = detail::openRaster(firstPath, role);
@@ -129,47 +126,17 @@ WaterStepWarp::WaterStepWarp(const Options& opt, const Raster& frame, size_t ste
 void WaterStepWarp::warp(size_t c0, size_t r0, size_t w, size_t h, float* out) const {
     std::fill(out, out + w * h, std::numeric_limits<float>::quiet_NaN());
     if (w == 0 || h == 0) return;
-    // The whole working raster as a virtual raster (nothing allocated): the transformer maps its pixel coordinates, so a
-    // window's pixels are computed as in the whole raster; WarpRegionToBuffer fills only the window.
-    GDALDriver* vrt = GetGDALDriverManager()->GetDriverByName("VRT");
-    DatasetPtr dst(vrt->Create("", int(width_), int(height_), 1, GDT_Float32, nullptr));
-    if (!dst) throw Error("cannot create a virtual raster: " + lastGdalError());
-    double gt[6];
-    std::copy(gt_, gt_ + 6, gt);
-    dst->SetGeoTransform(gt);
-    if (!dstWkt_.empty()) dst->SetProjection(dstWkt_.c_str());
-    char** opts = dstWkt_.empty() ? nullptr : CSLSetNameValue(nullptr, "DST_SRS", dstWkt_.c_str());
-    void* tr = GDALCreateGenImgProjTransformer2(GDALDataset::ToHandle(ds_.get()), GDALDataset::ToHandle(dst.get()), opts);
-    CSLDestroy(opts);
-    if (!tr) throw Error(what_ + ": cannot transform onto the terrain: " + lastGdalError());
-    std::unique_ptr<void, void (*)(void*)> trOwner(tr, GDALDestroyGenImgProjTransformer);
-    GDALWarpOptions* wo = GDALCreateWarpOptions();
-    std::unique_ptr<GDALWarpOptions, void (*)(GDALWarpOptions*)> woOwner(wo, GDALDestroyWarpOptions);
-    wo->hSrcDS = GDALDataset::ToHandle(ds_.get());
-    wo->hDstDS = GDALDataset::ToHandle(dst.get());
-    wo->nBandCount = 1;
-    wo->panSrcBands = static_cast<int*>(CPLMalloc(sizeof(int)));
-    wo->panDstBands = static_cast<int*>(CPLMalloc(sizeof(int)));
-    wo->panSrcBands[0] = band_;
-    wo->panDstBands[0] = 1;
-    wo->eResampleAlg = GRA_Bilinear;
-    wo->eWorkingDataType = GDT_Float32;
-    if (nodata_) {
-        wo->padfSrcNoDataReal = static_cast<double*>(CPLMalloc(sizeof(double)));
-        wo->padfSrcNoDataReal[0] = *nodata_;
-    }
-    wo->padfDstNoDataReal = static_cast<double*>(CPLMalloc(sizeof(double)));
-    wo->padfDstNoDataReal[0] = std::numeric_limits<double>::quiet_NaN();
-    wo->pfnTransformer = GDALGenImgProjTransform;  // exact: no approximation (gdalwarp -et 0)
-    wo->pTransformerArg = tr;
-    const std::string sc = exact(scale_);
-    wo->papszWarpOptions = CSLSetNameValue(wo->papszWarpOptions, "XSCALE", sc.c_str());
-    wo->papszWarpOptions = CSLSetNameValue(wo->papszWarpOptions, "YSCALE", sc.c_str());
-    wo->papszWarpOptions = CSLSetNameValue(wo->papszWarpOptions, "NUM_THREADS", std::to_string(resolveThreads(threads_)).c_str());
-    GDALWarpOperation op;
-    CPLErrorReset();
-    if (op.Initialize(wo) != CE_None || op.WarpRegionToBuffer(int(c0), int(r0), int(w), int(h), out, GDT_Float32) != CE_None)
-        throw Error(what_ + ": resampling onto the terrain: " + lastGdalError());
+    WindowWarp ww;
+    ww.src = ds_.get();
+    ww.band = band_;
+    ww.hasSrcNoData = nodata_.has_value(), ww.srcNoData = nodata_.value_or(0);
+    std::copy(gt_, gt_ + 6, ww.gt);
+    ww.width = width_, ww.height = height_;
+    ww.dstSrs = dstWkt_, ww.dstWkt = dstWkt_;
+    ww.scale = scale_, ww.threads = threads_;
+    ww.setupError = what_ + ": cannot transform onto the terrain";
+    ww.warpError = what_ + ": resampling onto the terrain";
+    ww.into(c0, r0, w, h, out);
     ds_->FlushCache(false);  // drops its blocks from GDAL's cache: the next window reads what it reaches
 }
 
