@@ -14,7 +14,6 @@
 #include <GeographicLib/UTMUPS.hpp>
 #include <gdal_alg.h>
 #include <gdalwarper.h>
-#include <gdal_utils.h>
 
 #include "gdal_util.h"
 #include "heightcast/core/error.h"
@@ -367,48 +366,6 @@ Raster projectToUtm(SourceBand&& src, const GeoTransform& gt, const OGRSpatialRe
 }
 
 }  // namespace
-
-namespace detail {
-
-// GDALWarp of `sources` (mosaicked) into a MEM dataset with the given arguments (GDAL's own option syntax).
-DatasetPtr warp(const std::vector<GDALDataset*>& sources, const std::vector<std::string>& args, const std::string& what) {
-    std::vector<char*> argv;
-    for (const auto& a : args) argv.push_back(const_cast<char*>(a.c_str()));
-    argv.push_back(nullptr);
-    GDALWarpAppOptions* options = GDALWarpAppOptionsNew(argv.data(), nullptr);
-    if (!options) throw Error(what + ": invalid warp options: " + lastGdalError());
-    std::vector<GDALDatasetH> in;
-    for (GDALDataset* d : sources) in.push_back(GDALDataset::ToHandle(d));
-    int usageError = 0;
-    CPLErrorReset();
-    GDALDatasetH out = GDALWarp("", nullptr, static_cast<int>(in.size()), in.data(), options, &usageError);
-    GDALWarpAppOptionsFree(options);
-    if (!out || usageError) throw Error(what + ": " + lastGdalError());
-    return DatasetPtr(GDALDataset::FromHandle(out));
-}
-
-DatasetPtr warp(GDALDataset& src, const std::vector<std::string>& args, const std::string& what) {
-    return warp(std::vector<GDALDataset*>{&src}, args, what);
-}
-
-// Reads band 1 of a (warped, float) dataset into a SourceBand (NaN nodata kept).
-SourceBand readFloatBand(GDALDataset& ds, const std::string& what) {
-    SourceBand s;
-    s.width = static_cast<size_t>(ds.GetRasterXSize());
-    s.height = static_cast<size_t>(ds.GetRasterYSize());
-    s.values.resize(s.width * s.height);
-    if (ds.GetRasterBand(1)->RasterIO(GF_Read, 0, 0, static_cast<int>(s.width), static_cast<int>(s.height), s.values.data(),
-                                      static_cast<int>(s.width), static_cast<int>(s.height), GDT_Float32, 0, 0, nullptr) != CE_None)
-        throw Error(what + ": cannot read the warped raster: " + lastGdalError());
-    int has = 0;
-    double nd = ds.GetRasterBand(1)->GetNoDataValue(&has);
-    if (has && !std::isnan(nd))
-        for (float& v : s.values)
-            if (v == static_cast<float>(nd)) v = kNaN;
-    return s;
-}
-
-}  // namespace detail
 
 void validateOptions(const Options& o) {
     auto bad = [](const std::string& m) { throw Error(m); };

@@ -7,12 +7,10 @@
 
 #include <fmt/format.h>
 
-#include <gdal_utils.h>
 #include <gdalwarper.h>
 
 #include "gdal_util.h"
 #include "heightcast/core/error.h"
-#include "heightcast/core/parallel.h"
 #include "heightcast/core/progress.h"
 #include "heightcast/ingest/ingest.h"
 #include "load_water.h"
