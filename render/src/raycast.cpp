@@ -436,6 +436,7 @@ Hit castRay(const RayContext& ctx, const glm::dvec3& dir, Beam* beam, double dir
     // Where the beam lets this ray's walk through cascade k start (t = tau |direction|; a hair early for rounding).
     auto from = [&](size_t k) { return beam ? beam->startDepth(k) * dirLength * (1 - 1e-12) : 0.0; };
     for (size_t k = 0; k < cs.size(); ++k) {
+        if (beam && beam->passesOver(k)) continue;  // the ray walks nothing there (Beam::passesOver)
         const double lo = k == 0 ? -HUGE_VAL : cs[k].splitNear;
         Hit h = hitIn(ctx, k, ctx.eyeLocal, dir, lo, cs[k].farWithOverlap, st, underground, from(k));
         if (underground) return Hit{};
@@ -450,7 +451,7 @@ Hit castRay(const RayContext& ctx, const glm::dvec3& dir, Beam* beam, double dir
             const glm::dvec2 eye{ctx.eyeLocal};
             const double off = glm::dot(eye + glm::dvec2(dir) * h.t - eye, ctx.fit->dir);
             const double zoneStart = cs[k].splitFar, zoneEnd = cs[k].farWithOverlap;
-            if (off > zoneStart && zoneEnd > zoneStart) {
+            if (off > zoneStart && zoneEnd > zoneStart && !(beam && beam->passesOver(k + 1))) {
                 RayState st2 = st;
                 st2.touchedTerrain = st2.touchedWater = true;
                 bool under2 = false;
@@ -513,7 +514,10 @@ double Beam::march(size_t k) {
     tau *= 1 - 1e-9;
     if (!(tau < tauEnd)) return 0;
     if (outer_) tau = std::max(tau, outer_->startDepth(k));  // none of the outer beam's rays meets the cascade before
-    if (!(tau < tauEnd)) return tauEnd;
+    if (!(tau < tauEnd)) {
+        passed_[k] = true;
+        return tauEnd;
+    }
     const bool water = tex.hasWater && tex.water.mip.size() == hf.mip.size();
     const bool both = water && tex.bothMip.size() == hf.mip.size();
     const int patches = hf.n - 1, top = int(hf.mip.size()) - 1;
@@ -556,6 +560,9 @@ double Beam::march(size_t k) {
         if (step <= smallest) return tau;
         step = std::max(0.5 * step, smallest);
     }
+    // Passed over the whole slab: every ray's span in this cascade ends by tauEnd (t = tau |direction|, up to rounding
+    // far inside the 1e-9 margins of the test above), and no node under it was reached.
+    passed_[k] = !(tau < tauEnd);
     return std::min(tau, tauEnd);
 }
 

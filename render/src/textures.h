@@ -100,6 +100,12 @@ public:
     // The depth tau before which no ray of the beam meets cascade k's surfaces or walls; marched once a tile, when
     // a ray first walks cascade k.
     double startDepth(size_t k);
+    // True when no ray of the beam meets cascade k at all: its march passed over every depth of the cascade's slab
+    // (or the outer beam's did), so a ray's entry into it would only clip its span and walk nothing.
+    bool passesOver(size_t k) {
+        startDepth(k);
+        return k < passed_.size() && passed_[k];
+    }
 
 private:
     double march(size_t k);
@@ -111,6 +117,7 @@ private:
     double minDot_ = 0, maxDot_ = 0;  // the least and largest horizontal rate along the fit's view direction
     double centreLen_ = 1;         // |the centre's direction|
     std::array<double, 8> depth_;  // per cascade (RenderOptions: at most 4); NaN until marched
+    std::array<bool, 8> passed_{};  // per cascade: the march passed the whole slab (passesOver)
 };
 
 // dir: unit direction of the ray. With a beam holding the ray (its direction before normalising was
