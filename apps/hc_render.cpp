@@ -20,6 +20,7 @@
 #include "render_setup.h"
 #include "heightcast/core/atomic_file.h"
 #include "heightcast/core/error.h"
+#include "heightcast/core/heap.h"
 #include "heightcast/grid/grid_file.h"
 #include "heightcast/core/parallel.h"
 #include "heightcast/core/timer.h"
@@ -324,7 +325,10 @@ int main(int argc, char** argv) {
             hc::cli::requireCpu("--cells on a grid read out of core (no .hci cache)", a.backend, decision);
         const hc::render::Camera camera = hc::cli::initialCamera(a.setup, *loaded->scene);
         refuseCameraBelowTerrain(*loaded->scene, camera);
-        if (a.flyFrames) return fly(a, decision, *loaded->scene, camera);
+        if (a.flyFrames) {
+            hc::keepFreedMemory();  // each frame reuses the last one's pages (core/heap.h)
+            return fly(a, decision, *loaded->scene, camera);
+        }
         if (!a.sequence) {
             const Rendered rendered = renderImage(decision, *loaded->scene, camera, a.setup.options);
             writeOutputs(a, rendered, std::nullopt);

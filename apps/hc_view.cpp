@@ -16,6 +16,7 @@
 #include "view/window.h"
 #include "view_support.h"
 #include "heightcast/core/error.h"
+#include "heightcast/core/heap.h"
 
 namespace {
 
@@ -135,6 +136,7 @@ int main(int argc, char** argv) {
         ViewArgs a;
         if (!parseOptions(argc, argv, a)) return 0;
         requireDisplay();
+        hc::keepFreedMemory();  // frame after frame: each reuses the last one's pages (core/heap.h)
         hc::view::Window window("hc-view: " + a.gridPath, a.setup.width, a.setup.height, a.frames == 0);
         // --backend gl without a 4.3 context fails here, before any work.
         hc::cli::BackendDecision decision = hc::cli::decideBackend(a.backend, window.gl());

@@ -38,6 +38,7 @@
 #include "backend_choice.h"
 #include "cli.h"
 #include "heightcast/core/error.h"
+#include "heightcast/core/heap.h"
 #include "heightcast/core/parallel.h"
 #include "heightcast/core/progress.h"
 #include "heightcast/core/rounded.h"
@@ -505,6 +506,7 @@ void writeCsv(const std::vector<const Scenario*>& scs, const std::vector<RunResu
 }  // namespace
 
 int main(int argc, char** argv) {
+    hc::keepFreedMemory();  // frames reuse the last one's pages, as in hc-view and hc-render's flights (core/heap.h)
     return hc::cli::run("hc-bench", [&] {
         Settings set;
         std::string size = "1920x1080", scenarios = "Marchfeld,Petzenkirchen,Wachau,Florence", csv, json, plot, backendText = "cpu";

@@ -1,0 +1,22 @@
+#include "heightcast/core/heap.h"
+
+#include <climits>
+
+#if defined(__GLIBC__)
+#include <malloc.h>
+#endif
+
+namespace hc {
+
+bool keepFreedMemory(size_t mmapAboveBytes, size_t keepBytes) {
+#if defined(__GLIBC__)
+    if (mmapAboveBytes > size_t(INT_MAX) || keepBytes > size_t(INT_MAX)) return false;  // mallopt takes an int
+    // Either setting also stops malloc from raising its thresholds on its own (glibc's "dynamic" thresholds).
+    return mallopt(M_MMAP_THRESHOLD, int(mmapAboveBytes)) == 1 && mallopt(M_TRIM_THRESHOLD, int(keepBytes)) == 1;
+#else
+    (void)mmapAboveBytes, (void)keepBytes;
+    return false;
+#endif
+}
+
+}  // namespace hc
