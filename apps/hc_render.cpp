@@ -325,10 +325,8 @@ int main(int argc, char** argv) {
             hc::cli::requireCpu("--cells on a grid read out of core (no .hci cache)", a.backend, decision);
         const hc::render::Camera camera = hc::cli::initialCamera(a.setup, *loaded->scene);
         refuseCameraBelowTerrain(*loaded->scene, camera);
-        if (a.flyFrames) {
-            hc::keepFreedMemory();  // each frame reuses the last one's pages (core/heap.h)
-            return fly(a, decision, *loaded->scene, camera);
-        }
+        if (a.flyFrames || a.sequence) hc::keepFreedMemory();  // frame after frame: each reuses the last one's pages (core/heap.h)
+        if (a.flyFrames) return fly(a, decision, *loaded->scene, camera);
         if (!a.sequence) {
             const Rendered rendered = renderImage(decision, *loaded->scene, camera, a.setup.options);
             writeOutputs(a, rendered, std::nullopt);

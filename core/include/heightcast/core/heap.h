@@ -8,7 +8,8 @@
 // keepFreedMemory() tells malloc to serve blocks up to `mmapAboveBytes` from its heap and to keep up to `keepBytes`
 // free at the heap's top: a frame then reuses its predecessor's pages. The default covers a 3840 x 2160 frame (layers
 // of 33 MB, directions of 100 MB). Call it once, at the start of a program that renders several frames (hc-view,
-// hc-render's flights, hc-bench); peak memory grows by 1-2 %, and memory freed stays with the process until it exits.
+// hc-render's flights and water steps, hc-bench); peak memory grows by 1.5-4 %, and memory freed stays with the
+// process until it exits.
 // A glibc that refuses the threshold asked for gets 32 MiB, the most every glibc takes. Returns false where the
 // allocator is not glibc's (nothing changed) or refused even that.
 #pragma once
