@@ -27,7 +27,7 @@ long minorFaults() {
 // One frame's allocations as renderFrame makes them at width x height: the ten float layers, the image, the rays'
 // directions and three cascades' textures (4.2 MB each), every byte written, freed in another order than allocated
 // (the textures first, the layers last, as the caller drops its Frame). Returns the minor page faults taken.
-long oneFrame(size_t width, size_t height) {
+[[maybe_unused]] long oneFrame(size_t width, size_t height) {
     const long before = minorFaults();
     const size_t pixels = width * height;
     std::vector<std::vector<float>> layers;
@@ -44,7 +44,7 @@ long oneFrame(size_t width, size_t height) {
 }
 
 // Six frames of one size: the faults of the first, and the most of any after the second.
-std::pair<long, long> faultsOfFrames(size_t width, size_t height) {
+[[maybe_unused]] std::pair<long, long> faultsOfFrames(size_t width, size_t height) {
     const long first = oneFrame(width, height);
     oneFrame(width, height);
     long later = 0;
