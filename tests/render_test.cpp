@@ -447,6 +447,40 @@ TEST(Render, InterpolatedPyramidTexelsStayWithinACoarserPatchError) {
                 worstDepth);
 }
 
+// The ray walk's shortcut under water (raycast.cpp, PatchWalk::endsAt: a patch with water at all four corners skips the
+// terrain's intersection for a ray that enters above the water) rests on this: wherever a texel holds water, its level
+// is at or above the terrain's texel, from every fill path (the kernels, pyramid samples copied, texels interpolated
+// from a coarser level) and with the minimum depth drawn at 0 as well as the default.
+TEST(Render, WaterTexelsLieAtOrAboveTheTerrain) {
+    uint64_t wet = 0, strictlyAbove = 0;
+    for (World* w : {&lidarFlood(), &hef()}) {
+        const hc::influence::SurfacePyramid pyramid = hc::influence::buildSurfacePyramid(w->grid, w->lists.params());
+        const Scene withPyramid(w->grid, w->lists, &pyramid);
+        for (const Scene* scene : {static_cast<const Scene*>(w->scene.get()), &withPyramid}) {
+            const Camera c = overviewCamera(*scene, 320, 200);
+            const detail::FrameSetup setup = detail::setUpFrame(*scene, c);
+            for (int texels : {64, 256}) {
+                const CascadeFit fit = fitCascades(setup.view, 3, texels);
+                for (const Cascade& k : fit.cascades)
+                    for (double minDepth : {0.0, 0.01})
+                        for (int interpolate : {0, 3}) {
+                            detail::CascadeTextures tex;
+                            detail::approximate(*scene, k, tex, minDepth, 0, nullptr, interpolate);
+                            ASSERT_TRUE(tex.hasWater);
+                            for (size_t at = 0; at < tex.water.h.size(); ++at) {
+                                if (!std::isfinite(tex.water.h[at])) continue;
+                                ++wet;
+                                ASSERT_GE(tex.water.h[at], tex.terrain.h[at]) << "texel " << at << " of a cascade of " << k.texelM << " m";
+                                strictlyAbove += tex.water.h[at] > tex.terrain.h[at];
+                            }
+                        }
+            }
+        }
+    }
+    EXPECT_GT(wet, 100000u) << "the floods are in view";
+    std::printf("%llu wet texels, %llu strictly above the terrain\n", (unsigned long long)wet, (unsigned long long)strictlyAbove);
+}
+
 TEST(Render, HitsLieOnTheExactSurfaceFrom200RandomCameras) {
     std::mt19937_64 rng(2024);
     size_t frames = 0, checked = 0, bad = 0, misses = 0;
