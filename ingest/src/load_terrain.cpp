@@ -489,7 +489,7 @@ struct WarpPlan {
     std::string note;                                     // for the report's method
     std::shared_ptr<OGRCoordinateTransformation> ct;       // source CRS -> target CRS (PROJ, exact)
     OGRSpatialReference target;
-    std::string targetText, input;
+    std::string targetText, targetWkt, input;  // the target as given (--t_srs) and as WKT
     double ext[4] = {0, 0, 0, 0};  // west, south, east, north [target units]
     double cell = 1, scale = 1;    // output pixel [target units]; output pixels per source pixel (the kernel's)
     size_t width = 0, height = 0;  // output pixels
@@ -528,7 +528,7 @@ struct WarpPlan {
             ww.hasSrcNoData = true, ww.srcNoData = std::numeric_limits<double>::quiet_NaN();
             std::copy(g.g, g.g + 6, ww.gt);
             ww.width = width, ww.height = height;
-            ww.dstSrs = targetText, ww.dstWkt = detail::toWkt(target);
+            ww.dstSrs = targetText, ww.dstWkt = targetWkt;
             ww.scale = scale, ww.threads = threads;
             ww.setupError = "--t_srs " + targetText + ": cannot transform " + input;
             ww.warpError = input + ": projecting to " + targetText;
@@ -545,6 +545,7 @@ WarpPlan planWarp(const GeoTransform& gtIn, size_t width, size_t height, const O
     WarpPlan plan;
     plan.target = target;
     plan.targetText = opt.targetSrs;
+    plan.targetWkt = detail::toWkt(target);
     plan.input = opt.input;
     plan.threads = opt.threads;
     struct Piece {

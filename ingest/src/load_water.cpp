@@ -85,8 +85,7 @@ void checkAgreesWithFirst(GDALDataset& ds, const std::string& path, const std::s
 
 namespace detail {
 
-WaterStepWarp::WaterStepWarp(const Options& opt, const Raster& frame, size_t step, LoadReport& report)
-    : width_(frame.width), height_(frame.height), threads_(opt.threads) {
+WaterStepWarp::WaterStepWarp(const Options& opt, const Raster& frame, size_t step, LoadReport& report) {
     if (opt.water != WaterSource::Depth && opt.water != WaterSource::Surface) throw Error("internal: a water step warp without a water raster");
     surface_ = opt.water == WaterSource::Surface;
     const std::string role = surface_ ? "water surface raster" : "water depth raster";
@@ -94,19 +93,17 @@ WaterStepWarp::WaterStepWarp(const Options& opt, const Raster& frame, size_t ste
     ds_ = openRaster(path, role);
     if (step > 0 && path != opt.waterPaths[0]) checkAgreesWithFirst(*ds_, path, opt.waterPaths[0], role);
     what_ = waterStepName(opt, step);
-    band_ = opt.waterBands.empty() ? 1 : opt.waterBands.at(step);
-    if (band_ < 1 || band_ > ds_->GetRasterCount()) throw Error(path + ": has no band " + std::to_string(band_));
+    const int band = opt.waterBands.empty() ? 1 : opt.waterBands.at(step);
+    if (band < 1 || band > ds_->GetRasterCount()) throw Error(path + ": has no band " + std::to_string(band));
     const OGRSpatialReference* srs = ds_->GetSpatialRef();
     const bool waterHasCrs = srs && !srs->IsEmpty();
     if (waterHasCrs != !frame.crsWkt.empty())
         report.warnings.push_back(what_ + ": " + (waterHasCrs ? "the terrain has no CRS" : "has no CRS") + "; both taken to be in the same frame");
-    if (waterHasCrs && !frame.crsWkt.empty()) dstWkt_ = frame.crsWkt;
-    gt_[0] = frame.westWorld, gt_[1] = frame.pixelSizeM, gt_[2] = 0;
-    gt_[3] = frame.northWorld, gt_[4] = 0, gt_[5] = -frame.pixelSizeM;
+    const std::string dstWkt = waterHasCrs && !frame.crsWkt.empty() ? frame.crsWkt : std::string();
     // The kernel's scale, fixed for the whole raster (GDAL's XSCALE, YSCALE): working pixels per water pixel, at most 1
     // (a water raster coarser than the working pixel is interpolated, a finer one averaged over the kernel's width).
     // GDAL estimates it from each chunk it warps, so without this a window could differ from the whole.
-    char** opts = dstWkt_.empty() ? nullptr : CSLSetNameValue(nullptr, "DST_SRS", dstWkt_.c_str());
+    char** opts = dstWkt.empty() ? nullptr : CSLSetNameValue(nullptr, "DST_SRS", dstWkt.c_str());
     void* tr = GDALCreateGenImgProjTransformer2(GDALDataset::ToHandle(ds_.get()), nullptr, opts);
     CSLDestroy(opts);
     if (!tr) throw Error(what_ + ": cannot transform onto the terrain: " + lastGdalError());
@@ -115,26 +112,25 @@ WaterStepWarp::WaterStepWarp(const Options& opt, const Raster& frame, size_t ste
     const CPLErr e = GDALSuggestedWarpOutput(GDALDataset::ToHandle(ds_.get()), GDALGenImgProjTransform, tr, sg, &pw, &ph);
     GDALDestroyGenImgProjTransformer(tr);
     if (e != CE_None) throw Error(what_ + ": cannot resample onto the terrain: " + lastGdalError());
-    scale_ = std::min(1.0, std::min(std::abs(sg[1]), std::abs(sg[5])) / frame.pixelSizeM);
     int has = 0;
-    const double nd = ds_->GetRasterBand(band_)->GetNoDataValue(&has);
-    if (has) nodata_ = nd;
+    const double nd = ds_->GetRasterBand(band)->GetNoDataValue(&has);
+    warp_.src = ds_.get();
+    warp_.band = band;
+    warp_.hasSrcNoData = has != 0, warp_.srcNoData = has ? nd : 0;
+    const double gt[6] = {frame.westWorld, frame.pixelSizeM, 0, frame.northWorld, 0, -frame.pixelSizeM};
+    std::copy(gt, gt + 6, warp_.gt);
+    warp_.width = frame.width, warp_.height = frame.height;
+    warp_.dstSrs = dstWkt, warp_.dstWkt = dstWkt;
+    warp_.scale = std::min(1.0, std::min(std::abs(sg[1]), std::abs(sg[5])) / frame.pixelSizeM);
+    warp_.threads = opt.threads;
+    warp_.setupError = what_ + ": cannot transform onto the terrain";
+    warp_.warpError = what_ + ": resampling onto the terrain";
 }
 
 void WaterStepWarp::warp(size_t c0, size_t r0, size_t w, size_t h, float* out) const {
     std::fill(out, out + w * h, std::numeric_limits<float>::quiet_NaN());
     if (w == 0 || h == 0) return;
-    WindowWarp ww;
-    ww.src = ds_.get();
-    ww.band = band_;
-    ww.hasSrcNoData = nodata_.has_value(), ww.srcNoData = nodata_.value_or(0);
-    std::copy(gt_, gt_ + 6, ww.gt);
-    ww.width = width_, ww.height = height_;
-    ww.dstSrs = dstWkt_, ww.dstWkt = dstWkt_;
-    ww.scale = scale_, ww.threads = threads_;
-    ww.setupError = what_ + ": cannot transform onto the terrain";
-    ww.warpError = what_ + ": resampling onto the terrain";
-    ww.into(c0, r0, w, h, out);
+    warp_.into(c0, r0, w, h, out);
     ds_->FlushCache(false);  // drops its blocks from GDAL's cache: the next window reads what it reaches
 }
 

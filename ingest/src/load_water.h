@@ -3,7 +3,6 @@
 #pragma once
 
 #include <cstdint>
-#include <optional>
 #include <string>
 
 #include "gdal_util.h"
@@ -28,14 +27,9 @@ public:
 private:
     void warp(size_t c0, size_t r0, size_t w, size_t h, float* out) const;  // the water raster's values, NaN where none
     DatasetPtr ds_;
-    std::string what_, dstWkt_;
-    int band_ = 1;
+    std::string what_;
     bool surface_ = false;
-    double gt_[6] = {0, 1, 0, 0, 0, -1};
-    size_t width_ = 0, height_ = 0;
-    double scale_ = 1;
-    std::optional<double> nodata_;
-    unsigned threads_ = 0;
+    WindowWarp warp_;  // over ds_, set up once: every window warps with the same settings
 };
 
 // The step's raster as messages name it: the file, and "(band B, step K)" for a band of a series.
