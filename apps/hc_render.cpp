@@ -317,8 +317,8 @@ int main(int argc, char** argv) {
         hc::cli::BackendDecision decision = chooseBackend(a.backend);
         if (!a.setup.colorBy.empty()) hc::cli::requireCpu("--color-by " + a.setup.colorBy, a.backend, decision);
         checkOutputs(a);
-        // Without a cache either backend reads the grid out of core (the GL one then fills its cascades on the CPU,
-        // gl_renderer.h); --color-by needs the grid and its lists in memory (the exact evaluator at every hit).
+        // Without a cache either backend reads the grid out of core (the GL one then evaluates the texels a frame newly
+        // sees on the CPU and keeps its cascades on the GPU, gl_renderer.h); --color-by needs the grid and its lists in memory (the exact evaluator at every hit).
         auto loaded = hc::cli::loadScene("hc-render", a.gridPath, a.setup, a.setup.colorBy.empty());
         // Cell outlines on the GL backend need the cells on the GPU.
         if (loaded->scene->outOfCore() && a.setup.options.cellOutlines)

@@ -37,8 +37,8 @@ void RenderSetup::addRenderOptions(Parser& p) {
     p.option("--cache", "C.hci", "influence cache: the grid is read whole with its lists (default: the grid's path with .hci when\n"
              "that exists; rebuilt if stale)", cachePath);
     p.flag("--out-of-core", "read the grid a region at a time, without lists (hc-render's default when no cache is beside\n"
-           "the grid): memory follows the cascades, not the grid (105 M cells: 0.8 GB); the GL backend then fills\n"
-           "its cascades on the CPU and casts on the GPU, and draws no --cells", outOfCore);
+           "the grid): memory follows the cascades, not the grid (105 M cells: 0.8 GB); the GL backend then evaluates\n"
+           "the texels a frame newly sees on the CPU, keeps its cascades on the GPU, and draws no --cells", outOfCore);
     p.exclusive({"--cache", "--out-of-core"});
     p.option("--pyramid", "P.hcp", "surface pyramid (hc-influence) to copy texels from (default: the grid's path with .hcp, used if\n"
              "valid; cascade texel sizes are then its spacings, powers of two of the finest cell)", pyramidPath);

@@ -116,6 +116,7 @@ struct RunResult {
     char device[256] = {};        // what rendered: "CPU" or the GL renderer and version
     // --fly-frames: means over frames 2..N of a camera flying forward, without and with a CascadeCache.
     double flyApproxFreshMs = 0, flyApproxCachedMs = 0, flyTotalFreshMs = 0, flyTotalCachedMs = 0, flyKept = 0;
+    double flyUploadFreshMs = 0, flyUploadCachedMs = 0, flyUploadFreshMB = 0, flyUploadCachedMB = 0;  // GL out of core
     double flyCellsFresh = 0, flyCellsCached = 0;  // grid cells the approximation visited per frame (CascadeStats::cellsVisited)
     // --pyramid: the surface pyramid's build time and bytes.
     double pyramidMs = 0;
@@ -317,8 +318,8 @@ RunResult runScenario(const Scenario& sc, const Settings& set) {
             // out of core the renderer's own cache keeps the texels (in memory the GPU sums every texel each frame).
             for (int cached = 0; cached < 2; ++cached) {
                 hc::render::CascadeCache cache;
-                double approx = 0, total = 0;
-                uint64_t kept = 0, visible = 0, cells = 0;
+                double approx = 0, total = 0, upload = 0;
+                uint64_t kept = 0, visible = 0, cells = 0, uploadBytes = 0;
                 for (int k = 0; k < set.flyFrames; ++k) {
                     say(fmt::format("fly-through {}, frame {} of {} ...", cached ? "with the cache" : "fresh", k + 1, set.flyFrames).c_str());
                     const hc::render::Camera c = hc::render::flightFrame(cam, set.flyStepM, unsigned(k));
@@ -330,12 +331,14 @@ RunResult runScenario(const Scenario& sc, const Settings& set) {
                         (void)hc::render::renderFrame(scene, c, set.options, tm, cached ? &cache : nullptr);
                     }
                     if (k == 0) continue;
-                    approx += tm.approximationMs, total += tm.totalMs;
+                    approx += tm.approximationMs, total += tm.totalMs, upload += tm.uploadMs, uploadBytes += tm.uploadBytes;
                     for (const auto& cs : tm.cascades) kept += cs.reusedTexels, visible += cs.visibleTexels, cells += cs.cellsVisited;
                 }
                 const double frames = set.flyFrames - 1;
                 (cached ? r.flyApproxCachedMs : r.flyApproxFreshMs) = approx / frames;
                 (cached ? r.flyTotalCachedMs : r.flyTotalFreshMs) = total / frames;
+                (cached ? r.flyUploadCachedMs : r.flyUploadFreshMs) = upload / frames;
+                (cached ? r.flyUploadCachedMB : r.flyUploadFreshMB) = double(uploadBytes) / 1e6 / frames;
                 (cached ? r.flyCellsCached : r.flyCellsFresh) = double(cells) / frames;
                 if (cached) r.flyKept = visible ? double(kept) / double(visible) : 0;
             }
@@ -469,6 +472,10 @@ void writeJson(const std::vector<const Scenario*>& scs, const std::vector<RunRes
             o["fly_total_ms_fresh"] = ms(r.flyTotalFreshMs);
             o["fly_total_ms_cached"] = ms(r.flyTotalCachedMs);
             o["fly_texels_kept"] = hc::rounded(r.flyKept, std::chars_format::fixed, 4);
+            o["fly_upload_ms_fresh"] = ms(r.flyUploadFreshMs);
+            o["fly_upload_ms_cached"] = ms(r.flyUploadCachedMs);
+            o["fly_upload_mb_fresh"] = sig6(r.flyUploadFreshMB);
+            o["fly_upload_mb_cached"] = sig6(r.flyUploadCachedMB);
             o["fly_cells_visited_fresh"] = std::llround(r.flyCellsFresh);
             o["fly_cells_visited_cached"] = std::llround(r.flyCellsCached);
         }
@@ -553,7 +560,8 @@ int main(int argc, char** argv) {
                  "      walks there (the same hits); 0 walks every ray from its cascade's start (default 4)", set.options.beamTilePx);
         p.flag("--out-of-core", "write each grid to a temporary .hcg and render out of core from it, without lists\n"
                "      (render::Scene over a GridRegionReader; with --pyramid the texels it holds need no cell; GL: the\n"
-               "      cascades filled on the CPU, the mipmaps, ray casting and shading on the GPU)", set.outOfCore);
+               "      texels a frame newly sees evaluated on the CPU, the cascades kept on the GPU, the mipmaps, ray\n"
+               "      casting and shading there)", set.outOfCore);
         p.flag("--accuracy", "measure the last frame's terrain hits against the exact surface: max, p99 and RMS of\n"
                "      |hit height - exact height| [m] (walls and water aside)", set.accuracy);
         p.option("--plot", "OUT.svg", "also draw each scenario's best stage times as stacked bars with the targets, SVG\n"
@@ -710,6 +718,16 @@ int main(int argc, char** argv) {
                 std::printf("%-14s %16.1f %16.1f %6.1f %14.1f %14.1f %14.1f %12.0f %12.0f\n", chosen[k]->name, r.flyApproxFreshMs, r.flyApproxCachedMs,
                             r.flyApproxCachedMs > 0 ? r.flyApproxFreshMs / r.flyApproxCachedMs : 0.0, r.flyTotalFreshMs, r.flyTotalCachedMs,
                             100 * r.flyKept, r.flyCellsFresh, r.flyCellsCached);
+            }
+            bool uploads = false;
+            for (const RunResult& r : results) uploads = uploads || r.flyUploadFreshMB > 0;
+            if (uploads) {  // the GL backend out of core: the texels the CPU evaluated, to the GPU (Timings::uploadMs)
+                std::printf("\n%-14s %16s %16s %16s %16s\n", "GL upload", "ms fresh", "ms cache", "MB fresh", "MB cache");
+                for (size_t k = 0; k < results.size(); ++k) {
+                    const RunResult& r = results[k];
+                    std::printf("%-14s %16.2f %16.2f %16.2f %16.3f\n", chosen[k]->name, r.flyUploadFreshMs, r.flyUploadCachedMs, r.flyUploadFreshMB,
+                                r.flyUploadCachedMB);
+                }
             }
         }
 

@@ -14,6 +14,7 @@
 #include <cstdlib>
 #include <filesystem>
 #include <memory>
+#include <optional>
 #include <random>
 #include <tuple>
 #include <unistd.h>
@@ -27,6 +28,7 @@
 #include "heightcast/render/gpu_layout.h"
 #include "heightcast/render/image_io.h"
 #include "heightcast/render/renderer.h"
+#include "../render/src/textures.h"
 #include "test_data.h"
 #include "test_grids.h"
 
@@ -352,6 +354,94 @@ TEST(RenderGl, OutOfCoreFillsTheCascadesOnTheCpuAndCastsOnTheGpu) {
                 EXPECT_NE(std::string(e.what()).find(path.string()), std::string::npos) << e.what();
                 EXPECT_NE(std::string(e.what()).find("--backend cpu"), std::string::npos) << e.what();
             }
+        }
+    }
+    std::filesystem::remove(path);
+}
+
+// Out of core the GL backend keeps its cascades on the GPU and uploads only the texels a frame newly sees
+// (assemble.comp places them beside the texels kept from the last frame). Over a flight (20 m steps, a 2 km jump that
+// keeps part of a cascade or none, steps again, a frame after forgetCascades) every frame's textures on the GPU are
+// the CPU's, texel for texel and bit for bit: the reference evaluates each cascade on the CPU with the texels it keeps
+// copied from the reference's own last frame, as renderFrame() does with a CascadeCache (a texel evaluated afresh may
+// differ from a kept one in its last bit: a few of a frame's do here). A 20 m step uploads under a tenth of the bytes
+// of a fresh frame. Fails when a kept texel is shifted by one (the texels differ) or when the kept spans are uploaded
+// again (the bytes).
+TEST(RenderGl, OutOfCoreKeepsTheCascadesOnTheGpuAndUploadsOnlyNewTexels) {
+    namespace detail = hc::render::detail;
+    World& w = hef();
+    HC_REQUIRE_GL(w);
+    const std::filesystem::path path = std::filesystem::temp_directory_path() / ("hc_gl_kept_" + std::to_string(::getpid()) + ".hcg");
+    hc::writeGrid(w.grid, path.string());
+    const hc::influence::SurfacePyramid pyramid = hc::influence::buildSurfacePyramid(w.grid, {});
+    {
+        const hc::GridRegionReader file(path.string());
+        const Scene scene(file, {}, &pyramid);
+        ASSERT_TRUE(scene.outOfCore());
+        ASSERT_TRUE(scene.hasWater());
+        const std::unique_ptr<GlRenderer> gl = GlRenderer::headless(scene);
+        const RenderOptions o = smallOptions();
+        Camera cam = lowOblique(scene, 320, 200);
+        const double moves[] = {0, 20, 20, 2000, 20, -2000, 20, 0};
+        uint64_t freshBytes = 0;
+        std::vector<Cascade> lastCascades;  // the reference's last frame
+        std::vector<detail::CascadeTextures> lastTextures;
+        for (size_t f = 0; f < std::size(moves); ++f) {
+            const std::string tag = "frame " + std::to_string(f);
+            cam.xWorld += moves[f];
+            const bool fresh = f == 0 || f + 1 == std::size(moves);
+            if (fresh) gl->forgetCascades(), lastCascades.clear(), lastTextures.clear();
+            Timings t;
+            (void)gl->render(cam, o, t);
+            uint64_t kept = 0, visible = 0;
+            for (const CascadeStats& cs : t.cascades) kept += cs.reusedTexels, visible += cs.visibleTexels;
+            if (fresh) {
+                EXPECT_EQ(kept, 0u) << tag << ": a fresh frame";
+                if (f == 0) freshBytes = t.uploadBytes;
+                EXPECT_GT(t.uploadBytes, visible * 3 * sizeof(float)) << tag << ": a fresh frame uploads its visible texels' three channels";
+            } else if (moves[f] == 20) {
+                EXPECT_GT(kept, visible * 9 / 10) << tag << ": a 20 m step keeps most texels";
+                EXPECT_LT(t.uploadBytes, freshBytes / 10) << tag << ": and uploads few";
+            }
+            // The reference: this frame's cascades on the CPU, each keeping the texels of the last frame's cascade of the
+            // same side, texel size and lattice placed nearest to it (renderer.cpp's reusableCascade).
+            const detail::FrameSetup setup = detail::setUpFrame(scene, cam);
+            Timings tf;
+            const CascadeFit fit = detail::fitFrame(scene, cam, setup, o, tf);
+            const std::vector<GlRenderer::CascadeTexels> onGpu = gl->cascadeTexturesForTest();
+            ASSERT_EQ(onGpu.size(), fit.cascades.size()) << tag;
+            std::vector<detail::CascadeTextures> textures(fit.cascades.size());
+            std::vector<bool> taken(lastCascades.size(), false);
+            uint64_t keptOnCpu = 0;
+            for (size_t k = 0; k < fit.cascades.size(); ++k) {
+                const Cascade& c = fit.cascades[k];
+                ASSERT_EQ(onGpu[k].n, c.empty() ? 0 : c.n) << tag << " cascade " << k;
+                if (c.empty()) continue;
+                std::optional<detail::TexelReuse> reuse;
+                size_t from = 0;
+                for (size_t e = 0; e < lastCascades.size(); ++e) {
+                    const Cascade& old = lastCascades[e];
+                    if (taken[e] || old.empty() || old.n != c.n || old.texelM != c.texelM) continue;
+                    const double fi = (c.x0 - old.x0) / c.texelM, fj = (c.y0 - old.y0) / c.texelM;
+                    if (std::abs(fi - std::round(fi)) >= 1e-6 || std::abs(fj - std::round(fj)) >= 1e-6) continue;
+                    const detail::TexelReuse r{&old, &lastTextures[e], int(std::round(fi)), int(std::round(fj))};
+                    if (!reuse || std::max(std::abs(r.di), std::abs(r.dj)) < std::max(std::abs(reuse->di), std::abs(reuse->dj))) reuse = r, from = e;
+                }
+                if (reuse) taken[from] = true;
+                detail::CascadeTextures& cpu = textures[k];
+                keptOnCpu += detail::approximate(scene, c, cpu, o.waterMinDepthM, 0, reuse ? &*reuse : nullptr, o.pyramidInterpolateLevels).reusedTexels;
+                size_t differ = 0, first = SIZE_MAX;
+                for (size_t i = 0; i < cpu.terrain.h.size(); ++i) {
+                    const bool same = std::bit_cast<uint32_t>(cpu.terrain.h[i]) == std::bit_cast<uint32_t>(onGpu[k].terrain[i]) &&
+                                      std::bit_cast<uint32_t>(cpu.water.h[i]) == std::bit_cast<uint32_t>(onGpu[k].water[i]) &&
+                                      std::bit_cast<uint32_t>(cpu.depth[i]) == std::bit_cast<uint32_t>(onGpu[k].depth[i]);
+                    if (!same && differ++ == 0) first = i;
+                }
+                EXPECT_EQ(differ, 0u) << tag << " cascade " << k << ": first at texel " << first << " of " << cpu.terrain.h.size() << " (n " << c.n << ")";
+            }
+            EXPECT_EQ(keptOnCpu, kept) << tag << ": the GPU kept what the CPU keeps";
+            lastCascades = fit.cascades;
+            lastTextures = std::move(textures);
         }
     }
     std::filesystem::remove(path);

@@ -9,7 +9,7 @@
 #   hc-probe WORKDIR/grid.hcg --xy X,Y            (the raster's centre; out of core: the cells around the point)
 #   hc-render WORKDIR/grid.hcg --size 1920x1080 --backend cpu   (one frame, the default overview camera; out of core,
 #                                                 texels from the pyramid)
-#   hc-render ... --backend gl                    (the same frame on the OpenGL backend: the cascades filled on the CPU
+#   hc-render ... --backend gl                    (the same frame on the OpenGL backend: the texels evaluated on the CPU
 #                                                 from the pyramid, mipmaps, ray casting and shading as compute shaders;
 #                                                 on a machine without a GPU, Mesa's llvmpipe, headless EGL)
 # and prints markdown tables, also written with the raw figures to WORKDIR/scale.csv and WORKDIR/files.csv (logs: WORKDIR/<tool>.log,

@@ -58,18 +58,34 @@ struct Todo {
 // evaluate. reuse->tex may be tex itself (renderFrame hands the last frame's storage on, so a moving camera
 // allocates nothing): this frame's row j reads the last frame's row j + dj, so rows are written in the order
 // that reads each of the last frame's rows before overwriting it.
-std::vector<Todo> copyReusedTexels(const Cascade& c, const TexelReuse* reuse, CascadeTextures& tex, uint64_t& copied, unsigned threads) {
+// With `rows` (RowFill): each row's spans into it, and only the spans left to evaluate written ("no surface"): the
+// texels kept from `reuse` are counted, not copied (the caller keeps them elsewhere), and the others left as they are.
+std::vector<Todo> copyReusedTexels(const Cascade& c, const TexelReuse* reuse, CascadeTextures& tex, uint64_t& copied, unsigned threads,
+                                   std::vector<RowFill>* rows) {
     const int n = c.n;
     const float noSurface = -std::numeric_limits<float>::infinity();
     std::vector<Todo> todo(static_cast<size_t>(n));
+    if (rows) rows->assign(size_t(n), RowFill{});
+    auto clearSpan = [&](size_t row, int lo, int hi) {  // [lo, hi] of a row "no surface"
+        if (hi < lo) return;
+        std::fill(&tex.terrain.h[row + size_t(lo)], &tex.terrain.h[row + size_t(hi)] + 1, noSurface);
+        if (tex.hasWater) {
+            std::fill(&tex.water.h[row + size_t(lo)], &tex.water.h[row + size_t(hi)] + 1, noSurface);
+            std::fill(&tex.depth[row + size_t(lo)], &tex.depth[row + size_t(hi)] + 1, 0.0f);
+        }
+    };
     if (!reuse) {  // a fresh cascade: every texel "no surface", the rows on all workers (up to 3 x 64 MB to write)
         parallelFor(size_t(n), 64, threads, [&](size_t b, size_t e, unsigned) {
             for (size_t j = b; j < e; ++j) {
                 const Cascade::RowSpan& r = c.rows[j];
                 todo[j].a0 = r.first, todo[j].a1 = r.last;
                 const size_t row = j * size_t(n);
-                std::fill_n(&tex.terrain.h[row], n, noSurface);
-                if (tex.hasWater) std::fill_n(&tex.water.h[row], n, noSurface), std::fill_n(&tex.depth[row], n, 0.0f);
+                if (rows) {
+                    (*rows)[j].a0 = r.first, (*rows)[j].a1 = r.last;
+                    clearSpan(row, r.first, r.last);
+                    continue;
+                }
+                clearSpan(row, 0, n - 1);
             }
         });
         return todo;
@@ -86,7 +102,17 @@ std::vector<Todo> copyReusedTexels(const Cascade& c, const TexelReuse* reuse, Ca
             const Cascade::RowSpan& p = reuse->cascade->rows[size_t(jp)];
             f = std::max(r.first, p.first - reuse->di), l = std::min(r.last, p.last - reuse->di);
         }
+        if (f <= l) {
+            copied += uint64_t(l - f + 1);
+            t = {r.first, f - 1, l + 1, r.last};
+        }
         const size_t row = size_t(j) * size_t(n);
+        if (rows) {
+            RowFill& out = (*rows)[size_t(j)];
+            out = RowFill{f, l, t.a0, t.a1, t.b0, t.b1};
+            clearSpan(row, t.a0, t.a1), clearSpan(row, t.b0, t.b1);
+            continue;
+        }
         auto place = [&](std::vector<float>& to, const std::vector<float>& from, float none) {
             float* const out = &to[row];
             if (l < f) {
@@ -97,14 +123,10 @@ std::vector<Todo> copyReusedTexels(const Cascade& c, const TexelReuse* reuse, Ca
             std::fill(out, out + f, none);
             std::fill(out + l + 1, out + n, none);
         };
-        place(tex.terrain.h, reuse ? reuse->tex->terrain.h : tex.terrain.h, noSurface);
+        place(tex.terrain.h, reuse->tex->terrain.h, noSurface);
         if (tex.hasWater) {
-            place(tex.water.h, reuse ? reuse->tex->water.h : tex.water.h, noSurface);
-            place(tex.depth, reuse ? reuse->tex->depth : tex.depth, 0.0f);
-        }
-        if (f <= l) {
-            copied += uint64_t(l - f + 1);
-            t = {r.first, f - 1, l + 1, r.last};
+            place(tex.water.h, reuse->tex->water.h, noSurface);
+            place(tex.depth, reuse->tex->depth, 0.0f);
         }
     }
     return todo;
@@ -821,18 +843,18 @@ influence::SurfaceRegion readNeededRegion(const GridRegionReader& file, const in
 }  // namespace
 
 ApproximationWork approximate(const Scene& scene, const Cascade& c, CascadeTextures& tex, double waterMinDepthM, unsigned threads,
-                              const TexelReuse* reuse, int interpolateLevels) {
+                              const TexelReuse* reuse, int interpolateLevels, std::vector<RowFill>* rows) {
     const int n = c.n;
     tex.hasWater = scene.hasWater();
     tex.terrain.n = tex.water.n = n;
-    // Sized only: copyReusedTexels writes every texel.
+    // Sized only: copyReusedTexels writes every texel (with `rows`, every texel to evaluate).
     tex.terrain.h.resize(size_t(n) * size_t(n));
     if (tex.hasWater) {
         tex.water.h.resize(size_t(n) * size_t(n));
         tex.depth.resize(size_t(n) * size_t(n));
     }
     ApproximationWork work;
-    std::vector<Todo> todo = copyReusedTexels(c, reuse, tex, work.reusedTexels, threads);
+    std::vector<Todo> todo = copyReusedTexels(c, reuse, tex, work.reusedTexels, threads, rows);
     // The texels left to evaluate: `need` (n^2) marks them, the spans of `todo` hold them (and copies between them).
     std::vector<uint8_t> copied(size_t(n) * size_t(n), 0), need(size_t(n) * size_t(n), 0);
     work.pyramidTexels = copyPyramidTexels(scene, c, tex, waterMinDepthM, interpolateLevels, threads, todo, copied, work);

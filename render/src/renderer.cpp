@@ -443,6 +443,7 @@ struct CascadeCache::Impl {
     struct Entry {
         Cascade cascade;
         detail::CascadeTextures tex;
+        size_t index = 0;  // the cascade's in its frame's fit
     };
     const Scene* scene = nullptr;  // what the entries were evaluated for
     size_t cells = 0;
@@ -485,10 +486,13 @@ std::optional<Reusable> reusableCascade(const CascadeCache::Impl& kept, const st
 }
 
 // Stages 2 and 3: each cascade's textures (copying what `kept` holds of the last frame) and max mipmaps, with
-// their statistics in timings.cascades.
+// their statistics in timings.cascades. With `fills` (detail::approximateOnCpu), what `kept` holds is not copied: each
+// cascade's spans and the last frame's cascade they keep go there.
 std::vector<detail::CascadeTextures> approximateCascades(const Scene& scene, const CascadeFit& fit, const RenderOptions& options,
-                                                         CascadeCache::Impl* kept, Timings& timings, bool mipmaps = true) {
+                                                         CascadeCache::Impl* kept, Timings& timings, bool mipmaps = true,
+                                                         std::vector<detail::CascadeFill>* fills = nullptr) {
     std::vector<detail::CascadeTextures> tex(fit.cascades.size());
+    if (fills) fills->assign(fit.cascades.size(), detail::CascadeFill{});
     std::vector<bool> taken(kept ? kept->entries.size() : 0, false);
     for (size_t k = 0; k < fit.cascades.size(); ++k) {
         const Cascade& c = fit.cascades[k];
@@ -501,12 +505,13 @@ std::vector<detail::CascadeTextures> approximateCascades(const Scene& scene, con
             taken[r->entry] = true;
             tex[k] = std::move(kept->entries[r->entry].tex);
             reuse = detail::TexelReuse{&kept->entries[r->entry].cascade, &tex[k], r->di, r->dj};
+            if (fills) (*fills)[k].from = int(kept->entries[r->entry].index), (*fills)[k].di = r->di, (*fills)[k].dj = r->dj;
         }
         CascadeStats cs = detail::statsOf(c);
         Stopwatch clock;
         if (!c.empty()) {
             const detail::ApproximationWork work = detail::approximate(scene, c, tex[k], options.waterMinDepthM, options.threads, reuse ? &*reuse : nullptr,
-                                                                            options.pyramidInterpolateLevels);
+                                                                            options.pyramidInterpolateLevels, fills ? &(*fills)[k].rows : nullptr);
             cs.gaussians = work.gaussians, cs.cellsVisited = work.cellsVisited, cs.reusedTexels = work.reusedTexels;
             cs.cellsRead = work.cellsRead, cs.regionsRead = work.regionsRead;
             cs.pyramidTexels = work.pyramidTexels, cs.pyramidLevel = work.pyramidLevel;
@@ -694,7 +699,7 @@ void keepCascades(CascadeCache::Impl& kept, const Scene& scene, const RenderOpti
     kept.scene = &scene, kept.cells = scene.cellCount(), kept.waterMinDepthM = options.waterMinDepthM;
     kept.entries.clear();
     for (size_t k = 0; k < fit.cascades.size(); ++k)
-        if (!fit.cascades[k].empty()) kept.entries.push_back({fit.cascades[k], std::move(tex[k])});
+        if (!fit.cascades[k].empty()) kept.entries.push_back({fit.cascades[k], std::move(tex[k]), k});
 }
 
 }  // namespace
@@ -703,13 +708,14 @@ struct detail::CacheAccess {
     static CascadeCache::Impl& of(CascadeCache& cache) { return *cache.impl_; }
 };
 
-void detail::approximateOnCpu(const Scene& scene, const CascadeFit& fit, const RenderOptions& options, CascadeCache* cache, Timings& timings,
-                              const std::function<void(size_t, const CascadeTextures&)>& use) {
-    CascadeCache::Impl* kept = cache ? keptFor(CacheAccess::of(*cache), scene, options) : nullptr;
-    std::vector<CascadeTextures> tex = approximateCascades(scene, fit, options, kept, timings, false);
+void detail::approximateOnCpu(const Scene& scene, const CascadeFit& fit, const RenderOptions& options, CascadeCache& cache, Timings& timings,
+                              const std::function<void(size_t, const CascadeTextures&, const CascadeFill&)>& use) {
+    CascadeCache::Impl* kept = keptFor(CacheAccess::of(cache), scene, options);
+    std::vector<CascadeFill> fills;
+    std::vector<CascadeTextures> tex = approximateCascades(scene, fit, options, kept, timings, false, &fills);
     for (size_t k = 0; k < fit.cascades.size(); ++k)
-        if (!fit.cascades[k].empty()) use(k, tex[k]);
-    if (kept) keepCascades(*kept, scene, options, fit, tex);
+        if (!fit.cascades[k].empty()) use(k, tex[k], fills[k]);
+    keepCascades(*kept, scene, options, fit, tex);  // their storage, for the next frame's spans
 }
 
 Frame renderFrame(const Scene& scene, const Camera& camera, const RenderOptions& options, Timings& timings, CascadeCache* cache) {
@@ -755,6 +761,7 @@ std::string Timings::toJson() const {
     j["gpu_ms"] = threeDecimals(gpuMs);
     j["readback_ms"] = threeDecimals(readbackMs);
     j["upload_ms"] = threeDecimals(uploadMs);
+    j["upload_bytes"] = uploadBytes;
     j["rays"] = rays;
     j["hits"] = hits;
     j["cascades"] = Json::array();
@@ -824,7 +831,7 @@ std::string Timings::toTable() const {
         s += b;
     }
     if (uploadMs > 0) {
-        std::snprintf(b, sizeof b, "    upload        %9.2f   the cascades the CPU filled, to the GPU\n", uploadMs);
+        std::snprintf(b, sizeof b, "    upload        %9.2f   the texels the CPU evaluated, to the GPU: %.2f MB\n", uploadMs, double(uploadBytes) / 1e6);
         s += b;
     }
     return s;

@@ -59,12 +59,22 @@ struct ApproximationWork {
     uint64_t cellsRead = 0;     // out of core: the cells those regions held (kernel margins included)
 };
 
+// A cascade's row j as approximate() filled it for a caller that keeps the last frame's texels itself (the GL backend
+// out of core keeps them on the GPU): the texels [keptFirst, keptLast] are the last frame's (TexelReuse: texel i + di of
+// its row j + dj), the spans [a0, a1] and [b0, b1] were evaluated; every other texel has no surface. Empty spans end
+// below their start.
+struct RowFill {
+    int keptFirst = 0, keptLast = -1;
+    int a0 = 0, a1 = -1, b0 = 0, b1 = -1;
+};
+
 // Approximation (approximate.cpp): fills the textures of one cascade. With `reuse`, the visible texels that were
 // visible there too are copied; with a scene pyramid at the cascade's texel size, texels whose samples it holds
 // are copied from it; the others are evaluated. The cells visited follow the texels evaluated (a few per texel),
-// not the cascade's area.
+// not the cascade's area. With `rows`, the kept texels are not copied and the texels outside every span are not
+// written: only the evaluated spans, which go into `rows` with the kept ones (RowFill).
 ApproximationWork approximate(const Scene& scene, const Cascade& c, CascadeTextures& tex, double waterMinDepthM, unsigned threads,
-                              const TexelReuse* reuse = nullptr, int interpolateLevels = 0);
+                              const TexelReuse* reuse = nullptr, int interpolateLevels = 0, std::vector<RowFill>* rows = nullptr);
 
 // One ray through the cascades (raycast.cpp).
 struct Hit {
@@ -124,13 +134,23 @@ private:
 // dirLength times dir), each cascade's walk starts where the beam's march allows.
 Hit castRay(const RayContext& ctx, const glm::dvec3& dir, Beam* beam = nullptr, double dirLength = 1);
 
-// Stage 2 on the CPU for a backend that runs the later stages elsewhere (the GL backend over an out-of-core scene,
-// which has no cells or lists to upload): every cascade's textures filled as renderFrame() fills them (from the
-// pyramid, the grid file and, with a cache, the last frame's texels), without max mipmaps, their statistics appended
-// to timings.cascades and their time to timings.approximationMs. Then use(k, textures) for each non-empty cascade,
-// after which the textures go into the cache for the next frame.
-void approximateOnCpu(const Scene& scene, const CascadeFit& fit, const RenderOptions& options, CascadeCache* cache, Timings& timings,
-                      const std::function<void(size_t, const CascadeTextures&)>& use);
+// What approximateOnCpu() filled of a cascade, for a backend that keeps the last frame's texels itself.
+struct CascadeFill {
+    std::vector<RowFill> rows;  // per texel row: the texels kept and the spans evaluated
+    int from = -1;              // the last frame's cascade (its index in that frame's fit) whose texels are kept, -1: none
+    int di = 0, dj = 0;         // this frame's texel (i, j) is that one's (i + di, j + dj)
+};
+
+// Stage 2 on the CPU for a backend that runs the later stages elsewhere and keeps the cascades' texels from one frame
+// to the next there (the GL backend over an out-of-core scene, which has no cells or lists to upload, keeps them on the
+// GPU): the texels of every cascade that the last frame of `cache` did not hold evaluated as renderFrame() evaluates
+// them (from the pyramid and the grid file), without max mipmaps, their statistics appended to timings.cascades and
+// their time to timings.approximationMs. Then use(k, textures, fill) for each non-empty cascade: only the texels of
+// fill's evaluated spans are defined in `textures`; the kept ones are the backend's to copy from its last frame (the
+// one this cache saw), those outside every span have no surface. The cache holds the cascades' shapes for the next
+// frame, not their texels: it must not be handed to renderFrame().
+void approximateOnCpu(const Scene& scene, const CascadeFit& fit, const RenderOptions& options, CascadeCache& cache, Timings& timings,
+                      const std::function<void(size_t, const CascadeTextures&, const CascadeFill&)>& use);
 
 // Per-frame set-up both backends share (renderer.cpp): the eye in the local frame, near and far along the
 // ray (the camera's, else from the scene's bounds), and the view volume cascade fitting takes.

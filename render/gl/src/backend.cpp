@@ -8,9 +8,11 @@
 // GL_TIMESTAMP queries between the dispatches.
 //
 // Out of core (a Scene over a GridRegionReader: no cells or lists in memory, the grid may hold 100 M cells) the
-// approximation runs on the CPU instead, exactly as renderFrame() runs it (from the surface pyramid, the cells
-// around the texels it does not hold, and the last frame's texels: detail::approximateOnCpu), and the filled
-// textures go up into the heights buffer; the mipmaps, ray casting and shading stay on the GPU. Nothing of the
+// cascades stay on the GPU from one frame to the next, and the CPU evaluates only the texels a frame newly sees, as
+// renderFrame() evaluates them (from the surface pyramid and the cells around the texels it does not hold:
+// detail::approximateOnCpu). Those go up packed with each cascade's rows, and assemble.comp builds the frame's
+// textures from them and the last frame's, which the GPU kept (two heights buffers, swapped each frame): a moving
+// camera uploads kilobytes, not the cascades. The mipmaps, ray casting and shading stay on the GPU. Nothing of the
 // grid is uploaded.
 #include <algorithm>
 #include <array>
@@ -80,8 +82,10 @@ void copyFloats(float* dst, const glm::dvec3& v) {
 struct GlRenderer::Impl {
     const Scene& scene;
     std::unique_ptr<gl::HeadlessContext> headless;  // null when rendering into the caller's context
-    GLuint approximate = 0, mipmap = 0, raycast = 0, shade = 0;
+    GLuint approximate = 0, assemble = 0, mipmap = 0, raycast = 0, shade = 0;
     Buffer frameBuf, cellsBuf, keysBuf, visibleBuf, heightsBuf, pixelsBuf, countersBuf;
+    // Out of core (the file comment): the last frame's heights buffer, and what the CPU evaluated this frame.
+    Buffer lastHeightsBuf, fillRowsBuf, fillTexelsBuf;
     // The rays are copied here on the GPU and read from here. Mapping pixelsBuf itself for reading made NVIDIA's
     // driver move it to host memory: every later frame's ray casting then wrote its rays over PCIe (H100: 1.2 ms
     // in the first frame, 12.5-14.5 ms in each after it; BENCHMARKS.md).
@@ -100,9 +104,23 @@ struct GlRenderer::Impl {
     GLint64 maxStorageBlock = 0;
     std::string device;
     detail::FrameSetup setup;  // of the last frame, for readback
-    // Out of core: the cascades are filled on the CPU (the file comment), keeping their texels for the next frame.
+    // Out of core: the cascades' new texels are evaluated on the CPU (the file comment). The cache holds the last frame's
+    // cascades (their shapes: the texels are on the GPU), lastCascades their places in lastHeightsBuf, and
+    // lastAssembled whether that frame got as far as building them (if not, nothing is kept).
     const bool cpuCascades;
     CascadeCache cascadeCache;
+    std::array<gpu::GpuCascade, gpu::kMaxCascades> lastCascades{};
+    size_t lastCascadeCount = 0;
+    bool lastAssembled = false;
+    struct Assembly {  // a cascade of this frame for assemble.comp
+        int rowBase = 0;          // its first row in fillRowsBuf
+        int from = -1, di = 0, dj = 0;  // detail::CascadeFill
+    };
+    std::array<Assembly, gpu::kMaxCascades> assembly{};
+    uint32_t fillPlane = 0;  // packed texels a channel
+    // What goes into fillRowsBuf and fillTexelsBuf (terrain, water, depth), kept from frame to frame (no new pages).
+    std::vector<int32_t> fillRows;
+    std::array<std::vector<float>, 3> fillTexels;
 
     Impl(const Scene& s, std::unique_ptr<gl::HeadlessContext> context) : scene(s), headless(std::move(context)), cpuCascades(s.outOfCore()) {
         gl::requireGl43("the GL backend");
@@ -113,6 +131,7 @@ struct GlRenderer::Impl {
         glGenQueries(kStamps, stamps.data());
         try {
             approximate = gl::compileEmbedded("approximate");
+            assemble = gl::compileEmbedded("assemble");
             mipmap = gl::compileEmbedded("mipmap");
             raycast = gl::compileEmbedded("raycast");
             shade = gl::compileEmbedded("shade");
@@ -129,10 +148,12 @@ struct GlRenderer::Impl {
     }
 
     void release() {
-        for (GLuint p : {approximate, mipmap, raycast, shade})
+        for (GLuint p : {approximate, assemble, mipmap, raycast, shade})
             if (p) glDeleteProgram(p);
-        approximate = mipmap = raycast = shade = 0;
-        for (Buffer* b : {&frameBuf, &cellsBuf, &keysBuf, &visibleBuf, &heightsBuf, &pixelsBuf, &countersBuf, &readbackBuf}) b->release();
+        approximate = assemble = mipmap = raycast = shade = 0;
+        for (Buffer* b : {&frameBuf, &cellsBuf, &keysBuf, &visibleBuf, &heightsBuf, &pixelsBuf, &countersBuf, &readbackBuf, &lastHeightsBuf,
+                          &fillRowsBuf, &fillTexelsBuf})
+            b->release();
         for (Buffer& b : indexBufs) b.release();
         if (colorTex) glDeleteTextures(1, &colorTex);
         colorTex = 0;
@@ -158,6 +179,12 @@ struct GlRenderer::Impl {
             cellsBuf.upload(&sentinel, sizeof sentinel);
             keysBuf.reserve(16);
             for (Buffer& b : indexBufs) b.reserve(16);
+            GLint bindings = 0;
+            glGetIntegerv(GL_MAX_SHADER_STORAGE_BUFFER_BINDINGS, &bindings);
+            if (bindings <= HC_BIND_FILL_TEXELS)
+                throw Error("the GL backend out of core needs " + std::to_string(HC_BIND_FILL_TEXELS + 1) + " shader storage buffer bindings; " + device +
+                            " has " + std::to_string(bindings) + ": use --backend cpu");
+            for (Buffer* b : {&lastHeightsBuf, &fillRowsBuf, &fillTexelsBuf}) b->reserve(16);
             return;
         }
         const Grid& g = scene.grid();
@@ -360,32 +387,113 @@ struct GlRenderer::Impl {
         glBindImageTexture(HC_IMAGE_COLOR, colorTex, 0, GL_FALSE, 0, GL_WRITE_ONLY, GL_RGBA8);
     }
 
+    // assemble.comp's texels an invocation (kRun) and invocations a work group (local_size_x).
+    static constexpr GLuint kAssembleRun = 16, kAssembleGroup = 64;
     // Work groups covering `size` invocations along one axis.
     static GLuint groups(int size) { return GLuint((size + HC_GROUP_2D - 1) / HC_GROUP_2D); }
 
-    // Stage 2 out of core, on the CPU (the file comment): the textures filled and uploaded; their statistics and
-    // times replace the ones layOutCascades and the time stamps give.
-    void approximateOnCpu(const CascadeFit& fit, const gpu::FrameBlock& block, const RenderOptions& options, Timings& timings) {
+    // Stage 2 out of core, on the CPU (the file comment): the texels this frame newly sees, evaluated there and packed
+    // with each cascade's rows into fillTexelsBuf and fillRowsBuf for assemble.comp; their statistics and times replace
+    // the ones layOutCascades and the time stamps give.
+    void approximateOnCpu(const CascadeFit& fit, const RenderOptions& options, Timings& timings) {
+        if (!lastAssembled) cascadeCache.clear();  // the GPU does not hold the frame the cache describes
+        lastAssembled = false;
+        const bool water = scene.hasWater();
+        std::vector<int32_t>& rows = fillRows;
+        std::array<std::vector<float>, 3>& packed = fillTexels;
+        rows.clear();
+        for (std::vector<float>& p : packed) p.clear();
+        assembly = {};
         Timings cpu;
-        double uploadMs = 0;
-        detail::approximateOnCpu(scene, fit, options, &cascadeCache, cpu, [&](size_t k, const detail::CascadeTextures& tex) {
+        double packMs = 0;
+        detail::approximateOnCpu(scene, fit, options, cascadeCache, cpu, [&](size_t k, const detail::CascadeTextures& tex, const detail::CascadeFill& fill) {
             const Stopwatch clock;
-            const gpu::GpuCascade& gc = block.cascades[k];
-            const size_t bytes = tex.terrain.h.size() * sizeof(float);
-            heightsBuf.upload(tex.terrain.h.data(), bytes, size_t(gc.terrainOffset) * 4);
-            if (scene.hasWater()) {
-                heightsBuf.upload(tex.water.h.data(), bytes, size_t(gc.waterOffset) * 4);
-                heightsBuf.upload(tex.depth.data(), bytes, size_t(gc.depthOffset) * 4);
+            Assembly& a = assembly[k];
+            a.rowBase = int(rows.size() / size_t(gpu::kFillRowInts));
+            a.from = fill.from, a.di = fill.di, a.dj = fill.dj;
+            const size_t n = size_t(fit.cascades[k].n), first = packed[0].size();
+            // Each row's place in the packed planes, then the rows copied there on all cores.
+            size_t end = first;
+            for (const detail::RowFill& r : fill.rows) {
+                const int32_t atA = int32_t(end);
+                end += size_t(std::max(0, r.a1 - r.a0 + 1));
+                const int32_t atB = int32_t(end);
+                end += size_t(std::max(0, r.b1 - r.b0 + 1));
+                rows.insert(rows.end(), {r.keptFirst, r.keptLast, r.a0, r.a1, r.b0, r.b1, atA, atB});
             }
-            uploadMs += clock.milliseconds();
+            const size_t channels = water ? 3 : 1;
+            for (size_t c = 0; c < channels; ++c) packed[c].resize(end);
+            const int32_t* rowInts = &rows[size_t(a.rowBase) * size_t(gpu::kFillRowInts)];
+            // On all cores where there is much to copy (a fresh cascade: up to 3 x 16 MB); a moving frame's few texels on this one.
+            const unsigned threads = end - first >= (size_t{1} << 16) ? options.threads : 1;
+            parallelFor(fill.rows.size(), 64, threads, [&](size_t b, size_t e, unsigned) {
+                for (size_t j = b; j < e; ++j) {
+                    const detail::RowFill& r = fill.rows[j];
+                    for (int span = 0; span < 2; ++span) {
+                        const int lo = span == 0 ? r.a0 : r.b0, hi = span == 0 ? r.a1 : r.b1;
+                        if (hi < lo) continue;
+                        const size_t from = j * n + size_t(lo), count = size_t(hi - lo + 1);
+                        const size_t to = size_t(rowInts[j * size_t(gpu::kFillRowInts) + 6 + size_t(span)]);
+                        std::memcpy(&packed[0][to], &tex.terrain.h[from], count * sizeof(float));
+                        if (water) {
+                            std::memcpy(&packed[1][to], &tex.water.h[from], count * sizeof(float));
+                            std::memcpy(&packed[2][to], &tex.depth[from], count * sizeof(float));
+                        }
+                    }
+                }
+            });
+            packMs += clock.milliseconds();
         });
+        const Stopwatch clock;
+        const size_t plane = packed[0].size(), planeBytes = plane * sizeof(float), channels = water ? 3 : 1;
+        if (plane >= (size_t{1} << 31)) throw Error("the GL backend out of core evaluated more than 2^31 texels in one frame");
+        fillPlane = uint32_t(plane);
+        const size_t rowBytes = rows.size() * sizeof(int32_t);
+        checkBlock(rowBytes, "the cascades' rows");
+        checkBlock(planeBytes * channels, "the texels the CPU evaluated");
+        fillRowsBuf.reserve(rowBytes);
+        if (rowBytes) fillRowsBuf.upload(rows.data(), rowBytes);
+        fillTexelsBuf.reserve(planeBytes * channels);
+        for (size_t c = 0; c < channels && plane; ++c) fillTexelsBuf.upload(packed[c].data(), planeBytes, c * planeBytes);
         timings.cascades = cpu.cascades;
         timings.approximationMs = cpu.approximationMs;
-        timings.uploadMs = uploadMs;
+        timings.uploadMs = packMs + clock.milliseconds();
+        timings.uploadBytes = rowBytes + planeBytes * channels;
+    }
+
+    // Stage 2 out of core on the GPU: each cascade's textures from the last frame's and the packed texels
+    // (assemble.comp). Then they are this frame's: the next may keep them.
+    void dispatchAssembly(const CascadeFit& fit) {
+        lastHeightsBuf.bind(HC_BIND_LAST_HEIGHTS);
+        fillRowsBuf.bind(HC_BIND_FILL_ROWS);
+        fillTexelsBuf.bind(HC_BIND_FILL_TEXELS);
+        glUseProgram(assemble);
+        auto uniform = [&](const char* name) { return glGetUniformLocation(assemble, name); };
+        for (size_t k = 0; k < fit.cascades.size(); ++k) {
+            if (fit.cascades[k].empty()) continue;
+            const Assembly& a = assembly[k];
+            const bool kept = a.from >= 0;
+            if (kept && (size_t(a.from) >= lastCascades.size() || lastCascades[size_t(a.from)].n != fit.cascades[k].n))
+                throw Error("the GL backend's cascades kept on the GPU do not match the CPU's (cascade " + std::to_string(k) + "): a bug");
+            const gpu::GpuCascade& last = lastCascades[kept ? size_t(a.from) : 0];
+            glUniform1i(uniform("uCascade"), int(k));
+            glUniform1i(uniform("uRowBase"), a.rowBase);
+            glUniform1ui(uniform("uPlane"), fillPlane);
+            glUniform1i(uniform("uKept"), kept ? 1 : 0);
+            glUniform1ui(uniform("uLastTerrain"), last.terrainOffset);
+            glUniform1ui(uniform("uLastWater"), last.waterOffset);
+            glUniform1ui(uniform("uLastDepth"), last.depthOffset);
+            glUniform1i(uniform("uDi"), a.di);
+            glUniform1i(uniform("uDj"), a.dj);
+            const GLuint runs = GLuint((fit.cascades[k].n + kAssembleRun - 1) / kAssembleRun);  // assemble.comp: kRun texels an invocation
+            glDispatchCompute((runs + kAssembleGroup - 1) / kAssembleGroup, GLuint(fit.cascades[k].n), 1);
+        }
+        glMemoryBarrier(GL_SHADER_STORAGE_BARRIER_BIT);
+        lastAssembled = true;
     }
 
     // Stage 2: the approximation, one dispatch per cascade, each followed by a time stamp (out of core the stamps
-    // only: the textures are filled already).
+    // only, after dispatchAssembly: the GPU's assembly then counts in the frame's GPU span, not in a stage).
     void dispatchApproximation(const CascadeFit& fit, const Stopwatch& frameClock, int& stamp) {
         glUseProgram(approximate);
         for (size_t k = 0; k < fit.cascades.size(); ++k) {
@@ -486,12 +594,16 @@ struct GlRenderer::Impl {
         if (!cpuCascades) setup.view.ladderStepsPerOctave = 8;
         const CascadeFit fit = detail::fitFrame(scene, camera, setup, options, timings);  // stage 1, on the CPU
         gpu::FrameBlock block{};
+        if (cpuCascades) std::swap(heightsBuf, lastHeightsBuf);  // the last frame's textures stay for assemble.comp to read
         uploadFrame(block, fit, camera, options, timings);
-        if (cpuCascades) approximateOnCpu(fit, block, options, timings);
+        if (cpuCascades) approximateOnCpu(fit, options, timings);
         bindFrame();
         int stamp = 0;
         timeStamp(stamp++, frameClock);
+        if (cpuCascades) dispatchAssembly(fit);
         dispatchApproximation(fit, frameClock, stamp);
+        std::copy(std::begin(block.cascades), std::end(block.cascades), lastCascades.begin());  // where this frame's textures lie
+        lastCascadeCount = fit.cascades.size();
         dispatchMipmaps(fit, block);
         timeStamp(stamp++, frameClock);
         dispatchPerPixel(raycast, camera);
@@ -599,6 +711,24 @@ unsigned GlRenderer::renderToTexture(const Camera& camera, const RenderOptions& 
 }
 
 std::string GlRenderer::deviceName() const { return impl_->device; }
+
+std::vector<GlRenderer::CascadeTexels> GlRenderer::cascadeTexturesForTest() const {
+    if (impl_->headless) impl_->headless->makeCurrent();
+    std::vector<CascadeTexels> out(impl_->lastCascadeCount);
+    glBindBuffer(GL_SHADER_STORAGE_BUFFER, impl_->heightsBuf.name);
+    for (size_t k = 0; k < out.size(); ++k) {
+        const gpu::GpuCascade& c = impl_->lastCascades[k];
+        out[k].n = c.n;
+        const size_t texels = size_t(c.n) * size_t(c.n);
+        auto read = [&](std::vector<float>& to, uint32_t offset) {
+            to.resize(texels);
+            if (texels) glGetBufferSubData(GL_SHADER_STORAGE_BUFFER, GLintptr(offset) * 4, GLsizeiptr(texels * 4), to.data());
+        };
+        read(out[k].terrain, c.terrainOffset);
+        if (impl_->scene.hasWater()) read(out[k].water, c.waterOffset), read(out[k].depth, c.depthOffset);
+    }
+    return out;
+}
 
 void GlRenderer::forgetCascades() { impl_->cascadeCache.clear(); }
 

@@ -24,5 +24,6 @@ void GlRenderer::limitIndexChunksForTest(uint64_t) {}
 void GlRenderer::compileForTest(const std::string&, const std::string&) const { throw Error(kBuiltOut); }
 GlRenderer::VariableLayout GlRenderer::bufferVariableLayout(const std::string&, const std::string&) const { return {}; }
 long GlRenderer::bufferBlockSize(const std::string&, const std::string&) const { return -1; }
+std::vector<GlRenderer::CascadeTexels> GlRenderer::cascadeTexturesForTest() const { return {}; }
 
 }  // namespace hc::render

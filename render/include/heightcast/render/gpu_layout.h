@@ -31,6 +31,10 @@ using uint = std::uint32_t;
 #define HC_BIND_HEIGHTS 5    // float[]: per cascade terrain, water, depth textures and both max mipmaps
 #define HC_BIND_PIXELS 6     // GpuPixel[width * height], row 0 at the top
 #define HC_BIND_COUNTERS 7   // uint[kCounterSlots * (kMaxCascades + 1)]: Gaussians per cascade, then hits
+// Out of core (assemble.comp): the last frame's heights buffer, and what the CPU evaluated this frame.
+#define HC_BIND_LAST_HEIGHTS 11  // float[]: the last frame's HC_BIND_HEIGHTS
+#define HC_BIND_FILL_ROWS 12     // int[kFillRowInts per texel row of every cascade]: RowFill, then its spans' first packed texels
+#define HC_BIND_FILL_TEXELS 13   // float[3 * plane]: the evaluated texels packed, terrain, then water, then depth
 #define HC_IMAGE_COLOR 0     // rgba8 image unit of the shaded picture (row 0 at the bottom)
 
 // Work-group sizes (macros: they go into layout(local_size_x = ...)).
@@ -41,6 +45,7 @@ const int kMaxMipLevels = 16;   // a 8192^2 cascade has 14 levels
 const int kCounterSlots = 64;   // a counter is spread over slots so that no uint overflows
 const int kMaxLabelChars = 12;  // legend labels ("-10994m")
 const int kIndexChunks = 4;     // storage buffers the influence lists' entries may span
+const int kFillRowInts = 8;     // a row of HC_BIND_FILL_ROWS: keptFirst, keptLast, a0, a1, b0, b1, packed a0, packed b0
 
 // One grid cell, plus a sentinel after the last so that cells[k + 1].listBegin ends k's list.
 struct GpuCell {

@@ -105,8 +105,11 @@ struct Timings {
     // copy of the finished frame to host memory (render(); a viewer drawing the texture has none). totalMs is
     // the wall time of the whole call, both included.
     double gpuMs = 0, readbackMs = 0;
-    // GL backend out of core: handing the cascades the CPU filled to the driver (in totalMs, not in gpuMs).
+    // GL backend out of core: packing the texels the CPU evaluated and handing them to the driver (in totalMs, not in
+    // gpuMs), and the bytes handed over: those texels and each cascade's rows (the texels kept from the last frame stay
+    // on the GPU).
     double uploadMs = 0;
+    uint64_t uploadBytes = 0;
     std::vector<CascadeStats> cascades;
     uint64_t rays = 0, hits = 0;
     std::string toJson() const;
@@ -208,7 +211,7 @@ public:
 
 private:
     friend Frame renderFrame(const Scene&, const Camera&, const RenderOptions&, Timings&, CascadeCache*);
-    friend struct detail::CacheAccess;  // the GL backend's cascades filled on the CPU (out of core) keep theirs here too
+    friend struct detail::CacheAccess;  // the GL backend out of core keeps its cascades' shapes here (detail::approximateOnCpu)
     std::unique_ptr<Impl> impl_;
 };
 

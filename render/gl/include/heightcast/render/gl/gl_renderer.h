@@ -6,10 +6,11 @@
 // same Frame and Timings as renderFrame(); GPU stage times come from GL timer queries.
 //
 // Out of core (Scene::outOfCore(): the grid read a region at a time, no cells or lists in memory, 100 M cells and
-// more) nothing of the grid goes to the GPU: the cascades are filled on the CPU exactly as renderFrame() fills them
-// (copies and interpolations from the surface pyramid, kernel sums from the cells around the rest, texels kept from
-// the renderer's last frame), uploaded, and the mipmaps, ray casting and shading run as compute shaders. Cell
-// outlines (RenderOptions::cellOutlines) need the cells on the GPU and are refused there.
+// more) nothing of the grid goes to the GPU: the cascades stay on the GPU from one frame to the next, and the texels a
+// frame newly sees are evaluated on the CPU exactly as renderFrame() evaluates them (copies and interpolations from the
+// surface pyramid, kernel sums from the cells around the rest) and uploaded; a compute shader places them beside the
+// texels kept from the last frame, and the mipmaps, ray casting and shading follow. Cell outlines
+// (RenderOptions::cellOutlines) need the cells on the GPU and are refused there.
 //
 // No GL type appears here: the GL state lives behind the pimpl in render/gl/src/. A build without OpenGL
 // (-DHC_WITH_GL=OFF) has this API too, from src/unavailable.cpp: headlessGlUnavailable() says the backend was
@@ -19,6 +20,7 @@
 #include <cstdint>
 #include <memory>
 #include <string>
+#include <vector>
 
 #include "heightcast/render/renderer.h"
 
@@ -71,6 +73,13 @@ public:
     VariableLayout bufferVariableLayout(const std::string& program, const std::string& variable) const;
     // GL_BUFFER_DATA_SIZE of a shader storage block ("FrameBlock"), -1 where absent.
     long bufferBlockSize(const std::string& program, const std::string& block) const;
+    // The last frame's cascade textures as the GPU holds them, n x n texels each (water and depth empty without water;
+    // n = 0 for an empty cascade).
+    struct CascadeTexels {
+        int n = 0;
+        std::vector<float> terrain, water, depth;
+    };
+    std::vector<CascadeTexels> cascadeTexturesForTest() const;
 
     struct Impl;
 
