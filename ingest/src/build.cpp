@@ -366,14 +366,11 @@ private:
     // The guarantee, measured: every valid pixel under cells [begin, end) of the batch against the stored value of its
     // cell (largest deviation, pixels and cells per level into acc); returns the sum of the squared deviations.
     double measure(const Batch& b, size_t begin, size_t end, Stats& acc, bool paintElevations) const;
-    // Under mpirun: a rank other than 0 sends its share (cells, statistics, per-unit sums of squares) to rank 0; rank 0
-    // receives every other rank's in order, feeds their cells to the sink and adds their statistics into `sum`.
-    // With `parts` (every rank wrote its own cells into rank 0's file: GridFilePart), a rank sends its part's result
-    // (GridFilePart::finish) instead of its cells, and rank 0 hands each to its writer (GridFileWriter::addPart).
-    void sendShare(const Batch& share, const Stats& sum, const std::vector<double>& unitSumSq, const std::vector<std::byte>* part) const;
-    void receiveShares(CellSink& sink, Stats& sum, std::vector<double>& unitSumSq, bool parts) const;
-    // Fills BuildOptions::cellElevations under cells [begin, end) of the batch (rank 0 does it for every rank's cells).
-    void paint(const Batch& b, size_t begin, size_t end) const;
+    // Under mpirun every rank writes its own cells into rank 0's file (GridFilePart); then a rank other than 0 sends its
+    // part's result (GridFilePart::finish) and its statistics (per-unit sums of squares) to rank 0, which receives every
+    // other rank's in order, hands each part to its writer (GridFileWriter::addPart) and adds the statistics into `sum`.
+    void sendShare(const Stats& sum, const std::vector<double>& unitSumSq, const std::vector<std::byte>& part) const;
+    void receiveShares(CellSink& sink, Stats& sum, std::vector<double>& unitSumSq) const;
 
     const Raster& t_;
     const RasterWindows* windows_;
@@ -641,10 +638,15 @@ void Builder::bathtubBlocks(double level, std::vector<std::vector<float>>& stora
 Stats Builder::run(CellSink& sink) {
     const unsigned threads = resolveThreads(opt_.threads);
     const size_t tiles = ntx_ * nty_;
-    // Under mpirun (ranks.h) each rank builds a contiguous share of the tiles, then of the cells; rank 0 receives the
-    // others' cells in order and alone feeds the sink. One process is rank 0 of 1: all of it.
+    // Under mpirun (ranks.h) each rank builds a contiguous share of the tiles, then of the cells, and writes those into
+    // rank 0's file at their place. One process is rank 0 of 1: all of it.
     const int rank = ranks::rank(), rankCount = ranks::count();
     const bool root = rank == 0;
+    // Ranks write into a file, never into a grid in memory, and paint no trace (the tools read rasters by windows under
+    // mpirun, and a trace is painted without windows only): the same answer on every rank, so all of them throw.
+    if (rankCount > 1 && (!sink.fileShape() || opt_.cellElevations))
+        throw Error("internal: under mpirun the grid is built into a file (each rank writes its own cells there) and without a trace of "
+                    "the source; an in-memory grid or a trace is built by one process");
     const auto rankStart = Stopwatch();
 
     // The shares: runs of share nodes in Morton order, about equal in area. A rank builds the tiles (pass A) and writes
@@ -779,40 +781,32 @@ Stats Builder::run(CellSink& sink) {
                             "the raster holds no valid pixel (all nodata): nothing to build");
             if (root) sink.begin(total);
         });
-        // Under mpirun, where rank 0's file lets them (no trace for rank 0 to paint), every rank writes its own cells
-        // into it in place (GridFilePart): rank 0 says where, the others open their parts. Else they send their cells to
-        // rank 0, which writes them. (With water steps each rank keeps its own cells' codes: CellSink::keepOwn.)
+        // Under mpirun every rank writes its own cells into rank 0's file in place (GridFilePart): rank 0 says where, the
+        // others open their parts. (With water steps each rank keeps its own cells' codes: CellSink::keepOwn.)
         std::unique_ptr<GridFilePart> part;
-        bool parts = false;
         if (rankCount > 1) {
             std::vector<std::byte> where;
-            if (root && !opt_.cellElevations)
-                if (GridFileWriter* w = sink.sharedWriter()) where = w->placement();
+            if (root) {
+                GridFileWriter* w = sink.sharedWriter();
+                if (!w) throw Error("internal: under mpirun rank 1's sink has no file for the ranks to write into");
+                where = w->placement();
+            }
             where = std::move(ranks::allGather(where)[0]);
-            parts = !where.empty();
             ranks::together([&] {
-                if (parts && !root) {
-                    if (!sink.fileShape()) throw Error("internal: a sink without a file shape for this rank's part");
-                    part = std::make_unique<GridFilePart>(where, *sink.fileShape(), offsetOf(myU0));
-                }
+                if (!root) part = std::make_unique<GridFilePart>(where, *sink.fileShape(), offsetOf(myU0));
             });
         }
 
         // Pass C, write: batches of consecutive units (about 64 k cells, a few MB), filled in parallel, measured, and
-        // handed to the sink in order (another rank writes them into the file at their place and keeps them for its turn
-        // of the checks, or keeps them and then sends them to rank 0). The squared
+        // handed to the sink in order (another rank writes them into the file at their place, to read them back in its
+        // turn of the hashes). The squared
         // deviations are summed per unit, then over the units in order: the same figure (bits) on any number of
         // threads and ranks.
         std::vector<Stats> acc(threads);
         for (auto& a : acc) a.perLevel.assign(static_cast<size_t>(maxLevel_) + 1, 0);
         std::vector<double> unitSumSq(myU1 - myU0, 0.0);
-        Batch batch, share;
+        Batch batch;
         batch.values.resize(static_cast<size_t>(layers_));
-        share.values.resize(static_cast<size_t>(layers_));
-        if (!root && !parts) {  // held until sent: sized once (growing by doubling would hold up to twice the share)
-            share.codes.reserve(myCells);
-            for (auto& v : share.values) v.reserve(myCells);
-        }
         ranks::together([&] {
             size_t u0 = myU0;
             while (u0 < myU1) {
@@ -846,14 +840,9 @@ Stats Builder::run(CellSink& sink) {
                 if (root) {
                     std::vector<std::span<const float>> values(batch.values.begin(), batch.values.end());
                     sink.append(batch.codes, values);
-                } else if (part) {  // into the file at its place; read back for the hashes (nothing held)
+                } else {  // into the file at its place; read back for the hashes (nothing held)
                     part->append(batch.codes, std::vector<std::span<const float>>(batch.values.begin(), batch.values.end()));
                     sink.keepOwn(batch.codes);
-                } else {
-                    sink.keepOwn(batch.codes);
-                    share.codes.insert(share.codes.end(), batch.codes.begin(), batch.codes.end());
-                    for (size_t l = 0; l < batch.values.size(); ++l)
-                        share.values[l].insert(share.values[l].end(), batch.values[l].begin(), batch.values[l].end());
                 }
                 u0 = u1;
             }
@@ -873,7 +862,7 @@ Stats Builder::run(CellSink& sink) {
         ranks::log("hc-ingest", fmt::format("{}{} tiles of {}^2 px built, {} units, {} cells written, {:.3f} s, peak {:.1f} MB resident", reads,
                                             myTiles.size(), 1u << tileLevel_, myU1 - myU0, myCells, rankStart.seconds(), double(peakRssBytes()) / 1e6));
         std::vector<std::byte> partResult;
-        if (parts) {
+        if (rankCount > 1) {
             // The hashes (one stream over the whole file) and the order check's seam go on from rank to rank in Morton
             // order (the checks, summaries and writing above went on in parallel): each rank in turn takes the state the
             // ranks before it left, hashes its own cells from it (read back from the file: its page cache, as it just
@@ -901,10 +890,10 @@ Stats Builder::run(CellSink& sink) {
                                                     myCells, double(myCells) * double(8 + 4 * layers_) / 1e6, inTurn, chain.seconds() - inTurn));
         }
         if (!root) {
-            sendShare(share, sum, unitSumSq, parts ? &partResult : nullptr);
+            sendShare(sum, unitSumSq, partResult);
             return sum;
         }
-        receiveShares(sink, sum, unitSumSq, parts);
+        receiveShares(sink, sum, unitSumSq);
         if (unitSumSq.size() != units.size())
             throw Error("ranks sent statistics of " + std::to_string(unitSumSq.size()) + " units, not " + std::to_string(units.size()));
         for (double u : unitSumSq) sum.sumSq += u;
@@ -914,62 +903,24 @@ Stats Builder::run(CellSink& sink) {
     }
 }
 
-// A share goes in pieces of kSharePiece cells (codes, then each layer), then an empty piece, then the statistics: rank 0
-// holds one piece of another rank's cells at a time, not the whole share.
-constexpr size_t kSharePiece = size_t{1} << 20;
-
-void Builder::sendShare(const Batch& share, const Stats& sum, const std::vector<double>& unitSumSq, const std::vector<std::byte>* part) const {
-    if (part) {
-        ranks::sendToRoot(*part);
-    } else {
-        for (size_t at = 0; at < share.codes.size(); at += kSharePiece) {
-            const size_t n = std::min(share.codes.size() - at, kSharePiece);
-            ranks::sendToRoot(std::as_bytes(std::span<const uint64_t>(share.codes.data() + at, n)));
-            for (const auto& v : share.values) ranks::sendToRoot(std::as_bytes(std::span<const float>(v.data() + at, n)));
-        }
-        ranks::sendToRoot(std::vector<uint64_t>{});  // the end of the cells
-    }
+void Builder::sendShare(const Stats& sum, const std::vector<double>& unitSumSq, const std::vector<std::byte>& part) const {
+    ranks::sendToRoot(part);
     std::vector<double> table{sum.maxDev, double(sum.pixels), double(sum.wetCells)};  // then cells per level, then the unit sums
     for (uint64_t c : sum.perLevel) table.push_back(double(c));
     table.insert(table.end(), unitSumSq.begin(), unitSumSq.end());
     ranks::sendToRoot(table);
 }
 
-void Builder::receiveShares(CellSink& sink, Stats& sum, std::vector<double>& unitSumSq, bool parts) const {
-    // A sink that fails (a full disk) must not leave a sender blocked on its next piece: every piece is still received,
-    // and the first failure thrown at the end.
+void Builder::receiveShares(CellSink& sink, Stats& sum, std::vector<double>& unitSumSq) const {
+    // A sink that fails (a full disk) must not leave a sender blocked: every rank's part and statistics are still
+    // received, and the first failure thrown at the end.
     std::exception_ptr failed;
     for (int r = 1; r < ranks::count(); ++r) {
-        if (parts) {
-            const std::vector<std::byte> part = ranks::receiveFrom(r);
-            try {
-                if (!failed) sink.sharedWriter()->addPart(part);
-            } catch (...) {
-                failed = std::current_exception();
-            }
-        }
-        while (!parts) {
-            Batch in;
-            in.codes = ranks::receiveVectorFrom<uint64_t>(r);
-            if (in.codes.empty()) break;
-            for (int l = 0; l < layers_; ++l) {
-                in.values.push_back(ranks::receiveVectorFrom<float>(r));
-                if (in.values.back().size() != in.codes.size())
-                    throw Error("rank " + std::to_string(r + 1) + " sent " + std::to_string(in.values.back().size()) + " values for " +
-                                std::to_string(in.codes.size()) + " cells");
-            }
-            if (failed) continue;
-            try {
-                if (opt_.cellElevations) paint(in, 0, in.codes.size());
-                for (size_t at = 0; at < in.codes.size(); at += size_t{1} << 16) {
-                    const size_t n = std::min(in.codes.size() - at, size_t{1} << 16);
-                    std::vector<std::span<const float>> values;
-                    for (const auto& v : in.values) values.emplace_back(v.data() + at, n);
-                    sink.append(std::span<const uint64_t>(in.codes.data() + at, n), values);
-                }
-            } catch (...) {
-                failed = std::current_exception();
-            }
+        const std::vector<std::byte> part = ranks::receiveFrom(r);
+        try {
+            if (!failed) sink.sharedWriter()->addPart(part);
+        } catch (...) {
+            failed = std::current_exception();
         }
         const std::vector<double> table = ranks::receiveVectorFrom<double>(r);
         const size_t levels = sum.perLevel.size();
@@ -981,16 +932,6 @@ void Builder::receiveShares(CellSink& sink, Stats& sum, std::vector<double>& uni
         unitSumSq.insert(unitSumSq.end(), table.begin() + ptrdiff_t(3 + levels), table.end());
     }
     if (failed) std::rethrow_exception(failed);
-}
-
-void Builder::paint(const Batch& b, size_t begin, size_t end) const {
-    for (size_t i = begin; i < end; ++i) {
-        const uint64_t key = codeKey(b.codes[i]);
-        const size_t span = size_t{1} << codeLevel(b.codes[i]);
-        const size_t ix0 = mortonX(key), iy0 = mortonY(key);
-        for (size_t iy = iy0; iy < iy0 + span; ++iy)
-            for (size_t ix = ix0; ix < ix0 + span; ++ix) (*opt_.cellElevations)[(t_.height - 1 - iy) * t_.width + ix] = b.values[0][i];
-    }
 }
 
 double Builder::measure(const Batch& b, size_t begin, size_t end, Stats& a, bool paintElevations) const {
@@ -1223,8 +1164,8 @@ BuildSummary buildFile(const Raster& terrain, const RasterWindows* windows, cons
     Stats st = builder.run(sink);
     for (uint64_t c : st.perLevel) out.cellCount += c;  // on rank 0 every rank's cells, on another its share
     if (stepCount > 0) {
-        // Each step's depth per cell: every rank over its own cells (on rank 0 the first of its codes: without parts it
-        // also appended the others'), the wet ones sent to rank 0 in rank order, which is the cells' order.
+        // Each step's depth per cell: every rank over its own cells (the codes its sink kept), the wet ones sent to rank 0
+        // in rank order, which is the cells' order.
         if (sink.codes.size() < st.ownCells) throw Error("internal: a rank kept fewer codes than it has cells");
         const std::span<const uint64_t> own = std::span<const uint64_t>(sink.codes).first(st.ownCells);
         const Stopwatch stepClock;

@@ -375,7 +375,7 @@ done
 # stops at the same point and rank 1 reports the failing rank's error once; outside it (nobody waits for that rank) the
 # failing rank reports and stops every rank. Without a failure the ranks reach the collective after it together.
 add_executable(hc_ranks_check ranks_check.cpp)
-target_link_libraries(hc_ranks_check PRIVATE hc_cli hc_ranks)
+target_link_libraries(hc_ranks_check PRIVATE hc_cli hc_ranks hc_ingest)
 target_include_directories(hc_ranks_check PRIVATE ${PROJECT_SOURCE_DIR}/apps)
 hc_target_defaults(hc_ranks_check)
 set(RANKS_CHECK $<TARGET_FILE:hc_ranks_check>)
@@ -385,6 +385,9 @@ hc_mpi_test(mpi.ranks_fail_together nonzero [[^ranks_check: error: rank 2/3: fai
   -- ${HC_MPIEXEC} -np 3 ${RANKS_CHECK} 2)
 hc_mpi_test(mpi.ranks_fail_alone nonzero [[ranks_check: error: rank 3/3: failed alone, outside together]]
   --no-match [[agreed]] -- ${HC_MPIEXEC} -np 3 ${RANKS_CHECK} 3 outside)
+# The builder under mpirun writes into a file only: a grid in memory is refused on every rank alike (no rank waits).
+hc_mpi_test(mpi.build_in_memory_refused nonzero [[under mpirun the grid is built into a file]]
+  --no-match [[built in memory]] -- ${HC_MPIEXEC} -np 2 ${RANKS_CHECK} in-memory)
 
 # A failure under mpirun: every rank stops, rank 1 says it once, no rank waits forever, and no file is left.
 hc_mpi_test(mpi.failure_reported_once nonzero [[hc-ingest: error: rank 1/3: nope\.tif: no such file \(terrain raster\)]]

@@ -45,12 +45,12 @@ public:
     virtual ~CellSink() = default;
     virtual void begin(uint64_t cellCount) = 0;
     virtual void append(std::span<const uint64_t> codes, const std::vector<std::span<const float>>& values) = 0;
-    // Under mpirun (DESIGN.md section 13): a sink whose file every rank may write its own cells into gives rank 0's
-    // writer after begin(), and every rank the file's shape for its GridFilePart; other sinks get the other ranks'
-    // cells through append() on rank 0.
+    // Under mpirun (DESIGN.md section 13) every rank writes its own cells into the sink's file: the sink gives rank 0's
+    // writer after begin(), and every rank the file's shape for its GridFilePart. A sink without a file (a grid in
+    // memory) is built by one process only.
     virtual GridFileWriter* sharedWriter() { return nullptr; }
     virtual const Grid* fileShape() const { return nullptr; }
-    // Under mpirun, on a rank other than 0: its own cells, in order, as it writes them into its part or sends them.
+    // Under mpirun, on a rank other than 0: its own cells, in order, as it writes them into its part.
     virtual void keepOwn(std::span<const uint64_t> /*codes*/) {}
 };
 
