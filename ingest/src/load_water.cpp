@@ -22,6 +22,9 @@ namespace {
 // Bathtub: depth = level - z in the pixels below `level` that water can reach from the domain
 // boundary (the raster edge and the edge of every nodata hole: water enters from outside the survey)
 // through 4-connected pixels below the level. Closed depressions stay dry, as they would in a flood.
+// One process, the whole raster held: a flood fill. Under mpirun no rank holds the raster, and Builder::bathtubBlocks
+// labels each window's components and joins them across the ranks instead; this fill is its reference (the MPI tests
+// compare the grids of 1, 2 and 3 ranks byte for byte, tests/cli/mpi.cmake).
 Raster bathtub(const Raster& t, double level) {
     Raster d = t;
     d.values.assign(t.values.size(), 0.0f);
