@@ -3,9 +3,11 @@
 // texels the CPU evaluated this frame, uploaded packed (detail::approximateOnCpu). Row by row as copyReusedTexels in
 // render/src/approximate.cpp places them: texel i of row j is the last frame's texel i + di of row j + dj where the row
 // keeps it (keptFirst..keptLast), the next packed texel where the row evaluated it (spans a and b), and "no surface"
-// (-inf, depth 0) elsewhere. So a moving camera uploads only the texels it newly sees, not the cascades.
+// (-inf, depth 0) elsewhere. So a moving camera uploads only the texels it newly sees, not the cascades. The cascade's
+// textures were cleared to "no surface" before (glClearBufferSubData): a run of texels outside the row's spans writes
+// nothing.
 // An invocation per run of kRun texels of a row: the row's spans are read once, and llvmpipe (one CPU thread a
-// work group) pays its per-invocation cost a sixteenth as often: 43 -> X ms on Petzenkirchen's cascades (BENCHMARKS.md).
+// work group) pays its per-invocation cost a sixteenth as often: 43 -> 22-24 ms on Petzenkirchen's cascades (BENCHMARKS.md).
 #define kRun 16
 layout(local_size_x = 64, local_size_y = 1) in;
 
@@ -32,6 +34,12 @@ void main() {
     const int keptFirst = uKept != 0 ? fillRows[r] : 0, keptLast = uKept != 0 ? fillRows[r + 1] : -1;
     const int a0 = fillRows[r + 2], a1 = fillRows[r + 3], b0 = fillRows[r + 4], b1 = fillRows[r + 5];
     const int packedA = fillRows[r + 6], packedB = fillRows[r + 7];
+    // The row's texels with a value: from the first span's start to the last one's end (empty spans end below their start).
+    int first = n, last = -1;
+    if (keptFirst <= keptLast) first = min(first, keptFirst), last = max(last, keptLast);
+    if (a0 <= a1) first = min(first, a0), last = max(last, a1);
+    if (b0 <= b1) first = min(first, b0), last = max(last, b1);
+    if (i0 + kRun <= first || i0 > last) return;
     const uint row = uint(j) * uint(n);
     const uint lastRow = uint(j + uDj) * uint(n);
     const bool water = frame.hasWater != 0;

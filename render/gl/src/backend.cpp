@@ -463,12 +463,27 @@ struct GlRenderer::Impl {
 
     // Stage 2 out of core on the GPU: each cascade's textures from the last frame's and the packed texels
     // (assemble.comp). Then they are this frame's: the next may keep them.
-    void dispatchAssembly(const CascadeFit& fit) {
+    void dispatchAssembly(const CascadeFit& fit, const gpu::FrameBlock& block) {
         lastHeightsBuf.bind(HC_BIND_LAST_HEIGHTS);
         fillRowsBuf.bind(HC_BIND_FILL_ROWS);
         fillTexelsBuf.bind(HC_BIND_FILL_TEXELS);
         glUseProgram(assemble);
         auto uniform = [&](const char* name) { return glGetUniformLocation(assemble, name); };
+        // Every texel "no surface" first (a driver's fill: a memset on llvmpipe), so that assemble.comp writes only the
+        // rows' spans: a third of the texels on the report's scenes.
+        const float noSurface = -std::numeric_limits<float>::infinity(), zero = 0.0f;
+        glBindBuffer(GL_SHADER_STORAGE_BUFFER, heightsBuf.name);
+        for (size_t k = 0; k < fit.cascades.size(); ++k) {
+            if (fit.cascades[k].empty()) continue;
+            const gpu::GpuCascade& c = block.cascades[k];
+            const GLsizeiptr bytes = GLsizeiptr(size_t(c.n) * size_t(c.n) * sizeof(float));
+            glClearBufferSubData(GL_SHADER_STORAGE_BUFFER, GL_R32F, GLintptr(c.terrainOffset) * 4, bytes, GL_RED, GL_FLOAT, &noSurface);
+            if (scene.hasWater()) {
+                glClearBufferSubData(GL_SHADER_STORAGE_BUFFER, GL_R32F, GLintptr(c.waterOffset) * 4, bytes, GL_RED, GL_FLOAT, &noSurface);
+                glClearBufferSubData(GL_SHADER_STORAGE_BUFFER, GL_R32F, GLintptr(c.depthOffset) * 4, bytes, GL_RED, GL_FLOAT, &zero);
+            }
+        }
+        glMemoryBarrier(GL_SHADER_STORAGE_BARRIER_BIT | GL_BUFFER_UPDATE_BARRIER_BIT);
         for (size_t k = 0; k < fit.cascades.size(); ++k) {
             if (fit.cascades[k].empty()) continue;
             const Assembly& a = assembly[k];
@@ -600,7 +615,7 @@ struct GlRenderer::Impl {
         bindFrame();
         int stamp = 0;
         timeStamp(stamp++, frameClock);
-        if (cpuCascades) dispatchAssembly(fit);
+        if (cpuCascades) dispatchAssembly(fit, block);
         dispatchApproximation(fit, frameClock, stamp);
         std::copy(std::begin(block.cascades), std::end(block.cascades), lastCascades.begin());  // where this frame's textures lie
         lastCascadeCount = fit.cascades.size();
