@@ -361,7 +361,9 @@ TEST(RenderGl, OutOfCoreFillsTheCascadesOnTheCpuAndCastsOnTheGpu) {
 
 // Out of core the GL backend keeps its cascades on the GPU and uploads only the texels a frame newly sees
 // (assemble.comp places them beside the texels kept from the last frame). Over a flight (20 m steps, a 2 km jump that
-// keeps part of a cascade or none, steps again, a frame after forgetCascades) every frame's textures on the GPU are
+// keeps part of a cascade or none, steps again, a frame after one that failed half-way (its cascades too large for any
+// driver's storage buffer: the two heights buffers were swapped, nothing built), a frame after forgetCascades) every
+// frame's textures on the GPU are
 // the CPU's, texel for texel and bit for bit: the reference evaluates each cascade on the CPU with the texels it keeps
 // copied from the reference's own last frame, as renderFrame() does with a CascadeCache (a texel evaluated afresh may
 // differ from a kept one in its last bit: a few of a frame's do here). A 20 m step uploads under a tenth of the bytes
@@ -382,15 +384,23 @@ TEST(RenderGl, OutOfCoreKeepsTheCascadesOnTheGpuAndUploadsOnlyNewTexels) {
         const std::unique_ptr<GlRenderer> gl = GlRenderer::headless(scene);
         const RenderOptions o = smallOptions();
         Camera cam = lowOblique(scene, 320, 200);
-        const double moves[] = {0, 20, 20, 2000, 20, -2000, 20, 0};
+        const double moves[] = {0, 20, 20, 2000, 20, -2000, 20, 20, 20, 0};
+        const size_t failedBefore = 8;  // a frame that fails after the swap comes before this one
         uint64_t freshBytes = 0;
         std::vector<Cascade> lastCascades;  // the reference's last frame
         std::vector<detail::CascadeTextures> lastTextures;
         for (size_t f = 0; f < std::size(moves); ++f) {
             const std::string tag = "frame " + std::to_string(f);
             cam.xWorld += moves[f];
-            const bool fresh = f == 0 || f + 1 == std::size(moves);
-            if (fresh) gl->forgetCascades(), lastCascades.clear(), lastTextures.clear();
+            const bool fresh = f == 0 || f + 1 == std::size(moves) || f == failedBefore;
+            if (f == failedBefore) {
+                RenderOptions huge = o;
+                huge.cascades = 4, huge.texelsPerSide = 8192;  // over 2^31 bytes of textures: more than a storage block holds (llvmpipe 128 MiB, NVIDIA 2 GiB)
+                Timings th;
+                EXPECT_THROW((void)gl->render(cam, huge, th), hc::Error) << tag;
+            }
+            if (fresh) lastCascades.clear(), lastTextures.clear();
+            if (fresh && f != failedBefore) gl->forgetCascades();  // after the failure the renderer must start afresh itself
             Timings t;
             (void)gl->render(cam, o, t);
             uint64_t kept = 0, visible = 0;

@@ -395,9 +395,10 @@ struct GlRenderer::Impl {
     // Stage 2 out of core, on the CPU (the file comment): the texels this frame newly sees, evaluated there and packed
     // with each cascade's rows into fillTexelsBuf and fillRowsBuf for assemble.comp; their statistics and times replace
     // the ones layOutCascades and the time stamps give.
-    void approximateOnCpu(const CascadeFit& fit, const RenderOptions& options, Timings& timings) {
-        if (!lastAssembled) cascadeCache.clear();  // the GPU does not hold the frame the cache describes
-        lastAssembled = false;
+    // `keep`: the last frame's textures are in lastHeightsBuf (else the cache starts afresh: the GPU does not hold the
+    // frame it describes).
+    void approximateOnCpu(const CascadeFit& fit, const RenderOptions& options, Timings& timings, bool keep) {
+        if (!keep) cascadeCache.clear();
         const bool water = scene.hasWater();
         std::vector<int32_t>& rows = fillRows;
         std::array<std::vector<float>, 3>& packed = fillTexels;
@@ -609,9 +610,12 @@ struct GlRenderer::Impl {
         if (!cpuCascades) setup.view.ladderStepsPerOctave = 8;
         const CascadeFit fit = detail::fitFrame(scene, camera, setup, options, timings);  // stage 1, on the CPU
         gpu::FrameBlock block{};
-        if (cpuCascades) std::swap(heightsBuf, lastHeightsBuf);  // the last frame's textures stay for assemble.comp to read
+        // The last frame's textures stay for assemble.comp to read, if that frame built them; from here until this frame
+        // has built its own (dispatchAssembly), a failure leaves nothing to keep.
+        const bool keep = lastAssembled;
+        if (cpuCascades) std::swap(heightsBuf, lastHeightsBuf), lastAssembled = false;
         uploadFrame(block, fit, camera, options, timings);
-        if (cpuCascades) approximateOnCpu(fit, options, timings);
+        if (cpuCascades) approximateOnCpu(fit, options, timings, keep);
         bindFrame();
         int stamp = 0;
         timeStamp(stamp++, frameClock);
