@@ -361,14 +361,14 @@ TEST(RenderGl, OutOfCoreFillsTheCascadesOnTheCpuAndCastsOnTheGpu) {
 
 // Out of core the GL backend keeps its cascades on the GPU and uploads only the texels a frame newly sees
 // (assemble.comp places them beside the texels kept from the last frame). Over a flight (20 m steps, a 2 km jump that
-// keeps part of a cascade or none, steps again, a frame after one that failed half-way (its cascades too large for any
-// driver's storage buffer: the two heights buffers were swapped, nothing built), a frame after forgetCascades) every
-// frame's textures on the GPU are
-// the CPU's, texel for texel and bit for bit: the reference evaluates each cascade on the CPU with the texels it keeps
-// copied from the reference's own last frame, as renderFrame() does with a CascadeCache (a texel evaluated afresh may
-// differ from a kept one in its last bit: a few of a frame's do here). A 20 m step uploads under a tenth of the bytes
-// of a fresh frame. Fails when a kept texel is shifted by one (the texels differ) or when the kept spans are uploaded
-// again (the bytes).
+// keeps part of a cascade or none, steps again, a frame after one that failed half-way, a frame after forgetCascades)
+// every frame's textures on the GPU are the CPU's, texel for texel and bit for bit: the reference evaluates each
+// cascade on the CPU with the texels it keeps copied from the reference's own last frame, as renderFrame() does with a
+// CascadeCache (a texel evaluated afresh may differ from a kept one in its last bit: a few of a frame's do here). A
+// 20 m step uploads under a tenth of the bytes of a fresh frame. Fails when a kept texel is shifted by one, when the
+// textures are not cleared first, when a frame keeps texels after a failed one (whose cascades, too large for any
+// driver's storage block, failed after the heights buffers were swapped: the texels of two frames before), or when
+// the kept spans are uploaded again (the bytes).
 TEST(RenderGl, OutOfCoreKeepsTheCascadesOnTheGpuAndUploadsOnlyNewTexels) {
     namespace detail = hc::render::detail;
     World& w = hef();
