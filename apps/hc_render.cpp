@@ -123,7 +123,7 @@ bool parseOptions(int argc, char** argv, RenderArgs& a) {
     p.option("--fly", "N", "render a flight of N >= 2 frames, one image each (OUT_0000.png ...; likewise --exr and --timings):\n"
              "      the camera moves --fly-step metres forward (horizontally, along its yaw) each frame, and each frame\n"
              "      keeps the texels the last one evaluated that it still sees (incremental cascades; the GL backend\n"
-             "      with the grid in memory sums every texel on the GPU instead); prints each frame's stage times\n"
+             "      keeps them on the GPU); prints each frame's stage times\n"
              "      (default 0: one image, no flight)", a.flyFrames);
     p.option("--fly-step", "M", "metres the camera moves forward per --fly frame (default 10)", a.flyStepM);
     p.flag("--fly-fresh", "with --fly: evaluate every frame from scratch (no texels kept), to compare", a.flyFresh);

@@ -315,7 +315,7 @@ RunResult runScenario(const Scenario& sc, const Settings& set) {
             // The camera flies forward (horizontally, along its yaw) flyStepM a frame: every frame evaluated afresh,
             // then the same frames through a CascadeCache (incremental cascades). Means over frames 2..N (the
             // first has nothing to reuse). GL: frames ending in the texture, back to back as a viewer draws them;
-            // out of core the renderer's own cache keeps the texels (in memory the GPU sums every texel each frame).
+            // the renderer keeps the texels on the GPU itself (forgetCascades starts each fresh frame).
             for (int cached = 0; cached < 2; ++cached) {
                 hc::render::CascadeCache cache;
                 double approx = 0, total = 0, upload = 0;
@@ -721,7 +721,7 @@ int main(int argc, char** argv) {
             }
             bool uploads = false;
             for (const RunResult& r : results) uploads = uploads || r.flyUploadFreshMB > 0;
-            if (uploads) {  // the GL backend out of core: the texels the CPU evaluated, to the GPU (Timings::uploadMs)
+            if (uploads) {  // the GL backend: the cascades' rows and (out of core) the texels the CPU evaluated (Timings::uploadMs)
                 std::printf("\n%-14s %16s %16s %16s %16s\n", "GL upload", "ms fresh", "ms cache", "MB fresh", "MB cache");
                 for (size_t k = 0; k < results.size(); ++k) {
                     const RunResult& r = results[k];

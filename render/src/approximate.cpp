@@ -53,6 +53,20 @@ struct Todo {
     int a0 = 0, a1 = -1, b0 = 0, b1 = -1;  // inclusive; empty when the end is below the start
 };
 
+// The texels [f, l] of row j of c that were visible in `reuse` too (empty: l < f), and the row's spans left to evaluate.
+Todo keptSpan(const Cascade& c, const TexelReuse* reuse, int j, int& f, int& l) {
+    const Cascade::RowSpan& r = c.rows[size_t(j)];
+    Todo t{r.first, r.last, 0, -1};
+    f = 0, l = -1;
+    const int jp = reuse ? j + reuse->dj : -1;
+    if (reuse && r.first <= r.last && jp >= 0 && jp < reuse->cascade->n) {
+        const Cascade::RowSpan& p = reuse->cascade->rows[size_t(jp)];
+        f = std::max(r.first, p.first - reuse->di), l = std::min(r.last, p.last - reuse->di);
+    }
+    if (f <= l) t = {r.first, f - 1, l + 1, r.last};
+    return t;
+}
+
 // Writes every texel of tex: the visible texels of c that were visible in `reuse` (if any) copied, their count
 // added to `copied`; every other one "no surface" (-inf, depth 0) until evaluated. Returns the spans left to
 // evaluate. reuse->tex may be tex itself (renderFrame hands the last frame's storage on, so a moving camera
@@ -93,19 +107,11 @@ std::vector<Todo> copyReusedTexels(const Cascade& c, const TexelReuse* reuse, Ca
     const bool upwards = reuse && reuse->dj < 0;
     for (int step = 0; step < n; ++step) {
         const int j = upwards ? n - 1 - step : step;
-        const Cascade::RowSpan& r = c.rows[size_t(j)];
+        int f, l;  // the copied texels of row j
         Todo& t = todo[size_t(j)];
-        t.a0 = r.first, t.a1 = r.last;
-        int f = 0, l = -1;  // the copied texels of row j
-        const int jp = reuse ? j + reuse->dj : -1;
-        if (reuse && r.first <= r.last && jp >= 0 && jp < reuse->cascade->n) {
-            const Cascade::RowSpan& p = reuse->cascade->rows[size_t(jp)];
-            f = std::max(r.first, p.first - reuse->di), l = std::min(r.last, p.last - reuse->di);
-        }
-        if (f <= l) {
-            copied += uint64_t(l - f + 1);
-            t = {r.first, f - 1, l + 1, r.last};
-        }
+        t = keptSpan(c, reuse, j, f, l);
+        if (f <= l) copied += uint64_t(l - f + 1);
+        const int jp = j + reuse->dj;
         const size_t row = size_t(j) * size_t(n);
         if (rows) {
             RowFill& out = (*rows)[size_t(j)];
@@ -841,6 +847,17 @@ influence::SurfaceRegion readNeededRegion(const GridRegionReader& file, const in
 }
 
 }  // namespace
+
+std::vector<RowFill> rowFills(const Cascade& c, const TexelReuse* reuse, uint64_t& kept) {
+    std::vector<RowFill> rows(size_t(c.n));
+    for (int j = 0; j < c.n; ++j) {
+        int f, l;
+        const Todo t = keptSpan(c, reuse, j, f, l);
+        rows[size_t(j)] = RowFill{f, l, t.a0, t.a1, t.b0, t.b1};
+        if (f <= l) kept += uint64_t(l - f + 1);
+    }
+    return rows;
+}
 
 ApproximationWork approximate(const Scene& scene, const Cascade& c, CascadeTextures& tex, double waterMinDepthM, unsigned threads,
                               const TexelReuse* reuse, int interpolateLevels, std::vector<RowFill>* rows) {

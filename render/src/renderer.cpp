@@ -718,6 +718,29 @@ void detail::approximateOnCpu(const Scene& scene, const CascadeFit& fit, const R
     keepCascades(*kept, scene, options, fit, tex);  // their storage, for the next frame's spans
 }
 
+std::vector<detail::CascadeFill> detail::planCascades(const Scene& scene, const CascadeFit& fit, const RenderOptions& options, CascadeCache& cache,
+                                                     Timings& timings) {
+    CascadeCache::Impl& kept = *keptFor(CacheAccess::of(cache), scene, options);
+    std::vector<CascadeFill> fills(fit.cascades.size());
+    std::vector<bool> taken(kept.entries.size(), false);
+    for (size_t k = 0; k < fit.cascades.size(); ++k) {
+        const Cascade& c = fit.cascades[k];
+        if (c.empty()) continue;
+        std::optional<TexelReuse> reuse;
+        if (const std::optional<Reusable> r = reusableCascade(kept, taken, c)) {
+            taken[r->entry] = true;
+            reuse = TexelReuse{&kept.entries[r->entry].cascade, nullptr, r->di, r->dj};
+            fills[k].from = int(kept.entries[r->entry].index), fills[k].di = r->di, fills[k].dj = r->dj;
+        }
+        uint64_t reused = 0;
+        fills[k].rows = rowFills(c, reuse ? &*reuse : nullptr, reused);
+        if (k < timings.cascades.size()) timings.cascades[k].reusedTexels = reused;
+    }
+    std::vector<CascadeTextures> none(fit.cascades.size());  // the shapes only
+    keepCascades(kept, scene, options, fit, none);
+    return fills;
+}
+
 Frame renderFrame(const Scene& scene, const Camera& camera, const RenderOptions& options, Timings& timings, CascadeCache* cache) {
     camera.validate();
     if (std::string why = options.validate(); !why.empty()) throw Error(why);
@@ -831,7 +854,7 @@ std::string Timings::toTable() const {
         s += b;
     }
     if (uploadMs > 0) {
-        std::snprintf(b, sizeof b, "    upload        %9.2f   the texels the CPU evaluated, to the GPU: %.2f MB\n", uploadMs, double(uploadBytes) / 1e6);
+        std::snprintf(b, sizeof b, "    upload        %9.2f   the rows and new texels, to the GPU: %.2f MB\n", uploadMs, double(uploadBytes) / 1e6);
         s += b;
     }
     return s;

@@ -68,6 +68,10 @@ struct RowFill {
     int a0 = 0, a1 = -1, b0 = 0, b1 = -1;
 };
 
+// The RowFill of every row of c with the texels kept from `reuse` (none without), adding their count to `kept`: what
+// approximate() with `rows` gives, without evaluating anything (the GL backend in memory sums the texels on the GPU).
+std::vector<RowFill> rowFills(const Cascade& c, const TexelReuse* reuse, uint64_t& kept);
+
 // Approximation (approximate.cpp): fills the textures of one cascade. With `reuse`, the visible texels that were
 // visible there too are copied; with a scene pyramid at the cascade's texel size, texels whose samples it holds
 // are copied from it; the others are evaluated. The cells visited follow the texels evaluated (a few per texel),
@@ -151,6 +155,11 @@ struct CascadeFill {
 // frame, not their texels: it must not be handed to renderFrame().
 void approximateOnCpu(const Scene& scene, const CascadeFit& fit, const RenderOptions& options, CascadeCache& cache, Timings& timings,
                       const std::function<void(size_t, const CascadeTextures&, const CascadeFill&)>& use);
+// The same plan without evaluating a texel, for a backend that evaluates them itself (the GL backend in memory): each
+// cascade's rows and the last frame's cascade it keeps texels of (CascadeFill), their count in timings.cascades[k]
+// (which must hold the frame's cascades) as reusedTexels. The cache holds the cascades' shapes for the next frame.
+std::vector<CascadeFill> planCascades(const Scene& scene, const CascadeFit& fit, const RenderOptions& options, CascadeCache& cache,
+                                      Timings& timings);
 
 // Per-frame set-up both backends share (renderer.cpp): the eye in the local frame, near and far along the
 // ray (the camera's, else from the scene's bounds), and the view volume cascade fitting takes.

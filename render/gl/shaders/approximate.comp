@@ -4,7 +4,9 @@
 // visible texel's cell is found by binary search of the sorted Morton keys (Grid::locate), and the
 // Gaussian RBF sum over that cell's influence list is taken relative to the cell's centre and value,
 // as the CPU does, so float keeps its precision however far the texel lies from the grid origin.
-// Texels that are invisible, in a hole or outside the domain get -inf ("no surface").
+// Only the texels of each row's spans to evaluate (HC_BIND_VISIBLE: the visible span less the texels kept from the last
+// frame) are written, those in a hole or outside the domain -inf ("no surface"); assemble.comp has written the others
+// before (the kept texels, and "no surface" everywhere else).
 layout(local_size_x = HC_GROUP_2D, local_size_y = HC_GROUP_2D) in;
 
 layout(std430, binding = HC_BIND_INDICES) readonly buffer IndexBlock0 { uint indices0[]; };
@@ -46,11 +48,12 @@ void main() {
     const uint t = j * n + i;
     const float noSurface = -kInf;
     float z = noSurface, water = noSurface, depth = 0.0;
-    const uint row = cascades[uCascade].visibleOffset + 2u * j;
-    const bool isVisible = int(i) >= visibleRows[row] && int(i) <= visibleRows[row + 1u];
+    const uint row = cascades[uCascade].visibleOffset + 4u * j;
+    const bool inA = int(i) >= visibleRows[row] && int(i) <= visibleRows[row + 1u];
+    if (!inA && !(int(i) >= visibleRows[row + 2u] && int(i) <= visibleRows[row + 3u])) return;
     // The texel centre in double, exactly as c.x0 + i * s in approximate.cpp.
     const double x = cascades[uCascade].x0 + double(i) * cascades[uCascade].texelM, y = cascades[uCascade].y0 + double(j) * cascades[uCascade].texelM;
-    const int k = isVisible ? locateCell(x, y) : -1;
+    const int k = locateCell(x, y);
     if (k >= 0) {
         const GpuCell ck = cells[k];
         const uint b = ck.listBegin, e = cells[k + 1].listBegin;

@@ -1,6 +1,7 @@
 #version 430
-// render/gl/shaders/assemble.comp: out of core, one cascade's textures from the last frame's, kept on the GPU, and the
-// texels the CPU evaluated this frame, uploaded packed (detail::approximateOnCpu). Row by row as copyReusedTexels in
+// render/gl/shaders/assemble.comp: one cascade's textures from the last frame's, kept on the GPU, and (out of core) the
+// texels the CPU evaluated this frame, uploaded packed (detail::approximateOnCpu); in memory approximate.comp sums the
+// evaluated spans' texels after this pass (detail::planCascades), which leaves them to it. Row by row as copyReusedTexels in
 // render/src/approximate.cpp places them: texel i of row j is the last frame's texel i + di of row j + dj where the row
 // keeps it (keptFirst..keptLast), the next packed texel where the row evaluated it (spans a and b), and "no surface"
 // (-inf, depth 0) elsewhere. So a moving camera uploads only the texels it newly sees, not the cascades. The cascade's
@@ -20,6 +21,7 @@ uniform int uCascade;
 uniform int uRowBase;        // the cascade's first row in fillRows [rows]
 uniform uint uPlane;         // packed texels per channel (the water's start in fillTexels, the depth's at twice that)
 uniform int uKept;           // 1: the rows keep texels of the last frame's cascade at uLast*
+uniform int uPacked;         // 1: the spans' texels are in fillTexels (out of core); 0: approximate.comp writes them
 uniform uint uLastTerrain;   // that cascade's terrain, water and depth offsets in lastHeights [floats]
 uniform uint uLastWater;
 uniform uint uLastDepth;
@@ -37,8 +39,8 @@ void main() {
     // The row's texels with a value: from the first span's start to the last one's end (empty spans end below their start).
     int first = n, last = -1;
     if (keptFirst <= keptLast) first = min(first, keptFirst), last = max(last, keptLast);
-    if (a0 <= a1) first = min(first, a0), last = max(last, a1);
-    if (b0 <= b1) first = min(first, b0), last = max(last, b1);
+    if (uPacked != 0 && a0 <= a1) first = min(first, a0), last = max(last, a1);
+    if (uPacked != 0 && b0 <= b1) first = min(first, b0), last = max(last, b1);
     if (i0 + kRun <= first || i0 > last) return;
     const uint row = uint(j) * uint(n);
     const uint lastRow = uint(j + uDj) * uint(n);
@@ -53,6 +55,7 @@ void main() {
                 depth = lastHeights[uLastDepth + at];
             }
         } else {
+            if (uPacked == 0) continue;
             int p = -1;
             if (i >= a0 && i <= a1) p = packedA + (i - a0);
             else if (i >= b0 && i <= b1) p = packedB + (i - b0);

@@ -7,6 +7,11 @@
 // the FrameBlock (gpu_layout.h) and the cascades' visible row spans go up. GPU stage times come from
 // GL_TIMESTAMP queries between the dispatches.
 //
+// The cascades stay on the GPU from one frame to the next (two heights buffers, swapped each frame): assemble.comp
+// starts each frame's textures from the last frame's texels that the frame still sees (the incremental cascades of
+// DESIGN.md section 6, planned on the CPU as renderFrame() plans them), and only the others are evaluated. In memory
+// approximate.comp sums those (detail::planCascades gives the spans).
+//
 // Out of core (a Scene over a GridRegionReader: no cells or lists in memory, the grid may hold 100 M cells) the
 // cascades stay on the GPU from one frame to the next, and the CPU evaluates only the texels a frame newly sees, as
 // renderFrame() evaluates them (from the surface pyramid and the cells around the texels it does not hold:
@@ -171,6 +176,12 @@ struct GlRenderer::Impl {
     // Cells (plus a sentinel), their sorted Morton keys and the influence lists: once per renderer. Out of core
     // none: every binding gets a small buffer (the shaders that would read them are not run, and cellCount is 0).
     void uploadScene() {
+        GLint bindings = 0;
+        glGetIntegerv(GL_MAX_SHADER_STORAGE_BUFFER_BINDINGS, &bindings);
+        if (bindings <= HC_BIND_FILL_TEXELS)
+            throw Error("the GL backend needs " + std::to_string(HC_BIND_FILL_TEXELS + 1) + " shader storage buffer bindings; " + device + " has " +
+                        std::to_string(bindings) + ": use --backend cpu");
+        for (Buffer* b : {&lastHeightsBuf, &fillRowsBuf, &fillTexelsBuf}) b->reserve(16);
         frameBuf.reserve(sizeof(gpu::FrameBlock));
         countersBuf.reserve(sizeof(uint32_t) * gpu::kCounterSlots * (gpu::kMaxCascades + 1));
         if (cpuCascades) {
@@ -179,12 +190,6 @@ struct GlRenderer::Impl {
             cellsBuf.upload(&sentinel, sizeof sentinel);
             keysBuf.reserve(16);
             for (Buffer& b : indexBufs) b.reserve(16);
-            GLint bindings = 0;
-            glGetIntegerv(GL_MAX_SHADER_STORAGE_BUFFER_BINDINGS, &bindings);
-            if (bindings <= HC_BIND_FILL_TEXELS)
-                throw Error("the GL backend out of core needs " + std::to_string(HC_BIND_FILL_TEXELS + 1) + " shader storage buffer bindings; " + device +
-                            " has " + std::to_string(bindings) + ": use --backend cpu");
-            for (Buffer* b : {&lastHeightsBuf, &fillRowsBuf, &fillTexelsBuf}) b->reserve(16);
             return;
         }
         const Grid& g = scene.grid();
@@ -324,7 +329,7 @@ struct GlRenderer::Impl {
             }
             gc.levels = levels;
             gc.visibleOffset = uint32_t(visibleWords);
-            visibleWords += 2 * n;  // a span per row
+            visibleWords += 4 * n;  // two spans a row: the texels to evaluate (planOnGpu)
         }
         return heightFloats;
     }
@@ -349,13 +354,8 @@ struct GlRenderer::Impl {
         const int W = camera.width, H = camera.height;
         checkBlock(heightFloats * 4, "the cascade textures");
         heightsBuf.reserve(heightFloats * 4);
-        checkBlock(visibleWords * 4, "the visible row spans");
+        checkBlock(visibleWords * 4, "the row spans to evaluate");
         visibleBuf.reserve(visibleWords * 4);
-        static_assert(sizeof(Cascade::RowSpan) == 2 * sizeof(int32_t), "approximate.comp reads a row span as two ints");
-        for (size_t k = 0; k < fit.cascades.size(); ++k)
-            if (!fit.cascades[k].empty())
-                visibleBuf.upload(fit.cascades[k].rows.data(), fit.cascades[k].rows.size() * sizeof(Cascade::RowSpan),
-                                  size_t(block.cascades[k].visibleOffset) * 4);
         frameBuf.upload(&block, sizeof block);
         const size_t pixels = size_t(W) * size_t(H);
         checkBlock(pixels * sizeof(gpu::GpuPixel), "the pixels");
@@ -462,8 +462,41 @@ struct GlRenderer::Impl {
         timings.uploadBytes = rowBytes + planeBytes * channels;
     }
 
-    // Stage 2 out of core on the GPU: each cascade's textures from the last frame's and the packed texels
-    // (assemble.comp). Then they are this frame's: the next may keep them.
+    // Stage 2 in memory, its plan on the CPU: each cascade's rows (the texels kept from the last frame, the spans to sum)
+    // into fillRowsBuf for assemble.comp, and the spans into visibleBuf for approximate.comp, which sums only those.
+    void planOnGpu(const CascadeFit& fit, const gpu::FrameBlock& block, const RenderOptions& options, Timings& timings, bool keep) {
+        if (!keep) cascadeCache.clear();
+        const Stopwatch clock;
+        const std::vector<detail::CascadeFill> fills = detail::planCascades(scene, fit, options, cascadeCache, timings);
+        fillRows.clear();
+        assembly = {};
+        std::vector<int32_t> spans;
+        size_t spanBytes = 0;
+        for (size_t k = 0; k < fit.cascades.size(); ++k) {
+            if (fit.cascades[k].empty()) continue;
+            Assembly& a = assembly[k];
+            a.rowBase = int(fillRows.size() / size_t(gpu::kFillRowInts));
+            a.from = fills[k].from, a.di = fills[k].di, a.dj = fills[k].dj;
+            spans.clear();
+            for (const detail::RowFill& r : fills[k].rows) {
+                fillRows.insert(fillRows.end(), {r.keptFirst, r.keptLast, r.a0, r.a1, r.b0, r.b1, 0, 0});
+                spans.insert(spans.end(), {r.a0, r.a1, r.b0, r.b1});
+            }
+            visibleBuf.upload(spans.data(), spans.size() * sizeof(int32_t), size_t(block.cascades[k].visibleOffset) * 4);
+            spanBytes += spans.size() * sizeof(int32_t);
+        }
+        const size_t rowBytes = fillRows.size() * sizeof(int32_t);
+        checkBlock(rowBytes, "the cascades' rows");
+        fillRowsBuf.reserve(rowBytes);
+        if (rowBytes) fillRowsBuf.upload(fillRows.data(), rowBytes);
+        fillPlane = 0;
+        timings.uploadMs = clock.milliseconds();
+        timings.uploadBytes = rowBytes + spanBytes;
+    }
+
+    // Stage 2 on the GPU: each cascade's textures cleared, then the texels kept from the last frame's and (out of core)
+    // the packed ones placed (assemble.comp); in memory approximate.comp then sums the rest. Then they are this frame's:
+    // the next may keep them.
     void dispatchAssembly(const CascadeFit& fit, const gpu::FrameBlock& block) {
         lastHeightsBuf.bind(HC_BIND_LAST_HEIGHTS);
         fillRowsBuf.bind(HC_BIND_FILL_ROWS);
@@ -496,6 +529,7 @@ struct GlRenderer::Impl {
             glUniform1i(uniform("uRowBase"), a.rowBase);
             glUniform1ui(uniform("uPlane"), fillPlane);
             glUniform1i(uniform("uKept"), kept ? 1 : 0);
+            glUniform1i(uniform("uPacked"), cpuCascades ? 1 : 0);
             glUniform1ui(uniform("uLastTerrain"), last.terrainOffset);
             glUniform1ui(uniform("uLastWater"), last.waterOffset);
             glUniform1ui(uniform("uLastDepth"), last.depthOffset);
@@ -509,7 +543,8 @@ struct GlRenderer::Impl {
     }
 
     // Stage 2: the approximation, one dispatch per cascade, each followed by a time stamp (out of core the stamps
-    // only, after dispatchAssembly: the GPU's assembly then counts in the frame's GPU span, not in a stage).
+    // only). The assembly before it counts in cascade 0's approximation time in memory, and in the frame's GPU span
+    // only out of core (where the CPU's times stand for the approximation).
     void dispatchApproximation(const CascadeFit& fit, const Stopwatch& frameClock, int& stamp) {
         glUseProgram(approximate);
         for (size_t k = 0; k < fit.cascades.size(); ++k) {
@@ -613,13 +648,14 @@ struct GlRenderer::Impl {
         // The last frame's textures stay for assemble.comp to read, if that frame built them; from here until this frame
         // has built its own (dispatchAssembly), a failure leaves nothing to keep.
         const bool keep = lastAssembled;
-        if (cpuCascades) std::swap(heightsBuf, lastHeightsBuf), lastAssembled = false;
+        std::swap(heightsBuf, lastHeightsBuf), lastAssembled = false;
         uploadFrame(block, fit, camera, options, timings);
         if (cpuCascades) approximateOnCpu(fit, options, timings, keep);
+        else planOnGpu(fit, block, options, timings, keep);
         bindFrame();
         int stamp = 0;
         timeStamp(stamp++, frameClock);
-        if (cpuCascades) dispatchAssembly(fit, block);
+        dispatchAssembly(fit, block);
         dispatchApproximation(fit, frameClock, stamp);
         std::copy(std::begin(block.cascades), std::end(block.cascades), lastCascades.begin());  // where this frame's textures lie
         lastCascadeCount = fit.cascades.size();

@@ -27,7 +27,7 @@ using uint = std::uint32_t;
 #define HC_BIND_INDICES_1 8  // further chunks of the entries (a driver caps one storage buffer: llvmpipe at
 #define HC_BIND_INDICES_2 9  //   128 MiB, which the lists of a million cells exceed)
 #define HC_BIND_INDICES_3 10
-#define HC_BIND_VISIBLE 4    // int[]: per cascade n row spans (Cascade::rows): first, last visible texel of each row
+#define HC_BIND_VISIBLE 4    // int[]: per cascade 4 ints a row: the spans to evaluate (RowFill a0, a1, b0, b1)
 #define HC_BIND_HEIGHTS 5    // float[]: per cascade terrain, water, depth textures and both max mipmaps
 #define HC_BIND_PIXELS 6     // GpuPixel[width * height], row 0 at the top
 #define HC_BIND_COUNTERS 7   // uint[kCounterSlots * (kMaxCascades + 1)]: Gaussians per cascade, then hits

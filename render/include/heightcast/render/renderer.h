@@ -105,9 +105,9 @@ struct Timings {
     // copy of the finished frame to host memory (render(); a viewer drawing the texture has none). totalMs is
     // the wall time of the whole call, both included.
     double gpuMs = 0, readbackMs = 0;
-    // GL backend out of core: packing the texels the CPU evaluated and handing them to the driver (in totalMs, not in
-    // gpuMs), and the bytes handed over: those texels and each cascade's rows (the texels kept from the last frame stay
-    // on the GPU).
+    // GL backend: handing the driver each cascade's rows (the texels kept from the last frame, which stay on the GPU, and
+    // the spans to evaluate) and, out of core, the texels the CPU evaluated, packed (in totalMs, not in gpuMs); and the
+    // bytes handed over.
     double uploadMs = 0;
     uint64_t uploadBytes = 0;
     std::vector<CascadeStats> cascades;

@@ -1,9 +1,9 @@
 // heightcast/render/gl/gl_renderer.h: the OpenGL 4.3 compute backend (DESIGN.md sections 5 and 9).
 //
 // The same stages as the CPU backend (renderer.h): cascade fitting (on the CPU, shared code), then
-// approximation into the cascade textures (visible texels only), max mipmaps, ray casting with exact
-// ray/bilinear-patch intersection and cascade blending, and shading, as compute shaders. It fills the
-// same Frame and Timings as renderFrame(); GPU stage times come from GL timer queries.
+// approximation into the cascade textures (visible texels only; those the last frame saw too are kept on the GPU),
+// max mipmaps, ray casting with exact ray/bilinear-patch intersection and cascade blending, and shading, as compute
+// shaders. It fills the same Frame and Timings as renderFrame(); GPU stage times come from GL timer queries.
 //
 // Out of core (Scene::outOfCore(): the grid read a region at a time, no cells or lists in memory, 100 M cells and
 // more) nothing of the grid goes to the GPU: the cascades stay on the GPU from one frame to the next, and the texels a
@@ -50,9 +50,9 @@ public:
     // (row 0 at the bottom, GL's convention) holding the shaded image, for a viewer to draw. Valid until
     // the next call.
     unsigned renderToTexture(const Camera& camera, const RenderOptions& options, Timings& timings);
-    // Out of core the renderer keeps each frame's cascade texels for the next (a moving camera fills only what it
-    // newly sees, as CascadeCache does for renderFrame()); after this call the next frame fills every texel afresh
-    // (benchmarks of from-scratch frames). In memory there is nothing kept.
+    // The renderer keeps each frame's cascade texels on the GPU for the next (a moving camera evaluates only what it
+    // newly sees, as CascadeCache does for renderFrame()); after this call the next frame evaluates every texel afresh
+    // (benchmarks of from-scratch frames).
     void forgetCascades();
     // "llvmpipe (LLVM 15.0.6, 256 bits), OpenGL 4.5 (Core Profile) Mesa 22.3.6", say.
     std::string deviceName() const;
