@@ -4,9 +4,12 @@
 // visible texel's cell is found by binary search of the sorted Morton keys (Grid::locate), and the
 // Gaussian RBF sum over that cell's influence list is taken relative to the cell's centre and value,
 // as the CPU does, so float keeps its precision however far the texel lies from the grid origin.
-// Only the texels of each row's spans to evaluate (HC_BIND_VISIBLE: the visible span less the texels kept from the last
-// frame) are written, those in a hole or outside the domain -inf ("no surface"); assemble.comp has written the others
-// before (the kept texels, and "no surface" everywhere else).
+// Each row's spans to evaluate (HC_BIND_VISIBLE: the visible span less the texels kept from the last frame), a dispatch
+// per span (uSpan). Narrow spans (a moving camera's: a few texels a row) get an invocation per texel of the span (x:
+// its place in the span, y: the row), not n a row; wide ones (a fresh frame's) an invocation per texel of the row, so
+// that a work group's 8 x 8 texels lie together (the same cells and lists: on llvmpipe a fresh frame took 12 % longer
+// with the texels of a group placed from each row's own start). Texels in a hole or outside the domain get -inf ("no surface"); assemble.comp has
+// written the others before (the kept texels, and "no surface" everywhere else).
 layout(local_size_x = HC_GROUP_2D, local_size_y = HC_GROUP_2D) in;
 
 layout(std430, binding = HC_BIND_INDICES) readonly buffer IndexBlock0 { uint indices0[]; };
@@ -18,6 +21,8 @@ layout(std430, binding = HC_BIND_HEIGHTS) buffer HeightBlock { float heights[]; 
 layout(std430, binding = HC_BIND_COUNTERS) buffer CounterBlock { uint counters[]; };
 
 uniform int uCascade;
+uniform int uSpan;      // 0: each row's first span to evaluate (RowFill a0..a1), 1: its second (b0..b1)
+uniform int uRelative;  // 1: x counts from the span's start, 0: from the row's
 
 // Entry e of the influence lists (InfluenceLists::indices()[e]), from the chunk that holds it.
 // Neighbouring texels share a list, so the branch hardly ever diverges.
@@ -42,15 +47,16 @@ float expNeg(float x) {
 
 void main() {
     // Fields are read from the buffer one by one (no local copy of the GpuCascade and its arrays).
-    const uint i = gl_GlobalInvocationID.x, j = gl_GlobalInvocationID.y;
-    const uint n = uint(cascades[uCascade].n);
-    if (i >= n || j >= n) return;
+    const uint j = gl_GlobalInvocationID.y, n = uint(cascades[uCascade].n);
+    if (j >= n) return;
+    const uint row = cascades[uCascade].visibleOffset + 4u * j + 2u * uint(uSpan);
+    const int first = visibleRows[row], last = visibleRows[row + 1u];
+    const int at = int(gl_GlobalInvocationID.x) + (uRelative != 0 ? first : 0);
+    if (at < first || at > last) return;  // outside the span (an empty one ends below its start)
+    const uint i = uint(at);
     const uint t = j * n + i;
     const float noSurface = -kInf;
     float z = noSurface, water = noSurface, depth = 0.0;
-    const uint row = cascades[uCascade].visibleOffset + 4u * j;
-    const bool inA = int(i) >= visibleRows[row] && int(i) <= visibleRows[row + 1u];
-    if (!inA && !(int(i) >= visibleRows[row + 2u] && int(i) <= visibleRows[row + 3u])) return;
     // The texel centre in double, exactly as c.x0 + i * s in approximate.cpp.
     const double x = cascades[uCascade].x0 + double(i) * cascades[uCascade].texelM, y = cascades[uCascade].y0 + double(j) * cascades[uCascade].texelM;
     const int k = locateCell(x, y);

@@ -120,6 +120,7 @@ struct GlRenderer::Impl {
     struct Assembly {  // a cascade of this frame for assemble.comp
         int rowBase = 0;          // its first row in fillRowsBuf
         int from = -1, di = 0, dj = 0;  // detail::CascadeFill
+        int widest[2] = {0, 0};   // in memory: the most texels of a row's first and second span to evaluate
     };
     std::array<Assembly, gpu::kMaxCascades> assembly{};
     uint32_t fillPlane = 0;  // packed texels a channel
@@ -481,6 +482,7 @@ struct GlRenderer::Impl {
             for (const detail::RowFill& r : fills[k].rows) {
                 fillRows.insert(fillRows.end(), {r.keptFirst, r.keptLast, r.a0, r.a1, r.b0, r.b1, 0, 0});
                 spans.insert(spans.end(), {r.a0, r.a1, r.b0, r.b1});
+                a.widest[0] = std::max(a.widest[0], r.a1 - r.a0 + 1), a.widest[1] = std::max(a.widest[1], r.b1 - r.b0 + 1);
             }
             visibleBuf.upload(spans.data(), spans.size() * sizeof(int32_t), size_t(block.cascades[k].visibleOffset) * 4);
             spanBytes += spans.size() * sizeof(int32_t);
@@ -548,9 +550,13 @@ struct GlRenderer::Impl {
     void dispatchApproximation(const CascadeFit& fit, const Stopwatch& frameClock, int& stamp) {
         glUseProgram(approximate);
         for (size_t k = 0; k < fit.cascades.size(); ++k) {
-            if (!fit.cascades[k].empty() && !cpuCascades) {
+            for (int span = 0; span < 2 && !fit.cascades[k].empty() && !cpuCascades; ++span) {  // x: along the span, y: rows
+                if (assembly[k].widest[span] <= 0) continue;  // no row has such a span (a fresh frame's second ones)
                 glUniform1i(glGetUniformLocation(approximate, "uCascade"), int(k));
-                glDispatchCompute(groups(fit.cascades[k].n), groups(fit.cascades[k].n), 1);
+                glUniform1i(glGetUniformLocation(approximate, "uSpan"), span);
+                const bool relative = assembly[k].widest[span] * 4 <= fit.cascades[k].n;  // narrow spans (approximate.comp)
+                glUniform1i(glGetUniformLocation(approximate, "uRelative"), relative ? 1 : 0);
+                glDispatchCompute(groups(relative ? assembly[k].widest[span] : fit.cascades[k].n), groups(fit.cascades[k].n), 1);
             }
             timeStamp(stamp++, frameClock);
         }
