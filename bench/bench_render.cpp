@@ -275,16 +275,16 @@ RunResult runScenario(const Scenario& sc, const Settings& set) {
             gl = hc::render::GlRenderer::headless(scene);
             std::snprintf(r.device, sizeof r.device, "%s", gl->deviceName().c_str());
             const hc::Stopwatch warmUp;
-            do {
+            do {  // from scratch, as the measured frames below (with texels kept the GPU would hardly work)
                 hc::render::Timings warm;
-                gl->renderToTexture(cam, set.options, warm);
+                gl->forgetCascades(), gl->renderToTexture(cam, set.options, warm);
             } while (warmUp.seconds() < 1.0);
         }
         for (int k = 0; k < set.repeat; ++k) {
             say(fmt::format("rendering, frame {} of {} ...", k + 1, set.repeat).c_str());
             hc::render::Timings tm;
             // GL: the measured frames end in the texture, as the viewer draws them; the picture is read back once below.
-            // Each from scratch: out of core the renderer would keep the last frame's texels (the same camera: all).
+            // Each from scratch: the renderer would keep the last frame's texels (the same camera: all).
             if (gl) gl->forgetCascades(), gl->renderToTexture(cam, set.options, tm);
             else frame = hc::render::renderFrame(scene, cam, set.options, tm);
             r.gpuMs = std::min(r.gpuMs, tm.gpuMs);
@@ -346,6 +346,7 @@ RunResult runScenario(const Scenario& sc, const Settings& set) {
         if (gl) {
             say("reading the frame back ...");
             hc::render::Timings tm;
+            gl->forgetCascades();  // from scratch, as the measured frames (after a flight it would keep its last frame's texels)
             frame = gl->render(cam, set.options, tm);
             r.readbackMs = tm.readbackMs;
         }
