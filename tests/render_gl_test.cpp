@@ -284,6 +284,19 @@ TEST(RenderGl, SameAsCpuOnTheAlpineDemFromFourCameras) {
     EXPECT_GT(wet, f.waterDepthM.size() / 10) << "the water camera sees water";
 }
 
+// A world's grid written to a temporary file (removed again when this goes, an assertion's early return too) and its
+// surface pyramid: what an out-of-core scene reads.
+struct GridOnDisk {
+    std::filesystem::path path;
+    hc::influence::SurfacePyramid pyramid;
+    GridOnDisk(const World& w, const std::string& stem)
+        : path(std::filesystem::temp_directory_path() / (stem + "_" + std::to_string(::getpid()) + ".hcg")),
+          pyramid(hc::influence::buildSurfacePyramid(w.grid, {})) {
+        hc::writeGrid(w.grid, path.string());
+    }
+    ~GridOnDisk() { std::filesystem::remove(path); }
+};
+
 // Out of core (a Scene over the grid file: no cells or lists in memory, as for 100 M cells) the GL backend fills the
 // cascades on the CPU as renderFrame() does and casts and shades on the GPU: the same picture as the CPU backend on the
 // same scene, the same texels copied from the pyramid, interpolated and summed (the Gaussians counted exactly), with and
@@ -292,9 +305,9 @@ TEST(RenderGl, SameAsCpuOnTheAlpineDemFromFourCameras) {
 TEST(RenderGl, OutOfCoreFillsTheCascadesOnTheCpuAndCastsOnTheGpu) {
     World& w = hef();
     HC_REQUIRE_GL(w);
-    const std::filesystem::path path = std::filesystem::temp_directory_path() / ("hc_gl_out_of_core_" + std::to_string(::getpid()) + ".hcg");
-    hc::writeGrid(w.grid, path.string());
-    const hc::influence::SurfacePyramid pyramid = hc::influence::buildSurfacePyramid(w.grid, {});
+    const GridOnDisk disk(w, "hc_gl_out_of_core");
+    const std::filesystem::path& path = disk.path;
+    const hc::influence::SurfacePyramid& pyramid = disk.pyramid;
     {
         const hc::GridRegionReader file(path.string());
         for (const hc::influence::SurfacePyramid* p : {static_cast<const hc::influence::SurfacePyramid*>(nullptr), &pyramid}) {
@@ -357,7 +370,6 @@ TEST(RenderGl, OutOfCoreFillsTheCascadesOnTheCpuAndCastsOnTheGpu) {
             }
         }
     }
-    std::filesystem::remove(path);
 }
 
 // Out of core the GL backend keeps its cascades on the GPU and uploads only the texels a frame newly sees
@@ -374,12 +386,10 @@ TEST(RenderGl, OutOfCoreKeepsTheCascadesOnTheGpuAndUploadsOnlyNewTexels) {
     namespace detail = hc::render::detail;
     World& w = hef();
     HC_REQUIRE_GL(w);
-    const std::filesystem::path path = std::filesystem::temp_directory_path() / ("hc_gl_kept_" + std::to_string(::getpid()) + ".hcg");
-    hc::writeGrid(w.grid, path.string());
-    const hc::influence::SurfacePyramid pyramid = hc::influence::buildSurfacePyramid(w.grid, {});
+    const GridOnDisk disk(w, "hc_gl_kept");
     {
-        const hc::GridRegionReader file(path.string());
-        const Scene scene(file, {}, &pyramid);
+        const hc::GridRegionReader file(disk.path.string());
+        const Scene scene(file, {}, &disk.pyramid);
         ASSERT_TRUE(scene.outOfCore());
         ASSERT_TRUE(scene.hasWater());
         const std::unique_ptr<GlRenderer> gl = GlRenderer::headless(scene);
@@ -455,7 +465,6 @@ TEST(RenderGl, OutOfCoreKeepsTheCascadesOnTheGpuAndUploadsOnlyNewTexels) {
             lastTextures = std::move(textures);
         }
     }
-    std::filesystem::remove(path);
 }
 
 // In memory the GL backend keeps its cascades on the GPU too (the incremental cascades of DESIGN.md section 6): a

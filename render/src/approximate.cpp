@@ -79,7 +79,6 @@ std::vector<Todo> copyReusedTexels(const Cascade& c, const TexelReuse* reuse, Ca
     const int n = c.n;
     const float noSurface = -std::numeric_limits<float>::infinity();
     std::vector<Todo> todo(static_cast<size_t>(n));
-    if (rows) rows->assign(size_t(n), RowFill{});
     auto clearSpan = [&](size_t row, int lo, int hi) {  // [lo, hi] of a row "no surface"
         if (hi < lo) return;
         std::fill(&tex.terrain.h[row + size_t(lo)], &tex.terrain.h[row + size_t(hi)] + 1, noSurface);
@@ -88,18 +87,23 @@ std::vector<Todo> copyReusedTexels(const Cascade& c, const TexelReuse* reuse, Ca
             std::fill(&tex.depth[row + size_t(lo)], &tex.depth[row + size_t(hi)] + 1, 0.0f);
         }
     };
+    if (rows) {  // the spans only, the rows on all workers
+        *rows = rowFills(c, reuse, copied);
+        parallelFor(size_t(n), 64, threads, [&](size_t b, size_t e, unsigned) {
+            for (size_t j = b; j < e; ++j) {
+                const RowFill& r = (*rows)[j];
+                todo[j] = {r.a0, r.a1, r.b0, r.b1};
+                clearSpan(j * size_t(n), r.a0, r.a1), clearSpan(j * size_t(n), r.b0, r.b1);
+            }
+        });
+        return todo;
+    }
     if (!reuse) {  // a fresh cascade: every texel "no surface", the rows on all workers (up to 3 x 64 MB to write)
         parallelFor(size_t(n), 64, threads, [&](size_t b, size_t e, unsigned) {
             for (size_t j = b; j < e; ++j) {
                 const Cascade::RowSpan& r = c.rows[j];
                 todo[j].a0 = r.first, todo[j].a1 = r.last;
-                const size_t row = j * size_t(n);
-                if (rows) {
-                    (*rows)[j].a0 = r.first, (*rows)[j].a1 = r.last;
-                    clearSpan(row, r.first, r.last);
-                    continue;
-                }
-                clearSpan(row, 0, n - 1);
+                clearSpan(j * size_t(n), 0, n - 1);
             }
         });
         return todo;
@@ -113,12 +117,6 @@ std::vector<Todo> copyReusedTexels(const Cascade& c, const TexelReuse* reuse, Ca
         if (f <= l) copied += uint64_t(l - f + 1);
         const int jp = j + reuse->dj;
         const size_t row = size_t(j) * size_t(n);
-        if (rows) {
-            RowFill& out = (*rows)[size_t(j)];
-            out = RowFill{f, l, t.a0, t.a1, t.b0, t.b1};
-            clearSpan(row, t.a0, t.a1), clearSpan(row, t.b0, t.b1);
-            continue;
-        }
         auto place = [&](std::vector<float>& to, const std::vector<float>& from, float none) {
             float* const out = &to[row];
             if (l < f) {

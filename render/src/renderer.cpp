@@ -485,6 +485,16 @@ std::optional<Reusable> reusableCascade(const CascadeCache::Impl& kept, const st
     return best;
 }
 
+// reusableCascade's pick for c, marked taken, and recorded in `fill` (for a backend that keeps the texels itself) if
+// given: the last frame's cascade by its index in that frame's fit.
+std::optional<Reusable> takeReusable(const CascadeCache::Impl& kept, std::vector<bool>& taken, const Cascade& c, detail::CascadeFill* fill) {
+    const std::optional<Reusable> r = reusableCascade(kept, taken, c);
+    if (!r) return r;
+    taken[r->entry] = true;
+    if (fill) fill->from = int(kept.entries[r->entry].index), fill->di = r->di, fill->dj = r->dj;
+    return r;
+}
+
 // Stages 2 and 3: each cascade's textures (copying what `kept` holds of the last frame) and max mipmaps, with
 // their statistics in timings.cascades. With `fills` (detail::approximateOnCpu), what `kept` holds is not copied: each
 // cascade's spans and the last frame's cascade they keep go there.
@@ -501,11 +511,9 @@ std::vector<detail::CascadeTextures> approximateCascades(const Scene& scene, con
         // machine, against under 1 ms in a fresh frame (which reuses the heap its predecessor freed): most likely
         // page faults as the heap grew and shrank every frame.
         std::optional<detail::TexelReuse> reuse;
-        if (const std::optional<Reusable> r = kept ? reusableCascade(*kept, taken, c) : std::nullopt) {
-            taken[r->entry] = true;
+        if (const std::optional<Reusable> r = kept ? takeReusable(*kept, taken, c, fills ? &(*fills)[k] : nullptr) : std::nullopt) {
             tex[k] = std::move(kept->entries[r->entry].tex);
             reuse = detail::TexelReuse{&kept->entries[r->entry].cascade, &tex[k], r->di, r->dj};
-            if (fills) (*fills)[k].from = int(kept->entries[r->entry].index), (*fills)[k].di = r->di, (*fills)[k].dj = r->dj;
         }
         CascadeStats cs = detail::statsOf(c);
         Stopwatch clock;
@@ -727,11 +735,8 @@ std::vector<detail::CascadeFill> detail::planCascades(const Scene& scene, const 
         const Cascade& c = fit.cascades[k];
         if (c.empty()) continue;
         std::optional<TexelReuse> reuse;
-        if (const std::optional<Reusable> r = reusableCascade(kept, taken, c)) {
-            taken[r->entry] = true;
+        if (const std::optional<Reusable> r = takeReusable(kept, taken, c, &fills[k]))
             reuse = TexelReuse{&kept.entries[r->entry].cascade, nullptr, r->di, r->dj};
-            fills[k].from = int(kept.entries[r->entry].index), fills[k].di = r->di, fills[k].dj = r->dj;
-        }
         uint64_t reused = 0;
         fills[k].rows = rowFills(c, reuse ? &*reuse : nullptr, reused);
         if (k < timings.cascades.size()) timings.cascades[k].reusedTexels = reused;

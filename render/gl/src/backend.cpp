@@ -396,36 +396,50 @@ struct GlRenderer::Impl {
     // Stage 2 out of core, on the CPU (the file comment): the texels this frame newly sees, evaluated there and packed
     // with each cascade's rows into fillTexelsBuf and fillRowsBuf for assemble.comp; their statistics and times replace
     // the ones layOutCascades and the time stamps give.
+    // Cascade k's rows into fillRows for assemble.comp (RowFill, then where its spans' texels start in the packed planes,
+    // counting from `packed`) and its Assembly; returns where the packed texels end.
+    size_t addRows(size_t k, const detail::CascadeFill& fill, size_t packed) {
+        Assembly& a = assembly[k];
+        a.rowBase = int(fillRows.size() / size_t(gpu::kFillRowInts));
+        a.from = fill.from, a.di = fill.di, a.dj = fill.dj;
+        for (const detail::RowFill& r : fill.rows) {
+            const int32_t atA = int32_t(packed);
+            packed += size_t(std::max(0, r.a1 - r.a0 + 1));
+            const int32_t atB = int32_t(packed);
+            packed += size_t(std::max(0, r.b1 - r.b0 + 1));
+            fillRows.insert(fillRows.end(), {r.keptFirst, r.keptLast, r.a0, r.a1, r.b0, r.b1, atA, atB});
+            a.widest[0] = std::max(a.widest[0], r.a1 - r.a0 + 1), a.widest[1] = std::max(a.widest[1], r.b1 - r.b0 + 1);
+        }
+        return packed;
+    }
+
+    // fillRows into fillRowsBuf; returns the bytes.
+    size_t uploadRows() {
+        const size_t bytes = fillRows.size() * sizeof(int32_t);
+        checkBlock(bytes, "the cascades' rows");
+        fillRowsBuf.reserve(bytes);
+        if (bytes) fillRowsBuf.upload(fillRows.data(), bytes);
+        return bytes;
+    }
+
     // `keep`: the last frame's textures are in lastHeightsBuf (else the cache starts afresh: the GPU does not hold the
     // frame it describes).
     void approximateOnCpu(const CascadeFit& fit, const RenderOptions& options, Timings& timings, bool keep) {
         if (!keep) cascadeCache.clear();
         const bool water = scene.hasWater();
-        std::vector<int32_t>& rows = fillRows;
         std::array<std::vector<float>, 3>& packed = fillTexels;
-        rows.clear();
+        fillRows.clear();
         for (std::vector<float>& p : packed) p.clear();
         assembly = {};
         Timings cpu;
         double packMs = 0;
         detail::approximateOnCpu(scene, fit, options, cascadeCache, cpu, [&](size_t k, const detail::CascadeTextures& tex, const detail::CascadeFill& fill) {
             const Stopwatch clock;
-            Assembly& a = assembly[k];
-            a.rowBase = int(rows.size() / size_t(gpu::kFillRowInts));
-            a.from = fill.from, a.di = fill.di, a.dj = fill.dj;
-            const size_t n = size_t(fit.cascades[k].n), first = packed[0].size();
             // Each row's place in the packed planes, then the rows copied there on all cores.
-            size_t end = first;
-            for (const detail::RowFill& r : fill.rows) {
-                const int32_t atA = int32_t(end);
-                end += size_t(std::max(0, r.a1 - r.a0 + 1));
-                const int32_t atB = int32_t(end);
-                end += size_t(std::max(0, r.b1 - r.b0 + 1));
-                rows.insert(rows.end(), {r.keptFirst, r.keptLast, r.a0, r.a1, r.b0, r.b1, atA, atB});
-            }
+            const size_t n = size_t(fit.cascades[k].n), first = packed[0].size(), end = addRows(k, fill, first);
             const size_t channels = water ? 3 : 1;
             for (size_t c = 0; c < channels; ++c) packed[c].resize(end);
-            const int32_t* rowInts = &rows[size_t(a.rowBase) * size_t(gpu::kFillRowInts)];
+            const int32_t* rowInts = &fillRows[size_t(assembly[k].rowBase) * size_t(gpu::kFillRowInts)];
             // On all cores where there is much to copy (a fresh cascade: up to 3 x 16 MB); a moving frame's few texels on this one.
             const unsigned threads = end - first >= (size_t{1} << 16) ? options.threads : 1;
             parallelFor(fill.rows.size(), 64, threads, [&](size_t b, size_t e, unsigned) {
@@ -450,11 +464,8 @@ struct GlRenderer::Impl {
         const size_t plane = packed[0].size(), planeBytes = plane * sizeof(float), channels = water ? 3 : 1;
         if (plane >= (size_t{1} << 31)) throw Error("the GL backend out of core evaluated more than 2^31 texels in one frame");
         fillPlane = uint32_t(plane);
-        const size_t rowBytes = rows.size() * sizeof(int32_t);
-        checkBlock(rowBytes, "the cascades' rows");
         checkBlock(planeBytes * channels, "the texels the CPU evaluated");
-        fillRowsBuf.reserve(rowBytes);
-        if (rowBytes) fillRowsBuf.upload(rows.data(), rowBytes);
+        const size_t rowBytes = uploadRows();
         fillTexelsBuf.reserve(planeBytes * channels);
         for (size_t c = 0; c < channels && plane; ++c) fillTexelsBuf.upload(packed[c].data(), planeBytes, c * planeBytes);
         timings.cascades = cpu.cascades;
@@ -475,22 +486,13 @@ struct GlRenderer::Impl {
         size_t spanBytes = 0;
         for (size_t k = 0; k < fit.cascades.size(); ++k) {
             if (fit.cascades[k].empty()) continue;
-            Assembly& a = assembly[k];
-            a.rowBase = int(fillRows.size() / size_t(gpu::kFillRowInts));
-            a.from = fills[k].from, a.di = fills[k].di, a.dj = fills[k].dj;
+            addRows(k, fills[k], 0);  // nothing packed: approximate.comp sums the spans (assemble.comp's uPacked 0)
             spans.clear();
-            for (const detail::RowFill& r : fills[k].rows) {
-                fillRows.insert(fillRows.end(), {r.keptFirst, r.keptLast, r.a0, r.a1, r.b0, r.b1, 0, 0});
-                spans.insert(spans.end(), {r.a0, r.a1, r.b0, r.b1});
-                a.widest[0] = std::max(a.widest[0], r.a1 - r.a0 + 1), a.widest[1] = std::max(a.widest[1], r.b1 - r.b0 + 1);
-            }
+            for (const detail::RowFill& r : fills[k].rows) spans.insert(spans.end(), {r.a0, r.a1, r.b0, r.b1});
             visibleBuf.upload(spans.data(), spans.size() * sizeof(int32_t), size_t(block.cascades[k].visibleOffset) * 4);
             spanBytes += spans.size() * sizeof(int32_t);
         }
-        const size_t rowBytes = fillRows.size() * sizeof(int32_t);
-        checkBlock(rowBytes, "the cascades' rows");
-        fillRowsBuf.reserve(rowBytes);
-        if (rowBytes) fillRowsBuf.upload(fillRows.data(), rowBytes);
+        const size_t rowBytes = uploadRows();
         fillPlane = 0;
         timings.uploadMs = clock.milliseconds();
         timings.uploadBytes = rowBytes + spanBytes;
