@@ -38,7 +38,6 @@
 #include <optional>
 #include <span>
 #include <unordered_map>
-#include <unordered_set>
 
 #include <fmt/format.h>
 
@@ -474,23 +473,18 @@ std::vector<Block> Builder::stepBlocks(size_t k, std::vector<std::vector<float>>
 }
 
 namespace {
-// Union-find over int64 keys (path halving); the smaller key becomes the root, so every rank joining the same pairs in
-// the same order gets the same roots.
-struct Joins {
-    std::unordered_map<int64_t, int64_t> parent;  // a key not in it is a root
-    int64_t find(int64_t k) {
-        for (;;) {
-            const auto it = parent.find(k);
-            if (it == parent.end()) return k;
-            if (const auto up = parent.find(it->second); up != parent.end()) it->second = up->second;  // halve the path
-            k = it->second;
-        }
+// Union-find over the indices of `parent` (path halving); the smaller index becomes a set's root, so the same joins in
+// the same order give the same roots. An index whose parent is -1 is in no set: callers keep it out of find and join.
+template <class Index>
+struct DisjointSets {
+    std::vector<Index> parent;  // parent[i] == i: a root
+    Index find(Index i) {
+        while (parent[size_t(i)] != i) i = parent[size_t(i)] = parent[size_t(parent[size_t(i)])];
+        return i;
     }
-    void join(int64_t a, int64_t b) {
+    void join(Index a, Index b) {
         a = find(a), b = find(b);
-        if (a == b) return;
-        if (b < a) std::swap(a, b);
-        parent[b] = a;
+        if (a != b) parent[size_t(std::max(a, b))] = std::min(a, b);
     }
 };
 }  // namespace
@@ -515,30 +509,23 @@ void Builder::bathtubBlocks(double level, std::vector<std::vector<float>>& stora
         const size_t n = b.w * b.h;
         if (n > size_t(std::numeric_limits<int32_t>::max())) throw Error("internal: a window of more than 2^31 pixels for the bathtub");
         auto below = [&](size_t p) { return !std::isnan(b.values[p]) && b.values[p] < level; };
-        std::vector<int32_t>& parent = L.root;
+        DisjointSets<int32_t> sets;  // the pixels below the level; the others -1
+        std::vector<int32_t>& parent = sets.parent;
         parent.assign(n, -1);
-        auto find = [&](int32_t p) {
-            while (parent[size_t(p)] != p) p = parent[size_t(p)] = parent[size_t(parent[size_t(p)])];
-            return p;
-        };
-        auto join = [&](int32_t a, int32_t c) {
-            a = find(a), c = find(c);
-            if (a != c) parent[size_t(std::max(a, c))] = std::min(a, c);
-        };
         for (size_t r = 0; r < b.h; ++r)  // row r of the block (north-up), column c
             for (size_t c = 0; c < b.w; ++c) {
                 const size_t p = r * b.w + c;
                 if (!below(p)) continue;
                 parent[p] = int32_t(p);
-                if (c > 0 && parent[p - 1] >= 0) join(int32_t(p), int32_t(p - 1));
-                if (r > 0 && parent[p - b.w] >= 0) join(int32_t(p), int32_t(p - b.w));
+                if (c > 0 && parent[p - 1] >= 0) sets.join(int32_t(p), int32_t(p - 1));
+                if (r > 0 && parent[p - b.w] >= 0) sets.join(int32_t(p), int32_t(p - b.w));
             }
         L.seed.assign(n, 0);
         for (size_t r = 0; r < b.h; ++r)
             for (size_t c = 0; c < b.w; ++c) {
                 const size_t p = r * b.w + c;
                 if (parent[p] < 0) continue;
-                parent[p] = find(int32_t(p));
+                parent[p] = sets.find(int32_t(p));
                 const size_t ix = b.x0 + c, iy = b.y0 + b.h - 1 - r;
                 // A neighbour outside the raster, or a hole inside this block: a seed (neighbours in other blocks: below).
                 const bool edge = ix == 0 || iy == 0 || ix + 1 >= W || iy + 1 >= H;
@@ -546,12 +533,13 @@ void Builder::bathtubBlocks(double level, std::vector<std::vector<float>>& stora
                                   (r > 0 && std::isnan(b.values[p - b.w])) || (r + 1 < b.h && std::isnan(b.values[p + b.w]));
                 if (edge || hole) L.seed[size_t(parent[p])] = 1;
             }
+        L.root = std::move(parent);  // every pixel below the level points at its root now
         edges.insert(edges.end(), {int64_t(b.x0), int64_t(b.y0), int64_t(b.w), int64_t(b.h)});
         auto state = [&](size_t r, size_t c) {
             const size_t p = r * b.w + c;
             if (std::isnan(b.values[p])) return kHole;
-            if (parent[p] < 0) return kDry;
-            return int64_t(parent[p]) * 2 + L.seed[size_t(parent[p])];
+            if (L.root[p] < 0) return kDry;
+            return int64_t(L.root[p]) * 2 + L.seed[size_t(L.root[p])];
         };
         for (size_t c = 0; c < b.w; ++c) edges.push_back(state(0, c));        // north
         for (size_t c = 0; c < b.w; ++c) edges.push_back(state(b.h - 1, c));  // south
@@ -591,19 +579,29 @@ void Builder::bathtubBlocks(double level, std::vector<std::vector<float>>& stora
         if (c == 0) return std::pair{size_t(g), e.at[2 * e.w + r]};
         return std::pair{size_t(g), e.at[2 * e.w + e.h + r]};
     };
+    // The components on the blocks' edges, numbered as met (the same order on every rank), and their joins.
     auto key = [](size_t g, int64_t s) { return int64_t(g) * (int64_t{1} << 40) + s / 2; };
-    Joins joins;
+    std::unordered_map<int64_t, int64_t> ids;
+    DisjointSets<int64_t> joins;
+    auto id = [&](size_t g, int64_t s) {
+        const auto [it, fresh] = ids.try_emplace(key(g, s), int64_t(joins.parent.size()));
+        if (fresh) joins.parent.push_back(it->second);
+        return it->second;
+    };
     std::vector<int64_t> seeds;
     auto meet = [&](size_t g, int64_t s, size_t ix, size_t iy) {  // s: a below pixel of block g; (ix, iy) its neighbour
         if (ix >= W || iy >= H) return;  // outside the raster: seeded in its block already
         const auto [h, t] = stateAt(ix, iy);
-        if (t == kHole) seeds.push_back(key(g, s));
-        else if (t >= 0) joins.join(key(g, s), key(h, t));
+        if (t == kHole) seeds.push_back(id(g, s));
+        else if (t >= 0) {
+            const int64_t a = id(g, s), c = id(h, t);  // numbered in this order
+            joins.join(a, c);
+        }
     };
     for (size_t g = 0; g < blocks.size(); ++g) {
         const Edges& e = blocks[g];
         for (size_t j = 0; j < 2 * (e.w + e.h); ++j)  // the components seeded in their own block
-            if (e.at[j] >= 0 && (e.at[j] & 1)) seeds.push_back(key(g, e.at[j]));
+            if (e.at[j] >= 0 && (e.at[j] & 1)) seeds.push_back(id(g, e.at[j]));
         for (size_t c = 0; c < e.w; ++c) {
             const size_t ix = e.x0 + c;
             if (const int64_t s = e.at[c]; s >= 0) meet(g, s, ix, e.y0 + e.h);  // north of the north edge
@@ -615,15 +613,16 @@ void Builder::bathtubBlocks(double level, std::vector<std::vector<float>>& stora
             if (const int64_t s = e.at[2 * e.w + e.h + r]; s >= 0) meet(g, s, e.x0 + e.w, iy);
         }
     }
-    std::unordered_set<int64_t> wet;  // the roots of seeded components that reach an edge
-    for (int64_t s : seeds) wet.insert(joins.find(s));
+    std::vector<uint8_t> wet(joins.parent.size(), 0);  // per root: its joined component holds a seed
+    for (int64_t s : seeds) wet[size_t(joins.find(s))] = 1;
     for (size_t i = 0; i < blocks_.size(); ++i) {
         const Block& b = blocks_[i];
         Local& L = local[i];
         std::vector<float>& d = storage[i];
         d.assign(b.w * b.h, 0.0f);
         for (size_t p = 0; p < d.size(); ++p)  // each component's answer once, at its root (its least pixel: first)
-            if (L.root[p] == int32_t(p) && !L.seed[p] && !wet.empty()) L.seed[p] = wet.count(joins.find(key(mine + i, int64_t(p) * 2))) > 0;
+            if (L.root[p] == int32_t(p) && !L.seed[p] && !seeds.empty())
+                if (const auto it = ids.find(key(mine + i, int64_t(p) * 2)); it != ids.end()) L.seed[p] = wet[size_t(joins.find(it->second))];
         for (size_t p = 0; p < d.size(); ++p) {
             if (std::isnan(b.values[p])) {
                 d[p] = std::numeric_limits<float>::quiet_NaN();
