@@ -548,7 +548,7 @@ int main(int argc, char** argv) {
                  "      raycast_ms, gaussians_per_s, rays_per_s, peak_rss_mb, and more) (default: none)", json);
         p.option("--fly-frames", "N", "after the timed frames, fly the camera forward for N frames, each evaluated afresh and\n"
                  "      then with incremental cascades (texels kept from the last frame); prints both (default 0: off). GL:\n"
-                 "      frames back to back into the texture; texels are kept out of core only (--out-of-core)", set.flyFrames);
+                 "      frames back to back into the texture, the texels kept on the GPU (in memory and --out-of-core)", set.flyFrames);
         p.option("--fly-step", "M", "metres the camera moves forward per fly-through frame (default 10)", set.flyStepM);
         p.flag("--pyramid", "also build the surface pyramid (hc-influence's .hcp, DESIGN.md section 10) and render from it:\n"
                "      texel sizes on its ladder (powers of two of the finest cell), texels it holds copied (CPU)", set.pyramid);
