@@ -16,7 +16,7 @@
 # output is the north-west SIDE_PX x SIDE_PX window. The mirror images are made by giving A a geotransform with
 # a negative pixel size (gdal_translate -a_ullr) and warping it back onto A's own grid with nearest neighbour:
 # an exact flip. The output keeps A's CRS, 20 m pixels and north-west corner (the mosaic extends east and south),
-# Float32 (the source's Float64 heights are given to the mm; Float32 keeps 0.25 mm at 3165 m), nodata -9999,
+# Float32 (the source's Float64 heights are given to the mm; Float32 keeps 0.25 mm at 3165 m), the source's nodata,
 # tiled 256 x 256, uncompressed. Deterministic (no timestamps, fixed inputs) and idempotent: the output is written
 # under a temporary name and renamed, and a rerun writes the same bytes.
 set -euo pipefail
@@ -42,10 +42,13 @@ export GDAL_PAM_ENABLED=NO  # no .aux.xml side files
 q=(-q)
 
 # The source's size and corners (from gdalinfo's JSON; jq-free: python3 is on every Debian with GDAL's tools).
-read -r w h x0 y0 px py < <(gdalinfo -json "$src" | python3 -c '
+# Its nodata value is kept: the mirror images carry it (gdalwarp keeps a source's nodata), and the output declares it,
+# -9999 where the source declares none. (Declaring -9999 over a source whose nodata was another value, as this script
+# did, made Kilauea's -32768 ocean pixels valid elevations.)
+read -r w h x0 y0 px py nodata < <(gdalinfo -json "$src" | python3 -c '
 import json, sys
-j = json.load(sys.stdin); g = j["geoTransform"]
-print(j["size"][0], j["size"][1], repr(g[0]), repr(g[3]), repr(g[1]), repr(g[5]))')
+j = json.load(sys.stdin); g = j["geoTransform"]; nd = j["bands"][0].get("noDataValue")
+print(j["size"][0], j["size"][1], repr(g[0]), repr(g[3]), repr(g[1]), repr(g[5]), "-9999" if nd is None else repr(nd))')
 read -r x1 y1 < <(python3 -c "print(repr($x0 + $w * $px), repr($y0 + $h * $py))")
 
 # A as Float32, and its three mirror images on A's own grid.
@@ -81,14 +84,14 @@ done
 
 if [[ $out == *.vrt ]]; then
     tmp="$work/out.tmp.$$.vrt"
-    gdal_translate "${q[@]}" -of VRT -srcwin 0 0 "$side" "$side" -a_nodata -9999 "$work/b$k.vrt" "$tmp"
+    gdal_translate "${q[@]}" -of VRT -srcwin 0 0 "$side" "$side" -a_nodata "$nodata" "$work/b$k.vrt" "$tmp"
     sed 's#relativeToVRT="1">#relativeToVRT="1">'"$(basename "$work")"'/#' "$tmp" > "$out.tmp.$$" && rm -f "$tmp"
     mv -f "$out.tmp.$$" "$out"
     echo "$out: ${side} x ${side} px, a VRT over $(basename "$work")/"
     exit 0
 fi
 tmp="$out.tmp.$$.tif"
-gdal_translate "${q[@]}" -srcwin 0 0 "$side" "$side" -a_nodata -9999 \
+gdal_translate "${q[@]}" -srcwin 0 0 "$side" "$side" -a_nodata "$nodata" \
     -co TILED=YES -co BLOCKXSIZE=256 -co BLOCKYSIZE=256 -co COMPRESS=NONE -co BIGTIFF=IF_SAFER \
     "$work/b$k.vrt" "$tmp"
 mv -f "$tmp" "$out"
