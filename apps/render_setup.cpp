@@ -49,7 +49,7 @@ void RenderSetup::addRenderOptions(Parser& p) {
              "twice their size, no finer cell within a kernel's reach) are interpolated, bicubic, from a stored level at most\n"
              "L above; 0..8, 0 sums them from the kernels (default 3)",
              options.pyramidInterpolateLevels);
-    p.option("--beam-tile", "P", "CPU backend: each tile of P x P pixels marches its rays' beam over the max mipmaps first, and\n"
+    p.option("--beam-tile", "P", "each tile of P x P pixels marches its rays' beam over the max mipmaps first (both backends), and\n"
              "its rays start their walks where none of them can hit before (the same hits, fewer node visits); 0..64,\n"
              "0 walks every ray from its cascade's start (default 4)", options.beamTilePx);
     p.option("--step", "K", "water step to show, 0-based (default 0; hc-info lists a grid's steps and their times)", step);

@@ -557,7 +557,7 @@ int main(int argc, char** argv) {
         p.option("--pyramid-interpolate", "L", "with --pyramid: texels finer than every level stored around them interpolated\n"
                  "      (bicubic) from a coarser stored level, at most L levels up; 0 sums them from the kernels (default 3)",
                  set.options.pyramidInterpolateLevels);
-        p.option("--beam-tile", "P", "CPU ray casting: tiles of P x P pixels march their beam first and start their rays'\n"
+        p.option("--beam-tile", "P", "ray casting, both backends: tiles of P x P pixels march their beam first and start their rays'\n"
                  "      walks there (the same hits); 0 walks every ray from its cascade's start (default 4)", set.options.beamTilePx);
         p.flag("--out-of-core", "write each grid to a temporary .hcg and render out of core from it, without lists\n"
                "      (render::Scene over a GridRegionReader; with --pyramid the texels it holds need no cell; GL: the\n"

@@ -56,12 +56,16 @@ int locateCell(double x, double y) {
     return -1;
 }
 
-// The unit ray direction of pixel (px, py), row 0 at the top: renderFrame()'s formula in renderer.cpp.
-vec3 rayDirection(uint px, uint py) {
-    const float sx = (2.0 * (float(px) + 0.5) / float(frame.width) - 1.0) * frame.tanHalfX;
-    const float sy = (1.0 - 2.0 * (float(py) + 0.5) / float(frame.height)) * frame.tanHalfY;
+// Pixel column px's and row py's place on the image plane at unit distance (row 0 at the top), and the direction
+// through it, not normalised: renderFrame()'s formula in renderer.cpp.
+float sxOf(float px) { return (2.0 * (px + 0.5) / float(frame.width) - 1.0) * frame.tanHalfX; }
+float syOf(float py) { return (1.0 - 2.0 * (py + 0.5) / float(frame.height)) * frame.tanHalfY; }
+vec3 rawDirection(float sx, float sy) {
     const vec3 f = vec3(frame.forward[0], frame.forward[1], frame.forward[2]);
     const vec3 r = vec3(frame.right[0], frame.right[1], frame.right[2]);
     const vec3 u = vec3(frame.up[0], frame.up[1], frame.up[2]);
-    return normalize(f + sx * r + sy * u);
+    return f + sx * r + sy * u;
 }
+
+// The unit ray direction of pixel (px, py).
+vec3 rayDirection(uint px, uint py) { return normalize(rawDirection(sxOf(float(px)), syOf(float(py)))); }

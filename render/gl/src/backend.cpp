@@ -87,8 +87,10 @@ void copyFloats(float* dst, const glm::dvec3& v) {
 struct GlRenderer::Impl {
     const Scene& scene;
     std::unique_ptr<gl::HeadlessContext> headless;  // null when rendering into the caller's context
-    GLuint approximate = 0, assemble = 0, mipmap = 0, raycast = 0, shade = 0;
+    GLuint approximate = 0, assemble = 0, beams = 0, mipmap = 0, raycast = 0, shade = 0;
     Buffer frameBuf, cellsBuf, keysBuf, visibleBuf, heightsBuf, pixelsBuf, countersBuf;
+    Buffer beamsBuf;        // beams.comp's start depths, beamSlots of them this frame (0: no beams)
+    size_t beamSlots = 0, outerBeamSlots = 0;
     // Out of core (the file comment): the last frame's heights buffer, and what the CPU evaluated this frame.
     Buffer lastHeightsBuf, fillRowsBuf, fillTexelsBuf;
     // The rays are copied here on the GPU and read from here. Mapping pixelsBuf itself for reading made NVIDIA's
@@ -138,6 +140,7 @@ struct GlRenderer::Impl {
         try {
             approximate = gl::compileEmbedded("approximate");
             assemble = gl::compileEmbedded("assemble");
+            beams = gl::compileEmbedded("beams");
             mipmap = gl::compileEmbedded("mipmap");
             raycast = gl::compileEmbedded("raycast");
             shade = gl::compileEmbedded("shade");
@@ -154,11 +157,11 @@ struct GlRenderer::Impl {
     }
 
     void release() {
-        for (GLuint p : {approximate, assemble, mipmap, raycast, shade})
+        for (GLuint p : {approximate, assemble, beams, mipmap, raycast, shade})
             if (p) glDeleteProgram(p);
-        approximate = assemble = mipmap = raycast = shade = 0;
+        approximate = assemble = beams = mipmap = raycast = shade = 0;
         for (Buffer* b : {&frameBuf, &cellsBuf, &keysBuf, &visibleBuf, &heightsBuf, &pixelsBuf, &countersBuf, &readbackBuf, &lastHeightsBuf,
-                          &fillRowsBuf, &fillTexelsBuf})
+                          &fillRowsBuf, &fillTexelsBuf, &beamsBuf})
             b->release();
         for (Buffer& b : indexBufs) b.release();
         if (colorTex) glDeleteTextures(1, &colorTex);
@@ -179,10 +182,10 @@ struct GlRenderer::Impl {
     void uploadScene() {
         GLint bindings = 0;
         glGetIntegerv(GL_MAX_SHADER_STORAGE_BUFFER_BINDINGS, &bindings);
-        if (bindings <= HC_BIND_FILL_TEXELS)
-            throw Error("the GL backend needs " + std::to_string(HC_BIND_FILL_TEXELS + 1) + " shader storage buffer bindings; " + device + " has " +
+        if (bindings <= HC_BIND_BEAMS)
+            throw Error("the GL backend needs " + std::to_string(HC_BIND_BEAMS + 1) + " shader storage buffer bindings; " + device + " has " +
                         std::to_string(bindings) + ": use --backend cpu");
-        for (Buffer* b : {&lastHeightsBuf, &fillRowsBuf, &fillTexelsBuf}) b->reserve(16);
+        for (Buffer* b : {&lastHeightsBuf, &fillRowsBuf, &fillTexelsBuf, &beamsBuf}) b->reserve(16);
         frameBuf.reserve(sizeof(gpu::FrameBlock));
         countersBuf.reserve(sizeof(uint32_t) * gpu::kCounterSlots * (gpu::kMaxCascades + 1));
         if (cpuCascades) {
@@ -294,6 +297,7 @@ struct GlRenderer::Impl {
             f.wallColor[c] = float(gpu::kWallColor[c]);
         }
         f.zFloor = float(scene.elevationMin);
+        f.beamTile = options.beamTilePx > 1 ? options.beamTilePx : 0;  // beams.comp, raycast.comp
 
     }
 
@@ -361,6 +365,14 @@ struct GlRenderer::Impl {
         const size_t pixels = size_t(W) * size_t(H);
         checkBlock(pixels * sizeof(gpu::GpuPixel), "the pixels");
         pixelsBuf.reserve(pixels * sizeof(gpu::GpuPixel));
+        beamSlots = outerBeamSlots = 0;
+        if (const int T = block.frame.beamTile; T > 1) {
+            const size_t across = size_t((W + T - 1) / T), down = size_t((H + T - 1) / T);
+            beamSlots = across * down * size_t(gpu::kMaxCascades);  // tiles, then blocks of 4 x 4 tiles (beams.comp)
+            outerBeamSlots = ((across + 3) / 4) * ((down + 3) / 4) * size_t(gpu::kMaxCascades);
+            checkBlock((beamSlots + outerBeamSlots) * 2 * sizeof(float), "the beams");
+            beamsBuf.reserve((beamSlots + outerBeamSlots) * 2 * sizeof(float));
+        }
         std::vector<uint32_t> zeros(countersBuf.bytes / 4, 0);
         countersBuf.upload(zeros.data(), countersBuf.bytes);
         if (!colorTex || texWidth != W || texHeight != H) {
@@ -384,6 +396,7 @@ struct GlRenderer::Impl {
         visibleBuf.bind(HC_BIND_VISIBLE);
         heightsBuf.bind(HC_BIND_HEIGHTS);
         pixelsBuf.bind(HC_BIND_PIXELS);
+        beamsBuf.bind(HC_BIND_BEAMS);
         countersBuf.bind(HC_BIND_COUNTERS);
         glBindImageTexture(HC_IMAGE_COLOR, colorTex, 0, GL_FALSE, 0, GL_WRITE_ONLY, GL_RGBA8);
     }
@@ -669,6 +682,16 @@ struct GlRenderer::Impl {
         lastCascadeCount = fit.cascades.size();
         dispatchMipmaps(fit, block);
         timeStamp(stamp++, frameClock);
+        if (beamSlots > 0) {  // the beams' marches, blocks then tiles, counted in the ray casting's time
+            glUseProgram(beams);
+            const GLint outer = glGetUniformLocation(beams, "uOuter");
+            for (const size_t slots : {outerBeamSlots, beamSlots}) {
+                glUniform1i(outer, slots == outerBeamSlots ? 1 : 0);
+                const size_t groups = (slots + 63) / 64, across = std::min<size_t>(groups, 65535);  // GL's least limit a dimension
+                glDispatchCompute(GLuint(across), GLuint((groups + across - 1) / across), 1);
+                glMemoryBarrier(GL_SHADER_STORAGE_BARRIER_BIT);
+            }
+        }
         dispatchPerPixel(raycast, camera);
         glMemoryBarrier(GL_SHADER_STORAGE_BARRIER_BIT);
         timeStamp(stamp++, frameClock);

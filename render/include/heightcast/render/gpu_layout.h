@@ -35,6 +35,8 @@ using uint = std::uint32_t;
 #define HC_BIND_LAST_HEIGHTS 11  // float[]: the last frame's HC_BIND_HEIGHTS
 #define HC_BIND_FILL_ROWS 12     // int[kFillRowInts per texel row of every cascade]: RowFill, then its spans' first packed texels
 #define HC_BIND_FILL_TEXELS 13   // float[3 * plane]: the evaluated texels packed, terrain, then water, then depth
+// raycast.comp's beams (beams.comp): per tile of GpuFrame::beamTile^2 pixels and cascade, (start depth, passed).
+#define HC_BIND_BEAMS 14         // vec2[tiles * kMaxCascades], tiles row-major over the image
 #define HC_IMAGE_COLOR 0     // rgba8 image unit of the shaded picture (row 0 at the bottom)
 
 // Work-group sizes (macros: they go into layout(local_size_x = ...)).
@@ -131,6 +133,8 @@ struct GpuFrame {
     float dryColor[3];
     float zFloor;     // the terrain block's bottom: the grid's lowest elevation, local z [m] (RayContext::zFloor)
     float wallColor[3];  // kWallColor, sRGB
+    int beamTile;     // raycast.comp's beams: tiles of beamTile^2 pixels, 0 or 1 none (RenderOptions::beamTilePx)
+    int pad[3];       // FrameBlock to a multiple of 16 bytes, to which Mesa rounds a buffer block's size
 };
 
 // One pixel's ray-cast result, row 0 at the top (Frame's layout).

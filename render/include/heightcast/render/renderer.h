@@ -47,9 +47,10 @@ struct RenderOptions {
     // terrain. Each hit's value is the exact evaluator's at the hit (in memory only: the scene needs its lists), on
     // a ramp over the layer's range in every step, with a legend in the layer's units. CPU backend only.
     std::string colorLayer;
-    // CPU backend: the rays of each tile of beamTilePx x beamTilePx pixels start their walks where a march of the
+    // Both backends: the rays of each tile of beamTilePx x beamTilePx pixels start their walks where a march of the
     // tile's beam over the max mipmaps shows none of them can hit before (the same hits; the tiles' marches start from
-    // their block's of 4 x 4 tiles); 0 or 1: every ray walks from its cascade's start. 0..64. BENCHMARKS.md measures it.
+    // their block's of 4 x 4 tiles; on the GL backend a pass of its own, beams.comp); 0 or 1: every ray walks from its
+    // cascade's start. 0..64. BENCHMARKS.md measures it.
     int beamTilePx = 4;
     std::string validate() const; // "" or what is wrong
 };
