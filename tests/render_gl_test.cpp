@@ -30,6 +30,7 @@
 #include "heightcast/render/renderer.h"
 #include "../render/src/textures.h"
 #include "test_data.h"
+#include "same_hits.h"
 #include "test_grids.h"
 
 namespace {
@@ -919,7 +920,7 @@ TEST(RenderGl, BeamsGiveTheSameHits) {
     gully.init();
     std::mt19937_64 rng(47);
     std::uniform_real_distribution<double> u(0, 1);
-    size_t pixels = 0, hits = 0, walls = 0, water = 0, rounded = 0, different = 0;
+    hc::test::SameHits n;
     for (World* w : {&hef(), &lidarFlood(), &gully}) {
         HC_REQUIRE_GL(*w);
         const Scene& s = *w->scene;
@@ -953,33 +954,16 @@ TEST(RenderGl, BeamsGiveTheSameHits) {
                 o.beamTilePx = tile;
                 w->gl->forgetCascades();
                 const Frame f = w->gl->render(c, o, t);
-                ASSERT_EQ(f.distanceM.size(), ref.distanceM.size());
-                for (size_t i = 0; i < f.distanceM.size(); ++i) {
-                    ++pixels;
-                    const bool hit = std::isfinite(ref.distanceM[i]);
-                    hits += hit, walls += ref.wall[i] > 0, water += ref.waterDepthM[i] > 0;
-                    const bool same = f.distanceM[i] == ref.distanceM[i] && f.cascade[i] == ref.cascade[i] && f.nX[i] == ref.nX[i] &&
-                                      f.nY[i] == ref.nY[i] && f.nZ[i] == ref.nZ[i] && f.wall[i] == ref.wall[i] &&
-                                      f.waterDepthM[i] == ref.waterDepthM[i];
-                    if (same) continue;
-                    const bool close = hit && std::abs(double(f.distanceM[i]) - ref.distanceM[i]) <= 1e-5 * ref.distanceM[i] &&
-                                       f.cascade[i] == ref.cascade[i] && f.wall[i] == ref.wall[i];
-                    (close ? rounded : different) += 1;
-                    if (!close && different < 5)
-                        ADD_FAILURE() << "tile " << tile << ", pixel " << i << ": distance " << f.distanceM[i] << " against " << ref.distanceM[i]
-                                      << ", cascade " << f.cascade[i] << " against " << ref.cascade[i] << "; camera " << c.xWorld << " "
-                                      << c.yWorld << " " << c.zWorld << " yaw " << c.yawDeg << " pitch " << c.pitchDeg << " roll " << c.rollDeg;
-                }
+                n.add(ref, f, 1e-5, 0.0, "tile " + std::to_string(tile) + ", " + hc::test::cameraText(c));
             }
         }
     }
-    std::printf("%zu pixels compared: %zu hits (%zu on walls, %zu on water), %zu rounded differently, %zu different\n", pixels, hits, walls,
-                water, rounded, different);
-    EXPECT_GT(hits, pixels / 4);
-    EXPECT_GT(walls, 500u) << "the comparison covers walls";
-    EXPECT_GT(water, 1000u) << "the comparison covers water";
-    EXPECT_EQ(different, 0u);
-    EXPECT_LE(rounded, pixels / 1000);
+    std::printf("%s\n", n.summary().c_str());
+    EXPECT_GT(n.hits, n.pixels / 4);
+    EXPECT_GT(n.walls, 500u) << "the comparison covers walls";
+    EXPECT_GT(n.water, 1000u) << "the comparison covers water";
+    EXPECT_EQ(n.different, 0u);
+    EXPECT_LE(n.rounded, n.pixels / 1000);
 }
 
 }  // namespace

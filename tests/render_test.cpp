@@ -27,6 +27,7 @@
 #include "heightcast/render/image_io.h"
 #include "heightcast/render/renderer.h"
 #include "test_data.h"
+#include "same_hits.h"
 #include "test_grids.h"
 // White box: the approximation's texel textures (render/src is the library's private part).
 #include "../render/src/textures.h"
@@ -524,7 +525,7 @@ TEST(Render, BeamsGiveTheSameHits) {
     static World gully = fromFile("west_bijou_gully_3m.asc", 0.25);
     std::mt19937_64 rng(31);
     std::uniform_real_distribution<double> u(0, 1);
-    size_t pixels = 0, hits = 0, walls = 0, water = 0, rounded = 0, different = 0;
+    hc::test::SameHits n;
     for (World* w : {&hef(), &lidarFlood(), &gully}) {
         std::vector<Camera> cameras;
         for (int i = 0; i < 16; ++i) {
@@ -548,33 +549,16 @@ TEST(Render, BeamsGiveTheSameHits) {
             for (int tile : {2, 5, 8, 64}) {
                 o.beamTilePx = tile;
                 const Frame f = renderFrame(s, c, o, t);
-                ASSERT_EQ(f.distanceM.size(), ref.distanceM.size());
-                for (size_t i = 0; i < f.distanceM.size(); ++i) {
-                    ++pixels;
-                    const bool hit = std::isfinite(ref.distanceM[i]);
-                    hits += hit, walls += ref.wall[i] > 0, water += ref.waterDepthM[i] > 0;
-                    const bool same = f.distanceM[i] == ref.distanceM[i] && f.cascade[i] == ref.cascade[i] && f.nX[i] == ref.nX[i] &&
-                                      f.nY[i] == ref.nY[i] && f.nZ[i] == ref.nZ[i] && f.wall[i] == ref.wall[i] &&
-                                      f.waterDepthM[i] == ref.waterDepthM[i] && f.posZ[i] == ref.posZ[i];
-                    if (same) continue;
-                    const bool close = hit && std::abs(double(f.distanceM[i]) - ref.distanceM[i]) <= 1e-9 * ref.distanceM[i] + 1e-6 &&
-                                       f.cascade[i] == ref.cascade[i] && f.wall[i] == ref.wall[i];
-                    (close ? rounded : different) += 1;
-                    if (!close && different < 5)
-                        ADD_FAILURE() << "tile " << tile << ", pixel " << i << ": distance " << f.distanceM[i] << " against " << ref.distanceM[i]
-                                      << ", cascade " << f.cascade[i] << " against " << ref.cascade[i] << "; camera " << c.xWorld << " "
-                                      << c.yWorld << " " << c.zWorld << " yaw " << c.yawDeg << " pitch " << c.pitchDeg << " roll " << c.rollDeg;
-                }
+                n.add(ref, f, 1e-9, 1e-6, "tile " + std::to_string(tile) + ", " + hc::test::cameraText(c));
             }
         }
     }
-    std::printf("%zu pixels compared: %zu hits (%zu on walls, %zu on water), %zu rounded differently, %zu different\n", pixels, hits, walls,
-                water, rounded, different);
-    EXPECT_GT(hits, pixels / 4);
-    EXPECT_GT(walls, 1000u) << "the comparison covers walls";
-    EXPECT_GT(water, 1000u) << "the comparison covers water";
-    EXPECT_EQ(different, 0u);
-    EXPECT_LE(rounded, pixels / 10000);
+    std::printf("%s\n", n.summary().c_str());
+    EXPECT_GT(n.hits, n.pixels / 4);
+    EXPECT_GT(n.walls, 1000u) << "the comparison covers walls";
+    EXPECT_GT(n.water, 1000u) << "the comparison covers water";
+    EXPECT_EQ(n.different, 0u);
+    EXPECT_LE(n.rounded, n.pixels / 10000);
 }
 
 TEST(Render, StableFittingKeepsTexelsOnTheLattice) {
