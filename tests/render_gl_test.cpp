@@ -910,8 +910,8 @@ TEST(RenderGlWater, BathtubFloodAsOnTheCpuAndOnItsLevel) {
 // only depths where every ray of the tile stays above every node's maximum by more than the walk's slack, so the walk
 // from the start would have skipped every node there, and the hits are the same. Compared pixel by pixel, beams against
 // none, from random cameras (rolled, with a near plane, straight down) on the flooded alpine DEM, the flooded LiDAR tile
-// (shores everywhere: the water rules) and the gully with holes (walls), and from outside the domain, for tiles of 2, 5
-// and 16 pixels (the image's edge, 100 x 70 pixels, cuts tiles). In float a ray running exactly through a patch corner may be found entering by the other
+// (shores everywhere: the water rules) and the gully with holes (walls), from outside the domain, level and looking up,
+// for tiles of 2, 5 and 16 pixels (the image's edge, 100 x 70 pixels, cuts tiles). In float a ray running exactly through a patch corner may be found entering by the other
 // edge and round its hit differently: allowed in one pixel in 10^3, within 1e-5 of its distance; anything else is a
 // wrong march. (With its margin made negative, 5 m too bold, it fails: checked when this test was written.)
 TEST(RenderGl, BeamsGiveTheSameHits) {
@@ -943,6 +943,10 @@ TEST(RenderGl, BeamsGiveTheSameHits) {
         outside.zWorld = s.elevationMin + 0.3 * (s.zMax - s.elevationMin), outside.yawDeg = 90, outside.pitchDeg = -4, outside.rollDeg = 0;
         cameras.push_back(outside);
         cameras.push_back(lowOblique(s, 100, 70));
+        Camera level = lowOblique(s, 100, 70), up = level;  // rays level with the eye at the image's centre row, and rising
+        level.pitchDeg = 0, level.zWorld = s.elevationMin + 0.7 * (s.zMax - s.elevationMin);
+        up.pitchDeg = 25, up.zWorld = level.zWorld;
+        cameras.push_back(level), cameras.push_back(up);
         for (const Camera& c : cameras) {
             RenderOptions o;
             o.texelsPerSide = 256;
