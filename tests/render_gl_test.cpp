@@ -911,7 +911,7 @@ TEST(RenderGlWater, BathtubFloodAsOnTheCpuAndOnItsLevel) {
 // from the start would have skipped every node there, and the hits are the same. Compared pixel by pixel, beams against
 // none, from random cameras (rolled, with a near plane, straight down) on the flooded alpine DEM, the flooded LiDAR tile
 // (shores everywhere: the water rules) and the gully with holes (walls), from outside the domain, level and looking up,
-// for tiles of 2, 5 and 16 pixels (the image's edge, 100 x 70 pixels, cuts tiles). In float a ray running exactly through a patch corner may be found entering by the other
+// for tiles of 2, 5 and 16 pixels (the image's edge, 100 x 70 pixels, cuts tiles; a 3 x 4 image is one tile of 5). In float a ray running exactly through a patch corner may be found entering by the other
 // edge and round its hit differently: allowed in one pixel in 10^3, within 1e-5 of its distance; anything else is a
 // wrong march. (With its margin made negative, 5 m too bold, it fails: checked when this test was written.)
 TEST(RenderGl, BeamsGiveTheSameHits) {
@@ -947,6 +947,9 @@ TEST(RenderGl, BeamsGiveTheSameHits) {
         level.pitchDeg = 0, level.zWorld = s.elevationMin + 0.7 * (s.zMax - s.elevationMin);
         up.pitchDeg = 25, up.zWorld = level.zWorld;
         cameras.push_back(level), cameras.push_back(up);
+        Camera tiny = lowOblique(s, 3, 4);  // one tile, and one block of tiles
+        tiny.fovYDeg = 5, tiny.pitchDeg = -20;
+        cameras.push_back(tiny);
         for (const Camera& c : cameras) {
             RenderOptions o;
             o.texelsPerSide = 256;

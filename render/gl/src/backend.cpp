@@ -685,8 +685,9 @@ struct GlRenderer::Impl {
         if (beamSlots > 0) {  // the beams' marches, blocks then tiles, counted in the ray casting's time
             glUseProgram(beams);
             const GLint outer = glGetUniformLocation(beams, "uOuter");
-            for (const size_t slots : {outerBeamSlots, beamSlots}) {
-                glUniform1i(outer, slots == outerBeamSlots ? 1 : 0);
+            for (const int pass : {1, 0}) {  // an image of one tile has as many blocks as tiles: told apart by the pass
+                glUniform1i(outer, pass);
+                const size_t slots = pass ? outerBeamSlots : beamSlots;
                 const size_t groups = (slots + 63) / 64, across = std::min<size_t>(groups, 65535);  // GL's least limit a dimension
                 glDispatchCompute(GLuint(across), GLuint((groups + across - 1) / across), 1);
                 glMemoryBarrier(GL_SHADER_STORAGE_BARRIER_BIT);
