@@ -919,29 +919,22 @@ TEST(RenderGl, BeamsGiveTheSameHits) {
     gully.grid = hc::test::ingestFile(hc::test::dataFile("west_bijou_gully_3m.asc"), 0.25);
     gully.init();
     std::mt19937_64 rng(47);
-    std::uniform_real_distribution<double> u(0, 1);
     hc::test::SameHits n;
     for (World* w : {&hef(), &lidarFlood(), &gully}) {
         HC_REQUIRE_GL(*w);
         const Scene& s = *w->scene;
-        std::vector<Camera> cameras;
-        for (int i = 0; i < 8; ++i) {
+        auto randomCamera = [&](std::mt19937_64& r) {  // 2 m .. half the extent above the top, looking down 3-83 degrees
+            std::uniform_real_distribution<double> u(0, 1);
             Camera c;
-            const double x = s.xMin + u(rng) * (s.xMax - s.xMin), y = s.yMin + u(rng) * (s.yMax - s.yMin);
+            const double x = s.xMin + u(r) * (s.xMax - s.xMin), y = s.yMin + u(r) * (s.yMax - s.yMin);
             const double extent = std::max(s.xMax - s.xMin, s.yMax - s.yMin);
             c.xWorld = w->grid.originWorldX + x, c.yWorld = w->grid.originWorldY + y;
-            c.zWorld = s.zMax + std::exp(std::log(2.0) + u(rng) * std::log(extent / 2.0));  // 2 m .. extent / 2 above the top
-            c.yawDeg = 360 * u(rng), c.pitchDeg = -3 - 80 * u(rng), c.fovYDeg = 30 + 40 * u(rng);
+            c.zWorld = s.zMax + std::exp(std::log(2.0) + u(r) * std::log(extent / 2.0));
+            c.yawDeg = 360 * u(r), c.pitchDeg = -3 - 80 * u(r), c.fovYDeg = 30 + 40 * u(r);
             c.width = 100, c.height = 70;
-            if (i % 4 == 1) c.rollDeg = 360 * u(rng);
-            if (i % 4 == 2) c.nearM = 5 + 200 * u(rng);
-            if (i % 4 == 3) c.pitchDeg = -90 + 1e-3 * u(rng);  // straight down
-            cameras.push_back(c);
-        }
-        Camera outside = cameras[0];  // outside the domain, looking across it
-        outside.xWorld = w->grid.originWorldX + s.xMin - 0.3 * (s.xMax - s.xMin), outside.yWorld = w->grid.originWorldY + 0.5 * (s.yMin + s.yMax);
-        outside.zWorld = s.elevationMin + 0.3 * (s.zMax - s.elevationMin), outside.yawDeg = 90, outside.pitchDeg = -4, outside.rollDeg = 0;
-        cameras.push_back(outside);
+            return c;
+        };
+        std::vector<Camera> cameras = hc::test::beamTestCameras(s, w->grid, 8, rng, randomCamera);
         cameras.push_back(lowOblique(s, 100, 70));
         Camera level = lowOblique(s, 100, 70), up = level;  // rays level with the eye at the image's centre row, and rising
         level.pitchDeg = 0, level.zWorld = s.elevationMin + 0.7 * (s.zMax - s.elevationMin);

@@ -524,22 +524,11 @@ TEST(Render, HitsLieOnTheExactSurfaceFrom200RandomCameras) {
 TEST(Render, BeamsGiveTheSameHits) {
     static World gully = fromFile("west_bijou_gully_3m.asc", 0.25);
     std::mt19937_64 rng(31);
-    std::uniform_real_distribution<double> u(0, 1);
     hc::test::SameHits n;
     for (World* w : {&hef(), &lidarFlood(), &gully}) {
-        std::vector<Camera> cameras;
-        for (int i = 0; i < 16; ++i) {
-            Camera c = randomCamera(*w, rng);
-            if (i % 4 == 1) c.rollDeg = 360 * u(rng);
-            if (i % 4 == 2) c.nearM = 5 + 200 * u(rng);
-            if (i % 4 == 3) c.pitchDeg = -90 + 1e-3 * u(rng);  // straight down
-            cameras.push_back(c);
-        }
         const Scene& s = *w->scene;
-        Camera outside = cameras[0];  // outside the domain, looking across it
-        outside.xWorld = w->grid.originWorldX + s.xMin - 0.3 * (s.xMax - s.xMin), outside.yWorld = w->grid.originWorldY + 0.5 * (s.yMin + s.yMax);
-        outside.zWorld = s.elevationMin + 0.3 * (s.zMax - s.elevationMin), outside.yawDeg = 90, outside.pitchDeg = -4, outside.rollDeg = 0;
-        cameras.push_back(outside);
+        const std::vector<Camera> cameras =
+            hc::test::beamTestCameras(s, w->grid, 16, rng, [&](std::mt19937_64& r) { return randomCamera(*w, r); });
         for (const Camera& c : cameras) {
             RenderOptions o;
             o.texelsPerSide = 256;

@@ -7,8 +7,11 @@
 
 #include <cmath>
 #include <cstddef>
+#include <random>
 #include <string>
+#include <vector>
 
+#include "heightcast/grid/grid.h"
 #include "heightcast/render/renderer.h"
 
 namespace hc::test {
@@ -46,6 +49,27 @@ struct SameHits {
                " different";
     }
 };
+
+// The cameras the beam tests look through: `count` of randomCamera(rng), of every four one as it is, one rolled, one
+// with a near plane and one looking straight down; then one outside the domain (west of it, at 30 % of its relief)
+// looking east across it.
+template <class RandomCamera>
+std::vector<render::Camera> beamTestCameras(const render::Scene& s, const Grid& g, int count, std::mt19937_64& rng, RandomCamera&& randomCamera) {
+    std::uniform_real_distribution<double> u(0, 1);
+    std::vector<render::Camera> cameras;
+    for (int i = 0; i < count; ++i) {
+        render::Camera c = randomCamera(rng);
+        if (i % 4 == 1) c.rollDeg = 360 * u(rng);
+        if (i % 4 == 2) c.nearM = 5 + 200 * u(rng);
+        if (i % 4 == 3) c.pitchDeg = -90 + 1e-3 * u(rng);  // straight down
+        cameras.push_back(c);
+    }
+    render::Camera outside = cameras.at(0);
+    outside.xWorld = g.originWorldX + s.xMin - 0.3 * (s.xMax - s.xMin), outside.yWorld = g.originWorldY + 0.5 * (s.yMin + s.yMax);
+    outside.zWorld = s.elevationMin + 0.3 * (s.zMax - s.elevationMin), outside.yawDeg = 90, outside.pitchDeg = -4, outside.rollDeg = 0;
+    cameras.push_back(outside);
+    return cameras;
+}
 
 // "camera X Y Z yaw Y pitch P roll R" for a failure message.
 inline std::string cameraText(const render::Camera& c) {
