@@ -41,8 +41,9 @@ bool parseOptions(int argc, char** argv, InfluenceArgs& a) {
                       "lattices (spacing finest cell * 2^t) in 16 x 16 tiles kept where cells are as fine as the\n"
                       "spacing, each tile with its measured error against the next coarser level. The lists take\n"
                       "about 220 bytes per cell; the pyramid about 4-20 per channel and needs no lists: for grids whose\n"
-                      "lists do not fit in memory (100 M cells), use --no-lists. Under `mpirun -np N` the ranks share the\n"
-                      "nodes of the grid, each reading its nodes and their halo, and write the same bytes as one process,\n"
+                      "lists do not fit in memory (100 M cells), use --no-lists: the grid is then read a node (at most\n"
+                      "4 M cells and their halo) at a time, never whole. Under `mpirun -np N` the ranks share the nodes\n"
+                      "of the grid, each reading its nodes and their halo, and write the same bytes as one process,\n"
                       "each its lists and tiles into the files rank 1 opens: they must lie on a file system every rank\n"
                       "sees (README, \"Preprocessing on several processes\").");
     p.positional("GRID.hcg", "grid file (hc-ingest)", a.gridPath);
@@ -158,7 +159,7 @@ void printHeader(const InfluenceArgs& a, uint64_t cells) {
     std::printf("  cells        %llu\n", (unsigned long long)cells);
 }
 
-// One process: the grid read whole, every list and tile built here.
+// One process building lists: the grid read whole, every list and tile built here.
 void runAlone(const InfluenceArgs& a) {
     namespace inf = hc::influence;
     hc::Grid grid = hc::readGrid(a.gridPath, nullptr, a.step < 0 ? 0 : size_t(a.step));
@@ -187,10 +188,10 @@ void runAlone(const InfluenceArgs& a) {
     }
 }
 
-// The ranks of mpirun (on_ranks.h): no rank reads the grid whole; each builds its nodes from regions of the file and
-// writes its lists and pyramid tiles at their place in the files rank 0 opens. Every collective step runs in
-// ranks::together, so a failure anywhere stops every rank there.
-void runDistributed(const InfluenceArgs& a) {
+// The ranks of mpirun (on_ranks.h), or one process without lists: no rank reads the grid whole; each builds its nodes
+// from regions of the file and writes its lists and pyramid tiles at their place in the files rank 0 opens. Every
+// collective step runs in ranks::together, so a failure anywhere stops every rank there.
+void runByNodes(const InfluenceArgs& a) {
     namespace inf = hc::influence;
     namespace ranks = hc::ranks;
     const bool root = ranks::rank() == 0, progress = !a.quiet && root;
@@ -202,9 +203,13 @@ void runDistributed(const InfluenceArgs& a) {
     uint64_t myNodes = 0, myCells = 0;
     for (size_t j = 0; j < part.keys.size(); ++j)
         if (part.rank[j] == ranks::rank()) ++myNodes, myCells += part.cells[j];
-    std::printf("  ranks        %d (mpirun): %zu nodes of %g m holding cells, shared out in Morton order by cell count; each rank reads\n"
-                "               its nodes' cells and their halo, and writes its lists and tiles into the files rank 1 opens\n",
-                ranks::count(), part.keys.size(), file->shape().levelSizeM(part.level));
+    if (ranks::distributed())
+        std::printf("  ranks        %d (mpirun): %zu nodes of %g m holding cells, shared out in Morton order by cell count; each rank reads\n"
+                    "               its nodes' cells and their halo, and writes its lists and tiles into the files rank 1 opens\n",
+                    ranks::count(), part.keys.size(), file->shape().levelSizeM(part.level));
+    else
+        std::printf("  nodes        %zu of %g m holding cells, read one at a time with their halo (the grid is never read whole)\n",
+                    part.keys.size(), file->shape().levelSizeM(part.level));
     hc::Stopwatch clock;
     inf::RankShare listShare, pyramidShare;
     if (a.lists) {
@@ -236,7 +241,7 @@ void runDistributed(const InfluenceArgs& a) {
         line += fmt::format("; {} pyramid tiles in {:.3f} s (at most {} cells read for a step)", pyramidShare.tiles, pyramidShare.seconds,
                             pyramidShare.cellsRead);
     line += fmt::format("; {:.3f} s in all, peak {:.1f} MB resident", all.seconds(), double(hc::peakRssBytes()) / 1e6);
-    ranks::log("hc-influence", line);
+    if (ranks::distributed()) ranks::log("hc-influence", line);
 }
 
 }  // namespace
@@ -247,7 +252,10 @@ int main(int argc, char** argv) {
         bool go = true;
         hc::ranks::together([&] { go = parseOptions(argc, argv, a); });
         if (!go) return 0;
-        if (hc::ranks::distributed()) runDistributed(a);
+        // Without lists nothing needs the grid whole: one process builds the pyramid as one rank would, a node of the
+        // grid at a time, so that its memory follows a node and the pyramid, not the grid (at 105 M cells 0.9 GB
+        // instead of 3.7 GB, in the same time and to the same bytes: BENCHMARKS.md).
+        if (hc::ranks::distributed() || !a.lists) runByNodes(a);
         else runAlone(a);
         std::printf("  memory       peak %.1f MB resident\n", double(hc::peakRssBytes()) / 1e6);
         return 0;

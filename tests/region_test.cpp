@@ -313,6 +313,36 @@ TEST(GridRegionReader, RunsNameEachRegionCellsIndexInTheFile) {
     EXPECT_EQ(k, r.cellCount());
 }
 
+// The file's pages a region touched stay resident until releasePages() drops them (hc-influence --no-lists calls it
+// between nodes: its memory then follows a node, not the file walked so far); a region read afterwards reads them back
+// from the page cache, the same bytes.
+TEST(GridRegionReader, ReleasedPagesLeaveResidentMemoryAndReadBackTheSame) {
+    if (hc::test::dataFile("lidar1m_minnesota_utm15.tif").empty()) GTEST_SKIP() << "no LiDAR raster";
+    const GridOnDisk& d = lidar();
+    const GridRegionReader file(d.path.string());
+    auto residentFileKb = [] {  // this process's resident pages of mapped files, /proc/self/status
+        std::ifstream status("/proc/self/status");
+        for (std::string line; std::getline(status, line);)
+            if (line.rfind("RssFile:", 0) == 0) return std::stol(line.substr(8));
+        return -1L;
+    };
+    double x0, y0, x1, y1;
+    d.grid.boundsLocal(x0, y0, x1, y1);
+    const Grid::Square all{x0, y0, x1, y1};
+    const Grid first = file.region(all);  // every cell: the file's cells and values all touched
+    ASSERT_EQ(first.cellCount(), d.grid.cellCount());
+    const long touched = residentFileKb();
+    file.releasePages();
+    const long released = residentFileKb();
+    ASSERT_GE(touched, 0) << "no RssFile in /proc/self/status";
+    // The cells (8 bytes of code and 4 of each layer's value a cell) leave resident memory, give or take a page.
+    const long cellsKb = long(d.grid.cellCount() * (8 + 4 * d.grid.layerCount()) / 1024);
+    EXPECT_GE(touched - released, cellsKb - 8) << "touched " << touched << " kB, after the release " << released << " kB";
+    const Grid again = file.region(all);
+    EXPECT_EQ(again.codes, first.codes);
+    EXPECT_EQ(again.values, first.values);
+}
+
 // The nodes the ranks of an MPI run share out (on_ranks.h): every cell in exactly one node, no node finer than the
 // coarsest cell, the ranks in Morton runs of about equal cell count (off by at most one node's cells).
 TEST(Ranks, PartitionPutsEveryCellInOneNodeAndBalancesTheRanks) {

@@ -89,6 +89,12 @@ MappedFile::MappedFile(const std::string& path) {
     ::close(fd);
 }
 
+void MappedFile::releasePages() const {
+#ifndef HC_FUZZ_HEAP_FILES
+    if (data_) ::madvise(const_cast<std::byte*>(data_), size_, MADV_DONTNEED);  // advice: nothing to do if refused
+#endif
+}
+
 MappedFile::~MappedFile() {
 #ifdef HC_FUZZ_HEAP_FILES
     if (data_) ::operator delete(const_cast<std::byte*>(data_), std::align_val_t{kFileSectionAlign});

@@ -1145,6 +1145,7 @@ GridRegionReader::~GridRegionReader() = default;
 const std::string& GridRegionReader::path() const { return impl_->file.path(); }
 const GridFileInfo& GridRegionReader::info() const { return impl_->info; }
 uint64_t GridRegionReader::bytesChecked() const { return impl_->file.bytesChecked(); }
+void GridRegionReader::releasePages() const { impl_->file.releasePages(); }
 
 std::optional<Grid::Square> GridRegionReader::cellSquareAt(double xLocal, double yLocal) const {
     const Grid& shape = impl_->info.shape;

@@ -3,6 +3,7 @@
 #include "heightcast/influence/on_ranks.h"
 
 #include <algorithm>
+#include <atomic>
 #include <bit>
 #include <limits>
 #include <memory>
@@ -25,6 +26,31 @@ namespace {
 
 constexpr int kNodesPerRank = 16;   // enough nodes to balance cell counts between ranks
 constexpr int kMaxPartitionDepth = 6;  // at most 4^6 nodes looked at
+constexpr uint64_t kMaxNodeCells = uint64_t{1} << 22;  // a node's cells, read at once: its region's memory
+
+// Keeps the grid file's pages that many small regions touch from piling up in resident memory: they are released
+// (GridRegionReader::releasePages) every 32 regions, and sooner once the regions read since the last release hold about
+// 64 MB of the file (their cells at 8 bytes of code and 4 of each value, and the blocks their reads checksummed, a block
+// whole). A region's binary searches touch pages beyond its cells: at 105 M cells the coarse tiles' 3584 regions read
+// 134 k cells and left 1.1 GB of the file resident without this. Any thread may call after(); a region read meanwhile
+// reads its pages back from the page cache.
+class PageReleaser {
+public:
+    explicit PageReleaser(const GridRegionReader& file) : file_(file), checkedAt_(file.bytesChecked()) {}
+    void after(const Grid& region) {
+        const uint64_t bytes = region.cellCount() * (8 + 4 * uint64_t(std::max<size_t>(1, region.values.size())));
+        const uint64_t touched = touched_.fetch_add(bytes) + bytes;
+        const uint64_t checked = file_.bytesChecked();
+        if (++regions_ % kRegions != 0 && touched + (checked - std::min(checked, checkedAt_.load())) < kBytes) return;  // min: a race
+        touched_ = 0, checkedAt_ = checked;
+        file_.releasePages();
+    }
+
+private:
+    static constexpr uint64_t kBytes = uint64_t{64} << 20, kRegions = 32;
+    const GridRegionReader& file_;
+    std::atomic<uint64_t> touched_{0}, checkedAt_, regions_{0};
+};
 
 Grid::Square nodeSquare(const Grid& shape, uint64_t key, int level) {
     const double x0 = double(mortonX(key)) * shape.finestCellM, y0 = double(mortonY(key)) * shape.finestCellM;
@@ -203,7 +229,10 @@ RankPartition partitionOf(const GridRegionReader& file, int ranks) {
                 p.keys.push_back(k * mortonSpan(level));
                 p.cells.push_back(n);
             }
-        if (p.keys.size() >= size_t(kNodesPerRank) * size_t(ranks) || level <= lowest || root - level >= kMaxPartitionDepth) break;
+        const uint64_t largest = p.cells.empty() ? 0 : *std::max_element(p.cells.begin(), p.cells.end());
+        if ((p.keys.size() >= size_t(kNodesPerRank) * size_t(ranks) && largest <= kMaxNodeCells) || level <= lowest ||
+            root - level >= kMaxPartitionDepth)
+            break;
     }
     const uint64_t total = std::accumulate(p.cells.begin(), p.cells.end(), uint64_t{0});
     uint64_t before = 0;
@@ -383,6 +412,7 @@ SurfacePyramid buildPyramidOnRanks(const GridRegionReader& file, const KernelPar
                 s.tiles += k.size();
             }
             s.nodes += 1, s.cells += r.hi - r.lo, s.cellsRead += r.grid.cellCount();
+            file.releasePages();  // the node's cells were copied out: the file's pages need not stay resident
             bar.advance(1);
         }
         bar.finish();
@@ -434,6 +464,7 @@ SurfacePyramid buildPyramidOnRanks(const GridRegionReader& file, const KernelPar
         s.tiles += ours.size();
         std::vector<uint64_t> readPerWorker(threads, 0);
         std::vector<detail::PyramidWorkspace> scratch(threads);
+        PageReleaser release(file);
         parallelFor(jobs.size(), 1, threads, [&](size_t b, size_t e, unsigned worker) {
             for (size_t q = b; q < e; ++q) {
                 const CoarseTile& c = ours[jobs[q].tile];
@@ -445,6 +476,7 @@ SurfacePyramid buildPyramidOnRanks(const GridRegionReader& file, const KernelPar
                 const Grid::Square box{x0 + bi * h, y0 + bj * h, x0 + (bi1 - 1) * h, y0 + (bj1 - 1) * h};
                 const Grid region = file.region(box, reach);
                 readPerWorker[worker] += region.cellCount();
+                release.after(region);
                 const detail::ListIndex index(region, params);
                 detail::buildTile(region, index, params, c.t, side, c.key, channels, depthLayer, &samples[size_t(c.t)][at[jobs[q].tile]],
                                   scratch[worker], jobs[q].block);

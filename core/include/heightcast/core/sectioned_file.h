@@ -74,6 +74,9 @@ public:
     MappedFile(const MappedFile&) = delete;
     MappedFile& operator=(const MappedFile&) = delete;
     std::span<const std::byte> bytes() const { return {data_, size_}; }
+    // Drops the mapping's pages from this process's resident memory (madvise MADV_DONTNEED): they stay in the page
+    // cache and are read back from it when touched again, the same bytes (the mapping is read-only).
+    void releasePages() const;
 
 private:
     const std::byte* data_ = nullptr;
@@ -110,6 +113,7 @@ public:
     // The offset of section s's table entry (for messages about its fields).
     static uint64_t entryOffset(size_t s) { return kFileHeaderBytes + s * kFileSectionEntryBytes; }
     std::shared_ptr<const MappedFile> mapping() const { return map_; }
+    void releasePages() const { map_->releasePages(); }  // MappedFile::releasePages
     const std::string& path() const { return path_; }
     [[noreturn]] void fail(uint64_t offset, const std::string& what) const;
     [[noreturn]] void failFile(const std::string& what) const;

@@ -244,6 +244,10 @@ public:
     void codesInNode(uint64_t key, int level, std::vector<uint64_t>& out) const;
     // Section bytes whose block checksums have been checked so far.
     uint64_t bytesChecked() const;
+    // Drops the file's pages from this process's resident memory; they stay in the page cache, and a later region
+    // reads them back from it. A builder that walks the grid a region at a time calls it between regions, so that
+    // its memory follows a region, not all of the file it has walked (hc-influence --no-lists: BENCHMARKS.md).
+    void releasePages() const;
 
 private:
     struct Impl;
