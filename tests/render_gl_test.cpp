@@ -943,19 +943,15 @@ TEST(RenderGl, BeamsGiveTheSameHits) {
         Camera tiny = lowOblique(s, 3, 4);  // one tile, and one block of tiles
         tiny.fovYDeg = 5, tiny.pitchDeg = -20;
         cameras.push_back(tiny);
+        auto draw = [&](const Camera& c, const RenderOptions& o) {  // every frame from scratch
+            Timings t;
+            w->gl->forgetCascades();
+            return w->gl->render(c, o, t);
+        };
         for (const Camera& c : cameras) {
             RenderOptions o;
             o.texelsPerSide = 256;
-            o.beamTilePx = 0;
-            Timings t;
-            w->gl->forgetCascades();
-            const Frame ref = w->gl->render(c, o, t);
-            for (int tile : {2, 5, 16}) {
-                o.beamTilePx = tile;
-                w->gl->forgetCascades();
-                const Frame f = w->gl->render(c, o, t);
-                n.add(ref, f, 1e-5, 0.0, "tile " + std::to_string(tile) + ", " + hc::test::cameraText(c));
-            }
+            n.addTiles(draw, c, o, {2, 5, 16}, 1e-5, 0.0);
         }
     }
     std::printf("%s\n", n.summary().c_str());

@@ -529,17 +529,14 @@ TEST(Render, BeamsGiveTheSameHits) {
         const Scene& s = *w->scene;
         const std::vector<Camera> cameras =
             hc::test::beamTestCameras(s, w->grid, 16, rng, [&](std::mt19937_64& r) { return randomCamera(*w, r); });
+        auto draw = [&](const Camera& c, const RenderOptions& o) {
+            Timings t;
+            return renderFrame(s, c, o, t);
+        };
         for (const Camera& c : cameras) {
             RenderOptions o;
             o.texelsPerSide = 256;
-            o.beamTilePx = 0;
-            Timings t;
-            const Frame ref = renderFrame(s, c, o, t);
-            for (int tile : {2, 5, 8, 64}) {
-                o.beamTilePx = tile;
-                const Frame f = renderFrame(s, c, o, t);
-                n.add(ref, f, 1e-9, 1e-6, "tile " + std::to_string(tile) + ", " + hc::test::cameraText(c));
-            }
+            n.addTiles(draw, c, o, {2, 5, 8, 64}, 1e-9, 1e-6);
         }
     }
     std::printf("%s\n", n.summary().c_str());

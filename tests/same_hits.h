@@ -7,6 +7,7 @@
 
 #include <cmath>
 #include <cstddef>
+#include <initializer_list>
 #include <random>
 #include <string>
 #include <vector>
@@ -15,6 +16,12 @@
 #include "heightcast/render/renderer.h"
 
 namespace hc::test {
+
+// "camera X Y Z yaw Y pitch P roll R" for a failure message.
+inline std::string cameraText(const render::Camera& c) {
+    return "camera " + std::to_string(c.xWorld) + " " + std::to_string(c.yWorld) + " " + std::to_string(c.zWorld) + " yaw " +
+           std::to_string(c.yawDeg) + " pitch " + std::to_string(c.pitchDeg) + " roll " + std::to_string(c.rollDeg);
+}
 
 struct SameHits {
     size_t pixels = 0, hits = 0, walls = 0, water = 0;  // of the reference frames
@@ -40,6 +47,19 @@ struct SameHits {
             if (!close && different < 5)
                 ADD_FAILURE() << where << ", pixel " << i << ": distance " << f.distanceM[i] << " against " << ref.distanceM[i] << ", cascade "
                               << f.cascade[i] << " against " << ref.cascade[i];
+        }
+    }
+
+    // Camera c's frames with beams of each tile size in `tiles` against its frame without (beamTilePx 0), as
+    // draw(c, options) makes them (one backend or the other), each compared by add().
+    template <class Draw>
+    void addTiles(Draw&& draw, const render::Camera& c, render::RenderOptions o, std::initializer_list<int> tiles, double relTol,
+                  double absTol) {
+        o.beamTilePx = 0;
+        const render::Frame ref = draw(c, o);
+        for (int tile : tiles) {
+            o.beamTilePx = tile;
+            add(ref, draw(c, o), relTol, absTol, "tile " + std::to_string(tile) + ", " + cameraText(c));
         }
     }
 
@@ -69,12 +89,6 @@ std::vector<render::Camera> beamTestCameras(const render::Scene& s, const Grid& 
     outside.zWorld = s.elevationMin + 0.3 * (s.zMax - s.elevationMin), outside.yawDeg = 90, outside.pitchDeg = -4, outside.rollDeg = 0;
     cameras.push_back(outside);
     return cameras;
-}
-
-// "camera X Y Z yaw Y pitch P roll R" for a failure message.
-inline std::string cameraText(const render::Camera& c) {
-    return "camera " + std::to_string(c.xWorld) + " " + std::to_string(c.yWorld) + " " + std::to_string(c.zWorld) + " yaw " +
-           std::to_string(c.yawDeg) + " pitch " + std::to_string(c.pitchDeg) + " roll " + std::to_string(c.rollDeg);
 }
 
 }  // namespace hc::test
