@@ -39,6 +39,7 @@ struct RenderArgs {
     unsigned flyFrames = 0;       // --fly N: one image per frame of a flight (0: no flight)
     double flyStepM = 10;         // --fly-step M: metres forward per frame
     bool flyFresh = false;        // --fly-fresh: every frame of the flight from scratch (no texels kept)
+    bool flyLastImage = false;    // --fly-last-image: only the last frame's outputs; GL frames before it left on the GPU
     double fps = 4;               // --fps, of the --video
     // The numbered images' first number and count (a sequence or a flight).
     unsigned firstImage() const { return sequence ? firstStep : 0; }
@@ -127,6 +128,9 @@ bool parseOptions(int argc, char** argv, RenderArgs& a) {
              "      (default 0: one image, no flight)", a.flyFrames);
     p.option("--fly-step", "M", "metres the camera moves forward per --fly frame (default 10)", a.flyStepM);
     p.flag("--fly-fresh", "with --fly: evaluate every frame from scratch (no texels kept), to compare", a.flyFresh);
+    p.flag("--fly-last-image", "with --fly: write the last frame's image alone (and its --exr, --timings); the GL backend\n"
+           "      leaves the frames before it on the GPU, unread, back to back as the viewer draws them (for timing: nothing\n"
+           "      is read back or written between frames, during which the GPU would idle and lower its clock)", a.flyLastImage);
     p.option("--video", "OUT.mp4", "with --steps or --fly: also an H.264 video of the images through ffmpeg (Debian package ffmpeg)", a.video);
     p.option("--fps", "F", "frames (steps) per second of the --video (default 4)", a.fps);
     p.exclusive({"--step", "--steps"});
@@ -157,6 +161,8 @@ bool parseOptions(int argc, char** argv, RenderArgs& a) {
     if (!std::isfinite(a.flyStepM) || std::fabs(a.flyStepM) > 1e6)
         throw hc::Error("--fly-step " + fmt::format("{:g}", a.flyStepM) + ": metres per frame, at most 1e6 either way");
     if (a.flyFresh && !a.flyFrames) throw hc::Error("--fly-fresh needs --fly N");
+    if (a.flyLastImage && !a.flyFrames) throw hc::Error("--fly-last-image needs --fly N");
+    if (a.flyLastImage && !a.video.empty()) throw hc::Error("--video needs every frame's image: leave out --fly-last-image");
     if (!a.video.empty() && !a.sequence && !a.flyFrames) throw hc::Error("--video needs --steps A:B or --fly N (one image per frame)");
     if (!(a.fps > 0) || a.fps > 240) throw hc::Error("--fps " + fmt::format("{:g}", a.fps) + ": must be in (0, 240]");
     return true;
@@ -284,8 +290,12 @@ int fly(const RenderArgs& a, const hc::cli::BackendDecision& decision, const hc:
             if (gl) gl->forgetCascades();
             cache.clear();
         }
-        r.frame = gl ? gl->render(camera, a.setup.options, r.timings) : hc::render::renderFrame(scene, camera, a.setup.options, r.timings, &cache);
-        writeOutputs(a, r, k);
+        const bool outputs = !a.flyLastImage || k + 1 == a.flyFrames;
+        if (gl && !outputs)
+            gl->renderToTexture(camera, a.setup.options, r.timings);
+        else
+            r.frame = gl ? gl->render(camera, a.setup.options, r.timings) : hc::render::renderFrame(scene, camera, a.setup.options, r.timings, &cache);
+        if (outputs) writeOutputs(a, r, k);
         uint64_t kept = 0, visible = 0;
         for (const auto& c : r.timings.cascades) kept += c.reusedTexels, visible += c.visibleTexels;
         const double ms = r.timings.totalMs - r.timings.readbackMs;
@@ -299,8 +309,9 @@ int fly(const RenderArgs& a, const hc::cli::BackendDecision& decision, const hc:
     // The frames after the first (which has nothing to keep): their median and slowest.
     std::vector<double> later(renderMs.begin() + 1, renderMs.end());
     std::sort(later.begin(), later.end());
-    std::printf("  frames 1..%u  render median %.2f ms, slowest %.2f ms; frame 0 %.2f ms; total %.3f s with the images\n",
-                a.flyFrames - 1, later[later.size() / 2], later.back(), renderMs[0], total.seconds());
+    std::printf("  frames 1..%u  render median %.2f ms, slowest %.2f ms; frame 0 %.2f ms; total %.3f s with the image%s\n",
+                a.flyFrames - 1, later[later.size() / 2], later.back(), renderMs[0], total.seconds(),
+                a.flyLastImage ? " (the last frame's alone)" : "s");
     if (!a.video.empty()) {
         writeVideo(ffmpeg, a);
         std::printf("  video        %s (%g frames per second)\n", a.video.c_str(), a.fps);
