@@ -183,8 +183,8 @@ void Viewer::schedule(bool force) {
     }
     RenderOptions o = currentOptions();
     if (c.width != camera_.width) {  // a moving frame: coarser cascades too (the approximation's cost is per texel)
-        // A power of two, so that consecutive moving frames share the texture side and the CPU worker's
-        // CascadeCache can keep their texels (it needs the same side and texel size).
+        // A power of two, so that consecutive moving frames share the texture side, and so the texel sizes the CPU
+        // worker's CascadeCache needs to keep their texels.
         const double scale = double(c.width) / camera_.width;
         int side = std::min(128, o.texelsPerSide);
         while (side * 2 <= int(o.texelsPerSide * scale)) side *= 2;

@@ -15,6 +15,7 @@
 #include <span>
 #include <unordered_map>
 
+#include "heightcast/core/error.h"
 #include "heightcast/core/parallel.h"
 #include "heightcast/grid/grid_file.h"
 #include "heightcast/grid/morton.h"
@@ -69,9 +70,10 @@ Todo keptSpan(const Cascade& c, const TexelReuse* reuse, int j, int& f, int& l) 
 
 // Writes every texel of tex: the visible texels of c that were visible in `reuse` (if any) copied, their count
 // added to `copied`; every other one "no surface" (-inf, depth 0) until evaluated. Returns the spans left to
-// evaluate. reuse->tex may be tex itself (renderFrame hands the last frame's storage on, so a moving camera
-// allocates nothing): this frame's row j reads the last frame's row j + dj, so rows are written in the order
-// that reads each of the last frame's rows before overwriting it.
+// evaluate. reuse->tex may be tex itself where the side is the same (renderFrame hands the last frame's storage on, so a
+// moving camera allocates nothing): this frame's row j reads the last frame's row j + dj, so rows are written in the
+// order that reads each of the last frame's rows before overwriting it. A cascade of another side reads storage of
+// its own (rows of reuse->cascade->n texels).
 // With `rows` (RowFill): each row's spans into it, and only the spans left to evaluate written ("no surface"): the
 // texels kept from `reuse` are counted, not copied (the caller keeps them elsewhere), and the others left as they are.
 std::vector<Todo> copyReusedTexels(const Cascade& c, const TexelReuse* reuse, CascadeTextures& tex, uint64_t& copied, unsigned threads,
@@ -108,7 +110,8 @@ std::vector<Todo> copyReusedTexels(const Cascade& c, const TexelReuse* reuse, Ca
         });
         return todo;
     }
-    const bool upwards = reuse && reuse->dj < 0;
+    if (reuse->tex == &tex && reuse->cascade->n != n) throw hc::Error("approximate: a cascade kept in place changed its side (a bug)");
+    const bool upwards = reuse->dj < 0;
     for (int step = 0; step < n; ++step) {
         const int j = upwards ? n - 1 - step : step;
         int f, l;  // the copied texels of row j
@@ -123,7 +126,8 @@ std::vector<Todo> copyReusedTexels(const Cascade& c, const TexelReuse* reuse, Ca
                 std::fill(out, out + n, none);
                 return;
             }
-            std::memmove(out + f, &from[size_t(jp) * size_t(n) + size_t(f + reuse->di)], size_t(l - f + 1) * sizeof(float));  // may overlap
+            const size_t at = size_t(jp) * size_t(reuse->cascade->n) + size_t(f + reuse->di);
+            std::memmove(out + f, &from[at], size_t(l - f + 1) * sizeof(float));  // may overlap (in place)
             std::fill(out, out + f, none);
             std::fill(out + l + 1, out + n, none);
         };

@@ -462,8 +462,9 @@ CascadeCache::Impl* keptFor(CascadeCache::Impl& kept, const Scene& scene, const 
     return &kept;
 }
 
-// The last frame's cascade of the same texel size and side as c, if its lattice is c's (stable fitting), among
-// those not yet taken: its index in kept.entries and the texel offset. Two cascades of a frame may share a texel
+// The last frame's cascade of the same texel size as c, if its lattice is c's (stable fitting), among those not yet
+// taken (its side may differ: a far cascade grows and shrinks by 64 texels as the camera moves, and keeps what it
+// still sees): its index in kept.entries and the texel offset. Two cascades of a frame may share a texel
 // size (a camera high above the terrain): the one placed nearest to c is taken, as the nearer holds more of c's
 // texels (the first one found copied 10 % of a far cascade in render_test's MovingCameraVisitsCellsUnderTheNewTexelsOnly).
 struct Reusable {
@@ -474,7 +475,7 @@ std::optional<Reusable> reusableCascade(const CascadeCache::Impl& kept, const st
     std::optional<Reusable> best;
     for (size_t e = 0; e < kept.entries.size(); ++e) {
         const Cascade& old = kept.entries[e].cascade;
-        if (taken[e] || old.n != c.n || old.texelM != c.texelM) continue;
+        if (taken[e] || old.texelM != c.texelM) continue;
         const double fi = (c.x0 - old.x0) / c.texelM, fj = (c.y0 - old.y0) / c.texelM;
         if (std::abs(fi) > 1e9 || std::abs(fj) > 1e9) continue;
         const double ri = std::round(fi), rj = std::round(fj);
@@ -511,9 +512,11 @@ std::vector<detail::CascadeTextures> approximateCascades(const Scene& scene, con
         // machine, against under 1 ms in a fresh frame (which reuses the heap its predecessor freed): most likely
         // page faults as the heap grew and shrank every frame.
         std::optional<detail::TexelReuse> reuse;
+        // A cascade of another side copies its kept texels from the last frame's storage into new storage.
         if (const std::optional<Reusable> r = kept ? takeReusable(*kept, taken, c, fills ? &(*fills)[k] : nullptr) : std::nullopt) {
-            tex[k] = std::move(kept->entries[r->entry].tex);
-            reuse = detail::TexelReuse{&kept->entries[r->entry].cascade, &tex[k], r->di, r->dj};
+            CascadeCache::Impl::Entry& from = kept->entries[r->entry];
+            if (from.cascade.n == c.n) tex[k] = std::move(from.tex);
+            reuse = detail::TexelReuse{&from.cascade, from.cascade.n == c.n ? &tex[k] : &from.tex, r->di, r->dj};
         }
         CascadeStats cs = detail::statsOf(c);
         Stopwatch clock;

@@ -4,11 +4,13 @@
 // evaluated spans' texels after this pass (detail::planCascades), which leaves them to it. Row by row as copyReusedTexels in
 // render/src/approximate.cpp places them: texel i of row j is the last frame's texel i + di of row j + dj where the row
 // keeps it (keptFirst..keptLast), the next packed texel where the row evaluated it (spans a and b), and "no surface"
-// (-inf, depth 0) elsewhere. So a moving camera uploads only the texels it newly sees, not the cascades. The cascade's
-// textures were cleared to "no surface" before (glClearBufferSubData): a run of texels outside the row's spans writes
-// nothing.
-// An invocation per run of kRun texels of a row: the row's spans are read once, and llvmpipe (one CPU thread a
-// work group) pays its per-invocation cost a sixteenth as often: 43 -> 22-24 ms on Petzenkirchen's cascades (BENCHMARKS.md).
+// (-inf, depth 0) elsewhere. So a moving camera uploads only the texels it newly sees, not the cascades. Every texel
+// of the cascade is written here, "no surface" too (in memory, where approximate.comp sums the spans' texels after
+// this pass, those included), so the textures need no clearing first.
+// A work group covers kRun x 64 texels of a row, an invocation kRun of them 64 apart: the row's spans are read once
+// per invocation (llvmpipe runs a work group on one CPU thread and pays its per-invocation cost a sixteenth as often
+// as with a texel an invocation), and at each step the group's 64 invocations touch 64 neighbouring texels (a GPU's
+// loads and stores coalesce; with the kRun texels of an invocation side by side they were 64 bytes apart).
 #define kRun 16
 layout(local_size_x = 64, local_size_y = 1) in;
 
@@ -27,25 +29,20 @@ uniform uint uLastWater;
 uniform uint uLastDepth;
 uniform int uDi;             // this frame's texel (i, j) is that cascade's (i + uDi, j + uDj)
 uniform int uDj;
+uniform int uLastN;          // that cascade's side [texels]: its rows' length (a far cascade's side changes by 64 texels)
 
 void main() {
-    const int i0 = int(gl_GlobalInvocationID.x) * kRun, j = int(gl_GlobalInvocationID.y);
+    const int i0 = int(gl_WorkGroupID.x) * (kRun * 64) + int(gl_LocalInvocationID.x), j = int(gl_GlobalInvocationID.y);
     const int n = cascades[uCascade].n;
     if (i0 >= n || j >= n) return;
     const int r = (uRowBase + j) * kFillRowInts;
     const int keptFirst = uKept != 0 ? fillRows[r] : 0, keptLast = uKept != 0 ? fillRows[r + 1] : -1;
     const int a0 = fillRows[r + 2], a1 = fillRows[r + 3], b0 = fillRows[r + 4], b1 = fillRows[r + 5];
     const int packedA = fillRows[r + 6], packedB = fillRows[r + 7];
-    // The row's texels with a value: from the first span's start to the last one's end (empty spans end below their start).
-    int first = n, last = -1;
-    if (keptFirst <= keptLast) first = min(first, keptFirst), last = max(last, keptLast);
-    if (uPacked != 0 && a0 <= a1) first = min(first, a0), last = max(last, a1);
-    if (uPacked != 0 && b0 <= b1) first = min(first, b0), last = max(last, b1);
-    if (i0 + kRun <= first || i0 > last) return;
     const uint row = uint(j) * uint(n);
-    const uint lastRow = uint(j + uDj) * uint(n);
+    const uint lastRow = uint(j + uDj) * uint(uLastN);
     const bool water = frame.hasWater != 0;
-    for (int i = i0; i < min(i0 + kRun, n); ++i) {
+    for (int i = i0; i < min(i0 + kRun * 64, n); i += 64) {
         float z = -kInf, w = -kInf, depth = 0.0;
         if (i >= keptFirst && i <= keptLast) {
             const uint at = lastRow + uint(i + uDi);
@@ -54,8 +51,7 @@ void main() {
                 w = lastHeights[uLastWater + at];
                 depth = lastHeights[uLastDepth + at];
             }
-        } else {
-            if (uPacked == 0) continue;
+        } else if (uPacked != 0) {
             int p = -1;
             if (i >= a0 && i <= a1) p = packedA + (i - a0);
             else if (i >= b0 && i <= b1) p = packedB + (i - b0);

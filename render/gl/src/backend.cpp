@@ -511,35 +511,20 @@ struct GlRenderer::Impl {
         timings.uploadBytes = rowBytes + spanBytes;
     }
 
-    // Stage 2 on the GPU: each cascade's textures cleared, then the texels kept from the last frame's and (out of core)
-    // the packed ones placed (assemble.comp); in memory approximate.comp then sums the rest. Then they are this frame's:
+    // Stage 2 on the GPU: each cascade's textures written whole by assemble.comp, the texels kept from the last frame's
+    // and (out of core) the packed ones placed, "no surface" elsewhere; in memory approximate.comp then sums the spans. Then they are this frame's:
     // the next may keep them.
-    void dispatchAssembly(const CascadeFit& fit, const gpu::FrameBlock& block) {
+    void dispatchAssembly(const CascadeFit& fit) {
         lastHeightsBuf.bind(HC_BIND_LAST_HEIGHTS);
         fillRowsBuf.bind(HC_BIND_FILL_ROWS);
         fillTexelsBuf.bind(HC_BIND_FILL_TEXELS);
         glUseProgram(assemble);
         auto uniform = [&](const char* name) { return glGetUniformLocation(assemble, name); };
-        // Every texel "no surface" first (a driver's fill: a memset on llvmpipe), so that assemble.comp writes only the
-        // rows' spans: a third of the texels on the report's scenes.
-        const float noSurface = -std::numeric_limits<float>::infinity(), zero = 0.0f;
-        glBindBuffer(GL_SHADER_STORAGE_BUFFER, heightsBuf.name);
-        for (size_t k = 0; k < fit.cascades.size(); ++k) {
-            if (fit.cascades[k].empty()) continue;
-            const gpu::GpuCascade& c = block.cascades[k];
-            const GLsizeiptr bytes = GLsizeiptr(size_t(c.n) * size_t(c.n) * sizeof(float));
-            glClearBufferSubData(GL_SHADER_STORAGE_BUFFER, GL_R32F, GLintptr(c.terrainOffset) * 4, bytes, GL_RED, GL_FLOAT, &noSurface);
-            if (scene.hasWater()) {
-                glClearBufferSubData(GL_SHADER_STORAGE_BUFFER, GL_R32F, GLintptr(c.waterOffset) * 4, bytes, GL_RED, GL_FLOAT, &noSurface);
-                glClearBufferSubData(GL_SHADER_STORAGE_BUFFER, GL_R32F, GLintptr(c.depthOffset) * 4, bytes, GL_RED, GL_FLOAT, &zero);
-            }
-        }
-        glMemoryBarrier(GL_SHADER_STORAGE_BARRIER_BIT | GL_BUFFER_UPDATE_BARRIER_BIT);
         for (size_t k = 0; k < fit.cascades.size(); ++k) {
             if (fit.cascades[k].empty()) continue;
             const Assembly& a = assembly[k];
             const bool kept = a.from >= 0;
-            if (kept && (size_t(a.from) >= lastCascades.size() || lastCascades[size_t(a.from)].n != fit.cascades[k].n))
+            if (kept && size_t(a.from) >= lastCascades.size())
                 throw Error("the GL backend's cascades kept on the GPU do not match the CPU's (cascade " + std::to_string(k) + "): a bug");
             const gpu::GpuCascade& last = lastCascades[kept ? size_t(a.from) : 0];
             glUniform1i(uniform("uCascade"), int(k));
@@ -552,8 +537,9 @@ struct GlRenderer::Impl {
             glUniform1ui(uniform("uLastDepth"), last.depthOffset);
             glUniform1i(uniform("uDi"), a.di);
             glUniform1i(uniform("uDj"), a.dj);
-            const GLuint runs = GLuint((fit.cascades[k].n + kAssembleRun - 1) / kAssembleRun);  // assemble.comp: kRun texels an invocation
-            glDispatchCompute((runs + kAssembleGroup - 1) / kAssembleGroup, GLuint(fit.cascades[k].n), 1);
+            glUniform1i(uniform("uLastN"), last.n);
+            const GLuint texelsPerGroup = kAssembleRun * kAssembleGroup;  // assemble.comp: kRun texels an invocation, 64 apart
+            glDispatchCompute((GLuint(fit.cascades[k].n) + texelsPerGroup - 1) / texelsPerGroup, GLuint(fit.cascades[k].n), 1);
         }
         glMemoryBarrier(GL_SHADER_STORAGE_BARRIER_BIT);
         lastAssembled = true;
@@ -676,7 +662,7 @@ struct GlRenderer::Impl {
         bindFrame();
         int stamp = 0;
         timeStamp(stamp++, frameClock);
-        dispatchAssembly(fit, block);
+        dispatchAssembly(fit);
         dispatchApproximation(fit, frameClock, stamp);
         std::copy(std::begin(block.cascades), std::end(block.cascades), lastCascades.begin());  // where this frame's textures lie
         lastCascadeCount = fit.cascades.size();
