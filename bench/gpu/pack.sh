@@ -23,6 +23,13 @@ cp "$(command -v gdalinfo)" /usr/bin/time "$kit/stage/"
 # HC_GPU_BEFORE=PATH: another build of hc-render (an earlier commit's) packed as hc-render-before, to time both on
 # the same machine (on_device.sh's fly part alternates them).
 [[ -n ${HC_GPU_BEFORE:-} ]] && cp "$HC_GPU_BEFORE" "$kit/stage/hc-render-before"
+# HC_GPU_AB="LABEL=BINDIR ...": earlier builds' hc-bench and hc-render (those BINDIR has), packed as hc-bench-LABEL and
+# hc-render-LABEL, for on_device.sh's ab part.
+for ab in ${HC_GPU_AB:-}; do
+    label=${ab%%=*} dir=${ab#*=}
+    [[ $label =~ ^[A-Za-z0-9_]+$ && -d $dir ]] || { echo "pack.sh: error: HC_GPU_AB: $ab: expected LABEL=BINDIR" >&2; exit 1; }
+    for t in hc-bench hc-render; do [[ -x $dir/$t ]] && cp "$dir/$t" "$kit/stage/$t-$label"; done
+done
 strip "$kit"/stage/hc-* 2>/dev/null || true
 # The libraries: every one ldd resolves for the tools, but the C and C++ runtimes.
 for f in "$kit"/stage/*; do [[ -f $f ]] && ldd "$f"; done | awk '/=> \// { print $3 }' | sort -u |
