@@ -390,14 +390,49 @@ private:
     std::vector<Level> levels_;
 };
 
+// Out of core: whether the pyramid tile (level t, its lattice: copyPyramidTexels) holding lattice point (gi, gj) lies
+// outside the domain or in a quadtree node that holds no cell at all. The surface is undefined at every texel there (a
+// hole, or outside the data), so there is nothing to copy, interpolate or sum. Counting a node's cells takes two
+// binary searches over the file's codes, next to each other; each tile is asked once. Where one tile covers the
+// domain there is no node to ask, and nothing is said empty.
+class EmptyTiles {
+public:
+    EmptyTiles(const GridRegionReader& file, int t) : file_(file), t_(t) {
+        const int root = file.shape().rootLevel;
+        asks_ = t >= 0 && t + influence::kPyramidTileLog2 <= root;
+        if (asks_) last_ = (uint64_t{1} << (root - t)) - 1;  // the lattice's last index inside the domain
+    }
+    bool asks() const { return asks_; }
+    bool operator()(uint64_t gi, uint64_t gj) {
+        if (!asks_) return false;
+        if (gi > last_ || gj > last_) return true;
+        const uint64_t ti = gi >> influence::kPyramidTileLog2, tj = gj >> influence::kPyramidTileLog2;
+        auto [it, fresh] = empty_.try_emplace(ti << 32 | tj, false);
+        if (fresh) {
+            const int shift = t_ + influence::kPyramidTileLog2;
+            it->second = file_.cellsInNode(mortonEncode(uint32_t(ti << shift), uint32_t(tj << shift)), shift) == 0;
+        }
+        return it->second;
+    }
+
+private:
+    const GridRegionReader& file_;
+    int t_;
+    bool asks_ = false;
+    uint64_t last_ = 0;
+    std::unordered_map<uint64_t, bool> empty_;  // per tile (ti << 32 | tj)
+};
+
 // Copies into tex the texels of `todo` whose centres are samples of a tile the surface pyramid holds at the
 // cascade's level (texelM is that level's spacing and the corner lies on its lattice: cascades.h), applying the
 // water rule of surface.h to the water channels as the kernel path does; with interpolateLevels > 0, texels finer
 // than the levels stored around them are interpolated from a coarser one (PyramidInterpolator). Each span of `todo`
 // shrinks to the texels it could not fill, from the first to the last of them, and `copiedMask` (n^2, zero) marks
 // the filled texels, so that the kernel path skips those left inside a span (a row with holes at both ends keeps its
-// whole span: 23 % of a far cascade's texels at 105 M cells, all of them copies). Returns the texels copied, adds
-// the texels interpolated to work.pyramidInterpolated (the most levels up to work.pyramidInterpolatedUp) and sets
+// whole span: 23 % of a far cascade's texels at 105 M cells, all of them copies). Out of core, texels in a tile whose
+// node holds no cell (EmptyTiles) are marked too, left "no surface": the interpolator would look for coarser samples
+// there in vain (1.4 us a texel: 8.5 ms of a fresh frame at 105 M cells, for 6 k texels over holes). Returns the
+// texels copied, adds the texels interpolated to work.pyramidInterpolated (the most levels up to work.pyramidInterpolatedUp) and sets
 // work.pyramidLevel to the pyramid level used (-1: none fits the cascade).
 uint64_t copyPyramidTexels(const Scene& scene, const Cascade& c, CascadeTextures& tex, double waterMinDepthM, int interpolateLevels, unsigned threads,
                            std::vector<Todo>& todo, std::vector<uint8_t>& copiedMask, ApproximationWork& work) {
@@ -422,6 +457,7 @@ uint64_t copyPyramidTexels(const Scene& scene, const Cascade& c, CascadeTextures
     // Each on its own allocation: side by side in one vector, one worker's writes (out of core, its codes_) would
     // evict the other's reads of the same cache line.
     std::vector<std::unique_ptr<PyramidInterpolator>> interpolators(workers);
+    std::vector<std::unique_ptr<EmptyTiles>> emptyTiles(workers);
     parallelFor(todo.size(), 16, threads, [&](size_t b, size_t e, unsigned worker) {
         std::optional<influence::SurfacePyramid::Cursor> samples, waterSamples;  // neighbouring rows share tiles
         if (t >= 0) samples.emplace(*p, int(t));
@@ -429,6 +465,8 @@ uint64_t copyPyramidTexels(const Scene& scene, const Cascade& c, CascadeTextures
         // One per worker for the whole cascade: the fine cells it looked up serve its later rows.
         std::unique_ptr<PyramidInterpolator>& interpolator = interpolators[worker];
         if (interpolateLevels > 0 && !interpolator) interpolator = std::make_unique<PyramidInterpolator>(scene, *p, wp, int(t), interpolateLevels);
+        std::unique_ptr<EmptyTiles>& empty = emptyTiles[worker];
+        if (scene.outOfCore() && t >= 0 && !empty) empty = std::make_unique<EmptyTiles>(*scene.file(), int(t));
         const size_t plane = samples ? samples->plane() : 0;
         uint64_t nCopied = 0, nInterpolated = 0;  // counted here, added once: per-worker counters share a cache line
         int up = 0;
@@ -484,8 +522,13 @@ uint64_t copyPyramidTexels(const Scene& scene, const Cascade& c, CascadeTextures
                         i = end + 1;
                         continue;
                     }
-                    // Finer than the level stored here: interpolated, or left to the kernels.
+                    // Finer than the level stored here: interpolated, or left to the kernels; nothing where no cell is.
                     const int len = end - i + 1;
+                    if (empty && (*empty)(uint64_t(gi), uint64_t(gj))) {
+                        std::memset(&copiedMask[rowAt + size_t(i)], 1, size_t(len));
+                        i = end + 1;
+                        continue;
+                    }
                     if (interpolator) {
                         values.resize(size_t(len)), filled.resize(size_t(len));
                         interpolator->run(uint64_t(i0 + double(i)), len, uint64_t(gj), values.data(), filled.data());
@@ -774,30 +817,17 @@ constexpr int kOutOfCoreMinBlock = 16;
 
 // Clears `need` at the texels of r whose pyramid tile (level t, its lattice: copyPyramidTexels) is not stored because
 // its quadtree node holds no cell at all: the surface is undefined at every texel there (a hole, or outside the data),
-// so no cell need be read for them. Counting a node's cells takes two binary searches over the file's codes, next to
-// each other; each tile is asked once. Texels outside the domain are cleared too.
+// so no cell need be read for them (EmptyTiles). Texels outside the domain are cleared too.
 void dropEmptyTiles(const GridRegionReader& file, const Cascade& c, int t, const TexelRange& r, std::vector<uint8_t>& need) {
-    const Grid& shape = file.shape();
-    if (t + influence::kPyramidTileLog2 > shape.rootLevel) return;  // one tile covers the domain: no node to ask
-    const uint64_t last = (uint64_t{1} << (shape.rootLevel - t)) - 1;  // the lattice's last index inside the domain
+    EmptyTiles empty(file, t);
+    if (!empty.asks()) return;
     const double i0 = std::round(c.x0 / c.texelM), j0 = std::round(c.y0 / c.texelM);
-    std::unordered_map<uint64_t, bool> empty;  // per tile (ti << 32 | tj)
     for (int j = r.j0; j <= r.j1; ++j)
         for (int i = r.i0; i <= r.i1; ++i) {
             uint8_t& flag = need[size_t(j) * size_t(c.n) + size_t(i)];
             if (!flag) continue;
             const double gi = i0 + i, gj = j0 + j;
-            if (gi < 0 || gj < 0 || gi > double(last) || gj > double(last)) {
-                flag = 0;
-                continue;
-            }
-            const uint64_t ti = uint64_t(gi) >> influence::kPyramidTileLog2, tj = uint64_t(gj) >> influence::kPyramidTileLog2;
-            auto [it, fresh] = empty.try_emplace(ti << 32 | tj, false);
-            if (fresh) {
-                const int shift = t + influence::kPyramidTileLog2;
-                it->second = file.cellsInNode(mortonEncode(uint32_t(ti << shift), uint32_t(tj << shift)), shift) == 0;
-            }
-            if (it->second) flag = 0;
+            if (gi < 0 || gj < 0 || empty(uint64_t(gi), uint64_t(gj))) flag = 0;
         }
 }
 
