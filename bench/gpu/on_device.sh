@@ -9,9 +9,11 @@
 #   report  hc-bench --backend gl on the report's four scenes, in memory and out of core from the pyramid, each with
 #           a fly-through of 20 frames (texels kept against every frame afresh)
 #   beams   the GL walk with and without its beams (--beam-tile 4 and 0): the look-at flight back to back, alternated twice
+#   grid    only the scale part's grid and pyramid (hc-ingest, hc-influence --no-lists), unmeasured, for the ab part
 #   ab      the earlier builds pack.sh packed (HC_GPU_AB) against this one, alternated twice: hc-bench --backend gl in memory
-#           on Petzenkirchen and Wachau with a fly-through, and (after the scale part) the look-at flight back to back (an
-#           hc-render older than b892aa2 has no --fly-last-image and fails that flight, saying so)
+#           on Petzenkirchen and Wachau with a fly-through, and (after the scale or grid part) the look-at flight back to
+#           back, with texels kept and from scratch (an hc-render older than b892aa2 has no --fly-last-image and fails
+#           those flights, saying so)
 set -uo pipefail
 [[ $# -eq 2 ]] || { echo "usage: $0 KIT_DIR OUT_DIR" >&2; exit 2; }
 kit=$(cd "$1" && pwd) out=$2
@@ -93,26 +95,42 @@ if [[ $parts == *,beams,* ]]; then
     } > "$out/beams.txt" 2>&1
     grep -E "^== |frames 1\.\." "$out/beams.txt"
 fi
+if [[ $parts == *,grid,* && ! -r $work/grid.hcg ]]; then
+    # The scale part's grid and pyramid without its measurements (for the ab part alone).
+    mkdir -p "$work"
+    hc-ingest "$raster" -o "$work/grid.hcg" --quiet && hc-influence "$work/grid.hcg" --no-lists -p "$work/grid.hcp" --quiet ||
+        { echo "on_device.sh: grid: building $work/grid.hcg failed" >&2; exit 1; }
+fi
 if [[ $parts == *,ab,* ]]; then
     labels=()
-    for f in "$root"/hc-bench-*; do [[ -x $f ]] && labels+=("${f##*/hc-bench-}"); done
+    for f in "$root"/hc-bench-* "$root"/hc-render-*; do
+        [[ -x $f && $f != */hc-render-before ]] || continue
+        l=${f##*/hc-bench-} && l=${l##*/hc-render-}
+        [[ " ${labels[*]} " == *" $l "* ]] || labels+=("$l")
+    done
     ((${#labels[@]})) || { echo "on_device.sh: ab: no earlier build in the kit (pack.sh's HC_GPU_AB)" >&2; exit 1; }
     labels+=(this)
     name() { [[ $2 == this ]] && echo "$1" || echo "$1-$2"; }
-    for round in 1 2; do
-        for l in "${labels[@]}"; do
-            echo "== $(name hc-bench "$l"), round $round"
-            "$(name hc-bench "$l")" --backend gl --scenarios Petzenkirchen,Wachau --repeat 10 --fly-frames 20 --fly-step 10
-        done
-    done > "$out/ab_bench.txt" 2>&1
-    grep -E "^== |total .*GPU|^(Petzenkirchen|Wachau) +[0-9.]+ +[0-9.]+ +[0-9.]+ +[0-9.]+ +[0-9.]+ +[0-9.]+ +[0-9]+ +[0-9]+$" "$out/ab_bench.txt"
+    if compgen -G "$root/hc-bench-*" > /dev/null; then  # an earlier hc-bench to compare with
+        for round in 1 2; do
+            for l in "${labels[@]}"; do
+                b=$(name hc-bench "$l")
+                [[ -x $root/$b ]] || continue
+                echo "== $b, round $round"
+                $b --backend gl --scenarios Petzenkirchen,Wachau --repeat 10 --fly-frames 20 --fly-step 10
+            done
+        done > "$out/ab_bench.txt" 2>&1
+        grep -E "^== |total .*GPU|^(Petzenkirchen|Wachau) +[0-9.]+ +[0-9.]+ +[0-9.]+ +[0-9.]+ +[0-9.]+ +[0-9.]+ +[0-9]+ +[0-9]+$" "$out/ab_bench.txt"
+    fi
     if [[ -r $work/grid.hcg ]]; then
         for round in 1 2; do
             for l in "${labels[@]}"; do
                 r=$(name hc-render "$l")
                 [[ -x $root/$r ]] || continue
-                echo "== $r, round $round"
+                echo "== $r, texels kept, round $round"
                 $r "$work/grid.hcg" -o "$work/ab.png" --size 1920x1080 --backend gl "${look[@]}" --fly 200 --fly-step 20 --fly-last-image
+                echo "== $r, from scratch, round $round"
+                $r "$work/grid.hcg" -o "$work/ab.png" --size 1920x1080 --backend gl "${look[@]}" --fly 20 --fly-step 20 --fly-last-image --fly-fresh
             done
         done > "$out/ab_fly.txt" 2>&1
         grep -E "^== |frames 1\.\." "$out/ab_fly.txt"
