@@ -390,6 +390,38 @@ private:
     std::vector<Level> levels_;
 };
 
+}  // namespace
+
+int copySamples(const float* s, const float* w, size_t plane, int count, float minDepth, float* h, float* depth, float* water) {
+    // Branch-free over raw pointers, so that it vectorises: a store through the mask's uint8_t may alias anything, and
+    // through the vectors would have every pointer reloaded per texel.
+    int defined = 0;
+    float* __restrict hr = h;
+    if (!w) {
+        for (int k = 0; k < count; ++k) {
+            const bool ok = !std::isnan(s[k]);  // NaN: outside every cell, no surface (as the kernels leave it)
+            hr[k] = ok ? s[k] : hr[k];
+            defined += ok;
+        }
+        return defined;
+    }
+    float* __restrict dr = depth;
+    float* __restrict wr = water;
+    const float* __restrict share = w + plane;
+    const float wetShare = float(influence::kWetShareMin);
+    for (int k = 0; k < count; ++k) {
+        const float z = s[k], level = w[k], d = level - z;
+        const bool ok = !std::isnan(z), wet = ok && !std::isnan(level) && share[k] >= wetShare;
+        hr[k] = ok ? z : hr[k];
+        dr[k] = wet && d > 0 ? d : dr[k];
+        wr[k] = wet && d > minDepth ? level : wr[k];
+        defined += ok;
+    }
+    return defined;
+}
+
+namespace {
+
 // Out of core: whether the pyramid tile (level t, its lattice: copyPyramidTexels) holding lattice point (gi, gj) lies
 // outside the domain or in a quadtree node that holds no cell at all. The surface is undefined at every texel there (a
 // hole, or outside the data), so there is nothing to copy, interpolate or sum. Counting a node's cells takes two
@@ -433,9 +465,12 @@ private:
 // node holds no cell (EmptyTiles) are marked too, left "no surface": the interpolator would look for coarser samples
 // there in vain (1.4 us a texel: 8.5 ms of a fresh frame at 105 M cells, for 6 k texels over holes). Returns the
 // texels copied, adds the texels interpolated to work.pyramidInterpolated (the most levels up to work.pyramidInterpolatedUp) and sets
-// work.pyramidLevel to the pyramid level used (-1: none fits the cascade).
+// work.pyramidLevel to the pyramid level used (-1: none fits the cascade). With `runs`, the copies are listed there
+// (PyramidRun) instead of written, and `written` (a Todo per row, empty) gets each span's interpolated texels, from the
+// first to the last.
 uint64_t copyPyramidTexels(const Scene& scene, const Cascade& c, CascadeTextures& tex, double waterMinDepthM, int interpolateLevels, unsigned threads,
-                           std::vector<Todo>& todo, std::vector<uint8_t>& copiedMask, ApproximationWork& work) {
+                           std::vector<Todo>& todo, std::vector<uint8_t>& copiedMask, ApproximationWork& work, std::vector<PyramidRun>* runs = nullptr,
+                           std::vector<Todo>* written = nullptr) {
     work.pyramidLevel = -1;
     const influence::SurfacePyramid* p = scene.pyramid();
     if (!p) return 0;
@@ -458,6 +493,7 @@ uint64_t copyPyramidTexels(const Scene& scene, const Cascade& c, CascadeTextures
     // evict the other's reads of the same cache line.
     std::vector<std::unique_ptr<PyramidInterpolator>> interpolators(workers);
     std::vector<std::unique_ptr<EmptyTiles>> emptyTiles(workers);
+    std::vector<std::vector<PyramidRun>> workerRuns(runs ? workers : 0);
     parallelFor(todo.size(), 16, threads, [&](size_t b, size_t e, unsigned worker) {
         std::optional<influence::SurfacePyramid::Cursor> samples, waterSamples;  // neighbouring rows share tiles
         if (t >= 0) samples.emplace(*p, int(t));
@@ -471,13 +507,16 @@ uint64_t copyPyramidTexels(const Scene& scene, const Cascade& c, CascadeTextures
         uint64_t nCopied = 0, nInterpolated = 0;  // counted here, added once: per-worker counters share a cache line
         int up = 0;
         const uint64_t sideMask = samples ? samples->side() - 1 : 0;
+        std::vector<PyramidRun> myRuns;  // this call's runs (with `runs`), added to its worker's at the end
         std::vector<PyramidInterpolator::Value> values;  // a run's interpolated texels
         std::vector<uint8_t> filled;
         for (size_t j = b; j < e; ++j) {
-            Todo& span = todo[j];
+            Todo& todoRow = todo[j];
             const double gj = j0 + double(j);
             const size_t rowAt = j * size_t(c.n);
-            for (auto [lo, hi] : {std::pair<int*, int*>{&span.a0, &span.a1}, {&span.b0, &span.b1}}) {
+            for (int span = 0; span < 2; ++span) {
+                int* const lo = span == 0 ? &todoRow.a0 : &todoRow.b0;
+                int* const hi = span == 0 ? &todoRow.a1 : &todoRow.b1;
                 int first = *hi + 1, last = *lo - 1;  // the texels left to the kernels
                 auto leave = [&](int i) { first = std::min(first, i), last = i; };
                 for (int i = *lo; i <= *hi;) {
@@ -491,34 +530,17 @@ uint64_t copyPyramidTexels(const Scene& scene, const Cascade& c, CascadeTextures
                     const float* s = samples ? samples->find(uint64_t(gi), uint64_t(gj)) : nullptr;
                     if (s) {  // copies: the tile's samples side by side, with the water rule of surface.h
                         const float* w = wp ? waterSamples->find(uint64_t(gi), uint64_t(gj)) : channels == 3 ? s + plane : nullptr;
-                        // Branch-free over raw pointers, so that it vectorises: a store through the mask's uint8_t may
-                        // alias anything, and through the vectors would have every pointer reloaded per texel.
                         const int len = end - i + 1;
                         const size_t at = rowAt + size_t(i);
                         std::memset(&copiedMask[at], 1, size_t(len));
-                        float* __restrict h = &tex.terrain.h[at];
-                        int defined = 0;
-                        if (!w) {
-                            for (int k = 0; k < len; ++k) {
-                                const bool ok = !std::isnan(s[k]);  // NaN: outside every cell, no surface (as the kernels leave it)
-                                h[k] = ok ? s[k] : h[k];
-                                defined += ok;
-                            }
+                        if (runs) {  // left to the caller: counted only
+                            const int sample = int(((uint64_t(gj) & sideMask) << std::countr_zero(samples->side())) | (uint64_t(gi) & sideMask));
+                            myRuns.push_back({int(j), i, len, sample, span, int(plane), s - sample, w ? w - sample : nullptr});
+                            for (int k = 0; k < len; ++k) nCopied += !std::isnan(s[k]);
                         } else {
-                            float* __restrict depth = &tex.depth[at];
-                            float* __restrict water = &tex.water.h[at];
-                            const float* __restrict share = w + plane;
-                            const float wetShare = float(influence::kWetShareMin);
-                            for (int k = 0; k < len; ++k) {
-                                const float z = s[k], level = w[k], d = level - z;
-                                const bool ok = !std::isnan(z), wet = ok && !std::isnan(level) && share[k] >= wetShare;
-                                h[k] = ok ? z : h[k];
-                                depth[k] = wet && d > 0 ? d : depth[k];
-                                water[k] = wet && d > minDepth ? level : water[k];
-                                defined += ok;
-                            }
+                            nCopied += uint64_t(copySamples(s, w, plane, len, minDepth, &tex.terrain.h[at], w ? &tex.depth[at] : nullptr,
+                                                            w ? &tex.water.h[at] : nullptr));
                         }
-                        nCopied += uint64_t(defined);
                         i = end + 1;
                         continue;
                     }
@@ -541,6 +563,12 @@ uint64_t copyPyramidTexels(const Scene& scene, const Cascade& c, CascadeTextures
                         const PyramidInterpolator::Value& v = values[size_t(k)];
                         const size_t at = rowAt + size_t(i);
                         copiedMask[at] = 1;
+                        if (written) {
+                            int& from = span == 0 ? (*written)[j].a0 : (*written)[j].b0;
+                            int& to = span == 0 ? (*written)[j].a1 : (*written)[j].b1;
+                            if (to < from) from = i;
+                            to = i;
+                        }
                         tex.terrain.h[at] = v.z;
                         ++nInterpolated;
                         up = std::max(up, v.up);
@@ -554,7 +582,10 @@ uint64_t copyPyramidTexels(const Scene& scene, const Cascade& c, CascadeTextures
             }
         }
         copied[worker] += nCopied, interpolated[worker] += nInterpolated, mostUp[worker] = std::max(mostUp[worker], up);
+        if (runs) workerRuns[worker].insert(workerRuns[worker].end(), myRuns.begin(), myRuns.end());
     });
+    if (runs)
+        for (const std::vector<PyramidRun>& r : workerRuns) runs->insert(runs->end(), r.begin(), r.end());
     uint64_t total = 0;
     for (unsigned k = 0; k < workers; ++k)
         total += copied[k], work.pyramidInterpolated += interpolated[k], work.pyramidInterpolatedUp = std::max(work.pyramidInterpolatedUp, mostUp[k]);
@@ -892,7 +923,7 @@ std::vector<RowFill> rowFills(const Cascade& c, const TexelReuse* reuse, uint64_
 }
 
 ApproximationWork approximate(const Scene& scene, const Cascade& c, CascadeTextures& tex, double waterMinDepthM, unsigned threads,
-                              const TexelReuse* reuse, int interpolateLevels, std::vector<RowFill>* rows) {
+                              const TexelReuse* reuse, int interpolateLevels, std::vector<RowFill>* rows, std::vector<PyramidRun>* runs) {
     const int n = c.n;
     tex.hasWater = scene.hasWater();
     tex.terrain.n = tex.water.n = n;
@@ -906,7 +937,20 @@ ApproximationWork approximate(const Scene& scene, const Cascade& c, CascadeTextu
     std::vector<Todo> todo = copyReusedTexels(c, reuse, tex, work.reusedTexels, threads, rows);
     // The texels left to evaluate: `need` (n^2) marks them, the spans of `todo` hold them (and copies between them).
     std::vector<uint8_t> copied(size_t(n) * size_t(n), 0), need(size_t(n) * size_t(n), 0);
-    work.pyramidTexels = copyPyramidTexels(scene, c, tex, waterMinDepthM, interpolateLevels, threads, todo, copied, work);
+    if (runs && !rows) throw Error("approximate: pyramid runs without row spans (a bug)");
+    std::vector<Todo> written(runs ? size_t(n) : 0);  // with `runs`: the texels interpolated, per row and span
+    work.pyramidTexels = copyPyramidTexels(scene, c, tex, waterMinDepthM, interpolateLevels, threads, todo, copied, work, runs, runs ? &written : nullptr);
+    if (runs) {  // each span: from the first texel written to the last (interpolated, or left to the kernels)
+        for (size_t j = 0; j < size_t(n); ++j) {
+            RowFill& r = (*rows)[j];
+            auto hull = [](int lo1, int hi1, int lo2, int hi2, int& lo, int& hi) {
+                lo = hi1 < lo1 ? lo2 : hi2 < lo2 ? lo1 : std::min(lo1, lo2);
+                hi = hi1 < lo1 ? hi2 : hi2 < lo2 ? hi1 : std::max(hi1, hi2);
+            };
+            hull(written[j].a0, written[j].a1, todo[j].a0, todo[j].a1, r.a0, r.a1);
+            hull(written[j].b0, written[j].b1, todo[j].b0, todo[j].b1, r.b0, r.b1);
+        }
+    }
     int i0 = n, i1 = -1, j0 = n, j1 = -1;
     uint64_t todoTexels = 0;
     for (int j = 0; j < n; ++j) {

@@ -498,10 +498,11 @@ std::optional<Reusable> takeReusable(const CascadeCache::Impl& kept, std::vector
 
 // Stages 2 and 3: each cascade's textures (copying what `kept` holds of the last frame) and max mipmaps, with
 // their statistics in timings.cascades. With `fills` (detail::approximateOnCpu), what `kept` holds is not copied: each
-// cascade's spans and the last frame's cascade they keep go there.
+// cascade's spans and the last frame's cascade they keep go there (and with pyramidRuns the runs left to copy from the
+// pyramid).
 std::vector<detail::CascadeTextures> approximateCascades(const Scene& scene, const CascadeFit& fit, const RenderOptions& options,
                                                          CascadeCache::Impl* kept, Timings& timings, bool mipmaps = true,
-                                                         std::vector<detail::CascadeFill>* fills = nullptr) {
+                                                         std::vector<detail::CascadeFill>* fills = nullptr, bool pyramidRuns = false) {
     std::vector<detail::CascadeTextures> tex(fit.cascades.size());
     if (fills) fills->assign(fit.cascades.size(), detail::CascadeFill{});
     std::vector<bool> taken(kept ? kept->entries.size() : 0, false);
@@ -521,8 +522,9 @@ std::vector<detail::CascadeTextures> approximateCascades(const Scene& scene, con
         CascadeStats cs = detail::statsOf(c);
         Stopwatch clock;
         if (!c.empty()) {
-            const detail::ApproximationWork work = detail::approximate(scene, c, tex[k], options.waterMinDepthM, options.threads, reuse ? &*reuse : nullptr,
-                                                                            options.pyramidInterpolateLevels, fills ? &(*fills)[k].rows : nullptr);
+            const detail::ApproximationWork work =
+                detail::approximate(scene, c, tex[k], options.waterMinDepthM, options.threads, reuse ? &*reuse : nullptr, options.pyramidInterpolateLevels,
+                                    fills ? &(*fills)[k].rows : nullptr, fills && pyramidRuns ? &(*fills)[k].runs : nullptr);
             cs.gaussians = work.gaussians, cs.cellsVisited = work.cellsVisited, cs.reusedTexels = work.reusedTexels;
             cs.cellsRead = work.cellsRead, cs.regionsRead = work.regionsRead;
             cs.pyramidTexels = work.pyramidTexels, cs.pyramidLevel = work.pyramidLevel;
@@ -720,10 +722,10 @@ struct detail::CacheAccess {
 };
 
 void detail::approximateOnCpu(const Scene& scene, const CascadeFit& fit, const RenderOptions& options, CascadeCache& cache, Timings& timings,
-                              const std::function<void(size_t, const CascadeTextures&, const CascadeFill&)>& use) {
+                              const std::function<void(size_t, CascadeTextures&, CascadeFill&)>& use, bool pyramidRuns) {
     CascadeCache::Impl* kept = keptFor(CacheAccess::of(cache), scene, options);
     std::vector<CascadeFill> fills;
-    std::vector<CascadeTextures> tex = approximateCascades(scene, fit, options, kept, timings, false, &fills);
+    std::vector<CascadeTextures> tex = approximateCascades(scene, fit, options, kept, timings, false, &fills, pyramidRuns);
     for (size_t k = 0; k < fit.cascades.size(); ++k)
         if (!fit.cascades[k].empty()) use(k, tex[k], fills[k]);
     keepCascades(*kept, scene, options, fit, tex);  // their storage, for the next frame's spans
@@ -793,6 +795,8 @@ std::string Timings::toJson() const {
     j["readback_ms"] = threeDecimals(readbackMs);
     j["upload_ms"] = threeDecimals(uploadMs);
     j["upload_bytes"] = uploadBytes;
+    j["atlas_texels"] = atlasTexels;
+    j["atlas_tiles_uploaded"] = atlasTilesUploaded;
     j["rays"] = rays;
     j["hits"] = hits;
     j["cascades"] = Json::array();
@@ -863,6 +867,11 @@ std::string Timings::toTable() const {
     }
     if (uploadMs > 0) {
         std::snprintf(b, sizeof b, "    upload        %9.2f   the rows and new texels, to the GPU: %.2f MB\n", uploadMs, double(uploadBytes) / 1e6);
+        s += b;
+    }
+    if (atlasTexels > 0) {
+        std::snprintf(b, sizeof b, "    pyramid tiles           %llu texels copied on the GPU from its tiles there (%llu tiles uploaded)\n",
+                      (unsigned long long)atlasTexels, (unsigned long long)atlasTilesUploaded);
         s += b;
     }
     return s;

@@ -68,6 +68,24 @@ struct RowFill {
     int a0 = 0, a1 = -1, b0 = 0, b1 = -1;
 };
 
+// A run of texels of one row that approximate() with `runs` leaves to the caller to copy from the surface pyramid (the
+// GL backend out of core copies them on the GPU, from its atlas of pyramid tiles): texels i .. i + count - 1 of row j
+// are the samples at .. at + count - 1 of `tile` (its first sample; channel c at [c * plane], plane = the tile's side
+// squared) under the water rule of surface.h, as copySamples() copies them. `water`: where the run's water levels and
+// wet shares are, at [at] and [at + plane] (the tile's own channels 1 and 2, or the water pyramid's tile at the same
+// place in a later step of a scenario), nullptr where the texels are dry. `span`: 0 or 1, the RowFill span (a or b)
+// the run lies in.
+struct PyramidRun {
+    int j = 0, i = 0, count = 0, at = 0, span = 0, plane = 0;
+    const float* tile = nullptr;
+    const float* water = nullptr;
+};
+
+// Copies `count` pyramid samples into a row of a cascade's textures with the water rule of surface.h: s the elevations,
+// w (nullptr: dry) the water levels with the wet shares at w + plane; NaN elevations (outside every cell) and dry
+// texels leave h, depth and water as they are. Returns the texels with a surface.
+int copySamples(const float* s, const float* w, size_t plane, int count, float minDepth, float* h, float* depth, float* water);
+
 // The RowFill of every row of c with the texels kept from `reuse` (none without), adding their count to `kept`: what
 // approximate() with `rows` gives, without evaluating anything (the GL backend in memory sums the texels on the GPU).
 std::vector<RowFill> rowFills(const Cascade& c, const TexelReuse* reuse, uint64_t& kept);
@@ -76,9 +94,13 @@ std::vector<RowFill> rowFills(const Cascade& c, const TexelReuse* reuse, uint64_
 // visible there too are copied; with a scene pyramid at the cascade's texel size, texels whose samples it holds
 // are copied from it; the others are evaluated. The cells visited follow the texels evaluated (a few per texel),
 // not the cascade's area. With `rows`, the kept texels are not copied and the texels outside every span are not
-// written: only the evaluated spans, which go into `rows` with the kept ones (RowFill).
+// written: only the evaluated spans, which go into `rows` with the kept ones (RowFill). With `rows` and `runs` too, the
+// texels copied from the pyramid are not written either but listed in `runs` (PyramidRun), and each RowFill span
+// shrinks to the texels written (interpolated or summed), from the first to the last of them: the caller copies the
+// runs itself, after the spans.
 ApproximationWork approximate(const Scene& scene, const Cascade& c, CascadeTextures& tex, double waterMinDepthM, unsigned threads,
-                              const TexelReuse* reuse = nullptr, int interpolateLevels = 0, std::vector<RowFill>* rows = nullptr);
+                              const TexelReuse* reuse = nullptr, int interpolateLevels = 0, std::vector<RowFill>* rows = nullptr,
+                              std::vector<PyramidRun>* runs = nullptr);
 
 // One ray through the cascades (raycast.cpp).
 struct Hit {
@@ -141,6 +163,7 @@ Hit castRay(const RayContext& ctx, const glm::dvec3& dir, Beam* beam = nullptr, 
 // What approximateOnCpu() filled of a cascade, for a backend that keeps the last frame's texels itself.
 struct CascadeFill {
     std::vector<RowFill> rows;  // per texel row: the texels kept and the spans evaluated
+    std::vector<PyramidRun> runs;  // with approximateOnCpu's pyramidRuns: the texels left to copy from the pyramid
     int from = -1;              // the last frame's cascade (its index in that frame's fit) whose texels are kept, -1: none
     int di = 0, dj = 0;         // this frame's texel (i, j) is that one's (i + di, j + dj)
 };
@@ -151,10 +174,12 @@ struct CascadeFill {
 // them (from the pyramid and the grid file), without max mipmaps, their statistics appended to timings.cascades and
 // their time to timings.approximationMs. Then use(k, textures, fill) for each non-empty cascade: only the texels of
 // fill's evaluated spans are defined in `textures`; the kept ones are the backend's to copy from its last frame (the
-// one this cache saw), those outside every span have no surface. The cache holds the cascades' shapes for the next
-// frame, not their texels: it must not be handed to renderFrame().
+// one this cache saw), those outside every span have no surface. With `pyramidRuns`, the texels copied from the
+// pyramid are left to the backend too (CascadeFill::runs; approximate() with `runs`), and `use` may write into the
+// textures (the runs it copies there itself). The cache holds the cascades' shapes for the next frame, not their
+// texels: it must not be handed to renderFrame().
 void approximateOnCpu(const Scene& scene, const CascadeFit& fit, const RenderOptions& options, CascadeCache& cache, Timings& timings,
-                      const std::function<void(size_t, const CascadeTextures&, const CascadeFill&)>& use);
+                      const std::function<void(size_t, CascadeTextures&, CascadeFill&)>& use, bool pyramidRuns = false);
 // The same plan without evaluating a texel, for a backend that evaluates them itself (the GL backend in memory): each
 // cascade's rows and the last frame's cascade it keeps texels of (CascadeFill), their count in timings.cascades[k]
 // (which must hold the frame's cascades) as reusedTexels. The cache holds the cascades' shapes for the next frame.

@@ -26,6 +26,8 @@
 #include <cstdio>
 #include <cstring>
 #include <limits>
+#include <unordered_map>
+#include <vector>
 
 #include "textures.h"
 #include "context.h"
@@ -34,6 +36,7 @@
 #include "heightcast/core/error.h"
 #include "heightcast/core/parallel.h"
 #include "heightcast/core/timer.h"
+#include "heightcast/influence/surface.h"
 #include "heightcast/render/gl/gl_renderer.h"
 #include "heightcast/render/gpu_layout.h"
 
@@ -53,6 +56,9 @@ namespace {
 
 // GlRenderer::limitIndexChunksForTest: the most entries one chunk of the lists may hold.
 uint64_t gIndexChunkLimitForTest = uint64_t{1} << 31;
+// GlRenderer::limitAtlasForTest: the most pyramid tiles an atlas may hold (0: as many as its storage allows), for the
+// renderers made after it.
+uint32_t gAtlasTileLimitForTest = 0;
 
 // A buffer that grows (never shrinks) to the size a frame needs.
 struct Buffer {
@@ -78,6 +84,75 @@ struct Buffer {
     }
 };
 
+// Pyramid tiles resident on the GPU from frame to frame (DESIGN.md section 10: the atlas), in slots of `planes` channels
+// of gpu::kAtlasPlane floats: out of core the texels a frame copies from the pyramid are copied there (atlas.comp)
+// instead of on the CPU, and only tiles not yet resident go up. A tile is known by its first sample's address in the
+// pyramid (a mapped file, or the water pyramid's). Slots are taken in turn, skipping those this frame uses; the one
+// taken last is the first dropped (a clock without reference bits, as the frames' tiles come and go together).
+struct TileAtlas {
+    static constexpr uint32_t kNone = ~uint32_t{0};
+    Buffer buffer;
+    size_t planes = 1;
+    uint32_t capacity = 0;  // slots
+    uint32_t limit = 0;     // at most this many (GlRenderer::limitAtlasForTest), 0: as many as fit
+    std::unordered_map<const float*, uint32_t> slotOf;
+    std::vector<const float*> tileIn;  // per slot (nullptr: free)
+    std::vector<uint64_t> usedIn;      // per slot: the frame that used it last
+    uint32_t hand = 0, usedNow = 0;
+    uint64_t frame = 0;
+    std::vector<float> staging;        // this frame's new tiles, in the order of stagedSlots
+    std::vector<uint32_t> stagedSlots;
+
+    // Sized once, at the first frame that copies from it: `bytes` of storage (the buffer is never grown: that would
+    // lose the tiles in it).
+    void open(size_t bytes, size_t channelPlanes) {
+        if (capacity) return;
+        planes = channelPlanes;
+        const size_t slotBytes = planes * size_t(gpu::kAtlasPlane) * sizeof(float);
+        capacity = uint32_t(std::min<size_t>(bytes / slotBytes, size_t{1} << 24));
+        if (limit) capacity = std::min(capacity, limit);
+        buffer.reserve(size_t(capacity) * slotBytes);
+        tileIn.assign(capacity, nullptr), usedIn.assign(capacity, 0);
+    }
+    void beginFrame() { ++frame, usedNow = 0, staging.clear(), stagedSlots.clear(); }
+    // The slot holding `tile` (its planes of `plane` floats each, `plane` apart) this frame, staged for upload if it was
+    // not resident; kNone when this frame already uses every slot.
+    uint32_t slot(const float* tile, size_t plane) {
+        if (const auto it = slotOf.find(tile); it != slotOf.end()) {
+            if (usedIn[it->second] != frame) usedIn[it->second] = frame, ++usedNow;
+            return it->second;
+        }
+        if (usedNow >= capacity) return kNone;
+        while (usedIn[hand] == frame && tileIn[hand]) hand = (hand + 1) % capacity;
+        const uint32_t s = hand;
+        hand = (hand + 1) % capacity;
+        if (tileIn[s]) slotOf.erase(tileIn[s]);
+        tileIn[s] = tile, usedIn[s] = frame, ++usedNow;
+        slotOf.emplace(tile, s);
+        const size_t at = staging.size();
+        staging.resize(at + planes * size_t(gpu::kAtlasPlane), 0.0f);
+        for (size_t c = 0; c < planes; ++c) std::copy_n(tile + c * plane, plane, &staging[at + c * size_t(gpu::kAtlasPlane)]);
+        stagedSlots.push_back(s);
+        return s;
+    }
+    // The staged tiles into their slots: one upload per run of consecutive slots. Returns the bytes.
+    size_t upload() {
+        const size_t slotFloats = planes * size_t(gpu::kAtlasPlane);
+        for (size_t a = 0; a < stagedSlots.size();) {
+            size_t b = a + 1;
+            while (b < stagedSlots.size() && stagedSlots[b] == stagedSlots[b - 1] + 1) ++b;
+            buffer.upload(&staging[a * slotFloats], (b - a) * slotFloats * sizeof(float), size_t(stagedSlots[a]) * slotFloats * sizeof(float));
+            a = b;
+        }
+        return staging.size() * sizeof(float);
+    }
+    void release() {
+        buffer.release();
+        capacity = 0, hand = 0, usedNow = 0;
+        slotOf.clear(), tileIn.clear(), usedIn.clear();
+    }
+};
+
 void copyFloats(float* dst, const glm::dvec3& v) {
     for (int i = 0; i < 3; ++i) dst[i] = float(v[i]);
 }
@@ -87,7 +162,7 @@ void copyFloats(float* dst, const glm::dvec3& v) {
 struct GlRenderer::Impl {
     const Scene& scene;
     std::unique_ptr<gl::HeadlessContext> headless;  // null when rendering into the caller's context
-    GLuint approximate = 0, assemble = 0, beams = 0, mipmap = 0, raycast = 0, shade = 0;
+    GLuint approximate = 0, assemble = 0, atlas = 0, beams = 0, mipmap = 0, raycast = 0, shade = 0;
     Buffer frameBuf, cellsBuf, keysBuf, visibleBuf, heightsBuf, pixelsBuf, countersBuf;
     Buffer beamsBuf;        // beams.comp's start depths, beamSlots of them this frame (0: no beams)
     size_t beamSlots = 0, outerBeamSlots = 0;
@@ -129,17 +204,25 @@ struct GlRenderer::Impl {
     // What goes into fillRowsBuf and fillTexelsBuf (terrain, water, depth), kept from frame to frame (no new pages).
     std::vector<int32_t> fillRows;
     std::array<std::vector<float>, 3> fillTexels;
+    // Out of core with a pyramid: its tiles on the GPU (elevations; water levels and wet shares), and this frame's runs
+    // of texels to copy from them (atlas.comp), 4 uints a run.
+    TileAtlas terrainAtlas, waterAtlas;
+    Buffer atlasRunsBuf;
+    std::vector<uint32_t> atlasRuns;
+    uint64_t atlasTexels = 0;  // this frame's
 
     Impl(const Scene& s, std::unique_ptr<gl::HeadlessContext> context) : scene(s), headless(std::move(context)), cpuCascades(s.outOfCore()) {
         gl::requireGl43("the GL backend");
         device = gl::currentDeviceName();
         software = isSoftwareRenderer(device);
         glGetInteger64v(GL_MAX_SHADER_STORAGE_BLOCK_SIZE, &maxStorageBlock);
+        terrainAtlas.limit = waterAtlas.limit = gAtlasTileLimitForTest;
         if (maxStorageBlock <= 0) maxStorageBlock = GLint64{1} << 24;  // OpenGL 4.3's minimum
         glGenQueries(kStamps, stamps.data());
         try {
             approximate = gl::compileEmbedded("approximate");
             assemble = gl::compileEmbedded("assemble");
+            atlas = gl::compileEmbedded("atlas");
             beams = gl::compileEmbedded("beams");
             mipmap = gl::compileEmbedded("mipmap");
             raycast = gl::compileEmbedded("raycast");
@@ -157,12 +240,13 @@ struct GlRenderer::Impl {
     }
 
     void release() {
-        for (GLuint p : {approximate, assemble, beams, mipmap, raycast, shade})
+        for (GLuint p : {approximate, assemble, atlas, beams, mipmap, raycast, shade})
             if (p) glDeleteProgram(p);
-        approximate = assemble = beams = mipmap = raycast = shade = 0;
+        approximate = assemble = atlas = beams = mipmap = raycast = shade = 0;
         for (Buffer* b : {&frameBuf, &cellsBuf, &keysBuf, &visibleBuf, &heightsBuf, &pixelsBuf, &countersBuf, &readbackBuf, &lastHeightsBuf,
-                          &fillRowsBuf, &fillTexelsBuf, &beamsBuf})
+                          &fillRowsBuf, &fillTexelsBuf, &beamsBuf, &atlasRunsBuf})
             b->release();
+        terrainAtlas.release(), waterAtlas.release();
         for (Buffer& b : indexBufs) b.release();
         if (colorTex) glDeleteTextures(1, &colorTex);
         colorTex = 0;
@@ -182,10 +266,10 @@ struct GlRenderer::Impl {
     void uploadScene() {
         GLint bindings = 0;
         glGetIntegerv(GL_MAX_SHADER_STORAGE_BUFFER_BINDINGS, &bindings);
-        if (bindings <= HC_BIND_BEAMS)
-            throw Error("the GL backend needs " + std::to_string(HC_BIND_BEAMS + 1) + " shader storage buffer bindings; " + device + " has " +
+        if (bindings <= HC_BIND_LAST)
+            throw Error("the GL backend needs " + std::to_string(HC_BIND_LAST + 1) + " shader storage buffer bindings; " + device + " has " +
                         std::to_string(bindings) + ": use --backend cpu");
-        for (Buffer* b : {&lastHeightsBuf, &fillRowsBuf, &fillTexelsBuf, &beamsBuf}) b->reserve(16);
+        for (Buffer* b : {&lastHeightsBuf, &fillRowsBuf, &fillTexelsBuf, &beamsBuf, &atlasRunsBuf, &terrainAtlas.buffer, &waterAtlas.buffer}) b->reserve(16);
         frameBuf.reserve(sizeof(gpu::FrameBlock));
         countersBuf.reserve(sizeof(uint32_t) * gpu::kCounterSlots * (gpu::kMaxCascades + 1));
         if (cpuCascades) {
@@ -446,8 +530,20 @@ struct GlRenderer::Impl {
         assembly = {};
         Timings cpu;
         double packMs = 0;
-        detail::approximateOnCpu(scene, fit, options, cascadeCache, cpu, [&](size_t k, const detail::CascadeTextures& tex, const detail::CascadeFill& fill) {
+        // With a pyramid the texels it holds are copied on the GPU, from its tiles resident there (the atlas); only the
+        // tiles not yet there go up, with the runs to copy (16 bytes a run of up to 16 texels).
+        const bool useAtlas = scene.pyramid() != nullptr;
+        atlasRuns.clear(), atlasTexels = 0;
+        if (useAtlas) {
+            const size_t atlasBytes = std::min<size_t>(size_t(maxStorageBlock), size_t(96) << 20);
+            terrainAtlas.open(atlasBytes, 1);
+            if (water) waterAtlas.open(atlasBytes, 2);
+            terrainAtlas.beginFrame(), waterAtlas.beginFrame();
+        }
+        const float minDepth = float(options.waterMinDepthM);
+        detail::approximateOnCpu(scene, fit, options, cascadeCache, cpu, [&](size_t k, detail::CascadeTextures& tex, detail::CascadeFill& fill) {
             const Stopwatch clock;
+            if (useAtlas) placeRuns(k, tex, fill, minDepth);
             // Each row's place in the packed planes, then the rows copied there on all cores.
             const size_t n = size_t(fit.cascades[k].n), first = packed[0].size(), end = addRows(k, fill, first);
             const size_t channels = water ? 3 : 1;
@@ -472,7 +568,7 @@ struct GlRenderer::Impl {
                 }
             });
             packMs += clock.milliseconds();
-        });
+        }, useAtlas);
         const Stopwatch clock;
         const size_t plane = packed[0].size(), planeBytes = plane * sizeof(float), channels = water ? 3 : 1;
         if (plane >= (size_t{1} << 31)) throw Error("the GL backend out of core evaluated more than 2^31 texels in one frame");
@@ -481,10 +577,60 @@ struct GlRenderer::Impl {
         const size_t rowBytes = uploadRows();
         fillTexelsBuf.reserve(planeBytes * channels);
         for (size_t c = 0; c < channels && plane; ++c) fillTexelsBuf.upload(packed[c].data(), planeBytes, c * planeBytes);
+        size_t atlasBytes = 0;
+        if (useAtlas) {
+            atlasBytes = terrainAtlas.upload() + (water ? waterAtlas.upload() : 0) + atlasRuns.size() * sizeof(uint32_t);
+            checkBlock(atlasRuns.size() * sizeof(uint32_t), "the runs of texels to copy from the pyramid's tiles");
+            atlasRunsBuf.reserve(atlasRuns.size() * sizeof(uint32_t));
+            if (!atlasRuns.empty()) atlasRunsBuf.upload(atlasRuns.data(), atlasRuns.size() * sizeof(uint32_t));
+        }
         timings.cascades = cpu.cascades;
         timings.approximationMs = cpu.approximationMs;
         timings.uploadMs = packMs + clock.milliseconds();
-        timings.uploadBytes = rowBytes + planeBytes * channels;
+        timings.uploadBytes = rowBytes + planeBytes * channels + atlasBytes;
+        timings.atlasTexels = atlasTexels;
+        timings.atlasTilesUploaded = terrainAtlas.stagedSlots.size() + waterAtlas.stagedSlots.size();
+    }
+
+    // Cascade k's runs of texels to copy from the pyramid (detail::PyramidRun) as atlas.comp's runs, their tiles staged
+    // into the atlas where not resident. A run whose tile finds no slot (this frame uses every one) is copied here, into
+    // `tex`, and its RowFill span widened to hold it, so that it goes up with the CPU's texels.
+    void placeRuns(size_t k, detail::CascadeTextures& tex, detail::CascadeFill& fill, float minDepth) {
+        const size_t n = size_t(tex.terrain.n);
+        for (const detail::PyramidRun& r : fill.runs) {
+            const uint32_t slot = terrainAtlas.slot(r.tile, size_t(r.plane));
+            const uint32_t waterSlot = r.water && slot != TileAtlas::kNone ? waterAtlas.slot(r.water, size_t(r.plane)) : TileAtlas::kNone;
+            if (slot != TileAtlas::kNone && (!r.water || waterSlot != TileAtlas::kNone)) {
+                atlasRuns.insert(atlasRuns.end(), {uint32_t(size_t(r.j) * n + size_t(r.i)), uint32_t(k) | uint32_t(r.count) << 8 | uint32_t(r.at) << 16,
+                                                   slot, r.water ? waterSlot : TileAtlas::kNone});
+                atlasTexels += uint64_t(r.count);
+                continue;
+            }
+            const size_t at = size_t(r.j) * n + size_t(r.i);
+            detail::copySamples(r.tile + r.at, r.water ? r.water + r.at : nullptr, size_t(r.plane), r.count, minDepth, &tex.terrain.h[at],
+                                r.water ? &tex.depth[at] : nullptr, r.water ? &tex.water.h[at] : nullptr);
+            detail::RowFill& row = fill.rows[size_t(r.j)];
+            int& lo = r.span == 0 ? row.a0 : row.b0;
+            int& hi = r.span == 0 ? row.a1 : row.b1;
+            if (hi < lo) lo = r.i, hi = r.i + r.count - 1;
+            else lo = std::min(lo, r.i), hi = std::max(hi, r.i + r.count - 1);
+        }
+    }
+
+    // Out of core with a pyramid: the runs of texels copied from its tiles on the GPU, after the assembly.
+    void dispatchAtlas(const RenderOptions& options) {
+        const size_t runs = atlasRuns.size() / 4;
+        if (!cpuCascades || runs == 0) return;
+        terrainAtlas.buffer.bind(HC_BIND_ATLAS_TERRAIN);
+        waterAtlas.buffer.bind(HC_BIND_ATLAS_WATER);
+        atlasRunsBuf.bind(HC_BIND_ATLAS_RUNS);
+        glUseProgram(atlas);
+        glUniform1ui(glGetUniformLocation(atlas, "uRuns"), GLuint(runs));
+        glUniform1f(glGetUniformLocation(atlas, "uMinDepth"), float(options.waterMinDepthM));
+        glUniform1f(glGetUniformLocation(atlas, "uWetShare"), float(influence::kWetShareMin));
+        const size_t groups = (runs * 16 + 63) / 64, across = std::min<size_t>(groups, 65535);  // GL's least limit a dimension
+        glDispatchCompute(GLuint(across), GLuint((groups + across - 1) / across), 1);
+        glMemoryBarrier(GL_SHADER_STORAGE_BARRIER_BIT);
     }
 
     // Stage 2 in memory, its plan on the CPU: each cascade's rows (the texels kept from the last frame, the spans to sum)
@@ -663,6 +809,7 @@ struct GlRenderer::Impl {
         int stamp = 0;
         timeStamp(stamp++, frameClock);
         dispatchAssembly(fit);
+        dispatchAtlas(options);
         dispatchApproximation(fit, frameClock, stamp);
         std::copy(std::begin(block.cascades), std::end(block.cascades), lastCascades.begin());  // where this frame's textures lie
         lastCascadeCount = fit.cascades.size();
@@ -806,6 +953,7 @@ std::vector<GlRenderer::CascadeTexels> GlRenderer::cascadeTexturesForTest() cons
 void GlRenderer::forgetCascades() { impl_->cascadeCache.clear(); }
 
 void GlRenderer::limitIndexChunksForTest(uint64_t entries) { gIndexChunkLimitForTest = entries ? entries : uint64_t{1} << 31; }
+void GlRenderer::limitAtlasForTest(uint32_t tiles) { gAtlasTileLimitForTest = tiles; }
 
 void GlRenderer::compileForTest(const std::string& name, const std::string& source) const {
     if (impl_->headless) impl_->headless->makeCurrent();

@@ -37,6 +37,11 @@ using uint = std::uint32_t;
 #define HC_BIND_FILL_TEXELS 13   // float[3 * plane]: the evaluated texels packed, terrain, then water, then depth
 // raycast.comp's beams (beams.comp): per tile of GpuFrame::beamTile^2 pixels and cascade, (start depth, passed).
 #define HC_BIND_BEAMS 14         // vec2[tiles * kMaxCascades], tiles row-major over the image
+// Out of core with a pyramid (atlas.comp): its tiles resident on the GPU, and the frame's runs of texels to copy.
+#define HC_BIND_ATLAS_TERRAIN 15 // float[kAtlasPlane per slot]: a tile's elevations
+#define HC_BIND_ATLAS_WATER 16   // float[2 kAtlasPlane per slot]: a tile's water levels, then its wet shares
+#define HC_BIND_ATLAS_RUNS 17    // uvec4 per run (atlas.comp)
+#define HC_BIND_LAST 17          // the highest binding
 #define HC_IMAGE_COLOR 0     // rgba8 image unit of the shaded picture (row 0 at the bottom)
 
 // Work-group sizes (macros: they go into layout(local_size_x = ...)).
@@ -48,6 +53,7 @@ const int kCounterSlots = 64;   // a counter is spread over slots so that no uin
 const int kMaxLabelChars = 12;  // legend labels ("-10994m")
 const int kIndexChunks = 4;     // storage buffers the influence lists' entries may span
 const int kFillRowInts = 8;     // a row of HC_BIND_FILL_ROWS: keptFirst, keptLast, a0, a1, b0, b1, packed a0, packed b0
+const int kAtlasPlane = 256;    // floats a channel of an atlas slot: a pyramid tile's samples (16^2; fewer where its side is less)
 
 // One grid cell, plus a sentinel after the last so that cells[k + 1].listBegin ends k's list.
 struct GpuCell {
