@@ -534,12 +534,7 @@ struct GlRenderer::Impl {
         // tiles not yet there go up, with the runs to copy (16 bytes a run of up to 16 texels).
         const bool useAtlas = scene.pyramid() != nullptr;
         atlasRuns.clear(), atlasTexels = 0;
-        if (useAtlas) {
-            const size_t atlasBytes = std::min<size_t>(size_t(maxStorageBlock), size_t(96) << 20);
-            terrainAtlas.open(atlasBytes, 1);
-            if (water) waterAtlas.open(atlasBytes, 2);
-            terrainAtlas.beginFrame(), waterAtlas.beginFrame();
-        }
+        if (useAtlas) terrainAtlas.beginFrame(), waterAtlas.beginFrame();
         const float minDepth = float(options.waterMinDepthM);
         detail::approximateOnCpu(scene, fit, options, cascadeCache, cpu, [&](size_t k, detail::CascadeTextures& tex, detail::CascadeFill& fill) {
             const Stopwatch clock;
@@ -596,6 +591,11 @@ struct GlRenderer::Impl {
     // into the atlas where not resident. A run whose tile finds no slot (this frame uses every one) is copied here, into
     // `tex`, and its RowFill span widened to hold it, so that it goes up with the CPU's texels.
     void placeRuns(size_t k, detail::CascadeTextures& tex, detail::CascadeFill& fill, float minDepth) {
+        if (fill.runs.empty()) return;
+        // The atlases take their storage at the first frame that copies from the pyramid: up to 96 MiB each.
+        const size_t atlasBytes = std::min<size_t>(size_t(maxStorageBlock), size_t(96) << 20);
+        terrainAtlas.open(atlasBytes, 1);
+        if (scene.hasWater()) waterAtlas.open(atlasBytes, 2);
         const size_t n = size_t(tex.terrain.n);
         for (const detail::PyramidRun& r : fill.runs) {
             const uint32_t slot = terrainAtlas.slot(r.tile, size_t(r.plane));
