@@ -507,7 +507,7 @@ uint64_t copyPyramidTexels(const Scene& scene, const Cascade& c, CascadeTextures
         uint64_t nCopied = 0, nInterpolated = 0;  // counted here, added once: per-worker counters share a cache line
         int up = 0;
         const uint64_t sideMask = samples ? samples->side() - 1 : 0;
-        std::vector<PyramidRun> myRuns;  // this call's runs (with `runs`), added to its worker's at the end
+        std::vector<PyramidRun>* myRuns = runs ? &workerRuns[worker] : nullptr;  // with `runs`: this worker's
         std::vector<PyramidInterpolator::Value> values;  // a run's interpolated texels
         std::vector<uint8_t> filled;
         for (size_t j = b; j < e; ++j) {
@@ -535,7 +535,7 @@ uint64_t copyPyramidTexels(const Scene& scene, const Cascade& c, CascadeTextures
                         std::memset(&copiedMask[at], 1, size_t(len));
                         if (runs) {  // left to the caller: counted only
                             const int sample = int(((uint64_t(gj) & sideMask) << std::countr_zero(samples->side())) | (uint64_t(gi) & sideMask));
-                            myRuns.push_back({int(j), i, len, sample, span, int(plane), s - sample, w ? w - sample : nullptr});
+                            myRuns->push_back({int(j), i, len, sample, span, int(plane), s - sample, w ? w - sample : nullptr});
                             for (int k = 0; k < len; ++k) nCopied += !std::isnan(s[k]);
                         } else {
                             nCopied += uint64_t(copySamples(s, w, plane, len, minDepth, &tex.terrain.h[at], w ? &tex.depth[at] : nullptr,
@@ -582,10 +582,13 @@ uint64_t copyPyramidTexels(const Scene& scene, const Cascade& c, CascadeTextures
             }
         }
         copied[worker] += nCopied, interpolated[worker] += nInterpolated, mostUp[worker] = std::max(mostUp[worker], up);
-        if (runs) workerRuns[worker].insert(workerRuns[worker].end(), myRuns.begin(), myRuns.end());
     });
-    if (runs)
+    if (runs) {
+        size_t total = runs->size();
+        for (const std::vector<PyramidRun>& r : workerRuns) total += r.size();
+        runs->reserve(total);
         for (const std::vector<PyramidRun>& r : workerRuns) runs->insert(runs->end(), r.begin(), r.end());
+    }
     uint64_t total = 0;
     for (unsigned k = 0; k < workers; ++k)
         total += copied[k], work.pyramidInterpolated += interpolated[k], work.pyramidInterpolatedUp = std::max(work.pyramidInterpolatedUp, mostUp[k]);
