@@ -87,8 +87,8 @@ struct Buffer {
 // Pyramid tiles resident on the GPU from frame to frame (DESIGN.md section 10: the atlas), in slots of `planes` channels
 // of gpu::kAtlasPlane floats: out of core the texels a frame copies from the pyramid are copied there (atlas.comp)
 // instead of on the CPU, and only tiles not yet resident go up. A tile is known by its first sample's address in the
-// pyramid (a mapped file, or the water pyramid's). Slots are taken in turn, skipping those this frame uses; the one
-// taken last is the first dropped (a clock without reference bits, as the frames' tiles come and go together).
+// pyramid (a mapped file, or the water pyramid's). Slots are taken in turn, skipping those this frame uses, so the tile
+// placed longest ago is the first dropped (a clock without reference bits: a flight's tiles come and go together).
 struct TileAtlas {
     static constexpr uint32_t kNone = ~uint32_t{0};
     Buffer buffer;
@@ -134,6 +134,11 @@ struct TileAtlas {
         for (size_t c = 0; c < planes; ++c) std::copy_n(tile + c * plane, plane, &staging[at + c * size_t(gpu::kAtlasPlane)]);
         stagedSlots.push_back(s);
         return s;
+    }
+    // A frame that failed before upload(): its staged tiles never reached their slots, which hold nothing now.
+    void dropStaged() {
+        for (const uint32_t s : stagedSlots) slotOf.erase(tileIn[s]), tileIn[s] = nullptr;
+        staging.clear(), stagedSlots.clear();
     }
     // The staged tiles into their slots: one upload per run of consecutive slots. Returns the bytes.
     size_t upload() {
@@ -536,6 +541,14 @@ struct GlRenderer::Impl {
         atlasRuns.clear(), atlasTexels = 0;
         if (useAtlas) terrainAtlas.beginFrame(), waterAtlas.beginFrame();
         const float minDepth = float(options.waterMinDepthM);
+        // A failure before the tiles go up leaves their slots empty (TileAtlas::dropStaged), not holding stale data.
+        struct DropStagedOnFailure {
+            TileAtlas &terrain, &waterTiles;
+            bool armed = true;
+            ~DropStagedOnFailure() {
+                if (armed) terrain.dropStaged(), waterTiles.dropStaged();
+            }
+        } guard{terrainAtlas, waterAtlas};
         detail::approximateOnCpu(scene, fit, options, cascadeCache, cpu, [&](size_t k, detail::CascadeTextures& tex, detail::CascadeFill& fill) {
             const Stopwatch clock;
             if (useAtlas) placeRuns(k, tex, fill, minDepth);
@@ -574,11 +587,12 @@ struct GlRenderer::Impl {
         for (size_t c = 0; c < channels && plane; ++c) fillTexelsBuf.upload(packed[c].data(), planeBytes, c * planeBytes);
         size_t atlasBytes = 0;
         if (useAtlas) {
-            atlasBytes = terrainAtlas.upload() + (water ? waterAtlas.upload() : 0) + atlasRuns.size() * sizeof(uint32_t);
             checkBlock(atlasRuns.size() * sizeof(uint32_t), "the runs of texels to copy from the pyramid's tiles");
+            atlasBytes = terrainAtlas.upload() + (water ? waterAtlas.upload() : 0) + atlasRuns.size() * sizeof(uint32_t);
             atlasRunsBuf.reserve(atlasRuns.size() * sizeof(uint32_t));
             if (!atlasRuns.empty()) atlasRunsBuf.upload(atlasRuns.data(), atlasRuns.size() * sizeof(uint32_t));
         }
+        guard.armed = false;
         timings.cascades = cpu.cascades;
         timings.approximationMs = cpu.approximationMs;
         timings.uploadMs = packMs + clock.milliseconds();
