@@ -100,6 +100,7 @@ struct TileAtlas {
     std::vector<uint64_t> usedIn;      // per slot: the frame that used it last
     uint32_t hand = 0, usedNow = 0;
     uint64_t frame = 0;
+    uint64_t uploadedTiles = 0, uploadedBytes = 0;  // this frame's
     std::vector<float> staging;        // this frame's new tiles, in the order of stagedSlots
     std::vector<uint32_t> stagedSlots;
 
@@ -114,7 +115,7 @@ struct TileAtlas {
         buffer.reserve(size_t(capacity) * slotBytes);
         tileIn.assign(capacity, nullptr), usedIn.assign(capacity, 0);
     }
-    void beginFrame() { ++frame, usedNow = 0, staging.clear(), stagedSlots.clear(); }
+    void beginFrame() { ++frame, usedNow = 0, uploadedTiles = 0, uploadedBytes = 0, staging.clear(), stagedSlots.clear(); }
     // The slot holding `tile` (its planes of `plane` floats each, `plane` apart) this frame, staged for upload if it was
     // not resident; kNone when this frame already uses every slot.
     uint32_t slot(const float* tile, size_t plane) {
@@ -135,13 +136,9 @@ struct TileAtlas {
         stagedSlots.push_back(s);
         return s;
     }
-    // A frame that failed before upload(): its staged tiles never reached their slots, which hold nothing now.
-    void dropStaged() {
-        for (const uint32_t s : stagedSlots) slotOf.erase(tileIn[s]), tileIn[s] = nullptr;
-        staging.clear(), stagedSlots.clear();
-    }
-    // The staged tiles into their slots: one upload per run of consecutive slots. Returns the bytes.
-    size_t upload() {
+    // The staged tiles into their slots, at once (a tile is never said resident without being there, whatever fails
+    // later in the frame): one upload per run of consecutive slots.
+    void upload() {
         const size_t slotFloats = planes * size_t(gpu::kAtlasPlane);
         for (size_t a = 0; a < stagedSlots.size();) {
             size_t b = a + 1;
@@ -149,7 +146,8 @@ struct TileAtlas {
             buffer.upload(&staging[a * slotFloats], (b - a) * slotFloats * sizeof(float), size_t(stagedSlots[a]) * slotFloats * sizeof(float));
             a = b;
         }
-        return staging.size() * sizeof(float);
+        uploadedTiles += stagedSlots.size(), uploadedBytes += staging.size() * sizeof(float);
+        staging.clear(), stagedSlots.clear();
     }
     void release() {
         buffer.release();
@@ -541,14 +539,6 @@ struct GlRenderer::Impl {
         atlasRuns.clear(), atlasTexels = 0;
         if (useAtlas) terrainAtlas.beginFrame(), waterAtlas.beginFrame();
         const float minDepth = float(options.waterMinDepthM);
-        // A failure before the tiles go up leaves their slots empty (TileAtlas::dropStaged), not holding stale data.
-        struct DropStagedOnFailure {
-            TileAtlas &terrain, &waterTiles;
-            bool armed = true;
-            ~DropStagedOnFailure() {
-                if (armed) terrain.dropStaged(), waterTiles.dropStaged();
-            }
-        } guard{terrainAtlas, waterAtlas};
         detail::approximateOnCpu(scene, fit, options, cascadeCache, cpu, [&](size_t k, detail::CascadeTextures& tex, detail::CascadeFill& fill) {
             const Stopwatch clock;
             if (useAtlas) placeRuns(k, tex, fill, minDepth);
@@ -588,21 +578,20 @@ struct GlRenderer::Impl {
         size_t atlasBytes = 0;
         if (useAtlas) {
             checkBlock(atlasRuns.size() * sizeof(uint32_t), "the runs of texels to copy from the pyramid's tiles");
-            atlasBytes = terrainAtlas.upload() + (water ? waterAtlas.upload() : 0) + atlasRuns.size() * sizeof(uint32_t);
+            atlasBytes = terrainAtlas.uploadedBytes + waterAtlas.uploadedBytes + atlasRuns.size() * sizeof(uint32_t);
             atlasRunsBuf.reserve(atlasRuns.size() * sizeof(uint32_t));
             if (!atlasRuns.empty()) atlasRunsBuf.upload(atlasRuns.data(), atlasRuns.size() * sizeof(uint32_t));
         }
-        guard.armed = false;
         timings.cascades = cpu.cascades;
         timings.approximationMs = cpu.approximationMs;
         timings.uploadMs = packMs + clock.milliseconds();
         timings.uploadBytes = rowBytes + planeBytes * channels + atlasBytes;
         timings.atlasTexels = atlasTexels;
-        timings.atlasTilesUploaded = terrainAtlas.stagedSlots.size() + waterAtlas.stagedSlots.size();
+        timings.atlasTilesUploaded = terrainAtlas.uploadedTiles + waterAtlas.uploadedTiles;
     }
 
-    // Cascade k's runs of texels to copy from the pyramid (detail::PyramidRun) as atlas.comp's runs, their tiles staged
-    // into the atlas where not resident. A run whose tile finds no slot (this frame uses every one) is copied here, into
+    // Cascade k's runs of texels to copy from the pyramid (detail::PyramidRun) as atlas.comp's runs, their tiles
+    // uploaded into the atlas where not resident. A run whose tile finds no slot (this frame uses every one) is copied here, into
     // `tex`, and its RowFill span widened to hold it, so that it goes up with the CPU's texels.
     void placeRuns(size_t k, detail::CascadeTextures& tex, detail::CascadeFill& fill, float minDepth) {
         if (fill.runs.empty()) return;
@@ -629,6 +618,7 @@ struct GlRenderer::Impl {
             if (hi < lo) lo = r.i, hi = r.i + r.count - 1;
             else lo = std::min(lo, r.i), hi = std::max(hi, r.i + r.count - 1);
         }
+        terrainAtlas.upload(), waterAtlas.upload();
     }
 
     // Out of core with a pyramid: the runs of texels copied from its tiles on the GPU, after the assembly.
