@@ -466,11 +466,10 @@ private:
 // there in vain (1.4 us a texel: 8.5 ms of a fresh frame at 105 M cells, for 6 k texels over holes). Returns the
 // texels copied, adds the texels interpolated to work.pyramidInterpolated (the most levels up to work.pyramidInterpolatedUp) and sets
 // work.pyramidLevel to the pyramid level used (-1: none fits the cascade). With `runs`, the copies are listed there
-// (PyramidRun) instead of written, and `written` (a Todo per row, empty) gets each span's interpolated texels, from the
-// first to the last.
+// (PyramidRun) instead of written, and each span shrinks to the texels written here (interpolated) or left to the
+// kernels, from the first to the last (the interpolated ones marked in copiedMask, so the kernels skip them).
 uint64_t copyPyramidTexels(const Scene& scene, const Cascade& c, CascadeTextures& tex, double waterMinDepthM, int interpolateLevels, unsigned threads,
-                           std::vector<Todo>& todo, std::vector<uint8_t>& copiedMask, ApproximationWork& work, std::vector<PyramidRun>* runs = nullptr,
-                           std::vector<Todo>* written = nullptr) {
+                           std::vector<Todo>& todo, std::vector<uint8_t>& copiedMask, ApproximationWork& work, std::vector<PyramidRun>* runs = nullptr) {
     work.pyramidLevel = -1;
     const influence::SurfacePyramid* p = scene.pyramid();
     if (!p) return 0;
@@ -534,7 +533,7 @@ uint64_t copyPyramidTexels(const Scene& scene, const Cascade& c, CascadeTextures
                         const size_t at = rowAt + size_t(i);
                         std::memset(&copiedMask[at], 1, size_t(len));
                         if (runs) {  // left to the caller: counted only
-                            const int sample = int(((uint64_t(gj) & sideMask) << std::countr_zero(samples->side())) | (uint64_t(gi) & sideMask));
+                            const int sample = int(s - samples->tile());  // the water tile's layout is the same
                             myRuns->push_back({int(j), i, len, sample, span, int(plane), s - sample, w ? w - sample : nullptr});
                             for (int k = 0; k < len; ++k) nCopied += !std::isnan(s[k]);
                         } else {
@@ -563,12 +562,7 @@ uint64_t copyPyramidTexels(const Scene& scene, const Cascade& c, CascadeTextures
                         const PyramidInterpolator::Value& v = values[size_t(k)];
                         const size_t at = rowAt + size_t(i);
                         copiedMask[at] = 1;
-                        if (written) {
-                            int& from = span == 0 ? (*written)[j].a0 : (*written)[j].b0;
-                            int& to = span == 0 ? (*written)[j].a1 : (*written)[j].b1;
-                            if (to < from) from = i;
-                            to = i;
-                        }
+                        if (runs) leave(i);  // written here: the caller packs it with the span
                         tex.terrain.h[at] = v.z;
                         ++nInterpolated;
                         up = std::max(up, v.up);
@@ -941,19 +935,12 @@ ApproximationWork approximate(const Scene& scene, const Cascade& c, CascadeTextu
     // The texels left to evaluate: `need` (n^2) marks them, the spans of `todo` hold them (and copies between them).
     std::vector<uint8_t> copied(size_t(n) * size_t(n), 0), need(size_t(n) * size_t(n), 0);
     if (runs && !rows) throw Error("approximate: pyramid runs without row spans (a bug)");
-    std::vector<Todo> written(runs ? size_t(n) : 0);  // with `runs`: the texels interpolated, per row and span
-    work.pyramidTexels = copyPyramidTexels(scene, c, tex, waterMinDepthM, interpolateLevels, threads, todo, copied, work, runs, runs ? &written : nullptr);
-    if (runs) {  // each span: from the first texel written to the last (interpolated, or left to the kernels)
+    work.pyramidTexels = copyPyramidTexels(scene, c, tex, waterMinDepthM, interpolateLevels, threads, todo, copied, work, runs);
+    if (runs)  // each span: the texels written here, the copies left out at its ends
         for (size_t j = 0; j < size_t(n); ++j) {
             RowFill& r = (*rows)[j];
-            auto hull = [](int lo1, int hi1, int lo2, int hi2, int& lo, int& hi) {
-                lo = hi1 < lo1 ? lo2 : hi2 < lo2 ? lo1 : std::min(lo1, lo2);
-                hi = hi1 < lo1 ? hi2 : hi2 < lo2 ? hi1 : std::max(hi1, hi2);
-            };
-            hull(written[j].a0, written[j].a1, todo[j].a0, todo[j].a1, r.a0, r.a1);
-            hull(written[j].b0, written[j].b1, todo[j].b0, todo[j].b1, r.b0, r.b1);
+            r.a0 = todo[j].a0, r.a1 = todo[j].a1, r.b0 = todo[j].b0, r.b1 = todo[j].b1;
         }
-    }
     int i0 = n, i1 = -1, j0 = n, j1 = -1;
     uint64_t todoTexels = 0;
     for (int j = 0; j < n; ++j) {

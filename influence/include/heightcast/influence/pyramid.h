@@ -106,6 +106,8 @@ public:
         }
         size_t side() const { return side_; }
         size_t plane() const { return side_ * side_; }
+        // The first sample of the tile the last find() returned a sample of (its address less that tile's).
+        const float* tile() const { return tile_; }
 
     private:
         void seek(uint64_t i, uint64_t j);  // remembers the tile holding (i, j)
