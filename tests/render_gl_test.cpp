@@ -403,102 +403,102 @@ TEST(RenderGl, OutOfCoreKeepsTheCascadesOnTheGpuAndUploadsOnlyNewTexels) {
             uint32_t atlasTiles;
         };
         for (const Flight flight : {Flight{512, 0}, Flight{128, 0}, Flight{128, 40}}) {
-        const uint32_t atlasTiles = flight.atlasTiles;
-        GlRenderer::limitAtlasForTest(atlasTiles);
-        const std::unique_ptr<GlRenderer> gl = GlRenderer::headless(scene);
-        GlRenderer::limitAtlasForTest(0);
-        RenderOptions o = smallOptions();
-        o.texelsPerSide = flight.texels;
-        Camera cam = lowOblique(scene, 320, 200);
-        // East (x) and up (z) [m] before each frame. The climbing frames grow the cascades: with the pyramid a cascade's
-        // side follows its extent in steps of 64 texels, so some keep the texels of a last-frame cascade of another side.
-        struct Move {
-            double dx, dz;
-        };
-        const Move moves[] = {{0, 0},   {20, 0},  {20, 0},  {2000, 0}, {20, 0},  {-2000, 0}, {20, 0},  {20, 0},  {20, 0},
-                              {30, 40}, {30, 40}, {30, 40}, {30, 40},  {30, 40}, {30, 40},   {30, 40}, {30, 40}, {0, 0}};
-        const size_t failedBefore = 8;  // a frame that fails after the swap comes before this one
-        int sideChanges = 0;
-        uint64_t freshBytes = 0;
-        std::vector<Cascade> lastCascades;  // the reference's last frame
-        std::vector<detail::CascadeTextures> lastTextures;
-        for (size_t f = 0; f < std::size(moves); ++f) {
-            const std::string tag = "frame " + std::to_string(f) + ", " + std::to_string(flight.texels) + " texels" +
-                                    (atlasTiles ? ", an atlas of 40 tiles" : "");
-            cam.xWorld += moves[f].dx, cam.zWorld += moves[f].dz;
-            const bool fresh = f == 0 || f + 1 == std::size(moves) || f == failedBefore;
-            if (f == failedBefore) {
-                RenderOptions huge = o;
-                huge.cascades = 4, huge.texelsPerSide = 8192;  // over 2^31 bytes of textures: more than a storage block holds (llvmpipe 128 MiB, NVIDIA 2 GiB)
-                Timings th;
-                EXPECT_THROW((void)gl->render(cam, huge, th), hc::Error) << tag;
-            }
-            if (fresh) lastCascades.clear(), lastTextures.clear();
-            if (fresh && f != failedBefore) gl->forgetCascades();  // after the failure the renderer must start afresh itself
-            Timings t;
-            (void)gl->render(cam, o, t);
-            uint64_t kept = 0, visible = 0;
-            for (const CascadeStats& cs : t.cascades) kept += cs.reusedTexels, visible += cs.visibleTexels;
-            if (fresh) {
-                EXPECT_EQ(kept, 0u) << tag << ": a fresh frame";
-                if (f == 0) freshBytes = t.uploadBytes;
-                if (flight.texels == 128) {
-                    EXPECT_GT(t.atlasTexels, 0u) << tag << ": a fresh frame copies texels from the pyramid's tiles on the GPU";
+            const uint32_t atlasTiles = flight.atlasTiles;
+            GlRenderer::limitAtlasForTest(atlasTiles);
+            const std::unique_ptr<GlRenderer> gl = GlRenderer::headless(scene);
+            GlRenderer::limitAtlasForTest(0);
+            RenderOptions o = smallOptions();
+            o.texelsPerSide = flight.texels;
+            Camera cam = lowOblique(scene, 320, 200);
+            // East (x) and up (z) [m] before each frame. The climbing frames grow the cascades: with the pyramid a cascade's
+            // side follows its extent in steps of 64 texels, so some keep the texels of a last-frame cascade of another side.
+            struct Move {
+                double dx, dz;
+            };
+            const Move moves[] = {{0, 0},   {20, 0},  {20, 0},  {2000, 0}, {20, 0},  {-2000, 0}, {20, 0},  {20, 0},  {20, 0},
+                                  {30, 40}, {30, 40}, {30, 40}, {30, 40},  {30, 40}, {30, 40},   {30, 40}, {30, 40}, {0, 0}};
+            const size_t failedBefore = 8;  // a frame that fails after the swap comes before this one
+            int sideChanges = 0;
+            uint64_t freshBytes = 0;
+            std::vector<Cascade> lastCascades;  // the reference's last frame
+            std::vector<detail::CascadeTextures> lastTextures;
+            for (size_t f = 0; f < std::size(moves); ++f) {
+                const std::string tag = "frame " + std::to_string(f) + ", " + std::to_string(flight.texels) + " texels" +
+                                        (atlasTiles ? ", an atlas of 40 tiles" : "");
+                cam.xWorld += moves[f].dx, cam.zWorld += moves[f].dz;
+                const bool fresh = f == 0 || f + 1 == std::size(moves) || f == failedBefore;
+                if (f == failedBefore) {
+                    RenderOptions huge = o;
+                    huge.cascades = 4, huge.texelsPerSide = 8192;  // over 2^31 bytes of textures: more than a storage block holds (llvmpipe 128 MiB, NVIDIA 2 GiB)
+                    Timings th;
+                    EXPECT_THROW((void)gl->render(cam, huge, th), hc::Error) << tag;
                 }
-                if (f == 0 && flight.texels == 128) {
-                    EXPECT_GT(t.atlasTilesUploaded, 0u) << tag;
-                    if (atlasTiles) {
-                        EXPECT_EQ(t.atlasTilesUploaded, 2 * atlasTiles) << tag << ": every slot of both atlases (elevation, water) taken";
+                if (fresh) lastCascades.clear(), lastTextures.clear();
+                if (fresh && f != failedBefore) gl->forgetCascades();  // after the failure the renderer must start afresh itself
+                Timings t;
+                (void)gl->render(cam, o, t);
+                uint64_t kept = 0, visible = 0;
+                for (const CascadeStats& cs : t.cascades) kept += cs.reusedTexels, visible += cs.visibleTexels;
+                if (fresh) {
+                    EXPECT_EQ(kept, 0u) << tag << ": a fresh frame";
+                    if (f == 0) freshBytes = t.uploadBytes;
+                    if (flight.texels == 128) {
+                        EXPECT_GT(t.atlasTexels, 0u) << tag << ": a fresh frame copies texels from the pyramid's tiles on the GPU";
+                    }
+                    if (f == 0 && flight.texels == 128) {
+                        EXPECT_GT(t.atlasTilesUploaded, 0u) << tag;
+                        if (atlasTiles) {
+                            EXPECT_EQ(t.atlasTilesUploaded, 2 * atlasTiles) << tag << ": every slot of both atlases (elevation, water) taken";
+                        }
+                    }
+                } else if (moves[f].dx == 20 && moves[f].dz == 0) {
+                    EXPECT_GT(kept, visible * 9 / 10) << tag << ": a 20 m step keeps most texels";
+                    if (!atlasTiles) {  // (an atlas too small uploads its tiles again)
+                        EXPECT_LT(t.uploadBytes, freshBytes / 10) << tag << ": and uploads few";
                     }
                 }
-            } else if (moves[f].dx == 20 && moves[f].dz == 0) {
-                EXPECT_GT(kept, visible * 9 / 10) << tag << ": a 20 m step keeps most texels";
-                if (!atlasTiles) {  // (an atlas too small uploads its tiles again)
-                    EXPECT_LT(t.uploadBytes, freshBytes / 10) << tag << ": and uploads few";
+                // The reference: this frame's cascades on the CPU, each keeping the texels of the last frame's cascade of the
+                // same texel size and lattice placed nearest to it, whatever its side (renderer.cpp's reusableCascade).
+                const detail::FrameSetup setup = detail::setUpFrame(scene, cam);
+                Timings tf;
+                const CascadeFit fit = detail::fitFrame(scene, cam, setup, o, tf);
+                const std::vector<GlRenderer::CascadeTexels> onGpu = gl->cascadeTexturesForTest();
+                ASSERT_EQ(onGpu.size(), fit.cascades.size()) << tag;
+                std::vector<detail::CascadeTextures> textures(fit.cascades.size());
+                std::vector<bool> taken(lastCascades.size(), false);
+                uint64_t keptOnCpu = 0;
+                for (size_t k = 0; k < fit.cascades.size(); ++k) {
+                    const Cascade& c = fit.cascades[k];
+                    ASSERT_EQ(onGpu[k].n, c.empty() ? 0 : c.n) << tag << " cascade " << k;
+                    if (c.empty()) continue;
+                    std::optional<detail::TexelReuse> reuse;
+                    size_t from = 0;
+                    for (size_t e = 0; e < lastCascades.size(); ++e) {
+                        const Cascade& old = lastCascades[e];
+                        if (taken[e] || old.empty() || old.texelM != c.texelM) continue;
+                        const double fi = (c.x0 - old.x0) / c.texelM, fj = (c.y0 - old.y0) / c.texelM;
+                        if (std::abs(fi - std::round(fi)) >= 1e-6 || std::abs(fj - std::round(fj)) >= 1e-6) continue;
+                        const detail::TexelReuse r{&old, &lastTextures[e], int(std::round(fi)), int(std::round(fj))};
+                        if (!reuse || std::max(std::abs(r.di), std::abs(r.dj)) < std::max(std::abs(reuse->di), std::abs(reuse->dj))) reuse = r, from = e;
+                    }
+                    if (reuse) taken[from] = true, sideChanges += reuse->cascade->n != c.n;
+                    detail::CascadeTextures& cpu = textures[k];
+                    keptOnCpu += detail::approximate(scene, c, cpu, o.waterMinDepthM, 0, reuse ? &*reuse : nullptr, o.pyramidInterpolateLevels).reusedTexels;
+                    size_t differ = 0, first = SIZE_MAX;
+                    for (size_t i = 0; i < cpu.terrain.h.size(); ++i) {
+                        const bool same = std::bit_cast<uint32_t>(cpu.terrain.h[i]) == std::bit_cast<uint32_t>(onGpu[k].terrain[i]) &&
+                                          std::bit_cast<uint32_t>(cpu.water.h[i]) == std::bit_cast<uint32_t>(onGpu[k].water[i]) &&
+                                          std::bit_cast<uint32_t>(cpu.depth[i]) == std::bit_cast<uint32_t>(onGpu[k].depth[i]);
+                        if (!same && differ++ == 0) first = i;
+                    }
+                    EXPECT_EQ(differ, 0u) << tag << " cascade " << k << ": first at texel " << first << " of " << cpu.terrain.h.size() << " (n " << c.n << ")";
                 }
+                EXPECT_EQ(keptOnCpu, kept) << tag << ": the GPU kept what the CPU keeps";
+                lastCascades = fit.cascades;
+                lastTextures = std::move(textures);
             }
-            // The reference: this frame's cascades on the CPU, each keeping the texels of the last frame's cascade of the
-            // same texel size and lattice placed nearest to it, whatever its side (renderer.cpp's reusableCascade).
-            const detail::FrameSetup setup = detail::setUpFrame(scene, cam);
-            Timings tf;
-            const CascadeFit fit = detail::fitFrame(scene, cam, setup, o, tf);
-            const std::vector<GlRenderer::CascadeTexels> onGpu = gl->cascadeTexturesForTest();
-            ASSERT_EQ(onGpu.size(), fit.cascades.size()) << tag;
-            std::vector<detail::CascadeTextures> textures(fit.cascades.size());
-            std::vector<bool> taken(lastCascades.size(), false);
-            uint64_t keptOnCpu = 0;
-            for (size_t k = 0; k < fit.cascades.size(); ++k) {
-                const Cascade& c = fit.cascades[k];
-                ASSERT_EQ(onGpu[k].n, c.empty() ? 0 : c.n) << tag << " cascade " << k;
-                if (c.empty()) continue;
-                std::optional<detail::TexelReuse> reuse;
-                size_t from = 0;
-                for (size_t e = 0; e < lastCascades.size(); ++e) {
-                    const Cascade& old = lastCascades[e];
-                    if (taken[e] || old.empty() || old.texelM != c.texelM) continue;
-                    const double fi = (c.x0 - old.x0) / c.texelM, fj = (c.y0 - old.y0) / c.texelM;
-                    if (std::abs(fi - std::round(fi)) >= 1e-6 || std::abs(fj - std::round(fj)) >= 1e-6) continue;
-                    const detail::TexelReuse r{&old, &lastTextures[e], int(std::round(fi)), int(std::round(fj))};
-                    if (!reuse || std::max(std::abs(r.di), std::abs(r.dj)) < std::max(std::abs(reuse->di), std::abs(reuse->dj))) reuse = r, from = e;
-                }
-                if (reuse) taken[from] = true, sideChanges += reuse->cascade->n != c.n;
-                detail::CascadeTextures& cpu = textures[k];
-                keptOnCpu += detail::approximate(scene, c, cpu, o.waterMinDepthM, 0, reuse ? &*reuse : nullptr, o.pyramidInterpolateLevels).reusedTexels;
-                size_t differ = 0, first = SIZE_MAX;
-                for (size_t i = 0; i < cpu.terrain.h.size(); ++i) {
-                    const bool same = std::bit_cast<uint32_t>(cpu.terrain.h[i]) == std::bit_cast<uint32_t>(onGpu[k].terrain[i]) &&
-                                      std::bit_cast<uint32_t>(cpu.water.h[i]) == std::bit_cast<uint32_t>(onGpu[k].water[i]) &&
-                                      std::bit_cast<uint32_t>(cpu.depth[i]) == std::bit_cast<uint32_t>(onGpu[k].depth[i]);
-                    if (!same && differ++ == 0) first = i;
-                }
-                EXPECT_EQ(differ, 0u) << tag << " cascade " << k << ": first at texel " << first << " of " << cpu.terrain.h.size() << " (n " << c.n << ")";
-            }
-            EXPECT_EQ(keptOnCpu, kept) << tag << ": the GPU kept what the CPU keeps";
-            lastCascades = fit.cascades;
-            lastTextures = std::move(textures);
-        }
-        EXPECT_GT(sideChanges, 0) << "no frame kept texels of a cascade of another side: the climb checks nothing";
-        std::printf("%d cascades kept texels of a last-frame cascade of another side\n", sideChanges);
+            EXPECT_GT(sideChanges, 0) << "no frame kept texels of a cascade of another side: the climb checks nothing";
+            std::printf("%d cascades kept texels of a last-frame cascade of another side\n", sideChanges);
         }
     }
 }
