@@ -213,26 +213,55 @@ struct Rgb {
     double r, g, b;
 };
 
-Rgb ramp(const std::vector<std::pair<double, Rgb>>& stops, double t) {
-    t = std::clamp(t, 0.0, 1.0);
-    for (size_t i = 1; i < stops.size(); ++i)
-        if (t <= stops[i].first) {
-            const double a = (t - stops[i - 1].first) / (stops[i].first - stops[i - 1].first);
-            const Rgb &p = stops[i - 1].second, &q = stops[i].second;
-            return {p.r + a * (q.r - p.r), p.g + a * (q.g - p.g), p.b + a * (q.b - p.b)};
+// A colour ramp: stops (position, sRGB colour), positions rising from 0 to 1, padded to kRampStops by repeating the
+// last. at() takes the segment that ends at the first stop at or past t, as a search from the first would, without a
+// branch, so that the shading loop vectorises (shadeBlock); t is clamped to [0, 1] and NaN takes the last stop.
+constexpr size_t kRampStops = 5;
+struct Ramp {
+    std::array<double, kRampStops> t{}, r{}, g{}, b{};
+    Rgb at(double x) const {
+        // std::clamp's value for every x but NaN, in two unconditional selects (the vectoriser does not speculate a
+        // comparison that one select would make conditional).
+        x = x < 0.0 ? 0.0 : x;
+        x = x <= 1.0 ? x : 1.0;
+        double t0 = t[0], t1 = t[1], r0 = r[0], r1 = r[1], g0 = g[0], g1 = g[1], b0 = b[0], b1 = b[1];
+        for (size_t k = 1; k + 1 < kRampStops; ++k) {
+            const bool past = x > t[k];
+            t0 = past ? t[k] : t0, t1 = past ? t[k + 1] : t1;
+            r0 = past ? r[k] : r0, r1 = past ? r[k + 1] : r1;
+            g0 = past ? g[k] : g0, g1 = past ? g[k + 1] : g1;
+            b0 = past ? b[k] : b0, b1 = past ? b[k + 1] : b1;
         }
-    return stops.back().second;
-}
+        const double a = (x - t0) / (t1 - t0);
+        return {r0 + a * (r1 - r0), g0 + a * (g1 - g0), b0 + a * (b1 - b0)};
+    }
+};
 
-// The ramps of gpu_layout.h (shared with shade.comp) as stops.
+// The ramps of gpu_layout.h (shared with shade.comp), and others, as Ramp.
 template <size_t N>
-std::vector<std::pair<double, Rgb>> stopsOf(const double (&ramp)[N][4]) {
-    std::vector<std::pair<double, Rgb>> stops;
-    for (const auto& s : ramp) stops.push_back({s[0], {s[1], s[2], s[3]}});
-    return stops;
+constexpr Ramp rampOf(const double (&stops)[N][4]) {
+    static_assert(N >= 2 && N <= kRampStops);
+    Ramp ramp;
+    for (size_t k = 0; k < kRampStops; ++k) {
+        const auto& s = stops[std::min(k, N - 1)];
+        ramp.t[k] = s[0], ramp.r[k] = s[1], ramp.g[k] = s[2], ramp.b[k] = s[3];
+    }
+    return ramp;
 }
-const std::vector<std::pair<double, Rgb>> kElevation = stopsOf(gpu::kElevationRamp);
-const std::vector<std::pair<double, Rgb>> kDepth = stopsOf(gpu::kDepthRamp);
+constexpr bool rampIsValid(const Ramp& ramp) {
+    if (ramp.t[0] != 0.0 || ramp.t[kRampStops - 1] != 1.0) return false;
+    for (size_t k = 1; k < kRampStops; ++k)
+        if (ramp.t[k] < ramp.t[k - 1]) return false;
+    return true;
+}
+constexpr Ramp kElevation = rampOf(gpu::kElevationRamp);
+constexpr Ramp kDepth = rampOf(gpu::kDepthRamp);
+static_assert(rampIsValid(kElevation) && rampIsValid(kDepth));
+constexpr Ramp kDryRamp = [] {
+    Ramp ramp = kElevation;
+    ramp.r.fill(gpu::kDryColor[0]), ramp.g.fill(gpu::kDryColor[1]), ramp.b.fill(gpu::kDryColor[2]);
+    return ramp;
+}();
 
 // sRGB transfer functions by table (pow per pixel channel was a sixth of a frame): 4096 steps keep
 // the 8-bit output exact to within one level.
@@ -249,10 +278,6 @@ struct SrgbTables {
     }
 };
 const SrgbTables kSrgb;
-// The nearest table entry (adding 0.5 and truncating rounds a non-negative value as lround does, inline).
-size_t tableIndex(double c) { return size_t(std::clamp(c, 0.0, 1.0) * 4096.0 + 0.5); }
-double toLinear(double c) { return kSrgb.toLinear[tableIndex(c)]; }
-uint8_t toSrgb8(double c) { return kSrgb.toSrgb[tableIndex(c)]; }
 
 void drawText(Frame& f, int x, int y, const std::string& text, int scale) {
     for (char ch : text) {
@@ -279,9 +304,10 @@ std::string label(double v, const std::string& units = "m") {
 
 // RenderOptions::colorLayer's ramp (perceptually ordered, dark violet to yellow, as viridis), distinct from the
 // elevation and depth ramps so that a picture never reads as one of those.
-const std::vector<std::pair<double, Rgb>> kLayerRamp = {
-    {0.0, {0.267, 0.005, 0.329}}, {0.25, {0.229, 0.322, 0.546}}, {0.5, {0.128, 0.567, 0.551}},
-    {0.75, {0.369, 0.789, 0.383}}, {1.0, {0.993, 0.906, 0.144}}};
+constexpr double kLayerStops[5][4] = {{0.0, 0.267, 0.005, 0.329}, {0.25, 0.229, 0.322, 0.546}, {0.5, 0.128, 0.567, 0.551},
+                                       {0.75, 0.369, 0.789, 0.383}, {1.0, 0.993, 0.906, 0.144}};
+constexpr Ramp kLayerRamp = rampOf(kLayerStops);
+static_assert(rampIsValid(kLayerRamp));
 
 // The layer's range over the whole scenario (every step's, from the step table; a static layer's from its
 // values), so that a colour means the same value in every step.
@@ -317,9 +343,9 @@ std::vector<float> colorLayerValues(const Scene& scene, const influence::Layer& 
 // A colour bar with its range, at the image's right edge.
 void drawLegend(Frame& f, const detail::LegendLayout& l) {
     if (!l.shown) return;
-    const auto& stops = l.layer ? kLayerRamp : l.depth ? kDepth : kElevation;
+    const Ramp& ramp = l.layer ? kLayerRamp : l.depth ? kDepth : kElevation;
     for (int y = 0; y < l.barH; ++y) {
-        const Rgb c = ramp(stops, 1.0 - double(y) / (l.barH - 1));
+        const Rgb c = ramp.at(1.0 - double(y) / (l.barH - 1));
         for (int x = 0; x < l.barW; ++x) {
             uint8_t* p = &f.rgb[(size_t(l.y0 + y) * size_t(f.width) + size_t(l.x0 + x)) * 3];
             p[0] = static_cast<uint8_t>(c.r * 255), p[1] = static_cast<uint8_t>(c.g * 255), p[2] = static_cast<uint8_t>(c.b * 255);
@@ -627,6 +653,105 @@ PixelRays castRays(const Scene& scene, const detail::FrameSetup& setup, const Ca
     return rays;
 }
 
+// Stage 5's inputs: the frame's layers and rays, and the shading's constants.
+struct ShadeInputs {
+    const Frame& f;
+    const PixelRays& rays;
+    const double* sun;  // the unit vector to the sun
+    double fogDist;     // [m]: a hit at distance d is 0.5 (1 - exp(-d / fogDist)) sky
+    Rgb skyHorizon, skyZenith;
+    double zMin, zRange, dRange;  // the elevation ramp's origin and range, the depth ramp's range [m]
+    double layerLo, layerRange;   // the colour layer's ramp
+    const float* layerValues;     // RenderOptions::colorLayer at every pixel (NaN where it does not colour), or null
+    bool layerOnWater;            // the colour layer is a water layer: dry terrain in the dry colour
+    bool depthMode;               // ColorMode::WaterDepth: dry terrain in the dry colour
+};
+
+// A worker's buffers for a run of up to kShadeBlock pixels of a row.
+constexpr size_t kShadeBlock = 256;
+struct ShadeBlock {
+    std::array<double, kShadeBlock> fog, up;  // the fog's share, the ray direction's z
+    std::array<double, kShadeBlock> dim;      // the cell outline's factor: 1, or 0.35 on an edge (RenderOptions::cellOutlines)
+    std::array<int, kShadeBlock> water;       // PixelRays::isWater
+    std::array<int, kShadeBlock> r, g, b;     // indices into the sRGB tables
+    ShadeBlock() { dim.fill(1.0); }
+};
+
+// Shades pixels i0 .. i0 + n - 1 into rgb (3 bytes a pixel); returns how many are hits. The colour of a pixel is
+// computed without branches (every ramp at every pixel, chosen by selects) so that the compiler vectorises the loop:
+// the arithmetic of a pixel, 17 ns on one core before, was 90 % of the stage. The exponential of the fog stays a
+// scalar loop (std::exp, as before), so that every pixel gets the same bytes as before (BENCHMARKS.md).
+template <bool Layer>
+uint64_t shadeBlock(const ShadeInputs& in, size_t i0, size_t n, ShadeBlock& blk, uint8_t* rgb) {
+    const Frame& f = in.f;
+    const float* dist = f.distanceM.data() + i0;
+    uint64_t hits = 0;
+    const std::array<float, 3>* dirs = in.rays.dirs.data() + i0;
+    const uint8_t* water = in.rays.isWater.data() + i0;
+    for (size_t k = 0; k < n; ++k) {
+        const bool hit = std::isfinite(dist[k]);
+        hits += hit;
+        blk.fog[k] = hit ? 0.5 * (1.0 - std::exp(-dist[k] / in.fogDist)) : 0.0;
+        blk.up[k] = dirs[k][2];  // the rays' directions are 12 bytes apart, and the flags bytes: out of the vectorised loop
+        blk.water[k] = water[k];
+    }
+    const float* nX = f.nX.data() + i0;
+    const float* nY = f.nY.data() + i0;
+    const float* nZ = f.nZ.data() + i0;
+    const float* posZ = f.posZ.data() + i0;
+    const float* depth = f.waterDepthM.data() + i0;
+    const float* wallAt = f.wall.data() + i0;
+    const float* layerAt = Layer ? in.layerValues + i0 : nullptr;
+    const float* toLin = kSrgb.toLinear.data();
+    // std::clamp(c, 0, 1) by value, in two unconditional selects (std::clamp returns a reference, a branch to the
+    // vectoriser, as is a comparison made only when another fails).
+    auto unit = [](double c) {
+        c = c < 0.0 ? 0.0 : c;
+        return 1.0 < c ? 1.0 : c;
+    };
+    // The nearest entry of kSrgb's tables (adding 0.5 and truncating rounds as lround does).
+    auto index = [&](double c) { return int(unit(c) * 4096.0 + 0.5); };
+    const Rgb hz = in.skyHorizon, zn = in.skyZenith, wallColor{gpu::kWallColor[0], gpu::kWallColor[1], gpu::kWallColor[2]},
+              dry{gpu::kDryColor[0], gpu::kDryColor[1], gpu::kDryColor[2]};
+    const double sun0 = in.sun[0], sun1 = in.sun[1], sun2 = in.sun[2];
+    // Dry land in ColorMode::WaterDepth: a ramp of the dry colour at every stop, which gives that colour exactly (a select
+    // on a flag the loop does not change is not vectorised).
+    const Ramp& landRamp = in.depthMode ? kDryRamp : kElevation;
+    for (size_t k = 0; k < n; ++k) {
+        const double up = unit(blk.up[k]);
+        const Rgb sky{hz.r + up * (zn.r - hz.r), hz.g + up * (zn.g - hz.g), hz.b + up * (zn.b - hz.b)};
+        const Rgb skyLin{toLin[index(sky.r)], toLin[index(sky.g)], toLin[index(sky.b)]};
+        // The base colour, by priority: wall, colour layer, dry under a water layer, water depth, dry (depth mode),
+        // elevation (each a select of plain doubles: a select of a struct is a branch to the vectoriser).
+        const bool isWater = blk.water[k] != 0, wall = wallAt[k] != 0;
+        const Rgb land = landRamp.at((posZ[k] - in.zMin) / in.zRange), wet = kDepth.at(depth[k] / in.dRange);
+        double br = isWater ? wet.r : land.r, bg = isWater ? wet.g : land.g, bb = isWater ? wet.b : land.b;
+        if constexpr (Layer) {
+            const bool dryUnder = in.layerOnWater && !isWater;
+            br = dryUnder ? dry.r : br, bg = dryUnder ? dry.g : bg, bb = dryUnder ? dry.b : bb;
+            const float v = layerAt[k];
+            const Rgb l = kLayerRamp.at((v - in.layerLo) / in.layerRange);
+            const bool valued = !std::isnan(v);
+            br = valued ? l.r : br, bg = valued ? l.g : bg, bb = valued ? l.b : bb;
+        }
+        br = wall ? wallColor.r : br, bg = wall ? wallColor.g : bg, bb = wall ? wallColor.b : bb;
+        const double lambert = nX[k] * sun0 + nY[k] * sun1 + nZ[k] * sun2;
+        const double light = 0.3 + 0.7 * (0.0 < lambert ? lambert : 0.0);  // std::max(0.0, lambert)
+        Rgb c{toLin[index(br)] * light, toLin[index(bg)] * light, toLin[index(bb)] * light};
+        c = {c.r * blk.dim[k], c.g * blk.dim[k], c.b * blk.dim[k]};  // 1 or 0.35: exact either way
+        const double fog = blk.fog[k];
+        const bool hit = std::isfinite(dist[k]);
+        const Rgb fogged{c.r + fog * (skyLin.r - c.r), c.g + fog * (skyLin.g - c.g), c.b + fog * (skyLin.b - c.b)};
+        c = {hit ? fogged.r : skyLin.r, hit ? fogged.g : skyLin.g, hit ? fogged.b : skyLin.b};
+        blk.r[k] = index(c.r), blk.g[k] = index(c.g), blk.b[k] = index(c.b);
+    }
+    for (size_t k = 0; k < n; ++k) {
+        uint8_t* p = rgb + 3 * k;
+        p[0] = kSrgb.toSrgb[size_t(blk.r[k])], p[1] = kSrgb.toSrgb[size_t(blk.g[k])], p[2] = kSrgb.toSrgb[size_t(blk.b[k])];
+    }
+    return hits;
+}
+
 // Stage 5: hillshade light, elevation or depth colours, distance fog, sky, outlines, legend into f.rgb.
 void shadePixels(const Scene& scene, const RenderOptions& options, const CameraBasis& basis, const PixelRays& rays, Frame& f, Timings& timings) {
     const Stopwatch clock;
@@ -651,52 +776,36 @@ void shadePixels(const Scene& scene, const RenderOptions& options, const CameraB
         const auto [lo, hi] = layerRange(scene.grid(), *colorLayer);
         layerLo = lo, layerRangeV = std::max(hi - lo, 1e-12);
     }
-    const bool layerOnWater = colorLayer && colorLayer->kind == influence::Layer::WaterCells;
+    ShadeInputs in{f, rays, sun, fogDist, skyHorizon, skyZenith, scene.elevationMin, zRange, dRange, 0.0, 1.0, nullptr, false, false};
+    in.depthMode = options.color == ColorMode::WaterDepth;
+    if (colorLayer) {
+        in.layerValues = layerValues.data(), in.layerLo = layerLo, in.layerRange = layerRangeV;
+        in.layerOnWater = colorLayer->kind == influence::Layer::WaterCells;
+    }
+    // Cell outlines: a hit within 0.7 pixel of its cell's edge is darkened (a scene lookup a pixel, so outside the
+    // vectorised loop: ShadeBlock::dim).
+    auto outline = [&](size_t i0, size_t n, double* dim) {
+        for (size_t k = 0; k < n; ++k) {
+            const size_t i = i0 + k;
+            dim[k] = 1.0;
+            if (!std::isfinite(f.distanceM[i]) || f.wall[i] != 0) continue;
+            if (auto cell = scene.cellSquareAt(f.posX[i], f.posY[i])) {
+                const auto q = *cell;
+                const double edge = std::min({f.posX[i] - q.x0, q.x1 - f.posX[i], f.posY[i] - q.y0, q.y1 - f.posY[i]});
+                if (edge < 0.7 * f.distanceM[i] * pixelAngle) dim[k] = 0.35;
+            }
+        }
+    };
     std::vector<uint64_t> hits(resolveThreads(options.threads), 0);
     parallelFor(size_t(H), 16, options.threads, [&](size_t b, size_t e, unsigned worker) {
+        ShadeBlock block;
         uint64_t hit = 0;  // added to hits[worker] once: the workers' counters share a cache line
         for (size_t py = b; py < e; ++py)
-            for (int px = 0; px < W; ++px) {
-                const size_t i = py * size_t(W) + size_t(px);
-                const auto& d = rays.dirs[i];
-                const double up = std::clamp(double(d[2]), 0.0, 1.0);
-                const Rgb sky{skyHorizon.r + up * (skyZenith.r - skyHorizon.r), skyHorizon.g + up * (skyZenith.g - skyHorizon.g),
-                              skyHorizon.b + up * (skyZenith.b - skyHorizon.b)};
-                Rgb c = sky;
-                if (std::isfinite(f.distanceM[i])) {
-                    ++hit;
-                    const double light = 0.3 + 0.7 * std::max(0.0, f.nX[i] * sun[0] + f.nY[i] * sun[1] + f.nZ[i] * sun[2]);
-                    Rgb base;
-                    const bool wall = f.wall[i] != 0;
-                    if (wall) {
-                        base = {gpu::kWallColor[0], gpu::kWallColor[1], gpu::kWallColor[2]};
-                    } else if (colorLayer && !std::isnan(layerValues[i])) {
-                        base = ramp(kLayerRamp, (layerValues[i] - layerLo) / layerRangeV);
-                    } else if (layerOnWater && !rays.isWater[i]) {
-                        base = {gpu::kDryColor[0], gpu::kDryColor[1], gpu::kDryColor[2]};
-                    } else if (rays.isWater[i]) {
-                        base = ramp(kDepth, f.waterDepthM[i] / dRange);
-                    } else if (options.color == ColorMode::WaterDepth) {
-                        base = {gpu::kDryColor[0], gpu::kDryColor[1], gpu::kDryColor[2]};
-                    } else {
-                        base = ramp(kElevation, (f.posZ[i] - scene.elevationMin) / zRange);
-                    }
-                    c = {toLinear(base.r) * light, toLinear(base.g) * light, toLinear(base.b) * light};
-                    if (options.cellOutlines && !wall) {
-                        if (auto cell = scene.cellSquareAt(f.posX[i], f.posY[i])) {
-                            const auto q = *cell;
-                            const double edge = std::min({f.posX[i] - q.x0, q.x1 - f.posX[i], f.posY[i] - q.y0, q.y1 - f.posY[i]});
-                            if (edge < 0.7 * f.distanceM[i] * pixelAngle) c = {c.r * 0.35, c.g * 0.35, c.b * 0.35};
-                        }
-                    }
-                    const double fog = 0.5 * (1.0 - std::exp(-f.distanceM[i] / fogDist));
-                    const Rgb skyLin{toLinear(sky.r), toLinear(sky.g), toLinear(sky.b)};
-                    c = {c.r + fog * (skyLin.r - c.r), c.g + fog * (skyLin.g - c.g), c.b + fog * (skyLin.b - c.b)};
-                } else {
-                    c = {toLinear(sky.r), toLinear(sky.g), toLinear(sky.b)};
-                }
-                uint8_t* p = &f.rgb[i * 3];
-                p[0] = toSrgb8(c.r), p[1] = toSrgb8(c.g), p[2] = toSrgb8(c.b);
+            for (size_t px = 0; px < size_t(W); px += kShadeBlock) {
+                const size_t i0 = py * size_t(W) + px, n = std::min(kShadeBlock, size_t(W) - px);
+                if (options.cellOutlines) outline(i0, n, block.dim.data());
+                uint8_t* rgb = &f.rgb[i0 * 3];
+                hit += colorLayer ? shadeBlock<true>(in, i0, n, block, rgb) : shadeBlock<false>(in, i0, n, block, rgb);
             }
         hits[worker] += hit;
     });
