@@ -431,10 +431,8 @@ Hit hitIn(const RayContext& ctx, size_t k, const glm::dvec3& o, const glm::dvec3
         h.nx = best.nx, h.ny = best.ny, h.nz = best.nz;
         return h;
     }
-    const double nl = std::sqrt(best.gx * best.gx + best.gy * best.gy + 1.0);
-    h.nx = -best.gx / nl;
-    h.ny = -best.gy / nl;
-    h.nz = 1.0 / nl;
+    h.slopeOnly = true;  // the normal: normalOfSlope, by the caller
+    h.gx = best.gx, h.gy = best.gy;
     if (h.water) {  // depth at the hit: bilinear from the depth texture
         const double u = (o[0] + d[0] * h.t - c.x0) / c.texelM, v = (o[1] + d[1] * h.t - c.y0) / c.texelM;
         const int i = std::clamp(int(std::floor(u)), 0, c.n - 2), j = std::clamp(int(std::floor(v)), 0, c.n - 2);
@@ -475,6 +473,8 @@ Hit castRay(const RayContext& ctx, const glm::dvec3& dir, Beam* beam, double dir
                 bool under2 = false;
                 Hit h2 = hitIn(ctx, k + 1, ctx.eyeLocal, dir, cs[k + 1].splitNear, cs[k + 1].farWithOverlap, st2, under2, from(k + 1));
                 if (h2.hit && h2.water == h.water && !h2.wall && std::abs(h2.t - h.t) <= std::max(cs[k].texelM, cs[k + 1].texelM)) {
+                    for (Hit* x : {&h, &h2})
+                        if (x->slopeOnly) normalOfSlope(x->gx, x->gy, x->nx, x->ny, x->nz), x->slopeOnly = false;
                     const double w = std::clamp((off - zoneStart) / (zoneEnd - zoneStart), 0.0, 1.0);
                     h.t = (1 - w) * h.t + w * h2.t;
                     double nx = (1 - w) * h.nx + w * h2.nx, ny = (1 - w) * h.ny + w * h2.ny, nz = (1 - w) * h.nz + w * h2.nz;

@@ -578,6 +578,26 @@ struct PixelRays {
     std::vector<uint8_t> isWater;
 };
 
+// Hits whose unit normal is still to be computed from their slope (detail::Hit::slopeOnly): a worker's, 256 at a time,
+// in vector registers. One at a time, its square root and three divisions at the end of every ray were 4-6 % of ray
+// casting (BENCHMARKS.md). The same bits either way (detail::normalOfSlope).
+struct PendingNormals {
+    static constexpr size_t kMax = 256;
+    std::array<double, kMax> gx, gy, nx, ny, nz;
+    std::array<size_t, kMax> at;  // the pixel
+    size_t n = 0;
+    void add(size_t pixel, double slopeX, double slopeY, Frame& f) {
+        if (n == kMax) flush(f);
+        at[n] = pixel, gx[n] = slopeX, gy[n] = slopeY, ++n;
+    }
+    void flush(Frame& f) {
+        const size_t count = n;  // a local: the stores below could change a member, for all the compiler knows
+        for (size_t k = 0; k < count; ++k) detail::normalOfSlope(gx[k], gy[k], nx[k], ny[k], nz[k]);
+        for (size_t k = 0; k < count; ++k) f.nX[at[k]] = float(nx[k]), f.nY[at[k]] = float(ny[k]), f.nZ[at[k]] = float(nz[k]);
+        n = 0;
+    }
+};
+
 // Stage 4: one ray per pixel through the cascades; fills the frame's ray layers (every pixel a miss to start).
 PixelRays castRays(const Scene& scene, const detail::FrameSetup& setup, const CascadeFit& fit, const std::vector<detail::CascadeTextures>& tex,
                    const RenderOptions& options, Frame& f, Timings& timings) {
@@ -603,7 +623,7 @@ PixelRays castRays(const Scene& scene, const detail::FrameSetup& setup, const Ca
     const detail::RayContext ctx{&fit, &tex, eye, setup.nearM, setup.farM, scene.elevationMin};
     auto sxOf = [&](int px) { return (2.0 * (px + 0.5) / W - 1.0) * basis.tanHalfX; };
     auto syOf = [&](int py) { return (1.0 - 2.0 * (double(py) + 0.5) / H) * basis.tanHalfY; };
-    auto cast = [&](int px, int py, detail::Beam* beam) {
+    auto cast = [&](int px, int py, detail::Beam* beam, PendingNormals& normals) {
         glm::dvec3 d = basis.forward + sxOf(px) * basis.right + syOf(py) * basis.up;
         const double length = glm::length(d);
         d /= length;  // each component divided, exact to half an ulp (normalize multiplies by a rounded 1 / length)
@@ -616,7 +636,8 @@ PixelRays castRays(const Scene& scene, const detail::FrameSetup& setup, const Ca
         f.posX[i] = float(eye.x + d.x * h.t);
         f.posY[i] = float(eye.y + d.y * h.t);
         f.posZ[i] = float(eye.z + d.z * h.t);
-        f.nX[i] = float(h.nx), f.nY[i] = float(h.ny), f.nZ[i] = float(h.nz);
+        if (h.slopeOnly) normals.add(i, h.gx, h.gy, f);
+        else f.nX[i] = float(h.nx), f.nY[i] = float(h.ny), f.nZ[i] = float(h.nz);
         f.cascade[i] = float(h.cascade);
         f.waterDepthM[i] = float(h.depth);
         f.wall[i] = h.wall ? 1.0f : 0.0f;
@@ -626,12 +647,15 @@ PixelRays castRays(const Scene& scene, const detail::FrameSetup& setup, const Ca
     const int tile = options.beamTilePx;
     if (tile <= 1) {
         parallelFor(size_t(H), 4, options.threads, [&](size_t b, size_t e, unsigned) {
+            PendingNormals normals;
             for (size_t py = b; py < e; ++py)
-                for (int px = 0; px < W; ++px) cast(px, int(py), nullptr);
+                for (int px = 0; px < W; ++px) cast(px, int(py), nullptr, normals);
+            normals.flush(f);
         });
     } else {  // a row of blocks of 4 x 4 tiles a task; each tile's rays with their beam (detail::Beam), inside its block's
         const int block = 4 * tile;
         parallelFor(size_t((H + block - 1) / block), 1, options.threads, [&](size_t b, size_t e, unsigned) {
+            PendingNormals normals;
             for (size_t by = b; by < e; ++by) {
                 const int qy0 = int(by) * block, qy1 = std::min(H, qy0 + block);
                 for (int qx0 = 0; qx0 < W; qx0 += block) {
@@ -642,10 +666,11 @@ PixelRays castRays(const Scene& scene, const detail::FrameSetup& setup, const Ca
                             const int py1 = std::min(qy1, py0 + tile), px1 = std::min(qx1, px0 + tile);
                             detail::Beam beam(ctx, basis, sxOf(px0), syOf(py0), sxOf(px1 - 1), syOf(py1 - 1), &outer);
                             for (int py = py0; py < py1; ++py)
-                                for (int px = px0; px < px1; ++px) cast(px, py, &beam);
+                                for (int px = px0; px < px1; ++px) cast(px, py, &beam, normals);
                         }
                 }
             }
+            normals.flush(f);
         });
     }
     timings.raycastMs = clock.milliseconds();
