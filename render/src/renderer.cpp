@@ -598,6 +598,33 @@ struct PendingNormals {
     }
 };
 
+// The rays of a rectangle of pixels: unit directions and their lengths before normalising, computed at once in vector
+// registers (a square root and three divisions a ray) in the operations each ray's used to be, one at a time: the same
+// bits (glm's d = forward + sx right + sy up, length(d), d / length component by component).
+struct RayDirections {
+    int x0 = 0, y0 = 0, width = 0;
+    std::vector<double> sx, sy, x, y, z, length;
+    size_t at(int px, int py) const { return size_t(py - y0) * size_t(width) + size_t(px - x0); }
+    void compute(const CameraBasis& basis, const double* sxAt, const double* syAt, int px0, int px1, int py0, int py1) {
+        x0 = px0, y0 = py0, width = px1 - px0;
+        const size_t n = size_t(width) * size_t(py1 - py0);
+        for (std::vector<double>* v : {&sx, &sy, &x, &y, &z, &length}) v->resize(n);
+        for (int py = py0; py < py1; ++py)
+            for (int px = px0; px < px1; ++px) sx[at(px, py)] = sxAt[px], sy[at(px, py)] = syAt[py];
+        unitDirections(basis, n, sx.data(), sy.data(), x.data(), y.data(), z.data(), length.data());
+    }
+    // Six arrays of their own (restrict: the compiler would otherwise check every pair for overlap before vectorising).
+    static void unitDirections(const CameraBasis& basis, size_t n, const double* __restrict sx, const double* __restrict sy, double* __restrict dx,
+                               double* __restrict dy, double* __restrict dz, double* __restrict len) {
+        const glm::dvec3 f = basis.forward, r = basis.right, u = basis.up;
+        for (size_t k = 0; k < n; ++k) {
+            const double vx = f.x + sx[k] * r.x + sy[k] * u.x, vy = f.y + sx[k] * r.y + sy[k] * u.y, vz = f.z + sx[k] * r.z + sy[k] * u.z;
+            const double l = std::sqrt(vx * vx + vy * vy + vz * vz);
+            dx[k] = vx / l, dy[k] = vy / l, dz[k] = vz / l, len[k] = l;
+        }
+    }
+};
+
 // Stage 4: one ray per pixel through the cascades; fills the frame's ray layers (every pixel a miss to start).
 PixelRays castRays(const Scene& scene, const detail::FrameSetup& setup, const CascadeFit& fit, const std::vector<detail::CascadeTextures>& tex,
                    const RenderOptions& options, Frame& f, Timings& timings) {
@@ -623,10 +650,14 @@ PixelRays castRays(const Scene& scene, const detail::FrameSetup& setup, const Ca
     const detail::RayContext ctx{&fit, &tex, eye, setup.nearM, setup.farM, scene.elevationMin};
     auto sxOf = [&](int px) { return (2.0 * (px + 0.5) / W - 1.0) * basis.tanHalfX; };
     auto syOf = [&](int py) { return (1.0 - 2.0 * (double(py) + 0.5) / H) * basis.tanHalfY; };
-    auto cast = [&](int px, int py, detail::Beam* beam, PendingNormals& normals) {
-        glm::dvec3 d = basis.forward + sxOf(px) * basis.right + syOf(py) * basis.up;
-        const double length = glm::length(d);
-        d /= length;  // each component divided, exact to half an ulp (normalize multiplies by a rounded 1 / length)
+    std::vector<double> sxAt(static_cast<size_t>(W)), syAt(static_cast<size_t>(H));  // each pixel column's and row's
+    for (int px = 0; px < W; ++px) sxAt[size_t(px)] = sxOf(px);
+    for (int py = 0; py < H; ++py) syAt[size_t(py)] = syOf(py);
+    // Pixel (px, py) of the rectangle `dirs` holds (RayDirections::compute).
+    auto cast = [&](int px, int py, const RayDirections& dirs, detail::Beam* beam, PendingNormals& normals) {
+        const size_t k = dirs.at(px, py);
+        const glm::dvec3 d{dirs.x[k], dirs.y[k], dirs.z[k]};
+        const double length = dirs.length[k];
         const size_t i = size_t(py) * size_t(W) + size_t(px);
         rays.dirs[i] = {float(d.x), float(d.y), float(d.z)};
         if (fit.hull.size() < 3) return;
@@ -648,25 +679,30 @@ PixelRays castRays(const Scene& scene, const detail::FrameSetup& setup, const Ca
     if (tile <= 1) {
         parallelFor(size_t(H), 4, options.threads, [&](size_t b, size_t e, unsigned) {
             PendingNormals normals;
-            for (size_t py = b; py < e; ++py)
-                for (int px = 0; px < W; ++px) cast(px, int(py), nullptr, normals);
+            RayDirections dirs;
+            for (size_t py = b; py < e; ++py) {
+                dirs.compute(basis, sxAt.data(), syAt.data(), 0, W, int(py), int(py) + 1);
+                for (int px = 0; px < W; ++px) cast(px, int(py), dirs, nullptr, normals);
+            }
             normals.flush(f);
         });
     } else {  // a row of blocks of 4 x 4 tiles a task; each tile's rays with their beam (detail::Beam), inside its block's
         const int block = 4 * tile;
         parallelFor(size_t((H + block - 1) / block), 1, options.threads, [&](size_t b, size_t e, unsigned) {
             PendingNormals normals;
+            RayDirections dirs;
             for (size_t by = b; by < e; ++by) {
                 const int qy0 = int(by) * block, qy1 = std::min(H, qy0 + block);
                 for (int qx0 = 0; qx0 < W; qx0 += block) {
                     const int qx1 = std::min(W, qx0 + block);
+                    dirs.compute(basis, sxAt.data(), syAt.data(), qx0, qx1, qy0, qy1);
                     detail::Beam outer(ctx, basis, sxOf(qx0), syOf(qy0), sxOf(qx1 - 1), syOf(qy1 - 1));
                     for (int py0 = qy0; py0 < qy1; py0 += tile)
                         for (int px0 = qx0; px0 < qx1; px0 += tile) {
                             const int py1 = std::min(qy1, py0 + tile), px1 = std::min(qx1, px0 + tile);
                             detail::Beam beam(ctx, basis, sxOf(px0), syOf(py0), sxOf(px1 - 1), syOf(py1 - 1), &outer);
                             for (int py = py0; py < py1; ++py)
-                                for (int px = px0; px < px1; ++px) cast(px, py, &beam, normals);
+                                for (int px = px0; px < px1; ++px) cast(px, py, dirs, &beam, normals);
                         }
                 }
             }
