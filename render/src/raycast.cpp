@@ -47,9 +47,9 @@ struct TexelRay {
     double zAt(double t) const { return z0 + dz * t; }
 };
 
-TexelRay texelRay(const Cascade& c, const glm::dvec3& o, const glm::dvec3& d) {
-    const double s = c.texelM;
-    return {(o.x - c.x0) / s, (o.y - c.y0) / s, d.x / s, d.y / s, o.z, d.z, s};
+// Ray `i` of `setups` in cascade c (setUpRays: u0 = (o.x - x0) / s, du = d.x / s, and likewise in v).
+TexelRay texelRay(const Cascade& c, const RaySetups::Cascade& setup, size_t i, const glm::dvec3& o, const glm::dvec3& d) {
+    return {setup.u0, setup.v0, setup.du[i], setup.dv[i], o.z, d.z, c.texelM};
 }
 
 // The part of a ray over one patch: parameters [t, t + len].
@@ -134,11 +134,12 @@ PatchContact patchContact(const Heightfield& hf, int iu, int iv, const TexelRay&
 // Narrows [tIn, tOut] to where the ray can meet the block of a cascade whose highest point is zTop; false when
 // nothing is left. A ray above the whole cascade never hits it; nor does the part of a ray above the cascade's
 // highest point, where the walk would only skip nodes: start where a falling ray comes down to that height,
-// stop where a rising one climbs above it (a hair early and late, for rounding).
-bool clipToHeights(const TexelRay& ray, double zTop, double zFloor, double& tIn, double& tOut) {
+// stop where a rising one climbs above it (a hair early and late, for rounding). tTop and tFloor: where the ray is at
+// heights zTop and zFloor, (z - z0) / dz (setUpRays), when dz != 0.
+bool clipToHeights(const TexelRay& ray, double zTop, double zFloor, double tTop, double tFloor, double& tIn, double& tOut) {
     if (std::min(ray.zAt(tIn), ray.zAt(tOut)) > zTop) return false;
     if (ray.dz != 0) {
-        const double tCross = (zTop - ray.z0) / ray.dz, margin = 1e-9 * (1.0 + std::abs(tCross));
+        const double tCross = tTop, margin = 1e-9 * (1.0 + std::abs(tCross));
         if (ray.dz < 0) tIn = std::max(tIn, tCross - margin);
         else tOut = std::min(tOut, tCross + margin);
         if (!(tIn < tOut)) return false;
@@ -147,7 +148,7 @@ bool clipToHeights(const TexelRay& ray, double zTop, double zFloor, double& tIn,
     // through it: start there; a falling ray ends there. (Without this a ray under the block walked every
     // patch at the finest level: 6.3 s for a 480 x 300 frame from a camera under a domain edge.)
     if (ray.dz != 0) {
-        const double tFloor = (zFloor - ray.z0) / ray.dz, margin = 1e-9 * (1.0 + std::abs(tFloor));
+        const double margin = 1e-9 * (1.0 + std::abs(tFloor));
         if (ray.dz > 0) tIn = std::max(tIn, tFloor - margin);
         else tOut = std::min(tOut, tFloor + margin);
         return tIn < tOut;
@@ -284,14 +285,16 @@ struct PatchWalk {
 // starts at level 0 at the patch under tFrom, entered where the walk from tIn would enter it: every node before it
 // would have been skipped without a contact (a patch's test fails wherever its ancestors' do), so the hit and the
 // ray's state are the same.
+//
+// `setup`, `i`, `tFloor`: the ray's setup in this cascade (RaySetups).
 PatchHit traverse(const CascadeTextures& tex, const Cascade& c, const glm::dvec3& o, const glm::dvec3& d, double tIn, double tOut, double zFloor,
-                  RayState& st, double tFrom) {
+                  RayState& st, double tFrom, const RaySetups::Cascade& setup, size_t i, double tFloor) {
     const Heightfield& hf = tex.terrain;
     if (hf.mip.empty() || !(tIn < tOut)) return PatchHit{};
-    const TexelRay ray = texelRay(c, o, d);
+    const TexelRay ray = texelRay(c, setup, i, o, d);
     PatchWalk walk{tex, ray, tIn, zFloor, tex.hasWater && !st.underWater && !tex.water.mip.empty(), st, PatchHit{}};
     const double u0 = ray.u0, v0 = ray.v0, du = ray.du, dv = ray.dv;
-    const double invDu = du != 0 ? 1.0 / du : 0.0, invDv = dv != 0 ? 1.0 / dv : 0.0;
+    const double invDu = setup.invDu[i], invDv = setup.invDv[i];  // du != 0 ? 1 / du : 0, and likewise
     const int top = int(hf.mip.size()) - 1;
     const int patches = hf.n - 1;
     const bool both = tex.bothMip.size() == hf.mip.size();  // one load a node (CascadeTextures::bothMip)
@@ -300,7 +303,7 @@ PatchHit traverse(const CascadeTextures& tex, const Cascade& c, const glm::dvec3
         if (both) return tex.bothMip[size_t(level)][idx];
         return std::max(hf.mip[size_t(level)][idx], tex.water.mip[size_t(level)][idx]);
     };
-    if (!clipToHeights(ray, maxAt(top, 0), zFloor, tIn, tOut)) return PatchHit{};
+    if (!clipToHeights(ray, maxAt(top, 0), zFloor, walk.water ? setup.tTopWet[i] : setup.tTopDry[i], tFloor, tIn, tOut)) return PatchHit{};
     // The walk carries its node as integers (level, iu, iv) and steps to the neighbour across the edge the ray
     // leaves by, as a grid walk does; each node's exit follows from its integers. It used to find each node
     // again from the ray's point a hair past t, a chain from float to int and back through every visit; now
@@ -376,46 +379,16 @@ PatchHit traverse(const CascadeTextures& tex, const Cascade& c, const glm::dvec3
     return walk.res;
 }
 
-// The ray parameter interval in which dot(xy - eye, dir) lies in [lo, hi].
-void offsetInterval(const glm::dvec3& o, const glm::dvec3& d, const glm::dvec2& dir, double eyeOffset, double lo, double hi, double& t0,
-                    double& t1) {
-    const double rate = glm::dot(glm::dvec2(d), dir);
-    const double at0 = glm::dot(glm::dvec2(o), dir) - eyeOffset;  // offset at t = 0
-    if (std::abs(rate) < 1e-15) {
-        if (at0 >= lo && at0 <= hi) return;  // the whole ray
-        t0 = 1, t1 = 0;
-        return;
-    }
-    double a = (lo - at0) / rate, b = (hi - at0) / rate;
-    if (a > b) std::swap(a, b);
-    t0 = std::max(t0, a);
-    t1 = std::min(t1, b);
-}
-
-Hit hitIn(const RayContext& ctx, size_t k, const glm::dvec3& o, const glm::dvec3& d, double lo, double hi, RayState& st, bool& underground,
+Hit hitIn(const RayContext& ctx, size_t k, const glm::dvec3& o, const glm::dvec3& d, const RaySetups& setups, size_t ray, RayState& st, bool& underground,
           double tFrom) {
     Hit h;
     const Cascade& c = ctx.fit->cascades[k];
     const CascadeTextures& tex = (*ctx.tex)[k];
     if (c.empty()) return h;
-    const double eyeOffset = glm::dot(glm::dvec2(o), ctx.fit->dir);
-    double t0 = ctx.nearM, t1 = ctx.farM;
-    offsetInterval(o, d, ctx.fit->dir, eyeOffset, lo, hi, t0, t1);
-    // Clip to the texture's patch domain.
-    const double ext = (c.n - 1) * c.texelM;
-    for (int axis = 0; axis < 2; ++axis) {
-        const double lo0 = axis == 0 ? c.x0 : c.y0;
-        if (std::abs(d[axis]) < 1e-300) {
-            if (o[axis] < lo0 || o[axis] > lo0 + ext) return h;
-            continue;
-        }
-        double a = (lo0 - o[axis]) / d[axis], b = (lo0 + ext - o[axis]) / d[axis];
-        if (a > b) std::swap(a, b);
-        t0 = std::max(t0, a);
-        t1 = std::min(t1, b);
-    }
+    const RaySetups::Cascade& setup = setups.cascades[k];
+    const double t0 = setup.t0[ray], t1 = setup.t1[ray];  // the ray's span in the cascade's slab and over its patches
     if (!(t0 < t1) || !(tFrom < t1)) return h;  // past tFrom the beam meets nothing of this cascade (traverse())
-    const PatchHit best = traverse(tex, c, o, d, t0, t1, ctx.zFloor, st, tFrom);
+    const PatchHit best = traverse(tex, c, o, d, t0, t1, ctx.zFloor, st, tFrom, setup, ray, setups.tFloor[ray]);
     if (best.terrainUnderground) {
         underground = true;
         return h;
@@ -445,7 +418,7 @@ Hit hitIn(const RayContext& ctx, size_t k, const glm::dvec3& o, const glm::dvec3
 
 }  // namespace
 
-Hit castRay(const RayContext& ctx, const glm::dvec3& dir, Beam* beam, double dirLength) {
+Hit castRay(const RayContext& ctx, const glm::dvec3& dir, const RaySetups& setups, size_t ray, Beam* beam, double dirLength) {
     const auto& cs = ctx.fit->cascades;
     RayState st;
     bool underground = false;
@@ -453,8 +426,7 @@ Hit castRay(const RayContext& ctx, const glm::dvec3& dir, Beam* beam, double dir
     auto from = [&](size_t k) { return beam ? beam->startDepth(k) * dirLength * (1 - 1e-12) : 0.0; };
     for (size_t k = 0; k < cs.size(); ++k) {
         if (beam && beam->passesOver(k)) continue;  // the ray walks nothing there (Beam::passesOver)
-        const double lo = k == 0 ? -HUGE_VAL : cs[k].splitNear;
-        Hit h = hitIn(ctx, k, ctx.eyeLocal, dir, lo, cs[k].farWithOverlap, st, underground, from(k));
+        Hit h = hitIn(ctx, k, ctx.eyeLocal, dir, setups, ray, st, underground, from(k));
         if (underground) return Hit{};
         if (!h.hit) continue;
         // In the overlap with the next cascade: blend both hits by a convex combination, if they are on the same
@@ -471,7 +443,7 @@ Hit castRay(const RayContext& ctx, const glm::dvec3& dir, Beam* beam, double dir
                 RayState st2 = st;
                 st2.touchedTerrain = st2.touchedWater = true;
                 bool under2 = false;
-                Hit h2 = hitIn(ctx, k + 1, ctx.eyeLocal, dir, cs[k + 1].splitNear, cs[k + 1].farWithOverlap, st2, under2, from(k + 1));
+                Hit h2 = hitIn(ctx, k + 1, ctx.eyeLocal, dir, setups, ray, st2, under2, from(k + 1));
                 if (h2.hit && h2.water == h.water && !h2.wall && std::abs(h2.t - h.t) <= std::max(cs[k].texelM, cs[k + 1].texelM)) {
                     for (Hit* x : {&h, &h2})
                         if (x->slopeOnly) normalOfSlope(x->gx, x->gy, x->nx, x->ny, x->nz), x->slopeOnly = false;
@@ -487,6 +459,100 @@ Hit castRay(const RayContext& ctx, const glm::dvec3& dir, Beam* beam, double dir
         return h;
     }
     return Hit{};
+}
+
+namespace {
+
+// The constants of setUpSpans: one cascade's, the same for every ray (they start at the eye).
+struct SpanConstants {
+    double nearM, farM;
+    double dirX, dirY;           // the fit's view direction
+    double loNum, hiNum;         // lo - at0, hi - at0: the cascade's slab along the view, from the eye's offset
+    double flatCap;              // a ray along the slab: +inf when the eye lies in it, else -inf (nothing there)
+    double xLoNum, xHiNum, xCap; // x0 - o.x, (x0 + ext) - o.x; a ray without x motion: +inf inside, -inf outside
+    double yLoNum, yHiNum, yCap;
+    double s;                    // the texel size
+    double topDryNum, topWetNum; // the cascade's highest point without water and with it, less o.z
+};
+
+// The spans, steps and crossings of n rays in one cascade (RaySetups), in the operations of a walk's set-up (hitIn()'s
+// clips, traverse()'s texel ray and clipToHeights()), in vector registers: a lane's value differs from those of that
+// code only where the ray has nothing in the cascade (t1 = -inf there, where those returned at once). Every condition
+// is a select of two values computed in full: this file is built without floating-point traps (render/CMakeLists.txt).
+void setUpSpans(size_t n, const double* __restrict dx, const double* __restrict dy, const double* __restrict dz, const SpanConstants& k,
+                double* __restrict t0s, double* __restrict t1s, double* __restrict dus, double* __restrict dvs, double* __restrict idus,
+                double* __restrict idvs, double* __restrict topDry, double* __restrict topWet) {
+    for (size_t i = 0; i < n; ++i) {
+        const double x = dx[i], y = dy[i];
+        double t0 = k.nearM, t1 = k.farM;
+        // The slab: where dot(xy - eye, dir) lies in [lo, hi]; a ray along it keeps its whole length or has nothing.
+        const double rate = x * k.dirX + y * k.dirY;
+        auto clip = [&](double loNum, double hiNum, double rateOrStep, bool none, double cap) {
+            const double a = loNum / rateOrStep, b = hiNum / rateOrStep;
+            const bool swap = a > b;
+            const double lo = swap ? b : a, hi = swap ? a : b;
+            const double m0 = t0 < lo ? lo : t0, m1 = hi < t1 ? hi : t1;  // std::max(t0, lo), std::min(t1, hi)
+            const double c1 = cap < t1 ? cap : t1;
+            t0 = none ? t0 : m0;
+            t1 = none ? c1 : m1;
+        };
+        clip(k.loNum, k.hiNum, rate, std::abs(rate) < 1e-15, k.flatCap);
+        // The texture's patch domain, in x and in y.
+        clip(k.xLoNum, k.xHiNum, x, std::abs(x) < 1e-300, k.xCap);
+        clip(k.yLoNum, k.yHiNum, y, std::abs(y) < 1e-300, k.yCap);
+        t0s[i] = t0, t1s[i] = t1;
+        const double du = x / k.s, dv = y / k.s;
+        const double iu = 1.0 / du, iv = 1.0 / dv;
+        dus[i] = du, dvs[i] = dv;
+        idus[i] = du != 0 ? iu : 0.0, idvs[i] = dv != 0 ? iv : 0.0;
+        topDry[i] = k.topDryNum / dz[i], topWet[i] = k.topWetNum / dz[i];
+    }
+}
+
+void floorDepths(size_t n, const double* __restrict dz, double num, double* __restrict out) {
+    for (size_t i = 0; i < n; ++i) out[i] = num / dz[i];
+}
+
+}  // namespace
+
+void setUpRays(const RayContext& ctx, size_t n, const double* dx, const double* dy, const double* dz, RaySetups& out) {
+    const auto& cs = ctx.fit->cascades;
+    const glm::dvec3& o = ctx.eyeLocal;
+    out.cascades.resize(cs.size());
+    out.tFloor.resize(n);
+    floorDepths(n, dz, ctx.zFloor - o.z, out.tFloor.data());
+    const glm::dvec2 dir = ctx.fit->dir;
+    const double eyeOffset = glm::dot(glm::dvec2(o), dir);
+    const double at0 = glm::dot(glm::dvec2(o), dir) - eyeOffset;  // the eye's offset from itself: 0, as hitIn had it
+    for (size_t k = 0; k < cs.size(); ++k) {
+        const Cascade& c = cs[k];
+        if (c.empty()) continue;  // hitIn returns before its setup
+        RaySetups::Cascade& r = out.cascades[k];
+        for (std::vector<double>* v : {&r.t0, &r.t1, &r.du, &r.dv, &r.invDu, &r.invDv, &r.tTopDry, &r.tTopWet}) v->resize(n);
+        const double s = c.texelM;
+        r.u0 = (o.x - c.x0) / s, r.v0 = (o.y - c.y0) / s;
+        const double lo = k == 0 ? -HUGE_VAL : c.splitNear, hi = c.farWithOverlap;
+        const double ext = (c.n - 1) * c.texelM;
+        SpanConstants sc{};
+        sc.nearM = ctx.nearM, sc.farM = ctx.farM, sc.dirX = dir.x, sc.dirY = dir.y;
+        sc.loNum = lo - at0, sc.hiNum = hi - at0, sc.flatCap = at0 >= lo && at0 <= hi ? HUGE_VAL : -HUGE_VAL;
+        sc.xLoNum = c.x0 - o.x, sc.xHiNum = c.x0 + ext - o.x, sc.xCap = o.x < c.x0 || o.x > c.x0 + ext ? -HUGE_VAL : HUGE_VAL;
+        sc.yLoNum = c.y0 - o.y, sc.yHiNum = c.y0 + ext - o.y, sc.yCap = o.y < c.y0 || o.y > c.y0 + ext ? -HUGE_VAL : HUGE_VAL;
+        sc.s = s;
+        // traverse()'s maxAt(top, 0) without water and with it (clipToHeights' zTop).
+        const CascadeTextures& tex = (*ctx.tex)[k];
+        const Heightfield& hf = tex.terrain;
+        if (!hf.mip.empty()) {
+            const size_t top = hf.mip.size() - 1;
+            const float dry = hf.mip[top][0];
+            float wet = dry;
+            if (tex.hasWater && !tex.water.mip.empty())
+                wet = tex.bothMip.size() == hf.mip.size() ? tex.bothMip[top][0] : std::max(hf.mip[top][0], tex.water.mip[top][0]);
+            sc.topDryNum = double(dry) - o.z, sc.topWetNum = double(wet) - o.z;
+        }
+        setUpSpans(n, dx, dy, dz, sc, r.t0.data(), r.t1.data(), r.du.data(), r.dv.data(), r.invDu.data(), r.invDv.data(), r.tTopDry.data(),
+                   r.tTopWet.data());
+    }
 }
 
 Beam::Beam(const RayContext& ctx, const CameraBasis& basis, double sx0, double sy0, double sx1, double sy1, Beam* outer)

@@ -604,14 +604,17 @@ struct PendingNormals {
 struct RayDirections {
     int x0 = 0, y0 = 0, width = 0;
     std::vector<double> sx, sy, x, y, z, length;
+    detail::RaySetups setups;  // and each ray's set-up in each cascade (detail::setUpRays)
     size_t at(int px, int py) const { return size_t(py - y0) * size_t(width) + size_t(px - x0); }
-    void compute(const CameraBasis& basis, const double* sxAt, const double* syAt, int px0, int px1, int py0, int py1) {
+    void compute(const detail::RayContext& ctx, const CameraBasis& basis, const double* sxAt, const double* syAt, int px0, int px1, int py0,
+                 int py1) {
         x0 = px0, y0 = py0, width = px1 - px0;
         const size_t n = size_t(width) * size_t(py1 - py0);
         for (std::vector<double>* v : {&sx, &sy, &x, &y, &z, &length}) v->resize(n);
         for (int py = py0; py < py1; ++py)
             for (int px = px0; px < px1; ++px) sx[at(px, py)] = sxAt[px], sy[at(px, py)] = syAt[py];
         unitDirections(basis, n, sx.data(), sy.data(), x.data(), y.data(), z.data(), length.data());
+        detail::setUpRays(ctx, n, x.data(), y.data(), z.data(), setups);
     }
     // Six arrays of their own (restrict: the compiler would otherwise check every pair for overlap before vectorising).
     static void unitDirections(const CameraBasis& basis, size_t n, const double* __restrict sx, const double* __restrict sy, double* __restrict dx,
@@ -661,7 +664,7 @@ PixelRays castRays(const Scene& scene, const detail::FrameSetup& setup, const Ca
         const size_t i = size_t(py) * size_t(W) + size_t(px);
         rays.dirs[i] = {float(d.x), float(d.y), float(d.z)};
         if (fit.hull.size() < 3) return;
-        const detail::Hit h = detail::castRay(ctx, d, beam, length);
+        const detail::Hit h = detail::castRay(ctx, d, dirs.setups, k, beam, length);
         if (!h.hit) return;
         f.distanceM[i] = float(h.t);
         f.posX[i] = float(eye.x + d.x * h.t);
@@ -681,7 +684,7 @@ PixelRays castRays(const Scene& scene, const detail::FrameSetup& setup, const Ca
             PendingNormals normals;
             RayDirections dirs;
             for (size_t py = b; py < e; ++py) {
-                dirs.compute(basis, sxAt.data(), syAt.data(), 0, W, int(py), int(py) + 1);
+                dirs.compute(ctx, basis, sxAt.data(), syAt.data(), 0, W, int(py), int(py) + 1);
                 for (int px = 0; px < W; ++px) cast(px, int(py), dirs, nullptr, normals);
             }
             normals.flush(f);
@@ -695,7 +698,7 @@ PixelRays castRays(const Scene& scene, const detail::FrameSetup& setup, const Ca
                 const int qy0 = int(by) * block, qy1 = std::min(H, qy0 + block);
                 for (int qx0 = 0; qx0 < W; qx0 += block) {
                     const int qx1 = std::min(W, qx0 + block);
-                    dirs.compute(basis, sxAt.data(), syAt.data(), qx0, qx1, qy0, qy1);
+                    dirs.compute(ctx, basis, sxAt.data(), syAt.data(), qx0, qx1, qy0, qy1);
                     detail::Beam outer(ctx, basis, sxOf(qx0), syOf(qy0), sxOf(qx1 - 1), syOf(qy1 - 1));
                     for (int py0 = qy0; py0 < qy1; py0 += tile)
                         for (int px0 = qx0; px0 < qx1; px0 += tile) {

@@ -171,9 +171,25 @@ private:
     std::array<bool, 8> passed_{};  // per cascade: the march passed the whole slab (passesOver)
 };
 
-// dir: unit direction of the ray. With a beam holding the ray (its direction before normalising was
-// dirLength times dir), each cascade's walk starts where the beam's march allows.
-Hit castRay(const RayContext& ctx, const glm::dvec3& dir, Beam* beam = nullptr, double dirLength = 1);
+// What each ray's walk through each cascade needs from its direction alone (raycast.cpp): its span there (the
+// cascade's slab along the view and its texture's patch domain), its steps in texel coordinates and their reciprocals,
+// and the depths where it crosses the cascade's highest point (without water and with it) and the block's bottom.
+// setUpRays() computes them for many rays at once in vector registers, in the operations a ray's walk used one at a
+// time (the same bits): a dozen divisions at the start of every walk, waited on before its first step (BENCHMARKS.md).
+struct RaySetups {
+    struct Cascade {
+        double u0 = 0, v0 = 0;  // the eye in the cascade's texel coordinates
+        std::vector<double> t0, t1, du, dv, invDu, invDv, tTopDry, tTopWet;  // per ray; t0 >= t1: nothing there
+    };
+    std::vector<Cascade> cascades;  // per cascade of ctx.fit
+    std::vector<double> tFloor;     // per ray
+};
+// The setups of n rays with unit directions (dx[i], dy[i], dz[i]), into `out` (its vectors reused from call to call).
+void setUpRays(const RayContext& ctx, size_t n, const double* dx, const double* dy, const double* dz, RaySetups& out);
+
+// dir: unit direction of the ray, setups.*[ray] its setup (setUpRays). With a beam holding the ray (its direction before
+// normalising was dirLength times dir), each cascade's walk starts where the beam's march allows.
+Hit castRay(const RayContext& ctx, const glm::dvec3& dir, const RaySetups& setups, size_t ray, Beam* beam = nullptr, double dirLength = 1);
 
 // What approximateOnCpu() filled of a cascade, for a backend that keeps the last frame's texels itself.
 struct CascadeFill {
