@@ -29,7 +29,7 @@ struct PatchHit {
     bool terrainUnderground = false;  // the ray met the terrain first from below: it starts inside it
     bool waterUnderground = false;    // the same for the water surface: the camera is under water
     double t = 0;
-    double gx = 0, gy = 0;  // surface slope dz/dx, dz/dy at the hit [m/m]
+    double gx = 0, gy = 0;  // surface rise at the hit per texel along x and y [m] (the slope times the texel size)
 };
 
 // What a ray has met so far, over its cascades: each surface's first contact decides whether the ray
@@ -80,7 +80,7 @@ enum class Contact { None, Below, Hit };
 struct PatchContact {
     Contact kind = Contact::None;
     double tau = -1;            // from span.t (Hit, Below)
-    double gx = 0, gy = 0;      // surface slope dz/dx, dz/dy there [m/m]
+    double gx = 0, gy = 0;      // surface rise there per texel along x and y [m] (normalOfSlope divides)
     bool enteredAbove = false;  // the ray entered the patch above its surface (RayState's `touched`)
 };
 
@@ -96,8 +96,8 @@ PatchContact patchContact(const PatchCorners& p, const TexelRay& ray, const RayS
     const double A = -e * du * dv;
     auto slope = [&](double at) {
         const double a = std::clamp(a0 + du * at, 0.0, 1.0), b = std::clamp(b0 + dv * at, 0.0, 1.0);
-        out.gx = ((h10 - h00) + e * b) / ray.texelM;
-        out.gy = ((h01 - h00) + e * a) / ray.texelM;
+        out.gx = (h10 - h00) + e * b;
+        out.gy = (h01 - h00) + e * a;
     };
     if (C <= 0) {  // at or under the surface where the ray enters the patch: the caller's rules decide
         out.kind = Contact::Below;
@@ -405,7 +405,7 @@ Hit hitIn(const RayContext& ctx, size_t k, const glm::dvec3& o, const glm::dvec3
         return h;
     }
     h.slopeOnly = true;  // the normal: normalOfSlope, by the caller
-    h.gx = best.gx, h.gy = best.gy;
+    h.gx = best.gx, h.gy = best.gy, h.texelM = c.texelM;
     if (h.water) {  // depth at the hit: bilinear from the depth texture
         const double u = (o[0] + d[0] * h.t - c.x0) / c.texelM, v = (o[1] + d[1] * h.t - c.y0) / c.texelM;
         const int i = std::clamp(int(std::floor(u)), 0, c.n - 2), j = std::clamp(int(std::floor(v)), 0, c.n - 2);
@@ -446,7 +446,7 @@ Hit castRay(const RayContext& ctx, const glm::dvec3& dir, const RaySetups& setup
                 Hit h2 = hitIn(ctx, k + 1, ctx.eyeLocal, dir, setups, ray, st2, under2, from(k + 1));
                 if (h2.hit && h2.water == h.water && !h2.wall && std::abs(h2.t - h.t) <= std::max(cs[k].texelM, cs[k + 1].texelM)) {
                     for (Hit* x : {&h, &h2})
-                        if (x->slopeOnly) normalOfSlope(x->gx, x->gy, x->nx, x->ny, x->nz), x->slopeOnly = false;
+                        if (x->slopeOnly) normalOfSlope(x->gx, x->gy, x->texelM, x->nx, x->ny, x->nz), x->slopeOnly = false;
                     const double w = std::clamp((off - zoneStart) / (zoneEnd - zoneStart), 0.0, 1.0);
                     h.t = (1 - w) * h.t + w * h2.t;
                     double nx = (1 - w) * h.nx + w * h2.nx, ny = (1 - w) * h.ny + w * h2.ny, nz = (1 - w) * h.nz + w * h2.nz;

@@ -579,20 +579,20 @@ struct PixelRays {
 };
 
 // Hits whose unit normal is still to be computed from their slope (detail::Hit::slopeOnly): a worker's, 256 at a time,
-// in vector registers. One at a time, its square root and three divisions at the end of every ray were 4-6 % of ray
+// in vector registers. One at a time, its square root and five divisions at the end of every ray were 4-6 % of ray
 // casting (BENCHMARKS.md). The same bits either way (detail::normalOfSlope).
 struct PendingNormals {
     static constexpr size_t kMax = 256;
-    std::array<double, kMax> gx, gy, nx, ny, nz;
+    std::array<double, kMax> gx, gy, texelM, nx, ny, nz;  // Hit's gx, gy, texelM; the normal
     std::array<size_t, kMax> at;  // the pixel
     size_t n = 0;
-    void add(size_t pixel, double slopeX, double slopeY, Frame& f) {
+    void add(size_t pixel, const detail::Hit& h, Frame& f) {
         if (n == kMax) flush(f);
-        at[n] = pixel, gx[n] = slopeX, gy[n] = slopeY, ++n;
+        at[n] = pixel, gx[n] = h.gx, gy[n] = h.gy, texelM[n] = h.texelM, ++n;
     }
     void flush(Frame& f) {
         const size_t count = n;  // a local: the stores below could change a member, for all the compiler knows
-        for (size_t k = 0; k < count; ++k) detail::normalOfSlope(gx[k], gy[k], nx[k], ny[k], nz[k]);
+        for (size_t k = 0; k < count; ++k) detail::normalOfSlope(gx[k], gy[k], texelM[k], nx[k], ny[k], nz[k]);
         for (size_t k = 0; k < count; ++k) f.nX[at[k]] = float(nx[k]), f.nY[at[k]] = float(ny[k]), f.nZ[at[k]] = float(nz[k]);
         n = 0;
     }
@@ -670,7 +670,7 @@ PixelRays castRays(const Scene& scene, const detail::FrameSetup& setup, const Ca
         f.posX[i] = float(eye.x + d.x * h.t);
         f.posY[i] = float(eye.y + d.y * h.t);
         f.posZ[i] = float(eye.z + d.z * h.t);
-        if (h.slopeOnly) normals.add(i, h.gx, h.gy, f);
+        if (h.slopeOnly) normals.add(i, h, f);
         else f.nX[i] = float(h.nx), f.nY[i] = float(h.ny), f.nZ[i] = float(h.nz);
         f.cascade[i] = float(h.cascade);
         f.waterDepthM[i] = float(h.depth);

@@ -108,20 +108,21 @@ struct Hit {
     bool hit = false;
     double t = 0;                          // distance along the ray [m]
     double nx = 0, ny = 0, nz = 1;         // unit normal (unless slopeOnly)
-    // The hit is on a smooth surface with slope (gx, gy) = (dz/dx, dz/dy) [m/m], and nx, ny, nz are not set: the caller
-    // takes the normal from normalOfSlope(), as castRays does for many hits at once, in vector registers.
+    // The hit is on a smooth surface that rises gx and gy [m] a texel of texelM [m] along x and y, and nx, ny, nz are not
+    // set: the caller takes the normal from normalOfSlope(), as castRays does for many hits at once, in vector registers.
     bool slopeOnly = false;
-    double gx = 0, gy = 0;
+    double gx = 0, gy = 0, texelM = 1;
     double depth = 0;                      // water depth at the hit (water hits), else 0
     bool water = false;
     bool wall = false;                     // on a cut face of the terrain block (raycast.cpp): a hole's or the domain's edge, the bottom
     int cascade = -1;
 };
 
-// The unit normal (-gx, -gy, 1) / |(-gx, -gy, 1)| of a surface with slope (gx, gy), in the operations every hit's
-// normal has always been computed with (the same bits whether one at a time or vectorised: IEEE square roots and
-// divisions are exact to half an ulp in any width).
-inline void normalOfSlope(double gx, double gy, double& nx, double& ny, double& nz) {
+// The unit normal (-gx, -gy, 1) / |(-gx, -gy, 1)| of a surface with slope (gx, gy) = (riseX, riseY) / texelM [m/m], in
+// the operations every hit's normal has always been computed with (the same bits whether one at a time or vectorised:
+// IEEE square roots and divisions are exact to half an ulp in any width).
+inline void normalOfSlope(double riseX, double riseY, double texelM, double& nx, double& ny, double& nz) {
+    const double gx = riseX / texelM, gy = riseY / texelM;
     const double nl = std::sqrt(gx * gx + gy * gy + 1.0);
     nx = -gx / nl;
     ny = -gy / nl;
