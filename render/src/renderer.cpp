@@ -574,7 +574,7 @@ std::vector<detail::CascadeTextures> approximateCascades(const Scene& scene, con
 // What shading needs of each pixel's ray beyond the Frame's layers: its unit direction (the sky's colour) and
 // whether it hit water.
 struct PixelRays {
-    std::vector<std::array<float, 3>> dirs;
+    std::vector<float> dirZ;  // the z of each ray's unit direction: the sky's colour (all the shading needs of it)
     std::vector<uint8_t> isWater;
 };
 
@@ -644,7 +644,7 @@ PixelRays castRays(const Scene& scene, const detail::FrameSetup& setup, const Ca
     parallelFor(kLayers + 2, 1, options.threads, [&](size_t b, size_t e, unsigned) {
         for (size_t i = b; i < e; ++i) {
             if (i < kLayers) layers[i].first->assign(pixels, layers[i].second);
-            else if (i == kLayers) rays.dirs.assign(pixels, {0.0f, 0.0f, 0.0f});
+            else if (i == kLayers) rays.dirZ.assign(pixels, 0.0f);
             else rays.isWater.assign(pixels, 0);
         }
     });
@@ -662,7 +662,7 @@ PixelRays castRays(const Scene& scene, const detail::FrameSetup& setup, const Ca
         const glm::dvec3 d{dirs.x[k], dirs.y[k], dirs.z[k]};
         const double length = dirs.length[k];
         const size_t i = size_t(py) * size_t(W) + size_t(px);
-        rays.dirs[i] = {float(d.x), float(d.y), float(d.z)};
+        rays.dirZ[i] = float(d.z);
         if (fit.hull.size() < 3) return;
         const detail::Hit h = detail::castRay(ctx, d, dirs.setups, k, beam, length);
         if (!h.hit) return;
@@ -734,7 +734,7 @@ struct ShadeInputs {
 // A worker's buffers for a run of up to kShadeBlock pixels of a row.
 constexpr size_t kShadeBlock = 256;
 struct ShadeBlock {
-    std::array<double, kShadeBlock> fog, up;  // the fog's share, the ray direction's z
+    std::array<double, kShadeBlock> fog;      // the fog's share
     std::array<double, kShadeBlock> dim;      // the cell outline's factor: 1, or 0.35 on an edge (RenderOptions::cellOutlines)
     std::array<int, kShadeBlock> water;       // PixelRays::isWater
     std::array<int, kShadeBlock> r, g, b;     // indices into the sRGB tables
@@ -750,14 +750,12 @@ uint64_t shadeBlock(const ShadeInputs& in, size_t i0, size_t n, ShadeBlock& blk,
     const Frame& f = in.f;
     const float* dist = f.distanceM.data() + i0;
     uint64_t hits = 0;
-    const std::array<float, 3>* dirs = in.rays.dirs.data() + i0;
     const uint8_t* water = in.rays.isWater.data() + i0;
     for (size_t k = 0; k < n; ++k) {
         const bool hit = std::isfinite(dist[k]);
         hits += hit;
         blk.fog[k] = hit ? 0.5 * (1.0 - std::exp(-dist[k] / in.fogDist)) : 0.0;
-        blk.up[k] = dirs[k][2];  // the rays' directions are 12 bytes apart, and the flags bytes: out of the vectorised loop
-        blk.water[k] = water[k];
+        blk.water[k] = water[k];  // bytes: out of the vectorised loop (a vector of bytes would make it 64 lanes wide)
     }
     const float* nX = f.nX.data() + i0;
     const float* nY = f.nY.data() + i0;
@@ -766,6 +764,7 @@ uint64_t shadeBlock(const ShadeInputs& in, size_t i0, size_t n, ShadeBlock& blk,
     const float* depth = f.waterDepthM.data() + i0;
     const float* wallAt = f.wall.data() + i0;
     const float* layerAt = Layer ? in.layerValues + i0 : nullptr;
+    const float* dirZ = in.rays.dirZ.data() + i0;
     const float* toLin = kSrgb.toLinear.data();
     // std::clamp(c, 0, 1) by value, in two unconditional selects (std::clamp returns a reference, a branch to the
     // vectoriser, as is a comparison made only when another fails).
@@ -782,7 +781,7 @@ uint64_t shadeBlock(const ShadeInputs& in, size_t i0, size_t n, ShadeBlock& blk,
     // on a flag the loop does not change is not vectorised).
     const Ramp& landRamp = in.depthMode ? kDryRamp : kElevation;
     for (size_t k = 0; k < n; ++k) {
-        const double up = unit(blk.up[k]);
+        const double up = unit(dirZ[k]);
         const Rgb sky{hz.r + up * (zn.r - hz.r), hz.g + up * (zn.g - hz.g), hz.b + up * (zn.b - hz.b)};
         const Rgb skyLin{toLin[index(sky.r)], toLin[index(sky.g)], toLin[index(sky.b)]};
         // The base colour, by priority: wall, colour layer, dry under a water layer, water depth, dry (depth mode),
