@@ -33,6 +33,8 @@
 // White box: the approximation's texel textures (render/src is the library's private part).
 #include "../render/src/textures.h"
 
+#include <glm/geometric.hpp>
+
 namespace {
 
 namespace fs = std::filesystem;
@@ -546,6 +548,124 @@ TEST(Render, BeamsGiveTheSameHits) {
     EXPECT_GT(n.water, 1000u) << "the comparison covers water";
     EXPECT_EQ(n.different, 0u);
     EXPECT_LE(n.rounded, n.pixels / 10000);
+}
+
+// detail::setUpRays computes each ray's span, texel steps and crossings for a block of rays at once in vector
+// registers, with selects where the walk used to return early. Against the walk's own scalar set-up as it was before
+// (offsetInterval, the clips to the texture, texelRay, the reciprocals and clipToHeights' crossings, written out here):
+// the same values wherever the ray has something in the cascade, and an empty span wherever that code gave up.
+// Tolerance 4 ulps: the same operations on the same operands, but the compiler may fuse a multiplication and an
+// addition into one rounding (GCC's -ffp-contract=fast) in one translation unit and not in another; a wrong clip,
+// swap or select is off by far more. (The frames themselves were compared byte for byte with the build before, in
+// BENCHMARKS.md.) The directions include rays with components that are exactly 0 or tiny, level rays, one straight
+// down and rays along the cascades' slabs.
+TEST(Render, RaySetupsAreTheWalksOwnClips) {
+    World& w = hef();
+    const Camera c = overviewCamera(*w.scene, 320, 200);
+    const detail::FrameSetup setup = detail::setUpFrame(*w.scene, c);
+    const CascadeFit fit = fitCascades(setup.view, 3, 256);
+    ASSERT_EQ(fit.cascades.size(), 3u);
+    std::vector<detail::CascadeTextures> tex(fit.cascades.size());
+    for (size_t k = 0; k < fit.cascades.size(); ++k) {
+        detail::approximate(*w.scene, fit.cascades[k], tex[k], 0.01, 0);
+        tex[k].terrain.buildMip(0);
+        if (tex[k].hasWater) tex[k].water.buildMip(0), tex[k].buildBothMip(0);
+    }
+    const glm::dvec3 o = setup.eyeLocal;
+    // The fitted cascades lie in front of the eye; moved so that it is over cascade 0's texture (rays with no motion
+    // in x or y walk there), over cascade 2's though outside its slab, and over cascade 1's in y (at the edge behind it
+    // along the view) but not in x, they give rays that only the slab, or only the x clip, leaves empty.
+    CascadeFit moved = fit;
+    for (size_t k : {0, 1, 2}) {
+        Cascade& m = moved.cascades[k];
+        const double side = (m.n - 1) * m.texelM;
+        if (k != 1) m.x0 = o.x - 0.5 * side, m.y0 = o.y - 0.5 * side;
+        else m.x0 = o.x + 10 * m.texelM, m.y0 = fit.dir.y >= 0 ? o.y - 10 * m.texelM : o.y - side + 10 * m.texelM;
+    }
+    std::vector<glm::dvec3> dirs = {{0, 0, -1}, {1, 0, 0}, {0, 1, 0}, {0, -1, -1e-300}, {1e-310, 1, -0.2}, {-1, 1e-320, 0}};
+    const glm::dvec2 v = fit.dir;
+    dirs.push_back({-v.y, v.x, 0}), dirs.push_back({v.y, -v.x, -0.3}), dirs.push_back({v.x, v.y, 0});
+    std::mt19937_64 rng(5);
+    std::normal_distribution<double> g;
+    for (int i = 0; i < 20000; ++i) dirs.push_back({g(rng), g(rng), -std::abs(g(rng))});
+    for (int i = 0; i < 2000; ++i) dirs.push_back({g(rng), g(rng), g(rng)});
+    for (int i = 0; i < 500; ++i) dirs.push_back({0, g(rng), -std::abs(g(rng))}), dirs.push_back({g(rng), 0, -std::abs(g(rng))});
+    for (int i = 0; i < 500; ++i) dirs.push_back({-v.y * (1 + 1e-3 * g(rng)), v.x, -std::abs(g(rng))});  // along a slab
+    for (glm::dvec3& d : dirs) d /= glm::length(d);
+    std::vector<double> dx, dy, dz;
+    for (const glm::dvec3& d : dirs) dx.push_back(d.x), dy.push_back(d.y), dz.push_back(d.z);
+    auto near = [](double a, double b) {  // within 4 ulps; an infinity only equals itself
+        if (a == b) return true;
+        if (!std::isfinite(a) || !std::isfinite(b)) return false;
+        return std::abs(a - b) <= 4 * std::numeric_limits<double>::epsilon() * std::max(std::abs(a), std::abs(b));
+    };
+    size_t compared = 0, empty = 0, edge = 0;
+    const CascadeFit* fits[] = {&fit, &moved};
+    for (const CascadeFit* f : fits) {
+        for (size_t k = 0; k < fit.cascades.size(); ++k) {
+            const detail::RayContext ctx{f, &tex, o, setup.nearM, setup.farM, w.scene->elevationMin};
+            detail::RaySetups rs;
+            detail::setUpRays(ctx, dirs.size(), dx.data(), dy.data(), dz.data(), rs);
+            const Cascade& ck = f->cascades[k];
+            const detail::RaySetups::Cascade& r = rs.cascades[k];
+            const detail::Heightfield& hf = tex[k].terrain;
+            const size_t top = hf.mip.size() - 1;
+            const double zDry = hf.mip[top][0];
+            const double zWet = tex[k].hasWater ? (tex[k].bothMip.empty() ? std::max(hf.mip[top][0], tex[k].water.mip[top][0]) : tex[k].bothMip[top][0]) : zDry;
+            const double lo = k == 0 ? -HUGE_VAL : ck.splitNear, hi = ck.farWithOverlap;
+            for (size_t i = 0; i < dirs.size(); ++i) {
+                const glm::dvec3 d = dirs[i];
+                // hitIn's clips as they were: none left means the walk returned before it began.
+                double t0 = setup.nearM, t1 = setup.farM;
+                bool none = false;
+                const double eyeOffset = glm::dot(glm::dvec2(o), v);
+                const double rate = glm::dot(glm::dvec2(d), v), at0 = glm::dot(glm::dvec2(o), v) - eyeOffset;
+                if (std::abs(rate) < 1e-15) {
+                    none = !(at0 >= lo && at0 <= hi);
+                } else {
+                    double a = (lo - at0) / rate, b = (hi - at0) / rate;
+                    if (a > b) std::swap(a, b);
+                    t0 = std::max(t0, a), t1 = std::min(t1, b);
+                }
+                const double ext = (ck.n - 1) * ck.texelM;
+                for (int axis = 0; axis < 2 && !none; ++axis) {
+                    const double lo0 = axis == 0 ? ck.x0 : ck.y0;
+                    if (std::abs(d[axis]) < 1e-300) {
+                        none = o[axis] < lo0 || o[axis] > lo0 + ext;
+                        continue;
+                    }
+                    double a = (lo0 - o[axis]) / d[axis], b = (lo0 + ext - o[axis]) / d[axis];
+                    if (a > b) std::swap(a, b);
+                    t0 = std::max(t0, a), t1 = std::min(t1, b);
+                }
+                if (!none && near(t0, t1)) {  // a span of a few ulps: empty or not by rounding alone
+                    ++edge;
+                    continue;
+                }
+                if (none || !(t0 < t1)) {
+                    ++empty;
+                    EXPECT_FALSE(r.t0[i] < r.t1[i]) << "cascade " << k << ", ray " << i << ": a span where the walk had none";
+                    continue;
+                }
+                ++compared;
+                EXPECT_TRUE(near(r.t0[i], t0)) << "cascade " << k << ", ray " << i << ": " << r.t0[i] << " against " << t0;
+                EXPECT_TRUE(near(r.t1[i], t1)) << "cascade " << k << ", ray " << i << ": " << r.t1[i] << " against " << t1;
+                const double du = d.x / ck.texelM, dv = d.y / ck.texelM;
+                EXPECT_TRUE(near(r.du[i], du) && near(r.dv[i], dv)) << "cascade " << k << ", ray " << i;
+                EXPECT_TRUE(near(r.invDu[i], du != 0 ? 1.0 / du : 0.0) && near(r.invDv[i], dv != 0 ? 1.0 / dv : 0.0)) << "cascade " << k << ", ray " << i;
+                EXPECT_TRUE(near(r.u0, (o.x - ck.x0) / ck.texelM) && near(r.v0, (o.y - ck.y0) / ck.texelM));
+                if (d.z != 0) {
+                    EXPECT_TRUE(near(r.tTopDry[i], (zDry - o.z) / d.z)) << "cascade " << k << ", ray " << i;
+                    EXPECT_TRUE(near(r.tTopWet[i], (zWet - o.z) / d.z)) << "cascade " << k << ", ray " << i;
+                    EXPECT_TRUE(near(rs.tFloor[i], (w.scene->elevationMin - o.z) / d.z)) << "ray " << i;
+                }
+            }
+        }
+    }
+    std::printf("%zu spans compared, %zu empty, %zu of a few ulps\n", compared, empty, edge);
+    EXPECT_GT(compared, 8000u);
+    EXPECT_GT(empty, 1000u) << "rays with nothing in a cascade are compared too";
+    EXPECT_LE(edge, 10u);
 }
 
 TEST(Render, StableFittingKeepsTexelsOnTheLattice) {
