@@ -241,15 +241,19 @@ TEST(Render, ApproximationEqualsTheExactSurfaceAtTexels) {
     EXPECT_GT(t.cascades[0].gaussians, 1000000u);
 }
 
+// The overview camera of w at 320 x 200, and its three cascades of 256^2 texels.
+std::pair<detail::FrameSetup, CascadeFit> overviewFit(World& w) {
+    const detail::FrameSetup setup = detail::setUpFrame(*w.scene, overviewCamera(*w.scene, 320, 200));
+    return {setup, fitCascades(setup.view, 3, 256)};
+}
+
 // The texels themselves against the exact evaluator: every visible texel of the three cascades of an
 // overview of the flooded demo DEM, terrain height and water depth. Tolerance 1 mm: the approximation
 // sums in float32 with kernel offsets taken relative to each cell's centre (no large coordinates), so its
 // error is a few float ulps of the values (0.25 mm at 2000-4000 m) plus the kernel weights' rounding.
 TEST(Render, TexelsEqualTheExactSurfaceWithin1mm) {
     World& w = hef();
-    const Camera c = overviewCamera(*w.scene, 320, 200);
-    const detail::FrameSetup setup = detail::setUpFrame(*w.scene, c);
-    const CascadeFit fit = fitCascades(setup.view, 3, 256);
+    const auto [setup, fit] = overviewFit(w);
     ASSERT_EQ(fit.cascades.size(), 3u);
     const auto depthLayer = hc::influence::Layer::byName(w.grid, "water_depth");
     double worstZ = 0, worstDepth = 0;
@@ -561,9 +565,7 @@ TEST(Render, BeamsGiveTheSameHits) {
 // down and rays along the cascades' slabs.
 TEST(Render, RaySetupsAreTheWalksOwnClips) {
     World& w = hef();
-    const Camera c = overviewCamera(*w.scene, 320, 200);
-    const detail::FrameSetup setup = detail::setUpFrame(*w.scene, c);
-    const CascadeFit fit = fitCascades(setup.view, 3, 256);
+    const auto [setup, fit] = overviewFit(w);
     ASSERT_EQ(fit.cascades.size(), 3u);
     std::vector<detail::CascadeTextures> tex(fit.cascades.size());
     for (size_t k = 0; k < fit.cascades.size(); ++k) {
