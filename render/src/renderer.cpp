@@ -571,16 +571,16 @@ std::vector<detail::CascadeTextures> approximateCascades(const Scene& scene, con
     return tex;
 }
 
-// What shading needs of each pixel's ray beyond the Frame's layers: its unit direction (the sky's colour) and
+// What shading needs of each pixel's ray beyond the Frame's layers: its unit direction's z (the sky's colour) and
 // whether it hit water.
 struct PixelRays {
-    std::vector<float> dirZ;  // the z of each ray's unit direction: the sky's colour (all the shading needs of it)
+    std::vector<float> dirZ;
     std::vector<uint8_t> isWater;
 };
 
 // Hits whose unit normal is still to be computed from their slope (detail::Hit::slopeOnly): a worker's, 256 at a time,
-// in vector registers. One at a time, its square root and five divisions at the end of every ray were 4-6 % of ray
-// casting (BENCHMARKS.md). The same bits either way (detail::normalOfSlope).
+// in vector registers. One at a time, the square root and divisions at the end of every ray that hit were 4-6 % of
+// ray casting (BENCHMARKS.md). The same bits either way (detail::normalOfSlope).
 struct PendingNormals {
     static constexpr size_t kMax = 256;
     std::array<double, kMax> gx, gy, texelM, nx, ny, nz;  // Hit's gx, gy, texelM; the normal
@@ -599,8 +599,8 @@ struct PendingNormals {
 };
 
 // The rays of a rectangle of pixels: unit directions and their lengths before normalising, computed at once in vector
-// registers (a square root and three divisions a ray) in the operations each ray's used to be, one at a time: the same
-// bits (glm's d = forward + sx right + sy up, length(d), d / length component by component).
+// registers (a square root and three divisions a ray) in the operations each ray used one at a time: the same bits
+// (glm's d = forward + sx right + sy up, length(d), d / length component by component).
 struct RayDirections {
     int x0 = 0, y0 = 0, width = 0;
     std::vector<double> sx, sy, x, y, z, length;
@@ -839,12 +839,20 @@ void shadePixels(const Scene& scene, const RenderOptions& options, const CameraB
         const auto [lo, hi] = layerRange(scene.grid(), *colorLayer);
         layerLo = lo, layerRangeV = std::max(hi - lo, 1e-12);
     }
-    ShadeInputs in{f, rays, sun, fogDist, skyHorizon, skyZenith, scene.elevationMin, zRange, dRange, 0.0, 1.0, nullptr, false, false};
-    in.depthMode = options.color == ColorMode::WaterDepth;
-    if (colorLayer) {
-        in.layerValues = layerValues.data(), in.layerLo = layerLo, in.layerRange = layerRangeV;
-        in.layerOnWater = colorLayer->kind == influence::Layer::WaterCells;
-    }
+    const ShadeInputs in{.f = f,
+                         .rays = rays,
+                         .sun = sun,
+                         .fogDist = fogDist,
+                         .skyHorizon = skyHorizon,
+                         .skyZenith = skyZenith,
+                         .zMin = scene.elevationMin,
+                         .zRange = zRange,
+                         .dRange = dRange,
+                         .layerLo = layerLo,
+                         .layerRange = layerRangeV,
+                         .layerValues = colorLayer ? layerValues.data() : nullptr,
+                         .layerOnWater = colorLayer && colorLayer->kind == influence::Layer::WaterCells,
+                         .depthMode = options.color == ColorMode::WaterDepth};
     // Cell outlines: a hit within 0.7 pixel of its cell's edge is darkened (a scene lookup a pixel, so outside the
     // vectorised loop: ShadeBlock::dim).
     auto outline = [&](size_t i0, size_t n, double* dim) {
