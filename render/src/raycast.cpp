@@ -139,9 +139,9 @@ PatchContact patchContact(const Heightfield& hf, int iu, int iv, const TexelRay&
 bool clipToHeights(const TexelRay& ray, double zTop, double zFloor, double tTop, double tFloor, double& tIn, double& tOut) {
     if (std::min(ray.zAt(tIn), ray.zAt(tOut)) > zTop) return false;
     if (ray.dz != 0) {
-        const double tCross = tTop, margin = 1e-9 * (1.0 + std::abs(tCross));
-        if (ray.dz < 0) tIn = std::max(tIn, tCross - margin);
-        else tOut = std::min(tOut, tCross + margin);
+        const double margin = 1e-9 * (1.0 + std::abs(tTop));
+        if (ray.dz < 0) tIn = std::max(tIn, tTop - margin);
+        else tOut = std::min(tOut, tTop + margin);
         if (!(tIn < tOut)) return false;
     }
     // Likewise under the block's bottom there is nothing to hit but the bottom, where a rising ray comes up
