@@ -466,7 +466,7 @@ private:
 // there in vain (1.4 us a texel: 8.5 ms of a fresh frame at 105 M cells, for 6 k texels over holes). Returns the
 // texels copied, adds the texels interpolated to work.pyramidInterpolated (the most levels up to work.pyramidInterpolatedUp) and sets
 // work.pyramidLevel to the pyramid level used (-1: none fits the cascade). With `runs`, the copies are listed there
-// (PyramidRun) instead of written, and each span shrinks to the texels written here (interpolated) or left to the
+// (PyramidRun) instead of written or counted (the caller counts what it copies), and each span shrinks to the texels written here (interpolated) or left to the
 // kernels, from the first to the last (the interpolated ones marked in copiedMask, so the kernels skip them).
 uint64_t copyPyramidTexels(const Scene& scene, const Cascade& c, CascadeTextures& tex, double waterMinDepthM, int interpolateLevels, unsigned threads,
                            std::vector<Todo>& todo, std::vector<uint8_t>& copiedMask, ApproximationWork& work, std::vector<PyramidRun>* runs = nullptr) {
@@ -532,10 +532,9 @@ uint64_t copyPyramidTexels(const Scene& scene, const Cascade& c, CascadeTextures
                         const int len = end - i + 1;
                         const size_t at = rowAt + size_t(i);
                         std::memset(&copiedMask[at], 1, size_t(len));
-                        if (runs) {  // left to the caller: counted only
+                        if (runs) {  // left to the caller, who counts them too (without reading the samples here)
                             const int sample = int(s - samples->tile());  // the water tile's layout is the same
                             myRuns->push_back({int(j), i, len, sample, span, int(plane), s - sample, w ? w - sample : nullptr});
-                            for (int k = 0; k < len; ++k) nCopied += !std::isnan(s[k]);
                         } else {
                             nCopied += uint64_t(copySamples(s, w, plane, len, minDepth, &tex.terrain.h[at], w ? &tex.depth[at] : nullptr,
                                                             w ? &tex.water.h[at] : nullptr));

@@ -207,6 +207,9 @@ Camera overviewCamera(const Scene& s, int width, int height) {
     return c;
 }
 
+// A copied sample is the exact surface rounded to float once: half an ulp of the largest height.
+double detail::pyramidCopyBoundM(const Scene& scene) { return std::ldexp(std::max(std::abs(scene.zMin), std::abs(scene.zMax)), -24); }
+
 namespace {
 
 struct Rgb {
@@ -556,8 +559,7 @@ std::vector<detail::CascadeTextures> approximateCascades(const Scene& scene, con
             cs.pyramidTexels = work.pyramidTexels, cs.pyramidLevel = work.pyramidLevel;
             cs.pyramidInterpolated = work.pyramidInterpolated, cs.pyramidInterpolatedUp = work.pyramidInterpolatedUp;
         }
-        // A copied sample is the exact surface rounded to float once: half an ulp of the largest height.
-        if (cs.pyramidTexels) cs.errorBoundM = std::ldexp(std::max(std::abs(scene.zMin), std::abs(scene.zMax)), -24);
+        if (cs.pyramidTexels) cs.errorBoundM = detail::pyramidCopyBoundM(scene);
         cs.approximationMs = clock.milliseconds();
         timings.approximationMs += cs.approximationMs;
         clock.restart();

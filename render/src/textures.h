@@ -82,6 +82,9 @@ struct PyramidRun {
     const float* water = nullptr;
 };
 
+// The error bound of a texel copied from the surface pyramid (CascadeStats::errorBoundM) [m].
+double pyramidCopyBoundM(const Scene& scene);
+
 // Copies `count` pyramid samples into a row of a cascade's textures with the water rule of surface.h: s the elevations,
 // w (nullptr: dry) the water levels with the wet shares at w + plane; NaN elevations (outside every cell) and dry
 // texels leave h, depth and water as they are. Returns the texels with a surface.

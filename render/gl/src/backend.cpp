@@ -98,6 +98,9 @@ struct TileAtlas {
     std::unordered_map<const float*, uint32_t> slotOf;
     std::vector<const float*> tileIn;  // per slot (nullptr: free)
     std::vector<uint64_t> usedIn;      // per slot: the frame that used it last
+    // Per slot: bit c of row r set where the tile's sample (c, r) of its first channel is a number (not NaN: outside every
+    // cell), so that a run's copied texels are counted without reading the tile again (validIn).
+    std::vector<std::array<uint16_t, 16>> validRows;
     uint32_t hand = 0, usedNow = 0;
     uint64_t frame = 0;
     uint64_t uploadedTiles = 0, uploadedBytes = 0;  // this frame's
@@ -113,7 +116,7 @@ struct TileAtlas {
         capacity = uint32_t(std::min<size_t>(bytes / slotBytes, size_t{1} << 24));
         if (limit) capacity = std::min(capacity, limit);
         buffer.reserve(size_t(capacity) * slotBytes);
-        tileIn.assign(capacity, nullptr), usedIn.assign(capacity, 0);
+        tileIn.assign(capacity, nullptr), usedIn.assign(capacity, 0), validRows.assign(capacity, {});
     }
     void beginFrame() { ++frame, usedNow = 0, uploadedTiles = 0, uploadedBytes = 0, staging.clear(), stagedSlots.clear(); }
     // The slot holding `tile` (its planes of `plane` floats each, `plane` apart) this frame, staged for upload if it was
@@ -134,7 +137,18 @@ struct TileAtlas {
         staging.resize(at + planes * size_t(gpu::kAtlasPlane), 0.0f);
         for (size_t c = 0; c < planes; ++c) std::copy_n(tile + c * plane, plane, &staging[at + c * size_t(gpu::kAtlasPlane)]);
         stagedSlots.push_back(s);
+        const size_t side = sideOf(plane);
+        validRows[s] = {};
+        for (size_t r = 0; r < side; ++r)
+            for (size_t c = 0; c < side; ++c) validRows[s][r] |= uint16_t(!std::isnan(tile[r * side + c]) << c);
         return s;
+    }
+    // A tile's side for a plane of `plane` samples (a power of four up to gpu::kAtlasPlane).
+    static size_t sideOf(size_t plane) { return size_t{1} << (std::countr_zero(plane) / 2); }
+    // Samples at .. at + count - 1 (within one row) of the tile in `slot`, a plane of `plane` samples, that are numbers.
+    int validIn(uint32_t s, int at, int count, size_t plane) const {
+        const size_t side = sideOf(plane), row = size_t(at) / side, col = size_t(at) % side;
+        return std::popcount(unsigned(validRows[s][row] >> col) & ((1u << count) - 1));
     }
     // The staged tiles into their slots, at once (a tile is never said resident without being there, whatever fails
     // later in the frame): one upload per run of consecutive slots.
@@ -152,7 +166,7 @@ struct TileAtlas {
     void release() {
         buffer.release();
         capacity = 0, hand = 0, usedNow = 0;
-        slotOf.clear(), tileIn.clear(), usedIn.clear();
+        slotOf.clear(), tileIn.clear(), usedIn.clear(), validRows.clear();
     }
 };
 
@@ -541,7 +555,11 @@ struct GlRenderer::Impl {
         const float minDepth = float(options.waterMinDepthM);
         detail::approximateOnCpu(scene, fit, options, cascadeCache, cpu, [&](size_t k, detail::CascadeTextures& tex, detail::CascadeFill& fill) {
             const Stopwatch clock;
-            if (useAtlas) placeRuns(k, tex, fill, minDepth);
+            if (useAtlas) {  // cpu.cascades: one per cascade of the fit (approximateCascades)
+                CascadeStats& stats = cpu.cascades[k];
+                stats.pyramidTexels += placeRuns(k, tex, fill, minDepth);
+                if (stats.pyramidTexels) stats.errorBoundM = detail::pyramidCopyBoundM(scene);
+            }
             // Each row's place in the packed planes, then the rows copied there on all cores.
             const size_t n = size_t(fit.cascades[k].n), first = packed[0].size(), end = addRows(k, fill, first);
             const size_t channels = water ? 3 : 1;
@@ -592,9 +610,12 @@ struct GlRenderer::Impl {
 
     // Cascade k's runs of texels to copy from the pyramid (detail::PyramidRun) as atlas.comp's runs, their tiles
     // uploaded into the atlas where not resident. A run whose tile finds no slot (this frame uses every one) is copied here, into
-    // `tex`, and its RowFill span widened to hold it, so that it goes up with the CPU's texels.
-    void placeRuns(size_t k, detail::CascadeTextures& tex, detail::CascadeFill& fill, float minDepth) {
-        if (fill.runs.empty()) return;
+    // `tex`, and its RowFill span widened to hold it, so that it goes up with the CPU's texels. Returns the texels copied
+    // with a surface (approximate() leaves them to be counted here: counting them there read every tile's samples,
+    // which the CPU otherwise never touches once the tile is resident; 40 % of copyPyramidTexels on llvmpipe).
+    uint64_t placeRuns(size_t k, detail::CascadeTextures& tex, detail::CascadeFill& fill, float minDepth) {
+        if (fill.runs.empty()) return 0;
+        uint64_t copied = 0;
         // The atlases take their storage at the first frame that copies from the pyramid: up to 96 MiB each.
         const size_t atlasBytes = std::min<size_t>(size_t(maxStorageBlock), size_t(96) << 20);
         terrainAtlas.open(atlasBytes, 1);
@@ -607,10 +628,11 @@ struct GlRenderer::Impl {
                 atlasRuns.insert(atlasRuns.end(), {uint32_t(size_t(r.j) * n + size_t(r.i)), uint32_t(k) | uint32_t(r.count) << 8 | uint32_t(r.at) << 16,
                                                    slot, r.water ? waterSlot : TileAtlas::kNone});
                 atlasTexels += uint64_t(r.count);
+                copied += uint64_t(terrainAtlas.validIn(slot, r.at, r.count, size_t(r.plane)));
                 continue;
             }
             const size_t at = size_t(r.j) * n + size_t(r.i);
-            detail::copySamples(r.tile + r.at, r.water ? r.water + r.at : nullptr, size_t(r.plane), r.count, minDepth, &tex.terrain.h[at],
+            copied += (uint64_t)detail::copySamples(r.tile + r.at, r.water ? r.water + r.at : nullptr, size_t(r.plane), r.count, minDepth, &tex.terrain.h[at],
                                 r.water ? &tex.depth[at] : nullptr, r.water ? &tex.water.h[at] : nullptr);
             detail::RowFill& row = fill.rows[size_t(r.j)];
             int& lo = r.span == 0 ? row.a0 : row.b0;
@@ -619,6 +641,7 @@ struct GlRenderer::Impl {
             else lo = std::min(lo, r.i), hi = std::max(hi, r.i + r.count - 1);
         }
         terrainAtlas.upload(), waterAtlas.upload();
+        return copied;
     }
 
     // Out of core with a pyramid: the runs of texels copied from its tiles on the GPU, after the assembly.
