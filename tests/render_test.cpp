@@ -613,7 +613,8 @@ TEST(Render, RaySetupsAreTheWalksOwnClips) {
             const detail::Heightfield& hf = tex[k].terrain;
             const size_t top = hf.mip.size() - 1;
             const double zDry = hf.mip[top][0];
-            const double zWet = tex[k].hasWater ? (tex[k].bothMip.empty() ? std::max(hf.mip[top][0], tex[k].water.mip[top][0]) : tex[k].bothMip[top][0]) : zDry;
+            double zWet = zDry;
+        if (tex[k].hasWater) zWet = tex[k].bothMip.empty() ? std::max(hf.mip[top][0], tex[k].water.mip[top][0]) : tex[k].bothMip[top][0];
             const double lo = k == 0 ? -HUGE_VAL : ck.splitNear, hi = ck.farWithOverlap;
             for (size_t i = 0; i < dirs.size(); ++i) {
                 const glm::dvec3 d = dirs[i];
@@ -654,7 +655,8 @@ TEST(Render, RaySetupsAreTheWalksOwnClips) {
                 EXPECT_TRUE(near(r.t1[i], t1)) << "cascade " << k << ", ray " << i << ": " << r.t1[i] << " against " << t1;
                 const double du = d.x / ck.texelM, dv = d.y / ck.texelM;
                 EXPECT_TRUE(near(r.du[i], du) && near(r.dv[i], dv)) << "cascade " << k << ", ray " << i;
-                EXPECT_TRUE(near(r.invDu[i], du != 0 ? 1.0 / du : 0.0) && near(r.invDv[i], dv != 0 ? 1.0 / dv : 0.0)) << "cascade " << k << ", ray " << i;
+                EXPECT_TRUE(near(r.invDu[i], du != 0 ? 1.0 / du : 0.0)) << "cascade " << k << ", ray " << i;
+                EXPECT_TRUE(near(r.invDv[i], dv != 0 ? 1.0 / dv : 0.0)) << "cascade " << k << ", ray " << i;
                 EXPECT_TRUE(near(r.u0, (o.x - ck.x0) / ck.texelM) && near(r.v0, (o.y - ck.y0) / ck.texelM));
                 if (d.z != 0) {
                     EXPECT_TRUE(near(r.tTopDry[i], (zDry - o.z) / d.z)) << "cascade " << k << ", ray " << i;

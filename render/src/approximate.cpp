@@ -466,8 +466,9 @@ private:
 // there in vain (1.4 us a texel: 8.5 ms of a fresh frame at 105 M cells, for 6 k texels over holes). Returns the
 // texels copied, adds the texels interpolated to work.pyramidInterpolated (the most levels up to work.pyramidInterpolatedUp) and sets
 // work.pyramidLevel to the pyramid level used (-1: none fits the cascade). With `runs`, the copies are listed there
-// (PyramidRun) instead of written or counted (the caller counts what it copies), and each span shrinks to the texels written here (interpolated) or left to the
-// kernels, from the first to the last (the interpolated ones marked in copiedMask, so the kernels skip them).
+// (PyramidRun) instead of written or counted (the caller counts what it copies), and each span shrinks to the texels
+// written here (interpolated) or left to the kernels, from the first to the last (the interpolated ones marked in
+// copiedMask, so the kernels skip them).
 uint64_t copyPyramidTexels(const Scene& scene, const Cascade& c, CascadeTextures& tex, double waterMinDepthM, int interpolateLevels, unsigned threads,
                            std::vector<Todo>& todo, std::vector<uint8_t>& copiedMask, ApproximationWork& work, std::vector<PyramidRun>* runs = nullptr) {
     work.pyramidLevel = -1;

@@ -379,8 +379,8 @@ PatchHit traverse(const CascadeTextures& tex, const Cascade& c, const glm::dvec3
     return walk.res;
 }
 
-Hit hitIn(const RayContext& ctx, size_t k, const glm::dvec3& o, const glm::dvec3& d, const RaySetups& setups, size_t ray, RayState& st, bool& underground,
-          double tFrom) {
+Hit hitIn(const RayContext& ctx, size_t k, const glm::dvec3& o, const glm::dvec3& d, const RaySetups& setups, size_t ray, RayState& st,
+          bool& underground, double tFrom) {
     Hit h;
     const Cascade& c = ctx.fit->cascades[k];
     const CascadeTextures& tex = (*ctx.tex)[k];

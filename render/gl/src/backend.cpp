@@ -101,6 +101,7 @@ struct TileAtlas {
     // Per slot: bit c of row r set where the tile's sample (c, r) of its first channel is a number (not NaN: outside every
     // cell), so that a run's copied texels are counted without reading the tile again (validIn).
     std::vector<std::array<uint16_t, 16>> validRows;
+    static_assert(gpu::kAtlasPlane <= 16 * 16, "validRows holds a tile of at most 16 x 16 samples");
     uint32_t hand = 0, usedNow = 0;
     uint64_t frame = 0;
     uint64_t uploadedTiles = 0, uploadedBytes = 0;  // this frame's
@@ -609,10 +610,10 @@ struct GlRenderer::Impl {
     }
 
     // Cascade k's runs of texels to copy from the pyramid (detail::PyramidRun) as atlas.comp's runs, their tiles
-    // uploaded into the atlas where not resident. A run whose tile finds no slot (this frame uses every one) is copied here, into
-    // `tex`, and its RowFill span widened to hold it, so that it goes up with the CPU's texels. Returns the texels copied
-    // with a surface (approximate() leaves them to be counted here: counting them there read every tile's samples,
-    // which the CPU otherwise never touches once the tile is resident; 40 % of copyPyramidTexels on llvmpipe).
+    // uploaded into the atlas where not resident. A run whose tile finds no slot (this frame uses every one) is copied
+    // here, into `tex`, and its RowFill span widened to hold it, so that it goes up with the CPU's texels. Returns the
+    // texels copied with a surface (approximate() leaves them to be counted here: counting them there read every tile's
+    // samples, which the CPU otherwise never touches once the tile is resident; 40 % of copyPyramidTexels on llvmpipe).
     uint64_t placeRuns(size_t k, detail::CascadeTextures& tex, detail::CascadeFill& fill, float minDepth) {
         if (fill.runs.empty()) return 0;
         uint64_t copied = 0;
@@ -632,8 +633,8 @@ struct GlRenderer::Impl {
                 continue;
             }
             const size_t at = size_t(r.j) * n + size_t(r.i);
-            copied += (uint64_t)detail::copySamples(r.tile + r.at, r.water ? r.water + r.at : nullptr, size_t(r.plane), r.count, minDepth, &tex.terrain.h[at],
-                                r.water ? &tex.depth[at] : nullptr, r.water ? &tex.water.h[at] : nullptr);
+            copied += uint64_t(detail::copySamples(r.tile + r.at, r.water ? r.water + r.at : nullptr, size_t(r.plane), r.count, minDepth,
+                                                   &tex.terrain.h[at], r.water ? &tex.depth[at] : nullptr, r.water ? &tex.water.h[at] : nullptr));
             detail::RowFill& row = fill.rows[size_t(r.j)];
             int& lo = r.span == 0 ? row.a0 : row.b0;
             int& hi = r.span == 0 ? row.a1 : row.b1;
