@@ -600,32 +600,30 @@ struct PendingNormals {
     }
 };
 
-// The rays of a rectangle of pixels: unit directions and their lengths before normalising, computed a row at a time in
-// vector registers (a square root and three divisions a ray) in the operations each ray used one at a time: the same
-// bits (glm's d = forward + sx right + sy up, length(d), d / length component by component).
+// The rays of a rectangle of pixels: unit directions and their lengths before normalising, computed at once in vector
+// registers (a square root and three divisions a ray) in the operations each ray used one at a time: the same bits
+// (glm's d = forward + sx right + sy up, length(d), d / length component by component).
 struct RayDirections {
     int x0 = 0, y0 = 0, width = 0;
-    std::vector<double> x, y, z, length;
+    std::vector<double> sx, sy, x, y, z, length;
     detail::RaySetups setups;  // and each ray's set-up in each cascade (detail::setUpRays)
     size_t at(int px, int py) const { return size_t(py - y0) * size_t(width) + size_t(px - x0); }
-    // Pixels px0 .. px1 - 1 of rows py0 .. py1 - 1; sxAt and syAt: each pixel column's and row's image-plane coordinate.
     void compute(const detail::RayContext& ctx, const CameraBasis& basis, const double* sxAt, const double* syAt, int px0, int px1, int py0,
                  int py1) {
         x0 = px0, y0 = py0, width = px1 - px0;
         const size_t n = size_t(width) * size_t(py1 - py0);
-        for (std::vector<double>* v : {&x, &y, &z, &length}) v->resize(n);
-        for (int py = py0; py < py1; ++py) {
-            const size_t row = at(px0, py);
-            unitDirections(basis, size_t(width), sxAt + px0, syAt[py], &x[row], &y[row], &z[row], &length[row]);
-        }
+        for (std::vector<double>* v : {&sx, &sy, &x, &y, &z, &length}) v->resize(n);
+        for (int py = py0; py < py1; ++py)
+            for (int px = px0; px < px1; ++px) sx[at(px, py)] = sxAt[px], sy[at(px, py)] = syAt[py];
+        unitDirections(basis, n, sx.data(), sy.data(), x.data(), y.data(), z.data(), length.data());
         detail::setUpRays(ctx, n, x.data(), y.data(), z.data(), setups);
     }
-    // Arrays of their own (restrict: the compiler would otherwise check every pair for overlap before vectorising).
-    static void unitDirections(const CameraBasis& basis, size_t n, const double* __restrict sx, double sy, double* __restrict dx,
+    // Six arrays of their own (restrict: the compiler would otherwise check every pair for overlap before vectorising).
+    static void unitDirections(const CameraBasis& basis, size_t n, const double* __restrict sx, const double* __restrict sy, double* __restrict dx,
                                double* __restrict dy, double* __restrict dz, double* __restrict len) {
         const glm::dvec3 f = basis.forward, r = basis.right, u = basis.up;
         for (size_t k = 0; k < n; ++k) {
-            const double vx = f.x + sx[k] * r.x + sy * u.x, vy = f.y + sx[k] * r.y + sy * u.y, vz = f.z + sx[k] * r.z + sy * u.z;
+            const double vx = f.x + sx[k] * r.x + sy[k] * u.x, vy = f.y + sx[k] * r.y + sy[k] * u.y, vz = f.z + sx[k] * r.z + sy[k] * u.z;
             const double l = std::sqrt(vx * vx + vy * vy + vz * vz);
             dx[k] = vx / l, dy[k] = vy / l, dz[k] = vz / l, len[k] = l;
         }
