@@ -122,8 +122,9 @@ struct Hit {
 };
 
 // The unit normal (-gx, -gy, 1) / |(-gx, -gy, 1)| of a surface with slope (gx, gy) = (riseX, riseY) / texelM [m/m], in
-// the operations every hit's normal has always been computed with (the same bits whether one at a time or vectorised:
-// IEEE square roots and divisions are exact to half an ulp in any width).
+// the operations every hit's normal has always been computed with. IEEE square roots and divisions round the same in
+// any vector width; a multiply-add the compiler fuses in one loop and not in another could move a last bit (none did
+// in the renders BENCHMARKS.md compares).
 inline void normalOfSlope(double riseX, double riseY, double texelM, double& nx, double& ny, double& nz) {
     const double gx = riseX / texelM, gy = riseY / texelM;
     const double nl = std::sqrt(gx * gx + gy * gy + 1.0);
@@ -179,7 +180,8 @@ private:
 // cascade's slab along the view and its texture's patch domain), its steps in texel coordinates and their reciprocals,
 // and the depths where it crosses the cascade's highest point (without water and with it) and the block's bottom.
 // setUpRays() computes them for many rays at once in vector registers, in the operations a ray's walk used one at a
-// time (the same bits): a dozen divisions at the start of every walk, waited on before its first step (BENCHMARKS.md).
+// time (the same values up to how the compiler fuses multiply-adds: Render.RaySetupsAreTheWalksOwnClips): a dozen
+// divisions at the start of every walk, waited on before its first step (BENCHMARKS.md).
 struct RaySetups {
     struct Cascade {
         double u0 = 0, v0 = 0;  // the eye in the cascade's texel coordinates
