@@ -6,6 +6,7 @@
 // cascade lies from the grid origin (the exact evaluator does the same in double).
 #include <algorithm>
 #include <array>
+#include <atomic>
 #include <bit>
 #include <cmath>
 #include <cstring>
@@ -465,12 +466,12 @@ private:
 // node holds no cell (EmptyTiles) are marked too, left "no surface": the interpolator would look for coarser samples
 // there in vain (1.4 us a texel: 8.5 ms of a fresh frame at 105 M cells, for 6 k texels over holes). Returns the
 // texels copied, adds the texels interpolated to work.pyramidInterpolated (the most levels up to work.pyramidInterpolatedUp) and sets
-// work.pyramidLevel to the pyramid level used (-1: none fits the cascade). With `runs`, the copies are listed there
-// (PyramidRun) instead of written or counted (the caller counts what it copies), and each span shrinks to the texels
-// written here (interpolated) or left to the kernels, from the first to the last (the interpolated ones marked in
-// copiedMask, so the kernels skip them).
+// work.pyramidLevel to the pyramid level used (-1: none fits the cascade). With `tiles`, the copies are marked there
+// (PyramidTiles: each worker sets its texels' bits, no list to merge) instead of written or counted (the caller counts
+// what it copies), and each span shrinks to the texels written here (interpolated) or left to the kernels, from the
+// first to the last (the interpolated ones marked in copiedMask, so the kernels skip them).
 uint64_t copyPyramidTexels(const Scene& scene, const Cascade& c, CascadeTextures& tex, double waterMinDepthM, int interpolateLevels, unsigned threads,
-                           std::vector<Todo>& todo, std::vector<uint8_t>& copiedMask, ApproximationWork& work, std::vector<PyramidRun>* runs = nullptr) {
+                           std::vector<Todo>& todo, std::vector<uint8_t>& copiedMask, ApproximationWork& work, PyramidTiles* tiles = nullptr) {
     work.pyramidLevel = -1;
     const influence::SurfacePyramid* p = scene.pyramid();
     if (!p) return 0;
@@ -493,7 +494,24 @@ uint64_t copyPyramidTexels(const Scene& scene, const Cascade& c, CascadeTextures
     // evict the other's reads of the same cache line.
     std::vector<std::unique_ptr<PyramidInterpolator>> interpolators(workers);
     std::vector<std::unique_ptr<EmptyTiles>> emptyTiles(workers);
-    std::vector<std::vector<PyramidRun>> workerRuns(runs ? workers : 0);
+    // With `tiles`: the table over the tiles of level t that the cascade's texels cover (those at lattice points >= 0).
+    const int64_t I0 = int64_t(i0), J0 = int64_t(j0);
+    int64_t tx0 = 0, ty0 = 0;
+    if (tiles) {
+        *tiles = PyramidTiles{};
+        for (size_t j = 0; j < todo.size(); ++j) tiles->spans.push_back({0, -1, todo[j].a0, todo[j].a1, todo[j].b0, todo[j].b1});
+        if (t >= 0 && I0 + c.n > 0 && J0 + c.n > 0) {
+            const influence::SurfacePyramid::Cursor probe(*p, int(t));
+            const int shift = std::countr_zero(probe.side());
+            tiles->side = int(probe.side()), tiles->plane = probe.plane();
+            tx0 = std::max<int64_t>(I0, 0) >> shift, ty0 = std::max<int64_t>(J0, 0) >> shift;
+            tiles->originI = I0 - (tx0 << shift), tiles->originJ = J0 - (ty0 << shift);
+            tiles->width = int(((I0 + c.n - 1) >> shift) - tx0 + 1), tiles->height = int(((J0 + c.n - 1) >> shift) - ty0 + 1);
+            const size_t entries = size_t(tiles->width) * size_t(tiles->height);
+            tiles->tile.assign(entries, nullptr), tiles->water.assign(entries, nullptr);
+            tiles->copied.assign(entries * size_t(tiles->side), 0);
+        }
+    }
     parallelFor(todo.size(), 16, threads, [&](size_t b, size_t e, unsigned worker) {
         std::optional<influence::SurfacePyramid::Cursor> samples, waterSamples;  // neighbouring rows share tiles
         if (t >= 0) samples.emplace(*p, int(t));
@@ -507,7 +525,7 @@ uint64_t copyPyramidTexels(const Scene& scene, const Cascade& c, CascadeTextures
         uint64_t nCopied = 0, nInterpolated = 0;  // counted here, added once: per-worker counters share a cache line
         int up = 0;
         const uint64_t sideMask = samples ? samples->side() - 1 : 0;
-        std::vector<PyramidRun>* myRuns = runs ? &workerRuns[worker] : nullptr;  // with `runs`: this worker's
+        const int tileShift = std::countr_zero(sideMask + 1);
         std::vector<PyramidInterpolator::Value> values;  // a run's interpolated texels
         std::vector<uint8_t> filled;
         for (size_t j = b; j < e; ++j) {
@@ -533,9 +551,15 @@ uint64_t copyPyramidTexels(const Scene& scene, const Cascade& c, CascadeTextures
                         const int len = end - i + 1;
                         const size_t at = rowAt + size_t(i);
                         std::memset(&copiedMask[at], 1, size_t(len));
-                        if (runs) {  // left to the caller, who counts them too (without reading the samples here)
+                        if (tiles) {  // left to the caller, who counts them too (without reading the samples here)
                             const int sample = int(s - samples->tile());  // the water tile's layout is the same
-                            myRuns->push_back({int(j), i, len, sample, span, int(plane), s - sample, w ? w - sample : nullptr});
+                            const size_t entry = size_t(int64_t(uint64_t(gi) >> tileShift) - tx0) +
+                                                 size_t(int64_t(uint64_t(gj) >> tileShift) - ty0) * size_t(tiles->width);
+                            // Workers meet in a tile only at the edges of their rows; the same pointers, bits or'ed.
+                            std::atomic_ref(tiles->tile[entry]).store(s - sample, std::memory_order_relaxed);
+                            if (w) std::atomic_ref(tiles->water[entry]).store(w - sample, std::memory_order_relaxed);
+                            std::atomic_ref(tiles->copied[entry * size_t(tiles->side) + size_t(uint64_t(gj) & sideMask)])
+                                .fetch_or(uint16_t(((1u << len) - 1) << (uint64_t(gi) & sideMask)), std::memory_order_relaxed);
                         } else {
                             nCopied += uint64_t(copySamples(s, w, plane, len, minDepth, &tex.terrain.h[at], w ? &tex.depth[at] : nullptr,
                                                             w ? &tex.water.h[at] : nullptr));
@@ -562,7 +586,7 @@ uint64_t copyPyramidTexels(const Scene& scene, const Cascade& c, CascadeTextures
                         const PyramidInterpolator::Value& v = values[size_t(k)];
                         const size_t at = rowAt + size_t(i);
                         copiedMask[at] = 1;
-                        if (runs) leave(i);  // written here: the caller packs it with the span
+                        if (tiles) leave(i);  // written here: the caller packs it with the span
                         tex.terrain.h[at] = v.z;
                         ++nInterpolated;
                         up = std::max(up, v.up);
@@ -577,12 +601,6 @@ uint64_t copyPyramidTexels(const Scene& scene, const Cascade& c, CascadeTextures
         }
         copied[worker] += nCopied, interpolated[worker] += nInterpolated, mostUp[worker] = std::max(mostUp[worker], up);
     });
-    if (runs) {
-        size_t total = runs->size();
-        for (const std::vector<PyramidRun>& r : workerRuns) total += r.size();
-        runs->reserve(total);
-        for (const std::vector<PyramidRun>& r : workerRuns) runs->insert(runs->end(), r.begin(), r.end());
-    }
     uint64_t total = 0;
     for (unsigned k = 0; k < workers; ++k)
         total += copied[k], work.pyramidInterpolated += interpolated[k], work.pyramidInterpolatedUp = std::max(work.pyramidInterpolatedUp, mostUp[k]);
@@ -920,7 +938,7 @@ std::vector<RowFill> rowFills(const Cascade& c, const TexelReuse* reuse, uint64_
 }
 
 ApproximationWork approximate(const Scene& scene, const Cascade& c, CascadeTextures& tex, double waterMinDepthM, unsigned threads,
-                              const TexelReuse* reuse, int interpolateLevels, std::vector<RowFill>* rows, std::vector<PyramidRun>* runs) {
+                              const TexelReuse* reuse, int interpolateLevels, std::vector<RowFill>* rows, PyramidTiles* tiles) {
     const int n = c.n;
     tex.hasWater = scene.hasWater();
     tex.terrain.n = tex.water.n = n;
@@ -934,25 +952,42 @@ ApproximationWork approximate(const Scene& scene, const Cascade& c, CascadeTextu
     std::vector<Todo> todo = copyReusedTexels(c, reuse, tex, work.reusedTexels, threads, rows);
     // The texels left to evaluate: `need` (n^2) marks them, the spans of `todo` hold them (and copies between them).
     std::vector<uint8_t> copied(size_t(n) * size_t(n), 0), need(size_t(n) * size_t(n), 0);
-    if (runs && !rows) throw Error("approximate: pyramid runs without row spans (a bug)");
-    work.pyramidTexels = copyPyramidTexels(scene, c, tex, waterMinDepthM, interpolateLevels, threads, todo, copied, work, runs);
-    if (runs)  // each span: the texels written here, the copies left out at its ends
+    if (tiles && !rows) throw Error("approximate: pyramid tiles without row spans (a bug)");
+    work.pyramidTexels = copyPyramidTexels(scene, c, tex, waterMinDepthM, interpolateLevels, threads, todo, copied, work, tiles);
+    if (tiles)  // each span: the texels written here, the copies left out at its ends
         for (size_t j = 0; j < size_t(n); ++j) {
             RowFill& r = (*rows)[j];
             r.a0 = todo[j].a0, r.a1 = todo[j].a1, r.b0 = todo[j].b0, r.b1 = todo[j].b1;
         }
+    // The texels left to the kernels, their box and count; on all cores where the spans are long (a fresh cascade 0 at
+    // 105 M cells: 553 k texels to look at, 0.9 ms on one core, all of them interpolated), else on this one (a moving
+    // frame's few new texels: waking the workers would cost more).
+    struct Box {
+        int i0, i1, j0, j1;
+        uint64_t texels;
+    };
+    uint64_t spanTexels = 0;
+    for (const Todo& t : todo) spanTexels += uint64_t(std::max(0, t.a1 - t.a0 + 1) + std::max(0, t.b1 - t.b0 + 1));
+    const unsigned boxThreads = spanTexels >= (uint64_t{1} << 16) ? threads : 1;
+    std::vector<Box> boxes(resolveThreads(boxThreads), Box{n, -1, n, -1, 0});
+    parallelFor(size_t(n), 64, boxThreads, [&](size_t b, size_t e, unsigned worker) {
+        Box x = boxes[worker];  // a copy: the workers' boxes share cache lines
+        for (int j = int(b); j < int(e); ++j) {
+            const Todo& t = todo[size_t(j)];
+            for (auto [lo, hi] : {std::pair{t.a0, t.a1}, {t.b0, t.b1}})
+                for (int i = lo; i <= hi; ++i) {
+                    const size_t at = size_t(j) * size_t(n) + size_t(i);
+                    if (copied[at]) continue;
+                    need[at] = 1;
+                    x = {std::min(x.i0, i), std::max(x.i1, i), std::min(x.j0, j), std::max(x.j1, j), x.texels + 1};
+                }
+        }
+        boxes[worker] = x;
+    });
     int i0 = n, i1 = -1, j0 = n, j1 = -1;
     uint64_t todoTexels = 0;
-    for (int j = 0; j < n; ++j) {
-        const Todo& t = todo[size_t(j)];
-        for (auto [lo, hi] : {std::pair{t.a0, t.a1}, {t.b0, t.b1}})
-            for (int i = lo; i <= hi; ++i) {
-                const size_t at = size_t(j) * size_t(n) + size_t(i);
-                if (copied[at]) continue;
-                need[at] = 1;
-                i0 = std::min(i0, i), i1 = std::max(i1, i), j0 = std::min(j0, j), j1 = std::max(j1, j), ++todoTexels;
-            }
-    }
+    for (const Box& x : boxes)
+        i0 = std::min(i0, x.i0), i1 = std::max(i1, x.i1), j0 = std::min(j0, x.j0), j1 = std::max(j1, x.j1), todoTexels += x.texels;
     copied = {};
     if (i1 < 0) return work;
     const double s = c.texelM;

@@ -527,11 +527,11 @@ std::optional<Reusable> takeReusable(const CascadeCache::Impl& kept, std::vector
 
 // Stages 2 and 3: each cascade's textures (copying what `kept` holds of the last frame) and max mipmaps, with
 // their statistics in timings.cascades. With `fills` (detail::approximateOnCpu), what `kept` holds is not copied: each
-// cascade's spans and the last frame's cascade they keep go there (and with pyramidRuns the runs left to copy from the
-// pyramid).
+// cascade's spans and the last frame's cascade they keep go there (and with pyramidTiles the texels left to copy from
+// the pyramid).
 std::vector<detail::CascadeTextures> approximateCascades(const Scene& scene, const CascadeFit& fit, const RenderOptions& options,
                                                          CascadeCache::Impl* kept, Timings& timings, bool mipmaps = true,
-                                                         std::vector<detail::CascadeFill>* fills = nullptr, bool pyramidRuns = false) {
+                                                         std::vector<detail::CascadeFill>* fills = nullptr, bool pyramidTiles = false) {
     std::vector<detail::CascadeTextures> tex(fit.cascades.size());
     if (fills) fills->assign(fit.cascades.size(), detail::CascadeFill{});
     std::vector<bool> taken(kept ? kept->entries.size() : 0, false);
@@ -553,7 +553,7 @@ std::vector<detail::CascadeTextures> approximateCascades(const Scene& scene, con
         if (!c.empty()) {
             const detail::ApproximationWork work =
                 detail::approximate(scene, c, tex[k], options.waterMinDepthM, options.threads, reuse ? &*reuse : nullptr, options.pyramidInterpolateLevels,
-                                    fills ? &(*fills)[k].rows : nullptr, fills && pyramidRuns ? &(*fills)[k].runs : nullptr);
+                                    fills ? &(*fills)[k].rows : nullptr, fills && pyramidTiles ? &(*fills)[k].tiles : nullptr);
             cs.gaussians = work.gaussians, cs.cellsVisited = work.cellsVisited, cs.reusedTexels = work.reusedTexels;
             cs.cellsRead = work.cellsRead, cs.regionsRead = work.regionsRead;
             cs.pyramidTexels = work.pyramidTexels, cs.pyramidLevel = work.pyramidLevel;
@@ -905,10 +905,10 @@ struct detail::CacheAccess {
 };
 
 void detail::approximateOnCpu(const Scene& scene, const CascadeFit& fit, const RenderOptions& options, CascadeCache& cache, Timings& timings,
-                              const std::function<void(size_t, CascadeTextures&, CascadeFill&)>& use, bool pyramidRuns) {
+                              const std::function<void(size_t, CascadeTextures&, CascadeFill&)>& use, bool pyramidTiles) {
     CascadeCache::Impl* kept = keptFor(CacheAccess::of(cache), scene, options);
     std::vector<CascadeFill> fills;
-    std::vector<CascadeTextures> tex = approximateCascades(scene, fit, options, kept, timings, false, &fills, pyramidRuns);
+    std::vector<CascadeTextures> tex = approximateCascades(scene, fit, options, kept, timings, false, &fills, pyramidTiles);
     for (size_t k = 0; k < fit.cascades.size(); ++k)
         if (!fit.cascades[k].empty()) use(k, tex[k], fills[k]);
     keepCascades(*kept, scene, options, fit, tex);  // their storage, for the next frame's spans

@@ -69,17 +69,22 @@ struct RowFill {
     int a0 = 0, a1 = -1, b0 = 0, b1 = -1;
 };
 
-// A run of texels of one row that approximate() with `runs` leaves to the caller to copy from the surface pyramid (the
-// GL backend out of core copies them on the GPU, from its atlas of pyramid tiles): texels i .. i + count - 1 of row j
-// are the samples at .. at + count - 1 of `tile` (its first sample; channel c at [c * plane], plane = the tile's side
-// squared) under the water rule of surface.h, as copySamples() copies them. `water`: where the run's water levels and
-// wet shares are, at [at] and [at + plane] (the tile's own channels 1 and 2, or the water pyramid's tile at the same
-// place in a later step of a scenario), nullptr where the texels are dry. `span`: 0 or 1, the RowFill span (a or b)
-// the run lies in.
-struct PyramidRun {
-    int j = 0, i = 0, count = 0, at = 0, span = 0, plane = 0;
-    const float* tile = nullptr;
-    const float* water = nullptr;
+// The texels that approximate() with `tiles` leaves to the caller to copy from the surface pyramid (the GL backend out
+// of core copies them on the GPU, from its atlas of pyramid tiles: a page table over them): a table of the tiles of the
+// cascade's level that its texels cover, `width` x `height` row-major, and for each the samples copied from it. Texel
+// (i, j) of the cascade is sample (originI + i, originJ + j) of the table, counting from its first tile's first sample;
+// those of a tile in the table are copied exactly where that tile's `copied` bit is set (every texel of a span to
+// evaluate that lies in a stored tile: no other is), under the water rule of surface.h as copySamples() copies them.
+struct PyramidTiles {
+    int side = 0;                  // samples a tile side (a power of two, <= 16); 0: nothing is copied
+    size_t plane = 0;              // samples a tile channel (side^2); channel c of a tile at [c * plane]
+    int64_t originI = 0, originJ = 0;
+    int width = 0, height = 0;     // tiles
+    std::vector<const float*> tile;    // per table entry: the tile's first sample, nullptr where nothing is copied from it
+    std::vector<const float*> water;   // its water levels (wet shares a plane after): its own channels 1 and 2, or the
+                                       // water pyramid's tile at the same place in a later step of a scenario; nullptr: dry
+    std::vector<uint16_t> copied;      // per entry, `side` rows: bit c of row r set where sample (c, r) is copied to a texel
+    std::vector<RowFill> spans;        // per texel row: its spans to evaluate before the copies were taken out (a0 .. b1)
 };
 
 // The error bound of a texel copied from the surface pyramid (CascadeStats::errorBoundM) [m].
@@ -98,13 +103,13 @@ std::vector<RowFill> rowFills(const Cascade& c, const TexelReuse* reuse, uint64_
 // visible there too are copied; with a scene pyramid at the cascade's texel size, texels whose samples it holds
 // are copied from it; the others are evaluated. The cells visited follow the texels evaluated (a few per texel),
 // not the cascade's area. With `rows`, the kept texels are not copied and the texels outside every span are not
-// written: only the evaluated spans, which go into `rows` with the kept ones (RowFill). With `rows` and `runs` too, the
-// texels copied from the pyramid are not written either but listed in `runs` (PyramidRun), and each RowFill span
+// written: only the evaluated spans, which go into `rows` with the kept ones (RowFill). With `rows` and `tiles` too, the
+// texels copied from the pyramid are not written either but marked in `tiles` (PyramidTiles), and each RowFill span
 // shrinks to the texels written (interpolated or summed), from the first to the last of them: the caller copies the
-// runs itself, after the spans.
+// marked texels itself, after the spans.
 ApproximationWork approximate(const Scene& scene, const Cascade& c, CascadeTextures& tex, double waterMinDepthM, unsigned threads,
                               const TexelReuse* reuse = nullptr, int interpolateLevels = 0, std::vector<RowFill>* rows = nullptr,
-                              std::vector<PyramidRun>* runs = nullptr);
+                              PyramidTiles* tiles = nullptr);
 
 // One ray through the cascades (raycast.cpp).
 struct Hit {
@@ -200,7 +205,7 @@ Hit castRay(const RayContext& ctx, const glm::dvec3& dir, const RaySetups& setup
 // What approximateOnCpu() filled of a cascade, for a backend that keeps the last frame's texels itself.
 struct CascadeFill {
     std::vector<RowFill> rows;  // per texel row: the texels kept and the spans evaluated
-    std::vector<PyramidRun> runs;  // with approximateOnCpu's pyramidRuns: the texels left to copy from the pyramid
+    PyramidTiles tiles;         // with approximateOnCpu's pyramidTiles: the texels left to copy from the pyramid
     int from = -1;              // the last frame's cascade (its index in that frame's fit) whose texels are kept, -1: none
     int di = 0, dj = 0;         // this frame's texel (i, j) is that one's (i + di, j + dj)
 };
@@ -211,12 +216,12 @@ struct CascadeFill {
 // them (from the pyramid and the grid file), without max mipmaps, their statistics appended to timings.cascades and
 // their time to timings.approximationMs. Then use(k, textures, fill) for each non-empty cascade: only the texels of
 // fill's evaluated spans are defined in `textures`; the kept ones are the backend's to copy from its last frame (the
-// one this cache saw), those outside every span have no surface. With `pyramidRuns`, the texels copied from the
-// pyramid are left to the backend too (CascadeFill::runs; approximate() with `runs`), and `use` may write into the
-// textures (the runs it copies there itself). The cache holds the cascades' shapes for the next frame, not their
+// one this cache saw), those outside every span have no surface. With `pyramidTiles`, the texels copied from the
+// pyramid are left to the backend too (CascadeFill::tiles; approximate() with `tiles`), and `use` may write into the
+// textures (the texels it copies there itself). The cache holds the cascades' shapes for the next frame, not their
 // texels: it must not be handed to renderFrame().
 void approximateOnCpu(const Scene& scene, const CascadeFit& fit, const RenderOptions& options, CascadeCache& cache, Timings& timings,
-                      const std::function<void(size_t, CascadeTextures&, CascadeFill&)>& use, bool pyramidRuns = false);
+                      const std::function<void(size_t, CascadeTextures&, CascadeFill&)>& use, bool pyramidTiles = false);
 // The same plan without evaluating a texel, for a backend that evaluates them itself (the GL backend in memory): each
 // cascade's rows and the last frame's cascade it keeps texels of (CascadeFill), their count in timings.cascades[k]
 // (which must hold the frame's cascades) as reusedTexels. The cache holds the cascades' shapes for the next frame.

@@ -99,7 +99,7 @@ struct TileAtlas {
     std::vector<const float*> tileIn;  // per slot (nullptr: free)
     std::vector<uint64_t> usedIn;      // per slot: the frame that used it last
     // Per slot: bit c of row r set where the tile's sample (c, r) of its first channel is a number (not NaN: outside every
-    // cell), so that a run's copied texels are counted without reading the tile again (validIn).
+    // cell), so that the copied texels of a tile are counted without reading the tile again (validIn).
     std::vector<std::array<uint16_t, 16>> validRows;
     static_assert(gpu::kAtlasPlane <= 16 * 16, "validRows holds a tile of at most 16 x 16 samples");
     uint32_t hand = 0, usedNow = 0;
@@ -146,10 +146,11 @@ struct TileAtlas {
     }
     // A tile's side for a plane of `plane` samples (a power of four up to gpu::kAtlasPlane).
     static size_t sideOf(size_t plane) { return size_t{1} << (std::countr_zero(plane) / 2); }
-    // Samples at .. at + count - 1 (within one row) of the tile in `slot`, a plane of `plane` samples, that are numbers.
-    int validIn(uint32_t s, int at, int count, size_t plane) const {
-        const size_t side = sideOf(plane), row = size_t(at) / side, col = size_t(at) % side;
-        return std::popcount(unsigned(validRows[s][row] >> col) & ((1u << count) - 1));
+    // The samples of the tile in `slot` marked in `rows` (a bit per sample, as validRows) that are numbers.
+    int validIn(uint32_t s, const uint16_t* rows, size_t side) const {
+        int valid = 0;
+        for (size_t r = 0; r < side; ++r) valid += std::popcount(unsigned(validRows[s][r] & rows[r]));
+        return valid;
     }
     // The staged tiles into their slots, at once (a tile is never said resident without being there, whatever fails
     // later in the frame): one upload per run of consecutive slots.
@@ -222,11 +223,11 @@ struct GlRenderer::Impl {
     // What goes into fillRowsBuf and fillTexelsBuf (terrain, water, depth), kept from frame to frame (no new pages).
     std::vector<int32_t> fillRows;
     std::array<std::vector<float>, 3> fillTexels;
-    // Out of core with a pyramid: its tiles on the GPU (elevations; water levels and wet shares), and this frame's runs
-    // of texels to copy from them (atlas.comp), 4 uints a run.
+    // Out of core with a pyramid: its tiles on the GPU (elevations; water levels and wet shares), and this frame's
+    // tiles to copy texels from (atlas.comp), 4 uints a tile.
     TileAtlas terrainAtlas, waterAtlas;
-    Buffer atlasRunsBuf;
-    std::vector<uint32_t> atlasRuns;
+    Buffer atlasTilesBuf;
+    std::vector<uint32_t> atlasTiles;
     uint64_t atlasTexels = 0;  // this frame's
 
     Impl(const Scene& s, std::unique_ptr<gl::HeadlessContext> context) : scene(s), headless(std::move(context)), cpuCascades(s.outOfCore()) {
@@ -262,7 +263,7 @@ struct GlRenderer::Impl {
             if (p) glDeleteProgram(p);
         approximate = assemble = atlas = beams = mipmap = raycast = shade = 0;
         for (Buffer* b : {&frameBuf, &cellsBuf, &keysBuf, &visibleBuf, &heightsBuf, &pixelsBuf, &countersBuf, &readbackBuf, &lastHeightsBuf,
-                          &fillRowsBuf, &fillTexelsBuf, &beamsBuf, &atlasRunsBuf})
+                          &fillRowsBuf, &fillTexelsBuf, &beamsBuf, &atlasTilesBuf})
             b->release();
         terrainAtlas.release(), waterAtlas.release();
         for (Buffer& b : indexBufs) b.release();
@@ -287,7 +288,8 @@ struct GlRenderer::Impl {
         if (bindings <= HC_BIND_LAST)
             throw Error("the GL backend needs " + std::to_string(HC_BIND_LAST + 1) + " shader storage buffer bindings; " + device + " has " +
                         std::to_string(bindings) + ": use --backend cpu");
-        for (Buffer* b : {&lastHeightsBuf, &fillRowsBuf, &fillTexelsBuf, &beamsBuf, &atlasRunsBuf, &terrainAtlas.buffer, &waterAtlas.buffer}) b->reserve(16);
+        for (Buffer* b : {&lastHeightsBuf, &fillRowsBuf, &fillTexelsBuf, &beamsBuf, &atlasTilesBuf, &terrainAtlas.buffer, &waterAtlas.buffer})
+            b->reserve(16);
         frameBuf.reserve(sizeof(gpu::FrameBlock));
         countersBuf.reserve(sizeof(uint32_t) * gpu::kCounterSlots * (gpu::kMaxCascades + 1));
         if (cpuCascades) {
@@ -539,7 +541,7 @@ struct GlRenderer::Impl {
 
     // `keep`: the last frame's textures are in lastHeightsBuf (else the cache starts afresh: the GPU does not hold the
     // frame it describes).
-    void approximateOnCpu(const CascadeFit& fit, const RenderOptions& options, Timings& timings, bool keep) {
+    void approximateOnCpu(const CascadeFit& fit, const gpu::FrameBlock& block, const RenderOptions& options, Timings& timings, bool keep) {
         if (!keep) cascadeCache.clear();
         const bool water = scene.hasWater();
         std::array<std::vector<float>, 3>& packed = fillTexels;
@@ -549,17 +551,24 @@ struct GlRenderer::Impl {
         Timings cpu;
         double packMs = 0;
         // With a pyramid the texels it holds are copied on the GPU, from its tiles resident there (the atlas); only the
-        // tiles not yet there go up, with the runs to copy (16 bytes a run of up to 16 texels).
+        // tiles not yet there go up, with the tiles to copy from (16 bytes a tile) and each row's spans.
         const bool useAtlas = scene.pyramid() != nullptr;
-        atlasRuns.clear(), atlasTexels = 0;
+        atlasTiles.clear(), atlasTexels = 0;
+        std::vector<int32_t> spans;
+        size_t spanBytes = 0;
         if (useAtlas) terrainAtlas.beginFrame(), waterAtlas.beginFrame();
         const float minDepth = float(options.waterMinDepthM);
         detail::approximateOnCpu(scene, fit, options, cascadeCache, cpu, [&](size_t k, detail::CascadeTextures& tex, detail::CascadeFill& fill) {
             const Stopwatch clock;
             if (useAtlas) {  // cpu.cascades: one per cascade of the fit (approximateCascades)
                 CascadeStats& stats = cpu.cascades[k];
-                stats.pyramidTexels += placeRuns(k, tex, fill, minDepth);
+                stats.pyramidTexels += placeTiles(k, tex, fill, minDepth);
                 if (stats.pyramidTexels) stats.errorBoundM = detail::pyramidCopyBoundM(scene);
+                // The spans before the copies were taken out, for atlas.comp (the visible buffer is in-memory's otherwise).
+                spans.clear();
+                for (const detail::RowFill& r : fill.tiles.spans) spans.insert(spans.end(), {r.a0, r.a1, r.b0, r.b1});
+                visibleBuf.upload(spans.data(), spans.size() * sizeof(int32_t), size_t(block.cascades[k].visibleOffset) * 4);
+                spanBytes += spans.size() * sizeof(int32_t);
             }
             // Each row's place in the packed planes, then the rows copied there on all cores.
             const size_t n = size_t(fit.cascades[k].n), first = packed[0].size(), end = addRows(k, fill, first);
@@ -596,10 +605,10 @@ struct GlRenderer::Impl {
         for (size_t c = 0; c < channels && plane; ++c) fillTexelsBuf.upload(packed[c].data(), planeBytes, c * planeBytes);
         size_t atlasBytes = 0;
         if (useAtlas) {
-            checkBlock(atlasRuns.size() * sizeof(uint32_t), "the runs of texels to copy from the pyramid's tiles");
-            atlasBytes = terrainAtlas.uploadedBytes + waterAtlas.uploadedBytes + atlasRuns.size() * sizeof(uint32_t);
-            atlasRunsBuf.reserve(atlasRuns.size() * sizeof(uint32_t));
-            if (!atlasRuns.empty()) atlasRunsBuf.upload(atlasRuns.data(), atlasRuns.size() * sizeof(uint32_t));
+            checkBlock(atlasTiles.size() * sizeof(uint32_t), "the pyramid tiles to copy texels from");
+            atlasBytes = terrainAtlas.uploadedBytes + waterAtlas.uploadedBytes + atlasTiles.size() * sizeof(uint32_t) + spanBytes;
+            atlasTilesBuf.reserve(atlasTiles.size() * sizeof(uint32_t));
+            if (!atlasTiles.empty()) atlasTilesBuf.upload(atlasTiles.data(), atlasTiles.size() * sizeof(uint32_t));
         }
         timings.cascades = cpu.cascades;
         timings.approximationMs = cpu.approximationMs;
@@ -609,55 +618,77 @@ struct GlRenderer::Impl {
         timings.atlasTilesUploaded = terrainAtlas.uploadedTiles + waterAtlas.uploadedTiles;
     }
 
-    // Cascade k's runs of texels to copy from the pyramid (detail::PyramidRun) as atlas.comp's runs, their tiles
-    // uploaded into the atlas where not resident. A run whose tile finds no slot (this frame uses every one) is copied
-    // here, into `tex`, and its RowFill span widened to hold it, so that it goes up with the CPU's texels. Returns the
-    // texels copied with a surface (approximate() leaves them to be counted here: counting them there read every tile's
-    // samples, which the CPU otherwise never touches once the tile is resident; 40 % of copyPyramidTexels on llvmpipe).
-    uint64_t placeRuns(size_t k, detail::CascadeTextures& tex, detail::CascadeFill& fill, float minDepth) {
-        if (fill.runs.empty()) return 0;
+    // Cascade k's tiles to copy texels from (detail::PyramidTiles) as atlas.comp's, uploaded into the atlas where not
+    // resident. The texels of a tile that finds no slot (this frame uses every one) are copied here, into `tex`, and
+    // their row's RowFill span widened to hold them, so that they go up with the CPU's texels. Returns the texels copied
+    // with a surface (approximate() leaves them to be counted here: counting them there read every tile's samples, which
+    // the CPU otherwise never touches once the tile is resident; 40 % of copyPyramidTexels on llvmpipe).
+    uint64_t placeTiles(size_t k, detail::CascadeTextures& tex, detail::CascadeFill& fill, float minDepth) {
+        const detail::PyramidTiles& p = fill.tiles;
+        if (p.side == 0) return 0;
         uint64_t copied = 0;
         // The atlases take their storage at the first frame that copies from the pyramid: up to 96 MiB each.
         const size_t atlasBytes = std::min<size_t>(size_t(maxStorageBlock), size_t(96) << 20);
         terrainAtlas.open(atlasBytes, 1);
         if (scene.hasWater()) waterAtlas.open(atlasBytes, 2);
-        const size_t n = size_t(tex.terrain.n);
-        for (const detail::PyramidRun& r : fill.runs) {
-            const uint32_t slot = terrainAtlas.slot(r.tile, size_t(r.plane));
-            const uint32_t waterSlot = r.water && slot != TileAtlas::kNone ? waterAtlas.slot(r.water, size_t(r.plane)) : TileAtlas::kNone;
-            if (slot != TileAtlas::kNone && (!r.water || waterSlot != TileAtlas::kNone)) {
-                atlasRuns.insert(atlasRuns.end(), {uint32_t(size_t(r.j) * n + size_t(r.i)), uint32_t(k) | uint32_t(r.count) << 8 | uint32_t(r.at) << 16,
-                                                   slot, r.water ? waterSlot : TileAtlas::kNone});
-                atlasTexels += uint64_t(r.count);
-                copied += uint64_t(terrainAtlas.validIn(slot, r.at, r.count, size_t(r.plane)));
+        const size_t n = size_t(tex.terrain.n), side = size_t(p.side);
+        const int shift = std::countr_zero(side);
+        for (size_t e = 0; e < p.tile.size(); ++e) {
+            const float* tile = p.tile[e];
+            if (!tile) continue;
+            const float* water = p.water[e];
+            const uint16_t* rows = &p.copied[e * side];
+            // The texel of the tile's first sample (it may lie outside the cascade: the tile's samples there are not marked).
+            const int64_t i0 = int64_t(e % size_t(p.width)) * int64_t(side) - p.originI, j0 = int64_t(e / size_t(p.width)) * int64_t(side) - p.originJ;
+            const uint32_t slot = terrainAtlas.slot(tile, p.plane);
+            const uint32_t waterSlot = water && slot != TileAtlas::kNone ? waterAtlas.slot(water, p.plane) : TileAtlas::kNone;
+            if (slot != TileAtlas::kNone && (!water || waterSlot != TileAtlas::kNone)) {
+                // The first texel's i and j in 16 bits each (offset by 2^15: a tile may begin left of or below texel 0).
+                atlasTiles.insert(atlasTiles.end(), {uint32_t(k) | uint32_t(shift) << 4, uint32_t(i0 + 32768) | uint32_t(j0 + 32768) << 16, slot,
+                                                     water ? waterSlot : TileAtlas::kNone});
+                for (size_t r = 0; r < side; ++r) atlasTexels += uint64_t(std::popcount(unsigned(rows[r])));
+                copied += uint64_t(terrainAtlas.validIn(slot, rows, side));
                 continue;
             }
-            const size_t at = size_t(r.j) * n + size_t(r.i);
-            copied += uint64_t(detail::copySamples(r.tile + r.at, r.water ? r.water + r.at : nullptr, size_t(r.plane), r.count, minDepth,
-                                                   &tex.terrain.h[at], r.water ? &tex.depth[at] : nullptr, r.water ? &tex.water.h[at] : nullptr));
-            detail::RowFill& row = fill.rows[size_t(r.j)];
-            int& lo = r.span == 0 ? row.a0 : row.b0;
-            int& hi = r.span == 0 ? row.a1 : row.b1;
-            if (hi < lo) lo = r.i, hi = r.i + r.count - 1;
-            else lo = std::min(lo, r.i), hi = std::max(hi, r.i + r.count - 1);
+            for (size_t r = 0; r < side; ++r) {
+                const size_t j = size_t(j0 + int64_t(r));
+                for (unsigned bits = rows[r]; bits;) {  // each run of marked samples, split where it leaves a span
+                    const int c0 = std::countr_zero(bits);
+                    int c1 = c0 + std::countr_one(bits >> c0) - 1;
+                    const int i = int(i0) + c0;
+                    const detail::RowFill& s = p.spans[j];
+                    const int span = i >= s.a0 && i <= s.a1 ? 0 : 1;
+                    c1 = std::min(c1, (span == 0 ? s.a1 : s.b1) - int(i0));
+                    bits &= ~((2u << c1) - (1u << c0));
+                    const size_t at = j * n + size_t(i), sample = (r << shift) + size_t(c0);
+                    const int count = c1 - c0 + 1;
+                    copied += uint64_t(detail::copySamples(tile + sample, water ? water + sample : nullptr, p.plane, count, minDepth,
+                                                           &tex.terrain.h[at], water ? &tex.depth[at] : nullptr, water ? &tex.water.h[at] : nullptr));
+                    detail::RowFill& row = fill.rows[j];
+                    int& lo = span == 0 ? row.a0 : row.b0;
+                    int& hi = span == 0 ? row.a1 : row.b1;
+                    if (hi < lo) lo = i, hi = i + count - 1;
+                    else lo = std::min(lo, i), hi = std::max(hi, i + count - 1);
+                }
+            }
         }
         terrainAtlas.upload(), waterAtlas.upload();
         return copied;
     }
 
-    // Out of core with a pyramid: the runs of texels copied from its tiles on the GPU, after the assembly.
+    // Out of core with a pyramid: the texels copied from its tiles on the GPU, after the assembly (a work group a tile).
     void dispatchAtlas(const RenderOptions& options) {
-        const size_t runs = atlasRuns.size() / 4;
-        if (!cpuCascades || runs == 0) return;
+        const size_t tiles = atlasTiles.size() / 4;
+        if (!cpuCascades || tiles == 0) return;
         terrainAtlas.buffer.bind(HC_BIND_ATLAS_TERRAIN);
         waterAtlas.buffer.bind(HC_BIND_ATLAS_WATER);
-        atlasRunsBuf.bind(HC_BIND_ATLAS_RUNS);
+        atlasTilesBuf.bind(HC_BIND_ATLAS_TILES);
         glUseProgram(atlas);
-        glUniform1ui(glGetUniformLocation(atlas, "uRuns"), GLuint(runs));
+        glUniform1ui(glGetUniformLocation(atlas, "uTiles"), GLuint(tiles));
         glUniform1f(glGetUniformLocation(atlas, "uMinDepth"), float(options.waterMinDepthM));
         glUniform1f(glGetUniformLocation(atlas, "uWetShare"), float(influence::kWetShareMin));
-        const size_t groups = (runs * 16 + 63) / 64, across = std::min<size_t>(groups, 65535);  // GL's least limit a dimension
-        glDispatchCompute(GLuint(across), GLuint((groups + across - 1) / across), 1);
+        const size_t across = std::min<size_t>(tiles, 65535);  // GL's least limit a dimension
+        glDispatchCompute(GLuint(across), GLuint((tiles + across - 1) / across), 1);
         glMemoryBarrier(GL_SHADER_STORAGE_BARRIER_BIT);
     }
 
@@ -831,7 +862,7 @@ struct GlRenderer::Impl {
         const bool keep = lastAssembled;
         std::swap(heightsBuf, lastHeightsBuf), lastAssembled = false;
         uploadFrame(block, fit, camera, options, timings);
-        if (cpuCascades) approximateOnCpu(fit, options, timings, keep);
+        if (cpuCascades) approximateOnCpu(fit, block, options, timings, keep);
         else planOnGpu(fit, block, options, timings, keep);
         bindFrame();
         int stamp = 0;

@@ -27,7 +27,8 @@ using uint = std::uint32_t;
 #define HC_BIND_INDICES_1 8  // further chunks of the entries (a driver caps one storage buffer: llvmpipe at
 #define HC_BIND_INDICES_2 9  //   128 MiB, which the lists of a million cells exceed)
 #define HC_BIND_INDICES_3 10
-#define HC_BIND_VISIBLE 4    // int[]: per cascade 4 ints a row: the spans to evaluate (RowFill a0, a1, b0, b1)
+#define HC_BIND_VISIBLE 4    // int[]: per cascade 4 ints a row: the spans to evaluate (RowFill a0, a1, b0, b1); out of core the
+                             //   spans atlas.comp copies the pyramid's texels in
 #define HC_BIND_HEIGHTS 5    // float[]: per cascade terrain, water, depth textures and both max mipmaps
 #define HC_BIND_PIXELS 6     // GpuPixel[width * height], row 0 at the top
 #define HC_BIND_COUNTERS 7   // uint[kCounterSlots * (kMaxCascades + 1)]: Gaussians per cascade, then hits
@@ -37,10 +38,11 @@ using uint = std::uint32_t;
 #define HC_BIND_FILL_TEXELS 13   // float[3 * plane]: the evaluated texels packed, terrain, then water, then depth
 // raycast.comp's beams (beams.comp): per tile of GpuFrame::beamTile^2 pixels and cascade, (start depth, passed).
 #define HC_BIND_BEAMS 14         // vec2[tiles * kMaxCascades], tiles row-major over the image
-// Out of core with a pyramid (atlas.comp): its tiles resident on the GPU, and the frame's runs of texels to copy.
+// Out of core with a pyramid (atlas.comp): its tiles resident on the GPU, and the frame's tiles to copy texels from
+// (each cascade's row spans to copy in, before the copies were taken out, are in HC_BIND_VISIBLE).
 #define HC_BIND_ATLAS_TERRAIN 15 // float[kAtlasPlane per slot]: a tile's elevations
 #define HC_BIND_ATLAS_WATER 16   // float[2 kAtlasPlane per slot]: a tile's water levels, then its wet shares
-#define HC_BIND_ATLAS_RUNS 17    // uvec4 per run (atlas.comp)
+#define HC_BIND_ATLAS_TILES 17   // uvec4 per tile to copy from (atlas.comp)
 #define HC_BIND_LAST 17          // the highest binding
 #define HC_IMAGE_COLOR 0     // rgba8 image unit of the shaded picture (row 0 at the bottom)
 

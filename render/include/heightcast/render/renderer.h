@@ -112,7 +112,8 @@ struct Timings {
     double uploadMs = 0;
     uint64_t uploadBytes = 0;
     // GL backend out of core with a pyramid: the texels copied on the GPU from the pyramid tiles resident there (the
-    // atlas; the uploads above hold the tiles not yet resident, atlasTilesUploaded of them, and the runs to copy).
+    // atlas; the uploads above hold the tiles not yet resident, atlasTilesUploaded of them, the tiles to copy from and
+    // the rows' spans).
     uint64_t atlasTexels = 0, atlasTilesUploaded = 0;
     std::vector<CascadeStats> cascades;
     uint64_t rays = 0, hits = 0;
