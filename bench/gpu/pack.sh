@@ -7,8 +7,10 @@
 #
 # Carried: every library the tools load but the C and C++ runtimes (glibc, libstdc++, libgcc_s; the target's own,
 # newer ones serve), xz-compressed. glvnd's libEGL/libOpenGL are carried too; the GPU's own EGL driver is the
-# target's (NVIDIA's, through glvnd's vendor files). The tools are built with -march=native (HC_NATIVE): the
-# target's CPU must have this machine's instruction set extensions (AVX2 and FMA here).
+# target's (NVIDIA's, through glvnd's vendor files). A default build is tuned with -march=native (HC_NATIVE): the
+# target's CPU must then have every instruction set extension of this machine's. Where it may not (this machine has
+# AVX-512 subsets the lent Xeons need not), pack a build made for it: bash scripts/build.sh DIR -DHC_NATIVE=OFF
+# -DCMAKE_CXX_FLAGS=-march=x86-64-v3 -DHC_BUILD_TESTS=OFF, then HC_BIN=DIR/bin bash bench/gpu/pack.sh.
 set -euo pipefail
 here=$(cd "$(dirname "$0")/../.." && pwd)
 kit=${1:-$here/.devkit}
