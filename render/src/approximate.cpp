@@ -121,7 +121,7 @@ std::vector<Todo> copyReusedTexels(const Cascade& c, const TexelReuse* reuse, Ca
         if (f <= l) copied += uint64_t(l - f + 1);
         const int jp = j + reuse->dj;
         const size_t row = size_t(j) * size_t(n);
-        auto place = [&](std::vector<float>& to, const std::vector<float>& from, float none) {
+        auto place = [&](Texels& to, const Texels& from, float none) {
             float* const out = &to[row];
             if (l < f) {
                 std::fill(out, out + n, none);

@@ -5,7 +5,10 @@
 #include <array>
 #include <cmath>
 #include <functional>
+#include <memory>
+#include <new>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include <glm/vec3.hpp>
@@ -16,11 +19,35 @@
 
 namespace hc::render::detail {
 
+// An allocator whose vectors leave new elements uninitialised where std::vector would zero them: a cascade's
+// textures are sized before every texel that is read is written (approximate(): copyReusedTexels writes every texel,
+// with RowFill spans every texel of a span, and no other is read), and zeroing them first took 0.15-0.25 ms a cascade
+// on one core (a 1344^2 texture is 7 MB) in every fresh frame.
+template <class T>
+struct UninitialisedAllocator : std::allocator<T> {
+    template <class U>
+    struct rebind {
+        using other = UninitialisedAllocator<U>;
+    };
+    UninitialisedAllocator() = default;
+    template <class U>
+    UninitialisedAllocator(const UninitialisedAllocator<U>&) noexcept {}
+    template <class U>
+    void construct(U* p) noexcept {
+        ::new (static_cast<void*>(p)) U;  // default-initialised: for float, nothing written
+    }
+    template <class U, class... Args>
+    void construct(U* p, Args&&... args) {
+        ::new (static_cast<void*>(p)) U(std::forward<Args>(args)...);
+    }
+};
+using Texels = std::vector<float, UninitialisedAllocator<float>>;
+
 // One heightfield in a cascade: heights at texel centres and its max mipmap over patches.
 // -inf marks "no surface" (a hole, dry land for water, or a texel outside the visible polygon).
 struct Heightfield {
     int n = 0;                             // texels per side; patches per side = n - 1
-    std::vector<float> h;                  // n * n [m, local z]
+    Texels h;                              // n * n [m, local z]
     std::vector<std::vector<float>> mip;   // mip[0]: (n-1)^2 patch maxima, then halving to 1 x 1
     std::vector<int> mipSide;              // side of each mip level
     void buildMip(unsigned threads);  // the rows of its large levels on `threads` workers (0 = all cores)
@@ -31,7 +58,7 @@ constexpr size_t kMipParallelNodes = size_t{1} << 16;
 
 struct CascadeTextures {
     Heightfield terrain, water;            // water: surface height where wet (depth > min), else -inf
-    std::vector<float> depth;              // water depth at texels (0 where dry)
+    Texels depth;                          // water depth at texels (0 where dry)
     bool hasWater = false;
     // With water: the larger of the two max mipmaps, level by level (buildBothMip, after both buildMip): the ray walk
     // over both surfaces reads one maximum a node instead of two. Empty: the walk reads both.
