@@ -18,7 +18,7 @@ for exe in build-minimal/bin/* build-minimal/tests/*_test; do
 done
 # In the full build only the programs that render (hc-render, hc-bench, hc-view) may link GL, only hc-export OpenVDB.
 if [ -d build/bin ]; then
-  for tool in hc-ingest hc-info hc-influence hc-probe hc-export hc-bench-ingest hc-bench-influence; do
+  for tool in hc-ingest hc-info hc-influence hc-probe hc-export hc-bench-ingest hc-bench-influence hc-bench-parallel; do
     [ -e "build/bin/$tool" ] || continue
     found=$(links "build/bin/$tool" | grep -oE 'lib(OpenGL|GL|GLX|EGL|GLdispatch|glfw)[^ ]*' || true)
     if [ -n "$found" ]; then echo "test_minimal: build/bin/$tool links $found" >&2; status=1; fi

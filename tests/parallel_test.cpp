@@ -1,9 +1,11 @@
 // parallelFor (core/parallel.h) on its pool of kept threads: every index once, worker numbers private to one thread at
-// a time (the callers index per-worker scratch by them), calls nested in a worker or in the caller's own share, calls
-// from several threads at once, and the first exception rethrown in the caller with the pool still usable after it.
+// a time (the callers index per-worker scratch by them), with its threads spinning or asleep when a call comes, calls
+// nested in a worker or in the caller's own share, calls from several threads at once, and the first exception
+// rethrown in the caller with the pool still usable after it.
 #include <gtest/gtest.h>
 
 #include <atomic>
+#include <chrono>
 #include <stdexcept>
 #include <thread>
 #include <vector>
@@ -39,6 +41,15 @@ TEST(Parallel, EveryItemOnceAndWorkersPrivateAcrossManyCalls) {
     // the most asked for, and a call that wants fewer leaves the others idle).
     for (int round = 0; round < 200; ++round)
         for (unsigned threads : {2u, 8u, 3u, 16u, 1u}) checkOneCall(size_t(round % 7) * 37 + 1, 3, threads);
+}
+
+TEST(Parallel, CallsAfterThePoolHasSlept) {
+    // The pool's threads spin for a while after a call, then sleep (core/src/parallel.cpp): calls that find them
+    // spinning, sleeping, and some of each (a pause about as long as the spin).
+    for (int round = 0; round < 30; ++round) {
+        for (unsigned threads : {4u, 2u, 16u}) checkOneCall(100, 1, threads);
+        std::this_thread::sleep_for(std::chrono::microseconds(round % 3 == 0 ? 0 : round % 3 == 1 ? 100 : 2000));
+    }
 }
 
 TEST(Parallel, NestedCallsRunOnThreadsOfTheirOwn) {
