@@ -633,6 +633,8 @@ struct GlRenderer::Impl {
         if (scene.hasWater()) waterAtlas.open(atlasBytes, 2);
         const size_t n = size_t(tex.terrain.n), side = size_t(p.side);
         const int shift = std::countr_zero(side);
+        if (n + side >= 32768)  // atlas.comp's tiles hold their first texel's i and j in 16 bits each
+            throw Error("the GL backend copies the pyramid's texels into cascades of under 32752 texels a side, not " + std::to_string(n));
         for (size_t e = 0; e < p.tile.size(); ++e) {
             const float* tile = p.tile[e];
             if (!tile) continue;
