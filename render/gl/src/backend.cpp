@@ -562,12 +562,24 @@ struct GlRenderer::Impl {
             const Stopwatch clock;
             if (useAtlas) {  // cpu.cascades: one per cascade of the fit (approximateCascades)
                 CascadeStats& stats = cpu.cascades[k];
+                const size_t firstTile = atlasTiles.size();
                 stats.pyramidTexels += placeTiles(k, tex, fill, minDepth);
                 if (stats.pyramidTexels) stats.errorBoundM = detail::pyramidCopyBoundM(scene);
-                // The spans before the copies were taken out, for atlas.comp (the visible buffer is in-memory's otherwise).
+                // The spans before the copies were taken out, of the rows of the tiles atlas.comp copies from (the
+                // visible buffer is in-memory's otherwise): a moving frame's few tiles need few rows.
+                const int n = fit.cascades[k].n;
+                int lo = n, hi = -1;
+                for (size_t t = firstTile; t < atlasTiles.size(); t += 4) {
+                    const int j0 = int(atlasTiles[t + 1] >> 16) - 32768;
+                    lo = std::min(lo, std::max(j0, 0)), hi = std::max(hi, std::min(j0 + fill.tiles.side - 1, n - 1));
+                }
                 spans.clear();
-                for (const detail::RowFill& r : fill.tiles.spans) spans.insert(spans.end(), {r.a0, r.a1, r.b0, r.b1});
-                visibleBuf.upload(spans.data(), spans.size() * sizeof(int32_t), size_t(block.cascades[k].visibleOffset) * 4);
+                for (int j = lo; j <= hi; ++j) {
+                    const detail::RowFill& r = fill.tiles.spans[size_t(j)];
+                    spans.insert(spans.end(), {r.a0, r.a1, r.b0, r.b1});
+                }
+                if (!spans.empty())
+                    visibleBuf.upload(spans.data(), spans.size() * sizeof(int32_t), (size_t(block.cascades[k].visibleOffset) + 4 * size_t(lo)) * 4);
                 spanBytes += spans.size() * sizeof(int32_t);
             }
             // Each row's place in the packed planes, then the rows copied there on all cores.
