@@ -40,24 +40,33 @@ std::vector<glm::dvec3> polyhedronVertices(const std::vector<Plane>& planes, dou
     return out;
 }
 
-// Keeps the part of a convex polygon where dot(p, dir) lies in [lo, hi].
-std::vector<glm::dvec2> clipSlab(const std::vector<glm::dvec2>& poly, const glm::dvec2& dir, double lo, double hi) {
-    auto clip = [&](const std::vector<glm::dvec2>& in, double sign, double bound) {
-        std::vector<glm::dvec2> out;
+// Keeps the part of a convex polygon where dot(p, dir) lies in [lo, hi], in `out`; `half` holds the polygon clipped
+// at lo. Both keep their storage from call to call (placeTexture clips a polygon for every texel row: allocating the
+// vectors anew cost more than clipping).
+void clipSlab(const std::vector<glm::dvec2>& poly, const glm::dvec2& dir, double lo, double hi, std::vector<glm::dvec2>& half,
+              std::vector<glm::dvec2>& out) {
+    auto clip = [&](const std::vector<glm::dvec2>& in, double sign, double bound, std::vector<glm::dvec2>& kept) {
+        kept.clear();
         const size_t m = in.size();
         for (size_t i = 0; i < m; ++i) {
             const glm::dvec2& a = in[i];
             const glm::dvec2& b = in[(i + 1) % m];
             const double fa = sign * (glm::dot(a, dir) - bound), fb = sign * (glm::dot(b, dir) - bound);
-            if (fa >= 0) out.push_back(a);
+            if (fa >= 0) kept.push_back(a);
             if ((fa >= 0) != (fb >= 0)) {
                 const double t = fa / (fa - fb);
-                out.push_back(a + t * (b - a));
+                kept.push_back(a + t * (b - a));
             }
         }
-        return out;
     };
-    return clip(clip(poly, 1.0, lo), -1.0, hi);
+    clip(poly, 1.0, lo, half);
+    clip(half, -1.0, hi, out);
+}
+
+std::vector<glm::dvec2> clipSlab(const std::vector<glm::dvec2>& poly, const glm::dvec2& dir, double lo, double hi) {
+    std::vector<glm::dvec2> half, out;
+    clipSlab(poly, dir, lo, hi, half, out);
+    return out;
 }
 
 // The potentially visible area: the view frustum intersected with the scene's box, projected to the ground
@@ -138,9 +147,10 @@ void placeTexture(Cascade& c, int texelsPerSide, double finestCellM, int stepsPe
     // clipped to the band [y - m, y + m], widened by m.
     const double m = 1.5 * c.texelM;
     const glm::dvec2 yAxis{0, 1};
+    std::vector<glm::dvec2> half, band;
     for (int j = 0; j < c.n; ++j) {
         const double y = c.y0 + j * c.texelM;
-        const std::vector<glm::dvec2> band = clipSlab(c.polygon, yAxis, y - m, y + m);
+        clipSlab(c.polygon, yAxis, y - m, y + m, half, band);
         if (band.empty()) continue;
         double xl = HUGE_VAL, xr = -HUGE_VAL;
         for (const glm::dvec2& p : band) xl = std::min(xl, p.x), xr = std::max(xr, p.x);
