@@ -1,5 +1,5 @@
 // parallelFor (core/parallel.h) on its pool of kept threads: every index once, worker numbers private to one thread at
-// a time (the callers index per-worker scratch by them), with its threads spinning or asleep when a call comes, calls
+// a time (the callers index per-worker scratch by them), with its threads busy or asleep when a call comes, calls
 // nested in a worker or in the caller's own share, calls from several threads at once, and the first exception
 // rethrown in the caller with the pool still usable after it.
 #include <gtest/gtest.h>
@@ -44,8 +44,7 @@ TEST(Parallel, EveryItemOnceAndWorkersPrivateAcrossManyCalls) {
 }
 
 TEST(Parallel, CallsAfterThePoolHasSlept) {
-    // The pool's threads spin for a while after a call, then sleep (core/src/parallel.cpp): calls that find them
-    // spinning, sleeping, and some of each (a pause about as long as the spin).
+    // Calls that find the pool's threads just done, asleep, or some of each (pauses of 0, 100 us and 2 ms).
     for (int round = 0; round < 30; ++round) {
         for (unsigned threads : {4u, 2u, 16u}) checkOneCall(100, 1, threads);
         std::this_thread::sleep_for(std::chrono::microseconds(round % 3 == 0 ? 0 : round % 3 == 1 ? 100 : 2000));
