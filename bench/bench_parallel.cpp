@@ -4,8 +4,8 @@
 //
 // One table: per thread count, the microseconds a call of parallelFor over `threads` chunks of trivial work takes,
 // the best of three runs of --calls calls each, in three rhythms: calls back to back; each after a pause of 20 us on
-// the calling thread (the pool's threads are still awake); each after a pause of 1 ms (they have gone to sleep). The
-// pause is not counted.
+// the calling thread (a pool whose threads spin after a call would still have them awake); each after a pause of
+// 1 ms. The pause is not counted.
 // Why a program and not a test: the figures depend on the machine; tests never time anything.
 #include <algorithm>
 #include <chrono>
@@ -26,7 +26,7 @@ namespace {
 const char* kUsage = R"(usage: hc-bench-parallel [options]
 
 The cost of one parallelFor call beyond its work (the pool of kept threads, core/parallel.h), in microseconds a call:
-back to back, after a pause of 20 us (the pool's threads awake), after a pause of 1 ms (asleep). Best of 3 runs.
+back to back, after a pause of 20 us, after a pause of 1 ms (the pool's threads sleep between calls). Best of 3 runs.
 
   --threads LIST   thread counts, comma-separated; 0 = all cores (default 2,0)
   --calls N        calls a run (default 20000; a tenth of it after 1 ms pauses)
@@ -96,9 +96,9 @@ int main(int argc, char** argv) {
         std::printf("%8s %16s %22s %22s\n", "threads", "back to back us", "after 20 us pauses us", "after 1 ms pauses us");
         for (const unsigned t : threads) {
             const double b2b = perCallUs(t, calls, std::chrono::microseconds(0));
-            const double awake = perCallUs(t, calls, std::chrono::microseconds(20));
-            const double asleep = perCallUs(t, std::max(10, calls / 10), std::chrono::microseconds(1000));
-            std::printf("%8u %16.2f %22.2f %22.2f\n", hc::resolveThreads(t), b2b, awake, asleep);
+            const double shortPause = perCallUs(t, calls, std::chrono::microseconds(20));
+            const double longPause = perCallUs(t, std::max(10, calls / 10), std::chrono::microseconds(1000));
+            std::printf("%8u %16.2f %22.2f %22.2f\n", hc::resolveThreads(t), b2b, shortPause, longPause);
         }
         return 0;
     } catch (const std::exception& e) {
