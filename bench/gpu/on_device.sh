@@ -14,6 +14,8 @@
 #           on Petzenkirchen and Wachau with a fly-through, and (after the scale or grid part) the look-at flight back to
 #           back, with texels kept and from scratch (an hc-render older than b892aa2 has no --fly-last-image and fails
 #           those flights, saying so)
+#   pool    hc-bench-parallel on the machine's cores: what a parallelFor call costs beyond its work (a fresh frame makes
+#           a dozen), back to back and after pauses
 set -uo pipefail
 [[ $# -eq 2 ]] || { echo "usage: $0 KIT_DIR OUT_DIR" >&2; exit 2; }
 kit=$(cd "$1" && pwd) out=$2
@@ -135,6 +137,10 @@ if [[ $parts == *,ab,* ]]; then
         done > "$out/ab_fly.txt" 2>&1
         grep -E "^== |frames 1\.\." "$out/ab_fly.txt"
     fi
+fi
+if [[ $parts == *,pool,* ]]; then
+    hc-bench-parallel --threads "$(nproc),$(($(nproc) / 2)),2" > "$out/pool.txt" 2>&1
+    cat "$out/pool.txt"
 fi
 if [[ $parts == *,report,* ]]; then
     {

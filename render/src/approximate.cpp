@@ -423,6 +423,68 @@ int copySamples(const float* s, const float* w, size_t plane, int count, float m
 
 namespace {
 
+// An interpolated texel into tex at `at`, with the water rule of surface.h as the kernel path applies it.
+inline void writeInterpolated(const PyramidInterpolator::Value& v, size_t at, float minDepth, CascadeTextures& tex) {
+    tex.terrain.h[at] = v.z;
+    if (std::isnan(v.level) || double(v.share) < influence::kWetShareMin) return;
+    const float d = v.level - v.z;
+    if (d > 0) tex.depth[at] = d;
+    if (d > minDepth) tex.water.h[at] = v.level;
+}
+
+// Level 0's tiles as PyramidTiles::Block wants them: whether the 3 x 3 tiles around tile (tx, ty) are all stored, all
+// numbers and all dry or all wet (then PyramidInterpolator interpolates every texel of the block from level 0 and refuses
+// none: no sample is undefined or missing, no wet meets dry, the stencil stays in the domain), and those tiles. One
+// per worker: each tile's kind is kept in a small table by its address.
+class LevelZeroBlocks {
+public:
+    LevelZeroBlocks(const influence::SurfacePyramid& p, const influence::SurfacePyramid* water)
+        : samples_(p, 0), channels3_(p.channels == 3), plane_(samples_.plane()), shift_(std::countr_zero(samples_.side())) {
+        if (water) water_.emplace(*water, 0);
+    }
+    // The block's tiles into b (tile, water), true where it is the caller's.
+    bool take(int64_t tx, int64_t ty, PyramidTiles::Block* b = nullptr) {
+        if (tx < 1 || ty < 1) return false;  // the stencil of the texels at the domain's edge would leave it
+        Kind first = kMixed;
+        for (int dy = -1; dy <= 1; ++dy)
+            for (int dx = -1; dx <= 1; ++dx) {
+                const uint64_t i = uint64_t(tx + dx) << shift_, j = uint64_t(ty + dy) << shift_;
+                const float* s = samples_.find(i, j);
+                if (!s) return false;
+                const float* w = water_ ? water_->find(i, j) : channels3_ ? s + plane_ : nullptr;
+                const Kind k = kindOf(s, w);
+                if (k == kMixed || (first != kMixed && k != first)) return false;
+                first = k;
+                if (b) b->tile[size_t(3 * (dy + 1) + dx + 1)] = s, b->water[size_t(3 * (dy + 1) + dx + 1)] = k == kWet ? w : nullptr;
+            }
+        return true;
+    }
+    int shift() const { return shift_; }
+
+private:
+    enum Kind : uint8_t { kMixed, kDry, kWet };  // kMixed: a NaN elevation, or wet and dry samples
+    Kind kindOf(const float* s, const float* w) {
+        Entry& e = kinds_[(reinterpret_cast<uintptr_t>(s) / (plane_ * sizeof(float))) % kinds_.size()];
+        if (e.tile == s && e.water == w) return e.kind;
+        size_t wet = 0;
+        bool number = true;
+        for (size_t k = 0; k < plane_; ++k) number &= !std::isnan(s[k]), wet += w && !std::isnan(w[k]);
+        e = {s, w, !number ? kMixed : wet == 0 ? kDry : wet == plane_ ? kWet : kMixed};
+        return e.kind;
+    }
+    struct Entry {
+        const float* tile = nullptr;
+        const float* water = nullptr;
+        Kind kind = kMixed;
+    };
+    influence::SurfacePyramid::Cursor samples_;
+    std::optional<influence::SurfacePyramid::Cursor> water_;
+    bool channels3_;
+    size_t plane_;
+    int shift_;
+    std::array<Entry, 256> kinds_{};
+};
+
 // Out of core: whether the pyramid tile (level t, its lattice: copyPyramidTexels) holding lattice point (gi, gj) lies
 // outside the domain or in a quadtree node that holds no cell at all. The surface is undefined at every texel there (a
 // hole, or outside the data), so there is nothing to copy, interpolate or sum. Counting a node's cells takes two
@@ -469,7 +531,9 @@ private:
 // work.pyramidLevel to the pyramid level used (-1: none fits the cascade). With `tiles`, the copies are marked there
 // (PyramidTiles: each worker sets its texels' bits, no list to merge) instead of written or counted (the caller counts
 // what it copies), and each span shrinks to the texels written here (interpolated) or left to the kernels, from the
-// first to the last (the interpolated ones marked in copiedMask, so the kernels skip them).
+// first to the last (the interpolated ones marked in copiedMask, so the kernels skip them). With `tiles` and a cascade
+// below level 0, the texels of blocks whose level-0 tiles are all stored and alike (PyramidTiles::Block) are left to
+// the caller to interpolate: marked in copiedMask, counted as interpolated, their blocks listed in `tiles`.
 uint64_t copyPyramidTexels(const Scene& scene, const Cascade& c, CascadeTextures& tex, double waterMinDepthM, int interpolateLevels, unsigned threads,
                            std::vector<Todo>& todo, std::vector<uint8_t>& copiedMask, ApproximationWork& work, PyramidTiles* tiles = nullptr) {
     work.pyramidLevel = -1;
@@ -512,8 +576,38 @@ uint64_t copyPyramidTexels(const Scene& scene, const Cascade& c, CascadeTextures
             tiles->copied.assign(entries * size_t(tiles->side), 0);
         }
     }
+    // With `tiles` and a cascade below level 0: the blocks left to the caller (PyramidTiles::Block), a table over those
+    // the cascade's texels cover: 0 not yet asked, 1 the caller's, 2 not.
+    int blockShift = 0;
+    int64_t bx0 = 0, by0 = 0, blocksWide = 0;
+    std::vector<uint8_t> blockState;
+    if (tiles && t < 0 && -t <= PyramidTiles::kMaxBlockUp && I0 + c.n > 0 && J0 + c.n > 0) {
+        const influence::SurfacePyramid::Cursor level0(*p, 0);
+        if (level0.side() >= 2) {  // a stencil reaches one sample beyond its block: into the next tile only
+            tiles->up = int(-t), tiles->levelSide = int(level0.side()), tiles->levelPlane = level0.plane();
+            blockShift = std::countr_zero(level0.side()) + tiles->up;
+            bx0 = std::max<int64_t>(I0, 0) >> blockShift, by0 = std::max<int64_t>(J0, 0) >> blockShift;
+            blocksWide = ((I0 + c.n - 1) >> blockShift) - bx0 + 1;
+            blockState.assign(size_t(blocksWide) * size_t(((J0 + c.n - 1) >> blockShift) - by0 + 1), 0);
+        }
+    }
+    const uint64_t blockMask = (uint64_t{1} << blockShift) - 1;
     parallelFor(todo.size(), 16, threads, [&](size_t b, size_t e, unsigned worker) {
         std::optional<influence::SurfacePyramid::Cursor> samples, waterSamples;  // neighbouring rows share tiles
+        std::optional<LevelZeroBlocks> blocks;
+        if (blockShift) blocks.emplace(*p, wp);
+        // Whether the block holding lattice point (gi, gj) is the caller's (asked once: workers that meet in a block
+        // find the same answer).
+        auto callersBlock = [&](uint64_t gi, uint64_t gj) {
+            const int64_t bx = int64_t(gi >> blockShift), by = int64_t(gj >> blockShift);
+            uint8_t& state = blockState[size_t(bx - bx0) + size_t(by - by0) * size_t(blocksWide)];
+            uint8_t now = std::atomic_ref(state).load(std::memory_order_relaxed);
+            if (now == 0) {
+                now = blocks->take(bx, by) ? 1 : 2;  // a block is one level-0 tile's texels: its index is the tile's
+                std::atomic_ref(state).store(now, std::memory_order_relaxed);
+            }
+            return now == 1;
+        };
         if (t >= 0) samples.emplace(*p, int(t));
         if (wp && t >= 0) waterSamples.emplace(*wp, int(t));
         // One per worker for the whole cascade: the fine cells it looked up serve its later rows.
@@ -543,8 +637,10 @@ uint64_t copyPyramidTexels(const Scene& scene, const Cascade& c, CascadeTextures
                         leave(i++);
                         continue;
                     }
-                    // The run of texels in one tile of the cascade's level (to the row's end where none is stored).
-                    const int end = samples ? std::min(*hi, i + int(sideMask - (uint64_t(gi) & sideMask))) : *hi;
+                    // The run of texels in one tile of the cascade's level, or in one block (else to the span's end).
+                    const int end = samples     ? std::min(*hi, i + int(sideMask - (uint64_t(gi) & sideMask)))
+                                    : blockShift ? std::min(*hi, i + int(blockMask - (uint64_t(gi) & blockMask)))
+                                                 : *hi;
                     const float* s = samples ? samples->find(uint64_t(gi), uint64_t(gj)) : nullptr;
                     if (s) {  // copies: the tile's samples side by side, with the water rule of surface.h
                         const float* w = wp ? waterSamples->find(uint64_t(gi), uint64_t(gj)) : channels == 3 ? s + plane : nullptr;
@@ -574,6 +670,12 @@ uint64_t copyPyramidTexels(const Scene& scene, const Cascade& c, CascadeTextures
                         i = end + 1;
                         continue;
                     }
+                    if (blockShift && callersBlock(uint64_t(gi), uint64_t(gj))) {  // the caller interpolates them
+                        std::memset(&copiedMask[rowAt + size_t(i)], 1, size_t(len));
+                        nInterpolated += uint64_t(len), up = std::max(up, tiles->up);
+                        i = end + 1;
+                        continue;
+                    }
                     if (interpolator) {
                         values.resize(size_t(len)), filled.resize(size_t(len));
                         interpolator->run(uint64_t(i0 + double(i)), len, uint64_t(gj), values.data(), filled.data());
@@ -587,13 +689,9 @@ uint64_t copyPyramidTexels(const Scene& scene, const Cascade& c, CascadeTextures
                         const size_t at = rowAt + size_t(i);
                         copiedMask[at] = 1;
                         if (tiles) leave(i);  // written here: the caller packs it with the span
-                        tex.terrain.h[at] = v.z;
+                        writeInterpolated(v, at, minDepth, tex);
                         ++nInterpolated;
                         up = std::max(up, v.up);
-                        if (std::isnan(v.level) || double(v.share) < influence::kWetShareMin) continue;
-                        const float d = v.level - v.z;
-                        if (d > 0) tex.depth[at] = d;
-                        if (d > minDepth) tex.water.h[at] = v.level;
                     }
                 }
                 *lo = first, *hi = last;
@@ -604,6 +702,16 @@ uint64_t copyPyramidTexels(const Scene& scene, const Cascade& c, CascadeTextures
     uint64_t total = 0;
     for (unsigned k = 0; k < workers; ++k)
         total += copied[k], work.pyramidInterpolated += interpolated[k], work.pyramidInterpolatedUp = std::max(work.pyramidInterpolatedUp, mostUp[k]);
+    if (blockShift) {  // the caller's blocks, with their tiles
+        LevelZeroBlocks blocks(*p, wp);
+        for (size_t e = 0; e < blockState.size(); ++e) {
+            if (blockState[e] != 1) continue;
+            const int64_t bx = bx0 + int64_t(e % size_t(blocksWide)), by = by0 + int64_t(e / size_t(blocksWide));
+            PyramidTiles::Block& b = tiles->blocks.emplace_back();
+            b.i0 = (bx << blockShift) - I0, b.j0 = (by << blockShift) - J0;
+            if (!blocks.take(bx, by, &b)) throw Error("copyPyramidTexels: a block changed its mind (a bug)");
+        }
+    }
     return total;
 }
 
@@ -925,6 +1033,39 @@ influence::SurfaceRegion readNeededRegion(const GridRegionReader& file, const in
 }
 
 }  // namespace
+
+uint64_t interpolateBlock(const Scene& scene, const Cascade& c, const PyramidTiles& tiles, const PyramidTiles::Block& block, double waterMinDepthM,
+                          CascadeTextures& tex, std::vector<RowFill>& rows) {
+    const influence::SurfacePyramid* p = scene.pyramid();
+    if (!p || tiles.up < 1) throw Error("interpolateBlock: no block to interpolate (a bug)");
+    PyramidInterpolator interpolator(scene, *p, scene.waterPyramid(), -tiles.up, tiles.up);
+    const int64_t I0 = int64_t(std::round(c.x0 / c.texelM)), J0 = int64_t(std::round(c.y0 / c.texelM));
+    const int64_t side = int64_t(tiles.levelSide) << tiles.up, n = c.n;
+    std::vector<PyramidInterpolator::Value> values(static_cast<size_t>(side));
+    std::vector<uint8_t> filled(static_cast<size_t>(side));
+    uint64_t written = 0;
+    for (int64_t j = std::max<int64_t>(block.j0, 0); j <= std::min(block.j0 + side - 1, n - 1); ++j) {
+        const RowFill& s = tiles.spans[size_t(j)];
+        for (int span = 0; span < 2; ++span) {
+            const int64_t lo = std::max({int64_t(span == 0 ? s.a0 : s.b0), block.i0, int64_t{0}});
+            const int64_t hi = std::min({int64_t(span == 0 ? s.a1 : s.b1), block.i0 + side - 1, n - 1});
+            if (hi < lo) continue;
+            const int len = int(hi - lo + 1);
+            interpolator.run(uint64_t(I0 + lo), len, uint64_t(J0 + j), values.data(), filled.data());
+            for (int k = 0; k < len; ++k) {
+                if (!filled[size_t(k)]) throw Error("interpolateBlock: a texel of a block refused (a bug)");
+                writeInterpolated(values[size_t(k)], size_t(j) * size_t(n) + size_t(lo + k), float(waterMinDepthM), tex);
+            }
+            written += uint64_t(len);
+            RowFill& row = rows[size_t(j)];
+            int& a = span == 0 ? row.a0 : row.b0;
+            int& b = span == 0 ? row.a1 : row.b1;
+            if (b < a) a = int(lo), b = int(hi);
+            else a = std::min(a, int(lo)), b = std::max(b, int(hi));
+        }
+    }
+    return written;
+}
 
 std::vector<RowFill> rowFills(const Cascade& c, const TexelReuse* reuse, uint64_t& kept) {
     std::vector<RowFill> rows(size_t(c.n));

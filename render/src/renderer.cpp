@@ -980,6 +980,7 @@ std::string Timings::toJson() const {
     j["upload_bytes"] = uploadBytes;
     j["atlas_texels"] = atlasTexels;
     j["atlas_tiles_uploaded"] = atlasTilesUploaded;
+    j["atlas_interpolated"] = atlasInterpolated;
     j["rays"] = rays;
     j["hits"] = hits;
     j["cascades"] = Json::array();
@@ -1055,6 +1056,11 @@ std::string Timings::toTable() const {
     if (atlasTexels > 0) {
         std::snprintf(b, sizeof b, "    pyramid tiles           %llu texels copied on the GPU from its tiles there (%llu tiles uploaded)\n",
                       (unsigned long long)atlasTexels, (unsigned long long)atlasTilesUploaded);
+        s += b;
+    }
+    if (atlasInterpolated > 0) {
+        std::snprintf(b, sizeof b, "    pyramid tiles           %llu texels interpolated on the GPU from level 0's tiles there\n",
+                      (unsigned long long)atlasInterpolated);
         s += b;
     }
     return s;

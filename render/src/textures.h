@@ -112,7 +112,30 @@ struct PyramidTiles {
                                        // water pyramid's tile at the same place in a later step of a scenario; nullptr: dry
     std::vector<uint16_t> copied;      // per entry, `side` rows: bit c of row r set where sample (c, r) is copied to a texel
     std::vector<RowFill> spans;        // per texel row: its spans to evaluate before the copies were taken out (a0 .. b1)
+
+    // Texels finer than every level (the cascade's level t < 0) left to the caller to interpolate from level 0, `up` = -t
+    // levels above, as PyramidInterpolator does (the GL backend does it on the GPU from its atlas: interpolate.comp), in
+    // blocks: a block is the footprint of one level-0 tile in texels, (levelSide << up)^2 of them, and is left to the
+    // caller where the Catmull-Rom stencils of all its texels lie in the 3 x 3 level-0 tiles around it and those are all
+    // stored, all numbers, and all dry or all wet: there the interpolator takes level 0 and refuses no texel. Every texel
+    // of a span to evaluate (`spans`) in a block is the caller's; no other is. They count as interpolated.
+    struct Block {
+        int64_t i0 = 0, j0 = 0;                       // its first texel (it may lie left of or below texel 0)
+        std::array<const float*, 9> tile{}, water{};  // level 0's tiles around it, (dx, dy) in -1..1 at 3 (dy + 1) + dx + 1;
+                                                      // water (levels, wet shares a plane after) nullptr: dry
+    };
+    static constexpr int kMaxBlockUp = 3;  // blocks only up to this many levels below level 0 (a block of 128^2 texels)
+    int up = 0;                            // levels from the cascade's up to level 0 (0: no blocks)
+    int levelSide = 0;                     // level 0's tile side (samples)
+    size_t levelPlane = 0;                 // its samples a channel
+    std::vector<Block> blocks;
 };
+
+// The texels of `block` (approximate() with `tiles` left them to the caller) interpolated on the CPU into tex, as
+// approximate() interpolates, for a caller that cannot take them (the GL backend whose atlas has no slot left), and
+// each RowFill span of `rows` widened to hold them. Returns the texels written.
+uint64_t interpolateBlock(const Scene& scene, const Cascade& c, const PyramidTiles& tiles, const PyramidTiles::Block& block, double waterMinDepthM,
+                          CascadeTextures& tex, std::vector<RowFill>& rows);
 
 // The error bound of a texel copied from the surface pyramid (CascadeStats::errorBoundM) [m].
 double pyramidCopyBoundM(const Scene& scene);
@@ -133,7 +156,7 @@ std::vector<RowFill> rowFills(const Cascade& c, const TexelReuse* reuse, uint64_
 // written: only the evaluated spans, which go into `rows` with the kept ones (RowFill). With `rows` and `tiles` too, the
 // texels copied from the pyramid are not written either but marked in `tiles` (PyramidTiles), and each RowFill span
 // shrinks to the texels written (interpolated or summed), from the first to the last of them: the caller copies the
-// marked texels itself, after the spans.
+// marked texels itself, after the spans, and interpolates the texels of the blocks listed there (PyramidTiles::Block).
 ApproximationWork approximate(const Scene& scene, const Cascade& c, CascadeTextures& tex, double waterMinDepthM, unsigned threads,
                               const TexelReuse* reuse = nullptr, int interpolateLevels = 0, std::vector<RowFill>* rows = nullptr,
                               PyramidTiles* tiles = nullptr);

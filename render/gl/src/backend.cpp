@@ -15,10 +15,12 @@
 // Out of core (a Scene over a GridRegionReader: no cells or lists in memory, the grid may hold 100 M cells) the
 // cascades stay on the GPU from one frame to the next, and the CPU evaluates only the texels a frame newly sees, as
 // renderFrame() evaluates them (from the surface pyramid and the cells around the texels it does not hold:
-// detail::approximateOnCpu). Those go up packed with each cascade's rows, and assemble.comp builds the frame's
-// textures from them and the last frame's, which the GPU kept (two heights buffers, swapped each frame): a moving
-// camera uploads kilobytes, not the cascades. The mipmaps, ray casting and shading stay on the GPU. Nothing of the
-// grid is uploaded.
+// detail::approximateOnCpu). With a surface pyramid the texels it holds are copied on the GPU from its tiles resident
+// there (the atlas: atlas.comp), and those finer than its finest level interpolated there from level 0's tiles where
+// those are all stored and alike (interpolate.comp); the CPU lists which. The rest go up packed with each cascade's
+// rows, and assemble.comp builds the frame's textures from them and the last frame's, which the GPU kept (two heights
+// buffers, swapped each frame): a moving camera uploads kilobytes, not the cascades. The mipmaps, ray casting and
+// shading stay on the GPU. Nothing of the grid is uploaded.
 #include <algorithm>
 #include <array>
 #include <bit>
@@ -26,6 +28,7 @@
 #include <cstdio>
 #include <cstring>
 #include <limits>
+#include <tuple>
 #include <unordered_map>
 #include <vector>
 
@@ -181,7 +184,7 @@ void copyFloats(float* dst, const glm::dvec3& v) {
 struct GlRenderer::Impl {
     const Scene& scene;
     std::unique_ptr<gl::HeadlessContext> headless;  // null when rendering into the caller's context
-    GLuint approximate = 0, assemble = 0, atlas = 0, beams = 0, mipmap = 0, raycast = 0, shade = 0;
+    GLuint approximate = 0, assemble = 0, atlas = 0, interpolate = 0, beams = 0, mipmap = 0, raycast = 0, shade = 0;
     Buffer frameBuf, cellsBuf, keysBuf, visibleBuf, heightsBuf, pixelsBuf, countersBuf;
     Buffer beamsBuf;        // beams.comp's start depths, beamSlots of them this frame (0: no beams)
     size_t beamSlots = 0, outerBeamSlots = 0;
@@ -223,12 +226,13 @@ struct GlRenderer::Impl {
     // What goes into fillRowsBuf and fillTexelsBuf (terrain, water, depth), kept from frame to frame (no new pages).
     std::vector<int32_t> fillRows;
     std::array<std::vector<float>, 3> fillTexels;
-    // Out of core with a pyramid: its tiles on the GPU (elevations; water levels and wet shares), and this frame's
-    // tiles to copy texels from (atlas.comp), 4 uints a tile.
+    // Out of core with a pyramid: its tiles on the GPU (elevations; water levels and wet shares), this frame's tiles to
+    // copy texels from (atlas.comp), 4 uints a tile, and its blocks of texels to interpolate from level 0's tiles
+    // (interpolate.comp), gpu::kAtlasBlockUints a block.
     TileAtlas terrainAtlas, waterAtlas;
-    Buffer atlasTilesBuf;
-    std::vector<uint32_t> atlasTiles;
-    uint64_t atlasTexels = 0;  // this frame's
+    Buffer atlasTilesBuf, atlasBlocksBuf;
+    std::vector<uint32_t> atlasTiles, atlasBlocks;
+    uint64_t atlasTexels = 0, atlasInterpolated = 0;  // this frame's
 
     Impl(const Scene& s, std::unique_ptr<gl::HeadlessContext> context) : scene(s), headless(std::move(context)), cpuCascades(s.outOfCore()) {
         gl::requireGl43("the GL backend");
@@ -242,6 +246,7 @@ struct GlRenderer::Impl {
             approximate = gl::compileEmbedded("approximate");
             assemble = gl::compileEmbedded("assemble");
             atlas = gl::compileEmbedded("atlas");
+            interpolate = gl::compileEmbedded("interpolate");
             beams = gl::compileEmbedded("beams");
             mipmap = gl::compileEmbedded("mipmap");
             raycast = gl::compileEmbedded("raycast");
@@ -259,11 +264,11 @@ struct GlRenderer::Impl {
     }
 
     void release() {
-        for (GLuint p : {approximate, assemble, atlas, beams, mipmap, raycast, shade})
+        for (GLuint p : {approximate, assemble, atlas, interpolate, beams, mipmap, raycast, shade})
             if (p) glDeleteProgram(p);
-        approximate = assemble = atlas = beams = mipmap = raycast = shade = 0;
+        approximate = assemble = atlas = interpolate = beams = mipmap = raycast = shade = 0;
         for (Buffer* b : {&frameBuf, &cellsBuf, &keysBuf, &visibleBuf, &heightsBuf, &pixelsBuf, &countersBuf, &readbackBuf, &lastHeightsBuf,
-                          &fillRowsBuf, &fillTexelsBuf, &beamsBuf, &atlasTilesBuf})
+                          &fillRowsBuf, &fillTexelsBuf, &beamsBuf, &atlasTilesBuf, &atlasBlocksBuf})
             b->release();
         terrainAtlas.release(), waterAtlas.release();
         for (Buffer& b : indexBufs) b.release();
@@ -288,7 +293,7 @@ struct GlRenderer::Impl {
         if (bindings <= HC_BIND_LAST)
             throw Error("the GL backend needs " + std::to_string(HC_BIND_LAST + 1) + " shader storage buffer bindings; " + device + " has " +
                         std::to_string(bindings) + ": use --backend cpu");
-        for (Buffer* b : {&lastHeightsBuf, &fillRowsBuf, &fillTexelsBuf, &beamsBuf, &atlasTilesBuf, &terrainAtlas.buffer, &waterAtlas.buffer})
+        for (Buffer* b : {&lastHeightsBuf, &fillRowsBuf, &fillTexelsBuf, &beamsBuf, &atlasTilesBuf, &atlasBlocksBuf, &terrainAtlas.buffer, &waterAtlas.buffer})
             b->reserve(16);
         frameBuf.reserve(sizeof(gpu::FrameBlock));
         countersBuf.reserve(sizeof(uint32_t) * gpu::kCounterSlots * (gpu::kMaxCascades + 1));
@@ -553,7 +558,7 @@ struct GlRenderer::Impl {
         // With a pyramid the texels it holds are copied on the GPU, from its tiles resident there (the atlas); only the
         // tiles not yet there go up, with the tiles to copy from (16 bytes a tile) and each row's spans.
         const bool useAtlas = scene.pyramid() != nullptr;
-        atlasTiles.clear(), atlasTexels = 0;
+        atlasTiles.clear(), atlasBlocks.clear(), atlasTexels = 0, atlasInterpolated = 0;
         std::vector<int32_t> spans;
         size_t spanBytes = 0;
         if (useAtlas) terrainAtlas.beginFrame(), waterAtlas.beginFrame();
@@ -562,17 +567,13 @@ struct GlRenderer::Impl {
             const Stopwatch clock;
             if (useAtlas) {  // cpu.cascades: one per cascade of the fit (approximateCascades)
                 CascadeStats& stats = cpu.cascades[k];
-                const size_t firstTile = atlasTiles.size();
-                stats.pyramidTexels += placeTiles(k, tex, fill, minDepth);
+                // The spans before the copies were taken out, of the rows of the tiles atlas.comp copies from and the
+                // blocks interpolate.comp fills (the visible buffer is in-memory's otherwise): a moving frame's few tiles
+                // need few rows.
+                int lo = fit.cascades[k].n, hi = -1;
+                stats.pyramidTexels += placeTiles(k, tex, fill, minDepth, lo, hi);
                 if (stats.pyramidTexels) stats.errorBoundM = detail::pyramidCopyBoundM(scene);
-                // The spans before the copies were taken out, of the rows of the tiles atlas.comp copies from (the
-                // visible buffer is in-memory's otherwise): a moving frame's few tiles need few rows.
-                const int n = fit.cascades[k].n;
-                int lo = n, hi = -1;
-                for (size_t t = firstTile; t < atlasTiles.size(); t += 4) {
-                    const int j0 = int(atlasTiles[t + 1] >> 16) - 32768;
-                    lo = std::min(lo, std::max(j0, 0)), hi = std::max(hi, std::min(j0 + fill.tiles.side - 1, n - 1));
-                }
+                placeBlocks(k, fit.cascades[k], tex, fill, options.waterMinDepthM, lo, hi);
                 spans.clear();
                 for (int j = lo; j <= hi; ++j) {
                     const detail::RowFill& r = fill.tiles.spans[size_t(j)];
@@ -621,12 +622,17 @@ struct GlRenderer::Impl {
             atlasBytes = terrainAtlas.uploadedBytes + waterAtlas.uploadedBytes + atlasTiles.size() * sizeof(uint32_t) + spanBytes;
             atlasTilesBuf.reserve(atlasTiles.size() * sizeof(uint32_t));
             if (!atlasTiles.empty()) atlasTilesBuf.upload(atlasTiles.data(), atlasTiles.size() * sizeof(uint32_t));
+            checkBlock(atlasBlocks.size() * sizeof(uint32_t), "the blocks to interpolate from the pyramid");
+            atlasBytes += atlasBlocks.size() * sizeof(uint32_t);
+            atlasBlocksBuf.reserve(atlasBlocks.size() * sizeof(uint32_t));
+            if (!atlasBlocks.empty()) atlasBlocksBuf.upload(atlasBlocks.data(), atlasBlocks.size() * sizeof(uint32_t));
         }
         timings.cascades = cpu.cascades;
         timings.approximationMs = cpu.approximationMs;
         timings.uploadMs = packMs + clock.milliseconds();
         timings.uploadBytes = rowBytes + planeBytes * channels + atlasBytes;
         timings.atlasTexels = atlasTexels;
+        timings.atlasInterpolated = atlasInterpolated;
         timings.atlasTilesUploaded = terrainAtlas.uploadedTiles + waterAtlas.uploadedTiles;
     }
 
@@ -635,14 +641,12 @@ struct GlRenderer::Impl {
     // their row's RowFill span widened to hold them, so that they go up with the CPU's texels. Returns the texels copied
     // with a surface (approximate() leaves them to be counted here: counting them there read every tile's samples, which
     // the CPU otherwise never touches once the tile is resident; 40 % of copyPyramidTexels on llvmpipe).
-    uint64_t placeTiles(size_t k, detail::CascadeTextures& tex, detail::CascadeFill& fill, float minDepth) {
+    // The rows of the tiles placed widen [rowLo, rowHi] (their spans go up for atlas.comp).
+    uint64_t placeTiles(size_t k, detail::CascadeTextures& tex, detail::CascadeFill& fill, float minDepth, int& rowLo, int& rowHi) {
         const detail::PyramidTiles& p = fill.tiles;
         if (p.side == 0) return 0;
         uint64_t copied = 0;
-        // The atlases take their storage at the first frame that copies from the pyramid: up to 96 MiB each.
-        const size_t atlasBytes = std::min<size_t>(size_t(maxStorageBlock), size_t(96) << 20);
-        terrainAtlas.open(atlasBytes, 1);
-        if (scene.hasWater()) waterAtlas.open(atlasBytes, 2);
+        openAtlases();
         const size_t n = size_t(tex.terrain.n), side = size_t(p.side);
         const int shift = std::countr_zero(side);
         if (n + side >= 32768)  // atlas.comp's tiles hold their first texel's i and j in 16 bits each
@@ -660,6 +664,7 @@ struct GlRenderer::Impl {
                 // The first texel's i and j in 16 bits each (offset by 2^15: a tile may begin left of or below texel 0).
                 atlasTiles.insert(atlasTiles.end(), {uint32_t(k) | uint32_t(shift) << 4, uint32_t(i0 + 32768) | uint32_t(j0 + 32768) << 16, slot,
                                                      water ? waterSlot : TileAtlas::kNone});
+                rowLo = std::min(rowLo, int(std::max<int64_t>(j0, 0))), rowHi = std::max(rowHi, int(std::min(j0 + int64_t(side) - 1, int64_t(n) - 1)));
                 for (size_t r = 0; r < side; ++r) atlasTexels += uint64_t(std::popcount(unsigned(rows[r])));
                 copied += uint64_t(terrainAtlas.validIn(slot, rows, side));
                 continue;
@@ -690,19 +695,69 @@ struct GlRenderer::Impl {
         return copied;
     }
 
-    // Out of core with a pyramid: the texels copied from its tiles on the GPU, after the assembly (a work group a tile).
+    // The atlases take their storage at the first frame that copies from the pyramid: up to 96 MiB each.
+    void openAtlases() {
+        const size_t atlasBytes = std::min<size_t>(size_t(maxStorageBlock), size_t(96) << 20);
+        terrainAtlas.open(atlasBytes, 1);
+        if (scene.hasWater()) waterAtlas.open(atlasBytes, 2);
+    }
+
+    // Cascade k's blocks of texels to interpolate from level 0's tiles (detail::PyramidTiles::Block) as
+    // interpolate.comp's, their tiles uploaded into the atlas where not resident; their rows widen [rowLo, rowHi]. A block
+    // whose tiles do not all find a slot (this frame uses every one) is interpolated here, into `tex`, and its rows'
+    // RowFill spans widened to hold it, so that it goes up with the CPU's texels.
+    void placeBlocks(size_t k, const Cascade& c, detail::CascadeTextures& tex, detail::CascadeFill& fill, double waterMinDepthM, int& rowLo, int& rowHi) {
+        const detail::PyramidTiles& p = fill.tiles;
+        if (p.blocks.empty()) return;
+        openAtlases();
+        const int n = tex.terrain.n, side = p.levelSide << p.up;
+        if (n + side >= 32768)  // interpolate.comp's blocks hold their first texel's i and j in 16 bits each
+            throw Error("the GL backend interpolates the pyramid's texels into cascades of under " + std::to_string(32768 - side) +
+                        " texels a side, not " + std::to_string(n));
+        for (const detail::PyramidTiles::Block& b : p.blocks) {
+            std::array<uint32_t, gpu::kAtlasBlockUints> e;
+            e[0] = uint32_t(k) | uint32_t(p.up) << 4 | uint32_t(std::countr_zero(unsigned(p.levelSide))) << 8;
+            e[1] = uint32_t(b.i0 + 32768) | uint32_t(b.j0 + 32768) << 16;
+            bool placed = true;
+            for (size_t q = 0; q < 9 && placed; ++q) {
+                e[2 + q] = terrainAtlas.slot(b.tile[q], p.levelPlane);
+                e[11 + q] = b.water[q] && e[2 + q] != TileAtlas::kNone ? waterAtlas.slot(b.water[q], p.levelPlane) : TileAtlas::kNone;
+                placed = e[2 + q] != TileAtlas::kNone && (!b.water[q] || e[11 + q] != TileAtlas::kNone);
+            }
+            if (!placed) {
+                detail::interpolateBlock(scene, c, p, b, waterMinDepthM, tex, fill.rows);
+                continue;
+            }
+            atlasBlocks.insert(atlasBlocks.end(), e.begin(), e.end());
+            const int j0 = int(b.j0);
+            rowLo = std::min(rowLo, std::max(j0, 0)), rowHi = std::max(rowHi, std::min(j0 + side - 1, n - 1));
+            const int i0 = std::max(int(b.i0), 0), i1 = int(b.i0) + side - 1;
+            for (int j = std::max(j0, 0); j <= std::min(j0 + side - 1, n - 1); ++j) {  // the texels interpolate.comp writes
+                const detail::RowFill& r = p.spans[size_t(j)];
+                for (auto [lo, hi] : {std::pair{r.a0, r.a1}, {r.b0, r.b1}}) atlasInterpolated += uint64_t(std::max(0, std::min(hi, i1) - std::max(lo, i0) + 1));
+            }
+        }
+        terrainAtlas.upload(), waterAtlas.upload();
+    }
+
+    // Out of core with a pyramid: the texels copied from its tiles on the GPU and those interpolated from level 0's, after
+    // the assembly (a work group a tile, a block); they write disjoint texels.
     void dispatchAtlas(const RenderOptions& options) {
-        const size_t tiles = atlasTiles.size() / 4;
-        if (!cpuCascades || tiles == 0) return;
+        const size_t tiles = atlasTiles.size() / 4, blocks = atlasBlocks.size() / size_t(gpu::kAtlasBlockUints);
+        if (!cpuCascades || tiles + blocks == 0) return;
         terrainAtlas.buffer.bind(HC_BIND_ATLAS_TERRAIN);
         waterAtlas.buffer.bind(HC_BIND_ATLAS_WATER);
         atlasTilesBuf.bind(HC_BIND_ATLAS_TILES);
-        glUseProgram(atlas);
-        glUniform1ui(glGetUniformLocation(atlas, "uTiles"), GLuint(tiles));
-        glUniform1f(glGetUniformLocation(atlas, "uMinDepth"), float(options.waterMinDepthM));
-        glUniform1f(glGetUniformLocation(atlas, "uWetShare"), float(influence::kWetShareMin));
-        const size_t across = std::min<size_t>(tiles, 65535);  // GL's least limit a dimension
-        glDispatchCompute(GLuint(across), GLuint((tiles + across - 1) / across), 1);
+        atlasBlocksBuf.bind(HC_BIND_ATLAS_BLOCKS);
+        for (const auto& [program, count, name] : {std::tuple{atlas, tiles, "uTiles"}, {interpolate, blocks, "uBlocks"}}) {
+            if (count == 0) continue;
+            glUseProgram(program);
+            glUniform1ui(glGetUniformLocation(program, name), GLuint(count));
+            glUniform1f(glGetUniformLocation(program, "uMinDepth"), float(options.waterMinDepthM));
+            glUniform1f(glGetUniformLocation(program, "uWetShare"), float(influence::kWetShareMin));
+            const size_t across = std::min<size_t>(count, 65535);  // GL's least limit a dimension
+            glDispatchCompute(GLuint(across), GLuint((count + across - 1) / across), 1);
+        }
         glMemoryBarrier(GL_SHADER_STORAGE_BARRIER_BIT);
     }
 

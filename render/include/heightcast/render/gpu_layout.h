@@ -43,7 +43,8 @@ using uint = std::uint32_t;
 #define HC_BIND_ATLAS_TERRAIN 15 // float[kAtlasPlane per slot]: a tile's elevations
 #define HC_BIND_ATLAS_WATER 16   // float[2 kAtlasPlane per slot]: a tile's water levels, then its wet shares
 #define HC_BIND_ATLAS_TILES 17   // uvec4 per tile to copy from (atlas.comp)
-#define HC_BIND_LAST 17          // the highest binding
+#define HC_BIND_ATLAS_BLOCKS 18  // uint[kAtlasBlockUints per block]: texels to interpolate from level 0's tiles (interpolate.comp)
+#define HC_BIND_LAST 18          // the highest binding
 #define HC_IMAGE_COLOR 0     // rgba8 image unit of the shaded picture (row 0 at the bottom)
 
 // Work-group sizes (macros: they go into layout(local_size_x = ...)).
@@ -56,6 +57,7 @@ const int kMaxLabelChars = 12;  // legend labels ("-10994m")
 const int kIndexChunks = 4;     // storage buffers the influence lists' entries may span
 const int kFillRowInts = 8;     // a row of HC_BIND_FILL_ROWS: keptFirst, keptLast, a0, a1, b0, b1, packed a0, packed b0
 const int kAtlasPlane = 256;    // floats a channel of an atlas slot: a pyramid tile's samples (16^2; fewer where its side is less)
+const int kAtlasBlockUints = 20;  // a block of interpolate.comp: its head, its first texel, 9 terrain slots, 9 water slots
 
 // One grid cell, plus a sentinel after the last so that cells[k + 1].listBegin ends k's list.
 struct GpuCell {

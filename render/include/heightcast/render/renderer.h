@@ -113,8 +113,9 @@ struct Timings {
     uint64_t uploadBytes = 0;
     // GL backend out of core with a pyramid: the texels copied on the GPU from the pyramid tiles resident there (the
     // atlas; the uploads above hold the tiles not yet resident, atlasTilesUploaded of them, the tiles to copy from and
-    // the rows' spans).
-    uint64_t atlasTexels = 0, atlasTilesUploaded = 0;
+    // the rows' spans), and those interpolated there from level 0's tiles (texels finer than every level: counted in
+    // their cascade's pyramidInterpolated too).
+    uint64_t atlasTexels = 0, atlasTilesUploaded = 0, atlasInterpolated = 0;
     std::vector<CascadeStats> cascades;
     uint64_t rays = 0, hits = 0;
     std::string toJson() const;
