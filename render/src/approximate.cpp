@@ -577,10 +577,13 @@ uint64_t copyPyramidTexels(const Scene& scene, const Cascade& c, CascadeTextures
         }
     }
     // With `tiles` and a cascade below level 0: the blocks left to the caller (PyramidTiles::Block), a table over those
-    // the cascade's texels cover: 0 not yet asked, 1 the caller's, 2 not.
+    // the cascade's texels cover: 0 not yet asked, 1 the caller's (its tiles in blockTiles), 2 not, 3 being asked.
+    enum : uint8_t { kUnasked, kCallers, kNotCallers, kAsking };
     int blockShift = 0;
     int64_t bx0 = 0, by0 = 0, blocksWide = 0;
     std::vector<uint8_t> blockState;
+    std::vector<PyramidTiles::Block> blockTiles;
+    std::vector<std::unique_ptr<LevelZeroBlocks>> zeroBlocks(workers);  // per worker: tile kinds kept across its rows
     if (tiles && t < 0 && -t <= PyramidTiles::kMaxBlockUp && I0 + c.n > 0 && J0 + c.n > 0) {
         const influence::SurfacePyramid::Cursor level0(*p, 0);
         if (level0.side() >= 2) {  // a stencil reaches one sample beyond its block: into the next tile only
@@ -588,31 +591,34 @@ uint64_t copyPyramidTexels(const Scene& scene, const Cascade& c, CascadeTextures
             blockShift = std::countr_zero(level0.side()) + tiles->up;
             bx0 = std::max<int64_t>(I0, 0) >> blockShift, by0 = std::max<int64_t>(J0, 0) >> blockShift;
             blocksWide = ((I0 + c.n - 1) >> blockShift) - bx0 + 1;
-            blockState.assign(size_t(blocksWide) * size_t(((J0 + c.n - 1) >> blockShift) - by0 + 1), 0);
+            blockState.assign(size_t(blocksWide) * size_t(((J0 + c.n - 1) >> blockShift) - by0 + 1), kUnasked);
+            blockTiles.resize(blockState.size());
         }
     }
     const uint64_t blockMask = (uint64_t{1} << blockShift) - 1;
     parallelFor(todo.size(), 16, threads, [&](size_t b, size_t e, unsigned worker) {
         std::optional<influence::SurfacePyramid::Cursor> samples, waterSamples;  // neighbouring rows share tiles
-        std::optional<LevelZeroBlocks> blocks;
-        if (blockShift) blocks.emplace(*p, wp);
-        // Whether the block holding lattice point (gi, gj) is the caller's (asked once: workers that meet in a block
-        // find the same answer).
+        std::unique_ptr<LevelZeroBlocks>& blocks = zeroBlocks[worker];
+        if (blockShift && !blocks) blocks = std::make_unique<LevelZeroBlocks>(*p, wp);
+        // Whether the block holding lattice point (gi, gj) is the caller's: asked once, by the worker that claims it
+        // (its tiles into blockTiles); a worker that meets it while another asks finds the same answer itself.
         auto callersBlock = [&](uint64_t gi, uint64_t gj) {
-            const int64_t bx = int64_t(gi >> blockShift), by = int64_t(gj >> blockShift);
-            uint8_t& state = blockState[size_t(bx - bx0) + size_t(by - by0) * size_t(blocksWide)];
-            uint8_t now = std::atomic_ref(state).load(std::memory_order_relaxed);
-            if (now == 0) {
-                now = blocks->take(bx, by) ? 1 : 2;  // a block is one level-0 tile's texels: its index is the tile's
-                std::atomic_ref(state).store(now, std::memory_order_relaxed);
+            const int64_t bx = int64_t(gi >> blockShift), by = int64_t(gj >> blockShift);  // a block is one level-0 tile's texels
+            const size_t entry = size_t(bx - bx0) + size_t(by - by0) * size_t(blocksWide);
+            std::atomic_ref state(blockState[entry]);
+            uint8_t now = state.load(std::memory_order_acquire);
+            if (now == kUnasked && state.compare_exchange_strong(now, kAsking, std::memory_order_acquire)) {
+                now = blocks->take(bx, by, &blockTiles[entry]) ? kCallers : kNotCallers;
+                state.store(now, std::memory_order_release);
+            } else if (now == kAsking) {
+                now = blocks->take(bx, by) ? kCallers : kNotCallers;
             }
-            return now == 1;
+            return now == kCallers;
         };
         if (t >= 0) samples.emplace(*p, int(t));
         if (wp && t >= 0) waterSamples.emplace(*wp, int(t));
-        // One per worker for the whole cascade: the fine cells it looked up serve its later rows.
+        // One per worker for the whole cascade, made when first wanted: the fine cells it looked up serve its later rows.
         std::unique_ptr<PyramidInterpolator>& interpolator = interpolators[worker];
-        if (interpolateLevels > 0 && !interpolator) interpolator = std::make_unique<PyramidInterpolator>(scene, *p, wp, int(t), interpolateLevels);
         std::unique_ptr<EmptyTiles>& empty = emptyTiles[worker];
         if (scene.outOfCore() && t >= 0 && !empty) empty = std::make_unique<EmptyTiles>(*scene.file(), int(t));
         const size_t plane = samples ? samples->plane() : 0;
@@ -676,6 +682,7 @@ uint64_t copyPyramidTexels(const Scene& scene, const Cascade& c, CascadeTextures
                         i = end + 1;
                         continue;
                     }
+                    if (interpolateLevels > 0 && !interpolator) interpolator = std::make_unique<PyramidInterpolator>(scene, *p, wp, int(t), interpolateLevels);
                     if (interpolator) {
                         values.resize(size_t(len)), filled.resize(size_t(len));
                         interpolator->run(uint64_t(i0 + double(i)), len, uint64_t(gj), values.data(), filled.data());
@@ -702,15 +709,11 @@ uint64_t copyPyramidTexels(const Scene& scene, const Cascade& c, CascadeTextures
     uint64_t total = 0;
     for (unsigned k = 0; k < workers; ++k)
         total += copied[k], work.pyramidInterpolated += interpolated[k], work.pyramidInterpolatedUp = std::max(work.pyramidInterpolatedUp, mostUp[k]);
-    if (blockShift) {  // the caller's blocks, with their tiles
-        LevelZeroBlocks blocks(*p, wp);
-        for (size_t e = 0; e < blockState.size(); ++e) {
-            if (blockState[e] != 1) continue;
-            const int64_t bx = bx0 + int64_t(e % size_t(blocksWide)), by = by0 + int64_t(e / size_t(blocksWide));
-            PyramidTiles::Block& b = tiles->blocks.emplace_back();
-            b.i0 = (bx << blockShift) - I0, b.j0 = (by << blockShift) - J0;
-            if (!blocks.take(bx, by, &b)) throw Error("copyPyramidTexels: a block changed its mind (a bug)");
-        }
+    for (size_t e = 0; e < blockState.size(); ++e) {  // the caller's blocks, with their tiles
+        if (blockState[e] != kCallers) continue;
+        const int64_t bx = bx0 + int64_t(e % size_t(blocksWide)), by = by0 + int64_t(e / size_t(blocksWide));
+        PyramidTiles::Block& b = tiles->blocks.emplace_back(blockTiles[e]);
+        b.i0 = (bx << blockShift) - I0, b.j0 = (by << blockShift) - J0;
     }
     return total;
 }
