@@ -106,14 +106,16 @@ fi
 if [[ $parts == *,ab,* ]]; then
     labels=()
     for f in "$root"/hc-bench-* "$root"/hc-render-*; do
-        [[ -x $f && $f != */hc-render-before ]] || continue
+        [[ -x $f && $f != */hc-render-before && $f != */hc-bench-parallel ]] || continue
         l=${f##*/hc-bench-} && l=${l##*/hc-render-}
         [[ " ${labels[*]} " == *" $l "* ]] || labels+=("$l")
     done
     ((${#labels[@]})) || { echo "on_device.sh: ab: no earlier build in the kit (pack.sh's HC_GPU_AB)" >&2; exit 1; }
     labels+=(this)
     name() { [[ $2 == this ]] && echo "$1" || echo "$1-$2"; }
-    if compgen -G "$root/hc-bench-*" > /dev/null; then  # an earlier hc-bench to compare with
+    earlierBench=0
+    for l in "${labels[@]}"; do [[ $l != this && -x $root/hc-bench-$l ]] && earlierBench=1; done
+    if ((earlierBench)); then  # an earlier hc-bench to compare with
         for round in 1 2; do
             for l in "${labels[@]}"; do
                 b=$(name hc-bench "$l")
