@@ -459,7 +459,6 @@ public:
             }
         return true;
     }
-    int shift() const { return shift_; }
 
 private:
     enum Kind : uint8_t { kMixed, kDry, kWet };  // kMixed: a NaN elevation, or wet and dry samples
