@@ -184,6 +184,20 @@ size_t expectMissesAreSky(const Frame& f) {
 // patches, found here by brute force, and the combined mipmap (buildBothMip) the larger of terrain's and water's.
 // Sides with odd levels (patches 1, 7, 8, 9, 16, 17, 99, 256, 399: the last on several workers), texels with holes
 // (-inf), one worker and all.
+// The timings JSON claims an error bound only for a cascade that copied texels from the pyramid: one whose texels were
+// all interpolated or summed has null there, not 0 (which would read as exact).
+TEST(Render, TimingsJsonClaimsABoundOnlyForCopiedTexels) {
+    Timings t;
+    t.cascades.resize(2);
+    t.cascades[0].pyramidTexels = 10, t.cascades[0].errorBoundM = 1.5e-4;
+    t.cascades[1].pyramidInterpolated = 10;
+    const std::string json = t.toJson();
+    EXPECT_NE(json.find("\"error_bound_m\": 0.00015"), std::string::npos) << json;
+    EXPECT_NE(json.find("\"error_bound_m\": null"), std::string::npos) << json;
+    EXPECT_EQ(json.find("\"error_bound_m\": 0,"), std::string::npos) << json;
+    EXPECT_EQ(json.find("\"error_bound_m\": 0.0,"), std::string::npos) << json;
+}
+
 TEST(Render, MaxMipmapHoldsTheLargestHeightUnderEveryNode) {
     std::mt19937 rng(11);
     for (auto [n, threads] : {std::pair{2, 0u}, {8, 0u}, {9, 0u}, {10, 0u}, {17, 0u}, {18, 0u}, {100, 0u}, {257, 0u}, {257, 1u}, {400, 0u}}) {

@@ -996,7 +996,8 @@ std::string Timings::toJson() const {
                                  {"pyramid_texels", c.pyramidTexels},
                                  {"pyramid_interpolated", c.pyramidInterpolated},
                                  {"pyramid_interpolated_levels_up", c.pyramidInterpolatedUp},
-                                 {"error_bound_m", rounded(c.errorBoundM, std::chars_format::general, 3)},
+                                 // null where no texel was copied: the bound is the copies' (CascadeStats::errorBoundM)
+                                 {"error_bound_m", c.pyramidTexels ? Json(rounded(c.errorBoundM, std::chars_format::general, 3)) : Json(nullptr)},
                                  {"gaussians", c.gaussians},
                                  {"cells_visited", c.cellsVisited},
                                  {"cells_read", c.cellsRead},

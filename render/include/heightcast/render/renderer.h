@@ -94,7 +94,8 @@ struct CascadeStats {
     // Largest |texel - exact surface| of the texels copied from the pyramid [m]: a sample is the exact surface
     // rounded to float once, so half a float ulp of the largest |height|; 0 when none was copied. The texels
     // summed from the kernels in float are not bounded here (tests: within 1 mm of the exact surface), nor are the
-    // interpolated ones (tests: within a bilinear patch's error at the spacing they came from).
+    // interpolated ones (tests: within a bilinear patch's error at the spacing they came from). toJson() writes null
+    // for a cascade that copied none (its texels interpolated or summed: no bound is claimed for them).
     double errorBoundM = 0;
     double approximationMs = 0;
 };
