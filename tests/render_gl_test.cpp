@@ -24,6 +24,7 @@
 #include "heightcast/influence/influence.h"
 #include "heightcast/influence/pyramid.h"
 #include "heightcast/influence/surface.h"
+#include "heightcast/ingest/ingest.h"
 #include "heightcast/render/gl/gl_renderer.h"
 #include "heightcast/render/gpu_layout.h"
 #include "heightcast/render/image_io.h"
@@ -374,6 +375,37 @@ TEST(RenderGl, OutOfCoreFillsTheCascadesOnTheCpuAndCastsOnTheGpu) {
     }
 }
 
+// A cascade's textures from the GPU (GlRenderer::cascadeTexturesForTest) against the CPU's, texel by texel: those that
+// differ, the first of them, and (counted apart, not as differing) those within a float rounding where the frame
+// interpolated texels on the GPU from level 0 (interpolate.comp): its double sums there are fused multiply-adds, the
+// CPU's where its compiler fuses them (GCC does for a CPU with FMA), else they may differ in their last bits and round
+// to floats one ulp apart. The elevation then within one ulp, the depth (level - elevation) and the water level within
+// one ulp of the larger of them each, and the water drawn on one side alone only at the depth threshold. Every other
+// texel must be the same bits.
+struct TexelDiff {
+    size_t differ = 0, first = SIZE_MAX, rounded = 0;
+};
+TexelDiff diffTextures(const hc::render::detail::CascadeTextures& cpu, const GlRenderer::CascadeTexels& gpu, float minDepth, bool gpuInterpolated) {
+    TexelDiff d;
+    const auto bits = [](float v) { return std::bit_cast<uint32_t>(v); };
+    for (size_t i = 0; i < cpu.terrain.h.size(); ++i) {
+        const float z = cpu.terrain.h[i], water = cpu.water.h[i], depth = cpu.depth[i];
+        const float gz = gpu.terrain[i], gWater = gpu.water[i], gDepth = gpu.depth[i];
+        if (bits(z) == bits(gz) && bits(water) == bits(gWater) && bits(depth) == bits(gDepth)) continue;
+        const float scale = std::max({std::abs(z), std::isfinite(water) ? std::abs(water) : 0.0f, 1.0f});
+        const float ulp = std::nextafter(scale, INFINITY) - scale, tol = 2 * ulp;
+        const bool near = std::abs(z - gz) <= ulp && std::abs(depth - gDepth) <= tol &&
+                          (bits(water) == bits(gWater) || (std::isfinite(water) && std::isfinite(gWater) && std::abs(water - gWater) <= tol) ||
+                           std::abs(depth - minDepth) <= tol);
+        if (near && gpuInterpolated) {
+            ++d.rounded;
+            continue;
+        }
+        if (d.differ++ == 0) d.first = i;
+    }
+    return d;
+}
+
 // Out of core the GL backend keeps its cascades on the GPU and uploads only the texels a frame newly sees
 // (assemble.comp places them beside the texels kept from the last frame). Over a flight (20 m steps, a 2 km jump that
 // keeps part of a cascade or none, steps again, a frame after one that failed half-way, a frame after forgetCascades)
@@ -489,28 +521,9 @@ TEST(RenderGl, OutOfCoreKeepsTheCascadesOnTheGpuAndUploadsOnlyNewTexels) {
                     if (reuse) taken[from] = true, sideChanges += reuse->cascade->n != c.n;
                     detail::CascadeTextures& cpu = textures[k];
                     keptOnCpu += detail::approximate(scene, c, cpu, o.waterMinDepthM, 0, reuse ? &*reuse : nullptr, o.pyramidInterpolateLevels).reusedTexels;
-                    size_t differ = 0, first = SIZE_MAX;
-                    for (size_t i = 0; i < cpu.terrain.h.size(); ++i) {
-                        const float z = cpu.terrain.h[i], water = cpu.water.h[i], depth = cpu.depth[i];
-                        const float gz = onGpu[k].terrain[i], gWater = onGpu[k].water[i], gDepth = onGpu[k].depth[i];
-                        const auto bits = [](float v) { return std::bit_cast<uint32_t>(v); };
-                        if (bits(z) == bits(gz) && bits(water) == bits(gWater) && bits(depth) == bits(gDepth)) continue;
-                        // A texel interpolated from level 0 on the GPU: its double sums there are fused multiply-adds,
-                        // the CPU's where its compiler fuses them (GCC does for a CPU with FMA), else they may differ
-                        // in their last bits and round to floats one ulp apart. The elevation then within one ulp, the
-                        // depth (level - elevation) and the water level within one ulp of the larger of them each, and
-                        // the water drawn on one side alone only at the depth threshold.
-                        const float scale = std::max({std::abs(z), std::isfinite(water) ? std::abs(water) : 0.0f, 1.0f});
-                        const float ulp = std::nextafter(scale, INFINITY) - scale, tol = 2 * ulp;
-                        const bool near = std::abs(z - gz) <= ulp && std::abs(depth - gDepth) <= tol &&
-                                          (bits(water) == bits(gWater) || (std::isfinite(water) && std::isfinite(gWater) && std::abs(water - gWater) <= tol) ||
-                                           std::abs(depth - float(o.waterMinDepthM)) <= tol);
-                        if (near && onGpu[k].n == c.n && t.atlasInterpolated > 0) {
-                            ++roundedOtherwise;
-                            continue;
-                        }
-                        if (differ++ == 0) first = i;
-                    }
+                    const TexelDiff d = diffTextures(cpu, onGpu[k], float(o.waterMinDepthM), t.atlasInterpolated > 0);
+                    roundedOtherwise += d.rounded;
+                    const size_t differ = d.differ, first = d.first;
                     EXPECT_EQ(differ, 0u) << tag << " cascade " << k << ": first at texel " << first << " of " << cpu.terrain.h.size() << " (n " << c.n << ")";
                 }
                 EXPECT_EQ(keptOnCpu, kept) << tag << ": the GPU kept what the CPU keeps";
@@ -531,6 +544,66 @@ TEST(RenderGl, OutOfCoreKeepsTheCascadesOnTheGpuAndUploadsOnlyNewTexels) {
                         (unsigned long long)roundedOtherwise);
         }
     }
+}
+
+// A later water step out of core (the first step's pyramid for the terrain, the step's own water pyramid, as
+// hc-influence --step builds it: influence::buildWaterPyramid): the texels finer than level 0 that the GL backend
+// interpolates on the GPU from level 0's terrain and water tiles give the CPU's textures (diffTextures), wet ones among
+// them. Fails when interpolate.comp drops the water, or when the blocks' kinds are taken from the base's water (every
+// block dry) instead of the step's.
+TEST(RenderGlWater, OutOfCoreWaterStepInterpolatedOnTheGpuAsOnTheCpu) {
+    namespace detail = hc::render::detail;
+    World& w = hef();
+    HC_REQUIRE_GL(w);
+    const std::filesystem::path path = std::filesystem::temp_directory_path() / ("hc_gl_steps_" + std::to_string(::getpid()) + ".hcg");
+    hc::ingest::Options in;
+    in.input = hc::test::dataFile("hef_srtm.tif");
+    in.toleranceM = 1;
+    in.maxCellM = 512;
+    in.water = hc::ingest::WaterSource::Level;
+    in.waterLevelsM = {1900, 2000, 2800};
+    hc::ingest::LoadReport rep;
+    hc::ingest::ingestToFile(in, path.string(), rep);
+    struct Remove {
+        std::filesystem::path p;
+        ~Remove() { std::filesystem::remove(p); }
+    } remove{path};
+    const hc::influence::KernelParams params{};
+    const hc::influence::SurfacePyramid base = hc::influence::buildSurfacePyramid(hc::readGrid(path.string(), nullptr, 0), params);
+    const hc::influence::SurfacePyramid water = hc::influence::buildWaterPyramid(hc::readGrid(path.string(), nullptr, 2), params);
+    const hc::GridRegionReader file(path.string(), 2);
+    const Scene scene(file, params, &base, &water);
+    ASSERT_TRUE(scene.outOfCore() && scene.hasWater());
+    const std::unique_ptr<GlRenderer> gl = GlRenderer::headless(scene);
+    RenderOptions o = smallOptions();
+    o.texelsPerSide = 512;  // a near cascade finer than level 0
+    uint64_t onGpu = 0, wetInterpolated = 0, rounded = 0;
+    for (const Camera& cam : {overviewCamera(scene, 320, 200), lowOblique(scene, 320, 200)}) {
+        gl->forgetCascades();
+        Timings t;
+        (void)gl->render(cam, o, t);
+        onGpu += t.atlasInterpolated;
+        const detail::FrameSetup setup = detail::setUpFrame(scene, cam);
+        Timings tf;
+        const CascadeFit fit = detail::fitFrame(scene, cam, setup, o, tf);
+        const std::vector<GlRenderer::CascadeTexels> textures = gl->cascadeTexturesForTest();
+        ASSERT_EQ(textures.size(), fit.cascades.size());
+        for (size_t k = 0; k < fit.cascades.size(); ++k) {
+            const Cascade& c = fit.cascades[k];
+            if (c.empty()) continue;
+            detail::CascadeTextures cpu;
+            const detail::ApproximationWork work = detail::approximate(scene, c, cpu, o.waterMinDepthM, 0, nullptr, o.pyramidInterpolateLevels);
+            const TexelDiff d = diffTextures(cpu, textures[k], float(o.waterMinDepthM), t.atlasInterpolated > 0);
+            EXPECT_EQ(d.differ, 0u) << "cascade " << k << ": first at texel " << d.first << " (n " << c.n << ")";
+            rounded += d.rounded;
+            if (work.pyramidLevel < 0 && work.pyramidInterpolated > 0)
+                for (size_t i = 0; i < cpu.water.h.size(); ++i) wetInterpolated += std::isfinite(cpu.water.h[i]) && cpu.depth[i] > 0;
+        }
+    }
+    std::printf("%llu texels interpolated on the GPU, %llu of them rounded otherwise than on the CPU; %llu wet texels in cascades finer than level 0\n",
+                (unsigned long long)onGpu, (unsigned long long)rounded, (unsigned long long)wetInterpolated);
+    EXPECT_GT(onGpu, 0u);
+    EXPECT_GT(wetInterpolated, 0u) << "the flood must lie in the fine cascades for the comparison to mean anything";
 }
 
 // In memory the GL backend keeps its cascades on the GPU too (the incremental cascades of DESIGN.md section 6): a

@@ -14,6 +14,8 @@
 #           on Petzenkirchen and Wachau with a fly-through, and (after the scale or grid part) the look-at flight back to
 #           back, with texels kept and from scratch (an hc-render older than b892aa2 has no --fly-last-image and fails
 #           those flights, saying so)
+#   same    (after the scale or grid part) the earlier builds' hc-render (HC_GPU_AB) against this one's: the look-at
+#           flight from scratch (3 frames, PNG and EXR) and moving (6 frames, PNG), each file compared byte for byte
 #   pool    hc-bench-parallel on the machine's cores: what a parallelFor call costs beyond its work (a fresh frame makes
 #           a dozen), back to back and after pauses
 set -uo pipefail
@@ -139,6 +141,32 @@ if [[ $parts == *,ab,* ]]; then
         done > "$out/ab_fly.txt" 2>&1
         grep -E "^== |frames 1\.\." "$out/ab_fly.txt"
     fi
+fi
+if [[ $parts == *,same,* ]]; then
+    [[ -r $work/grid.hcg ]] || { echo "on_device.sh: same: $work/grid.hcg missing (run the scale or grid part first)" >&2; exit 1; }
+    mkdir -p "$work/same"
+    {
+        for f in "$root"/hc-render-*; do
+            [[ -x $f && $f != */hc-render-before ]] || continue
+            l=${f##*/hc-render-}
+            for r in "hc-render-$l" hc-render; do
+                $r "$work/grid.hcg" -o "$work/same/$r.png" --exr "$work/same/$r.exr" --size 1920x1080 --backend gl "${look[@]}" \
+                    --fly 3 --fly-step 20 --fly-fresh > /dev/null
+                $r "$work/grid.hcg" -o "$work/same/$r-kept.png" --size 1920x1080 --backend gl "${look[@]}" --fly 6 --fly-step 20 > /dev/null
+            done
+            for k in 0000 0001 0002; do
+                for e in png exr; do
+                    cmp -s "$work/same/hc-render-${l}_$k.$e" "$work/same/hc-render_$k.$e" && v="the same bytes" || v=DIFFERENT
+                    echo "$l against this, from scratch, frame $k $e: $v"
+                done
+            done
+            for k in 0000 0003 0005; do
+                cmp -s "$work/same/hc-render-$l-kept_$k.png" "$work/same/hc-render-kept_$k.png" && v="the same bytes" || v=DIFFERENT
+                echo "$l against this, moving, frame $k png: $v"
+            done
+        done
+    } > "$out/same.txt" 2>&1
+    cat "$out/same.txt"
 fi
 if [[ $parts == *,pool,* ]]; then
     hc-bench-parallel --threads "$(nproc),$(($(nproc) / 2)),2" > "$out/pool.txt" 2>&1
