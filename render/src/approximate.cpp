@@ -1042,30 +1042,20 @@ uint64_t interpolateBlock(const Scene& scene, const Cascade& c, const PyramidTil
     if (!p || tiles.up < 1) throw Error("interpolateBlock: no block to interpolate (a bug)");
     PyramidInterpolator interpolator(scene, *p, scene.waterPyramid(), -tiles.up, tiles.up);
     const int64_t I0 = int64_t(std::round(c.x0 / c.texelM)), J0 = int64_t(std::round(c.y0 / c.texelM));
-    const int64_t side = int64_t(tiles.levelSide) << tiles.up, n = c.n;
-    std::vector<PyramidInterpolator::Value> values(static_cast<size_t>(side));
-    std::vector<uint8_t> filled(static_cast<size_t>(side));
+    const size_t side = size_t(tiles.levelSide) << tiles.up;
+    std::vector<PyramidInterpolator::Value> values(side);
+    std::vector<uint8_t> filled(side);
     uint64_t written = 0;
-    for (int64_t j = std::max<int64_t>(block.j0, 0); j <= std::min(block.j0 + side - 1, n - 1); ++j) {
-        const RowFill& s = tiles.spans[size_t(j)];
-        for (int span = 0; span < 2; ++span) {
-            const int64_t lo = std::max({int64_t(span == 0 ? s.a0 : s.b0), block.i0, int64_t{0}});
-            const int64_t hi = std::min({int64_t(span == 0 ? s.a1 : s.b1), block.i0 + side - 1, n - 1});
-            if (hi < lo) continue;
-            const int len = int(hi - lo + 1);
-            interpolator.run(uint64_t(I0 + lo), len, uint64_t(J0 + j), values.data(), filled.data());
-            for (int k = 0; k < len; ++k) {
-                if (!filled[size_t(k)]) throw Error("interpolateBlock: a texel of a block refused (a bug)");
-                writeInterpolated(values[size_t(k)], size_t(j) * size_t(n) + size_t(lo + k), float(waterMinDepthM), tex);
-            }
-            written += uint64_t(len);
-            RowFill& row = rows[size_t(j)];
-            int& a = span == 0 ? row.a0 : row.b0;
-            int& b = span == 0 ? row.a1 : row.b1;
-            if (b < a) a = int(lo), b = int(hi);
-            else a = std::min(a, int(lo)), b = std::max(b, int(hi));
+    forEachBlockRun(tiles, block, c.n, [&](int j, int lo, int hi, int span) {
+        const int len = hi - lo + 1;
+        interpolator.run(uint64_t(I0 + lo), len, uint64_t(J0 + j), values.data(), filled.data());
+        for (int k = 0; k < len; ++k) {
+            if (!filled[size_t(k)]) throw Error("interpolateBlock: a texel of a block refused (a bug)");
+            writeInterpolated(values[size_t(k)], size_t(j) * size_t(c.n) + size_t(lo + k), float(waterMinDepthM), tex);
         }
-    }
+        written += uint64_t(len);
+        widenSpan(rows[size_t(j)], span, lo, hi);
+    });
     return written;
 }
 

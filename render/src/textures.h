@@ -2,8 +2,10 @@
 // backend (private to render/).
 #pragma once
 
+#include <algorithm>
 #include <array>
 #include <cmath>
+#include <cstdint>
 #include <functional>
 #include <memory>
 #include <new>
@@ -96,6 +98,15 @@ struct RowFill {
     int a0 = 0, a1 = -1, b0 = 0, b1 = -1;
 };
 
+// Widens span `span` (0: a, 1: b) of `row` to hold texels lo .. hi (a span empty before becomes lo .. hi): a backend
+// that writes texels approximate() left to it into the textures after all (its atlas has no slot for their tile).
+inline void widenSpan(RowFill& row, int span, int lo, int hi) {
+    int& first = span == 0 ? row.a0 : row.b0;
+    int& last = span == 0 ? row.a1 : row.b1;
+    if (last < first) first = lo, last = hi;
+    else first = std::min(first, lo), last = std::max(last, hi);
+}
+
 // The texels that approximate() with `tiles` leaves to the caller to copy from the surface pyramid (the GL backend out
 // of core copies them on the GPU, from its atlas of pyramid tiles: a page table over them): a table of the tiles of the
 // cascade's level that its texels cover, `width` x `height` row-major, and for each the samples copied from it. Texel
@@ -130,6 +141,22 @@ struct PyramidTiles {
     size_t levelPlane = 0;                 // its samples a channel
     std::vector<Block> blocks;
 };
+
+// Calls fn(j, lo, hi, span) for each run of texels lo .. hi of row j that lie in `block` and in span `span` (0: a, 1: b)
+// of that row's spans to evaluate (tiles.spans), in a cascade of n texels a side: the texels of the block that are the
+// caller's.
+template <class Fn>
+void forEachBlockRun(const PyramidTiles& tiles, const PyramidTiles::Block& block, int n, Fn&& fn) {
+    const int64_t side = int64_t(tiles.levelSide) << tiles.up;
+    for (int64_t j = std::max<int64_t>(block.j0, 0); j <= std::min<int64_t>(block.j0 + side - 1, n - 1); ++j) {
+        const RowFill& s = tiles.spans[size_t(j)];
+        for (int span = 0; span < 2; ++span) {
+            const int64_t lo = std::max({int64_t(span == 0 ? s.a0 : s.b0), block.i0, int64_t{0}});
+            const int64_t hi = std::min({int64_t(span == 0 ? s.a1 : s.b1), block.i0 + side - 1, int64_t(n) - 1});
+            if (lo <= hi) fn(int(j), int(lo), int(hi), span);
+        }
+    }
+}
 
 // The texels of `block` (approximate() with `tiles` left them to the caller) interpolated on the CPU into tex, as
 // approximate() interpolates, for a caller that cannot take them (the GL backend whose atlas has no slot left), and

@@ -683,11 +683,7 @@ struct GlRenderer::Impl {
                     const int count = c1 - c0 + 1;
                     copied += uint64_t(detail::copySamples(tile + sample, water ? water + sample : nullptr, p.plane, count, minDepth,
                                                            &tex.terrain.h[at], water ? &tex.depth[at] : nullptr, water ? &tex.water.h[at] : nullptr));
-                    detail::RowFill& row = fill.rows[j];
-                    int& lo = span == 0 ? row.a0 : row.b0;
-                    int& hi = span == 0 ? row.a1 : row.b1;
-                    if (hi < lo) lo = i, hi = i + count - 1;
-                    else lo = std::min(lo, i), hi = std::max(hi, i + count - 1);
+                    detail::widenSpan(fill.rows[j], span, i, i + count - 1);
                 }
             }
         }
@@ -731,11 +727,8 @@ struct GlRenderer::Impl {
             atlasBlocks.insert(atlasBlocks.end(), e.begin(), e.end());
             const int j0 = int(b.j0);
             rowLo = std::min(rowLo, std::max(j0, 0)), rowHi = std::max(rowHi, std::min(j0 + side - 1, n - 1));
-            const int i0 = std::max(int(b.i0), 0), i1 = int(b.i0) + side - 1;
-            for (int j = std::max(j0, 0); j <= std::min(j0 + side - 1, n - 1); ++j) {  // the texels interpolate.comp writes
-                const detail::RowFill& r = p.spans[size_t(j)];
-                for (auto [lo, hi] : {std::pair{r.a0, r.a1}, {r.b0, r.b1}}) atlasInterpolated += uint64_t(std::max(0, std::min(hi, i1) - std::max(lo, i0) + 1));
-            }
+            // The texels interpolate.comp writes.
+            detail::forEachBlockRun(p, b, n, [&](int, int lo, int hi, int) { atlasInterpolated += uint64_t(hi - lo + 1); });
         }
         terrainAtlas.upload(), waterAtlas.upload();
     }
