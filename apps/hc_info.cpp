@@ -120,6 +120,8 @@ void printJson(const hc::GridFileInfo& info, const Summary& s, const std::string
     j["source"] = g.stats.sourcePath;
     j["source_crs"] = g.stats.sourceCrsName;
     j["source_kind"] = g.stats.sourceKind.empty() ? "raster" : g.stats.sourceKind;
+    if (!g.stats.sourceFormat.empty()) j["source_format"] = g.stats.sourceFormat;
+    if (g.stats.latticeResidualM >= 0) j["lattice_residual_m"] = g.stats.latticeResidualM;
     j["valid_pixels"] = g.stats.validPixels;  // a mesh: its faces with terrain
     if (g.stats.sourceKind.empty()) {  // a mesh is taken as it is: no tolerance, nothing deviates
         j["tolerance_m"] = g.stats.toleranceM;
@@ -163,8 +165,12 @@ void printText(const hc::GridFileInfo& info, const Summary& s, const std::string
     const char* sourceCrs = g.stats.sourceCrsName.empty() ? "no CRS" : g.stats.sourceCrsName.c_str();
     if (!g.stats.sourceKind.empty()) {
         std::printf("  source       %s (%s, %s); %llu faces taken as cells as they are (no merging, no resampling: no deviation)\n",
-                    g.stats.sourcePath.c_str(), g.stats.sourceKind.c_str(), sourceCrs, (unsigned long long)g.stats.validPixels);
+                    g.stats.sourcePath.c_str(), g.stats.sourceFormat.empty() ? g.stats.sourceKind.c_str() : g.stats.sourceFormat.c_str(), sourceCrs,
+                    (unsigned long long)g.stats.validPixels);
+        if (g.stats.latticeResidualM >= 0)
+            std::printf("  lattice      every node within %.3g m of the lattice fitted to the faces\n", g.stats.latticeResidualM);
     } else {
+        if (!g.stats.sourceFormat.empty()) std::printf("  model        %s, sampled onto the working raster\n", g.stats.sourceFormat.c_str());
         std::printf("  source       %s (%s); working raster %llu x %llu px, %llu valid\n", g.stats.sourcePath.c_str(), sourceCrs,
                     (unsigned long long)g.stats.sourceWidth, (unsigned long long)g.stats.sourceHeight, (unsigned long long)g.stats.validPixels);
         std::printf("  deviation    max %.6g m, RMS %.6g m (tolerance %.6g m)\n", g.stats.maxDevM, g.stats.rmsDevM, g.stats.toleranceM);

@@ -15,23 +15,25 @@
 #include "heightcast/grid/grid_file.h"
 #include "heightcast/core/progress.h"
 #include "heightcast/ingest/ingest.h"
-#include "heightcast/ingest/ugrid.h"
+#include "heightcast/ingest/mesh.h"
+#include "heightcast/ingest/model.h"
 
 namespace {
 
 constexpr int kBandNotGiven = -1000000;  // --band's value before parsing: tells "not given" from any number a user types
 
-void printSummary(const hc::ingest::BuildSummary& b, const hc::ingest::LoadReport& r, const std::string& out, bool timesGuessed, bool mesh) {
+void printSummary(const hc::ingest::BuildSummary& b, const hc::ingest::LoadReport& r, const std::string& out, bool timesGuessed) {
     const hc::Grid& g = b.shape;
     const hc::IngestStats& s = g.stats;
+    const bool mesh = !s.sourceKind.empty();  // faces taken as cells (a sampled mesh is built as a raster)
     std::printf("hc-ingest: %s -> %s\n", s.sourcePath.c_str(), out.c_str());
     std::printf("  input        %s\n", r.sourceDescription.c_str());
     std::printf("  input CRS    %s\n", r.sourceCrsName.empty() ? "none" : r.sourceCrsName.c_str());
     std::printf("  grid CRS     %s\n", r.gridCrsName.empty() ? "none (local metres)" : r.gridCrsName.c_str());
     std::printf("  method       %s\n", r.method.c_str());
     if (mesh)
-        std::printf("  finest face  %.9g m%s\n", g.finestCellM,
-                    g.rotationDeg != 0 ? fmt::format(", grid turned {:.9g} degrees", g.rotationDeg).c_str() : "");
+        std::printf("  finest face  %.9g m%s; nodes within %.3g m of the fitted lattice\n", g.finestCellM,
+                    g.rotationDeg != 0 ? fmt::format(", grid turned {:.9g} degrees", g.rotationDeg).c_str() : "", s.latticeResidualM);
     else
         std::printf("  working      %llu x %llu px of %.6g m, %llu valid\n", (unsigned long long)s.sourceWidth,
                     (unsigned long long)s.sourceHeight, g.finestCellM, (unsigned long long)s.validPixels);
@@ -80,16 +82,18 @@ void printSummary(const hc::ingest::BuildSummary& b, const hc::ingest::LoadRepor
 
 // The options into `o`, validated before any work; false after --help.
 bool parseOptions(int argc, char** argv, hc::ingest::Options& o, std::string& out, bool& quiet, bool& mesh) {
-    std::string water, waterSurface, waterLevel, times, faceLayers;
+    std::string water, waterSurface, waterLevel, times, faceLayers, meshMode = "auto";
     std::optional<double> nodata;
     hc::cli::Parser p("hc-ingest", "INPUT -o OUT.hcg [options]",
-                      "Converts a raster DEM (any format GDAL reads, any CRS) into an adaptive quadtree grid file.\n"
+                      "Converts a raster DEM (any format GDAL reads, any CRS), or a flood model's results (SFINCS, D-Flow FM and\n"
+                      "other UGRID maps, HEC-RAS 2D, ANUGA, TELEMAC, 3Di, TUFLOW FV), into an adaptive quadtree grid file.\n"
                       "Four cells merge into one while their mean stays within --tolerance of every pixel they\n"
                       "cover (in every layer); the achieved max and RMS deviation is measured and reported.\n"
                       "Under `mpirun -np N` the ranks share the build and write the same bytes as one process: each reads\n"
                       "only its windows of the raster and of the water rasters and writes its own cells\n"
                       "into the one output, whose folder every rank must see (README, \"Preprocessing on several processes\").");
-    p.positional("INPUT", "terrain raster: GeoTIFF, SRTM .hgt / .hgt.zip, ESRI ASCII, NetCDF, PNG, ... (GDAL)", o.input);
+    p.positional("INPUT", "terrain raster: GeoTIFF, SRTM .hgt / .hgt.zip, ESRI ASCII, NetCDF, PNG, ... (GDAL); or model results\n"
+                 "      (docs/models.md: terrain and every water step from the one file)", o.input);
     p.option("-o", "OUT.hcg", "output grid file (required; written atomically)", out);
     p.option("--tolerance", "M", "max |pixel - cell value| in every layer, metres (default 0.25)", o.toleranceM);
     p.option("--min-cell", "M", "finest cell size, metres (default: the source pixel size after projection)", o.minCellM);
@@ -117,25 +121,49 @@ bool parseOptions(int argc, char** argv, hc::ingest::Options& o, std::string& ou
              "      (raster edge or nodata) through pixels below L, 4-connected: pixels touching only at a corner do not connect;\n"
              "      several levels make several steps (a rising flood: 300,302,304)", waterLevel);
     p.option("--times", "T[,T...]", "time of each water step, seconds, strictly increasing (default: the step index 0, 1, 2, ...)", times);
-    p.option("--terrain-var", "NAME", "UGRID mesh input: the face variable of the terrain; faces where it is a fill value are holes\n"
-             "      (default zb)", o.terrainVar);
-    p.option("--water-surface-var", "NAME", "UGRID mesh input: the face variable of the water level over time, one step per time;\n"
-             "      fill values and levels not above the terrain are dry (default zs)", o.waterSurfaceVar);
-    p.option("--face-layers", "NAME[,NAME...]", "UGRID mesh input: further face variables over time (velocity magnitude, ...), each\n"
+    p.option("--water-mesh", "RESULTS", "flood model results whose water levels flood the raster's terrain, one step per time\n"
+             "      (depth = level - terrain; dry where the model is dry, outside its faces, or depth <= 0)", o.waterMesh);
+    p.option("--mesh", "auto|cells|sample", "model results: 'cells' takes a quadtree's faces as cells (refusing any other mesh),\n"
+             "      'sample' samples the faces onto the grid (terrain as for a raster: --min-cell, --tolerance); default auto:\n"
+             "      cells for quadtree models (SFINCS, 3Di) and meshes of square power-of-two faces, sampled otherwise", meshMode);
+    p.option("--mesh-tolerance", "M", "a quadtree's nodes may lie this far from the lattice fitted to them, metres (default: a few\n"
+             "      ulps of the coordinates' storage at their magnitude, e.g. 1 m for float32 at y = 5e6)", o.meshToleranceM);
+    p.option("--mesh-srs", "CRS", "CRS of --water-mesh's coordinates, overriding or supplying the file's own", o.meshSrs);
+    p.option("--terrain-var", "NAME", "model results: the bed level variable; faces where it is a fill value are holes\n"
+             "      (default: the format's own: zb, mesh2d_flowelem_bl, mesh2d_node_z, ...)", o.terrainVar);
+    p.option("--water-surface-var", "NAME", "model results: the water level variable over time, one step per time; fill values\n"
+             "      and levels not above the bed are dry (default: the format's own: zs, mesh2d_s1, ...)", o.waterSurfaceVar);
+    p.option("--face-layers", "NAME[,NAME...]", "quadtree model results: further variables over time (velocity magnitude, ...), each\n"
              "      stored per step on the wet faces as a layer of that name and the variable's units (default none)", faceLayers);
     p.option("--threads", "N", "worker threads (default 0 = all cores; under mpirun: per rank)", o.threads);
     p.flag("--quiet", "print only warnings and failures (no progress, no summary)", quiet);
     p.exclusive({"--water", "--water-surface", "--water-level"});
     if (!p.parse(argc, argv)) return false;
     if (out.empty()) throw hc::Error("no output file: give -o OUT.hcg");
-    // A UGRID quadtree mesh (a NetCDF map file of SFINCS and the like) goes in as it is: one cell per face.
-    mesh = !o.input.empty() && hc::ingest::isUgridMesh(o.input);
+    if (meshMode != "auto" && meshMode != "cells" && meshMode != "sample") throw hc::Error("--mesh " + meshMode + ": not auto, cells or sample");
+    o.meshMode = meshMode == "cells" ? hc::ingest::MeshMode::Cells : meshMode == "sample" ? hc::ingest::MeshMode::Sample : hc::ingest::MeshMode::Auto;
+    if (o.meshToleranceM && !(*o.meshToleranceM >= 0)) throw hc::Error("--mesh-tolerance must be a length >= 0");
+    // Flood model results (a SFINCS map, a HEC-RAS plan, ...) carry terrain and water steps in one file.
+    mesh = !o.input.empty() && !hc::ingest::modelFormatOf(o.input).empty();
+    if (!mesh && !o.input.empty())
+        if (std::string hint = hc::ingest::unreadModelFormat(o.input); !hint.empty()) throw hc::Error(o.input + ": " + hint);
+    if (!o.waterMesh.empty()) {
+        if (mesh) throw hc::Error("--water-mesh: the input " + o.input + " is itself model results; give a terrain raster as INPUT");
+        for (const char* opt : {"--water", "--water-surface", "--water-level", "--times"})
+            if (p.given(opt)) throw hc::Error(std::string(opt) + " and --water-mesh both give water: choose one");
+        if (hc::ingest::modelFormatOf(o.waterMesh).empty())
+            throw hc::Error("--water-mesh " + o.waterMesh + ": not model results read here" +
+                            (hc::ingest::unreadModelFormat(o.waterMesh).empty() ? "" : ": " + hc::ingest::unreadModelFormat(o.waterMesh)));
+        hc::cli::checkNotSame(out, o.waterMesh, "output grid");
+    }
     if (mesh) {
-        for (const char* opt : {"--water", "--water-surface", "--water-level", "--times", "--tolerance", "--min-cell", "--max-cell", "--t_srs",
-                                "--band", "--nodata", "--z-scale", "--terrain-rgb"})
+        o.samplingGiven = p.given("--tolerance") || p.given("--min-cell") || p.given("--max-cell");
+        for (const char* opt : {"--water", "--water-surface", "--water-level", "--times", "--t_srs", "--band", "--nodata", "--z-scale",
+                                "--terrain-rgb", "--mesh-srs"})
             if (p.given(opt))
-                throw hc::Error(std::string(opt) + ": " + o.input + " is a UGRID mesh, taken as it is (its faces, terrain and water levels): " +
-                                "only --terrain-var, --water-surface-var, --face-layers and --s_srs apply");
+                throw hc::Error(std::string(opt) + ": " + o.input + " is flood model results (terrain and water steps from the file): " +
+                                "--terrain-var, --water-surface-var, --face-layers, --mesh, --mesh-tolerance, --s_srs and, for a sampled mesh, " +
+                                "--tolerance, --min-cell and --max-cell apply");
         for (size_t b = 0, e = 0; b < faceLayers.size(); b = e + 1) {
             e = std::min(faceLayers.find(',', b), faceLayers.size());
             if (e == b) throw hc::Error("--face-layers " + faceLayers + ": an empty name");
@@ -145,8 +173,8 @@ bool parseOptions(int argc, char** argv, hc::ingest::Options& o, std::string& ou
         hc::cli::checkNotSame(out, o.input, "output grid");
         return true;
     }
-    if (p.given("--terrain-var") || p.given("--water-surface-var") || p.given("--face-layers"))
-        throw hc::Error("--terrain-var / --water-surface-var / --face-layers: " + o.input + " is not a UGRID mesh (no mesh_topology variable)");
+    if (o.waterMesh.empty() && (p.given("--terrain-var") || p.given("--water-surface-var") || p.given("--face-layers")))
+        throw hc::Error("--terrain-var / --water-surface-var / --face-layers: " + o.input + " is not model results read here");
     o.bandGiven = o.band != kBandNotGiven;
     if (!o.bandGiven) o.band = 1;
     o.nodata = nodata;
@@ -180,7 +208,7 @@ hc::ingest::BuildSummary buildGrid(const hc::ingest::Options& o, const std::stri
     };
     hc::ingest::BuildSummary summary;
     try {
-        summary = mesh ? hc::ingest::ingestUgridToFile(o, out, report) : hc::ingest::ingestToFile(o, out, report);
+        summary = mesh ? hc::ingest::ingestModelToFile(o, out, report) : hc::ingest::ingestToFile(o, out, report);
     } catch (...) {
         printWarnings();
         throw;
@@ -204,11 +232,11 @@ int main(int argc, char** argv) {
         hc::ingest::LoadReport report;
         hc::ingest::BuildSummary summary;
         if (mesh) {
-            // A mesh is taken as it is, one cell per face: no build to share, rank 0 reads and writes it.
+            // Model results are read by rank 0 alone (a quadtree's cells one per face; a sampled mesh in one process).
             ranks::together([&] {
                 if (ranks::rank() == 0) summary = buildGrid(o, out, report, mesh);
             });
-            ranks::log("hc-ingest", ranks::rank() == 0 ? "the mesh read and written whole (one cell per face: nothing to share)" : "idle: a mesh is read by rank 1");
+            ranks::log("hc-ingest", ranks::rank() == 0 ? "the model results read and built in one process" : "idle: model results are read by rank 1");
         } else {
             // A NetCDF water variable over time is a series in one file: one step per time, times from the file.
             ranks::together([&] {
@@ -216,7 +244,7 @@ int main(int argc, char** argv) {
             });
             ranks::together([&] { summary = buildGrid(o, out, report, mesh); });
         }
-        if (!quiet && ranks::rank() == 0) printSummary(summary, report, out, o.timesS.empty() && !mesh, mesh);
+        if (!quiet && ranks::rank() == 0) printSummary(summary, report, out, o.timesS.empty() && !mesh && o.waterMesh.empty());
         if (ranks::distributed() && ranks::rank() == 0)
             ranks::log("hc-ingest", fmt::format("{} ranks, {:.3f} s in all", ranks::count(), clock.seconds()));
         return 0;

@@ -89,6 +89,8 @@ std::vector<std::byte> encodeMeta(const Grid& g, const GridSummary& summary) {
     kv.emplace_back("ingest.source", s.sourcePath);
     kv.emplace_back("ingest.source_crs", s.sourceCrsName);
     if (!s.sourceKind.empty()) kv.emplace_back("ingest.source_kind", s.sourceKind);  // absent for rasters (older files too)
+    if (!s.sourceFormat.empty()) kv.emplace_back("ingest.source_format", s.sourceFormat);  // flood model results only
+    if (s.latticeResidualM >= 0) kv.emplace_back("ingest.lattice_residual_m", fmtDouble(s.latticeResidualM));
     kv.emplace_back("ingest.source_width", std::to_string(s.sourceWidth));
     kv.emplace_back("ingest.source_height", std::to_string(s.sourceHeight));
     kv.emplace_back("ingest.valid_pixels", std::to_string(s.validPixels));
@@ -162,6 +164,8 @@ void parseMeta(const SectionedFileReader& file, const FileSection& s, Grid& g, u
     if (kv.count("ingest.source")) g.stats.sourcePath = kv["ingest.source"];
     if (kv.count("ingest.source_crs")) g.stats.sourceCrsName = kv["ingest.source_crs"];
     if (kv.count("ingest.source_kind")) g.stats.sourceKind = kv["ingest.source_kind"];
+    if (kv.count("ingest.source_format")) g.stats.sourceFormat = kv["ingest.source_format"];
+    number("ingest.lattice_residual_m", g.stats.latticeResidualM);
     number("ingest.source_width", g.stats.sourceWidth);
     number("ingest.source_height", g.stats.sourceHeight);
     number("ingest.valid_pixels", g.stats.validPixels);

@@ -13,6 +13,7 @@
 #include "heightcast/core/ranks.h"
 #include "heightcast/core/timer.h"
 #include "load_water.h"
+#include "model/model_ingest.h"
 #include "resample.h"
 
 namespace hc::ingest {
@@ -161,6 +162,7 @@ void afterBuild(const Prepared& p, const IngestStats& stats, const Options& opt,
 
 Grid ingest(const Options& opt, LoadReport& report) {
     const Stopwatch clock;
+    if (!opt.waterMesh.empty()) throw Error("--water-mesh needs ingestToFile (hc-ingest)");
     if (waterStepCount(opt) > 1)
         throw Error("an in-memory grid holds one water step; " + std::to_string(waterStepCount(opt)) + " need ingestToFile (hc-ingest)");
     Prepared p = prepare(opt, report);
@@ -260,10 +262,14 @@ BuildSummary ingestByWindows(const Options& opt, const std::string& path, LoadRe
 
 BuildSummary ingestToFile(const Options& opt, const std::string& path, LoadReport& report) {
     const Stopwatch clock;
+    if (ranks::distributed() && !opt.waterMesh.empty()) throw Error("--water-mesh runs in one process: run hc-ingest without mpirun");
     if (ranks::distributed()) return ingestByWindows(opt, path, report, clock);  // each rank its own windows
     Prepared p = prepare(opt, report);
     setBuild(p, opt, report);
-    bindWater(p, opt, report);
+    if (opt.waterMesh.empty())
+        bindWater(p, opt, report);
+    else
+        p.water = detail::meshWaterSteps(opt, p.terrain, report);
     traceBuild(p);
     IngestStats extra;
     extra.sourcePath = opt.input;

@@ -7,13 +7,14 @@ set(HEF_MESH "${HEF_STEPS} && $HC_EXPORT f.hcg -o f.nc >/dev/null")
 
 # Out and back: the same cells per level (a level without cells is not in a mesh), the same steps; the probe of the flooded valley gives each step's
 # level on both grids (the node coordinates carry the origin to 1e-6 m: the values agree to 1e-6 m).
-hc_cli_test(mesh.roundtrip 0 [[input +UGRID mesh: [0-9]+ faces \([0-9]+ with terrain\), [0-9]+ nodes, 3 steps.*cells +[0-9]+ \(one per face\)]]
+hc_cli_test(mesh.roundtrip 0 [[input +heightcast quadtree mesh \(UGRID-1.0\): [0-9]+ faces \(quadrilaterals\), [0-9]+ nodes, 3 steps.*nodes within [0-9.e-]+ m of the fitted lattice.*cells +[0-9]+ \(one per face\)]]
   --setup ${HEF_MESH} --exists m.hcg --no-match [[error|warning]]
   --check [["$HC_INFO" f.hcg --json | tr -d ' \n' | grep -oE '"cells":[0-9]+|"time_s":[0-9.]+|"wet_cells":[0-9]+' | grep -v '"cells":0$' > a.txt
             "$HC_INFO" m.hcg --json | tr -d ' \n' | grep -oE '"cells":[0-9]+|"time_s":[0-9.]+|"wet_cells":[0-9]+' | grep -v '"cells":0$' > b.txt
             cat b.txt && cmp a.txt b.txt]]
   --check [["$HC_INFO" m.hcg --json | tr -d ' \n' | grep -F '"source_kind":"UGRIDmesh"' && "$HC_INFO" m.hcg --json | grep -vq max_dev_m]]
-  --check [["$HC_INFO" m.hcg | grep -E 'source +f\.nc \(UGRID mesh, WGS 84 / UTM zone 32N \(EPSG:32632\)\)' && ! "$HC_INFO" m.hcg | grep '^  deviation']]
+  --check [["$HC_INFO" m.hcg | grep -E 'source +f\.nc \(heightcast quadtree mesh \(UGRID-1\.0\): [0-9]+ faces .*, WGS 84 / UTM zone 32N \(EPSG:32632\)\)' && ! "$HC_INFO" m.hcg | grep '^  deviation'
+            "$HC_INFO" m.hcg | grep -E '^  lattice +every node within [0-9.e-]+ m of the lattice']]
   --check [["$HC_PROBE" f.hcg --xy 622800,5170600 --layer water_surface --all-steps > pa.csv
             "$HC_PROBE" m.hcg --xy 622800,5170600 --layer water_surface --all-steps > pb.csv
             paste -d, pa.csv pb.csv | awk -F, 'NR > 1 { e = $5 - $10
@@ -27,7 +28,7 @@ hc_cli_test(mesh.roundtrip 0 [[input +UGRID mesh: [0-9]+ faces \([0-9]+ with ter
 # prints it, --json has rotation_deg), the probe at a world point equals the unrotated grid's at the point turned
 # back, and the render shows terrain.
 set(TURNED "${HEF_STEPS} && '${ROTATE_GRID}' f.hcg t.hcg 30 && $HC_EXPORT t.hcg -o t.nc >/dev/null")
-hc_cli_test(mesh.rotated 0 [[quadtree is turned 30 degrees against the CRS's axes]]
+hc_cli_test(mesh.rotated 0 [[turned 30 degrees against the CRS's axes]]
   --setup ${TURNED} --exists r.hcg --no-match [[error|warning]]
   --check [["$HC_INFO" r.hcg | grep -E '^  rotation +30\.0000000'
             "$HC_INFO" r.hcg --json | tr -d ' \n' | grep -E '"rotation_deg":30\.0000000']]
@@ -49,14 +50,14 @@ hc_cli_test(mesh.rotated 0 [[quadtree is turned 30 degrees against the CRS's axe
   --check "'$<TARGET_FILE:hc-render>' r.hcg -o r.png --step 2 --size 320x180 --texels 128 --backend cpu > /dev/null && '${PNG_CHECK}' r.png"
   -- ${INGEST} t.nc -o r.hcg)
 
-# Refusals: raster options on a mesh, a step layer that is not there, and a mesh exported over its own grid.
-hc_cli_test(mesh.raster_option_refused nonzero [[^hc-ingest: error: --tolerance: f\.nc is a UGRID mesh, taken as it is]]
+# Refusals: a sampling option on a quadtree taken as cells, a step layer that is not there, and a mesh exported over its own grid.
+hc_cli_test(mesh.raster_option_refused nonzero [[^hc-ingest: error: --tolerance / --min-cell / --max-cell: f\.nc's faces are taken as cells]]
   --setup ${HEF_MESH} --absent m.hcg
   -- ${INGEST} f.nc -o m.hcg --tolerance 1)
 hc_cli_test(mesh.face_layer_missing nonzero [[^hc-ingest: error: f\.nc: no variable 'vel' \(--face-layers\)]]
   --setup ${HEF_MESH} --absent m.hcg
   -- ${INGEST} f.nc -o m.hcg --face-layers vel)
-hc_cli_test(mesh.face_layers_need_a_mesh nonzero [[^hc-ingest: error: --terrain-var / --water-surface-var / --face-layers: .*hef_srtm\.tif is not a UGRID mesh]]
+hc_cli_test(mesh.face_layers_need_a_mesh nonzero [[^hc-ingest: error: --terrain-var / --water-surface-var / --face-layers: .*hef_srtm\.tif is not model results read here]]
   --absent m.hcg
   -- ${INGEST} ${D}/hef_srtm.tif -o m.hcg --face-layers vel)
 hc_cli_test(mesh.export_options_refused nonzero [[^hc-export: error: --resolution: a \.nc mesh holds the cells themselves]]

@@ -362,7 +362,7 @@ endif()
 
 # A rotated quadtree mesh (mesh.cmake's fixture, turned 30 degrees): rank 1 reads the mesh whole (one cell per face:
 # nothing to share), the others say so; the influence cache and every step's pyramid are the same bytes from 3 ranks.
-hc_mpi_test(mpi.mesh_rotated 0 [[rank 2/3: idle: a mesh is read by rank 1]]
+hc_mpi_test(mpi.mesh_rotated 0 [[rank 2/3: idle: model results are read by rank 1]]
   --setup "${TURNED} && $HC_INGEST --quiet t.nc -o one.hcg && $HC_INFLUENCE --quiet one.hcg > /dev/null"
   --no-match [[error:|warning]]
   --check [[cmp one.hcg m.hcg && for f in hci step0000.hcp step0001.hcp step0002.hcp

@@ -51,6 +51,10 @@ struct IngestStats {
     std::string sourceCrsName;   // the input's CRS name ("" when it had none)
     std::string sourceKind;      // "" for a raster (the working raster and deviation below apply); "UGRID mesh" for a
                                  // mesh taken as it is (one cell per face: no working raster, nothing to deviate)
+    std::string sourceFormat;    // a flood model's results: the model, format, mesh kind, faces, nodes and steps ("SFINCS
+                                 // quadtree map (UGRID-1.0): 4226 faces (quadtree), ..."); "" for a raster
+    double latticeResidualM = -1;  // a quadtree mesh taken as it is: the largest distance of a node from the fitted
+                                   // lattice [m]; < 0 for none
     uint64_t sourceWidth = 0;    // pixels of the working raster (after projection / resampling)
     uint64_t sourceHeight = 0;
     uint64_t validPixels = 0;    // working-raster pixels that carry data

@@ -29,6 +29,11 @@ namespace hc::ingest {
 
 enum class WaterSource { None, Depth, Surface, Level };
 
+// How a flood model's mesh becomes cells: Auto takes a quadtree's faces as they are (a quadtree model's, or a mesh of
+// square faces of power-of-two sizes) and samples any other mesh; Cells insists on the faces (refusing a mesh that is no
+// quadtree); Sample samples every mesh onto the adaptive grid.
+enum class MeshMode { Auto, Cells, Sample };
+
 struct Options {
     std::string input;                  // raster path (anything GDAL opens, /vsizip/ and NETCDF:"f.nc":var included)
     int band = 1;                       // 1-based
@@ -54,6 +59,12 @@ struct Options {
     std::string waterSurfaceVar = "zs"; // UGRID meshes: the face variable of the water level over time ("" = none)
     std::vector<std::string> faceLayerVars;  // UGRID meshes: further face variables over time (velocity magnitude, ...),
                                         // each a step layer of that name, stored on the wet faces of every step
+    // Flood model results (mesh.h, docs/models.md).
+    std::string waterMesh;              // --water-mesh: model results whose water levels flood the raster input's terrain
+    MeshMode meshMode = MeshMode::Auto; // --mesh: a model's faces as cells (quadtrees) or sampled onto the grid
+    std::optional<double> meshToleranceM;  // --mesh-tolerance: how far a quadtree's node may lie from the fitted lattice [m]
+    std::string meshSrs;                // --mesh-srs: the CRS of --water-mesh's coordinates (default: the file's own)
+    bool samplingGiven = false;         // --tolerance, --min-cell or --max-cell was given: refused for faces taken as cells
     unsigned threads = 0;               // 0 = all cores
     bool progress = false;              // terminal progress on stderr
 };

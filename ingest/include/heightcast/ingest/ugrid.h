@@ -10,7 +10,8 @@
 //
 // The mesh must be a quadtree: every face a square of four nodes whose side is a power-of-two multiple of the
 // smallest face's, all faces turned by one angle against the CRS's axes (the grid's rotation), each face's corner on
-// the finest faces' lattice and aligned to its own size, no two faces overlapping. Anything else is refused naming
+// the finest faces' lattice and aligned to its own size, no two faces overlapping. The lattice is fitted to every node
+// by least squares (model.h): nodes stored as float32 lie within their rounding of it. Anything else is refused naming
 // the face and what is wrong. Faces whose terrain is a fill value are holes; per step, faces whose level is a fill
 // value, or not above the terrain, are dry (depth = level - terrain). Further face variables over time
 // (Options::faceLayerVars: velocity magnitude, ...) become step layers of their own name and units, stored on the wet
