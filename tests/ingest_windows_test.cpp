@@ -12,10 +12,12 @@
 #include <cstring>
 #include <filesystem>
 #include <functional>
+#include <memory>
 #include <random>
 
 #include <gdal_priv.h>
 #include <gdal_utils.h>
+#include <ogr_spatialref.h>
 
 #include "heightcast/core/error.h"
 #include "heightcast/ingest/ingest.h"
@@ -200,6 +202,67 @@ TEST(IngestWindows, WarpedSourceReadsTheSameBitsByWindow) {
     o.targetSrs = "EPSG:3035";
     o.minCellM = 200;
     EXPECT_GT(compareWindows(o, "warped to ETRS89-extended / LAEA Europe", 19, 13), 2000u);
+}
+
+// Issue 40: the output pixels between the last source column west of 180 degrees and the first east of it, where the
+// warp reads two pieces of the source (split at 180), or the grid's last column and its first (a grid around the
+// globe, read as one piece), interpolate across the seam: each is the bilinear value of both columns (before, it was
+// the nearer column alone, up to hundreds of metres off on this 1-degree relief). The global grid to PDC Mercator,
+// centred on 150 degrees, at 80 km pixels: as it is (-180 .. 180: its edges meet at 180), and moved 90 degrees east
+// (-90 .. 270: split at 180).
+TEST(IngestWindows, WarpInterpolatesAcrossTheSeams) {
+    HC_REQUIRE_DATA(src, "etopo1_1deg.tif");
+    GDALAllRegister();
+    OGRSpatialReference pdc, geo;
+    pdc.importFromEPSG(3832), geo.importFromEPSG(4326);
+    pdc.SetAxisMappingStrategy(OAMS_TRADITIONAL_GIS_ORDER), geo.SetAxisMappingStrategy(OAMS_TRADITIONAL_GIS_ORDER);
+    std::unique_ptr<OGRCoordinateTransformation> back(OGRCreateCoordinateTransformation(&pdc, &geo));
+    // The pixels between source columns i0 and i0 + 1 (around the circle) against their bilinear value; their count.
+    auto check = [&](const std::string& path, size_t i0, const char* what) {
+        SCOPED_TRACE(what);
+        Options o;
+        o.input = path;
+        o.targetSrs = "EPSG:3832";
+        o.minCellM = 80000;  // 0.72 degrees: pixel columns in every degree of longitude
+        LoadReport rep;
+        const Raster r = hc::ingest::loadTerrain(o, rep);
+        GDALDatasetUniquePtr ds(GDALDataset::Open(path.c_str(), GDAL_OF_RASTER | GDAL_OF_READONLY));
+        const size_t w = size_t(ds->GetRasterXSize()), h = size_t(ds->GetRasterYSize()), period = 360;
+        double gt[6];
+        ds->GetGeoTransform(gt);
+        std::vector<float> v(w * h);
+        EXPECT_EQ(ds->GetRasterBand(1)->RasterIO(GF_Read, 0, 0, int(w), int(h), v.data(), int(w), int(h), GDT_Float32, 0, 0), CE_None);
+        const double first = gt[0] + gt[1] / 2;  // column 0's centre; columns repeat every 360
+        const size_t i1 = (i0 + 1) % period;
+        size_t found = 0;
+        double worst = 0;
+        std::vector<double> xs(r.width), ys(r.width);
+        std::vector<int> ok(r.width);
+        for (size_t row = 0; row < r.height; ++row) {
+            for (size_t col = 0; col < r.width; ++col)
+                xs[col] = r.westWorld + (double(col) + 0.5) * r.pixelSizeM, ys[col] = r.northWorld - (double(row) + 0.5) * r.pixelSizeM;
+            back->Transform(int(r.width), xs.data(), ys.data(), nullptr, ok.data());
+            for (size_t col = 0; col < r.width; ++col) {
+                const double x = xs[col], y = ys[col];
+                if (!ok[col]) continue;
+                const double fi = std::fmod(std::fmod(x - first, 360.0) + 360.0, 360.0);  // columns from column 0
+                const double fx = fi - double(i0), fy = (y - gt[3]) / gt[5] - 0.5, ry = std::floor(fy), wy = fy - ry;
+                if (!(fx > 0 && fx < 1) || ry < 0 || ry + 1 >= double(h)) continue;
+                const size_t r0 = size_t(ry);
+                const double want = (1 - wy) * ((1 - fx) * v[r0 * w + i0] + fx * v[r0 * w + i1]) +
+                                    wy * ((1 - fx) * v[(r0 + 1) * w + i0] + fx * v[(r0 + 1) * w + i1]);
+                worst = std::max(worst, std::abs(double(r.at(col, row)) - want));
+                ++found;
+            }
+        }
+        // The bilinear value in double against the warped float32 (values to 5855 m: 5e-4 m a rounding): 1 cm.
+        EXPECT_LT(worst, 0.01);
+        return found;
+    };
+    EXPECT_GT(check(src, 359, "the grid's last column (179) and its first (-180 = 180)"), 50u);
+    const std::string moved = (tempDir() / "etopo_east_seams.tif").string();
+    ASSERT_NO_FATAL_FAILURE(copyWithGeoTransform(src, moved, [](double* gt) { gt[0] += 90; }));
+    EXPECT_GT(check(moved, 269, "179 and 180 degrees, where the two pieces meet"), 50u);
 }
 
 // A geographic source past 180 degrees, which --t_srs warps as two pieces (the east one shifted by -360): each window

@@ -23,6 +23,7 @@
 #include "heightcast/grid/grid_file.h"
 #include "heightcast/ingest/ingest.h"
 #include "resample.h"
+#include "warp_seam.h"
 
 namespace hc::ingest {
 
@@ -486,6 +487,7 @@ private:
 // (tests/ingest_windows_test.cpp).
 struct WarpPlan {
     std::vector<std::unique_ptr<SourceDataset>> sources;  // one per piece of the source (two when split at 180 degrees)
+    std::unique_ptr<detail::WarpSeams> seams;             // pixels between the pieces' columns, interpolated across (or null)
     std::string note;                                     // for the report's method
     std::shared_ptr<OGRCoordinateTransformation> ct;       // source CRS -> target CRS (PROJ, exact)
     OGRSpatialReference target;
@@ -535,6 +537,7 @@ struct WarpPlan {
             ww.into(col0, row0, w, h, out);
             source->FlushCache(false);  // drops its blocks from GDAL's cache: the next window reads what it reaches
         }
+        if (seams) seams->apply(col0, row0, w, h, out);
     }
 };
 
@@ -553,6 +556,8 @@ WarpPlan planWarp(const GeoTransform& gtIn, size_t width, size_t height, const O
         GeoTransform gt;
     };
     std::vector<Piece> pieces{{0, width, gtIn}};
+    std::vector<detail::WarpSeams::Seam> seams;  // where the warp reads two columns from different pieces
+    GeoTransform moved = gtIn;                   // the source with its west edge in -180..180 (the seams' frame)
     std::string& note = plan.note;
     const double dx = gtIn.g[1];
     if (srs.IsGeographic() && !gtIn.rotated() && dx > 0 && srs.GetPrimeMeridian() == 0 &&
@@ -572,6 +577,10 @@ WarpPlan planWarp(const GeoTransform& gtIn, size_t width, size_t height, const O
             pieces.push_back({firstEast, end, east});
             note = "; split at 180 degrees (east part shifted by -360)";
         }
+        // Seams: at 180 degrees between the pieces, and around a grid that closes the globe (its last column before its first).
+        if (firstEast < end && firstEast > 0) seams.push_back({firstEast - 1, firstEast, gt.g[0] + (double(firstEast) - 0.5) * dx});
+        if (end <= width && std::abs(double(end) * dx - 360.0) < 1e-6 * 360.0) seams.push_back({end - 1, 0, gt.g[0] + (double(end) - 0.5) * dx});
+        moved = gt;
         if (gt.g[0] != gtIn.g[0]) note += "; longitudes moved by " + fmt(gt.g[0] - gtIn.g[0]) + " degrees";
         if (end < width) note += "; " + std::to_string(width - end) + " closing column(s) repeating the first left out";
         if (pieces[0].c1 == 0) pieces.erase(pieces.begin());
@@ -645,6 +654,10 @@ WarpPlan planWarp(const GeoTransform& gtIn, size_t width, size_t height, const O
     plan.height = size_t((ext[3] - ext[1] + cell / 2) / cell);
     if (plan.width == 0 || plan.height == 0) throw Error(opt.input + ": projected to " + targetText + ": an empty raster");
     checkWorkingSize(double(plan.width), double(plan.height), cell * target.GetLinearUnits(), opt);
+    // Across the seams, pixels as fine as the source or finer (a coarser output widens GDAL's kernel: not done here).
+    if (!seams.empty() && plan.scale == 1.0)
+        plan.seams = std::make_unique<detail::WarpSeams>(seams, moved.g, height, srs, target, plan.ct, plan.ext, plan.cell, plan.width,
+                                                         plan.height, fill);
     return plan;
 }
 
