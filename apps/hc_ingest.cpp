@@ -107,7 +107,8 @@ bool parseOptions(int argc, char** argv, hc::ingest::Options& o, std::string& ou
     o.band = kBandNotGiven;
     p.option("--band", "N", "band to read, 1-based (default 1; a 3-band 8-bit image is refused without it or --terrain-rgb)", o.band);
     p.option("--nodata", "V", "a further nodata value (the band's own nodata, NaN and +-inf always count; a warning names\n"
-             "      classic sentinels such as -9999 that the file holds without declaring them)", nodata);
+             "      classic sentinels such as -9999 that the file holds without declaring them); for model results, bed and\n"
+             "      water levels equal to V are no value (a hole, dry)", nodata);
     p.option("--z-scale", "F", "multiply elevations by F after unit conversion (default 1)", o.zScale);
     p.flag("--terrain-rgb", "decode Terrain-RGB bands 1-3: h = -10000 + 0.1 * (R * 65536 + G * 256 + B) metres", o.terrainRgb);
     p.option("--water", "RASTERS", "water depth raster(s), metres (resampled onto the terrain; nodata and <= 0 are dry); several\n"
@@ -158,11 +159,12 @@ bool parseOptions(int argc, char** argv, hc::ingest::Options& o, std::string& ou
     }
     if (mesh) {
         o.samplingGiven = p.given("--tolerance") || p.given("--min-cell") || p.given("--max-cell");
-        for (const char* opt : {"--water", "--water-surface", "--water-level", "--times", "--t_srs", "--band", "--nodata", "--z-scale",
+        o.nodata = nodata;
+        for (const char* opt : {"--water", "--water-surface", "--water-level", "--times", "--t_srs", "--band", "--z-scale",
                                 "--terrain-rgb", "--mesh-srs"})
             if (p.given(opt))
                 throw hc::Error(std::string(opt) + ": " + o.input + " is flood model results (terrain and water steps from the file): " +
-                                "--terrain-var, --water-surface-var, --face-layers, --mesh, --mesh-tolerance, --s_srs and, for a sampled mesh, " +
+                                "--terrain-var, --water-surface-var, --face-layers, --mesh, --mesh-tolerance, --s_srs, --nodata and, for a sampled mesh, " +
                                 "--tolerance, --min-cell and --max-cell apply");
         for (size_t b = 0, e = 0; b < faceLayers.size(); b = e + 1) {
             e = std::min(faceLayers.find(',', b), faceLayers.size());

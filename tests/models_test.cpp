@@ -313,6 +313,34 @@ TEST_F(Models, WaterMeshFloodsTheDem) {
     EXPECT_GT(wet, 100u);
 }
 
+// A fill value the file does not declare (-9999 on the bed of a face): said, with the fix; --nodata -9999 makes it a hole.
+TEST_F(Models, UndeclaredFillValuesAreSaidAndNodataMakesThemHoles) {
+    {
+        NcWriter w(path("fill.nc"));
+        auto nodes = w.dim("nNodes", 9), faces = w.dim("nFaces", 4), four = w.dim("four", 4), time = w.dim("time", 1);
+        auto topo = w.array("mesh", {}, GDT_Int32, {}, {{"cf_role", "mesh_topology"}, {"node_coordinates", "nx ny"}, {"face_node_connectivity", "fn"}});
+        w.intAttr(topo, "topology_dimension", 2);
+        w.array("nx", {nodes}, GDT_Float64, {0, 10, 20, 0, 10, 20, 0, 10, 20});
+        w.array("ny", {nodes}, GDT_Float64, {0, 0, 0, 10, 10, 10, 20, 20, 20});
+        w.array("fn", {faces, four}, GDT_Int32, {0, 1, 4, 3, 1, 2, 5, 4, 3, 4, 7, 6, 4, 5, 8, 7});
+        w.array("zb", {faces}, GDT_Float64, {1, -9999, 3, 4});
+        w.array("time", {time}, GDT_Float64, {0}, {{"units", "seconds since 2000-01-01"}});
+        w.array("zs", {time, faces}, GDT_Float64, {2, 5, 5, 5});
+    }
+    hc::ingest::Options o;
+    o.input = path("fill.nc");
+    hc::ingest::LoadReport r;
+    EXPECT_EQ(hc::ingest::ingestModelToFile(o, path("a.hcg"), r).cellCount, 4u);
+    bool said = false;
+    for (const std::string& w : r.warnings) said = said || w.find("1 bed values are -9999") != std::string::npos;
+    EXPECT_TRUE(said) << "the sentinel and --nodata -9999 are named";
+    o.nodata = -9999;
+    hc::ingest::LoadReport r2;
+    const hc::ingest::BuildSummary b = hc::ingest::ingestModelToFile(o, path("b.hcg"), r2);
+    EXPECT_EQ(b.cellCount, 3u) << "the face is a hole";
+    EXPECT_EQ(b.steps.at(0).wetCells, 3u);
+}
+
 // Files that are wrong: each refused naming the file and the face or step, nothing written.
 TEST_F(Models, BrokenModelFilesAreRefusedByName) {
     auto refused = [&](const std::string& file, const std::string& what) {

@@ -53,6 +53,20 @@ std::vector<double> MdFile::readSlice(const ArrayPtr& a, size_t first) const {
     return readBox(*this, a, start, shape);
 }
 
+bool holds(const std::shared_ptr<GDALGroup>& root, std::initializer_list<const char*> all, std::initializer_list<const char*> any) {
+    if (!root) return false;
+    const MdFile f{"", nullptr, root};
+    try {
+        for (const char* n : all)
+            if (!f.find(n)) return false;
+        if (any.size() == 0) return true;
+        for (const char* n : any)
+            if (f.find(n)) return true;
+    } catch (...) {
+    }
+    return false;
+}
+
 std::string textAttr(const ArrayPtr& a, const std::string& name) {
     if (!a) return "";
     auto at = a->GetAttribute(name);

@@ -32,6 +32,9 @@ struct MdFile {
     std::vector<double> readSlice(const ArrayPtr& a, size_t first) const;
 };
 
+// Whether the group holds every one of `all` and, when `any` is not empty, one of `any` (a format's probe; never throws).
+bool holds(const std::shared_ptr<GDALGroup>& root, std::initializer_list<const char*> all, std::initializer_list<const char*> any = {});
+
 // A text attribute ("" when missing) and a numeric one (nullopt when missing).
 std::string textAttr(const ArrayPtr& a, const std::string& name);
 std::optional<double> numAttr(const ArrayPtr& a, const std::string& name);

@@ -10,6 +10,7 @@
 #include <fmt/format.h>
 
 #include "heightcast/core/error.h"
+#include "heightcast/core/progress.h"
 #include "heightcast/core/timer.h"
 #include "heightcast/grid/grid_file.h"
 #include "heightcast/ingest/mesh.h"
@@ -51,18 +52,19 @@ void describe(const ModelMesh& m, LoadReport& report) {
 
 // ---- a quadtree's faces as cells ----
 
-// The faces with a bed value (the others are holes), as a mesh of their own; ids[k] is face k's index in `m`.
-ModelMesh facesWithBed(const ModelMesh& m, std::vector<size_t>& ids) {
+// The faces with a bed value (the others are holes), as a mesh of their own, which takes over m's nodes (m keeps its
+// faces, bed and steps, and must outlive it); ids[k] is face k's index in `m`.
+ModelMesh facesWithBed(ModelMesh& m, std::vector<size_t>& ids) {
     ModelMesh out;
-    out.source = m.source, out.coordsFloat32 = m.coordsFloat32, out.nodeX = m.nodeX, out.nodeY = m.nodeY;
+    out.source = m.source, out.coordsFloat32 = m.coordsFloat32, out.nodeX = std::move(m.nodeX), out.nodeY = std::move(m.nodeY);
     for (size_t f = 0; f < m.faceCount(); ++f) {
         if (std::isnan(m.bed.values[f])) continue;
         out.faceNodes.insert(out.faceNodes.end(), m.faceNodes.begin() + long(m.faceStart[f]), m.faceNodes.begin() + long(m.faceStart[f + 1]));
         out.faceStart.push_back(out.faceNodes.size());
         ids.push_back(f);
     }
-    auto names = std::make_shared<std::vector<size_t>>(ids);
-    out.faceName = [names, m](size_t k) { return m.nameOf((*names)[k]); };
+    const ModelMesh* whole = &m;
+    out.faceName = [whole, &ids](size_t k) { return whole->nameOf(ids[k]); };
     return out;
 }
 
@@ -78,27 +80,66 @@ Grid cellsShape(const detail::QuadtreeFit& q, const detail::MeshFrame& frame, co
     return shape;
 }
 
-BuildSummary ingestCells(const Options& opt, const ModelMesh& m, const detail::MeshFrame& frame, const std::string& path, LoadReport& report,
+// The faces' cells in Morton order: codes, their faces (as indexes into the mesh) and elevations.
+struct Cells {
+    std::vector<uint64_t> codes;
+    std::vector<size_t> face;
+    std::vector<float> elevation;
+};
+
+Cells cellsOf(const ModelMesh& m, const std::vector<size_t>& ids, const detail::QuadtreeFit& q) {
+    std::vector<uint64_t> codeOf(ids.size());
+    for (size_t k = 0; k < ids.size(); ++k) codeOf[k] = makeCellCode(mortonEncode(q.ix[k], q.iy[k]), q.level[k]);
+    std::vector<size_t> order(ids.size());
+    std::iota(order.begin(), order.end(), size_t{0});
+    std::sort(order.begin(), order.end(), [&](size_t a, size_t b) { return codeOf[a] < codeOf[b]; });
+    Cells c;
+    for (size_t k : order) c.codes.push_back(codeOf[k]), c.face.push_back(ids[k]), c.elevation.push_back(float(m.bed.values[ids[k]]));
+    for (size_t i = 1; i < c.codes.size(); ++i)
+        if (c.codes[i] == c.codes[i - 1]) throw Error(m.source + ": " + m.nameOf(c.face[i - 1]) + " and " + m.nameOf(c.face[i]) + " are the same square");
+    return c;
+}
+
+// Step k's wet cells: depth = level - bed where positive (a NaN level, a fill value, is dry), and the further layers
+// there (a fill value taken as 0, counted in `unset`).
+WaterStepData stepOf(const ModelMesh& m, const Cells& c, size_t k, std::vector<uint64_t>& unset) {
+    const MeshField level = m.level(k);
+    if (level.at != MeshAt::Face) throw Error(m.source + ": the water level is given at nodes: a quadtree's faces need it per face (--mesh sample)");
+    std::vector<MeshField> layers;
+    for (const MeshLayer& l : m.layers) layers.push_back(l.read(k));
+    WaterStepData step;
+    step.timeS = m.timesS[k];
+    step.values.resize(1 + layers.size());
+    for (size_t i = 0; i < c.face.size(); ++i) {
+        const size_t f = c.face[i];
+        const float depth = float(level.values[f] - m.bed.values[f]);
+        if (!(depth > 0)) continue;
+        step.wet.push_back(uint32_t(i));
+        step.values[0].push_back(depth);
+        for (size_t l = 0; l < layers.size(); ++l) {
+            const double v = layers[l].values.at(f);
+            unset[l] += !std::isfinite(v);
+            step.values[1 + l].push_back(std::isfinite(v) ? float(v) : 0.0f);
+        }
+    }
+    return step;
+}
+
+BuildSummary ingestCells(const Options& opt, ModelMesh& m, const detail::MeshFrame& frame, const std::string& path, LoadReport& report,
                          const Stopwatch& clock) {
     if (m.bed.at != MeshAt::Face) throw Error(m.source + ": the bed is given at nodes: a quadtree's faces need it per face (--mesh sample samples it)");
     if (opt.samplingGiven)
         throw Error("--tolerance / --min-cell / --max-cell: " + m.source + "'s faces are taken as cells, as they are (a quadtree): nothing is "
                     "sampled or merged; --mesh sample samples them onto the grid");
     std::vector<size_t> ids;
-    const ModelMesh kept = facesWithBed(m, ids);
-    if (ids.empty()) throw Error(m.source + ": every face's bed level is a fill value: nothing to ingest");
-    const detail::QuadtreeFit q = detail::fitQuadtree(kept, opt.meshToleranceM.value_or(-1));
+    detail::QuadtreeFit q;
+    {
+        const ModelMesh kept = facesWithBed(m, ids);
+        if (ids.empty()) throw Error(m.source + ": every face's bed level is a fill value: nothing to ingest");
+        q = detail::fitQuadtree(kept, opt.meshToleranceM.value_or(-1));
+    }
+    const Cells c = cellsOf(m, ids, q);
     const Grid shape = cellsShape(q, frame, m);
-    std::vector<uint64_t> codeOf(ids.size());
-    for (size_t k = 0; k < ids.size(); ++k) codeOf[k] = makeCellCode(mortonEncode(q.ix[k], q.iy[k]), q.level[k]);
-    std::vector<size_t> order(ids.size());
-    std::iota(order.begin(), order.end(), size_t{0});
-    std::sort(order.begin(), order.end(), [&](size_t a, size_t b) { return codeOf[a] < codeOf[b]; });
-    std::vector<uint64_t> codes(ids.size());
-    std::vector<float> elevation(ids.size());
-    for (size_t i = 0; i < order.size(); ++i) codes[i] = codeOf[order[i]], elevation[i] = float(m.bed.values[ids[order[i]]]);
-    for (size_t i = 1; i < codes.size(); ++i)
-        if (codes[i] == codes[i - 1]) throw Error(m.source + ": " + m.nameOf(ids[order[i - 1]]) + " and " + m.nameOf(ids[order[i]]) + " are the same square");
     IngestStats stats;
     stats.sourcePath = opt.input, stats.sourceKind = "UGRID mesh", stats.sourceFormat = report.sourceDescription;
     stats.sourceCrsName = frame.sourceCrsName, stats.validPixels = ids.size(), stats.latticeResidualM = q.maxResidual;
@@ -110,30 +151,14 @@ BuildSummary ingestCells(const Options& opt, const ModelMesh& m, const detail::M
     std::vector<uint64_t> unset(m.layers.size(), 0);
     try {
         GridFileWriter writer(path, shape, ids.size(), m.timesS.size());
-        writer.append(codes, {std::span<const float>(elevation)});
+        writer.append(c.codes, {std::span<const float>(c.elevation)});
+        Progress progress("writing " + std::to_string(m.timesS.size()) + " steps", m.timesS.size(), opt.progress && !m.timesS.empty());
         for (size_t k = 0; k < m.timesS.size(); ++k) {
-            const MeshField level = m.level(k);
-            if (level.at != MeshAt::Face) throw Error(m.source + ": the water level is given at nodes: a quadtree's faces need it per face (--mesh sample)");
-            std::vector<MeshField> layers;
-            for (const MeshLayer& l : m.layers) layers.push_back(l.read(k));
-            WaterStepData step;
-            step.timeS = m.timesS[k];
-            step.values.resize(1 + layers.size());
-            for (size_t i = 0; i < order.size(); ++i) {
-                const size_t f = ids[order[i]];
-                const float depth = float(level.values[f] - m.bed.values[f]);  // NaN (dry, a fill value) is not > 0
-                if (!(depth > 0)) continue;
-                step.wet.push_back(uint32_t(i));
-                step.values[0].push_back(depth);
-                for (size_t l = 0; l < layers.size(); ++l) {
-                    const double v = layers[l].values.at(f);
-                    unset[l] += !std::isfinite(v);
-                    step.values[1 + l].push_back(std::isfinite(v) ? float(v) : 0.0f);
-                }
-            }
+            const WaterStepData step = stepOf(m, c, k, unset);
             out.steps.push_back({step.timeS, step.wet.size(), 0, {}, {}});
             out.stepBytes += 8 * step.wet.size();
             writer.appendStep(step);
+            progress.advance(1);
         }
         stats.seconds = clock.seconds();
         writer.commit(stats);
@@ -228,6 +253,29 @@ BuildSummary ingestSampled(const Options& opt, std::shared_ptr<ModelMesh> m, con
     return b;
 }
 
+// Fill values the file does not declare: --nodata V makes bed and levels equal to V no value; without it, a classic
+// sentinel in the bed is said, with that fix (a level at a sentinel is below any bed: dry either way).
+void undeclaredFills(const Options& opt, ModelMesh& m, LoadReport& report) {
+    if (opt.nodata) {
+        const double v = *opt.nodata;
+        for (double& z : m.bed.values)
+            if (z == v) z = NAN;
+        if (m.level) m.level = [inner = m.level, v](size_t k) {
+            MeshField f = inner(k);
+            for (double& z : f.values)
+                if (z == v) z = NAN;
+            return f;
+        };
+        return;
+    }
+    for (double sentinel : {-9999.0, -99999.0, -999.0, -32768.0}) {
+        const auto n = std::count(m.bed.values.begin(), m.bed.values.end(), sentinel);
+        if (n > 0)
+            report.warnings.push_back(fmt::format("{}: {} bed values are {:g}, a classic fill value the file does not declare: taken as ground at "
+                                                  "that height; --nodata {:g} takes them as holes", m.source, n, sentinel, sentinel));
+    }
+}
+
 }  // namespace
 
 BuildSummary ingestModelToFile(const Options& opt, const std::string& path, LoadReport& report) {
@@ -237,6 +285,7 @@ BuildSummary ingestModelToFile(const Options& opt, const std::string& path, Load
             throw Error("--face-layers " + name + ": that name is the terrain or the water; name further variables (velocity, ...)");
     auto m = std::make_shared<ModelMesh>(readModelMesh(opt.input, readOptions(opt)));
     describe(*m, report);
+    undeclaredFills(opt, *m, report);
     const detail::MeshFrame frame = detail::meshToMetric(*m, opt.sourceSrs, report);
     report.sourceCrsName = frame.sourceCrsName, report.gridCrsName = frame.crsName;
     std::string why;

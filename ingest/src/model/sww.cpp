@@ -174,14 +174,7 @@ void readSteps(const MdFile& f, const MeshReadOptions& opt, ModelMesh& m) {
 }  // namespace
 
 std::string swwFormat(const std::shared_ptr<GDALGroup>& root) {
-    try {
-        MdFile f{"", nullptr, root};
-        if (!root || !f.find("volumes") || !f.find("x") || !f.find("y")) return "";
-        if (!f.find("stage") && !f.find("elevation") && !f.find("z")) return "";
-        return "ANUGA sww";
-    } catch (...) {
-        return "";
-    }
+    return holds(root, {"volumes", "x", "y"}, {"stage", "elevation", "z"}) ? "ANUGA sww" : "";
 }
 
 ModelMesh readSww(const std::string& path, std::shared_ptr<GDALDataset> keep, const MeshReadOptions& opt) {

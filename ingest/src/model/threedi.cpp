@@ -196,14 +196,7 @@ void readSteps(const MdFile& f, const Cells& c, const MeshReadOptions& opt, cons
 }  // namespace
 
 std::string threeDiFormat(const std::shared_ptr<GDALGroup>& root) {
-    try {
-        MdFile f{"", nullptr, root};
-        if (!root || !f.find("Mesh2DFace_xcc") || !f.find("Mesh2DFace_ycc")) return "";
-        if (!f.find("Mesh2D_s1") && !f.find("Mesh2DFace_zcc")) return "";
-        return "3Di results (NetCDF)";
-    } catch (...) {
-        return "";
-    }
+    return holds(root, {"Mesh2DFace_xcc", "Mesh2DFace_ycc"}, {"Mesh2D_s1", "Mesh2DFace_zcc"}) ? "3Di results (NetCDF)" : "";
 }
 
 ModelMesh readThreeDi(const std::string& path, std::shared_ptr<GDALDataset> keep, const MeshReadOptions& opt) {

@@ -226,14 +226,7 @@ void readSteps(const MdFile& f, const MeshReadOptions& opt, size_t cells3d, Mode
 }  // namespace
 
 std::string tuflowFvFormat(const std::shared_ptr<GDALGroup>& root) {
-    try {
-        MdFile f{"", nullptr, root};
-        if (!root || !f.find("cell_Nvert") || !f.find("cell_node") || !f.find("node_X") || !f.find("node_Y")) return "";
-        if (!f.find("H") && !f.find("cell_Zb")) return "";
-        return "TUFLOW FV results (NetCDF)";
-    } catch (...) {
-        return "";
-    }
+    return holds(root, {"cell_Nvert", "cell_node", "node_X", "node_Y"}, {"H", "cell_Zb"}) ? "TUFLOW FV results (NetCDF)" : "";
 }
 
 ModelMesh readTuflowFv(const std::string& path, std::shared_ptr<GDALDataset> keep, const MeshReadOptions& opt) {
