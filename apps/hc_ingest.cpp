@@ -146,7 +146,7 @@ bool parseOptions(int argc, char** argv, hc::ingest::Options& o, std::string& ou
     if (o.meshToleranceM && !(*o.meshToleranceM >= 0)) throw hc::Error("--mesh-tolerance must be a length >= 0");
     // Flood model results (a SFINCS map, a HEC-RAS plan, ...) carry terrain and water steps in one file.
     mesh = !o.input.empty() && !hc::ingest::modelFormatOf(o.input).empty();
-    if (!mesh && !o.input.empty())
+    if (!mesh && std::filesystem::exists(o.input))
         if (std::string hint = hc::ingest::unreadModelFormat(o.input); !hint.empty()) throw hc::Error(o.input + ": " + hint);
     if (!o.waterMesh.empty()) {
         if (mesh) throw hc::Error("--water-mesh: the input " + o.input + " is itself model results; give a terrain raster as INPUT");
@@ -160,6 +160,7 @@ bool parseOptions(int argc, char** argv, hc::ingest::Options& o, std::string& ou
     if (mesh) {
         o.samplingGiven = p.given("--tolerance") || p.given("--min-cell") || p.given("--max-cell");
         o.nodata = nodata;
+        o.band = 1;  // no band: --band is refused below
         for (const char* opt : {"--water", "--water-surface", "--water-level", "--times", "--t_srs", "--band", "--z-scale",
                                 "--terrain-rgb", "--mesh-srs"})
             if (p.given(opt))

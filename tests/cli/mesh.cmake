@@ -100,3 +100,12 @@ if(HC_WITH_GL AND HC_XVFB_RUN)
     --check "'${PNG_CHECK}' shot.png"
     -- ${HC_XVFB_RUN} -a -s "-screen 0 1280x1024x24" $<TARGET_FILE:hc-view> s.hcg --color-by speed --step 2 --frames 2 --screenshot shot.png --size 480x300 --texels 128)
 endif()
+
+# Model results that are no quadtree, end to end: the bundled DEM written by hc-bench-models as a finite-element
+# model's map (nodes at the pixel centres, two triangles a square of them, bed and levels per node, in WGS 84 degrees
+# as the DEM is), sampled by hc-ingest (projected to UTM, linear over the triangles); hc-info names the model.
+hc_cli_test(mesh.sampled_triangles 0 [[input +D-Flow FM map \(UGRID-1\.0\): [0-9]+ faces \(triangles\), [0-9]+ nodes, 3 steps.*grid CRS +WGS 84 / UTM zone 32N.*method +sampled at the centres of]]
+  --setup "'$<TARGET_FILE:hc-bench-models>' ${D}/hef_srtm.tif -o t.nc --faces triangles --steps 3 > /dev/null"
+  --exists s.hcg --no-match [[error]]
+  --check [["$HC_INFO" s.hcg | grep -E '^  model +D-Flow FM map \(UGRID-1\.0\): [0-9]+ faces \(triangles\)']]
+  -- ${INGEST} t.nc -o s.hcg)

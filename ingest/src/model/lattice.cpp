@@ -88,6 +88,7 @@ Similarity fitSimilarity(const std::vector<double>& x, const std::vector<double>
         sii += di * di + dj * dj, sa += di * dx + dj * dy, sb += di * dy - dj * dx;
     }
     Similarity s;
+    if (!(sii > 0)) return s;  // every node on one lattice point: no fit (the caller's residuals refuse it)
     s.a = sa / sii, s.b = turned ? sb / sii : 0.0;
     s.tx = mx - s.a * mi + s.b * mj, s.ty = my - s.b * mi - s.a * mj;
     return s;
@@ -200,6 +201,8 @@ QuadtreeFit fitQuadtree(const ModelMesh& m, double toleranceM) {
     q.worstFace = faceOf[worst];
     q.finest = std::hypot(s.a, s.b);
     q.rotationDeg = std::atan2(s.b, s.a) * 180.0 / M_PI;
+    if (!(q.finest > 0) || !std::isfinite(q.finest) || !std::isfinite(q.maxResidual))
+        fail("the faces' nodes fit no lattice (its finest side comes out as " + num(q.finest) + " m): not a quadtree mesh");
     if (q.maxResidual > q.tolerance)
         fail(fmt::format("the faces' nodes do not fit one lattice: a node of {} lies {:.6g} m from its lattice point (finest side {:.9g} m, "
                          "turned {:.9g} degrees; tolerance {:.6g} m{}): not a quadtree mesh; --mesh-tolerance M accepts more, "

@@ -101,6 +101,8 @@ MeshFrame meshToMetric(ModelMesh& m, const std::string& override, LoadReport& re
         OGRSpatialReference utm;
         utm.CopyGeogCSFrom(&srs);
         utm.SetUTM(zone, lat >= 0);
+        utm.SetProjCS(fmt::format("{} / UTM zone {}{}", srs.GetName() ? srs.GetName() : "unnamed", zone, lat >= 0 ? "N" : "S").c_str());
+        utm.AutoIdentifyEPSG();  // WGS 84's zones become EPSG:326zz / 327zz
         utm.SetAxisMappingStrategy(OAMS_TRADITIONAL_GIS_ORDER);
         transform(m, srs, utm);
         fr.crsWkt = toWkt(utm), fr.crsName = crsName(&utm);

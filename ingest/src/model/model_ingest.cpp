@@ -280,6 +280,7 @@ void undeclaredFills(const Options& opt, ModelMesh& m, LoadReport& report) {
 
 BuildSummary ingestModelToFile(const Options& opt, const std::string& path, LoadReport& report) {
     const Stopwatch clock;
+    validateOptions(opt);  // --tolerance, --min-cell, --max-cell, --nodata: as for a raster
     for (const std::string& name : opt.faceLayerVars)
         if (name == "elevation" || name == "water_depth" || name == "water_surface" || name == opt.terrainVar || name == opt.waterSurfaceVar)
             throw Error("--face-layers " + name + ": that name is the terrain or the water; name further variables (velocity, ...)");
