@@ -80,6 +80,19 @@ void printSummary(const hc::ingest::BuildSummary& b, const hc::ingest::LoadRepor
                 double(hc::peakRssBytes()) / 1e6, size_t(8 + 4 * g.firstStepLayer()), b.steps.empty() ? "" : ", and 8 per wet cell and step");
 }
 
+// A variable of a model's results named as a raster (NETCDF:"run.nc":zs, HDF5:"plan.hdf"://...): the file behind it, if
+// it holds model results read here ("" otherwise). Such a variable has no georeferencing of its own: the model's
+// coordinates are in other variables, which only the model readers take.
+std::string modelBehind(const std::string& name) {
+    for (const char* driver : {"NETCDF:", "HDF5:"}) {
+        if (name.rfind(driver, 0) != 0) continue;
+        std::string rest = name.substr(std::string(driver).size());
+        std::string file = rest[0] == '"' ? rest.substr(1, rest.find('"', 1) - 1) : rest.substr(0, rest.rfind(':'));
+        return !file.empty() && !hc::ingest::modelFormatOf(file).empty() ? file : "";
+    }
+    return "";
+}
+
 // The options into `o`, validated before any work; false after --help.
 bool parseOptions(int argc, char** argv, hc::ingest::Options& o, std::string& out, bool& quiet, bool& mesh) {
     std::string water, waterSurface, waterLevel, times, faceLayers, meshMode = "auto";
@@ -148,6 +161,9 @@ bool parseOptions(int argc, char** argv, hc::ingest::Options& o, std::string& ou
     mesh = !o.input.empty() && !hc::ingest::modelFormatOf(o.input).empty();
     if (!mesh && std::filesystem::exists(o.input))
         if (std::string hint = hc::ingest::unreadModelFormat(o.input); !hint.empty()) throw hc::Error(o.input + ": " + hint);
+    if (std::string file = modelBehind(o.input); !file.empty())
+        throw hc::Error(o.input + ": a variable of flood model results (" + hc::ingest::modelFormatOf(file) + "), which has no georeferencing of "
+                        "its own: give the file itself (hc-ingest " + file + " -o OUT.hcg: terrain and every step)");
     if (!o.waterMesh.empty()) {
         if (mesh) throw hc::Error("--water-mesh: the input " + o.input + " is itself model results; give a terrain raster as INPUT");
         for (const char* opt : {"--water", "--water-surface", "--water-level", "--times"})
@@ -187,9 +203,14 @@ bool parseOptions(int argc, char** argv, hc::ingest::Options& o, std::string& ou
     if (!waterLevel.empty())
         o.water = hc::ingest::WaterSource::Level, o.waterLevelsM = hc::cli::parseNumberList(waterLevel, "--water-level", 1, SIZE_MAX);
     if (!times.empty()) o.timesS = hc::cli::parseNumberList(times, "--times", 1, SIZE_MAX);
+    for (const auto& w : o.waterPaths) {
+        hc::cli::checkNotSame(out, w, "output grid");
+        if (std::string file = modelBehind(w); !file.empty())
+            throw hc::Error(w + ": a variable of flood model results (" + hc::ingest::modelFormatOf(file) + "), which has no georeferencing of its "
+                            "own: give the file with --water-mesh " + file + " (its levels over time on the terrain)");
+    }
     if (o.waterPaths.size() == 1) o.waterPath = o.waterPaths[0], o.waterPaths.clear();
     if (o.waterLevelsM.size() == 1) o.waterLevelM = o.waterLevelsM[0], o.waterLevelsM.clear();
-    for (const auto& w : o.waterPaths) hc::cli::checkNotSame(out, w, "output grid");
     o.progress = !quiet;
     hc::ingest::validateOptions(o);
     hc::cli::checkWritable(out, "output grid");

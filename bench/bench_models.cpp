@@ -6,6 +6,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <filesystem>
 #include <memory>
 #include <string>
 #include <vector>
@@ -136,7 +137,16 @@ int main(int argc, char** argv) {
         if (out.empty() || (faces != "quads" && faces != "triangles") || steps == 0) throw hc::Error("give -o OUT.nc, --faces quads|triangles, --steps >= 1");
         GDALAllRegister();
         const Raster r = readRaster(raster);
-        writeMesh(r, out, faces == "quads", steps);
+        const std::string tmp = out + ".partial.nc";  // renamed when whole: a run stopped midway leaves no OUT.nc
+        std::error_code ec;
+        try {
+            writeMesh(r, tmp, faces == "quads", steps);
+        } catch (...) {
+            std::filesystem::remove(tmp, ec);
+            throw;
+        }
+        std::filesystem::rename(tmp, out, ec);
+        if (ec) throw hc::Error(out + ": cannot be written: " + ec.message());
         std::printf("hc-bench-models: %s -> %s: %zu x %zu px as %s, %u steps\n", raster.c_str(), out.c_str(), r.w, r.h, faces.c_str(), steps);
         return 0;
     });

@@ -109,3 +109,12 @@ hc_cli_test(mesh.sampled_triangles 0 [[input +D-Flow FM map \(UGRID-1\.0\): [0-9
   --exists s.hcg --no-match [[error]]
   --check [["$HC_INFO" s.hcg | grep -E '^  model +D-Flow FM map \(UGRID-1\.0\): [0-9]+ faces \(triangles\)']]
   -- ${INGEST} t.nc -o s.hcg)
+
+# A variable of model results named as a raster has no georeferencing of its own: refused, naming the file to give.
+set(BENCH_MAP "'$<TARGET_FILE:hc-bench-models>' ${D}/hef_srtm.tif -o q.nc --steps 2 > /dev/null")
+hc_cli_test(mesh.model_variable_as_terrain nonzero [[^hc-ingest: error: NETCDF:"q\.nc":zb: a variable of flood model results .*give the file itself \(hc-ingest q\.nc]]
+  --setup ${BENCH_MAP} --absent x.hcg
+  -- ${INGEST} [[NETCDF:"q.nc":zb]] -o x.hcg)
+hc_cli_test(mesh.model_variable_as_water nonzero [[^hc-ingest: error: NETCDF:"q\.nc":zs: a variable of flood model results .*--water-mesh q\.nc]]
+  --setup ${BENCH_MAP} --absent x.hcg
+  -- ${INGEST} ${D}/hef_srtm.tif --water-surface [[NETCDF:"q.nc":zs]] -o x.hcg)
