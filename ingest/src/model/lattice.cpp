@@ -152,16 +152,24 @@ QuadtreeFit fitQuadtree(const ModelMesh& m, double toleranceM) {
     }
     double minSide = std::numeric_limits<double>::infinity();
     for (const FaceShape& s : shapes) minSide = std::min(minSide, s.side);
+    // Each face's level by its side's ratio to the smallest; then each side against its level's multiple of the mean
+    // finest side (the smallest side alone is biased low where nodes scatter by their rounding).
     q.level.resize(n);
     double sumSide = 0, sumScale = 0;
     for (size_t f = 0; f < n; ++f) {
         const int l = int(std::lround(std::log2(shapes[f].side / minSide)));
-        if (l < 0 || l > kMaxLevel || std::abs(shapes[f].side - std::ldexp(minSide, l)) > 2 * slack + 1e-6 * shapes[f].side)
+        if (l < 0 || l > kMaxLevel || std::abs(shapes[f].side / std::ldexp(minSide, l) - 1) > 0.01)
             fail(m.nameOf(f) + " has a side of " + num(shapes[f].side) + " m, not a power-of-two multiple of the smallest face's " + num(minSide) +
                  " m: not a quadtree mesh");
         q.level[f] = l;
         sumSide += shapes[f].side, sumScale += std::ldexp(1.0, l);
     }
+    const double meanFinest = sumSide / sumScale;
+    for (size_t f = 0; f < n; ++f)
+        if (std::abs(shapes[f].side - std::ldexp(meanFinest, q.level[f])) > 2 * slack + 1e-6 * shapes[f].side)
+            fail(m.nameOf(f) + " has a side of " + num(shapes[f].side) + " m, " + num(std::ldexp(meanFinest, q.level[f])) + " m for 2^" +
+                 std::to_string(q.level[f]) + " faces of the finest side (" + num(meanFinest) + " m on average): not a power-of-two multiple of it " +
+                 "to " + num(2 * slack) + " m: not a quadtree mesh");
     // The nodes the faces use, relative to the first face's first node (no UTM magnitude is rotated or squared).
     std::vector<int64_t> slot(m.nodeX.size(), -1);
     std::vector<size_t> nodes, faceOf;
