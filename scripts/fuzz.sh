@@ -33,7 +33,7 @@ cmake --build build-fuzz -j "$(nproc)" --target fuzz
 
 mkdir -p build-fuzz/findings
 status=0
-for reader in hcg hci hcp bookmarks points ugrid selafin; do
+for reader in hcg hci hcp bookmarks points ugrid selafin 2dm; do
   work=$(mktemp -d)
   cp fuzz/corpus/$reader/* "$work/"
   dict=()

@@ -173,4 +173,14 @@ inline void writeSelafin(const TriMesh& m, const std::vector<double>& times, con
     }
 }
 
+// The mesh as an SMS .2dm (nodes with the bed as z, E3T triangles), as TUFLOW and SMS write their meshes.
+inline void writeTwoDm(const TriMesh& m, const std::string& path) {
+    std::ofstream out(path);
+    out.precision(17);
+    out << "MESH2D\n";
+    for (size_t i = 0; i < m.tris.size(); ++i)
+        out << "E3T " << i + 1 << ' ' << m.tris[i][0] + 1 << ' ' << m.tris[i][1] + 1 << ' ' << m.tris[i][2] + 1 << " 1\n";
+    for (size_t i = 0; i < m.x.size(); ++i) out << "ND " << i + 1 << ' ' << m.x[i] << ' ' << m.y[i] << ' ' << m.bed[i] << '\n';
+}
+
 }  // namespace hc::test

@@ -265,6 +265,16 @@ TEST_F(Models, TriangleMeshIsSampledLinearlyOverItsTriangles) {
         w.array("time", {time}, GDT_Float64, {0, 600}, {{"units", "seconds since 2000-01-01"}});
         w.array("mesh2d_s1", {time, nodes}, GDT_Float64, lv32, {{"location", "node"}});
     }
+    // The same mesh as an SMS .2dm (terrain only; full-precision coordinates and bed): the same cells, and elevations
+    // within float32's rounding of the Selafin ones (which stored both as float32).
+    hc::test::writeTwoDm(tm, path("mesh.2dm"));
+    ASSERT_EQ(hc::ingest::modelFormatOf(path("mesh.2dm")), "SMS/TUFLOW .2dm mesh (terrain only)");
+    ingestModel(path("mesh.2dm"), path("t.hcg"), o);
+    {
+        const Grid a = hc::readGrid(path("s.hcg")), t = hc::readGrid(path("t.hcg"));
+        ASSERT_EQ(a.codes, t.codes);
+        for (size_t i = 0; i < a.cellCount(); ++i) ASSERT_NEAR(a.values[0][i], t.values[0][i], 5e-5) << i;
+    }
     o.terrainVar = "mesh2d_node_z", o.waterSurfaceVar = "mesh2d_s1";
     ingestModel(path("mesh.nc"), path("u.hcg"), o);
     for (size_t k = 0; k < 2; ++k) {

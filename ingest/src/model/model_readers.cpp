@@ -35,10 +35,17 @@ const Format kFormats[] = {{detail::hecRasFormat, detail::readHecRas},     {deta
                            {detail::swwFormat, detail::readSww},           {detail::threeDiFormat, detail::readThreeDi},
                            {detail::tuflowFvFormat, detail::readTuflowFv}, {detail::ugridFormat, detail::readUgrid}};
 
+// A .2dm mesh alone: terrain only (its nodes' z), no results.
+bool isTwoDm(const std::string& path) {
+    return detail::lower(std::filesystem::path(path).extension().string()) == ".2dm" && std::filesystem::is_regular_file(path);
+}
+
 }  // namespace
 
 std::string modelFormatOf(const std::string& path) {
     if (detail::isSelafin(path)) return "TELEMAC Selafin";
+    if (isTwoDm(path)) return "SMS/TUFLOW .2dm mesh (terrain only)";
+    if (std::string f = detail::xmdfFormat(path); !f.empty()) return f;
     std::shared_ptr<GDALDataset> keep;
     auto root = detail::openMultidimRoot(path, keep);
     if (!root) return "";
@@ -53,18 +60,20 @@ std::string unreadModelFormat(const std::string& path) {
     if (ext == ".dfsu" || ext == ".dfs2")
         return "a MIKE 21 result (" + ext + "): not read here; convert it to a UGRID NetCDF map (mikeio: Dataset.to_xarray, "
                "then xugrid) or export the water level as GeoTIFFs per step (--water-surface)";
-    if (ext == ".2dm")
-        return "an SMS/TUFLOW .2dm mesh holds no results: give its results file (TUFLOW FV .nc) or export the water "
-               "level as GeoTIFFs per step (--water-surface)";
-    if (ext == ".xmdf" || ext == ".dat")
-        return "an XMDF/ASCII-dat result (" + ext + ", TUFLOW classic, SMS, HYDRO_AS-2D): not read here; export the water "
-               "level as GeoTIFFs per step from TUFLOW or QGIS's mesh tools (--water-surface), or convert to a UGRID NetCDF map";
+    if (ext == ".xmdf")
+        return "an XMDF result without its mesh: put the .2dm beside it (NAME.2dm for NAME.xmdf, or MODEL.2dm for "
+               "MODEL_anything.xmdf)";
+    if (ext == ".dat")
+        return "an SMS ASCII/binary .dat result: not read here; export the water level as GeoTIFFs per step from SMS or "
+               "QGIS's mesh tools (--water-surface), or convert to XMDF or a UGRID NetCDF map";
     if (ext == ".sqlite" || ext == ".gpkg") return "a model's geometry database: give its results file (results_3di.nc)";
     return "";
 }
 
 ModelMesh readModelMesh(const std::string& path, const MeshReadOptions& opt) {
     if (detail::isSelafin(path)) return detail::readSelafin(path, opt);
+    if (isTwoDm(path)) return readTwoDmMesh(path);
+    if (!detail::xmdfFormat(path).empty()) return detail::readXmdf(path, opt);
     std::shared_ptr<GDALDataset> keep;
     auto root = detail::openMultidimRoot(path, keep);
     if (!root) {

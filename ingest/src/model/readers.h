@@ -32,4 +32,11 @@ ModelMesh readThreeDi(const std::string& path, std::shared_ptr<GDALDataset> keep
 ModelMesh readTuflowFv(const std::string& path, std::shared_ptr<GDALDataset> keep, const MeshReadOptions& opt);
 ModelMesh readSelafin(const std::string& path, const MeshReadOptions& opt);
 
+// TUFLOW/SMS XMDF results (xmdf.cpp): an HDF5 file GDAL opens whose root "File Type" is "Xmdf" or which holds a group
+// of "Values" and "Times", with a .2dm mesh found for it: NAME.2dm for NAME.xmdf (or NAME.h5); else in the same folder
+// the .2dm MODEL.2dm for MODEL_anything.xmdf (the longest such MODEL); else the folder's only .2dm. "" otherwise;
+// never throws.
+std::string xmdfFormat(const std::string& path);
+ModelMesh readXmdf(const std::string& path, const MeshReadOptions& opt);
+
 }  // namespace hc::ingest::detail

@@ -90,6 +90,9 @@ std::string unreadModelFormat(const std::string& path);
 // step or variable that is wrong; an unknown model format is refused naming the format and what to convert it to.
 ModelMesh readModelMesh(const std::string& path, const MeshReadOptions& options);
 
+// An SMS/TUFLOW .2dm mesh alone (xmdf.cpp): its nodes, 2-D faces and bed (the nodes' z); throws hc::Error.
+ModelMesh readTwoDmMesh(const std::string& path);
+
 // Checks a mesh as read (node indexes in range, faces of >= 3 nodes, step field sizes, times increasing): throws
 // hc::Error naming the face or step. Every reader calls it last.
 void checkModelMesh(const ModelMesh& mesh);
