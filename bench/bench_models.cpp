@@ -1,6 +1,6 @@
 // hc-bench-models: a flood model's results of any size, for the model-ingest benchmark (bench/models/run.sh): a real
-// raster written as a UGRID-1.0 map, as a quadtree model writes it (one square face per pixel, the bed per face) or as a
-// finite-element model does (nodes at the pixel centres, two triangles a square of them, the bed per node), with a
+// raster written as a UGRID-1.0 map, as a quadtree model writes it (one square face per pixel, the bed per face) or as
+// a finite-element model does (nodes at the pixel centres, two triangles a square of them, the bed per node), with a
 // flood rising over N steps (the level rises evenly from the lowest to the highest bed; zs is the bed where dry, as
 // SFINCS and D-Flow FM write it). Steps are written one at a time: memory stays at the raster and the mesh.
 #include <algorithm>
@@ -42,12 +42,14 @@ Raster readRaster(const std::string& path) {
         CPLFree(wkt);
     }
     r.z.resize(r.w * r.h);
-    if (ds->GetRasterBand(1)->RasterIO(GF_Read, 0, 0, int(r.w), int(r.h), r.z.data(), int(r.w), int(r.h), GDT_Float32, 0, 0) != CE_None)
+    if (ds->GetRasterBand(1)->RasterIO(GF_Read, 0, 0, int(r.w), int(r.h), r.z.data(), int(r.w), int(r.h), GDT_Float32,
+                                       0, 0) != CE_None)
         throw hc::Error(path + ": cannot be read");
     return r;
 }
 
-void write(const ArrayPtr& a, const std::vector<GUInt64>& start, const std::vector<size_t>& count, const void* data, GDALDataType t) {
+void write(const ArrayPtr& a, const std::vector<GUInt64>& start, const std::vector<size_t>& count, const void* data,
+           GDALDataType t) {
     if (!a->Write(start.data(), count.data(), nullptr, nullptr, GDALExtendedDataType::Create(t), data))
         throw hc::Error("cannot write " + a->GetName() + ": " + CPLGetLastErrorMsg());
 }
@@ -63,10 +65,13 @@ void writeMesh(const Raster& r, const std::string& out, bool quads, size_t steps
     if (!ds) throw hc::Error(out + ": cannot be created");
     auto root = ds->GetRootGroup();
     // Quads: nodes at the pixel corners, a face per pixel. Triangles: nodes at the pixel centres.
-    const size_t nw = quads ? r.w + 1 : r.w, nh = quads ? r.h + 1 : r.h, faces = quads ? r.w * r.h : 2 * (r.w - 1) * (r.h - 1);
+    const size_t nw = quads ? r.w + 1 : r.w, nh = quads ? r.h + 1 : r.h,
+                 faces = quads ? r.w * r.h : 2 * (r.w - 1) * (r.h - 1);
     const size_t per = quads ? 4 : 3;
-    auto dn = root->CreateDimension("mesh2d_nNodes", "", "", nw * nh), df = root->CreateDimension("mesh2d_nFaces", "", "", faces);
-    auto dk = root->CreateDimension("mesh2d_nMax_face_nodes", "", "", per), dt = root->CreateDimension("time", "", "", steps);
+    auto dn = root->CreateDimension("mesh2d_nNodes", "", "", nw * nh),
+         df = root->CreateDimension("mesh2d_nFaces", "", "", faces);
+    auto dk = root->CreateDimension("mesh2d_nMax_face_nodes", "", "", per),
+         dt = root->CreateDimension("time", "", "", steps);
     auto mesh = root->CreateMDArray("mesh2d", {}, GDALExtendedDataType::Create(GDT_Int32));
     text(mesh, "cf_role", "mesh_topology");
     mesh->CreateAttribute("topology_dimension", {}, GDALExtendedDataType::Create(GDT_Int32))->WriteInt(2);
@@ -80,7 +85,9 @@ void writeMesh(const Raster& r, const std::string& out, bool quads, size_t steps
     std::vector<double> x(nw * nh), y(nw * nh);
     const double off = quads ? 0.0 : 0.5;
     for (size_t j = 0; j < nh; ++j)
-        for (size_t i = 0; i < nw; ++i) x[j * nw + i] = r.gt[0] + (double(i) + off) * r.gt[1], y[j * nw + i] = r.gt[3] + (double(j) + off) * r.gt[5];
+        for (size_t i = 0; i < nw; ++i)
+            x[j * nw + i] = r.gt[0] + (double(i) + off) * r.gt[1],
+                       y[j * nw + i] = r.gt[3] + (double(j) + off) * r.gt[5];
     auto ax = root->CreateMDArray("mesh2d_node_x", {dn}, GDALExtendedDataType::Create(GDT_Float64));
     auto ay = root->CreateMDArray("mesh2d_node_y", {dn}, GDALExtendedDataType::Create(GDT_Float64));
     write(ax, {0}, {x.size()}, x.data(), GDT_Float64);
@@ -91,8 +98,10 @@ void writeMesh(const Raster& r, const std::string& out, bool quads, size_t steps
     auto n = [&](size_t i, size_t j) { return int32_t(j * nw + i); };
     for (size_t j = 0; j + 1 < nh; ++j)
         for (size_t i = 0; i + 1 < nw; ++i) {
-            if (quads) conn.insert(conn.end(), {n(i, j + 1), n(i + 1, j + 1), n(i + 1, j), n(i, j)});
-            else conn.insert(conn.end(), {n(i, j + 1), n(i + 1, j + 1), n(i + 1, j), n(i, j + 1), n(i + 1, j), n(i, j)});
+            if (quads)
+                conn.insert(conn.end(), {n(i, j + 1), n(i + 1, j + 1), n(i + 1, j), n(i, j)});
+            else
+                conn.insert(conn.end(), {n(i, j + 1), n(i + 1, j + 1), n(i + 1, j), n(i, j + 1), n(i + 1, j), n(i, j)});
         }
     auto fn = root->CreateMDArray("mesh2d_face_nodes", {df, dk}, GDALExtendedDataType::Create(GDT_Int32));
     write(fn, {0, 0}, {faces, per}, conn.data(), GDT_Int32);
@@ -130,11 +139,14 @@ int main(int argc, char** argv) {
                           "model-ingest benchmark (bench/models/run.sh).");
         p.positional("RASTER", "terrain raster (GDAL)", raster);
         p.option("-o", "OUT.nc", "the map file to write", out);
-        p.option("--faces", "quads|triangles", "one square face per pixel (bed per face), or two triangles a square of pixel centres\n"
-                 "      (bed per node) (default quads)", faces);
+        p.option("--faces", "quads|triangles",
+                 "one square face per pixel (bed per face), or two triangles a square of pixel centres\n"
+                 "      (bed per node) (default quads)",
+                 faces);
         p.option("--steps", "N", "time steps, 600 s apart (default 100)", steps);
         if (!p.parse(argc, argv)) return 0;
-        if (out.empty() || (faces != "quads" && faces != "triangles") || steps == 0) throw hc::Error("give -o OUT.nc, --faces quads|triangles, --steps >= 1");
+        if (out.empty() || (faces != "quads" && faces != "triangles") || steps == 0)
+            throw hc::Error("give -o OUT.nc, --faces quads|triangles, --steps >= 1");
         GDALAllRegister();
         const Raster r = readRaster(raster);
         const std::string tmp = out + ".partial.nc";  // renamed when whole: a run stopped midway leaves no OUT.nc
@@ -147,7 +159,8 @@ int main(int argc, char** argv) {
         }
         std::filesystem::rename(tmp, out, ec);
         if (ec) throw hc::Error(out + ": cannot be written: " + ec.message());
-        std::printf("hc-bench-models: %s -> %s: %zu x %zu px as %s, %u steps\n", raster.c_str(), out.c_str(), r.w, r.h, faces.c_str(), steps);
+        std::printf("hc-bench-models: %s -> %s: %zu x %zu px as %s, %u steps\n", raster.c_str(), out.c_str(), r.w, r.h,
+                    faces.c_str(), steps);
         return 0;
     });
 }

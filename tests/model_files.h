@@ -34,7 +34,9 @@ inline RasterValues readRasterValues(const std::string& path) {
     r.width = size_t(ds->GetRasterXSize()), r.height = size_t(ds->GetRasterYSize());
     r.v.resize(r.width * r.height);
     GDALRasterBand* b = ds->GetRasterBand(1);
-    if (b->RasterIO(GF_Read, 0, 0, int(r.width), int(r.height), r.v.data(), int(r.width), int(r.height), GDT_Float64, 0, 0) != CE_None) r.v.clear();
+    if (b->RasterIO(GF_Read, 0, 0, int(r.width), int(r.height), r.v.data(), int(r.width), int(r.height), GDT_Float64, 0,
+                    0) != CE_None)
+        r.v.clear();
     int has = 0;
     const double nodata = b->GetNoDataValue(&has);
     for (double& x : r.v)
@@ -47,32 +49,43 @@ class NcWriter {
 public:
     explicit NcWriter(const std::string& path) {
         GDALAllRegister();
-        ds_.reset(GetGDALDriverManager()->GetDriverByName("netCDF")->CreateMultiDimensional(path.c_str(), nullptr, nullptr));
+        ds_.reset(
+            GetGDALDriverManager()->GetDriverByName("netCDF")->CreateMultiDimensional(path.c_str(), nullptr, nullptr));
         if (ds_) root_ = ds_->GetRootGroup();
     }
     bool ok() const { return root_ != nullptr; }
-    std::shared_ptr<GDALDimension> dim(const std::string& name, size_t n) { return root_->CreateDimension(name, "", "", n); }
+    std::shared_ptr<GDALDimension> dim(const std::string& name, size_t n) {
+        return root_->CreateDimension(name, "", "", n);
+    }
     // An array of `type` holding `values` (converted), with text attributes and an optional fill value.
-    std::shared_ptr<GDALMDArray> array(const std::string& name, const std::vector<std::shared_ptr<GDALDimension>>& dims, GDALDataType type,
-                                       const std::vector<double>& values, std::vector<std::pair<std::string, std::string>> attrs = {},
+    std::shared_ptr<GDALMDArray> array(const std::string& name, const std::vector<std::shared_ptr<GDALDimension>>& dims,
+                                       GDALDataType type, const std::vector<double>& values,
+                                       std::vector<std::pair<std::string, std::string>> attrs = {},
                                        std::optional<double> fill = std::nullopt) {
         auto a = root_->CreateMDArray(name, dims, GDALExtendedDataType::Create(type));
         if (!a) return a;
         if (fill) a->SetNoDataValue(*fill);
-        for (const auto& [k, v] : attrs) a->CreateAttribute(k, {}, GDALExtendedDataType::CreateString())->Write(v.c_str());
+        for (const auto& [k, v] : attrs)
+            a->CreateAttribute(k, {}, GDALExtendedDataType::CreateString())->Write(v.c_str());
         std::vector<GUInt64> start(dims.size(), 0);
         std::vector<size_t> count;
         for (const auto& d : dims) count.push_back(size_t(d->GetSize()));
         if (!values.empty()) {
-            EXPECT_TRUE(a->Write(start.data(), count.data(), nullptr, nullptr, GDALExtendedDataType::Create(GDT_Float64), values.data())) << name;
+            EXPECT_TRUE(a->Write(start.data(), count.data(), nullptr, nullptr,
+                                 GDALExtendedDataType::Create(GDT_Float64), values.data()))
+                << name;
         }
         return a;
     }
     void intAttr(const std::shared_ptr<GDALMDArray>& a, const std::string& k, int v) {
         a->CreateAttribute(k, {}, GDALExtendedDataType::Create(GDT_Int32))->WriteInt(v);
     }
-    void globalNum(const std::string& k, double v) { root_->CreateAttribute(k, {}, GDALExtendedDataType::Create(GDT_Float64))->Write(v); }
-    void globalText(const std::string& k, const std::string& v) { root_->CreateAttribute(k, {}, GDALExtendedDataType::CreateString())->Write(v.c_str()); }
+    void globalNum(const std::string& k, double v) {
+        root_->CreateAttribute(k, {}, GDALExtendedDataType::Create(GDT_Float64))->Write(v);
+    }
+    void globalText(const std::string& k, const std::string& v) {
+        root_->CreateAttribute(k, {}, GDALExtendedDataType::CreateString())->Write(v.c_str());
+    }
     void close() { ds_.reset(), root_.reset(); }
 
 private:
@@ -84,10 +97,10 @@ private:
 // (split along the south-west to north-east diagonal); node values the raster's. Coordinates: pixel centres of a
 // raster of `pixel` metres whose north-west corner is (west, north).
 struct TriMesh {
-    size_t cols = 0, rows = 0;           // nodes along x and y, row 0 the northern-most
-    std::vector<double> x, y, bed;       // per node
+    size_t cols = 0, rows = 0;      // nodes along x and y, row 0 the northern-most
+    std::vector<double> x, y, bed;  // per node
     std::vector<std::array<uint32_t, 3>> tris;
-    double spacing = 0;                  // between nodes [m]
+    double spacing = 0;  // between nodes [m]
 };
 
 inline TriMesh triangulate(const RasterValues& r, size_t step, double west, double north, double pixel) {
@@ -117,7 +130,8 @@ inline bool triangleAt(const TriMesh& m, double px, double py, std::array<size_t
     const size_t i = std::min(size_t(fi), m.cols - 2), j = std::min(size_t(fj), m.rows - 2);
     u = fi - double(i), v = double(j + 1) - fj;
     auto n = [&](size_t a, size_t b) { return b * m.cols + a; };
-    nodes = u >= v ? std::array<size_t, 3>{n(i, j + 1), n(i + 1, j + 1), n(i + 1, j)} : std::array<size_t, 3>{n(i, j + 1), n(i, j), n(i + 1, j)};
+    nodes = u >= v ? std::array<size_t, 3>{n(i, j + 1), n(i + 1, j + 1), n(i + 1, j)}
+                   : std::array<size_t, 3>{n(i, j + 1), n(i, j), n(i + 1, j)};
     return true;
 }
 
@@ -132,7 +146,8 @@ inline double interpolate(const TriMesh& m, const std::vector<double>& values, d
 }
 
 // The mesh as a TELEMAC Selafin file (single precision, TELEMAC's English names), levels per step per node.
-inline void writeSelafin(const TriMesh& m, const std::vector<double>& times, const std::vector<std::vector<double>>& levels, const std::string& path) {
+inline void writeSelafin(const TriMesh& m, const std::vector<double>& times,
+                         const std::vector<std::vector<double>>& levels, const std::string& path) {
     std::ofstream out(path, std::ios::binary);
     auto be32 = [&](uint32_t v) {
         const uint32_t b = std::endian::native == std::endian::little ? __builtin_bswap32(v) : v;
@@ -179,8 +194,10 @@ inline void writeTwoDm(const TriMesh& m, const std::string& path) {
     out.precision(17);
     out << "MESH2D\n";
     for (size_t i = 0; i < m.tris.size(); ++i)
-        out << "E3T " << i + 1 << ' ' << m.tris[i][0] + 1 << ' ' << m.tris[i][1] + 1 << ' ' << m.tris[i][2] + 1 << " 1\n";
-    for (size_t i = 0; i < m.x.size(); ++i) out << "ND " << i + 1 << ' ' << m.x[i] << ' ' << m.y[i] << ' ' << m.bed[i] << '\n';
+        out << "E3T " << i + 1 << ' ' << m.tris[i][0] + 1 << ' ' << m.tris[i][1] + 1 << ' ' << m.tris[i][2] + 1
+            << " 1\n";
+    for (size_t i = 0; i < m.x.size(); ++i)
+        out << "ND " << i + 1 << ' ' << m.x[i] << ' ' << m.y[i] << ' ' << m.bed[i] << '\n';
 }
 
 }  // namespace hc::test

@@ -24,10 +24,10 @@ protected:
 };
 
 struct Case {
-    const char* path;      // under models/mdal/
-    const char* format;    // the start of modelFormatOf's name
-    size_t faces, steps;   // as the reader gives them
-    bool cells;            // faces taken as cells (a quadtree) rather than sampled
+    const char* path;     // under models/mdal/
+    const char* format;   // the start of modelFormatOf's name
+    size_t faces, steps;  // as the reader gives them
+    bool cells;           // faces taken as cells (a quadtree) rather than sampled
 };
 
 // The figures each reader gave on these files when they were written (docs/models.md); a reader that changes how it

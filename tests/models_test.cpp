@@ -54,7 +54,8 @@ void writeQuadtreeMap(const std::string& gridPath, const std::string& out, doubl
         const double h = g.cellSizeM(i) / 2;
         const double corners[4][2] = {{cx - h, cy - h}, {cx + h, cy - h}, {cx + h, cy + h}, {cx - h, cy + h}};
         for (const auto& p : corners) {
-            nx.push_back(double(float(x0 + c * p[0] - s * p[1]))), ny.push_back(double(float(y0 + s * p[0] + c * p[1])));
+            nx.push_back(double(float(x0 + c * p[0] - s * p[1]))),
+                ny.push_back(double(float(y0 + s * p[0] + c * p[1])));
             conn.push_back(double(nx.size() - 1));
         }
     }
@@ -62,15 +63,20 @@ void writeQuadtreeMap(const std::string& gridPath, const std::string& out, doubl
     for (size_t k = 0; k < g.steps.size(); ++k) {
         const Grid at = hc::readGrid(gridPath, nullptr, k);
         times.push_back(at.steps[k].timeS / 3600);
-        for (size_t i = 0; i < at.cellCount(); ++i) zs.push_back(at.values[1][i] > 0 ? double(at.values[0][i]) + double(at.values[1][i]) : -99999.0);
+        for (size_t i = 0; i < at.cellCount(); ++i)
+            zs.push_back(at.values[1][i] > 0 ? double(at.values[0][i]) + double(at.values[1][i]) : -99999.0);
     }
     NcWriter w(out);
     ASSERT_TRUE(w.ok());
     w.globalText("Producer", "SFINCS model: Super-Fast INundation of CoastS");  // as SFINCS writes it
-    auto nodes = w.dim("nmesh2d_node", nx.size()), faces = w.dim("nmesh2d_face", g.cellCount()), four = w.dim("max_nmesh2d_face_nodes", 4);
+    auto nodes = w.dim("nmesh2d_node", nx.size()), faces = w.dim("nmesh2d_face", g.cellCount()),
+         four = w.dim("max_nmesh2d_face_nodes", 4);
     auto time = w.dim("time", times.size());
-    auto topo = w.array("mesh2d", {}, GDT_Int32, {}, {{"cf_role", "mesh_topology"}, {"node_coordinates", "mesh2d_node_x mesh2d_node_y"},
-                                                      {"face_node_connectivity", "mesh2d_face_nodes"}, {"face_dimension", "nmesh2d_face"}});
+    auto topo = w.array("mesh2d", {}, GDT_Int32, {},
+                        {{"cf_role", "mesh_topology"},
+                         {"node_coordinates", "mesh2d_node_x mesh2d_node_y"},
+                         {"face_node_connectivity", "mesh2d_face_nodes"},
+                         {"face_dimension", "nmesh2d_face"}});
     w.intAttr(topo, "topology_dimension", 2);
     w.array("mesh2d_node_x", {nodes}, GDT_Float32, nx);
     w.array("mesh2d_node_y", {nodes}, GDT_Float32, ny);
@@ -117,19 +123,23 @@ TEST_F(Models, Float32QuadtreeFitsItsLatticeCellForCell) {
     EXPECT_NEAR(q.rotationDeg, 27.0, 1e-3);
     EXPECT_NEAR(q.originWorldX, 450000.0, 0.25);
     EXPECT_NEAR(q.originWorldY, 5000000.0, 0.25);
-    // Every node lies within float32's rounding of the lattice (0.5 m apart: at most 0.25 m each way, plus the fit's own
-    // error), and some lie off it: the default tolerance is 2 ulps, 1 m.
+    // Every node lies within float32's rounding of the lattice (0.5 m apart: at most 0.25 m each way, plus the fit's
+    // own error), and some lie off it: the default tolerance is 2 ulps, 1 m.
     EXPECT_GT(q.stats.latticeResidualM, 0.05);
     EXPECT_LE(q.stats.latticeResidualM, 0.5);
-    EXPECT_EQ(q.stats.sourceFormat.rfind("SFINCS quadtree map (UGRID-1.0): " + std::to_string(a.cellCount()) + " faces", 0), 0u)
+    EXPECT_EQ(
+        q.stats.sourceFormat.rfind("SFINCS quadtree map (UGRID-1.0): " + std::to_string(a.cellCount()) + " faces", 0),
+        0u)
         << q.stats.sourceFormat << ": hc-info names the model, the format and the faces";
     ASSERT_EQ(b.steps.size(), 3u);
     for (size_t k = 0; k < 3; ++k) {
         const Grid x = hc::readGrid(src, nullptr, k), y = hc::readGrid(path("q.hcg"), nullptr, k);
         EXPECT_EQ(y.stepTimeS(), x.stepTimeS());
         ASSERT_EQ(y.steps[k].wetCells, x.steps[k].wetCells);
-        for (size_t i = 0; i < x.cellCount(); ++i)  // level = elevation + depth in double, minus elevation: the depth to a rounding
-            ASSERT_NEAR(y.values[1][i], x.values[1][i], 1e-5f * std::max(1.0f, x.values[1][i])) << "step " << k << " cell " << i;
+        for (size_t i = 0; i < x.cellCount();
+             ++i)  // level = elevation + depth in double, minus elevation: the depth to a rounding
+            ASSERT_NEAR(y.values[1][i], x.values[1][i], 1e-5f * std::max(1.0f, x.values[1][i]))
+                << "step " << k << " cell " << i;
     }
     // A tolerance tighter than the file's own precision refuses the mesh, naming the face and its residual.
     hc::ingest::Options tight;
@@ -180,7 +190,8 @@ TEST_F(Models, SfincsRegularMapIsTakenCellByCell) {
                         const size_t cell = transposed ? b * m + a : a * m + b;
                         zs.push_back(level > zb[cell] ? level : zb[cell]);  // SFINCS writes zs = zb where dry
                     }
-            w.array("zs", transposed ? std::vector{time, dm, dn} : std::vector{time, dn, dm}, GDT_Float32, zs, {}, -99999.0);
+            w.array("zs", transposed ? std::vector{time, dm, dn} : std::vector{time, dn, dm}, GDT_Float32, zs, {},
+                    -99999.0);
         }
         ASSERT_EQ(hc::ingest::modelFormatOf(nc), "SFINCS regular map (NetCDF)");
         const hc::ingest::BuildSummary b = ingestModel(nc, path("r.hcg"));
@@ -197,7 +208,8 @@ TEST_F(Models, SfincsRegularMapIsTakenCellByCell) {
                 }
                 ASSERT_TRUE(at) << cell;
                 ASSERT_EQ(g.values[0][*at], float(zb[cell]));
-                const double depth = levels[k] > double(float(zb[cell])) ? double(float(levels[k])) - double(float(zb[cell])) : 0.0;
+                const double depth =
+                    levels[k] > double(float(zb[cell])) ? double(float(levels[k])) - double(float(zb[cell])) : 0.0;
                 ASSERT_NEAR(g.values[1][*at], depth, 1e-5) << "cell " << cell << " step " << k;
             }
         }
@@ -249,8 +261,11 @@ TEST_F(Models, TriangleMeshIsSampledLinearlyOverItsTriangles) {
     // The same mesh and fields as a UGRID map with node variables: the same cells and values, bit for bit.
     {
         NcWriter w(path("mesh.nc"));
-        auto nodes = w.dim("nNodes", tm.x.size()), faces = w.dim("nFaces", tm.tris.size()), three = w.dim("three", 3), time = w.dim("time", 2);
-        auto topo = w.array("mesh", {}, GDT_Int32, {}, {{"cf_role", "mesh_topology"}, {"node_coordinates", "nx ny"}, {"face_node_connectivity", "fn"}});
+        auto nodes = w.dim("nNodes", tm.x.size()), faces = w.dim("nFaces", tm.tris.size()), three = w.dim("three", 3),
+             time = w.dim("time", 2);
+        auto topo =
+            w.array("mesh", {}, GDT_Int32, {},
+                    {{"cf_role", "mesh_topology"}, {"node_coordinates", "nx ny"}, {"face_node_connectivity", "fn"}});
         w.intAttr(topo, "topology_dimension", 2);
         std::vector<double> f32x, f32y, conn, bed32, lv32;
         for (size_t i = 0; i < tm.x.size(); ++i)  // Selafin stored them as float32: so do we here
@@ -330,12 +345,15 @@ TEST_F(Models, WaterMeshFloodsTheDem) {
     EXPECT_GT(wet, 100u);
 }
 
-// A fill value the file does not declare (-9999 on the bed of a face): said, with the fix; --nodata -9999 makes it a hole.
+// A fill value the file does not declare (-9999 on the bed of a face): said, with the fix; --nodata -9999 makes it a
+// hole.
 TEST_F(Models, UndeclaredFillValuesAreSaidAndNodataMakesThemHoles) {
     {
         NcWriter w(path("fill.nc"));
         auto nodes = w.dim("nNodes", 9), faces = w.dim("nFaces", 4), four = w.dim("four", 4), time = w.dim("time", 1);
-        auto topo = w.array("mesh", {}, GDT_Int32, {}, {{"cf_role", "mesh_topology"}, {"node_coordinates", "nx ny"}, {"face_node_connectivity", "fn"}});
+        auto topo =
+            w.array("mesh", {}, GDT_Int32, {},
+                    {{"cf_role", "mesh_topology"}, {"node_coordinates", "nx ny"}, {"face_node_connectivity", "fn"}});
         w.intAttr(topo, "topology_dimension", 2);
         w.array("nx", {nodes}, GDT_Float64, {0, 10, 20, 0, 10, 20, 0, 10, 20});
         w.array("ny", {nodes}, GDT_Float64, {0, 0, 0, 10, 10, 10, 20, 20, 20});
@@ -374,9 +392,12 @@ TEST_F(Models, BrokenModelFilesAreRefusedByName) {
     // A small triangle mesh, written with one thing wrong at a time.
     auto write = [&](const std::string& nc, int badNode, size_t levelFaces, std::vector<double> times) {
         NcWriter w(nc);
-        auto nodes = w.dim("nNodes", 4), faces = w.dim("nFaces", 2), three = w.dim("three", 3), time = w.dim("time", times.size());
+        auto nodes = w.dim("nNodes", 4), faces = w.dim("nFaces", 2), three = w.dim("three", 3),
+             time = w.dim("time", times.size());
         auto lf = levelFaces == 2 ? faces : w.dim("other", levelFaces);
-        auto topo = w.array("mesh", {}, GDT_Int32, {}, {{"cf_role", "mesh_topology"}, {"node_coordinates", "nx ny"}, {"face_node_connectivity", "fn"}});
+        auto topo =
+            w.array("mesh", {}, GDT_Int32, {},
+                    {{"cf_role", "mesh_topology"}, {"node_coordinates", "nx ny"}, {"face_node_connectivity", "fn"}});
         w.intAttr(topo, "topology_dimension", 2);
         w.array("nx", {nodes}, GDT_Float64, {0, 10, 10, 0});
         w.array("ny", {nodes}, GDT_Float64, {0, 0, 10, 10});

@@ -11,9 +11,14 @@
 namespace hc::ingest::detail {
 
 WarpSeams::WarpSeams(std::vector<Seam> seams, const double gt[6], size_t srcHeight, const OGRSpatialReference& source,
-                     const OGRSpatialReference& target, std::shared_ptr<OGRCoordinateTransformation> ct, const double ext[4], double cell,
-                     size_t width, size_t height, Fill fill)
-    : seams_(std::move(seams)), srcHeight_(srcHeight), cell_(cell), width_(width), height_(height), fill_(std::move(fill)) {
+                     const OGRSpatialReference& target, std::shared_ptr<OGRCoordinateTransformation> ct,
+                     const double ext[4], double cell, size_t width, size_t height, Fill fill)
+    : seams_(std::move(seams)),
+      srcHeight_(srcHeight),
+      cell_(cell),
+      width_(width),
+      height_(height),
+      fill_(std::move(fill)) {
     std::copy(gt, gt + 6, gt_);
     std::copy(ext, ext + 4, ext_);
     OGRSpatialReference from = target, to = source;
@@ -21,8 +26,8 @@ WarpSeams::WarpSeams(std::vector<Seam> seams, const double gt[6], size_t srcHeig
     to.SetAxisMappingStrategy(OAMS_TRADITIONAL_GIS_ORDER);
     inverse_.reset(OGRCreateCoordinateTransformation(&from, &to));
     if (!inverse_) throw Error("cannot transform back from the target CRS: " + lastGdalError());
-    // Each seam's footprint: both columns' meridians, sampled every quarter source row, mapped into output pixels; every
-    // output row between consecutive samples gets the columns between them, two more on each side.
+    // Each seam's footprint: both columns' meridians, sampled every quarter source row, mapped into output pixels;
+    // every output row between consecutive samples gets the columns between them, two more on each side.
     const double dx = gt_[1];
     for (const Seam& s : seams_) {
         Band b;
@@ -30,7 +35,8 @@ WarpSeams::WarpSeams(std::vector<Seam> seams, const double gt[6], size_t srcHeig
         b.last.assign(height_, std::numeric_limits<int64_t>::min());
         for (double lon : {s.lonW, s.lonW + dx}) {
             std::vector<double> x, y;
-            for (size_t q = 0; q <= 4 * srcHeight_; ++q) x.push_back(lon), y.push_back(gt_[3] + double(q) / 4.0 * gt_[5]);
+            for (size_t q = 0; q <= 4 * srcHeight_; ++q)
+                x.push_back(lon), y.push_back(gt_[3] + double(q) / 4.0 * gt_[5]);
             std::vector<int> ok(x.size());
             CPLErrorStateBackuper quiet;
             ct->Transform(int(x.size()), x.data(), y.data(), nullptr, ok.data());
@@ -90,16 +96,19 @@ void WarpSeams::apply(size_t c0, size_t r0, size_t w, size_t h, float* out) cons
     for (size_t k = 0; k < seams_.size(); ++k) {
         const Seam& s = seams_[k];
         for (size_t r = r0; r < r0 + h; ++r) {
-            const int64_t a = std::max(bands_[k].first[r], int64_t(c0)), b = std::min(bands_[k].last[r], int64_t(c0 + w) - 1);
+            const int64_t a = std::max(bands_[k].first[r], int64_t(c0)),
+                          b = std::min(bands_[k].last[r], int64_t(c0 + w) - 1);
             if (a > b) continue;
             x.clear(), y.clear();
-            for (int64_t c = a; c <= b; ++c) x.push_back(ext_[0] + (double(c) + 0.5) * cell_), y.push_back(ext_[3] - (double(r) + 0.5) * cell_);
+            for (int64_t c = a; c <= b; ++c)
+                x.push_back(ext_[0] + (double(c) + 0.5) * cell_), y.push_back(ext_[3] - (double(r) + 0.5) * cell_);
             ok.assign(x.size(), 0);
             CPLErrorStateBackuper quiet;
             inverse_->Transform(int(x.size()), x.data(), y.data(), nullptr, ok.data());
             for (size_t i = 0; i < x.size(); ++i) {
                 if (!ok[i]) continue;
-                const double lon = s.lonW + std::remainder(x[i] - s.lonW - gt_[1] / 2, 360.0) + gt_[1] / 2;  // near the seam
+                const double lon =
+                    s.lonW + std::remainder(x[i] - s.lonW - gt_[1] / 2, 360.0) + gt_[1] / 2;  // near the seam
                 if (!(lon > s.lonW && lon < s.lonW + gt_[1])) continue;
                 const double v = interpolate(s, k, lon, y[i]);
                 out[(r - r0) * w + size_t(a - int64_t(c0)) + i] = float(v);

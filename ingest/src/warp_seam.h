@@ -20,19 +20,21 @@ namespace hc::ingest::detail {
 
 class WarpSeams {
 public:
-    using Fill = std::function<void(size_t col0, size_t row0, size_t w, size_t h, float* out)>;  // source columns, row-major
+    using Fill =
+        std::function<void(size_t col0, size_t row0, size_t w, size_t h, float* out)>;  // source columns, row-major
     // A seam between source columns colW and colE, colW's centre at lonW [degrees] and colE's at lonW + dx.
     struct Seam {
         size_t colW = 0, colE = 0;
         double lonW = 0;
     };
-    // `gt`: the source's geotransform (north-up, degrees); srcHeight its rows; `ct`: source -> target; the output's west
-    // and north edges, pixel size and size [target units].
+    // `gt`: the source's geotransform (north-up, degrees); srcHeight its rows; `ct`: source -> target; the output's
+    // west and north edges, pixel size and size [target units].
     WarpSeams(std::vector<Seam> seams, const double gt[6], size_t srcHeight, const OGRSpatialReference& source,
-              const OGRSpatialReference& target, std::shared_ptr<OGRCoordinateTransformation> ct, const double ext[4], double cell,
-              size_t width, size_t height, Fill fill);
+              const OGRSpatialReference& target, std::shared_ptr<OGRCoordinateTransformation> ct, const double ext[4],
+              double cell, size_t width, size_t height, Fill fill);
     bool empty() const { return seams_.empty(); }
-    // Re-interpolates the pixels [c0, c0 + w) x [r0, r0 + h) of `out` (the warped window) that lie between a seam's columns.
+    // Re-interpolates the pixels [c0, c0 + w) x [r0, r0 + h) of `out` (the warped window) that lie between a seam's
+    // columns.
     void apply(size_t c0, size_t r0, size_t w, size_t h, float* out) const;
 
 private:

@@ -37,22 +37,27 @@ double angleMod90(double deg) {
 // Four nodes, square to `slack` (sides within slack of their mean, corners right within the same).
 FaceShape faceShape(const ModelMesh& m, size_t f, double slackOf1) {
     if (m.nodesOf(f) != 4)
-        throw Error(m.source + ": " + m.nameOf(f) + " has " + std::to_string(m.nodesOf(f)) + " nodes: a quadtree mesh has square faces of 4 nodes");
+        throw Error(m.source + ": " + m.nameOf(f) + " has " + std::to_string(m.nodesOf(f)) +
+                    " nodes: a quadtree mesh has square faces of 4 nodes");
     double ex[4], ey[4], len[4], s = 0;
     for (int e = 0; e < 4; ++e) {
-        const uint32_t a = m.faceNodes[m.faceStart[f] + size_t(e)], b = m.faceNodes[m.faceStart[f] + size_t((e + 1) % 4)];
+        const uint32_t a = m.faceNodes[m.faceStart[f] + size_t(e)],
+                       b = m.faceNodes[m.faceStart[f] + size_t((e + 1) % 4)];
         ex[e] = m.nodeX[b] - m.nodeX[a], ey[e] = m.nodeY[b] - m.nodeY[a];
         len[e] = std::hypot(ex[e], ey[e]);
         s += len[e] / 4;
     }
-    if (!(len[0] > 0)) throw Error(m.source + ": " + m.nameOf(f) + " has two nodes at one place: a quadtree mesh has square faces");
+    if (!(len[0] > 0))
+        throw Error(m.source + ": " + m.nameOf(f) + " has two nodes at one place: a quadtree mesh has square faces");
     const double slack = slackOf1 + 1e-6 * s;
     for (int e = 0; e < 4; ++e)
         if (std::abs(len[e] - len[0]) > 2 * slack)
-            throw Error(m.source + ": " + m.nameOf(f) + " is not a square (sides " + num(len[0]) + " and " + num(len[e]) + " m): not a quadtree mesh");
+            throw Error(m.source + ": " + m.nameOf(f) + " is not a square (sides " + num(len[0]) + " and " +
+                        num(len[e]) + " m): not a quadtree mesh");
     for (int e = 0; e < 4; ++e)
         if (std::abs(ex[e] * ex[(e + 1) % 4] + ey[e] * ey[(e + 1) % 4]) > 4 * slack * s)
-            throw Error(m.source + ": " + m.nameOf(f) + " is not a square (its corners are not right angles): not a quadtree mesh");
+            throw Error(m.source + ": " + m.nameOf(f) +
+                        " is not a square (its corners are not right angles): not a quadtree mesh");
     return {s, angleMod90(std::atan2(ey[0], ex[0]) * 180.0 / M_PI)};
 }
 
@@ -81,7 +86,8 @@ Similarity fitSimilarity(const std::vector<double>& x, const std::vector<double>
                          const std::vector<int64_t>& j, bool turned) {
     const double n = double(x.size());
     double mx = 0, my = 0, mi = 0, mj = 0;
-    for (size_t k = 0; k < x.size(); ++k) mx += x[k] / n, my += y[k] / n, mi += double(i[k]) / n, mj += double(j[k]) / n;
+    for (size_t k = 0; k < x.size(); ++k)
+        mx += x[k] / n, my += y[k] / n, mi += double(i[k]) / n, mj += double(j[k]) / n;
     double sii = 0, sa = 0, sb = 0;
     for (size_t k = 0; k < x.size(); ++k) {
         const double di = double(i[k]) - mi, dj = double(j[k]) - mj, dx = x[k] - mx, dy = y[k] - my;
@@ -108,7 +114,8 @@ bool looksLikeQuadtree(const ModelMesh& m, double slack, std::string& why) {
             if (m.nodesOf(f) != 4) return why = m.nameOf(f) + " has " + std::to_string(m.nodesOf(f)) + " nodes", false;
             double len[4];
             for (int e = 0; e < 4; ++e) {
-                const uint32_t a = m.faceNodes[m.faceStart[f] + size_t(e)], b = m.faceNodes[m.faceStart[f] + size_t((e + 1) % 4)];
+                const uint32_t a = m.faceNodes[m.faceStart[f] + size_t(e)],
+                               b = m.faceNodes[m.faceStart[f] + size_t((e + 1) % 4)];
                 len[e] = std::hypot(m.nodeX[b] - m.nodeX[a], m.nodeY[b] - m.nodeY[a]);
             }
             const auto [lo, hi] = std::minmax_element(len, len + 4);
@@ -130,8 +137,10 @@ QuadtreeFit fitQuadtree(const ModelMesh& m, double toleranceM) {
     const size_t n = m.faceCount();
     // Structure: square faces, one orientation, power-of-two sides (to the tolerance the fit will hold them to).
     double smallest = std::numeric_limits<double>::infinity();
-    for (size_t f = 0; f < n; ++f) smallest = std::min(smallest, std::hypot(m.nodeX[m.faceNodes[m.faceStart[f] + 1]] - m.nodeX[m.faceNodes[m.faceStart[f]]],
-                                                                          m.nodeY[m.faceNodes[m.faceStart[f] + 1]] - m.nodeY[m.faceNodes[m.faceStart[f]]]));
+    for (size_t f = 0; f < n; ++f)
+        smallest = std::min(
+            smallest, std::hypot(m.nodeX[m.faceNodes[m.faceStart[f] + 1]] - m.nodeX[m.faceNodes[m.faceStart[f]]],
+                                 m.nodeY[m.faceNodes[m.faceStart[f] + 1]] - m.nodeY[m.faceNodes[m.faceStart[f]]]));
     QuadtreeFit q;
     q.tolerance = toleranceM >= 0 ? toleranceM : defaultTolerance(m, smallest);
     // The faces' shapes are checked to the coordinates' own precision (or a larger tolerance given): a tighter one
@@ -145,10 +154,11 @@ QuadtreeFit fitQuadtree(const ModelMesh& m, double toleranceM) {
         if (std::abs(std::remainder(shapes[f].angle - theta, 90.0)) <= slackDeg) continue;
         size_t other = 0;  // the face turned furthest from this one, to name beside it
         for (size_t g = 0; g < n; ++g)
-            if (std::abs(std::remainder(shapes[g].angle - shapes[f].angle, 90.0)) > std::abs(std::remainder(shapes[other].angle - shapes[f].angle, 90.0)))
+            if (std::abs(std::remainder(shapes[g].angle - shapes[f].angle, 90.0)) >
+                std::abs(std::remainder(shapes[other].angle - shapes[f].angle, 90.0)))
                 other = g;
-        fail(m.nameOf(f) + " is turned by " + num(shapes[f].angle) + " degrees, " + m.nameOf(other) + " by " + num(shapes[other].angle) +
-             ": a quadtree's faces share one orientation");
+        fail(m.nameOf(f) + " is turned by " + num(shapes[f].angle) + " degrees, " + m.nameOf(other) + " by " +
+             num(shapes[other].angle) + ": a quadtree's faces share one orientation");
     }
     double minSide = std::numeric_limits<double>::infinity();
     for (const FaceShape& s : shapes) minSide = std::min(minSide, s.side);
@@ -159,23 +169,26 @@ QuadtreeFit fitQuadtree(const ModelMesh& m, double toleranceM) {
     for (size_t f = 0; f < n; ++f) {
         const int l = int(std::lround(std::log2(shapes[f].side / minSide)));
         if (l < 0 || l > kMaxLevel || std::abs(shapes[f].side / std::ldexp(minSide, l) - 1) > 0.01)
-            fail(m.nameOf(f) + " has a side of " + num(shapes[f].side) + " m, not a power-of-two multiple of the smallest face's " + num(minSide) +
-                 " m: not a quadtree mesh");
+            fail(m.nameOf(f) + " has a side of " + num(shapes[f].side) +
+                 " m, not a power-of-two multiple of the smallest face's " + num(minSide) + " m: not a quadtree mesh");
         q.level[f] = l;
         sumSide += shapes[f].side, sumScale += std::ldexp(1.0, l);
     }
     const double meanFinest = sumSide / sumScale;
     for (size_t f = 0; f < n; ++f)
         if (std::abs(shapes[f].side - std::ldexp(meanFinest, q.level[f])) > 2 * slack + 1e-6 * shapes[f].side)
-            fail(m.nameOf(f) + " has a side of " + num(shapes[f].side) + " m, " + num(std::ldexp(meanFinest, q.level[f])) + " m for 2^" +
-                 std::to_string(q.level[f]) + " faces of the finest side (" + num(meanFinest) + " m on average): not a power-of-two multiple of it " +
-                 "to " + num(2 * slack) + " m: not a quadtree mesh");
+            fail(m.nameOf(f) + " has a side of " + num(shapes[f].side) + " m, " +
+                 num(std::ldexp(meanFinest, q.level[f])) + " m for 2^" + std::to_string(q.level[f]) +
+                 " faces of the finest side (" + num(meanFinest) +
+                 " m on average): not a power-of-two multiple of it " + "to " + num(2 * slack) +
+                 " m: not a quadtree mesh");
     // The nodes the faces use, relative to the first face's first node (no UTM magnitude is rotated or squared).
     std::vector<int64_t> slot(m.nodeX.size(), -1);
     std::vector<size_t> nodes, faceOf;
     for (size_t f = 0; f < n; ++f)
         for (uint64_t k = m.faceStart[f]; k < m.faceStart[f + 1]; ++k)
-            if (slot[m.faceNodes[k]] < 0) slot[m.faceNodes[k]] = int64_t(nodes.size()), nodes.push_back(m.faceNodes[k]), faceOf.push_back(f);
+            if (slot[m.faceNodes[k]] < 0)
+                slot[m.faceNodes[k]] = int64_t(nodes.size()), nodes.push_back(m.faceNodes[k]), faceOf.push_back(f);
     const double refX = m.nodeX[nodes[0]], refY = m.nodeY[nodes[0]];
     std::vector<double> x(nodes.size()), y(nodes.size());
     for (size_t k = 0; k < nodes.size(); ++k) x[k] = m.nodeX[nodes[k]] - refX, y[k] = m.nodeY[nodes[k]] - refY;
@@ -200,7 +213,8 @@ QuadtreeFit fitQuadtree(const ModelMesh& m, double toleranceM) {
     double sumSq = 0;
     size_t worst = 0;
     for (size_t k = 0; k < nodes.size(); ++k) {
-        const double ex = s.a * double(i[k]) - s.b * double(j[k]) + s.tx - x[k], ey = s.b * double(i[k]) + s.a * double(j[k]) + s.ty - y[k];
+        const double ex = s.a * double(i[k]) - s.b * double(j[k]) + s.tx - x[k],
+                     ey = s.b * double(i[k]) + s.a * double(j[k]) + s.ty - y[k];
         const double r = std::hypot(ex, ey);
         sumSq += r * r;
         if (r > q.maxResidual) q.maxResidual = r, worst = k;
@@ -210,13 +224,16 @@ QuadtreeFit fitQuadtree(const ModelMesh& m, double toleranceM) {
     q.finest = std::hypot(s.a, s.b);
     q.rotationDeg = std::atan2(s.b, s.a) * 180.0 / M_PI;
     if (!(q.finest > 0) || !std::isfinite(q.finest) || !std::isfinite(q.maxResidual))
-        fail("the faces' nodes fit no lattice (its finest side comes out as " + num(q.finest) + " m): not a quadtree mesh");
+        fail("the faces' nodes fit no lattice (its finest side comes out as " + num(q.finest) +
+             " m): not a quadtree mesh");
     if (q.maxResidual > q.tolerance)
-        fail(fmt::format("the faces' nodes do not fit one lattice: a node of {} lies {:.6g} m from its lattice point (finest side {:.9g} m, "
-                         "turned {:.9g} degrees; tolerance {:.6g} m{}): not a quadtree mesh; --mesh-tolerance M accepts more, "
-                         "--mesh sample samples the faces instead",
-                         m.nameOf(q.worstFace), q.maxResidual, q.finest, q.rotationDeg, q.tolerance,
-                         m.coordsFloat32 ? ", the rounding of float32 coordinates" : ""));
+        fail(fmt::format(
+            "the faces' nodes do not fit one lattice: a node of {} lies {:.6g} m from its lattice point (finest side "
+            "{:.9g} m, "
+            "turned {:.9g} degrees; tolerance {:.6g} m{}): not a quadtree mesh; --mesh-tolerance M accepts more, "
+            "--mesh sample samples the faces instead",
+            m.nameOf(q.worstFace), q.maxResidual, q.finest, q.rotationDeg, q.tolerance,
+            m.coordsFloat32 ? ", the rounding of float32 coordinates" : ""));
     // Each face's cell: its lowest corner on the lattice, its side 2^level lattice steps.
     std::vector<int64_t> ci(n), cj(n);
     size_t coarsest = 0;
@@ -225,7 +242,8 @@ QuadtreeFit fitQuadtree(const ModelMesh& m, double toleranceM) {
         int64_t lo[2] = {INT64_MAX, INT64_MAX}, hi[2] = {INT64_MIN, INT64_MIN};
         for (uint64_t k = m.faceStart[f]; k < m.faceStart[f + 1]; ++k) {
             const size_t at = size_t(slot[m.faceNodes[k]]);
-            lo[0] = std::min(lo[0], i[at]), hi[0] = std::max(hi[0], i[at]), lo[1] = std::min(lo[1], j[at]), hi[1] = std::max(hi[1], j[at]);
+            lo[0] = std::min(lo[0], i[at]), hi[0] = std::max(hi[0], i[at]), lo[1] = std::min(lo[1], j[at]),
+            hi[1] = std::max(hi[1], j[at]);
         }
         const int64_t span = int64_t{1} << q.level[f];
         if (hi[0] - lo[0] != span || hi[1] - lo[1] != span)
@@ -236,15 +254,18 @@ QuadtreeFit fitQuadtree(const ModelMesh& m, double toleranceM) {
     }
     // The origin: on the coarsest face's lattice, at or below every face's corner, so every face aligns to its size.
     const int64_t big = int64_t{1} << q.level[coarsest];
-    const int64_t oi = ci[coarsest] - (ci[coarsest] - minI + big - 1) / big * big, oj = cj[coarsest] - (cj[coarsest] - minJ + big - 1) / big * big;
+    const int64_t oi = ci[coarsest] - (ci[coarsest] - minI + big - 1) / big * big,
+                  oj = cj[coarsest] - (cj[coarsest] - minJ + big - 1) / big * big;
     q.ix.resize(n), q.iy.resize(n);
     int64_t extent = 1;
     for (size_t f = 0; f < n; ++f) {
         const int64_t span = int64_t{1} << q.level[f], fx = ci[f] - oi, fy = cj[f] - oj;
         if (fx % span != 0 || fy % span != 0)
-            fail(m.nameOf(f) + " (side " + num(shapes[f].side) + " m) is not aligned to its own size: not a quadtree mesh");
+            fail(m.nameOf(f) + " (side " + num(shapes[f].side) +
+                 " m) is not aligned to its own size: not a quadtree mesh");
         if (fx + span > (int64_t{1} << kMaxRootLevel) || fy + span > (int64_t{1} << kMaxRootLevel))
-            fail("the mesh spans more than 2^" + std::to_string(kMaxRootLevel) + " smallest faces: too large for one grid");
+            fail("the mesh spans more than 2^" + std::to_string(kMaxRootLevel) +
+                 " smallest faces: too large for one grid");
         q.ix[f] = uint32_t(fx), q.iy[f] = uint32_t(fy);
         extent = std::max({extent, fx + span, fy + span});
         q.maxLevel = std::max(q.maxLevel, q.level[f]);

@@ -17,10 +17,10 @@ struct QuadtreeFit {
     std::vector<uint32_t> ix, iy;     // each face's south-west corner in finest units from the origin
     std::vector<int> level;           // each face's level (side = finest * 2^level)
     int rootLevel = 0, maxLevel = 0;
-    double maxResidual = 0;           // the largest distance of a node from its lattice point
+    double maxResidual = 0;  // the largest distance of a node from its lattice point
     double rmsResidual = 0;
     size_t worstFace = 0;
-    double tolerance = 0;             // what the fit accepted
+    double tolerance = 0;  // what the fit accepted
 };
 
 // Whether the mesh looks like a quadtree (every face four nodes, square to `slack` of its side, sides power-of-two

@@ -33,7 +33,8 @@ std::vector<double> readBox(const MdFile& f, const ArrayPtr& a, std::vector<GUIn
     size_t total = 1;
     for (size_t c : count) total *= c;
     std::vector<double> v(total);
-    if (total && !a->Read(start.data(), count.data(), nullptr, nullptr, GDALExtendedDataType::Create(GDT_Float64), v.data()))
+    if (total &&
+        !a->Read(start.data(), count.data(), nullptr, nullptr, GDALExtendedDataType::Create(GDT_Float64), v.data()))
         f.fail("cannot read the variable '" + a->GetFullName() + "': " + lastGdalError());
     return v;
 }
@@ -46,14 +47,16 @@ std::vector<double> MdFile::read(const ArrayPtr& a) const {
 
 std::vector<double> MdFile::readSlice(const ArrayPtr& a, size_t first) const {
     std::vector<size_t> shape = shapeOf(a);
-    if (shape.empty() || first >= shape[0]) fail("the variable '" + a->GetFullName() + "' has no index " + std::to_string(first));
+    if (shape.empty() || first >= shape[0])
+        fail("the variable '" + a->GetFullName() + "' has no index " + std::to_string(first));
     std::vector<GUInt64> start(shape.size(), 0);
     start[0] = first;
     shape[0] = 1;
     return readBox(*this, a, start, shape);
 }
 
-bool holds(const std::shared_ptr<GDALGroup>& root, std::initializer_list<const char*> all, std::initializer_list<const char*> any) {
+bool holds(const std::shared_ptr<GDALGroup>& root, std::initializer_list<const char*> all,
+           std::initializer_list<const char*> any) {
     if (!root) return false;
     const MdFile f{"", nullptr, root};
     try {
@@ -131,8 +134,8 @@ void checkIncreasing(const MdFile& f, const std::vector<double>& t, const std::s
     for (size_t k = 0; k < t.size(); ++k) {
         if (!std::isfinite(t[k])) f.fail("the time of step " + std::to_string(k) + " (" + what + ") is not a number");
         if (k > 0 && !(t[k] > t[k - 1]))
-            f.fail("the times (" + what + ") do not increase: step " + std::to_string(k) + " at " + fmt(t[k], 9) + " s follows " +
-                   fmt(t[k - 1], 9) + " s");
+            f.fail("the times (" + what + ") do not increase: step " + std::to_string(k) + " at " + fmt(t[k], 9) +
+                   " s follows " + fmt(t[k - 1], 9) + " s");
     }
 }
 

@@ -1,5 +1,5 @@
-// ingest/src/model/md_util.h: reading variables of multidimensional files (NetCDF, HDF5) through GDAL's multidim API, for
-// the model readers (private to ingest/).
+// ingest/src/model/md_util.h: reading variables of multidimensional files (NetCDF, HDF5) through GDAL's multidim API,
+// for the model readers (private to ingest/).
 #pragma once
 
 #include <memory>
@@ -32,8 +32,10 @@ struct MdFile {
     std::vector<double> readSlice(const ArrayPtr& a, size_t first) const;
 };
 
-// Whether the group holds every one of `all` and, when `any` is not empty, one of `any` (a format's probe; never throws).
-bool holds(const std::shared_ptr<GDALGroup>& root, std::initializer_list<const char*> all, std::initializer_list<const char*> any = {});
+// Whether the group holds every one of `all` and, when `any` is not empty, one of `any` (a format's probe; never
+// throws).
+bool holds(const std::shared_ptr<GDALGroup>& root, std::initializer_list<const char*> all,
+           std::initializer_list<const char*> any = {});
 
 // A text attribute ("" when missing) and a numeric one (nullopt when missing).
 std::string textAttr(const ArrayPtr& a, const std::string& name);

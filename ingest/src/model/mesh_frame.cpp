@@ -46,7 +46,9 @@ void transform(ModelMesh& m, const OGRSpatialReference& from, const OGRSpatialRe
         const size_t n = std::min(kChunk, m.nodeX.size() - b);
         if (ct->Transform(int(n), m.nodeX.data() + b, m.nodeY.data() + b, nullptr, ok.data())) continue;
         for (size_t i = 0; i < n; ++i)
-            if (!ok[i]) throw Error(m.source + ": node " + std::to_string(b + i) + " cannot be transformed from " + crsName(&from) + " to " + crsName(&to));
+            if (!ok[i])
+                throw Error(m.source + ": node " + std::to_string(b + i) + " cannot be transformed from " +
+                            crsName(&from) + " to " + crsName(&to));
     }
 }
 
@@ -75,15 +77,20 @@ MeshFrame meshToMetric(ModelMesh& m, const std::string& override, LoadReport& re
     std::string text = override == "local" ? "" : override.empty() ? m.crs : override;
     if (text.empty()) {
         // Degrees by the numbers alone only where metres would make faces under a centimetre: no flood model's.
-        if (override.empty() && box.degreesLike() && box.x1 - box.x0 < 20 && box.y1 - box.y0 < 20 && finestFaceSide(m) < 0.01) {
-            report.warnings.push_back(m.source + ": the mesh names no CRS and its coordinates look like degrees: taken as WGS 84 "
-                                                 "longitude/latitude (--s_srs names its CRS, --s_srs local insists on metres)");
+        if (override.empty() && box.degreesLike() && box.x1 - box.x0 < 20 && box.y1 - box.y0 < 20 &&
+            finestFaceSide(m) < 0.01) {
+            report.warnings.push_back(m.source +
+                                      ": the mesh names no CRS and its coordinates look like degrees: taken as WGS 84 "
+                                      "longitude/latitude (--s_srs names its CRS, --s_srs local insists on metres)");
             text = "EPSG:4326";
         } else {
-            const bool said = std::any_of(report.warnings.begin(), report.warnings.end(),
-                                          [&](const std::string& w) { return w.rfind(m.source, 0) == 0 && w.find("CRS") != std::string::npos; });
+            const bool said = std::any_of(report.warnings.begin(), report.warnings.end(), [&](const std::string& w) {
+                return w.rfind(m.source, 0) == 0 && w.find("CRS") != std::string::npos;
+            });
             if (!said && override.empty())
-                report.warnings.push_back(m.source + ": the mesh names no CRS: coordinates taken as metres in a local frame (name the CRS with --s_srs)");
+                report.warnings.push_back(m.source +
+                                          ": the mesh names no CRS: coordinates taken as metres in a local frame (name "
+                                          "the CRS with --s_srs)");
             return fr;
         }
     }
@@ -92,8 +99,10 @@ MeshFrame meshToMetric(ModelMesh& m, const std::string& override, LoadReport& re
     fr.sourceCrsName = crsName(&srs);
     if (srs.IsGeographic()) {
         if (!box.degreesLike()) {
-            report.warnings.push_back(fmt::format("{}: the CRS {} is geographic, but the coordinates reach {:.9g}, {:.9g}: not degrees; taken as "
-                                                  "metres in a local frame (--s_srs names the right CRS)", m.source, fr.sourceCrsName, box.x1, box.y1));
+            report.warnings.push_back(fmt::format(
+                "{}: the CRS {} is geographic, but the coordinates reach {:.9g}, {:.9g}: not degrees; taken as "
+                "metres in a local frame (--s_srs names the right CRS)",
+                m.source, fr.sourceCrsName, box.x1, box.y1));
             return fr;
         }
         const double lon = std::remainder((box.x0 + box.x1) / 2, 360.0), lat = (box.y0 + box.y1) / 2;
@@ -101,7 +110,9 @@ MeshFrame meshToMetric(ModelMesh& m, const std::string& override, LoadReport& re
         OGRSpatialReference utm;
         utm.CopyGeogCSFrom(&srs);
         utm.SetUTM(zone, lat >= 0);
-        utm.SetProjCS(fmt::format("{} / UTM zone {}{}", srs.GetName() ? srs.GetName() : "unnamed", zone, lat >= 0 ? "N" : "S").c_str());
+        utm.SetProjCS(
+            fmt::format("{} / UTM zone {}{}", srs.GetName() ? srs.GetName() : "unnamed", zone, lat >= 0 ? "N" : "S")
+                .c_str());
         utm.AutoIdentifyEPSG();  // WGS 84's zones become EPSG:326zz / 327zz
         utm.SetAxisMappingStrategy(OAMS_TRADITIONAL_GIS_ORDER);
         transform(m, srs, utm);
@@ -110,9 +121,11 @@ MeshFrame meshToMetric(ModelMesh& m, const std::string& override, LoadReport& re
         return fr;
     }
     if (!srs.IsProjected() || !plausible(srs, box)) {
-        report.warnings.push_back(fmt::format("{}: the coordinates ({:.9g}..{:.9g}, {:.9g}..{:.9g}) cannot lie in {} ({}): taken as metres in a "
-                                              "local frame (--s_srs names the right CRS)", m.source, box.x0, box.x1, box.y0, box.y1, fr.sourceCrsName,
-                                              srs.IsProjected() ? "outside its area of use" : "not a projected CRS"));
+        report.warnings.push_back(fmt::format(
+            "{}: the coordinates ({:.9g}..{:.9g}, {:.9g}..{:.9g}) cannot lie in {} ({}): taken as metres in a "
+            "local frame (--s_srs names the right CRS)",
+            m.source, box.x0, box.x1, box.y0, box.y1, fr.sourceCrsName,
+            srs.IsProjected() ? "outside its area of use" : "not a projected CRS"));
         fr.sourceCrsName.clear();
         return fr;
     }
@@ -121,8 +134,10 @@ MeshFrame meshToMetric(ModelMesh& m, const std::string& override, LoadReport& re
         metric.SetLinearUnitsAndUpdateParameters(SRS_UL_METER, 1.0);
         metric.SetAxisMappingStrategy(OAMS_TRADITIONAL_GIS_ORDER);
         transform(m, srs, metric);
-        report.warnings.push_back(fmt::format("{}: the CRS's unit is {:.10g} m: coordinates converted to metres (the same projection in metres); "
-                                              "levels are taken as the reader gave them", m.source, srs.GetLinearUnits()));
+        report.warnings.push_back(fmt::format(
+            "{}: the CRS's unit is {:.10g} m: coordinates converted to metres (the same projection in metres); "
+            "levels are taken as the reader gave them",
+            m.source, srs.GetLinearUnits()));
         fr.crsWkt = toWkt(metric), fr.crsName = crsName(&metric), fr.moved = true;
         return fr;
     }
@@ -134,9 +149,13 @@ void meshToTarget(ModelMesh& m, const std::string& override, const std::string& 
     const std::string text = override == "local" ? "" : override.empty() ? m.crs : override;
     if (text.empty() || targetWkt.empty()) {
         if (text.empty() && !targetWkt.empty())
-            report.warnings.push_back(m.source + ": the mesh names no CRS: its coordinates are taken in the terrain's CRS (--mesh-srs names the mesh's)");
+            report.warnings.push_back(m.source +
+                                      ": the mesh names no CRS: its coordinates are taken in the terrain's CRS "
+                                      "(--mesh-srs names the mesh's)");
         if (!text.empty() && targetWkt.empty())
-            report.warnings.push_back(m.source + ": the terrain has no CRS: the mesh's coordinates are taken as they are, in the terrain's frame");
+            report.warnings.push_back(
+                m.source +
+                ": the terrain has no CRS: the mesh's coordinates are taken as they are, in the terrain's frame");
         return;
     }
     OGRSpatialReference from = parse(m, text, override.empty() ? "the file names" : "--mesh-srs"), to;

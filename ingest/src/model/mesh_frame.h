@@ -1,4 +1,5 @@
-// ingest/src/model/mesh_frame.h: a model mesh's coordinates brought into the metric frame of a grid (private to ingest/).
+// ingest/src/model/mesh_frame.h: a model mesh's coordinates brought into the metric frame of a grid (private to
+// ingest/).
 #pragma once
 
 #include <string>

@@ -41,11 +41,14 @@ void describe(const ModelMesh& m, LoadReport& report) {
     size_t lo = SIZE_MAX, hi = 0;
     for (size_t f = 0; f < m.faceCount(); ++f) lo = std::min(lo, m.nodesOf(f)), hi = std::max(hi, m.nodesOf(f));
     const std::string kind = !m.kind.empty() ? m.kind
-                             : lo == hi      ? (lo == 3 ? "triangles" : lo == 4 ? "quadrilaterals" : fmt::format("faces of {} nodes", lo))
+                             : lo == hi      ? (lo == 3   ? "triangles"
+                                                : lo == 4 ? "quadrilaterals"
+                                                          : fmt::format("faces of {} nodes", lo))
                                              : fmt::format("mixed faces of {}-{} nodes", lo, hi);
-    report.sourceDescription = fmt::format("{}: {} faces ({}), {} nodes, {} step{}", m.format, m.faceCount(), kind, m.nodeX.size(), m.timesS.size(),
-                                           m.timesS.size() == 1 ? "" : "s");
-    if (!m.timesS.empty()) report.sourceDescription += fmt::format(" at {:.9g}..{:.9g} s", m.timesS.front(), m.timesS.back());
+    report.sourceDescription = fmt::format("{}: {} faces ({}), {} nodes, {} step{}", m.format, m.faceCount(), kind,
+                                           m.nodeX.size(), m.timesS.size(), m.timesS.size() == 1 ? "" : "s");
+    if (!m.timesS.empty())
+        report.sourceDescription += fmt::format(" at {:.9g}..{:.9g} s", m.timesS.front(), m.timesS.back());
     passOn(m, report);
     report.sourceWidth = m.faceCount(), report.sourceHeight = 1;
 }
@@ -56,10 +59,12 @@ void describe(const ModelMesh& m, LoadReport& report) {
 // faces, bed and steps, and must outlive it); ids[k] is face k's index in `m`.
 ModelMesh facesWithBed(ModelMesh& m, std::vector<size_t>& ids) {
     ModelMesh out;
-    out.source = m.source, out.coordsFloat32 = m.coordsFloat32, out.nodeX = std::move(m.nodeX), out.nodeY = std::move(m.nodeY);
+    out.source = m.source, out.coordsFloat32 = m.coordsFloat32, out.nodeX = std::move(m.nodeX),
+    out.nodeY = std::move(m.nodeY);
     for (size_t f = 0; f < m.faceCount(); ++f) {
         if (std::isnan(m.bed.values[f])) continue;
-        out.faceNodes.insert(out.faceNodes.end(), m.faceNodes.begin() + long(m.faceStart[f]), m.faceNodes.begin() + long(m.faceStart[f + 1]));
+        out.faceNodes.insert(out.faceNodes.end(), m.faceNodes.begin() + long(m.faceStart[f]),
+                             m.faceNodes.begin() + long(m.faceStart[f + 1]));
         out.faceStart.push_back(out.faceNodes.size());
         ids.push_back(f);
     }
@@ -94,9 +99,12 @@ Cells cellsOf(const ModelMesh& m, const std::vector<size_t>& ids, const detail::
     std::iota(order.begin(), order.end(), size_t{0});
     std::sort(order.begin(), order.end(), [&](size_t a, size_t b) { return codeOf[a] < codeOf[b]; });
     Cells c;
-    for (size_t k : order) c.codes.push_back(codeOf[k]), c.face.push_back(ids[k]), c.elevation.push_back(float(m.bed.values[ids[k]]));
+    for (size_t k : order)
+        c.codes.push_back(codeOf[k]), c.face.push_back(ids[k]), c.elevation.push_back(float(m.bed.values[ids[k]]));
     for (size_t i = 1; i < c.codes.size(); ++i)
-        if (c.codes[i] == c.codes[i - 1]) throw Error(m.source + ": " + m.nameOf(c.face[i - 1]) + " and " + m.nameOf(c.face[i]) + " are the same square");
+        if (c.codes[i] == c.codes[i - 1])
+            throw Error(m.source + ": " + m.nameOf(c.face[i - 1]) + " and " + m.nameOf(c.face[i]) +
+                        " are the same square");
     return c;
 }
 
@@ -104,7 +112,9 @@ Cells cellsOf(const ModelMesh& m, const std::vector<size_t>& ids, const detail::
 // there (a fill value taken as 0, counted in `unset`).
 WaterStepData stepOf(const ModelMesh& m, const Cells& c, size_t k, std::vector<uint64_t>& unset) {
     const MeshField level = m.level(k);
-    if (level.at != MeshAt::Face) throw Error(m.source + ": the water level is given at nodes: a quadtree's faces need it per face (--mesh sample)");
+    if (level.at != MeshAt::Face)
+        throw Error(m.source +
+                    ": the water level is given at nodes: a quadtree's faces need it per face (--mesh sample)");
     std::vector<MeshField> layers;
     for (const MeshLayer& l : m.layers) layers.push_back(l.read(k));
     WaterStepData step;
@@ -125,11 +135,14 @@ WaterStepData stepOf(const ModelMesh& m, const Cells& c, size_t k, std::vector<u
     return step;
 }
 
-BuildSummary ingestCells(const Options& opt, ModelMesh& m, const detail::MeshFrame& frame, const std::string& path, LoadReport& report,
-                         const Stopwatch& clock) {
-    if (m.bed.at != MeshAt::Face) throw Error(m.source + ": the bed is given at nodes: a quadtree's faces need it per face (--mesh sample samples it)");
+BuildSummary ingestCells(const Options& opt, ModelMesh& m, const detail::MeshFrame& frame, const std::string& path,
+                         LoadReport& report, const Stopwatch& clock) {
+    if (m.bed.at != MeshAt::Face)
+        throw Error(m.source +
+                    ": the bed is given at nodes: a quadtree's faces need it per face (--mesh sample samples it)");
     if (opt.samplingGiven)
-        throw Error("--tolerance / --min-cell / --max-cell: " + m.source + "'s faces are taken as cells, as they are (a quadtree): nothing is "
+        throw Error("--tolerance / --min-cell / --max-cell: " + m.source +
+                    "'s faces are taken as cells, as they are (a quadtree): nothing is "
                     "sampled or merged; --mesh sample samples them onto the grid");
     std::vector<size_t> ids;
     detail::QuadtreeFit q;
@@ -152,7 +165,8 @@ BuildSummary ingestCells(const Options& opt, ModelMesh& m, const detail::MeshFra
     try {
         GridFileWriter writer(path, shape, ids.size(), m.timesS.size());
         writer.append(c.codes, {std::span<const float>(c.elevation)});
-        Progress progress("writing " + std::to_string(m.timesS.size()) + " steps", m.timesS.size(), opt.progress && !m.timesS.empty());
+        Progress progress("writing " + std::to_string(m.timesS.size()) + " steps", m.timesS.size(),
+                          opt.progress && !m.timesS.empty());
         for (size_t k = 0; k < m.timesS.size(); ++k) {
             const WaterStepData step = stepOf(m, c, k, unset);
             out.steps.push_back({step.timeS, step.wet.size(), 0, {}, {}});
@@ -164,20 +178,26 @@ BuildSummary ingestCells(const Options& opt, ModelMesh& m, const detail::MeshFra
         writer.commit(stats);
     } catch (const Error& e) {
         const std::string msg = e.what();  // the writer checks every cell: overlapping faces are caught there
-        if (msg.find("overlap") != std::string::npos) throw Error(m.source + ": faces overlap (" + msg + "): not a quadtree mesh");
+        if (msg.find("overlap") != std::string::npos)
+            throw Error(m.source + ": faces overlap (" + msg + "): not a quadtree mesh");
         throw;
     }
     for (size_t l = 0; l < m.layers.size(); ++l)
         if (unset[l])
-            report.warnings.push_back(fmt::format("{}: {} is a fill value on {} wet face{} (summed over the steps): taken as 0", m.source, m.layers[l].name,
-                                                  unset[l], unset[l] == 1 ? "" : "s"));
+            report.warnings.push_back(
+                fmt::format("{}: {} is a fill value on {} wet face{} (summed over the steps): taken as 0", m.source,
+                            m.layers[l].name, unset[l], unset[l] == 1 ? "" : "s"));
     out.shape.stats = stats;
     out.shape.steps = out.steps;
     out.wetCells = out.steps.empty() ? 0 : out.steps.back().wetCells;
-    report.method = fmt::format("taken as it is: one cell per face, no resampling; the lattice fitted to every node (largest residual {:.3g} m, "
-                                "RMS {:.3g} m, tolerance {:.3g} m){}", q.maxResidual, q.rmsResidual, q.tolerance,
-                                shape.rotationDeg == 0 ? std::string()
-                                                       : fmt::format("; turned {:.9g} degrees against the CRS's axes (the grid's rotation)", shape.rotationDeg));
+    report.method = fmt::format(
+        "taken as it is: one cell per face, no resampling; the lattice fitted to every node (largest residual {:.3g} "
+        "m, "
+        "RMS {:.3g} m, tolerance {:.3g} m){}",
+        q.maxResidual, q.rmsResidual, q.tolerance,
+        shape.rotationDeg == 0
+            ? std::string()
+            : fmt::format("; turned {:.9g} degrees against the CRS's axes (the grid's rotation)", shape.rotationDeg));
     report.sourceValidPixels = ids.size();
     return out;
 }
@@ -187,14 +207,16 @@ BuildSummary ingestCells(const Options& opt, ModelMesh& m, const detail::MeshFra
 detail::PixelFrame frameOver(const ModelMesh& m, double cell) {
     double x0 = HUGE_VAL, x1 = -HUGE_VAL, y0 = HUGE_VAL, y1 = -HUGE_VAL;
     for (uint32_t n : m.faceNodes)
-        x0 = std::min(x0, m.nodeX[n]), x1 = std::max(x1, m.nodeX[n]), y0 = std::min(y0, m.nodeY[n]), y1 = std::max(y1, m.nodeY[n]);
+        x0 = std::min(x0, m.nodeX[n]), x1 = std::max(x1, m.nodeX[n]), y0 = std::min(y0, m.nodeY[n]),
+        y1 = std::max(y1, m.nodeY[n]);
     detail::PixelFrame f;
     f.pixelSizeM = cell;
     f.west = std::floor(x0 / cell) * cell, f.north = std::ceil(y1 / cell) * cell;
     const double w = std::ceil((x1 - f.west) / cell), h = std::ceil((f.north - y0) / cell);
     if (w * h > 4e9 || w > 1e9 || h > 1e9)
-        throw Error(fmt::format("{}: sampling {:.6g} x {:.6g} m at {:.6g} m pixels needs {:.3g} pixels: give a coarser --min-cell", m.source, x1 - x0, y1 - y0,
-                                cell, w * h));
+        throw Error(fmt::format(
+            "{}: sampling {:.6g} x {:.6g} m at {:.6g} m pixels needs {:.3g} pixels: give a coarser --min-cell",
+            m.source, x1 - x0, y1 - y0, cell, w * h));
     f.width = size_t(std::max(1.0, w)), f.height = size_t(std::max(1.0, h));
     return f;
 }
@@ -227,28 +249,39 @@ WaterSteps stepsOf(Sampled s, const Raster& terrain) {
     return w;
 }
 
-BuildSummary ingestSampled(const Options& opt, std::shared_ptr<ModelMesh> m, const detail::MeshFrame& frame, const std::string& path,
-                           LoadReport& report, const Stopwatch& clock) {
+BuildSummary ingestSampled(const Options& opt, std::shared_ptr<ModelMesh> m, const detail::MeshFrame& frame,
+                           const std::string& path, LoadReport& report, const Stopwatch& clock) {
     if (m->bed.values.empty())
-        throw Error(m->source + ": the results hold no bed level: give the terrain as a DEM (hc-ingest DEM.tif --water-mesh " + m->source + ")");
-    if (!m->layers.empty()) throw Error(m->source + ": --face-layers are read from quadtree meshes only (their faces taken as cells)");
+        throw Error(m->source +
+                    ": the results hold no bed level: give the terrain as a DEM (hc-ingest DEM.tif --water-mesh " +
+                    m->source + ")");
+    if (!m->layers.empty())
+        throw Error(m->source + ": --face-layers are read from quadtree meshes only (their faces taken as cells)");
     const double cell = opt.minCellM ? *opt.minCellM : detail::finestFaceSide(*m);
     const detail::PixelFrame pf = frameOver(*m, cell);
     auto cover = std::make_shared<detail::MeshCover>(*m, pf, opt.threads);
     Raster terrain;
-    terrain.width = pf.width, terrain.height = pf.height, terrain.westWorld = pf.west, terrain.northWorld = pf.north, terrain.pixelSizeM = cell;
+    terrain.width = pf.width, terrain.height = pf.height, terrain.westWorld = pf.west, terrain.northWorld = pf.north,
+    terrain.pixelSizeM = cell;
     terrain.crsWkt = frame.crsWkt, terrain.crsName = frame.crsName;
     terrain.values = cover->sample(m->bed);
-    if (terrain.validCount() == 0) throw Error(m->source + ": no pixel centre of " + fmt::format("{:.6g}", cell) + " m lies on a face with a bed level: choose a finer --min-cell");
+    if (terrain.validCount() == 0)
+        throw Error(m->source + ": no pixel centre of " + fmt::format("{:.6g}", cell) +
+                    " m lies on a face with a bed level: choose a finer --min-cell");
     BuildOptions build;
-    build.toleranceM = opt.toleranceM, build.maxLevel = chooseMaxLevel(opt, cell, report), build.threads = opt.threads, build.progress = opt.progress;
+    build.toleranceM = opt.toleranceM, build.maxLevel = chooseMaxLevel(opt, cell, report), build.threads = opt.threads,
+    build.progress = opt.progress;
     const WaterSteps steps = stepsOf({m, cover}, terrain);
     IngestStats extra;
-    extra.sourcePath = opt.input, extra.sourceCrsName = frame.sourceCrsName, extra.sourceFormat = report.sourceDescription, extra.seconds = clock.seconds();
+    extra.sourcePath = opt.input, extra.sourceCrsName = frame.sourceCrsName,
+    extra.sourceFormat = report.sourceDescription, extra.seconds = clock.seconds();
     BuildSummary b = buildGridFile(terrain, steps.count ? &steps : nullptr, build, path, extra);
-    report.method = fmt::format("sampled at the centres of {} x {} pixels of {:.6g} m ({}; the bed and each step's level as the model defines them: {}), "
-                                "then built as a raster", pf.width, pf.height, cell, opt.minCellM ? "--min-cell" : "the finest faces' size",
-                                m->bed.at == MeshAt::Face ? "constant per face" : "linear over triangles");
+    report.method = fmt::format(
+        "sampled at the centres of {} x {} pixels of {:.6g} m ({}; the bed and each step's level as the model defines "
+        "them: {}), "
+        "then built as a raster",
+        pf.width, pf.height, cell, opt.minCellM ? "--min-cell" : "the finest faces' size",
+        m->bed.at == MeshAt::Face ? "constant per face" : "linear over triangles");
     report.sourceValidPixels = cover->covered();
     return b;
 }
@@ -260,19 +293,22 @@ void undeclaredFills(const Options& opt, ModelMesh& m, LoadReport& report) {
         const double v = *opt.nodata;
         for (double& z : m.bed.values)
             if (z == v) z = NAN;
-        if (m.level) m.level = [inner = m.level, v](size_t k) {
-            MeshField f = inner(k);
-            for (double& z : f.values)
-                if (z == v) z = NAN;
-            return f;
-        };
+        if (m.level)
+            m.level = [inner = m.level, v](size_t k) {
+                MeshField f = inner(k);
+                for (double& z : f.values)
+                    if (z == v) z = NAN;
+                return f;
+            };
         return;
     }
     for (double sentinel : {-9999.0, -99999.0, -999.0, -32768.0}) {
         const auto n = std::count(m.bed.values.begin(), m.bed.values.end(), sentinel);
         if (n > 0)
-            report.warnings.push_back(fmt::format("{}: {} bed values are {:g}, a classic fill value the file does not declare: taken as ground at "
-                                                  "that height; --nodata {:g} takes them as holes", m.source, n, sentinel, sentinel));
+            report.warnings.push_back(fmt::format(
+                "{}: {} bed values are {:g}, a classic fill value the file does not declare: taken as ground at "
+                "that height; --nodata {:g} takes them as holes",
+                m.source, n, sentinel, sentinel));
     }
 }
 
@@ -282,8 +318,10 @@ BuildSummary ingestModelToFile(const Options& opt, const std::string& path, Load
     const Stopwatch clock;
     validateOptions(opt);  // --tolerance, --min-cell, --max-cell, --nodata: as for a raster
     for (const std::string& name : opt.faceLayerVars)
-        if (name == "elevation" || name == "water_depth" || name == "water_surface" || name == opt.terrainVar || name == opt.waterSurfaceVar)
-            throw Error("--face-layers " + name + ": that name is the terrain or the water; name further variables (velocity, ...)");
+        if (name == "elevation" || name == "water_depth" || name == "water_surface" || name == opt.terrainVar ||
+            name == opt.waterSurfaceVar)
+            throw Error("--face-layers " + name +
+                        ": that name is the terrain or the water; name further variables (velocity, ...)");
     auto m = std::make_shared<ModelMesh>(readModelMesh(opt.input, readOptions(opt)));
     describe(*m, report);
     undeclaredFills(opt, *m, report);
@@ -307,15 +345,18 @@ namespace detail {
 
 WaterSteps meshWaterSteps(const Options& opt, const Raster& terrain, LoadReport& report) {
     auto m = std::make_shared<ModelMesh>(readModelMesh(opt.waterMesh, readOptions(opt)));
-    if (m->timesS.empty()) throw Error(opt.waterMesh + ": the results hold no water level over time (--water-surface-var names it)");
+    if (m->timesS.empty())
+        throw Error(opt.waterMesh + ": the results hold no water level over time (--water-surface-var names it)");
     passOn(*m, report);
     meshToTarget(*m, opt.meshSrs, terrain.crsWkt, report);
     const PixelFrame pf{terrain.westWorld, terrain.northWorld, terrain.pixelSizeM, terrain.width, terrain.height};
     auto cover = std::make_shared<const MeshCover>(*m, pf, opt.threads);
     if (cover->covered() == 0)
-        throw Error(opt.waterMesh + ": no face of the mesh lies on the terrain's pixels: are both in the CRS they say (--mesh-srs names the mesh's)?");
-    report.method += fmt::format("; water from {} ({} faces, {} steps, on {} of the terrain's pixels)", m->format, m->faceCount(), m->timesS.size(),
-                                 cover->covered());
+        throw Error(opt.waterMesh +
+                    ": no face of the mesh lies on the terrain's pixels: are both in the CRS they say (--mesh-srs "
+                    "names the mesh's)?");
+    report.method += fmt::format("; water from {} ({} faces, {} steps, on {} of the terrain's pixels)", m->format,
+                                 m->faceCount(), m->timesS.size(), cover->covered());
     return stepsOf({m, cover}, terrain);
 }
 

@@ -1,4 +1,5 @@
-// ingest/src/model/sample_mesh.h: a mesh's fields sampled at the pixel centres of a working raster (private to ingest/).
+// ingest/src/model/sample_mesh.h: a mesh's fields sampled at the pixel centres of a working raster (private to
+// ingest/).
 #pragma once
 
 #include <cstdint>

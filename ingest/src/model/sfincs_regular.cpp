@@ -13,8 +13,8 @@ namespace hc::ingest::detail {
 namespace {
 
 struct Lattice {
-    size_t rows = 0, cols = 0;  // the 2-D arrays' dimensions as stored (n, m; or transposed)
-    std::vector<double> x, y;   // cell centres, NaN where the file has a fill value
+    size_t rows = 0, cols = 0;              // the 2-D arrays' dimensions as stored (n, m; or transposed)
+    std::vector<double> x, y;               // cell centres, NaN where the file has a fill value
     double ux = 0, uy = 0, vx = 0, vy = 0;  // one cell along a row (u) and down the columns (v)
 };
 
@@ -27,11 +27,15 @@ void cellSteps(const MdFile& f, Lattice& l) {
         for (size_t c = 0; c < l.cols; ++c) {
             const size_t i = r * l.cols + c;
             if (std::isnan(l.x[i]) || std::isnan(l.y[i])) continue;
-            if (c + 1 < l.cols && !std::isnan(l.x[i + 1]) && !std::isnan(l.y[i + 1])) su[0] += l.x[i + 1] - l.x[i], su[1] += l.y[i + 1] - l.y[i], ++nu;
+            if (c + 1 < l.cols && !std::isnan(l.x[i + 1]) && !std::isnan(l.y[i + 1]))
+                su[0] += l.x[i + 1] - l.x[i], su[1] += l.y[i + 1] - l.y[i], ++nu;
             if (r + 1 < l.rows && !std::isnan(l.x[i + l.cols]) && !std::isnan(l.y[i + l.cols]))
                 sv[0] += l.x[i + l.cols] - l.x[i], sv[1] += l.y[i + l.cols] - l.y[i], ++nv;
         }
-    if (!nu || !nv) f.fail("the cell centres (x, y) have no two neighbouring valid cells along each axis: cannot find the grid's cell size");
+    if (!nu || !nv)
+        f.fail(
+            "the cell centres (x, y) have no two neighbouring valid cells along each axis: cannot find the grid's cell "
+            "size");
     l.ux = su[0] / double(nu), l.uy = su[1] / double(nu), l.vx = sv[0] / double(nv), l.vy = sv[1] / double(nv);
 }
 
@@ -58,13 +62,16 @@ ModelMesh readSfincsRegular(const std::string& path, std::shared_ptr<GDALDataset
     fillToNaN(l.x, fillOf(xv)), fillToNaN(l.y, fillOf(yv));
     m.coordsFloat32 = xv->GetDataType().GetNumericDataType() == GDT_Float32;
     ArrayPtr zbv = f.open(opt.terrainVar.empty() ? "zb" : opt.terrainVar, "the bed level, --terrain-var");
-    if (shapeOf(zbv) != shape) f.fail(zbv->GetName() + " is not shaped as x and y (" + std::to_string(l.rows) + " x " + std::to_string(l.cols) + ")");
+    if (shapeOf(zbv) != shape)
+        f.fail(zbv->GetName() + " is not shaped as x and y (" + std::to_string(l.rows) + " x " +
+               std::to_string(l.cols) + ")");
     std::vector<double> zb = f.read(zbv);
     const size_t bedFills = fillToNaN(zb, fillOf(zbv));
     std::vector<double> msk;
     if (ArrayPtr mv = f.find("msk"); mv && shapeOf(mv) == shape) msk = f.read(mv);
     cellSteps(f, l);
-    // One square face per active cell (msk > 0, or a bed value where there is no mask), corners at centre +- half steps.
+    // One square face per active cell (msk > 0, or a bed value where there is no mask), corners at centre +- half
+    // steps.
     std::vector<size_t> cells;
     for (size_t i = 0; i < l.x.size(); ++i) {
         if (std::isnan(l.x[i]) || std::isnan(l.y[i]) || std::isnan(zb[i]) || (!msk.empty() && !(msk[i] > 0))) continue;
@@ -86,20 +93,27 @@ ModelMesh readSfincsRegular(const std::string& path, std::shared_ptr<GDALDataset
     };
     const double du = std::hypot(l.ux, l.uy), dv = std::hypot(l.vx, l.vy);
     m.quadtreeModel = std::abs(du - dv) <= 1e-3 * du;  // dx = dy: squares, one cell each; else sampled
-    m.kind = fmt::format("a regular grid of {} x {} cells of {:.6g} x {:.6g} m, {} active", l.cols, l.rows, du, dv, cells.size());
+    m.kind = fmt::format("a regular grid of {} x {} cells of {:.6g} x {:.6g} m, {} active", l.cols, l.rows, du, dv,
+                         cells.size());
     if (bedFills) m.notes.push_back(std::to_string(bedFills) + " cells without a bed level (fill values) left out");
     if (ArrayPtr crs = f.find("crs")) {
         const std::string code = textAttr(crs, "epsg_code");
         if (!code.empty() && code != "EPSG:" && code != "EPSG:0" && code != "EPSG:-") m.crs = code;
     }
-    if (m.crs.empty()) m.warnings.push_back(path + ": crs:epsg_code names no CRS: coordinates taken as metres in a local frame (name the CRS with --s_srs)");
+    if (m.crs.empty())
+        m.warnings.push_back(
+            path +
+            ": crs:epsg_code names no CRS: coordinates taken as metres in a local frame (name the CRS with --s_srs)");
     // Water levels: zs (time, rows, cols) as x, or with the two grid dimensions the other way round.
-    ArrayPtr zs = opt.waterSurfaceVar == "-" ? nullptr : f.find(opt.waterSurfaceVar.empty() ? "zs" : opt.waterSurfaceVar);
+    ArrayPtr zs =
+        opt.waterSurfaceVar == "-" ? nullptr : f.find(opt.waterSurfaceVar.empty() ? "zs" : opt.waterSurfaceVar);
     if (!zs) return checkModelMesh(m), m;
     const std::vector<size_t> zshape = shapeOf(zs);
     const bool same = zshape.size() == 3 && zshape[1] == l.rows && zshape[2] == l.cols;
     const bool swapped = zshape.size() == 3 && zshape[1] == l.cols && zshape[2] == l.rows && !same;
-    if (!same && !swapped) f.fail(zs->GetName() + " is not (time, " + std::to_string(l.rows) + ", " + std::to_string(l.cols) + ") as x and y are");
+    if (!same && !swapped)
+        f.fail(zs->GetName() + " is not (time, " + std::to_string(l.rows) + ", " + std::to_string(l.cols) +
+               ") as x and y are");
     ArrayPtr time = zs->GetDimensions()[0]->GetIndexingVariable();
     if (!time) time = f.find("time");
     if (!time) f.fail("no time variable for " + zs->GetName());

@@ -196,7 +196,8 @@ void readSteps(const MdFile& f, const Cells& c, const MeshReadOptions& opt, cons
 }  // namespace
 
 std::string threeDiFormat(const std::shared_ptr<GDALGroup>& root) {
-    return holds(root, {"Mesh2DFace_xcc", "Mesh2DFace_ycc"}, {"Mesh2D_s1", "Mesh2DFace_zcc"}) ? "3Di results (NetCDF)" : "";
+    return holds(root, {"Mesh2DFace_xcc", "Mesh2DFace_ycc"}, {"Mesh2D_s1", "Mesh2DFace_zcc"}) ? "3Di results (NetCDF)"
+                                                                                              : "";
 }
 
 ModelMesh readThreeDi(const std::string& path, std::shared_ptr<GDALDataset> keep, const MeshReadOptions& opt) {

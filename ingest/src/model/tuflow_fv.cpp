@@ -226,7 +226,8 @@ void readSteps(const MdFile& f, const MeshReadOptions& opt, size_t cells3d, Mode
 }  // namespace
 
 std::string tuflowFvFormat(const std::shared_ptr<GDALGroup>& root) {
-    return holds(root, {"cell_Nvert", "cell_node", "node_X", "node_Y"}, {"H", "cell_Zb"}) ? "TUFLOW FV results (NetCDF)" : "";
+    return holds(root, {"cell_Nvert", "cell_node", "node_X", "node_Y"}, {"H", "cell_Zb"}) ? "TUFLOW FV results (NetCDF)"
+                                                                                          : "";
 }
 
 ModelMesh readTuflowFv(const std::string& path, std::shared_ptr<GDALDataset> keep, const MeshReadOptions& opt) {

@@ -31,9 +31,9 @@ std::pair<std::string, std::string> twoNames(const std::string& text) {
     return {a, b};
 }
 
-
 // The first of `names` the file has (the option's name alone when given).
-ArrayPtr firstOf(const MdFile& f, const std::string& given, std::initializer_list<std::string> names, const std::string& role) {
+ArrayPtr firstOf(const MdFile& f, const std::string& given, std::initializer_list<std::string> names,
+                 const std::string& role) {
     if (!given.empty()) return f.open(given, role);
     for (const std::string& n : names)
         if (ArrayPtr a = f.find(n)) return a;
@@ -47,7 +47,8 @@ struct Topology {
     std::string faceDim, nodeDim;  // the dimensions of the connectivity's faces and of the node coordinates
 };
 
-// Where a variable lives on the mesh: by its `location` attribute, else by its last dimension (its name, else its size).
+// Where a variable lives on the mesh: by its `location` attribute, else by its last dimension (its name, else its
+// size).
 std::optional<MeshAt> locationOf(const ArrayPtr& a, const Topology& t) {
     const std::string loc = textAttr(a, "location");
     if (loc == "face") return MeshAt::Face;
@@ -91,8 +92,8 @@ void readNodesAndFaces(const MdFile& f, Topology& t, ModelMesh& m) {
             if (std::isnan(v) || (fill && v == *fill) || v < start) continue;  // padding of a face with fewer nodes
             const double node = v - start;
             if (node >= double(m.nodeX.size()) || node != std::floor(node))
-                f.fail("face " + std::to_string(face) + " names node " + fmt(v, 9) + ", not one of the " + std::to_string(m.nodeX.size()) +
-                       " nodes (start_index " + fmt(start) + ")");
+                f.fail("face " + std::to_string(face) + " names node " + fmt(v, 9) + ", not one of the " +
+                       std::to_string(m.nodeX.size()) + " nodes (start_index " + fmt(start) + ")");
             m.faceNodes.push_back(uint32_t(node));
         }
         m.faceStart.push_back(m.faceNodes.size());
@@ -100,14 +101,16 @@ void readNodesAndFaces(const MdFile& f, Topology& t, ModelMesh& m) {
 }
 
 // A field on the mesh: one value per face or node; `steps` > 0: (time, where) read a step at a time.
-MeshField readField(const MdFile& f, const ArrayPtr& a, const Topology& t, MeshAt at, std::optional<size_t> step, size_t& fills) {
+MeshField readField(const MdFile& f, const ArrayPtr& a, const Topology& t, MeshAt at, std::optional<size_t> step,
+                    size_t& fills) {
     MeshField out;
     out.at = at;
     out.values = step ? f.readSlice(a, *step) : f.read(a);
     const size_t need = at == MeshAt::Face ? t.faces : t.nodes;
     if (out.values.size() != need)
-        f.fail(a->GetName() + (step ? " at step " + std::to_string(*step) : std::string()) + " has " + std::to_string(out.values.size()) +
-               " values for " + std::to_string(need) + (at == MeshAt::Face ? " faces" : " nodes"));
+        f.fail(a->GetName() + (step ? " at step " + std::to_string(*step) : std::string()) + " has " +
+               std::to_string(out.values.size()) + " values for " + std::to_string(need) +
+               (at == MeshAt::Face ? " faces" : " nodes"));
     fills += fillToNaN(out.values, fillOf(a));
     return out;
 }
@@ -146,7 +149,8 @@ std::string ugridFormat(const std::shared_ptr<GDALGroup>& root) {
         sfincs = sfincs || (v && std::string(v).find("SFINCS") != std::string::npos);
     }
     if (sfincs) return "SFINCS quadtree map (UGRID-1.0)";
-    if (textAttr(topos[0], "long_name").find("heightcast") != std::string::npos) return "heightcast quadtree mesh (UGRID-1.0)";
+    if (textAttr(topos[0], "long_name").find("heightcast") != std::string::npos)
+        return "heightcast quadtree mesh (UGRID-1.0)";
     const std::vector<std::string> names = root->GetMDArrayNames();
     const bool dflow = std::find(names.begin(), names.end(), "mesh2d_s1") != names.end() ||
                        std::find(names.begin(), names.end(), "mesh2d_flowelem_bl") != names.end();
@@ -161,39 +165,51 @@ ModelMesh readUgrid(const std::string& path, std::shared_ptr<GDALDataset> keep, 
     m.source = path;
     m.format = ugridFormat(f.root);
     Topology t{topos[0], topos[0]->GetName(), 0, 0, "", ""};
-    if (topos.size() > 1) m.notes.push_back(std::to_string(topos.size() - 1) + " further 2-D mesh(es) beside '" + t.mesh + "' not read");
+    if (topos.size() > 1)
+        m.notes.push_back(std::to_string(topos.size() - 1) + " further 2-D mesh(es) beside '" + t.mesh + "' not read");
     for (const ArrayPtr& net : topologies(f.root, 1))
-        m.notes.push_back("the 1-D network '" + net->GetName() + "' (" + textAttr(net, "long_name") + ") is not drawn: 2-D faces only");
+        m.notes.push_back("the 1-D network '" + net->GetName() + "' (" + textAttr(net, "long_name") +
+                          ") is not drawn: 2-D faces only");
     readNodesAndFaces(f, t, m);
     t.faces = m.faceCount(), t.nodes = m.nodeX.size();
     const std::string& mesh = t.mesh;
     m.quadtreeModel = m.format.rfind("SFINCS", 0) == 0 || m.format.rfind("heightcast", 0) == 0;
     // The bed: the option's, else the models' own names (face values first: the model's cells).
     size_t bedFills = 0;
-    ArrayPtr bed = firstOf(f, opt.terrainVar, {"zb", mesh + "_flowelem_bl", mesh + "_face_z", mesh + "_node_z", "mesh2d_node_z"}, "--terrain-var");
+    ArrayPtr bed =
+        firstOf(f, opt.terrainVar, {"zb", mesh + "_flowelem_bl", mesh + "_face_z", mesh + "_node_z", "mesh2d_node_z"},
+                "--terrain-var");
     if (bed) {
         auto at = locationOf(bed, t);
         if (!at) f.fail(bed->GetName() + " is neither a face nor a node variable of " + mesh);
         m.bed = readField(f, bed, t, *at, std::nullopt, bedFills);
-        if (bedFills) m.warnings.push_back(path + ": " + std::to_string(bedFills) + " values of " + bed->GetName() + " are fill values: holes");
+        if (bedFills)
+            m.warnings.push_back(path + ": " + std::to_string(bedFills) + " values of " + bed->GetName() +
+                                 " are fill values: holes");
     } else {
-        m.warnings.push_back(path + ": no bed level (zb, " + mesh + "_flowelem_bl, " + mesh + "_node_z; --terrain-var names one): a DEM must give the terrain");
+        m.warnings.push_back(path + ": no bed level (zb, " + mesh + "_flowelem_bl, " + mesh +
+                             "_node_z; --terrain-var names one): a DEM must give the terrain");
     }
     m.crs = crsText(f, bed ? bed : t.topo, m);
     // The water level over time.
-    ArrayPtr level = opt.waterSurfaceVar == "-" ? nullptr : firstOf(f, opt.waterSurfaceVar, {"zs", mesh + "_s1"}, "--water-surface-var");
-    if (!level && !opt.layerVars.empty()) f.fail("--face-layers needs the water level: step layers are stored on wet faces");
+    ArrayPtr level = opt.waterSurfaceVar == "-"
+                         ? nullptr
+                         : firstOf(f, opt.waterSurfaceVar, {"zs", mesh + "_s1"}, "--water-surface-var");
+    if (!level && !opt.layerVars.empty())
+        f.fail("--face-layers needs the water level: step layers are stored on wet faces");
     if (!level) return checkModelMesh(m), m;
     const auto at = locationOf(level, t);
     const auto shape = shapeOf(level);
-    if (!at || shape.size() != 2) f.fail(level->GetName() + " is not a (time, face) or (time, node) variable of " + mesh);
+    if (!at || shape.size() != 2)
+        f.fail(level->GetName() + " is not a (time, face) or (time, node) variable of " + mesh);
     ArrayPtr time = level->GetDimensions()[0]->GetIndexingVariable();
     if (!time) time = f.find(level->GetDimensions()[0]->GetName());
     if (time) {
         m.timesS = cfTimesS(f, time);
     } else {
         for (size_t k = 0; k < shape[0]; ++k) m.timesS.push_back(double(k));
-        m.warnings.push_back(path + ": " + level->GetName() + "'s first dimension has no time variable: the step index is taken as time [s]");
+        m.warnings.push_back(path + ": " + level->GetName() +
+                             "'s first dimension has no time variable: the step index is taken as time [s]");
     }
     if (m.timesS.size() != shape[0]) f.fail("the time variable and " + level->GetName() + " differ in steps");
     m.level = [f, level, t, at](size_t k) {
@@ -202,10 +218,12 @@ ModelMesh readUgrid(const std::string& path, std::shared_ptr<GDALDataset> keep, 
     };
     for (const std::string& name : opt.layerVars) {
         if (name == level->GetName() || (bed && name == bed->GetName()))
-            f.fail("--face-layers " + name + ": that is the " + (bed && name == bed->GetName() ? "bed" : "water level") + "; name further variables");
+            f.fail("--face-layers " + name + ": that is the " +
+                   (bed && name == bed->GetName() ? "bed" : "water level") + "; name further variables");
         ArrayPtr a = f.open(name, "--face-layers");
         const auto la = locationOf(a, t);
-        if (!la || shapeOf(a) != shape) f.fail(name + " is not shaped as the water level " + level->GetName() + ": a step layer must be");
+        if (!la || shapeOf(a) != shape)
+            f.fail(name + " is not shaped as the water level " + level->GetName() + ": a step layer must be");
         m.layers.push_back({name, a->GetUnit().empty() ? textAttr(a, "units") : a->GetUnit(), [f, a, t, la](size_t k) {
                                 size_t fills = 0;
                                 return readField(f, a, t, *la, k, fills);

@@ -36,8 +36,8 @@ struct MeshLayer {
 };
 
 struct ModelMesh {
-    std::string source;       // the file, for messages
-    std::string format;       // "D-Flow FM map (UGRID-1.0)", "HEC-RAS 2D plan results (HDF5, version 6)", ...
+    std::string source;  // the file, for messages
+    std::string format;  // "D-Flow FM map (UGRID-1.0)", "HEC-RAS 2D plan results (HDF5, version 6)", ...
     // Nodes in the mesh's CRS (projected: its linear unit; geographic: degrees east/north), and the 2-D faces as
     // polygons of 3 or more nodes in order around them (compressed rows: face f's nodes are
     // faceNodes[faceStart[f] .. faceStart[f + 1]), 0-based). faceStart has faceCount() + 1 entries.
@@ -48,9 +48,9 @@ struct ModelMesh {
     std::function<std::string(size_t face)> faceName;
     // The bed (terrain) [m]; values empty where the file has none (a DEM must then be given).
     MeshField bed;
-    // The water surface elevation [m] per step, read one step at a time (meshes of 10 M faces and 100 steps need not fit
-    // in memory together); times [s], strictly increasing (a reader checks and says which step goes back). No steps:
-    // a terrain mesh only.
+    // The water surface elevation [m] per step, read one step at a time (meshes of 10 M faces and 100 steps need not
+    // fit in memory together); times [s], strictly increasing (a reader checks and says which step goes back). No
+    // steps: a terrain mesh only.
     std::vector<double> timesS;
     std::function<MeshField(size_t step)> level;
     std::vector<MeshLayer> layers;
@@ -64,8 +64,8 @@ struct ModelMesh {
     bool quadtreeModel = false;
     std::vector<std::string> warnings;  // what the reader assumed or turned into NaN, each with its override
     std::vector<std::string> notes;     // what it skipped: "a 1-D network of 40 nodes (not drawn)", 3-D layers, ...
-    std::string kind;                   // "triangles", "quadrilaterals", "mixed faces of 3-6 nodes", "quadtree" (filled by
-                                        // describe() when left empty)
+    std::string kind;  // "triangles", "quadrilaterals", "mixed faces of 3-6 nodes", "quadtree" (filled by
+                       // describe() when left empty)
 
     size_t faceCount() const { return faceStart.size() - 1; }
     size_t nodesOf(size_t f) const { return size_t(faceStart[f + 1] - faceStart[f]); }
@@ -73,8 +73,8 @@ struct ModelMesh {
 };
 
 struct MeshReadOptions {
-    std::string terrainVar;      // UGRID: the bed variable; "" = the format's own (zb, mesh2d_flowelem_bl, ...)
-    std::string waterSurfaceVar; // UGRID: the water level variable; "" = the format's own (zs, mesh2d_s1, ...)
+    std::string terrainVar;              // UGRID: the bed variable; "" = the format's own (zb, mesh2d_flowelem_bl, ...)
+    std::string waterSurfaceVar;         // UGRID: the water level variable; "" = the format's own (zs, mesh2d_s1, ...)
     std::vector<std::string> layerVars;  // further variables over time, each a step layer
 };
 
