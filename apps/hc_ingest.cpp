@@ -146,7 +146,8 @@ bool parseOptions(int argc, char** argv, hc::ingest::Options& o, std::string& ou
     p.option("--terrain-var", "NAME", "model results: the bed level variable; faces where it is a fill value are holes\n"
              "      (default: the format's own: zb, mesh2d_flowelem_bl, mesh2d_node_z, ...)", o.terrainVar);
     p.option("--water-surface-var", "NAME", "model results: the water level variable over time, one step per time; fill values\n"
-             "      and levels not above the bed are dry (default: the format's own: zs, mesh2d_s1, ...)", o.waterSurfaceVar);
+             "      and levels not above the bed are dry; '-' reads the terrain only (default: the format's own: zs,\n"
+             "      mesh2d_s1, ...)", o.waterSurfaceVar);
     p.option("--face-layers", "NAME[,NAME...]", "quadtree model results: further variables over time (velocity magnitude, ...), each\n"
              "      stored per step on the wet faces as a layer of that name and the variable's units (default none)", faceLayers);
     p.option("--threads", "N", "worker threads (default 0 = all cores; under mpirun: per rank)", o.threads);

@@ -23,17 +23,6 @@ const std::string kLevelVar = "Water Surface";
 constexpr double kFootM = 0.3048;
 constexpr double kUsSurveyFootM = 1200.0 / 3937.0;
 
-std::string trim(const std::string& s) {
-    const size_t b = s.find_first_not_of(" \t\r\n"), e = s.find_last_not_of(" \t\r\n");
-    return b == std::string::npos ? "" : s.substr(b, e - b + 1);
-}
-
-std::string rootAttr(const std::shared_ptr<GDALGroup>& root, const std::string& name) {
-    auto at = root ? root->GetAttribute(name) : nullptr;
-    const char* v = at ? at->ReadAsString() : nullptr;
-    return v ? trim(v) : "";
-}
-
 std::shared_ptr<GDALGroup> group(const std::shared_ptr<GDALGroup>& root, const std::string& path) {
     CPLErrorStateBackuper quiet;
     return root ? root->OpenGroupFromFullname(path) : nullptr;
@@ -191,7 +180,7 @@ Area readArea(const MdFile& f, const AreaRef& ref, const MeshReadOptions& opt, d
 
 // Metres per unit of the file's elevations, with the warning that says so where they are feet.
 double elevationUnit(const MdFile& f, const OGRSpatialReference* srs, ModelMesh& m) {
-    const std::string system = rootAttr(f.root, "Units System");
+    const std::string system = rootText(f, "Units System");
     const std::string low = lower(system);
     if (low.find("us customary") != std::string::npos || low.find("english") != std::string::npos) {
         const bool survey = srs && srs->IsProjected() && std::abs(srs->GetLinearUnits() - kUsSurveyFootM) < 1e-9;
@@ -210,9 +199,9 @@ double elevationUnit(const MdFile& f, const OGRSpatialReference* srs, ModelMesh&
 
 // The CRS from the root attribute 'Projection' (ESRI WKT), or "" with a warning.
 std::string readCrs(const MdFile& f, OGRSpatialReference& srs, ModelMesh& m) {
-    const std::string text = rootAttr(f.root, "Projection");
+    const std::string text = rootText(f, "Projection");
     std::string local = ": coordinates taken as metres in a local frame unless --s_srs names one";
-    if (lower(rootAttr(f.root, "Units System")).find("us customary") != std::string::npos)
+    if (lower(rootText(f, "Units System")).find("us customary") != std::string::npos)
         local += " (the file's units are US customary: its coordinates are likely feet)";
     if (text.empty()) {
         m.warnings.push_back(f.path + ": names no CRS (root attribute 'Projection' missing or empty)" + local);
@@ -360,7 +349,8 @@ std::string meshKind(const ModelMesh& m) {
 
 std::string hecRasFormat(const std::shared_ptr<GDALGroup>& root) {
     try {
-        const std::string version = rootAttr(root, "File Version"), type = rootAttr(root, "File Type");
+        const MdFile f{"", nullptr, root};
+        const std::string version = rootText(f, "File Version"), type = rootText(f, "File Type");
         if (version.rfind("HEC-RAS", 0) != 0 && type.rfind("HEC-RAS", 0) != 0) return "";
         // "HEC-RAS 6.1.0 September 2021" -> "HEC-RAS 6.1.0"
         const size_t end = version.find(' ', 8);
@@ -403,7 +393,7 @@ ModelMesh readHecRas(const std::string& path, std::shared_ptr<GDALDataset> keep,
         m.timesS = readTimes(f, m);
         attachSteps(f, areas, opt, toM, m);
     } else if (!results) {
-        const bool plan = rootAttr(f.root, "File Type").find("Results") != std::string::npos;
+        const bool plan = rootText(f, "File Type").find("Results") != std::string::npos;
         const std::string none = "no 2-D results ('" + kSeries + "/2D Flow Areas'): read as terrain only";
         if (plan) m.warnings.push_back(f.path + ": " + none);
         else m.notes.push_back(none);

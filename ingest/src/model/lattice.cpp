@@ -103,25 +103,20 @@ Similarity fitSimilarity(const std::vector<double>& x, const std::vector<double>
 }  // namespace
 
 bool looksLikeQuadtree(const ModelMesh& m, double slack, std::string& why) {
+    // Each face: four nodes, its sides within `slack` of each other (the fit checks right angles and rounding).
     double smallest = std::numeric_limits<double>::infinity();
     std::vector<double> sides(m.faceCount());
     for (size_t f = 0; f < m.faceCount(); ++f) {
-        try {
-            const FaceShape s = faceShape(m, f, 0);
-            sides[f] = s.side;
-        } catch (const Error&) {
-            // Not square to float rounding: square to `slack` still counts (the fit decides).
-            if (m.nodesOf(f) != 4) return why = m.nameOf(f) + " has " + std::to_string(m.nodesOf(f)) + " nodes", false;
-            double len[4];
-            for (int e = 0; e < 4; ++e) {
-                const uint32_t a = m.faceNodes[m.faceStart[f] + size_t(e)],
-                               b = m.faceNodes[m.faceStart[f] + size_t((e + 1) % 4)];
-                len[e] = std::hypot(m.nodeX[b] - m.nodeX[a], m.nodeY[b] - m.nodeY[a]);
-            }
-            const auto [lo, hi] = std::minmax_element(len, len + 4);
-            if (*hi - *lo > slack * *hi) return why = m.nameOf(f) + " is not a square", false;
-            sides[f] = (len[0] + len[1] + len[2] + len[3]) / 4;
+        if (m.nodesOf(f) != 4) return why = m.nameOf(f) + " has " + std::to_string(m.nodesOf(f)) + " nodes", false;
+        double len[4];
+        for (int e = 0; e < 4; ++e) {
+            const uint32_t a = m.faceNodes[m.faceStart[f] + size_t(e)],
+                           b = m.faceNodes[m.faceStart[f] + size_t((e + 1) % 4)];
+            len[e] = std::hypot(m.nodeX[b] - m.nodeX[a], m.nodeY[b] - m.nodeY[a]);
         }
+        const auto [lo, hi] = std::minmax_element(len, len + 4);
+        if (*hi - *lo > slack * *hi) return why = m.nameOf(f) + " is not a square", false;
+        sides[f] = (len[0] + len[1] + len[2] + len[3]) / 4;
         smallest = std::min(smallest, sides[f]);
     }
     for (size_t f = 0; f < m.faceCount(); ++f) {

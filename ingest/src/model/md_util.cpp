@@ -85,10 +85,23 @@ std::optional<double> numAttr(const ArrayPtr& a, const std::string& name) {
     return at->ReadAsDouble();
 }
 
+std::string trim(const std::string& s) {
+    const size_t b = s.find_first_not_of(" \t\r\n"), e = s.find_last_not_of(" \t\r\n");
+    return b == std::string::npos ? "" : s.substr(b, e - b + 1);
+}
+
 std::string rootText(const MdFile& f, const std::string& name) {
     auto at = f.root ? f.root->GetAttribute(name) : nullptr;
     const char* v = at ? at->ReadAsString() : nullptr;
-    return v ? v : "";
+    return v ? trim(v) : "";
+}
+
+ArrayPtr readNodes(const MdFile& f, const std::string& xName, const std::string& yName, ModelMesh& m) {
+    ArrayPtr xv = f.open(xName, "node x"), yv = f.open(yName, "node y");
+    m.nodeX = f.read(xv), m.nodeY = f.read(yv);
+    if (m.nodeX.size() != m.nodeY.size()) f.fail(xName + " and " + yName + " differ in length");
+    m.coordsFloat32 = xv->GetDataType().GetNumericDataType() == GDT_Float32;
+    return xv;
 }
 
 std::optional<double> rootNum(const MdFile& f, const std::string& name) {

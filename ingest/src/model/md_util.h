@@ -9,6 +9,8 @@
 
 #include <gdal_priv.h>
 
+#include "heightcast/ingest/mesh.h"
+
 namespace hc::ingest::detail {
 
 using ArrayPtr = std::shared_ptr<GDALMDArray>;
@@ -41,7 +43,10 @@ bool holds(const std::shared_ptr<GDALGroup>& root, std::initializer_list<const c
 std::string textAttr(const ArrayPtr& a, const std::string& name);
 std::optional<double> numAttr(const ArrayPtr& a, const std::string& name);
 // A global attribute of the file (on its root group): text ("" when missing) or a number (nullopt when missing).
+// A text attribute of the root group, without surrounding white space ("" when missing).
 std::string rootText(const MdFile& f, const std::string& name);
+// `s` without leading and trailing white space (models pad their names).
+std::string trim(const std::string& s);
 std::optional<double> rootNum(const MdFile& f, const std::string& name);
 // The variable's fill value (_FillValue, missing_value), or nullopt.
 std::optional<double> fillOf(const ArrayPtr& a);
@@ -49,6 +54,9 @@ std::optional<double> fillOf(const ArrayPtr& a);
 size_t fillToNaN(std::vector<double>& v, std::optional<double> fill);
 // The sizes of `a`'s dimensions.
 std::vector<size_t> shapeOf(const ArrayPtr& a);
+// The nodes' coordinates from the variables xName and yName (one value a node) into m.nodeX, m.nodeY and
+// m.coordsFloat32; throws when they differ in length. Returns the x variable (its dimension names the nodes).
+ArrayPtr readNodes(const MdFile& f, const std::string& xName, const std::string& yName, ModelMesh& m);
 // Times of a CF time variable in seconds (units "hours since ..."); throws naming the variable when its units are
 // not CF's time units; checks they increase (naming the step that goes back).
 std::vector<double> cfTimesS(const MdFile& f, const ArrayPtr& time);

@@ -24,8 +24,8 @@ namespace {
 
 MeshReadOptions readOptions(const Options& o) {
     MeshReadOptions r;
-    r.terrainVar = o.terrainVar == "zb" ? "" : o.terrainVar;  // "zb" is Options' default: let each format use its own
-    r.waterSurfaceVar = o.waterSurfaceVar == "zs" ? "" : o.waterSurfaceVar.empty() ? "-" : o.waterSurfaceVar;
+    r.terrainVar = o.terrainVar;
+    r.waterSurfaceVar = o.waterSurfaceVar;
     r.layerVars = o.faceLayerVars;
     return r;
 }

@@ -289,9 +289,11 @@ Roles chooseVariables(const std::string& path, const std::vector<Var>& vars, con
     Roles r;
     r.bed = opt.terrainVar.empty() ? findVar(vars, {"BOTTOM", "FOND"})
                                    : namedVar(path, vars, opt.terrainVar, "--terrain-var");
-    r.surface = opt.waterSurfaceVar.empty() ? findVar(vars, {"FREE SURFACE", "SURFACE LIBRE"})
-                                            : namedVar(path, vars, opt.waterSurfaceVar, "--water-surface-var");
-    if (!r.surface) r.depth = findVar(vars, {"WATER DEPTH", "HAUTEUR D'EAU"});
+    if (opt.waterSurfaceVar != "-") {  // "-": none asked for, terrain only
+        r.surface = opt.waterSurfaceVar.empty() ? findVar(vars, {"FREE SURFACE", "SURFACE LIBRE"})
+                                                : namedVar(path, vars, opt.waterSurfaceVar, "--water-surface-var");
+        if (!r.surface) r.depth = findVar(vars, {"WATER DEPTH", "HAUTEUR D'EAU"});
+    }
     for (const std::string& name : opt.layerVars) r.layers.push_back(namedVar(path, vars, name, "a layer asked for"));
     return r;
 }

@@ -12,10 +12,7 @@ namespace {
 
 // The triangles (volumes, 0-based node indexes) and the nodes (x, y plus the file's xllcorner, yllcorner).
 void readTriangles(const MdFile& f, ModelMesh& m) {
-    ArrayPtr xv = f.open("x", "node x"), yv = f.open("y", "node y");
-    m.nodeX = f.read(xv), m.nodeY = f.read(yv);
-    if (m.nodeX.size() != m.nodeY.size()) f.fail("x and y differ in length");
-    m.coordsFloat32 = xv->GetDataType().GetNumericDataType() == GDT_Float32;
+    readNodes(f, "x", "y", m);
     const double x0 = rootNum(f, "xllcorner").value_or(0), y0 = rootNum(f, "yllcorner").value_or(0);
     for (size_t i = 0; i < m.nodeX.size(); ++i) m.nodeX[i] += x0, m.nodeY[i] += y0;
 

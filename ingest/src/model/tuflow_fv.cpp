@@ -17,10 +17,7 @@ namespace {
 
 // The cells (cell_node: 1-based node numbers, cell_Nvert of them each) and the nodes (node_X, node_Y).
 void readCells(const MdFile& f, ModelMesh& m) {
-    ArrayPtr xv = f.open("node_X", "node x"), yv = f.open("node_Y", "node y");
-    m.nodeX = f.read(xv), m.nodeY = f.read(yv);
-    if (m.nodeX.size() != m.nodeY.size()) f.fail("node_X and node_Y differ in length");
-    m.coordsFloat32 = xv->GetDataType().GetNumericDataType() == GDT_Float32;
+    readNodes(f, "node_X", "node_Y", m);
     ArrayPtr nv = f.open("cell_Nvert", "the cells' node counts"), cn = f.open("cell_node", "the cells' nodes");
     const std::vector<size_t> shape = shapeOf(cn);
     const std::vector<double> counts = f.read(nv), nodes = f.read(cn);

@@ -66,10 +66,7 @@ std::optional<MeshAt> locationOf(const ArrayPtr& a, const Topology& t) {
 void readNodesAndFaces(const MdFile& f, Topology& t, ModelMesh& m) {
     const auto [xName, yName] = twoNames(textAttr(t.topo, "node_coordinates"));
     if (yName.empty()) f.fail(t.mesh + ":node_coordinates does not name two variables (x y)");
-    ArrayPtr xv = f.open(xName, "node x"), yv = f.open(yName, "node y");
-    m.nodeX = f.read(xv), m.nodeY = f.read(yv);
-    m.coordsFloat32 = xv->GetDataType().GetNumericDataType() == GDT_Float32;
-    if (m.nodeX.size() != m.nodeY.size()) f.fail(xName + " and " + yName + " differ in length");
+    const ArrayPtr xv = readNodes(f, xName, yName, m);
     if (xv->GetDimensionCount() == 1) t.nodeDim = xv->GetDimensions()[0]->GetName();
     const std::string connName = textAttr(t.topo, "face_node_connectivity");
     if (connName.empty()) f.fail(t.mesh + " has no face_node_connectivity: not a mesh of faces");

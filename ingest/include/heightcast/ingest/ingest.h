@@ -55,8 +55,9 @@ struct Options {
     std::vector<double> timesS;         // time of each step [s], strictly increasing; empty: the step index
     std::vector<int> waterBands;        // band (1-based) of each step's raster, beside waterPaths: a NetCDF time series is
                                         // one file with one band per time (expandWaterTimeSeries); empty: band 1
-    std::string terrainVar = "zb";      // UGRID meshes (ugrid.h): the face variable of the terrain
-    std::string waterSurfaceVar = "zs"; // UGRID meshes: the face variable of the water level over time ("" = none)
+    std::string terrainVar;             // model results (mesh.h): the bed variable ("" = the format's own: zb, ...)
+    std::string waterSurfaceVar;        // model results: the water level over time ("" = the format's own: zs, ...;
+                                        // "-" = none, terrain only)
     std::vector<std::string> faceLayerVars;  // UGRID meshes: further face variables over time (velocity magnitude, ...),
                                         // each a step layer of that name, stored on the wet faces of every step
     // Flood model results (mesh.h, docs/models.md).
