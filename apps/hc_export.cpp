@@ -4,7 +4,7 @@
 #include <cstdio>
 #include <filesystem>
 
-#include "cli.h"
+#include "heightcast/support/cli.h"
 #include "heightcast/export/export.h"
 #include "heightcast/core/error.h"
 #include "heightcast/core/timer.h"

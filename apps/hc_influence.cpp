@@ -6,8 +6,8 @@
 
 #include <fmt/format.h>
 
-#include "cli.h"
-#include "on_ranks.h"
+#include "heightcast/support/cli.h"
+#include "heightcast/support/on_ranks.h"
 #include "heightcast/core/ranks.h"
 #include "heightcast/core/error.h"
 #include "heightcast/core/progress.h"
@@ -37,7 +37,7 @@ bool parseOptions(int argc, char** argv, InfluenceArgs& a) {
                       "Builds the influence list of every cell (the cells whose truncated Gaussian reaches into it)\n"
                       "and writes them as a cache that hc-probe, hc-export and the renderer reuse. A cache depends\n"
                       "only on the grid's tree, sigma and R: new water values on the same tree keep it valid.\n"
-                      "Then samples the exact smooth surface into the surface pyramid (DESIGN.md section 10): dyadic\n"
+                      "Then samples the exact smooth surface into the surface pyramid (docs/design.md section 4): dyadic\n"
                       "lattices (spacing finest cell * 2^t) in 16 x 16 tiles kept where cells are as fine as the\n"
                       "spacing, each tile with its measured error against the next coarser level. The lists take\n"
                       "about 220 bytes per cell; the pyramid about 4-20 per channel and needs no lists: for grids whose\n"
@@ -45,7 +45,7 @@ bool parseOptions(int argc, char** argv, InfluenceArgs& a) {
                       "4 M cells and their halo) at a time, never whole. Under `mpirun -np N` the ranks share the nodes\n"
                       "of the grid, each reading its nodes and their halo, and write the same bytes as one process,\n"
                       "each its lists and tiles into the files rank 1 opens: they must lie on a file system every rank\n"
-                      "sees (README, \"Preprocessing on several processes\").");
+                      "sees (docs/mpi.md).");
     p.positional("GRID.hcg", "grid file (hc-ingest)", a.gridPath);
     p.option("-o", "OUT.hci", "cache file (default: the grid's path with .hci)", a.out);
     p.option("--sigma", "S", "Gaussian width in cell sizes (default 1.0, the report's)", a.params.sigma);
@@ -253,8 +253,8 @@ int main(int argc, char** argv) {
         hc::ranks::together([&] { go = parseOptions(argc, argv, a); });
         if (!go) return 0;
         // Without lists nothing needs the grid whole: one process builds the pyramid as one rank would, a node of the
-        // grid at a time, so that its memory follows a node and the pyramid, not the grid (at 105 M cells 0.9 GB
-        // instead of 3.7 GB, in the same time and to the same bytes: BENCHMARKS.md).
+        // grid at a time, so that its memory follows a node and the pyramid, not the grid (a fraction of the
+        // whole grid's peak, in the same time and to the same bytes: docs/benchmarks.md).
         if (hc::ranks::distributed() || !a.lists) runByNodes(a);
         else runAlone(a);
         std::printf("  memory       peak %.1f MB resident\n", double(hc::peakRssBytes()) / 1e6);

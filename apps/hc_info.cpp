@@ -9,7 +9,7 @@
 #include <nlohmann/json.hpp>
 #include <proj.h>
 
-#include "cli.h"
+#include "heightcast/support/cli.h"
 #include "heightcast/core/atomic_file.h"
 #include "heightcast/core/error.h"
 #include "heightcast/grid/grid_file.h"
@@ -112,7 +112,7 @@ void printJson(const hc::GridFileInfo& info, const Summary& s, const std::string
         }
         j["layers"].push_back(layer);
     }
-    // Water steps (DESIGN.md section 11): a 1.2 file's water layer, or a grid written from memory, is one step at 0 s.
+    // Water steps (docs/design.md section 6): a 1.2 file's water layer, or a grid written from memory, is one step at 0 s.
     j["steps"] = nlohmann::ordered_json::array();
     for (size_t k = 0; k < g.steps.size(); ++k)
         j["steps"].push_back({{"step", k}, {"time_s", g.steps[k].timeS}, {"wet_cells", g.steps[k].wetCells}});

@@ -7,8 +7,8 @@
 
 #include <fmt/format.h>
 
-#include "cli.h"
-#include "on_ranks.h"
+#include "heightcast/support/cli.h"
+#include "heightcast/support/on_ranks.h"
 #include "heightcast/core/ranks.h"
 #include "heightcast/core/timer.h"
 #include "heightcast/core/error.h"
@@ -104,11 +104,13 @@ bool parseOptions(int argc, char** argv, hc::ingest::Options& o, std::string& ou
                       "cover (in every layer); the achieved max and RMS deviation is measured and reported.\n"
                       "Under `mpirun -np N` the ranks share the build and write the same bytes as one process: each reads\n"
                       "only its windows of the raster and of the water rasters and writes its own cells\n"
-                      "into the one output, whose folder every rank must see (README, \"Preprocessing on several processes\").");
+                      "into the one output, whose folder every rank must see (docs/mpi.md).");
     p.positional("INPUT", "terrain raster: GeoTIFF, SRTM .hgt / .hgt.zip, ESRI ASCII, NetCDF, PNG, ... (GDAL); or model results\n"
                  "      (docs/models.md: terrain and every water step from the one file)", o.input);
     p.option("-o", "OUT.hcg", "output grid file (required; written atomically)", out);
-    p.option("--tolerance", "M", "max |pixel - cell value| in every layer, metres (default 0.25)", o.toleranceM);
+    p.option("--tolerance", "M",
+             fmt::format("max |pixel - cell value| in every layer, metres (default {:g})", hc::ingest::kDefaultToleranceM),
+             o.toleranceM);
     p.option("--min-cell", "M", "finest cell size, metres (default: the source pixel size after projection)", o.minCellM);
     p.option("--max-cell", "M", "coarsest cell size, metres, rounded down to finest * 2^k (default: largest <= 96 m)", o.maxCellM);
     p.option("--t_srs", "CRS", "project into this CRS (EPSG:xxxx, WKT, PROJ string) with GDAL, bilinear, exact transformer; a\n"

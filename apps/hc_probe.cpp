@@ -5,7 +5,7 @@
 #include <string>
 #include <vector>
 
-#include "cli.h"
+#include "heightcast/support/cli.h"
 #include "heightcast/core/atomic_file.h"
 #include "heightcast/core/error.h"
 #include "heightcast/grid/grid_file.h"
@@ -30,7 +30,7 @@ bool parseOptions(int argc, char** argv, ProbeArgs& a) {
                       "of a 100 M-cell grid takes milliseconds and no influence cache.\n"
                       "Prints or writes x,y,value with full precision; the value is empty where the surface is\n"
                       "undefined (holes, outside the grid, or dry land for water_surface).\n"
-                      "Water (DESIGN.md section 12): water_surface is the level of the wet cells alone (a level flood\n"
+                      "Water (docs/design.md section 6): water_surface is the level of the wet cells alone (a level flood\n"
                       "stays level), drawn where wet cells hold >= 1/2 of the kernel weight and the level is above the\n"
                       "terrain; water_depth is that level - elevation there and 0 on dry land, in metres.");
     p.positional("GRID.hcg", "grid file", a.gridPath);

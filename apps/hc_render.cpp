@@ -15,9 +15,9 @@
 
 #include <fmt/format.h>
 
-#include "backend_choice.h"
-#include "cli.h"
-#include "render_setup.h"
+#include "heightcast/support/backend_choice.h"
+#include "heightcast/support/cli.h"
+#include "heightcast/support/render_setup.h"
 #include "heightcast/core/atomic_file.h"
 #include "heightcast/core/error.h"
 #include "heightcast/core/heap.h"

@@ -1,4 +1,4 @@
-// hc-view: the interactive viewer of a grid's smooth surface (a GLFW window; DESIGN.md sections 5 and 9).
+// hc-view: the interactive viewer of a grid's smooth surface (a GLFW window; docs/design.md sections 5 and 9).
 //
 // The image comes from a render backend (view/backends.h: the CPU one on a worker thread, or the GL one in the
 // window's context), chosen by the rule hc-render follows (backend_choice.h) from what the window's context
@@ -8,13 +8,13 @@
 #include <memory>
 #include <string>
 
-#include "backend_choice.h"
-#include "cli.h"
-#include "render_setup.h"
+#include "heightcast/support/backend_choice.h"
+#include "heightcast/support/cli.h"
+#include "heightcast/support/render_setup.h"
 #include "view/backends.h"
 #include "view/viewer.h"
 #include "view/window.h"
-#include "view_support.h"
+#include "heightcast/support/view_support.h"
 #include "heightcast/core/error.h"
 #include "heightcast/core/heap.h"
 

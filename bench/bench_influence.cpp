@@ -34,7 +34,7 @@
 
 #include "bench_common.h"
 #include "svg_plot.h"
-#include "cli.h"
+#include "heightcast/support/cli.h"
 #include "heightcast/core/error.h"
 #include "heightcast/grid/morton.h"
 #include "heightcast/core/parallel.h"
@@ -278,7 +278,7 @@ int main(int argc, char** argv) {
         unsigned threads = 0;
         bool quick = false;
         hc::cli::Parser p("hc-bench-influence", "[options]",
-                          "Benchmarks the influence lists and the exact smooth surface (DESIGN.md section 4).\n"
+                          "Benchmarks the influence lists and the exact smooth surface (docs/design.md section 3).\n"
                           "  1 build: buildInfluenceLists (sigma 1, R 3.5) on N00E010.hgt ingested at tolerances 0.5 and 2 m and\n"
                           "    on a synthetic grid of cell sizes 0.75 .. 96 m (ratio 128); target >= 2 M cells/s on 2 cores.\n"
                           "  2 evaluate: SurfaceEvaluator::value at uniform random points (defined ones counted), one thread\n"

@@ -41,7 +41,7 @@
 
 #include "bench_common.h"
 #include "svg_plot.h"
-#include "cli.h"
+#include "heightcast/support/cli.h"
 #include "heightcast/core/error.h"
 #include "heightcast/grid/grid_file.h"
 #include "heightcast/core/progress.h"

@@ -14,7 +14,7 @@
 #include <fmt/format.h>
 #include <gdal_priv.h>
 
-#include "cli.h"
+#include "heightcast/support/cli.h"
 #include "heightcast/core/error.h"
 #include "heightcast/core/progress.h"
 

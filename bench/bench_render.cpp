@@ -35,8 +35,8 @@
 
 #include "bench_common.h"
 #include "svg_plot.h"
-#include "backend_choice.h"
-#include "cli.h"
+#include "heightcast/support/backend_choice.h"
+#include "heightcast/support/cli.h"
 #include "heightcast/core/error.h"
 #include "heightcast/core/heap.h"
 #include "heightcast/core/parallel.h"
@@ -550,7 +550,7 @@ int main(int argc, char** argv) {
                  "      then with incremental cascades (texels kept from the last frame); prints both (default 0: off). GL:\n"
                  "      frames back to back into the texture, the texels kept on the GPU (in memory and --out-of-core)", set.flyFrames);
         p.option("--fly-step", "M", "metres the camera moves forward per fly-through frame (default 10)", set.flyStepM);
-        p.flag("--pyramid", "also build the surface pyramid (hc-influence's .hcp, DESIGN.md section 10) and render from it:\n"
+        p.flag("--pyramid", "also build the surface pyramid (hc-influence's .hcp, docs/design.md section 4) and render from it:\n"
                "      texel sizes on its ladder (powers of two of the finest cell), texels it holds copied (CPU)", set.pyramid);
         p.flag("--pyramid-coarse", "with --pyramid: texels up to 2x coarser than without it (N a side) instead of up to\n"
                "      2x finer (up to 2N a side)", set.options.pyramidCoarseTexels);

@@ -1,11 +1,13 @@
 # Script mode (cmake -P): assembles each compute shader of the GL backend and embeds them all in one
 # C++ source. A shader's text is its #version line, then render/include/heightcast/render/gpu_layout.h
-# (the structs both backends share), then render/gl/shaders/common.glsl, then the rest of the .comp file
-# after a #line directive (so driver and glslangValidator messages name the .comp file's own lines).
+# (the structs both backends share) and water_rule.h (the water rule both backends apply), then
+# render/gl/shaders/common.glsl, then the rest of the .comp file after a #line directive (so driver and
+# glslangValidator messages name the .comp file's own lines).
 #
-# Inputs: HC_LAYOUT (gpu_layout.h), HC_COMMON (common.glsl), HC_SHADERS (list of .comp paths),
+# Inputs: HC_LAYOUT (gpu_layout.h), HC_WATER_RULE (water_rule.h), HC_COMMON (common.glsl), HC_SHADERS (list of .comp paths),
 # HC_OUT_DIR (assembled .comp files), HC_OUT_CPP (the generated source).
 file(READ ${HC_LAYOUT} layout_text)
+file(READ ${HC_WATER_RULE} water_rule_text)
 file(READ ${HC_COMMON} common_text)
 set(entries "")
 foreach(path ${HC_SHADERS})
@@ -19,7 +21,7 @@ foreach(path ${HC_SHADERS})
   math(EXPR rest_begin "${eol} + 1")
   string(SUBSTRING "${text}" ${rest_begin} -1 rest)
   # #line 2 names line 2 of the .comp; the source-string number 0 is the only one.
-  set(full "${version_line}\n${layout_text}\n${common_text}\n#line 2\n${rest}")
+  set(full "${version_line}\n${layout_text}\n${water_rule_text}\n${common_text}\n#line 2\n${rest}")
   file(WRITE ${HC_OUT_DIR}/${name}.comp "${full}")
   if(full MATCHES "\\)hc_glsl\"")
     message(FATAL_ERROR "${path} contains the raw-string delimiter )hc_glsl\"")

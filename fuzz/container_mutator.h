@@ -4,7 +4,7 @@
 // a count of 2^62 together with sections resized to what the wrapped products expect takes several
 // coordinated edits (the count, the table's sizes, the data moved so that padding stays zero). Against the
 // old .hcg reader, byte mutations alone did not find the 2^62-cell bug in 233 k executions; with this
-// mutator fuzz_hcg found it after 134 k (README.md, section Fuzzing).
+// mutator fuzz_hcg found it after 134 k (docs/testing.md, Fuzzing).
 // This mutator edits the file as header + sections: a header field or a u64/u32 inside a section set to
 // a value that breaks size arithmetic (0, 1, 2^31, 2^32, 2^61, 2^62, 2^63, 2^64 - 1, the file size ...),
 // a section emptied, cut, grown, dropped, duplicated or retyped, or its bytes mutated by libFuzzer; a header

@@ -4,7 +4,7 @@
 #include <string_view>
 
 #include "heightcast/core/error.h"
-#include "view_support.h"
+#include "heightcast/support/view_support.h"
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
     try {

@@ -3,7 +3,7 @@
 #include <cmath>
 #include <string_view>
 
-#include "cli.h"
+#include "heightcast/support/cli.h"
 #include "heightcast/core/error.h"
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {

@@ -15,17 +15,16 @@
 #include <vector>
 
 #include "heightcast/core/atomic_file.h"
+#include "temp_dir.h"
 
 namespace fs = std::filesystem;
 
 namespace {
 
-fs::path freshDir(const std::string& name) {
-    fs::path d = fs::temp_directory_path() / ("hc_atomic_file_test_" + name);
-    fs::remove_all(d);
-    fs::create_directories(d);
-    return d;
-}
+class AtomicFile : public hc::test::TempDirTest {
+protected:
+    AtomicFile() : TempDirTest("hc_atomic_file_") {}
+};
 
 std::vector<std::string> names(const fs::path& dir) {
     std::vector<std::string> out;
@@ -44,8 +43,8 @@ bool isTemporaryOf(const std::string& name, const std::string& target) {
 
 void writeText(const fs::path& p, const std::string& text) { std::ofstream(p) << text; }
 
-TEST(AtomicFile, TemporaryNamesNeverEndInTheTargetsExtension) {
-    fs::path d = freshDir("names");
+TEST_F(AtomicFile, TemporaryNamesNeverEndInTheTargetsExtension) {
+    const fs::path& d = dir_;
     hc::AtomicPath p((d / "out.png").string());
     EXPECT_TRUE(isTemporaryOf(fs::path(p.temp()).filename().string(), "out.png")) << p.temp();
     hc::AtomicFileWriter w((d / "out.png").string());
@@ -53,8 +52,8 @@ TEST(AtomicFile, TemporaryNamesNeverEndInTheTargetsExtension) {
     EXPECT_EQ(names(d).size(), 2u);
 }
 
-TEST(AtomicFile, NextWriteRemovesAKilledWritersTemporary) {
-    fs::path d = freshDir("stale");
+TEST_F(AtomicFile, NextWriteRemovesAKilledWritersTemporary) {
+    const fs::path& d = dir_;
     // What a writer killed by SIGKILL leaves: a temporary nobody holds a lock on.
     writeText(d / "g.hcg.tmp.Ab12Cd", "half a grid");
     // Not ours to touch: other targets' temporaries, names that only look alike, the user's files.
@@ -75,8 +74,8 @@ TEST(AtomicFile, NextWriteRemovesAKilledWritersTemporary) {
     EXPECT_FALSE(fs::exists(d / "e.tif"));
 }
 
-TEST(AtomicFile, ALiveWritersTemporaryIsKept) {
-    fs::path d = freshDir("live");
+TEST_F(AtomicFile, ALiveWritersTemporaryIsKept) {
+    const fs::path& d = dir_;
     hc::AtomicFileWriter first((d / "g.hci").string());  // still writing: it holds its temporary's lock
     hc::AtomicPath second((d / "g.hci").string());       // a concurrent writer of the same target
     EXPECT_EQ(names(d).size(), 2u);

@@ -1,10 +1,10 @@
-// The backend choice hc-render and hc-view share (apps/backend_choice.h): every branch of its rule, from the
+// The backend choice hc-render and hc-view share (support/backend_choice.h): every branch of its rule, from the
 // GL on hand as the probe reports it; and the probe itself in a build without the GL backend.
 #include <gtest/gtest.h>
 
 #include <string>
 
-#include "backend_choice.h"
+#include "heightcast/support/backend_choice.h"
 #include "heightcast/core/error.h"
 
 using namespace hc::cli;

@@ -21,6 +21,7 @@
 #include "heightcast/export/export.h"
 #include "heightcast/core/error.h"
 #include "heightcast/ingest/ingest.h"
+#include "temp_dir.h"
 #include "test_data.h"
 
 namespace {
@@ -51,18 +52,21 @@ Scene& scene() {
     return s;
 }
 
-fs::path dir() {
-    fs::path d = fs::temp_directory_path() / ("hc_export_test_" + std::to_string(::getpid()));
-    fs::create_directories(d);
-    return d;
-}
+class Export : public hc::test::TempDirTest {
+protected:
+    Export() : TempDirTest("hc_export_") {}
+};
+class ExportWater : public hc::test::TempDirTest {
+protected:
+    ExportWater() : TempDirTest("hc_export_water_") {}
+};
 
 SampledRaster sample(const std::string& layer, double res, bool gradients = false) {
     Scene& s = scene();
     return hc::exporting::sampleSurface(*s.eval, hc::influence::Layer::byName(s.grid, layer), layer, res, std::nullopt, gradients, 0, false);
 }
 
-TEST(Export, SamplesAreTheExactSurfaceAtPixelCentres) {
+TEST_F(Export, SamplesAreTheExactSurfaceAtPixelCentres) {
     Scene& s = scene();
     SampledRaster r = sample("elevation", 250);
     ASSERT_GT(r.definedCount(), r.values.size() / 2);
@@ -81,7 +85,7 @@ TEST(Export, SamplesAreTheExactSurfaceAtPixelCentres) {
         }
 }
 
-TEST(Export, RefusesAbsurdRequests) {
+TEST_F(Export, RefusesAbsurdRequests) {
     Scene& s = scene();
     auto layer = hc::influence::Layer{};
     EXPECT_THROW(hc::exporting::sampleSurface(*s.eval, layer, "elevation", 0, std::nullopt, false, 0, false), hc::Error);
@@ -91,10 +95,10 @@ TEST(Export, RefusesAbsurdRequests) {
                  hc::Error);
 }
 
-TEST(Export, GeoTiffReadsBackThroughGdal) {
+TEST_F(Export, GeoTiffReadsBackThroughGdal) {
     Scene& s = scene();
     SampledRaster r = sample("elevation", 200);
-    const std::string path = (dir() / "e.tif").string();
+    const std::string path = (dir_ / "e.tif").string();
     hc::exporting::writeGeoTiff(r, path);
     GDALAllRegister();
     std::unique_ptr<GDALDataset> ds(GDALDataset::Open(path.c_str(), GDAL_OF_RASTER | GDAL_OF_READONLY));
@@ -127,9 +131,9 @@ TEST(Export, GeoTiffReadsBackThroughGdal) {
     }
 }
 
-TEST(Export, ExrReadsBackThroughOpenExr) {
+TEST_F(Export, ExrReadsBackThroughOpenExr) {
     SampledRaster r = sample("water_depth", 200);
-    const std::string path = (dir() / "d.exr").string();
+    const std::string path = (dir_ / "d.exr").string();
     hc::exporting::writeExr(r, path);
     Imf::InputFile in(path.c_str());
     const Imf::Header& h = in.header();
@@ -165,12 +169,12 @@ TEST(Export, ExrReadsBackThroughOpenExr) {
 }
 
 #if HC_WITH_VDB
-TEST(Export, VdbLevelSetsCrossZeroOnTheSurface) {
+TEST_F(Export, VdbLevelSetsCrossZeroOnTheSurface) {
     EXPECT_TRUE(hc::exporting::vdbAvailable());
     SampledRaster terrain = sample("elevation", 100, true);
     SampledRaster water = sample("water_surface", 100, true);
     ASSERT_GT(water.definedCount(), 100u);
-    const std::string path = (dir() / "s.vdb").string();
+    const std::string path = (dir_ / "s.vdb").string();
     hc::exporting::writeVdb(terrain, &water, path);
     openvdb::initialize();
     openvdb::io::File file(path);
@@ -214,10 +218,10 @@ TEST(Export, VdbLevelSetsCrossZeroOnTheSurface) {
 }
 #else
 // A build without OpenVDB (-DHC_WITH_VDB=OFF) refuses .vdb, naming the file and the option, and writes nothing.
-TEST(Export, VdbBuiltOutIsRefused) {
+TEST_F(Export, VdbBuiltOutIsRefused) {
     EXPECT_FALSE(hc::exporting::vdbAvailable());
     SampledRaster terrain = sample("elevation", 100, true);
-    const std::string path = (dir() / "s.vdb").string();
+    const std::string path = (dir_ / "s.vdb").string();
     try {
         hc::exporting::writeVdb(terrain, nullptr, path);
         FAIL() << "writeVdb wrote in a build without OpenVDB";
@@ -233,7 +237,7 @@ TEST(Export, VdbBuiltOutIsRefused) {
 // gridOrigin stays the grid's origin and the raster corners are the origin plus the corner's local offset.
 // A writer that stored one for the other (as heightcast.originX once meant the origin in .exr and the raster
 // corner in .vdb) fails here. 1e-6 m: world y is summed from offsets near 5e6 m (a double's step there is 1e-9 m).
-TEST(Export, GridOriginAndRasterCornersAreDistinctAttributes) {
+TEST_F(Export, GridOriginAndRasterCornersAreDistinctAttributes) {
     Scene& s = scene();
     const double res = 100, offX = 1200, offY = 700;  // the raster's south-west corner, local [m]
     const size_t cols = 20, rows = 15;
@@ -243,7 +247,7 @@ TEST(Export, GridOriginAndRasterCornersAreDistinctAttributes) {
     ASSERT_EQ(r.width, cols);
     ASSERT_EQ(r.height, rows);
 
-    const std::string exrPath = (dir() / "corner.exr").string();
+    const std::string exrPath = (dir_ / "corner.exr").string();
     hc::exporting::writeExr(r, exrPath);
     Imf::InputFile in(exrPath.c_str());
     const Imf::Header& h = in.header();
@@ -253,7 +257,7 @@ TEST(Export, GridOriginAndRasterCornersAreDistinctAttributes) {
     EXPECT_NEAR(exrDouble("heightcast.rasterNorthWestX"), s.grid.originWorldX + offX, 1e-6);
     EXPECT_NEAR(exrDouble("heightcast.rasterNorthWestY"), s.grid.originWorldY + offY + double(rows) * res, 1e-6);
 #if HC_WITH_VDB
-    const std::string vdbPath = (dir() / "corner.vdb").string();
+    const std::string vdbPath = (dir_ / "corner.vdb").string();
     hc::exporting::writeVdb(r, nullptr, vdbPath);
     openvdb::initialize();
     openvdb::io::File file(vdbPath);
@@ -269,9 +273,9 @@ TEST(Export, GridOriginAndRasterCornersAreDistinctAttributes) {
 #endif
 }
 
-TEST(Export, FailedWritesLeaveNothing) {
+TEST_F(Export, FailedWritesLeaveNothing) {
     SampledRaster r = sample("elevation", 500);
-    fs::path d = dir() / "nothing";
+    fs::path d = dir_ / "nothing";
     fs::create_directories(d);
     EXPECT_THROW(hc::exporting::writeGeoTiff(r, (d / "missing_dir" / "x.tif").string()), hc::Error);
     EXPECT_THROW(hc::exporting::writeExr(r, (d / "missing_dir" / "x.exr").string()), hc::Error);
@@ -280,7 +284,7 @@ TEST(Export, FailedWritesLeaveNothing) {
 }
 
 // ---------------------------------------------------------------------------------------------------------
-// The water level field (DESIGN.md section 12; issue 11, "The water surface is not level"): the exports
+// The water level field (docs/design.md section 6; issue 11, "The water surface is not level"): the exports
 // carry what hc-probe and the renderers show. The demo flood is a bathtub at 2600 m, so the exported water
 // surface is flat at 2600 m (1 cm, the issue's figure; float32 storage rounds to 2.4e-4 m there), the
 // exported depth is that surface minus the exported elevation where there is water (1 mm: three float32
@@ -304,13 +308,14 @@ std::vector<float> readGeoTiff(const std::string& path, const SampledRaster& r) 
     return v;
 }
 
-TEST(ExportWater, BathtubFloodExportsFlatWithDepthToTheTerrain) {
+TEST_F(ExportWater, BathtubFloodExportsFlatWithDepthToTheTerrain) {
     const double level = 2600;
     const double res = 100;
     SampledRaster zr = sample("elevation", res), sr = sample("water_surface", res), dr = sample("water_depth", res);
-    hc::exporting::writeGeoTiff(sr, (dir() / "ws.tif").string());
-    hc::exporting::writeGeoTiff(dr, (dir() / "wd.tif").string());
-    const std::vector<float> surface = readGeoTiff((dir() / "ws.tif").string(), sr), depth = readGeoTiff((dir() / "wd.tif").string(), dr);
+    hc::exporting::writeGeoTiff(sr, (dir_ / "ws.tif").string());
+    hc::exporting::writeGeoTiff(dr, (dir_ / "wd.tif").string());
+    const std::vector<float> surface = readGeoTiff((dir_ / "ws.tif").string(), sr),
+                             depth = readGeoTiff((dir_ / "wd.tif").string(), dr);
     ASSERT_EQ(surface.size(), zr.values.size());
     ASSERT_EQ(depth.size(), zr.values.size());
     size_t wet = 0, dry = 0;
@@ -341,7 +346,7 @@ TEST(ExportWater, BathtubFloodExportsFlatWithDepthToTheTerrain) {
     // The VDB: the water level set crosses zero at the level, between the two voxels around it (the existing
     // VdbLevelSetsCrossZeroOnTheSurface test's interpolation, within 1e-3 voxel).
     SampledRaster terrain = sample("elevation", res, true), water = sample("water_surface", res, true);
-    const std::string path = (dir() / "w.vdb").string();
+    const std::string path = (dir_ / "w.vdb").string();
     hc::exporting::writeVdb(terrain, &water, path);
     openvdb::initialize();
     openvdb::io::File file(path);

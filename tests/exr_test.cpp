@@ -18,20 +18,19 @@
 
 #include "heightcast/core/error.h"
 #include "heightcast/core/exr.h"
+#include "temp_dir.h"
 
 namespace {
 
 namespace fs = std::filesystem;
 
-fs::path freshDir(const std::string& name) {
-    fs::path d = fs::temp_directory_path() / ("hc_exr_test_" + std::to_string(::getpid()) + "_" + name);
-    fs::remove_all(d);
-    fs::create_directories(d);
-    return d;
-}
+class Exr : public hc::test::TempDirTest {
+protected:
+    Exr() : TempDirTest("hc_exr_") {}
+};
 
-TEST(Exr, ChannelsAndTypedAttributesReadBack) {
-    const fs::path dir = freshDir("read_back");
+TEST_F(Exr, ChannelsAndTypedAttributesReadBack) {
+    const fs::path& dir = dir_;
     const size_t width = 3, height = 2;
     const float inf = std::numeric_limits<float>::infinity(), nan = std::numeric_limits<float>::quiet_NaN();
     // Row 0 first; the extremes a float channel must keep: NaN, infinity, negative zero, the smallest subnormal.
@@ -69,13 +68,11 @@ TEST(Exr, ChannelsAndTypedAttributesReadBack) {
             EXPECT_EQ(zBack[i], z[i]) << i;
         EXPECT_EQ(aBack[i], a[i]) << i;
     }
-    std::error_code ec;
     EXPECT_EQ(std::distance(fs::directory_iterator(dir), fs::directory_iterator()), 1) << "a temporary was left beside t.exr";
-    fs::remove_all(dir, ec);
 }
 
-TEST(Exr, FailedWriteNamesTheFileAndLeavesNothing) {
-    const fs::path dir = freshDir("failed");
+TEST_F(Exr, FailedWriteNamesTheFileAndLeavesNothing) {
+    const fs::path& dir = dir_;
     const std::vector<float> v(4, 1.0f);
     const hc::exr::FloatChannel channels[] = {{"Z", v}};
     const std::string path = (dir / "missing_dir" / "x.exr").string();
@@ -86,8 +83,6 @@ TEST(Exr, FailedWriteNamesTheFileAndLeavesNothing) {
         EXPECT_NE(std::string(e.what()).find(path), std::string::npos) << e.what();
     }
     EXPECT_TRUE(fs::is_empty(dir));
-    std::error_code ec;
-    fs::remove_all(dir, ec);
 }
 
 }  // namespace

@@ -497,7 +497,7 @@ TEST_F(GridFile, FuzzFindingCellCountWrappingToTheSectionSizes) {
 
 // ------------------------------------------------------------------ block checksums and the stored summary
 
-// The container as the .hcg reader sees it (grid_file.cpp), to read sections in parts.
+// The container as the .hcg reader sees it (grid_file_internal.h), to read sections in parts.
 const hc::FileFormat kGridFormat12{{'\x89', 'H', 'C', 'G', 'R', 'I', 'D', '\n'}, 1, 2, "heightcast grid (.hcg)", {1, 2, 3}, 2};
 
 // 300 k level-0 cells: CELLS spans 3 blocks of 1 MiB (2.4 MB), the elevation layer 2.
@@ -656,7 +656,7 @@ TEST_F(GridFile, ALyingSummaryIsCaughtByVerification) {
 
 }  // namespace
 
-// ---- water steps (format 1.3, DESIGN.md section 11) ----
+// ---- water steps (format 1.3, docs/design.md section 6) ----
 
 // tinyGrid's water as three steps: dry, the tiny grid's own water, and every cell wet. Velocity is a step layer.
 struct Scenario {
@@ -825,7 +825,7 @@ TEST_F(GridFile, StepsAreReadLazilyAndCheckedWhenRead) {
     EXPECT_THROW(hc::verifyGridFile(path("bad2.hcg"), 0), hc::Error);
 }
 
-// Writing by parts (under mpirun each rank writes its own run of cells into rank 0's file, DESIGN.md section 13), run
+// Writing by parts (under mpirun each rank writes its own run of cells into rank 0's file, docs/design.md section 7), run
 // here in one process: rank 0's writer appends cells [0, a), two parts write [a, b) and [b, n) straight into its
 // temporary (the second before the first, as ranks race), checking and summarising them as they go, then hash them in
 // turn, read back from the file, from the state the run before left. The file must be the very bytes writeGrid() writes: cuts inside checksum blocks, a second

@@ -1,5 +1,6 @@
 // Morton keys, point location, range and neighbour queries: each checked against brute force on
 // real grids (ingested from data/) and on a synthetic grid with a cell-size ratio of 128.
+#include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -172,22 +173,26 @@ TEST(GridQueries, NeighboursMatchBruteForce) {
 }
 
 TEST(GridValidate, CatchesBrokenInvariants) {
+    // Each broken invariant is named, with the cell it breaks at: a message that blamed the wrong cell or the wrong
+    // rule would send a user (or a reader's caller) to the wrong place.
+    using ::testing::HasSubstr;
     Grid g = ratio128Grid();
     ASSERT_EQ(g.validate(), "");
     Grid unsorted = g;
     std::swap(unsorted.codes[10], unsorted.codes[11]);
-    EXPECT_NE(unsorted.validate(), "");
+    EXPECT_THAT(unsorted.validate(), HasSubstr("cell 11 overlaps or precedes cell 10"));
     Grid misaligned = g;
     size_t big = 0;
     while (hc::codeLevel(misaligned.codes[big]) == 0) ++big;
     misaligned.codes[big] = hc::makeCellCode(hc::codeKey(misaligned.codes[big]) + 1, hc::codeLevel(misaligned.codes[big]));
-    EXPECT_NE(misaligned.validate(), "");
+    EXPECT_THAT(misaligned.validate(), HasSubstr("cell " + std::to_string(big) + " is not aligned to its level"));
     Grid nonFinite = g;
     nonFinite.values[0][5] = NAN;
-    EXPECT_NE(nonFinite.validate(), "");
+    EXPECT_THAT(nonFinite.validate(), HasSubstr("cell 5 has a non-finite elevation value"));
     Grid shortLayer = g;
     shortLayer.values[0].pop_back();
-    EXPECT_NE(shortLayer.validate(), "");
+    EXPECT_THAT(shortLayer.validate(), HasSubstr("layer elevation has " + std::to_string(g.codes.size() - 1) + " values for " +
+                                                 std::to_string(g.codes.size()) + " cells"));
 }
 
 TEST(GridHashes, StructureIgnoresValuesContentDoesNot) {

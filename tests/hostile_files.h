@@ -14,7 +14,7 @@
 
 namespace hc::hostile {
 
-// The formats' container parameters (grid_file.cpp, cache_file.cpp), repeated here on purpose: a test that
+// The formats' container parameters (grid_file_internal.h, cache_file.cpp), repeated here on purpose: a test that
 // borrowed the readers' own constants would not notice if they changed.
 inline const FileFormat kGridFormat{{'\x89', 'H', 'C', 'G', 'R', 'I', 'D', '\n'}, 1, 0, "heightcast grid (.hcg)", {1, 2, 3}};
 inline const FileFormat kCacheFormat{{'\x89', 'H', 'C', 'I', 'N', 'F', 'L', '\n'}, 1, 0, "heightcast influence cache (.hci)", {1, 2}};

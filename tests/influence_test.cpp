@@ -278,7 +278,7 @@ TEST(Surface, GradientMatchesFiniteDifferences) {
     EXPECT_LE(offKink, checked / 50) << offKink << " of " << checked << " points off";
 }
 
-// ---- the water level field (DESIGN.md section 12, surface.h) ----
+// ---- the water level field (docs/design.md section 6, surface.h) ----
 
 // A river whose surface is not level, over the real LiDAR tile: the cells of the bathtub grid keep their
 // elevation, and the depth becomes max(0, level(x) - z) for a surface rising 4 m from west to east (1 %: a

@@ -1,4 +1,4 @@
-// The terrain read window by window (what each rank of `mpirun hc-ingest` reads, DESIGN.md section 13) against the
+// The terrain read window by window (what each rank of `mpirun hc-ingest` reads, docs/design.md section 7) against the
 // same raster read whole by loadTerrain, the reference: the same geometry, the same bits in every pixel of every
 // window, and the same reading counts. Sources that are kept as is, resampled (a geographic raster projected to UTM, a
 // rotated geotransform, --min-cell) and warped by GDAL (--t_srs), on real rasters, with holes.
@@ -21,7 +21,8 @@
 
 #include "heightcast/core/error.h"
 #include "heightcast/ingest/ingest.h"
-#include "resample.h"
+#include "heightcast/ingest/detail/windows.h"
+#include "temp_dir.h"
 #include "test_data.h"
 
 namespace {
@@ -32,18 +33,18 @@ using hc::ingest::Options;
 using hc::ingest::Raster;
 namespace detail = hc::ingest::detail;
 
-fs::path tempDir() {
-    fs::path d = fs::temp_directory_path() / ("hc_ingest_windows_test_" + std::to_string(::getpid()));
-    fs::create_directories(d);
-    return d;
-}
+class IngestWindows : public hc::test::TempDirTest {
+protected:
+    IngestWindows() : TempDirTest("hc_ingest_windows_") {}
+};
 
 bool sameBits(float a, float b) { return std::memcmp(&a, &b, sizeof a) == 0; }
 
 // Reads `o` whole and window by window: windows of awkward sizes tiling the working raster (so every pixel is read
 // once, its edges included) plus random ones overlapping them; every pixel compared bit for bit. Returns the number
-// of valid pixels compared (so a caller can see the comparison was not vacuous).
-size_t compareWindows(const Options& o, const std::string& expectMethod, size_t tileW, size_t tileH) {
+// of valid pixels compared (so a caller can see the comparison was not vacuous). The grid it writes goes into `dir`.
+size_t compareWindows(const fs::path& dir, const Options& o, const std::string& expectMethod, size_t tileW,
+                      size_t tileH) {
     LoadReport wholeReport;
     const Raster whole = hc::ingest::loadTerrain(o, wholeReport);
     EXPECT_NE(wholeReport.method.find(expectMethod), std::string::npos) << wholeReport.method;
@@ -95,7 +96,7 @@ size_t compareWindows(const Options& o, const std::string& expectMethod, size_t 
     // The check of every source pixel against the cell under its centre, as the ranks make it (strip by strip, against
     // the written file's regions), equals the one-process check (against the painted cells of the whole build): the
     // same counts and largest deviation exactly, the RMS to 1e-12 (its sum of squares is added in another order).
-    const std::string grid = (tempDir() / "windows_check.hcg").string();
+    const std::string grid = (dir / "windows_check.hcg").string();
     LoadReport fileReport;
     hc::ingest::ingestToFile(o, grid, fileReport);
     const std::optional<detail::SourceCheckSums> sums = windows->checkAgainst(grid);
@@ -138,22 +139,22 @@ void copyWithHole(const std::string& src, const std::string& path) {
 }
 
 // The bundled WGS 84 SRTM tile (384 x 284 px of 1"), a box of it burnt to its declared nodata: projected to UTM 32N.
-TEST(IngestWindows, GeographicSourceProjectedToUtmReadsTheSameBitsByWindow) {
+TEST_F(IngestWindows, GeographicSourceProjectedToUtmReadsTheSameBitsByWindow) {
     HC_REQUIRE_DATA(src, "hef_srtm.tif");
     GDALAllRegister();
-    const std::string path = (tempDir() / "hef_holes.tif").string();
+    const std::string path = (dir_ / "hef_holes.tif").string();
     ASSERT_NO_FATAL_FAILURE(copyWithHole(src, path));
     Options o;
     o.input = path;
-    const size_t valid = compareWindows(o, "projected to UTM zone 32N", 37, 23);
+    const size_t valid = compareWindows(dir_, o, "projected to UTM zone 32N", 37, 23);
     EXPECT_GT(valid, 50000u);  // most of the ~60 k working pixels, the hole and the skewed footprint's corners aside
 }
 
 // The bundled 1 m LiDAR tile under a geotransform turned by 20 degrees: resampled north-up.
-TEST(IngestWindows, RotatedGeotransformReadsTheSameBitsByWindow) {
+TEST_F(IngestWindows, RotatedGeotransformReadsTheSameBitsByWindow) {
     HC_REQUIRE_DATA(src, "lidar1m_minnesota_utm15.tif");
     GDALAllRegister();
-    const std::string path = (tempDir() / "lidar_rotated.tif").string();
+    const std::string path = (dir_ / "lidar_rotated.tif").string();
     ASSERT_NO_FATAL_FAILURE(copyWithGeoTransform(src, path, [](double* gt) {
         const double a = 20 * M_PI / 180, px = gt[1];
         const double rot[6] = {gt[0], px * std::cos(a), px * std::sin(a), gt[3], px * std::sin(a), -px * std::cos(a)};
@@ -161,11 +162,11 @@ TEST(IngestWindows, RotatedGeotransformReadsTheSameBitsByWindow) {
     }));
     Options o;
     o.input = path;
-    EXPECT_GT(compareWindows(o, "rotated geotransform", 64, 41), 10000u);
+    EXPECT_GT(compareWindows(dir_, o, "rotated geotransform", 64, 41), 10000u);
 }
 
 // The same LiDAR tile, kept north-up but resampled to --min-cell 3 (coarser than its 1 m pixels), and to 0.7 m (finer).
-TEST(IngestWindows, MinCellReadsTheSameBitsByWindow) {
+TEST_F(IngestWindows, MinCellReadsTheSameBitsByWindow) {
     HC_REQUIRE_DATA(src, "lidar1m_minnesota_utm15.tif");
     GDALAllRegister();
     for (double cell : {3.0, 0.7}) {
@@ -173,35 +174,35 @@ TEST(IngestWindows, MinCellReadsTheSameBitsByWindow) {
         Options o;
         o.input = src;
         o.minCellM = cell;
-        EXPECT_GT(compareWindows(o, "--min-cell", 50, 29), 1000u);
+        EXPECT_GT(compareWindows(dir_, o, "--min-cell", 50, 29), 1000u);
     }
 }
 
 // A source kept as is (a projected GeoTIFF): the windows are its own pixels.
-TEST(IngestWindows, KeptSourceReadsTheSameBitsByWindow) {
+TEST_F(IngestWindows, KeptSourceReadsTheSameBitsByWindow) {
     HC_REQUIRE_DATA(src, "south_glacier_utm7.tif");
     GDALAllRegister();
     Options o;
     o.input = src;
-    EXPECT_GT(compareWindows(o, "kept as is", 45, 33), 1000u);
+    EXPECT_GT(compareWindows(dir_, o, "kept as is", 45, 33), 1000u);
 }
 
 // --t_srs (GDAL's warper, exact transformer): each window warped on its own from the source blocks it reaches, on the
 // whole output's pixel centres and with the kernel's scale fixed: the same bits as the whole warp. The bundled WGS 84
 // tile with a hole to Austria's Gauss-Krueger zone (EPSG:31254), and the same to ETRS89 LAEA (EPSG:3035) at --min-cell
 // 200 (coarser than the ~30 m pixels: the kernel widens).
-TEST(IngestWindows, WarpedSourceReadsTheSameBitsByWindow) {
+TEST_F(IngestWindows, WarpedSourceReadsTheSameBitsByWindow) {
     HC_REQUIRE_DATA(src, "hef_srtm.tif");
     GDALAllRegister();
-    const std::string path = (tempDir() / "hef_holes_warp.tif").string();
+    const std::string path = (dir_ / "hef_holes_warp.tif").string();
     ASSERT_NO_FATAL_FAILURE(copyWithHole(src, path));
     Options o;
     o.input = path;
     o.targetSrs = "EPSG:31254";
-    EXPECT_GT(compareWindows(o, "warped to MGI / Austria GK West", 37, 23), 50000u);
+    EXPECT_GT(compareWindows(dir_, o, "warped to MGI / Austria GK West", 37, 23), 50000u);
     o.targetSrs = "EPSG:3035";
     o.minCellM = 200;
-    EXPECT_GT(compareWindows(o, "warped to ETRS89-extended / LAEA Europe", 19, 13), 2000u);
+    EXPECT_GT(compareWindows(dir_, o, "warped to ETRS89-extended / LAEA Europe", 19, 13), 2000u);
 }
 
 // Issue 40: the output pixels between the last source column west of 180 degrees and the first east of it, where the
@@ -210,7 +211,7 @@ TEST(IngestWindows, WarpedSourceReadsTheSameBitsByWindow) {
 // the nearer column alone, up to hundreds of metres off on this 1-degree relief). The global grid to PDC Mercator,
 // centred on 150 degrees, at 80 km pixels: as it is (-180 .. 180: its edges meet at 180), and moved 90 degrees east
 // (-90 .. 270: split at 180).
-TEST(IngestWindows, WarpInterpolatesAcrossTheSeams) {
+TEST_F(IngestWindows, WarpInterpolatesAcrossTheSeams) {
     HC_REQUIRE_DATA(src, "etopo1_1deg.tif");
     GDALAllRegister();
     OGRSpatialReference pdc, geo;
@@ -260,7 +261,7 @@ TEST(IngestWindows, WarpInterpolatesAcrossTheSeams) {
         return found;
     };
     EXPECT_GT(check(src, 359, "the grid's last column (179) and its first (-180 = 180)"), 50u);
-    const std::string moved = (tempDir() / "etopo_east_seams.tif").string();
+    const std::string moved = (dir_ / "etopo_east_seams.tif").string();
     ASSERT_NO_FATAL_FAILURE(copyWithGeoTransform(src, moved, [](double* gt) { gt[0] += 90; }));
     EXPECT_GT(check(moved, 269, "179 and 180 degrees, where the two pieces meet"), 50u);
 }
@@ -271,18 +272,18 @@ TEST(IngestWindows, WarpInterpolatesAcrossTheSeams) {
 // moved to 178..182 E, into EPSG:3857, whose edge is at 180 degrees), the whole raster's valid pixels, counted over
 // every window, refuse it with the whole read's message (checkValid); and a count of none says the footprint misses
 // every pixel centre.
-TEST(IngestWindows, WarpAcross180ReadsTheSameBitsByWindow) {
+TEST_F(IngestWindows, WarpAcross180ReadsTheSameBitsByWindow) {
     HC_REQUIRE_DATA(src, "etopo1_1deg.tif");
     GDALAllRegister();
-    const std::string path = (tempDir() / "etopo_east.tif").string();
+    const std::string path = (dir_ / "etopo_east.tif").string();
     ASSERT_NO_FATAL_FAILURE(copyWithGeoTransform(src, path, [](double* gt) { gt[0] += 90; }));
     Options o;
     o.input = path;
     o.targetSrs = "EPSG:3832";
-    EXPECT_GT(compareWindows(o, "split at 180 degrees", 41, 17), 10000u);
+    EXPECT_GT(compareWindows(dir_, o, "split at 180 degrees", 41, 17), 10000u);
 
     HC_REQUIRE_DATA(hef, "hef_srtm.tif");
-    const std::string across = (tempDir() / "across.tif").string();
+    const std::string across = (dir_ / "across.tif").string();
     size_t hw = 0, hh = 0;
     {
         GDALDatasetUniquePtr in(GDALDataset::Open(hef.c_str(), GDAL_OF_RASTER | GDAL_OF_READONLY));

@@ -1,4 +1,4 @@
-// UGRID quadtree meshes (DESIGN.md section 11) and rotated grids: meshes written by hc-export's writer (and by hand,
+// UGRID quadtree meshes (docs/design.md section 6) and rotated grids: meshes written by hc-export's writer (and by hand,
 // through GDAL's multidimensional API, for what the writer never writes) read back by hc-ingest's reader; a rotated
 // grid probed and rendered as the same grid unrotated seen from a turned camera.
 #include <gtest/gtest.h>
@@ -443,7 +443,7 @@ TEST_F(Mesh, ColorByAStepLayerShowsItsExactValuesOnTheWater) {
     const auto vel = hc::influence::Layer::byName(g, "vel");
     size_t water = 0, dry = 0;
     for (size_t i = 0; i < f.distanceM.size(); ++i) {
-        if (!std::isfinite(f.distanceM[i]) || f.wall[i]) continue;
+        if (!std::isfinite(f.distanceM[i]) || f.wall[i] != 0) continue;
         if (f.waterDepthM[i] > 0) {
             const auto v = e.value(f.posX[i], f.posY[i], vel);
             // The hit lies on the drawn water; its float position may straddle the water's edge by a rounding.

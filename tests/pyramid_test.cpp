@@ -9,7 +9,6 @@
 #include <optional>
 #include <random>
 #include <set>
-#include <unistd.h>
 #include <cstring>
 #include <bit>
 #include <array>
@@ -20,6 +19,7 @@
 #include "heightcast/influence/pyramid.h"
 #include "heightcast/influence/surface.h"
 #include "heightcast/ingest/build.h"
+#include "temp_dir.h"
 #include "test_data.h"
 #include "test_grids.h"
 
@@ -215,7 +215,7 @@ TEST(SurfacePyramid, ParentErrorIsTheLargestInterpolationErrorOfTheTile) {
     EXPECT_GT(tilesWithError, 0u) << "the rough strip must show somewhere";
 }
 
-// Water (DESIGN.md section 12) on the real LiDAR tile with a sloping river: wherever the exact evaluator draws
+// Water (docs/design.md section 6) on the real LiDAR tile with a sloping river: wherever the exact evaluator draws
 // water the level channel equals its water surface and the pyramid's rule draws it too; wherever it does not,
 // the pyramid's rule does not either (samples whose wet share or level sits within float rounding of the rule's
 // thresholds are counted and excluded: float cannot decide them).
@@ -272,7 +272,7 @@ TEST(SurfacePyramid, WaterPyramidBuiltWhereWaterReachesEqualsTheWholeOnesWater) 
     const int depth = g.findLayer("water_depth");
     double x0, y0, x1, y1;
     g.boundsLocal(x0, y0, x1, y1);
-    for (const double corner : {0.0, 1.0}) {  // a river sloping along x; then water in the south-west corner only
+    for (const bool corner : {false, true}) {  // a river sloping along x; then water in the south-west corner only
         SCOPED_TRACE(corner ? "corner" : "river");
         for (size_t i = 0; i < g.cellCount(); ++i) {
             double cx, cy;
@@ -305,12 +305,9 @@ TEST(SurfacePyramid, WaterPyramidBuiltWhereWaterReachesEqualsTheWholeOnesWater) 
     EXPECT_THROW(hc::influence::buildWaterPyramid(dry, KernelParams{}), hc::Error);
 }
 
-class PyramidFile : public ::testing::Test {
+class PyramidFile : public hc::test::TempDirTest {
 protected:
-    fs::path dir = fs::temp_directory_path() / ("hc_pyramid_test_" + std::to_string(::getpid()));
-    void SetUp() override { fs::create_directories(dir); }
-    void TearDown() override { fs::remove_all(dir); }
-    std::string path(const std::string& name) const { return (dir / name).string(); }
+    PyramidFile() : TempDirTest("hc_pyramid_") {}
 };
 
 TEST_F(PyramidFile, RoundTripsAndRefusesForeignGridsAndDamage) {

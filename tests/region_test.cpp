@@ -1,4 +1,4 @@
-// Out of core (DESIGN.md section 10): a grid file read a region at a time (GridRegionReader), the exact surface
+// Out of core (docs/design.md section 4): a grid file read a region at a time (GridRegionReader), the exact surface
 // from the cells around its points (influence/region.h) and frames rendered without the whole grid or its lists
 // (render::Scene over a file), each against the in-memory path on real rasters.
 #include <gtest/gtest.h>
@@ -11,14 +11,13 @@
 #include <random>
 #include <set>
 
-#include <unistd.h>
-
 #include "heightcast/core/error.h"
 #include "heightcast/grid/grid_file.h"
 #include "heightcast/influence/on_ranks.h"
 #include "heightcast/influence/pyramid.h"
 #include "heightcast/influence/region.h"
 #include "heightcast/render/renderer.h"
+#include "temp_dir.h"
 #include "test_data.h"
 #include "test_grids.h"
 
@@ -34,7 +33,7 @@ struct GridOnDisk {
     Grid grid;
     fs::path path;
     GridOnDisk(Grid g, const std::string& tag) : grid(std::move(g)) {
-        path = fs::temp_directory_path() / ("hc_region_" + tag + "_" + std::to_string(::getpid()) + ".hcg");
+        path = hc::test::tempPath("hc_region_", tag + ".hcg");
         hc::writeGrid(grid, path.string());
     }
     ~GridOnDisk() { fs::remove(path); }

@@ -1,4 +1,4 @@
-// Flood scenarios over time (DESIGN.md section 11): ingest of water steps into one structure, and reading them back.
+// Flood scenarios over time (docs/design.md section 6): ingest of water steps into one structure, and reading them back.
 //
 // The structure a scenario shares must keep every step's wet/dry edges and depth tolerance; the build reaches it
 // through per-step merge masks (ingest/src/build.cpp). These tests compare it with the rule written out directly

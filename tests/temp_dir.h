@@ -1,22 +1,33 @@
-// tests/temp_dir.h: a test fixture with a fresh directory of its own, made before each test and removed after it
-// (named by the test program's prefix, the process and the test, so that ctest -j runs never share one).
+// tests/temp_dir.h: the tests' temporary files. TempDirTest is a fixture with a fresh directory of its own, made before
+// each test and removed after it (named by the test program's prefix, the process and the test, so that ctest -j runs
+// never share one). tempPath() names a file of its own for a helper that outlives a test (a static cache, removing its
+// file when the program ends).
 #pragma once
 
 #include <gtest/gtest.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <filesystem>
 #include <string>
+#include <utility>
 
 namespace hc::test {
+
+// PREFIX<pid>_NAME under the system's temporary directory: this process's own.
+inline std::filesystem::path tempPath(const std::string& prefix, const std::string& name) {
+    return std::filesystem::temp_directory_path() / (prefix + std::to_string(::getpid()) + "_" + name);
+}
 
 class TempDirTest : public ::testing::Test {
 protected:
     explicit TempDirTest(std::string prefix) : prefix_(std::move(prefix)) {}
     void SetUp() override {
-        dir_ = std::filesystem::temp_directory_path() /
-               (prefix_ + std::to_string(::getpid()) + "_" + ::testing::UnitTest::GetInstance()->current_test_info()->name());
-        std::filesystem::remove_all(dir_);
+        // A parameterised test's name is NAME/INDEX: one directory, not one inside another.
+        std::string test = ::testing::UnitTest::GetInstance()->current_test_info()->name();
+        std::replace(test.begin(), test.end(), '/', '_');
+        dir_ = tempPath(prefix_, test);
+        std::filesystem::remove_all(dir_);  // left by a run that crashed
         std::filesystem::create_directories(dir_);
     }
     void TearDown() override { std::filesystem::remove_all(dir_); }
@@ -25,6 +36,13 @@ protected:
 
 private:
     std::string prefix_;
+};
+
+// TempDirTest for TEST_P: GetParam() as in ::testing::TestWithParam<P>.
+template <typename P>
+class TempDirTestWithParam : public TempDirTest, public ::testing::WithParamInterface<P> {
+protected:
+    using TempDirTest::TempDirTest;
 };
 
 }  // namespace hc::test

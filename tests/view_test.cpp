@@ -1,4 +1,4 @@
-// hc-view's window-free pieces (apps/view_support.h): bookmarks JSON round trip and validation, camera
+// hc-view's window-free pieces (support/view_support.h): bookmarks JSON round trip and validation, camera
 // motions, the bitmap font.
 #include <gtest/gtest.h>
 
@@ -7,17 +7,18 @@
 #include <fstream>
 
 #include "heightcast/core/error.h"
-#include "view_support.h"
+#include "heightcast/support/view_support.h"
+#include "temp_dir.h"
 
 using namespace hc::view;
 
 namespace {
 
-std::string tempDir() {
-    auto d = std::filesystem::temp_directory_path() / ("hc_view_test_" + std::to_string(::getpid()));
-    std::filesystem::create_directories(d);
-    return d.string();
-}
+// The suite's fixture, named as the suite: in its tests `Bookmarks` is this class, hc::view::Bookmarks the slots.
+class Bookmarks : public hc::test::TempDirTest {
+protected:
+    Bookmarks() : TempDirTest("hc_view_") {}
+};
 
 std::string errorOf(const std::string& json) {
     try {
@@ -28,19 +29,18 @@ std::string errorOf(const std::string& json) {
     return "";
 }
 
-}  // namespace
-
-TEST(Bookmarks, PathBesideTheGrid) {
+// In this namespace (not at global scope, where hc::view::Bookmarks is seen too) `Bookmarks` names the fixture.
+TEST_F(Bookmarks, PathBesideTheGrid) {
     EXPECT_EQ(bookmarksPath("out/hef.hcg"), "out/hef.bookmarks.json");
     EXPECT_EQ(bookmarksPath("grid"), "grid.bookmarks.json");
 }
 
-TEST(Bookmarks, RoundTripIsExact) {
-    Bookmarks b;
+TEST_F(Bookmarks, RoundTripIsExact) {
+    hc::view::Bookmarks b;
     b[1] = Bookmark{633759.123456789, 5184153.987654321, 3210.5, 45.25, -20.125, 60};
     b[9] = Bookmark{-1e-300, 1e300, 0.1, -179.9, -90, 179};  // extremes that %.6g would lose
     b[4] = Bookmark{0.1 + 0.2, 1.0 / 3.0, 2.0 / 3.0, 0, 90, 1e-3};
-    const Bookmarks back = bookmarksFromJson(bookmarksToJson(b));
+    const hc::view::Bookmarks back = bookmarksFromJson(bookmarksToJson(b));
     for (int s = 0; s <= 9; ++s) {
         ASSERT_EQ(back[s].has_value(), b[s].has_value()) << "slot " << s;
         if (!b[s]) continue;
@@ -52,26 +52,25 @@ TEST(Bookmarks, RoundTripIsExact) {
         EXPECT_EQ(back[s]->fovYDeg, b[s]->fovYDeg);
     }
     // No bookmarks: still a valid file.
-    for (const auto& s : bookmarksFromJson(bookmarksToJson(Bookmarks{}))) EXPECT_FALSE(s.has_value());
+    for (const auto& s : bookmarksFromJson(bookmarksToJson(hc::view::Bookmarks{}))) EXPECT_FALSE(s.has_value());
 }
 
-TEST(Bookmarks, FileRoundTripAndMissingFile) {
-    const std::string dir = tempDir();
+TEST_F(Bookmarks, FileRoundTripAndMissingFile) {
+    const std::string dir = dir_.string();
     const std::string path = dir + "/g.bookmarks.json";
     std::filesystem::remove(path);
     for (const auto& s : readBookmarks(path)) EXPECT_FALSE(s.has_value());  // no file: no bookmarks, no error
-    Bookmarks b;
+    hc::view::Bookmarks b;
     b[3] = Bookmark{1, 2, 3, 4, 5, 6};
     writeBookmarks(path, b);
-    const Bookmarks back = readBookmarks(path);
+    const hc::view::Bookmarks back = readBookmarks(path);
     ASSERT_TRUE(back[3].has_value());
     EXPECT_EQ(back[3]->fovYDeg, 6);
     for (const auto& e : std::filesystem::directory_iterator(dir))  // the atomic write left no temporary
         EXPECT_EQ(e.path().filename().string().find(".tmp."), std::string::npos) << e.path();
-    std::filesystem::remove_all(dir);
 }
 
-TEST(Bookmarks, BrokenFilesAreRefusedSayingWhy) {
+TEST_F(Bookmarks, BrokenFilesAreRefusedSayingWhy) {
     const std::string head = R"({"format": "heightcast-bookmarks", "version": 1, "bookmarks": [)";
     const std::string ok = R"({"slot": 2, "x": 1, "y": 2, "z": 3, "yaw": 4, "pitch": -5, "fov": 50})";
     EXPECT_EQ(errorOf(head + ok + "]}"), "");
@@ -100,6 +99,8 @@ TEST(Bookmarks, BrokenFilesAreRefusedSayingWhy) {
     const size_t whole = full.find_last_of('}') + 1;  // what follows is whitespace
     for (size_t n = 0; n < whole; ++n) EXPECT_NE(errorOf(full.substr(0, n)), "") << "truncated at byte " << n;
 }
+
+}  // namespace
 
 TEST(CameraMotion, OrbitKeepsTheDistanceAndLooksAtThePivot) {
     hc::render::Camera c;

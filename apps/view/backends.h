@@ -42,7 +42,7 @@ public:
 };
 
 // The CPU backend (renderFrame) with `threads` workers (0: all cores) on a thread of its own, so the window
-// stays responsive while a frame takes 0.5 s. `scene` must outlive it.
+// stays responsive while a frame renders. `scene` must outlive it.
 std::unique_ptr<ViewBackend> makeCpuBackend(const render::Scene& scene, unsigned threads);
 // The GL compute backend in the window's current context; throws hc::Error saying why not (no 4.3 compute
 // shaders, a driver failure). `scene` must outlive it.

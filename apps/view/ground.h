@@ -6,7 +6,7 @@
 #include <array>
 #include <optional>
 
-#include "render_setup.h"
+#include "heightcast/support/render_setup.h"
 #include "heightcast/influence/surface.h"
 #include "heightcast/render/camera.h"
 

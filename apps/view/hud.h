@@ -7,7 +7,7 @@
 #include <string>
 
 #include "view/window.h"
-#include "view_support.h"
+#include "heightcast/support/view_support.h"
 #include "heightcast/core/timer.h"
 #include "heightcast/render/camera.h"
 #include "heightcast/render/renderer.h"

@@ -11,12 +11,12 @@
 #include <string>
 #include <vector>
 
-#include "render_setup.h"
+#include "heightcast/support/render_setup.h"
 #include "view/backends.h"
 #include "view/ground.h"
 #include "view/hud.h"
 #include "view/window.h"
-#include "view_support.h"
+#include "heightcast/support/view_support.h"
 
 namespace hc::view {
 
@@ -42,7 +42,7 @@ public:
     // the first shows the next water step (wrapping around), as playback does.
     void runScripted(int frames, const std::string& screenshot, bool play = false);
 
-    // Water steps (DESIGN.md section 11): the one shown, how many, and how long the last switch took [ms] (reading the
+    // Water steps (docs/design.md section 6): the one shown, how many, and how long the last switch took [ms] (reading the
     // step, its pyramid, the new scene and backend; the frame after it is timed as any frame).
     size_t step() const { return step_; }
     size_t stepCount() const { return stepCount_; }

@@ -12,7 +12,7 @@
 #define GLFW_INCLUDE_NONE
 #include <GLFW/glfw3.h>
 
-#include "backend_choice.h"
+#include "heightcast/support/backend_choice.h"
 #include "heightcast/render/renderer.h"
 
 namespace hc::view {

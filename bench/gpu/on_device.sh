@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# bench/gpu/on_device.sh KIT_DIR OUT_DIR: on a machine with a GPU, runs the GPU benchmarks of BENCHMARKS.md with the
+# bench/gpu/on_device.sh KIT_DIR OUT_DIR: on a machine with a GPU, runs the GPU benchmarks of docs/benchmarks.md with the
 # tools bench/gpu/pack.sh packed into KIT_DIR, and writes the logs to OUT_DIR. Parts (HC_GPU_PARTS, default all,
 # comma-separated):
 #   scale   bench/scale/run.sh on the kit's raster, 105 M cells (every tool from a cold page cache; the GL row on the GPU)

@@ -2,7 +2,7 @@
 # bench/gpu/pack.sh [KIT_DIR]: packs the built tools, the shared libraries they load and the 105 M-cell benchmark
 # raster (as a VRT over four small GeoTIFFs, bench/scale/make_raster.sh) into KIT_DIR (default .devkit, ignored by
 # git), for a machine with a GPU that has none of the toolkit's Debian packages and cannot install them: the
-# machine lent to a session by this workplace's device tool (BENCHMARKS.md, "GL backend on a GPU"). There
+# machine lent to a session by this workplace's device tool (docs/benchmarks.md, "GL backend on a GPU"). There
 # bench/gpu/on_device.sh KIT_DIR runs the benchmarks. On a machine with the packages, build and run there instead.
 #
 # Carried: every library the tools load but the C and C++ runtimes (glibc, libstdc++, libgcc_s; the target's own,

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# bench/mpi/run.sh RASTER WORKDIR [RANKS...]: strong scaling of the preprocessing under MPI (issue 15, DESIGN.md
+# bench/mpi/run.sh RASTER WORKDIR [RANKS...]: strong scaling of the preprocessing under MPI (issue 15, docs/design.md
 # section 13) on this machine. For hc-ingest and hc-influence (lists and pyramid; --no-lists with HC_MPI_NO_LISTS=1):
 # one process with every core (the tools as they run without mpirun), then `mpirun -np N` for each N of RANKS (default
 # 1 2 3) with one thread a rank, so that N ranks use N cores (3 on a 2-core machine: oversubscribed). Every output is

@@ -8,7 +8,7 @@
 # projected CRS with an EPSG identity, in metres, at 10-30 m and without nodata, so every output pixel is valid
 # (kilauea_utm.nc, 30 m, has 3 % nodata ocean and a CRS without identity; the 1 m LiDAR has 31 m of relief).
 # Another source (HC_SCALE_SOURCE) keeps its own CRS and pixel size: a geographic mosaic of the two SRTM tiles
-# (gdalbuildvrt of N00E010.hgt and N00E011.hgt) makes the geographic raster of the MPI benchmark (BENCHMARKS.md).
+# (gdalbuildvrt of N00E010.hgt and N00E011.hgt) makes the geographic raster of the MPI benchmark (docs/benchmarks.md).
 #
 # Mirroring keeps the terrain continuous: the source A and its mirror images (flipped in x, in y, in both) make a
 # 2 x 2 block M = [A fx(A); fy(A) fxy(A)] whose opposite edges match, so copies of M side by side are continuous

@@ -7,7 +7,7 @@
 namespace hc {
 namespace {
 
-// Slicing-by-8 tables for the reflected IEEE polynomial 0xEDB88320 (about 8x faster than one
+// Slicing-by-8 tables for the reflected IEEE polynomial 0xEDB88320 (eight bytes a step, far faster than one
 // table lookup per byte; the grid reader checks every byte it loads).
 struct CrcTables {
     std::array<std::array<uint32_t, 256>, 8> t{};

@@ -1,111 +1,27 @@
+// grid/src/grid_file.cpp: reading the .hcg format (docs/formats/hcg.md): the header, META, the STEPS table and a
+// step's section parsed and checked, and the whole grid, one step of it, or the file's summary read (readGrid,
+// readGridStep, readGridInfo, verifyGridFile). Writing is grid_file_write.cpp's, reading regions of a file that is not
+// held grid_region_reader.cpp's; what they share is in grid_file_internal.h.
 #include "heightcast/grid/grid_file.h"
 
 #include <algorithm>
-#include <bit>
 #include <charconv>
 #include <cmath>
 #include <cstring>
 #include <map>
 #include <memory>
 #include <optional>
-#include <sstream>
 #include <vector>
 
-#include "heightcast/core/sectioned_file.h"
-#include "heightcast/core/checksum.h"
+#include "grid_file_internal.h"
 #include "heightcast/core/bytes.h"
+#include "heightcast/core/checksum.h"
 #include "heightcast/core/error.h"
-#include "quadtree_walk.h"
+#include "heightcast/core/sectioned_file.h"
 
 namespace hc {
+using namespace detail;
 namespace {
-
-enum SectionKind : uint32_t { kMeta = 1, kCells = 2, kLayer = 3, kSteps = 4, kStep = 5 };
-
-const FileFormat kFormat{{'\x89', 'H', 'C', 'G', 'R', 'I', 'D', '\n'}, kGridFileMajor, kGridFileMinor,
-                         "heightcast grid (.hcg)", {kMeta, kCells, kLayer, kSteps, kStep}, /*blockChecksumsSince=*/2};
-constexpr uint16_t kSummarySince = 2;  // the minor from which META holds the summary (GridSummary)
-constexpr uint16_t kStepsSince = 3;    // the minor from which water is stored as steps (STEP, STEPS)
-
-// The grid's own header fields (grid_file.h); pinned by the golden-bytes test.
-namespace off {
-constexpr size_t cellCount = 24, originX = 32, originY = 40, finestCell = 48, rootLevel = 56, minLevel = 57,
-                 maxLevel = 58, layerCount = 59, contentHash = 64, structureHash = 72, rotation = 80, reserved = 80, reservedEnd = 120;
-}
-constexpr uint16_t kRotationSince = 3;  // from 1.3 on bytes 80..87 hold the rotation (f64 degrees); before, zero
-static_assert(kGridHeaderBytes == kFileHeaderBytes);
-
-
-std::string fmtDouble(double v) {
-    char buf[32];
-    auto r = std::to_chars(buf, buf + sizeof buf, v);  // shortest exact round trip
-    return std::string(buf, r.ptr);
-}
-
-std::string fmtFloat(float v) {
-    char buf[32];
-    auto r = std::to_chars(buf, buf + sizeof buf, v);  // shortest decimal that reads back as this float
-    return std::string(buf, r.ptr);
-}
-
-void appendString(std::vector<std::byte>& out, const std::string& s) {
-    auto n = static_cast<uint32_t>(s.size());
-    auto* p = reinterpret_cast<const std::byte*>(&n);
-    out.insert(out.end(), p, p + 4);
-    auto* q = reinterpret_cast<const std::byte*>(s.data());
-    out.insert(out.end(), q, q + s.size());
-}
-
-std::string joinNumbers(std::span<const uint64_t> v) {
-    std::string out;
-    for (uint64_t x : v) {
-        if (!out.empty()) out += ' ';
-        out += std::to_string(x);
-    }
-    return out;
-}
-
-std::vector<std::byte> encodeMeta(const Grid& g, const GridSummary& summary) {
-    std::vector<std::pair<std::string, std::string>> kv{{"crs_wkt", g.crsWkt}, {"crs_name", g.crsName}};
-    const size_t firstStep = g.firstStepLayer();
-    if (firstStep < g.layers.size()) {
-        kv.emplace_back("step_layers", std::to_string(g.layers.size() - firstStep));
-        for (size_t l = firstStep; l < g.layers.size(); ++l) {
-            kv.emplace_back("step_layer." + std::to_string(l - firstStep) + ".name", g.layers[l].name);
-            kv.emplace_back("step_layer." + std::to_string(l - firstStep) + ".units", g.layers[l].units);
-        }
-    }
-    for (size_t l = 0; l < firstStep; ++l) {
-        kv.emplace_back("layer." + std::to_string(l) + ".name", g.layers[l].name);
-        kv.emplace_back("layer." + std::to_string(l) + ".units", g.layers[l].units);
-        if (l < summary.layerMin.size()) {  // an empty grid has no values, so no range
-            kv.emplace_back("layer." + std::to_string(l) + ".min", fmtFloat(summary.layerMin[l]));
-            kv.emplace_back("layer." + std::to_string(l) + ".max", fmtFloat(summary.layerMax[l]));
-        }
-    }
-    kv.emplace_back("summary.cells_per_level", joinNumbers(summary.cellsPerLevel));
-    kv.emplace_back("summary.bounds_finest", joinNumbers(summary.boundsFinest));
-    const IngestStats& s = g.stats;
-    kv.emplace_back("ingest.source", s.sourcePath);
-    kv.emplace_back("ingest.source_crs", s.sourceCrsName);
-    if (!s.sourceKind.empty()) kv.emplace_back("ingest.source_kind", s.sourceKind);  // absent for rasters (older files too)
-    if (!s.sourceFormat.empty()) kv.emplace_back("ingest.source_format", s.sourceFormat);  // flood model results only
-    if (s.latticeResidualM >= 0) kv.emplace_back("ingest.lattice_residual_m", fmtDouble(s.latticeResidualM));
-    kv.emplace_back("ingest.source_width", std::to_string(s.sourceWidth));
-    kv.emplace_back("ingest.source_height", std::to_string(s.sourceHeight));
-    kv.emplace_back("ingest.valid_pixels", std::to_string(s.validPixels));
-    kv.emplace_back("ingest.tolerance_m", fmtDouble(s.toleranceM));
-    kv.emplace_back("ingest.max_dev_m", fmtDouble(s.maxDevM));
-    kv.emplace_back("ingest.rms_dev_m", fmtDouble(s.rmsDevM));
-    // No wall time (ingest.seconds, written up to this change, still read): a grid's bytes depend on its inputs only,
-    // so a run under mpirun, or a rerun, gives the same file (DESIGN.md section 13).
-    std::vector<std::byte> out;
-    for (auto& [k, v] : kv) {
-        appendString(out, k);
-        appendString(out, v);
-    }
-    return out;
-}
 
 // Parses META (checked on this first touch); for a file of a minor with a summary, fills `summary` and
 // checks it against the header: counts per level add up to the cell count, only at levels in range, a
@@ -222,113 +138,6 @@ void parseMeta(const SectionedFileReader& file, const FileSection& s, Grid& g, u
     }
 }
 
-// The summary of cells in memory (what the writer computes as they stream past).
-class SummaryBuilder {
-public:
-    SummaryBuilder(int maxLevel, size_t layers) : layers_(layers) { s_.cellsPerLevel.assign(static_cast<size_t>(maxLevel) + 1, 0); }
-    // Cells already checked (CellStreamCheck or Grid::validate): levels in range, values finite.
-    void add(std::span<const uint64_t> codes, const std::vector<std::span<const float>>& values) {
-        for (uint64_t c : codes) {
-            const int level = codeLevel(c);
-            ++s_.cellsPerLevel[static_cast<size_t>(level)];
-            const uint64_t key = codeKey(c), x = mortonX(key), y = mortonY(key), span = uint64_t{1} << level;
-            if (first_) s_.boundsFinest = {x, y, x + span, y + span};
-            s_.boundsFinest = {std::min(s_.boundsFinest[0], x), std::min(s_.boundsFinest[1], y), std::max(s_.boundsFinest[2], x + span),
-                               std::max(s_.boundsFinest[3], y + span)};
-            first_ = false;
-        }
-        if (codes.empty()) return;
-        if (s_.layerMin.empty()) {
-            s_.layerMin.assign(layers_, HUGE_VALF);
-            s_.layerMax.assign(layers_, -HUGE_VALF);
-        }
-        for (size_t l = 0; l < layers_; ++l)
-            for (float v : values[l]) {
-                s_.layerMin[l] = std::min(s_.layerMin[l], v);
-                s_.layerMax[l] = std::max(s_.layerMax[l], v);
-            }
-    }
-    const GridSummary& summary() const { return s_; }
-
-    // The summary so far as words, and back (a rank's run goes on from the runs before it: GridFilePart).
-    void save(std::vector<uint64_t>& out) const {
-        out.push_back(first_);
-        out.insert(out.end(), s_.cellsPerLevel.begin(), s_.cellsPerLevel.end());
-        out.insert(out.end(), s_.boundsFinest.begin(), s_.boundsFinest.end());
-        out.push_back(!s_.layerMin.empty());
-        for (size_t l = 0; l < layers_; ++l) {
-            out.push_back(s_.layerMin.empty() ? 0 : std::bit_cast<uint32_t>(s_.layerMin[l]));
-            out.push_back(s_.layerMax.empty() ? 0 : std::bit_cast<uint32_t>(s_.layerMax[l]));
-        }
-    }
-    // Adds the summary of the cells after these (another rank's run, GridFilePart).
-    void merge(const SummaryBuilder& o) {
-        if (o.first_) return;
-        if (first_) {
-            *this = o;
-            return;
-        }
-        for (size_t l = 0; l < s_.cellsPerLevel.size(); ++l) s_.cellsPerLevel[l] += o.s_.cellsPerLevel[l];
-        const auto &a = s_.boundsFinest, &b = o.s_.boundsFinest;
-        s_.boundsFinest = {std::min(a[0], b[0]), std::min(a[1], b[1]), std::max(a[2], b[2]), std::max(a[3], b[3])};
-        for (size_t l = 0; l < layers_; ++l) {
-            s_.layerMin[l] = std::min(s_.layerMin[l], o.s_.layerMin[l]);
-            s_.layerMax[l] = std::max(s_.layerMax[l], o.s_.layerMax[l]);
-        }
-    }
-    // Words [at, ...) as save() wrote them; returns the index after them, or 0 where the words run short.
-    size_t resume(std::span<const uint64_t> in, size_t at) {
-        const size_t levels = s_.cellsPerLevel.size();
-        if (in.size() < at + 1 + levels + 4 + 1 + 2 * layers_) return 0;
-        first_ = in[at++] != 0;
-        for (size_t l = 0; l < levels; ++l) s_.cellsPerLevel[l] = in[at++];
-        for (size_t k = 0; k < 4; ++k) s_.boundsFinest[k] = in[at++];
-        const bool ranges = in[at++] != 0;
-        s_.layerMin.clear(), s_.layerMax.clear();
-        for (size_t l = 0; l < layers_; ++l, at += 2)
-            if (ranges) {
-                s_.layerMin.push_back(std::bit_cast<float>(uint32_t(in[at])));
-                s_.layerMax.push_back(std::bit_cast<float>(uint32_t(in[at + 1])));
-            }
-        return at;
-    }
-
-private:
-    size_t layers_;
-    bool first_ = true;
-    GridSummary s_;
-};
-
-// Where one run of cells leaves the order check and the hashes for the next (GridFileWriter::streamState,
-// GridFilePart::state): 64-bit words, little-endian: a tag, the static layers L, the order check (the first key not
-// covered, the cells so far), the hashes ((1 + L) x 4 words: Hash64::State).
-constexpr uint64_t kStreamStateTag = 0x4554415453474348ull;  // "HCGSTATE"
-
-std::vector<std::byte> saveStream(CellStreamCheck::State check, const GridHasher& hasher, size_t layers) {
-    std::vector<uint64_t> w{kStreamStateTag, layers, check.nextFree, check.count};
-    for (const Hash64::State& h : hasher.save()) w.insert(w.end(), {h.state, h.length, h.pending, h.pendingBytes});
-    std::vector<std::byte> out(w.size() * 8);
-    std::memcpy(out.data(), w.data(), out.size());
-    return out;
-}
-
-std::vector<uint64_t> words(std::span<const std::byte> bytes, const std::string& what) {
-    if (bytes.size() % 8 != 0) throw Error(what + " is no whole number of words");
-    std::vector<uint64_t> w(bytes.size() / 8);
-    if (!w.empty()) std::memcpy(w.data(), bytes.data(), bytes.size());
-    return w;
-}
-
-CellStreamCheck::State resumeStream(std::span<const std::byte> bytes, GridHasher& hasher, size_t layers, const std::string& what) {
-    const std::vector<uint64_t> w = words(bytes, what + ": the cells' running state from the ranks before");
-    if (w.size() != 4 + 4 * (1 + layers) || w[0] != kStreamStateTag || w[1] != layers)
-        throw Error(what + ": the cells' running state from the ranks before is not one of this grid");
-    std::vector<Hash64::State> h(1 + layers);
-    for (size_t k = 0; k < h.size(); ++k) h[k] = {w[4 + 4 * k], w[5 + 4 * k], w[6 + 4 * k], w[7 + 4 * k]};
-    hasher.resume(h);
-    return {w[2], w[3]};
-}
-
 GridSummary summarise(const Grid& g) {
     SummaryBuilder b(g.maxLevel, g.layers.size());
     std::vector<std::span<const float>> values(g.values.begin(), g.values.end());
@@ -339,35 +148,6 @@ GridSummary summarise(const Grid& g) {
 bool operator==(const GridSummary& a, const GridSummary& b) {
     return a.cellsPerLevel == b.cellsPerLevel && a.boundsFinest == b.boundsFinest && a.layerMin == b.layerMin && a.layerMax == b.layerMax;
 }
-
-// A grid's geometry, CRS, layers and statistics, never its cells.
-Grid shapeOf(const Grid& g) {
-    Grid bare;
-    bare.originWorldX = g.originWorldX;
-    bare.originWorldY = g.originWorldY;
-    bare.finestCellM = g.finestCellM;
-    bare.rotationDeg = g.rotationDeg;
-    bare.rootLevel = g.rootLevel;
-    bare.minLevel = g.minLevel;
-    bare.maxLevel = g.maxLevel;
-    bare.crsWkt = g.crsWkt;
-    bare.crsName = g.crsName;
-    bare.layers = g.layers;
-    bare.values.assign(g.layers.size(), {});
-    bare.stats = g.stats;
-    bare.steps = g.steps;
-    bare.step = g.step;
-    return bare;
-}
-
-struct Located {
-    uint64_t cellCount = 0;
-    const FileSection* meta = nullptr;
-    const FileSection* cells = nullptr;
-    std::vector<const FileSection*> layers;  // the static LAYER sections
-    const FileSection* stepsTable = nullptr;  // STEPS (1.3 files with water)
-    std::vector<const FileSection*> steps;    // STEP sections by step index (sized by parseSteps)
-};
 
 // The header's fields into `g` (no cells) and the sections located and sized: no section data read.
 Located parseHeader(const SectionedFileReader& file, Grid& g) {
@@ -546,17 +326,6 @@ void addStepRanges(GridSummary& s, const Grid& g, uint64_t cellCount) {
     }
 }
 
-// The header's content hash of a file with steps: the static grid's content hash and every step's (time, hash).
-uint64_t scenarioHash(uint64_t staticContentHash, const std::vector<StepInfo>& steps) {
-    Hash64 h(0x6863737465707321ull);
-    h.updateValue(staticContentHash);
-    for (const StepInfo& s : steps) {
-        h.updateValue(s.timeS);
-        h.updateValue(s.contentHash);
-    }
-    return h.digest();
-}
-
 // Name and digest of each static layer (combineContentHash's parts).
 std::vector<std::pair<std::string, uint64_t>> staticDigests(const Grid& g) {
     std::vector<std::pair<std::string, uint64_t>> parts;
@@ -629,39 +398,33 @@ Grid parseGrid(const SectionedFileReader& file, size_t step, Located* located = 
 
 }  // namespace
 
-// The grid's static part: its layers before the step layers, as the writer's hasher and summary see it.
-Grid staticShapeOf(const Grid& g) {
-    Grid bare = shapeOf(g);
-    bare.layers.resize(g.firstStepLayer());
-    bare.values.resize(g.firstStepLayer());
-    bare.steps.clear();
-    bare.step = 0;
+Grid detail::shapeOf(const Grid& g) {
+    Grid bare;
+    bare.originWorldX = g.originWorldX;
+    bare.originWorldY = g.originWorldY;
+    bare.finestCellM = g.finestCellM;
+    bare.rotationDeg = g.rotationDeg;
+    bare.rootLevel = g.rootLevel;
+    bare.minLevel = g.minLevel;
+    bare.maxLevel = g.maxLevel;
+    bare.crsWkt = g.crsWkt;
+    bare.crsName = g.crsName;
+    bare.layers = g.layers;
+    bare.values.assign(g.layers.size(), {});
+    bare.stats = g.stats;
+    bare.steps = g.steps;
+    bare.step = g.step;
     return bare;
 }
 
-WaterStepData sparseStep(const Grid& g) {
-    WaterStepData out;
-    out.timeS = g.stepTimeS();
-    const size_t first = g.firstStepLayer();
-    if (first >= g.layers.size()) return out;
-    const auto& depth = g.values[first];
-    out.values.resize(g.layers.size() - first);
-    for (size_t i = 0; i < depth.size(); ++i) {
-        if (depth[i] > 0) {
-            out.wet.push_back(static_cast<uint32_t>(i));
-            for (size_t l = first; l < g.layers.size(); ++l) out.values[l - first].push_back(g.values[l][i]);
-            continue;
-        }
-        // A step stores its wet cells only: a value on a dry cell would be lost, so it is refused.
-        if (depth[i] < 0)
-            throw Error("cell " + std::to_string(i) + " has water_depth " + fmtFloat(depth[i]) + ": depths are >= 0 (0 = dry)");
-        for (size_t l = first + 1; l < g.layers.size(); ++l)
-            if (g.values[l][i] != 0)
-                throw Error("cell " + std::to_string(i) + " is dry (water_depth " + fmtFloat(depth[i]) + ") but its step layer " + g.layers[l].name +
-                            " is " + fmtFloat(g.values[l][i]) + ": step layers (water_depth and the layers after it) are stored on wet cells "
-                            "only; put a layer that does not change with the water before water_depth");
+uint64_t detail::scenarioHash(uint64_t staticContentHash, const std::vector<StepInfo>& steps) {
+    Hash64 h(0x6863737465707321ull);
+    h.updateValue(staticContentHash);
+    for (const StepInfo& s : steps) {
+        h.updateValue(s.timeS);
+        h.updateValue(s.contentHash);
     }
-    return out;
+    return h.digest();
 }
 
 void selectStep(Grid& g, const WaterStepData& data, size_t step) {
@@ -673,338 +436,6 @@ void selectStep(Grid& g, const WaterStepData& data, size_t step) {
         for (size_t j = 0; j < data.wet.size(); ++j) v.at(data.wet[j]) = src.at(j);
     }
     g.step = step;
-}
-
-struct GridFileWriter::Impl {
-    Impl(const std::string& path, const Grid& gridShape, uint64_t cells, std::vector<FileSection> layout, size_t stepsAnnounced)
-        : out(path, kFormat, std::move(layout), 1 + (stepsAnnounced ? stepsAnnounced + 1 : 0)), shape(gridShape), staticShape(staticShapeOf(gridShape)),
-          cellCount(cells), stepCount(stepsAnnounced), check(staticShape), hasher(staticShape, cells),
-          summary(staticShape.maxLevel, staticShape.layers.size()) {}
-    SectionedFileWriter out;
-    Grid shape;        // geometry, CRS and layers (step layers too); no cells
-    Grid staticShape;  // the same without the step layers
-    uint64_t cellCount;
-    size_t stepCount;
-    CellStreamCheck check;
-    GridHasher hasher;
-    SummaryBuilder summary;
-    uint64_t written = 0;
-    std::vector<StepInfo> steps;  // those appended so far
-};
-
-GridFileWriter::GridFileWriter(const std::string& path, const Grid& shape, uint64_t cellCount, size_t stepCount) {
-    std::string problem = shape.validateShape();
-    if (!problem.empty()) throw Error(path + ": refusing to write an invalid grid: " + problem);
-    const bool water = shape.firstStepLayer() < shape.layers.size();
-    if (water && stepCount == 0) throw Error(path + ": a grid with water needs at least one water step");
-    if (!water && stepCount > 0) throw Error(path + ": water steps need a water_depth layer");
-    if (water && cellCount > UINT32_MAX) throw Error(path + ": a grid with water steps holds at most 2^32 - 1 cells");
-    Grid bare = shapeOf(shape);
-    bare.steps.clear();
-    bare.step = 0;
-    // Layout: CELLS, static LAYER..., then the STEP sections, STEPS and META as they become known.
-    std::vector<FileSection> layout{{kCells, 0, 0, cellCount * 8, 0}};
-    for (size_t l = 0; l < shape.firstStepLayer(); ++l) layout.push_back({kLayer, static_cast<uint32_t>(l), 0, cellCount * 4, 0});
-    impl_ = std::make_unique<Impl>(path, bare, cellCount, std::move(layout), stepCount);
-}
-
-GridFileWriter::~GridFileWriter() = default;
-
-namespace {
-
-// The shape of a batch of cells: a value array per static layer, each as long as the codes.
-void checkBatchShape(const std::string& path, std::span<const uint64_t> codes, const std::vector<std::span<const float>>& layerValues, size_t layers) {
-    if (layerValues.size() != layers)
-        throw Error(path + ": " + std::to_string(layerValues.size()) + " value arrays for " + std::to_string(layers) + " static layers");
-    for (const auto& v : layerValues)
-        if (v.size() != codes.size()) throw Error(path + ": layer values and cells differ in number");
-}
-
-// Every cell's rules (CellStreamCheck), then the cells into the summary.
-void checkCells(const std::string& path, std::span<const uint64_t> codes, const std::vector<std::span<const float>>& layerValues,
-                CellStreamCheck& check, SummaryBuilder& summary) {
-    const size_t layers = layerValues.size();
-    float v[256];
-    for (size_t i = 0; i < codes.size(); ++i) {
-        for (size_t l = 0; l < layers; ++l) v[l] = layerValues[l][i];
-        std::string problem = check.next(codes[i], v);
-        if (!problem.empty()) throw Error(path + ": refusing to write an invalid grid: " + problem);
-    }
-    summary.add(codes, layerValues);
-}
-
-void hashCells(std::span<const uint64_t> codes, const std::vector<std::span<const float>>& layerValues, GridHasher& hasher) {
-    hasher.addCodes(codes);
-    for (size_t l = 0; l < layerValues.size(); ++l) hasher.addValues(l, layerValues[l]);
-}
-
-}  // namespace
-
-void GridFileWriter::append(std::span<const uint64_t> codes, const std::vector<std::span<const float>>& layerValues) {
-    Impl& w = *impl_;
-    const size_t layers = w.staticShape.layers.size();
-    const std::string& path = w.out.path();
-    checkBatchShape(path, codes, layerValues, layers);
-    if (codes.size() > w.cellCount - w.written) throw Error(path + ": more cells than the " + std::to_string(w.cellCount) + " announced");
-    checkCells(path, codes, layerValues, w.check, w.summary);
-    hashCells(codes, layerValues, w.hasher);
-    w.out.append(0, std::as_bytes(codes));
-    for (size_t l = 0; l < layers; ++l) w.out.append(1 + l, std::as_bytes(layerValues[l]));
-    w.written += codes.size();
-}
-
-// A part for addPart: 64-bit words: first cell, cells, the state's bytes, the pieces' count; then the state, then the
-// pieces (FilePiece, 32 bytes each).
-std::vector<std::byte> GridFileWriter::placement() const {
-    const Impl& w = *impl_;
-    std::vector<std::byte> out(8);
-    bytes::store(out, 0, w.cellCount);
-    const std::vector<std::byte> p = w.out.placement().encode();
-    out.insert(out.end(), p.begin(), p.end());
-    return out;
-}
-
-std::vector<std::byte> GridFileWriter::streamState() const {
-    const Impl& w = *impl_;
-    return saveStream(w.check.save(), w.hasher, w.staticShape.layers.size());
-}
-
-// A part for addPart: five 64-bit words (first cell, cells, the bytes of its state, of its summary, the pieces' count),
-// then the state after its cells (saveStream), its cells' summary (SummaryBuilder::save), the pieces (FilePiece, 32 bytes
-// each).
-void GridFileWriter::addPart(std::span<const std::byte> part) {
-    Impl& w = *impl_;
-    const std::string& path = w.out.path();
-    if (part.size() < 40) throw Error(path + ": a rank's part of " + std::to_string(part.size()) + " bytes is cut short");
-    uint64_t head[5];
-    std::memcpy(head, part.data(), sizeof head);
-    const auto [first, cells, stateBytes, summaryBytes, pieces] = head;
-    if (stateBytes > part.size() - 40 || summaryBytes > part.size() - 40 - stateBytes ||
-        pieces > (part.size() - 40 - stateBytes - summaryBytes) / sizeof(FilePiece) ||
-        40 + stateBytes + summaryBytes + pieces * sizeof(FilePiece) != part.size())
-        throw Error(path + ": a rank's part is malformed");
-    if (first != w.written || cells > w.cellCount - w.written)
-        throw Error(path + ": a rank's part holds cells " + std::to_string(first) + ".." + std::to_string(first + cells) + " where cell " +
-                    std::to_string(w.written) + " comes next of " + std::to_string(w.cellCount));
-    std::vector<FilePiece> table(pieces);
-    if (pieces) std::memcpy(table.data(), part.data() + 40 + stateBytes + summaryBytes, pieces * sizeof(FilePiece));
-    w.out.addPieces(table);
-    const CellStreamCheck::State after = resumeStream(part.subspan(40, stateBytes), w.hasher, w.staticShape.layers.size(), path);
-    w.check.resume(after);
-    SummaryBuilder theirs(w.staticShape.maxLevel, w.staticShape.layers.size());
-    const std::vector<uint64_t> sw = words(part.subspan(40 + stateBytes, summaryBytes), path + ": a rank's summary");
-    if (theirs.resume(sw, 0) != sw.size() || sw.empty()) throw Error(path + ": a rank's summary is malformed");
-    w.summary.merge(theirs);
-    w.written += cells;
-    if (after.count != w.written)
-        throw Error(path + ": a rank's part ends at cell " + std::to_string(after.count) + ", not at the " + std::to_string(w.written) + " written");
-}
-
-struct GridFilePart::Impl {
-    Impl(FilePlacement placement, const Grid& gridShape, uint64_t cells, uint64_t firstCell)
-        : out(std::move(placement)), staticShape(staticShapeOf(gridShape)), cellCount(cells), first(firstCell), check(staticShape),
-          hasher(staticShape, cells), summary(staticShape.maxLevel, staticShape.layers.size()) {
-        check.resume({0, first});  // cells are numbered as in the file; the first one's order is checked by resume()
-    }
-    SectionedFilePart out;
-    Grid staticShape;
-    uint64_t cellCount, first;
-    CellStreamCheck check;  // this run's cells among themselves, as they are appended
-    GridHasher hasher;
-    SummaryBuilder summary;
-    uint64_t written = 0, followed = 0;  // cells of this run written, and hashed
-    uint64_t firstKey = 0;               // of the run's first cell
-    std::optional<CellStreamCheck::State> before;  // where the runs before leave the order check (resume)
-    std::string path;
-
-    // The run's first cell after the cells before it (CellStreamCheck's rule across the seam).
-    void checkSeam() const {
-        if (before && written > 0 && first > 0 && firstKey < before->nextFree)
-            throw Error(path + ": refusing to write an invalid grid: cell " + std::to_string(first) + " overlaps or precedes cell " +
-                        std::to_string(first - 1));
-    }
-};
-
-GridFilePart::GridFilePart(std::span<const std::byte> placement, const Grid& shape, uint64_t firstCell) {
-    if (placement.size() < 8) throw Error("a grid file's placement is cut short");
-    const uint64_t cells = bytes::load<uint64_t>(placement.data());
-    FilePlacement p = FilePlacement::decode(placement.subspan(8));
-    const std::string path = p.path;
-    if (p.sections.size() < 1 + shape.firstStepLayer() || p.sections[0].bytes != 8 * cells || firstCell > cells)
-        throw Error(path + ": the placement does not match this grid (" + std::to_string(cells) + " cells)");
-    impl_ = std::make_unique<Impl>(std::move(p), shape, cells, firstCell);
-    impl_->path = path;
-}
-
-GridFilePart::~GridFilePart() = default;
-
-void GridFilePart::append(std::span<const uint64_t> codes, const std::vector<std::span<const float>>& layerValues) {
-    Impl& w = *impl_;
-    const size_t layers = w.staticShape.layers.size();
-    checkBatchShape(w.path, codes, layerValues, layers);
-    const uint64_t at = w.first + w.written;
-    if (codes.size() > w.cellCount - at) throw Error(w.path + ": more cells than the " + std::to_string(w.cellCount) + " announced");
-    if (codes.empty()) return;
-    // Checked and summarised here, each rank its own run at once; only the seam and the hashes wait for the ranks before.
-    checkCells(w.path, codes, layerValues, w.check, w.summary);
-    if (w.written == 0) w.firstKey = codeKey(codes[0]);
-    w.out.writeAt(0, 8 * at, std::as_bytes(codes));
-    for (size_t l = 0; l < layers; ++l) w.out.writeAt(1 + l, 4 * at, std::as_bytes(layerValues[l]));
-    w.written += codes.size();
-    w.checkSeam();
-}
-
-void GridFilePart::resume(std::span<const std::byte> state) {
-    Impl& w = *impl_;
-    const CellStreamCheck::State before = resumeStream(state, w.hasher, w.staticShape.layers.size(), w.path);
-    if (before.count != w.first)
-        throw Error(w.path + ": the ranks before this one wrote " + std::to_string(before.count) + " cells, but its own begin at cell " +
-                    std::to_string(w.first));
-    w.before = before;
-    w.checkSeam();
-}
-
-void GridFilePart::follow() {
-    Impl& w = *impl_;
-    if (!w.before) throw Error(w.path + ": a rank's cells hashed before the state of the ranks before it arrived");
-    const size_t layers = w.staticShape.layers.size();
-    constexpr uint64_t kChunk = uint64_t{1} << 17;  // 1 MiB of codes at a time
-    std::vector<uint64_t> codes;
-    std::vector<std::vector<float>> values(layers);
-    while (w.followed < w.written) {
-        const uint64_t at = w.first + w.followed, n = std::min(kChunk, w.written - w.followed);
-        codes.resize(n);
-        w.out.readAt(0, 8 * at, std::as_writable_bytes(std::span<uint64_t>(codes)));
-        for (size_t l = 0; l < layers; ++l) {
-            values[l].resize(n);
-            w.out.readAt(1 + l, 4 * at, std::as_writable_bytes(std::span<float>(values[l])));
-        }
-        hashCells(codes, std::vector<std::span<const float>>(values.begin(), values.end()), w.hasher);
-        w.followed += n;
-    }
-}
-
-std::vector<std::byte> GridFilePart::state() const {
-    const Impl& w = *impl_;
-    if (!w.before || w.followed != w.written)
-        throw Error(w.path + ": a rank's state asked for with " + std::to_string(w.followed) + " of its " + std::to_string(w.written) + " cells hashed");
-    // The order check goes on from this run's last cell, or from the runs before where this one is empty.
-    const CellStreamCheck::State after{w.written > 0 ? w.check.save().nextFree : w.before->nextFree, w.first + w.written};
-    return saveStream(after, w.hasher, w.staticShape.layers.size());
-}
-
-std::vector<std::byte> GridFilePart::finish() {
-    Impl& w = *impl_;
-    const std::vector<std::byte> s = state();
-    const std::vector<FilePiece> pieces = w.out.finish();
-    std::vector<uint64_t> summary;
-    w.summary.save(summary);
-    const size_t summaryBytes = 8 * summary.size();
-    std::vector<std::byte> out(40 + s.size() + summaryBytes + pieces.size() * sizeof(FilePiece));
-    const uint64_t head[5] = {w.first, w.written, s.size(), summaryBytes, pieces.size()};
-    std::memcpy(out.data(), head, sizeof head);
-    std::memcpy(out.data() + 40, s.data(), s.size());
-    std::memcpy(out.data() + 40 + s.size(), summary.data(), summaryBytes);
-    if (!pieces.empty()) std::memcpy(out.data() + 40 + s.size() + summaryBytes, pieces.data(), pieces.size() * sizeof(FilePiece));
-    return out;
-}
-
-void GridFileWriter::appendStep(const WaterStepData& step) {
-    Impl& w = *impl_;
-    const std::string& path = w.out.path();
-    const size_t k = w.steps.size();
-    const std::string name = path + ": step " + std::to_string(k);
-    if (w.written != w.cellCount) throw Error(name + " comes before all " + std::to_string(w.cellCount) + " cells");
-    if (k >= w.stepCount) throw Error(name + ": more steps than the " + std::to_string(w.stepCount) + " announced");
-    const size_t first = w.shape.firstStepLayer(), L = w.shape.layers.size() - first;
-    if (step.values.size() != L) throw Error(name + ": " + std::to_string(step.values.size()) + " value arrays for " + std::to_string(L) + " step layers");
-    for (const auto& v : step.values)
-        if (v.size() != step.wet.size()) throw Error(name + ": step values and wet cells differ in number");
-    if (!std::isfinite(step.timeS)) throw Error(name + ": time is not finite");
-    if (k > 0 && !(step.timeS > w.steps.back().timeS))
-        throw Error(name + ": times must increase strictly, " + fmtDouble(step.timeS) + " s follows " + fmtDouble(w.steps.back().timeS) + " s");
-    const size_t n = step.wet.size();
-    for (size_t j = 0; j < n; ++j)
-        if (step.wet[j] >= w.cellCount || (j > 0 && step.wet[j] <= step.wet[j - 1]))
-            throw Error(name + ": wet cell indices must ascend below the cell count");
-    StepInfo info;
-    info.timeS = step.timeS;
-    info.wetCells = n;
-    std::vector<std::pair<std::string, uint64_t>> parts;
-    for (size_t l = 0; l < first; ++l) parts.emplace_back(w.shape.layers[l].name, w.hasher.layerDigest(l));
-    for (size_t l = 0; l < L; ++l) {
-        float lo = HUGE_VALF, hi = -HUGE_VALF;
-        for (float v : step.values[l]) {
-            if (!std::isfinite(v) || (l == 0 && !(v > 0)))
-                throw Error(name + ": " + w.shape.layers[first + l].name + " values must be finite" + (l == 0 ? " and > 0 (only wet cells are stored)" : ""));
-            lo = std::min(lo, v);
-            hi = std::max(hi, v);
-        }
-        if (n > 0) info.layerMin.push_back(lo), info.layerMax.push_back(hi);
-        parts.emplace_back(w.shape.layers[first + l].name, sparseLayerDigest(w.cellCount, step.wet, step.values[l]));
-    }
-    info.contentHash = combineContentHash(w.hasher.structureHash(), parts);
-    std::vector<std::byte> data(4 * n * (1 + L));
-    if (n > 0) {
-        std::memcpy(data.data(), step.wet.data(), 4 * n);
-        for (size_t l = 0; l < L; ++l) std::memcpy(data.data() + 4 * n * (1 + l), step.values[l].data(), 4 * n);
-    }
-    w.out.addSection(kStep, static_cast<uint32_t>(k), data);
-    w.steps.push_back(std::move(info));
-}
-
-void GridFileWriter::commit(const IngestStats& stats) {
-    Impl& w = *impl_;
-    if (w.written != w.cellCount)
-        throw Error(w.out.path() + ": " + std::to_string(w.written) + " cells written of " + std::to_string(w.cellCount) + " announced");
-    if (w.steps.size() != w.stepCount)
-        throw Error(w.out.path() + ": " + std::to_string(w.steps.size()) + " water steps written of " + std::to_string(w.stepCount) + " announced");
-    w.shape.stats = stats;
-    uint64_t contentHash = w.hasher.contentHash();
-    if (w.stepCount > 0) {
-        const size_t L = w.shape.layers.size() - w.shape.firstStepLayer();
-        std::vector<std::byte> table(w.steps.size() * (24 + 8 * L));
-        for (size_t k = 0; k < w.steps.size(); ++k) {
-            const StepInfo& s = w.steps[k];
-            const size_t at = k * (24 + 8 * L);
-            bytes::store(table, at, s.timeS);
-            bytes::store(table, at + 8, s.wetCells);
-            bytes::store(table, at + 16, s.contentHash);
-            for (size_t l = 0; l < L; ++l) {
-                bytes::store(table, at + 24 + 8 * l, s.wetCells ? s.layerMin[l] : 0.0f);
-                bytes::store(table, at + 28 + 8 * l, s.wetCells ? s.layerMax[l] : 0.0f);
-            }
-        }
-        w.out.addSection(kSteps, 0, table);
-        contentHash = scenarioHash(contentHash, w.steps);
-    }
-    w.out.addSection(kMeta, 0, encodeMeta(w.shape, w.summary.summary()));
-    const Grid& g = w.shape;
-    std::vector<std::byte> head(kFileHeaderBytes, std::byte{0});
-    bytes::store(head, off::cellCount, w.cellCount);
-    bytes::store(head, off::originX, g.originWorldX);
-    bytes::store(head, off::originY, g.originWorldY);
-    bytes::store(head, off::finestCell, g.finestCellM);
-    bytes::store(head, off::rotation, g.rotationDeg == 0 ? 0.0 : g.rotationDeg);  // never -0: its sign bit is a byte
-    bytes::store(head, off::rootLevel, static_cast<uint8_t>(g.rootLevel));
-    bytes::store(head, off::minLevel, static_cast<uint8_t>(g.minLevel));
-    bytes::store(head, off::maxLevel, static_cast<uint8_t>(g.maxLevel));
-    bytes::store(head, off::layerCount, static_cast<uint8_t>(g.firstStepLayer()));
-    bytes::store(head, off::contentHash, contentHash);
-    bytes::store(head, off::structureHash, w.hasher.structureHash());
-    w.out.commit(std::move(head));
-}
-
-void writeGrid(const Grid& g, const std::string& path) {
-    std::string problem = g.validate();
-    if (!problem.empty()) throw Error(path + ": refusing to write an invalid grid: " + problem);
-    const bool water = g.firstStepLayer() < g.layers.size();
-    GridFileWriter w(path, g, g.cellCount(), water ? 1 : 0);
-    std::vector<std::span<const float>> values;
-    for (size_t l = 0; l < g.firstStepLayer(); ++l) values.emplace_back(g.values[l]);
-    w.append(g.codes, values);
-    if (water) w.appendStep(sparseStep(g));
-    w.commit(g.stats);
 }
 
 Grid readGrid(const std::string& path, uint16_t* fileMinor, size_t step) {
@@ -1040,11 +471,7 @@ void readGridStep(const std::string& path, Grid& grid, size_t step, const Static
     selectStep(grid, data, step);
 }
 
-namespace {
-
-// readGridInfo's work on an open file; `at` receives the located sections (1.2 files: not read; older ones:
-// read and validated whole, as they store no summary).
-GridFileInfo infoOf(const SectionedFileReader& reader, Located& at, size_t step) {
+GridFileInfo detail::infoOf(const SectionedFileReader& reader, Located& at, size_t step) {
     GridFileInfo info;
     info.fileMinor = reader.minor();
     info.fileBytes = reader.mapping()->bytes().size();
@@ -1077,8 +504,6 @@ GridFileInfo infoOf(const SectionedFileReader& reader, Located& at, size_t step)
     return info;
 }
 
-}  // namespace
-
 GridFileInfo readGridInfo(const std::string& path, size_t step) {
     const SectionedFileReader reader(path, kFormat);
     Located at;
@@ -1109,180 +534,6 @@ GridFileInfo verifyGridFile(const std::string& path, size_t step) {
     info.shape = shapeOf(g);
     info.grid = std::make_shared<const Grid>(std::move(g));
     return info;
-}
-
-}  // namespace hc
-
-namespace hc {
-
-struct GridRegionReader::Impl {
-    Impl(const std::string& path, size_t step) : file(path, kFormat) { info = infoOf(file, at, step); }
-    SectionedFileReader file;
-    Located at;
-    GridFileInfo info;
-    uint64_t codeAt(size_t i) const { return bytes::load<uint64_t>(file.read(*at.cells, uint64_t{8} * i, 8).data()); }
-    // The first cell in [lo, hi) whose code is not below `code` (hi if none).
-    uint64_t lowerBound(uint64_t code, uint64_t lo, uint64_t hi) const {
-        while (lo < hi) {
-            const uint64_t mid = lo + (hi - lo) / 2;
-            if (codeAt(mid) < code) lo = mid + 1;
-            else hi = mid;
-        }
-        return lo;
-    }
-    uint64_t lowerBound(uint64_t code) const { return lowerBound(code, 0, info.cellCount); }
-    // The selected step's wet entries whose cell index is below `cell` (a binary search over its STEP section).
-    uint64_t wetBelow(uint64_t cell) const {
-        const FileSection& sec = *at.steps[info.shape.step];
-        uint64_t lo = 0, hi = info.shape.steps[info.shape.step].wetCells;
-        while (lo < hi) {
-            const uint64_t mid = lo + (hi - lo) / 2;
-            if (bytes::load<uint32_t>(file.read(sec, 4 * mid, 4).data()) < cell) lo = mid + 1;
-            else hi = mid;
-        }
-        return lo;
-    }
-};
-
-GridRegionReader::GridRegionReader(const std::string& path, size_t step) : impl_(std::make_unique<Impl>(path, step)) {}
-GridRegionReader::~GridRegionReader() = default;
-const std::string& GridRegionReader::path() const { return impl_->file.path(); }
-const GridFileInfo& GridRegionReader::info() const { return impl_->info; }
-uint64_t GridRegionReader::bytesChecked() const { return impl_->file.bytesChecked(); }
-void GridRegionReader::releasePages() const { impl_->file.releasePages(); }
-
-std::optional<Grid::Square> GridRegionReader::cellSquareAt(double xLocal, double yLocal) const {
-    const Grid& shape = impl_->info.shape;
-    const std::optional<uint64_t> key = shape.finestKeyAt(xLocal, yLocal);
-    if (!key) return std::nullopt;
-    // The last cell whose corner key is <= key is the only one that can contain it.
-    const uint64_t after = impl_->lowerBound(makeCellCode(*key + 1, 0));
-    if (after == 0) return std::nullopt;
-    const uint64_t code = impl_->codeAt(after - 1);
-    const int level = codeLevel(code);
-    if (level > shape.rootLevel || *key - codeKey(code) >= mortonSpan(level)) return std::nullopt;
-    const uint64_t ix = mortonX(codeKey(code)), iy = mortonY(codeKey(code)), span = uint64_t{1} << level;
-    const double f = shape.finestCellM;
-    return Grid::Square{double(ix) * f, double(iy) * f, double(ix + span) * f, double(iy + span) * f};
-}
-
-uint64_t GridRegionReader::cellsInNode(uint64_t key, int level) const {
-    const uint64_t lo = impl_->lowerBound(makeCellCode(key, 0)), hi = impl_->lowerBound(makeCellCode(key + mortonSpan(level), 0));
-    if (lo > 0) {
-        // A cell coarser than the node, starting before it, may contain it.
-        const uint64_t code = impl_->codeAt(lo - 1);
-        if (codeKey(code) + mortonSpan(std::min(codeLevel(code), impl_->info.shape.rootLevel)) > key) return hi - lo + 1;
-    }
-    return hi - lo;
-}
-
-void GridRegionReader::codesInNode(uint64_t key, int level, std::vector<uint64_t>& out) const {
-    const uint64_t lo = impl_->lowerBound(makeCellCode(key, 0)), hi = impl_->lowerBound(makeCellCode(key + mortonSpan(level), 0));
-    for (uint64_t k = lo; k < hi; ++k) out.push_back(impl_->codeAt(k));
-}
-
-Grid GridRegionReader::region(const Grid::Square& box, std::span<const double> marginM, std::vector<std::pair<uint64_t, uint64_t>>* runsOut) const {
-    const Impl& r = *impl_;
-    const Grid& shape = r.info.shape;
-    Grid g = shapeOf(shape);
-    if (runsOut) runsOut->clear();
-    if (!(box.x0 <= box.x1 && box.y0 <= box.y1)) return g;
-    // A node of level L holds cells of levels <= L: it is searched with the largest margin of those levels.
-    const int levels = shape.rootLevel + 1;
-    std::vector<double> margin(size_t(levels), 0.0), upTo(size_t(levels), 0.0);
-    for (int l = 0; l < levels; ++l) {
-        margin[size_t(l)] = marginM.empty() ? 0.0 : marginM[std::min(size_t(l), marginM.size() - 1)];
-        upTo[size_t(l)] = std::max(margin[size_t(l)], l > 0 ? upTo[size_t(l - 1)] : 0.0);
-    }
-    auto square = [&](uint64_t key, int level) {
-        const uint64_t ix = mortonX(key), iy = mortonY(key), span = uint64_t{1} << level;
-        return Grid::Square{double(ix) * shape.finestCellM, double(iy) * shape.finestCellM, double(ix + span) * shape.finestCellM,
-                            double(iy + span) * shape.finestCellM};
-    };
-    auto meets = [&](const Grid::Square& q, double m) {
-        if (q.x1 < box.x0 - m || q.x0 > box.x1 + m || q.y1 < box.y0 - m || q.y0 > box.y1 + m) return 0;
-        if (q.x0 >= box.x0 && q.x1 <= box.x1 && q.y0 >= box.y0 && q.y1 <= box.y1) return 2;
-        return 1;
-    };
-    std::vector<std::pair<uint64_t, uint64_t>> runs;  // [lo, hi) cell index ranges, ascending
-    auto take = [&](uint64_t lo, uint64_t hi) {
-        if (!runs.empty()) lo = std::max(lo, runs.back().second);  // a coarse cell over two start nodes comes once
-        if (lo >= hi) return;
-        if (!runs.empty() && runs.back().second == lo) runs.back().second = hi;
-        else runs.push_back({lo, hi});
-    };
-    auto takeCell = [&](size_t i) {
-        const uint64_t code = r.codeAt(i);
-        const int level = codeLevel(code);
-        if (level >= levels || meets(square(codeKey(code), level), margin[size_t(level)]) != 0) take(i, i + 1);  // bad level: validate() names it
-    };
-    // The walk starts at the few nodes that cover the box grown by the largest margin, not at the root: a binary search
-    // over all cells for each child boundary of the root's descendants would check blocks all over the file (647 MB of
-    // a 1.26 GB file for one point), while the start nodes' bounds lie next to the box in Morton order (a few MB).
-    const double side = shape.domainSizeM(), grow = upTo[size_t(std::min(shape.maxLevel, levels - 1))];
-    const double gx0 = std::max(0.0, box.x0 - grow), gy0 = std::max(0.0, box.y0 - grow);
-    const double gx1 = std::min(side, box.x1 + grow), gy1 = std::min(side, box.y1 + grow);
-    if (gx0 > gx1 || gy0 > gy1) return g;
-    int start = 0;
-    while (start < shape.rootLevel && shape.levelSizeM(start) < std::max(gx1 - gx0, gy1 - gy0)) ++start;
-    const double node = shape.levelSizeM(start);
-    const uint64_t last = (uint64_t{1} << (shape.rootLevel - start)) - 1;
-    auto nodeIndex = [&](double v) { return std::min(last, uint64_t(std::max(0.0, std::floor(v / node)))); };
-    std::vector<uint64_t> starts;  // corner keys of the start nodes (at most 2 x 2)
-    for (uint64_t iy = nodeIndex(gy0); iy <= nodeIndex(gy1); ++iy)
-        for (uint64_t ix = nodeIndex(gx0); ix <= nodeIndex(gx1); ++ix)
-            starts.push_back(mortonEncode(uint32_t(ix << start), uint32_t(iy << start)));
-    std::sort(starts.begin(), starts.end());
-    for (const uint64_t key : starts) {
-        const uint64_t lo = r.lowerBound(makeCellCode(key, 0)), hi = r.lowerBound(makeCellCode(key + mortonSpan(start), 0));
-        if (lo > 0) {
-            // A cell before the node may contain it (a cell coarser than the node).
-            const uint64_t code = r.codeAt(lo - 1);
-            if (codeKey(code) + mortonSpan(std::min(codeLevel(code), shape.rootLevel)) > key) takeCell(lo - 1);
-        }
-        detail::walkQuadtree(
-            key, start, lo, hi, [&](size_t i) { return r.codeAt(i); },
-            [&](size_t a, size_t b, uint64_t code) { return size_t(r.lowerBound(code, a, b)); },
-            [&](uint64_t k, int level) { return meets(square(k, level), upTo[size_t(level)]); }, take, takeCell);
-    }
-    if (runsOut) *runsOut = runs;
-    uint64_t total = 0;
-    for (auto [lo, hi] : runs) total += hi - lo;
-    g.codes.reserve(total);
-    for (auto& v : g.values) v.reserve(total);
-    for (auto [lo, hi] : runs) {
-        const auto codes = r.file.read(*r.at.cells, 8 * lo, 8 * (hi - lo));
-        const size_t at = g.codes.size();
-        g.codes.resize(at + (hi - lo));
-        std::memcpy(g.codes.data() + at, codes.data(), codes.size());
-        for (size_t l = 0; l < r.at.layers.size(); ++l) {
-            const auto values = r.file.read(*r.at.layers[l], 4 * lo, 4 * (hi - lo));
-            g.values[l].resize(at + (hi - lo));
-            std::memcpy(g.values[l].data() + at, values.data(), values.size());
-        }
-        if (shape.steps.empty()) continue;
-        // The step layers: 0 where dry, the stored values at the run's wet cells.
-        const size_t first = shape.firstStepLayer(), L = shape.layers.size() - first;
-        for (size_t l = first; l < shape.layers.size(); ++l) g.values[l].resize(at + (hi - lo), 0.0f);
-        const FileSection& sec = *r.at.steps[shape.step];
-        const uint64_t w = shape.steps[shape.step].wetCells, j0 = r.wetBelow(lo), j1 = r.wetBelow(hi);
-        if (j1 == j0) continue;
-        const auto idx = r.file.read(sec, 4 * j0, 4 * (j1 - j0));
-        for (size_t l = 0; l < L; ++l) {
-            const auto vals = r.file.read(sec, 4 * w * (1 + l) + 4 * j0, 4 * (j1 - j0));
-            for (uint64_t j = 0; j < j1 - j0; ++j) {
-                const uint32_t cell = bytes::load<uint32_t>(idx.data() + 4 * j);
-                const float v = bytes::load<float>(vals.data() + 4 * j);
-                if (cell < lo || cell >= hi || (j > 0 && cell <= bytes::load<uint32_t>(idx.data() + 4 * (j - 1))) || !std::isfinite(v) ||
-                    (l == 0 && !(v > 0)))
-                    r.file.fail(sec.offset + 4 * (j0 + j), "step " + std::to_string(shape.step) + ": wet cell " + std::to_string(j0 + j) +
-                                                               " is out of order or its value is not finite (water_depth > 0)");
-                g.values[first + l][at + (cell - lo)] = v;
-            }
-        }
-    }
-    if (std::string problem = g.validate(); !problem.empty()) r.file.fail(r.at.cells->offset, "invalid grid: " + problem);
-    return g;
 }
 
 }  // namespace hc

@@ -1,6 +1,6 @@
 // grid/src/quadtree_walk.h: the depth-first walk over the implicit quadtree of sorted cell codes, shared by
 // the in-memory queries (Grid::cellsInBox, cellsInDisk) and the region reads of a grid file that is not held
-// (GridRegionReader, grid_file.cpp), which reach the codes through a function rather than an array.
+// (GridRegionReader, grid_region_reader.cpp), which reach the codes through a function rather than an array.
 #pragma once
 
 #include <cstddef>

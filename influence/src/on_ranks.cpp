@@ -31,8 +31,8 @@ constexpr uint64_t kMaxNodeCells = uint64_t{1} << 22;  // a node's cells, read a
 // Keeps the grid file's pages that many small regions touch from piling up in resident memory: they are released
 // (GridRegionReader::releasePages) every 32 regions, and sooner once the regions read since the last release hold about
 // 64 MB of the file (their cells at 8 bytes of code and 4 of each value, and the blocks their reads checksummed, a block
-// whole). A region's binary searches touch pages beyond its cells: at 105 M cells the coarse tiles' 3584 regions read
-// 134 k cells and left 1.1 GB of the file resident without this. Any thread may call after(); a region read meanwhile
+// whole). A region's binary searches touch pages beyond its cells: without this, the coarse tiles' many small regions
+// left far more of the file resident than the cells they read. Any thread may call after(); a region read meanwhile
 // reads its pages back from the page cache.
 class PageReleaser {
 public:

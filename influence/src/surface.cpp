@@ -117,7 +117,7 @@ std::optional<ValueGradient> SurfaceEvaluator::evaluate(double x, double y, cons
     };
     double denAll, denWet = 0;
     if (layer.kind == Layer::Cells) return one(layer.index, nullptr, grid_.values[layer.index][*k], denAll);
-    // Water (DESIGN.md section 12, surface.h): the level field of the wet cells, drawn where they hold at
+    // Water (docs/design.md section 6, surface.h): the level field of the wet cells, drawn where they hold at
     // least kWetShareMin of the weight and the level lies above the smooth terrain.
     const ValueGradient z = one(0, nullptr, grid_.values[0][*k], denAll);
     const double base = levelBase(*k);

@@ -31,6 +31,20 @@ int chooseMaxLevel(const Options& opt, double pixelSizeM, LoadReport&) {
     return level;
 }
 
+void checkToleranceM(double toleranceM) {
+    if (!std::isfinite(toleranceM) || toleranceM < 0)
+        throw Error("--tolerance " + fmtM(toleranceM) + ": must be a finite number of metres >= 0");
+}
+
+BuildOptions buildOptions(const Options& opt, double pixelSizeM, LoadReport& report) {
+    BuildOptions b;
+    b.toleranceM = opt.toleranceM;
+    b.maxLevel = chooseMaxLevel(opt, pixelSizeM, report);
+    b.threads = opt.threads;
+    b.progress = opt.progress;
+    return b;
+}
+
 namespace {
 
 // Loads terrain (and water) and chooses the build options: the shared first half of both jobs.
@@ -73,16 +87,6 @@ void bindWater(Prepared& p, const Options& opt, LoadReport& report) {
         if (cache) p.waterCache[k] = d;
         return d;
     };
-}
-
-// The build's options for a working raster of pixelSizeM.
-BuildOptions buildOptions(const Options& opt, double pixelSizeM, LoadReport& report) {
-    BuildOptions b;
-    b.toleranceM = opt.toleranceM;
-    b.maxLevel = chooseMaxLevel(opt, pixelSizeM, report);
-    b.threads = opt.threads;
-    b.progress = opt.progress;
-    return b;
 }
 
 void setBuild(Prepared& p, const Options& opt, LoadReport& report) { p.build = buildOptions(opt, p.terrain.pixelSizeM, report); }

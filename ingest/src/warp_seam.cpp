@@ -12,11 +12,10 @@ namespace hc::ingest::detail {
 
 WarpSeams::WarpSeams(std::vector<Seam> seams, const double gt[6], size_t srcHeight, const OGRSpatialReference& source,
                      const OGRSpatialReference& target, std::shared_ptr<OGRCoordinateTransformation> ct,
-                     const double ext[4], double cell, size_t width, size_t height, Fill fill)
+                     const double ext[4], double cell, size_t height, Fill fill)
     : seams_(std::move(seams)),
       srcHeight_(srcHeight),
       cell_(cell),
-      width_(width),
       height_(height),
       fill_(std::move(fill)) {
     std::copy(gt, gt + 6, gt_);

@@ -28,10 +28,10 @@ public:
         double lonW = 0;
     };
     // `gt`: the source's geotransform (north-up, degrees); srcHeight its rows; `ct`: source -> target; the output's
-    // west and north edges, pixel size and size [target units].
+    // west and north edges, pixel size [target units] and row count.
     WarpSeams(std::vector<Seam> seams, const double gt[6], size_t srcHeight, const OGRSpatialReference& source,
               const OGRSpatialReference& target, std::shared_ptr<OGRCoordinateTransformation> ct, const double ext[4],
-              double cell, size_t width, size_t height, Fill fill);
+              double cell, size_t height, Fill fill);
     bool empty() const { return seams_.empty(); }
     // Re-interpolates the pixels [c0, c0 + w) x [r0, r0 + h) of `out` (the warped window) that lie between a seam's
     // columns.
@@ -49,7 +49,7 @@ private:
     size_t srcHeight_;
     std::unique_ptr<OGRCoordinateTransformation> inverse_;  // target -> source
     double ext_[4], cell_;
-    size_t width_, height_;
+    size_t height_;
     Fill fill_;
     mutable std::once_flag read_;
     mutable std::vector<std::vector<float>> west_, east_;  // per seam, its two columns (srcHeight values each)

@@ -134,8 +134,8 @@ void placeTexture(Cascade& c, int texelsPerSide, double finestCellM, int stepsPe
         c.texelM = finestCellM * std::exp2(coarser ? std::ceil(t - 1e-9) : std::floor(t + 1e-9));
         // The side is rounded up to a multiple of 64 texels: as the camera moves the extent changes a little every
         // frame. Exact sides changed every 4-6 frames of a 20 m-a-frame flight at 105 M cells, and a cascade whose side
-        // changed then kept none of its texels (1.4 M texels of a far cascade evaluated afresh, 15-24 ms on 16 cores;
-        // BENCHMARKS.md). It keeps them now (CascadeCache), but into new storage, where the same side moves them in place.
+        // changed then kept none of its texels (a far cascade's millions of texels evaluated afresh). It keeps them now
+        // (CascadeCache), but into new storage, where the same side moves them in place.
         if (!coarser) c.n = (int(std::ceil(extent / c.texelM)) + 3 + 63) / 64 * 64;
     }
     // Corner on the lattice, one texel outside the box so every patch of the box is whole.

@@ -1,7 +1,7 @@
 // Ray casting through the cascades: hierarchical max-mipmap traversal (Tevs et al. 2008) and exact
 // ray/bilinear-patch intersection, cascades near to far, blended in their overlaps. Terrain and water
 // share one walk per cascade (nodes skipped above the larger maximum), which on the flood scenes is
-// 1.1-1.4x faster than walking each heightfield on its own (BENCHMARKS.md).
+// faster than walking each heightfield on its own.
 //
 // The terrain is a solid block (a block diagram): the smooth surface on top, over the patches whose four
 // corner texels are defined; vertical walls where the defined patches end (hole and domain edges), from the
@@ -16,7 +16,7 @@
 #include <glm/geometric.hpp>
 #include <glm/vec2.hpp>
 
-#include "textures.h"
+#include "heightcast/render/detail/frame.h"
 
 namespace hc::render::detail {
 namespace {
@@ -187,8 +187,7 @@ struct PatchWalk {
         // terrain by more than the minimum depth (approximate.cpp), so the water's bilinear surface is at or above the
         // terrain's everywhere in the patch. A ray that enters the patch above the water then enters above the terrain
         // too, and meets the water first (the water wins a tie below), or neither: the terrain's intersection can be
-        // skipped. That is 3-52 % of the patch tests on the report's four scenes, and ray casting 2-13 % faster
-        // (BENCHMARKS.md); frames byte-identical. The GL walk (raycast.comp) intersects both, as before.
+        // skipped: a share of the patch tests on every flood scene, the frames byte-identical. The GL walk (raycast.comp) intersects both, as before.
         if (water) {
             if (const std::optional<PatchCorners> wc = cornersOf(tex.water, iu, iv)) {
                 const PatchContact cw = patchContact(*wc, ray, segment);
@@ -307,9 +306,9 @@ PatchHit traverse(const CascadeTextures& tex, const Cascade& c, const glm::dvec3
     // The walk carries its node as integers (level, iu, iv) and steps to the neighbour across the edge the ray
     // leaves by, as a grid walk does; each node's exit follows from its integers. It used to find each node
     // again from the ray's point a hair past t, a chain from float to int and back through every visit; now
-    // only a descent reads the ray's point, to pick the child it enters (4-17 % faster at full scale, BENCHMARKS.md).
+    // only a descent reads the ray's point, to pick the child it enters.
     // Start three levels below the top (the coarsest nodes are nearly always entered; the walk climbs back
-    // when it leaves a parent): 1-2 % faster than starting at the top, no more (BENCHMARKS.md).
+    // when it leaves a parent): a little faster than starting at the top, no more.
     int level = std::max(0, top - 3);
     const double tiny = 1e-9 * (1.0 + std::abs(tOut));
     // The patch under the ray a hair past t (so a node boundary belongs to the node the ray moves into);

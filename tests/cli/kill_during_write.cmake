@@ -19,7 +19,7 @@ endforeach()
 
 # The sanitizer build (scripts/test_sanitized.sh): hc-view's tests open a GL window under Xvfb, where
 # LeakSanitizer fails them on allocations inside Mesa and the X libraries (unsymbolised frames of the run-time
-# loaded driver, none in our code; DESIGN.md section 9 saw it crash in llvmpipe too), so they run without it;
+# loaded driver, none in our code; docs/testing.md saw it crash in llvmpipe too), so they run without it;
 # every other CLI test keeps leak detection. Set here because this file is included last, after every cli.view.* test exists.
 get_property(hc_cli_tests DIRECTORY PROPERTY TESTS)
 foreach(t IN LISTS hc_cli_tests)

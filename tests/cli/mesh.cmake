@@ -1,4 +1,4 @@
-# tests/cli/mesh.cmake: UGRID quadtree meshes (issue 14, DESIGN.md section 11) end to end: a scenario written as a
+# tests/cli/mesh.cmake: UGRID quadtree meshes (issue 14, docs/design.md section 6) end to end: a scenario written as a
 # mesh by hc-export and read back by hc-ingest as the same grid, a rotated quadtree (made by rotate_grid, written as a
 # turned mesh) kept with its rotation through info, probe and render; and the refusals, each leaving nothing behind.
 #

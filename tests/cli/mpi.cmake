@@ -1,4 +1,4 @@
-# tests/cli/mpi.cmake: preprocessing on the ranks of mpirun (issue 15, DESIGN.md section 13). `mpirun -np N` with
+# tests/cli/mpi.cmake: preprocessing on the ranks of mpirun (issue 15, docs/design.md section 7). `mpirun -np N` with
 # N = 1, 2, 3 on this one machine (oversubscribed: more ranks than cores) must write the very bytes one process
 # writes, for hc-ingest and hc-influence (lists and every step's pyramid), on three kinds of grid: a raster with
 # holes (interior nodata burnt into the bundled DEM, and the rotated footprint's edges), water steps (a rising flood
@@ -371,12 +371,11 @@ done
 "$HC_INFO" m.hcg | grep -E '^  rotation +30\.0000000']]
   -- ${HC_BASH} -c [["$HC_MPIRUN" -np 3 "$HC_INGEST" --quiet t.nc -o m.hcg && "$HC_MPIRUN" -np 3 "$HC_INFLUENCE" --quiet m.hcg]])
 
-# The ranks' agreement (core/ranks, apps/on_ranks.h) with a failure on one rank only: inside ranks::together every rank
+# The ranks' agreement (core/ranks, support/on_ranks.h) with a failure on one rank only: inside ranks::together every rank
 # stops at the same point and rank 1 reports the failing rank's error once; outside it (nobody waits for that rank) the
 # failing rank reports and stops every rank. Without a failure the ranks reach the collective after it together.
 add_executable(hc_ranks_check ranks_check.cpp)
 target_link_libraries(hc_ranks_check PRIVATE hc_cli hc_ranks hc_ingest)
-target_include_directories(hc_ranks_check PRIVATE ${PROJECT_SOURCE_DIR}/apps)
 hc_target_defaults(hc_ranks_check)
 set(RANKS_CHECK $<TARGET_FILE:hc_ranks_check>)
 hc_mpi_test(mpi.ranks_agree 0 [[ranks_check: 3 ranks agreed]] --no-match [[error]] -- ${HC_MPIEXEC} -np 3 ${RANKS_CHECK} 0)

@@ -1,4 +1,4 @@
-// ranks_check RANK [outside]: a program that runs under mpirun as hc-ingest and hc-influence do (apps/on_ranks.h) and
+// ranks_check RANK [outside]: a program that runs under mpirun as hc-ingest and hc-influence do (support/on_ranks.h) and
 // fails on one rank only (1-based RANK; 0: none), inside ranks::together (the others reach the same agreement point and
 // stop there with the same error, reported once by rank 1) or, with `outside`, where no other rank waits for it (it
 // reports with its own name and stops every rank). After the agreement, a collective the ranks only reach together: a
@@ -11,7 +11,7 @@
 #include <vector>
 
 #include "heightcast/ingest/build.h"
-#include "on_ranks.h"
+#include "heightcast/support/on_ranks.h"
 
 int main(int argc, char** argv) {
     return hc::cli::runOnRanks("ranks_check", argc, argv, [&] {

@@ -1,4 +1,4 @@
-# tests/cli/steps.cmake: flood scenarios over time (issue 14, DESIGN.md section 11) end to end: water steps from a
+# tests/cli/steps.cmake: flood scenarios over time (issue 14, docs/design.md section 6) end to end: water steps from a
 # series of levels or rasters into one grid, their pyramids, a sequence of images (and a video), a point's hydrograph,
 # one step exported, the viewer playing them; and the refusals (unsorted times, series that disagree, steps that do
 # not exist), each leaving nothing behind.

@@ -1,4 +1,4 @@
-# tests/cli/water_level.cmake: the water level field (DESIGN.md section 12) end to end. Issue 11, "The water
+# tests/cli/water_level.cmake: the water level field (docs/design.md section 6) end to end. Issue 11, "The water
 # surface is not level": a bathtub flood at 20 m probed at up to 27 m, because dry neighbours brought terrain but
 # no depth into the average. Now hc-probe and hc-export give the wet cells' level wherever water is drawn.
 #

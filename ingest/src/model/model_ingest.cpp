@@ -268,9 +268,7 @@ BuildSummary ingestSampled(const Options& opt, std::shared_ptr<ModelMesh> m, con
     if (terrain.validCount() == 0)
         throw Error(m->source + ": no pixel centre of " + fmt::format("{:.6g}", cell) +
                     " m lies on a face with a bed level: choose a finer --min-cell");
-    BuildOptions build;
-    build.toleranceM = opt.toleranceM, build.maxLevel = chooseMaxLevel(opt, cell, report), build.threads = opt.threads,
-    build.progress = opt.progress;
+    const BuildOptions build = buildOptions(opt, cell, report);
     const WaterSteps steps = stepsOf({m, cover}, terrain);
     IngestStats extra;
     extra.sourcePath = opt.input, extra.sourceCrsName = frame.sourceCrsName,

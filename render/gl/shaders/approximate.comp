@@ -1,15 +1,15 @@
 #version 430
-// render/gl/shaders/approximate.comp: the approximation pass of one cascade (DESIGN.md section 5 step
-// 2), mirroring detail::approximate() in render/src/approximate.cpp. One invocation per texel: a
+// render/gl/shaders/approximate.comp: the approximation pass of one cascade (docs/design.md section 5 step
+// 2), mirroring detail::approximate() in render/src/approximate*.cpp. One invocation per texel: a
 // visible texel's cell is found by binary search of the sorted Morton keys (Grid::locate), and the
 // Gaussian RBF sum over that cell's influence list is taken relative to the cell's centre and value,
 // as the CPU does, so float keeps its precision however far the texel lies from the grid origin.
 // Each row's spans to evaluate (HC_BIND_VISIBLE: the visible span less the texels kept from the last frame), a dispatch
 // per span (uSpan). Narrow spans (a moving camera's: a few texels a row) get an invocation per texel of the span (x:
 // its place in the span, y: the row), not n a row; wide ones (a fresh frame's) an invocation per texel of the row, so
-// that a work group's 8 x 8 texels lie together (the same cells and lists: on llvmpipe a fresh frame took 12 % longer
-// with the texels of a group placed from each row's own start). Texels in a hole or outside the domain get -inf ("no surface"); assemble.comp has
-// written the others before (the kept texels, and "no surface" everywhere else).
+// that a work group's 8 x 8 texels lie together (the same cells and lists: on llvmpipe a fresh frame took longer
+// with the texels of a group placed from each row's own start). Texels in a hole or outside the domain get -inf
+// ("no surface"); assemble.comp has written the others before (the kept texels, and "no surface" everywhere else).
 layout(local_size_x = HC_GROUP_2D, local_size_y = HC_GROUP_2D) in;
 
 layout(std430, binding = HC_BIND_INDICES) readonly buffer IndexBlock0 { uint indices0[]; };
@@ -34,7 +34,7 @@ uint listEntry(uint e) {
     return indices3[at];
 }
 
-// exp(x) for x <= 0, the same branch-free polynomial as expNeg() in approximate.cpp (so both
+// exp(x) for x <= 0, the same branch-free polynomial as expNeg() in approximate_sum.cpp (so both
 // backends round alike; the driver's exp() is allowed 3 ulp and differs between GPUs).
 float expNeg(float x) {
     x = max(x, -87.0);
@@ -57,7 +57,7 @@ void main() {
     const uint t = j * n + i;
     const float noSurface = -kInf;
     float z = noSurface, water = noSurface, depth = 0.0;
-    // The texel centre in double, exactly as c.x0 + i * s in approximate.cpp.
+    // The texel centre in double, exactly as c.x0 + i * s in approximate_sum.cpp.
     const double x = cascades[uCascade].x0 + double(i) * cascades[uCascade].texelM, y = cascades[uCascade].y0 + double(j) * cascades[uCascade].texelM;
     const int k = locateCell(x, y);
     if (k >= 0) {
@@ -68,7 +68,7 @@ void main() {
         const double halfFinest = 0.5 * frame.finestM;
         const float h = float(halfFinest);
         const float fx = float(x - double(kcx2) * halfFinest), fy = float(y - double(kcy2) * halfFinest);
-        // The water level field (DESIGN.md section 12, influence/surface.h) from the wet cells only (depth > 0),
+        // The water level field (docs/design.md section 6, influence/surface.h) from the wet cells only (depth > 0),
         // relative to a wet cell's level: k's own if k is wet, else the first wet cell of its list (levelBase()).
         bool anyWet = frame.hasWater != 0 && ck.depth > 0.0;
         float levelBase = ck.z + ck.depth;
@@ -97,14 +97,12 @@ void main() {
         // den >= the cell's own weight at its farthest point (kernel.h): never zero here.
         const double zd = double(ck.z) + double(num / den);
         z = float(zd);
-        // Water where the wet cells hold at least half the weight (kWetShareMin) and their level is above the
-        // terrain: the depth texture holds level - terrain, the water heightfield the level where that depth
-        // exceeds the minimum drawn (approximate.cpp).
-        if (anyWet && denW > 0.0 && denW >= 0.5 * den) {
+        // The water rule (water_rule.h): the depth texture holds level - terrain, the water heightfield the level.
+        if (anyWet && wetWeights(denW, den)) {
             const double level = double(levelBase) + double(numL / denW);
             const float d = float(level - zd);
-            if (d > 0.0) depth = d;
-            if (d > frame.minDepthM) water = float(level);
+            if (holdsDepth(d)) depth = d;
+            if (drawsWater(d, frame.minDepthM)) water = float(level);
         }
         atomicAdd(counters[uint(uCascade) * uint(kCounterSlots) + (gl_WorkGroupID.x + 7u * gl_WorkGroupID.y) % uint(kCounterSlots)], e - b);
     }

@@ -1,6 +1,6 @@
 #version 430
 // render/gl/shaders/atlas.comp: out of core, the texels a frame copies from the surface pyramid, copied on the GPU from
-// the pyramid tiles resident there (the atlas, DESIGN.md section 10), after assemble.comp has placed the kept and the
+// the pyramid tiles resident there (the atlas, docs/design.md section 4), after assemble.comp has placed the kept and the
 // CPU's texels. A work group per tile this frame copies from (detail::PyramidTiles), an invocation per sample of it: the
 // sample is copied to its texel where that texel lies in one of its row's spans to evaluate (as they were before the
 // copies were taken out of them): exactly the texels the CPU marked for this tile. The water rule of surface.h as
@@ -18,8 +18,6 @@ layout(std430, binding = HC_BIND_ATLAS_WATER) readonly buffer AtlasWaterBlock { 
 layout(std430, binding = HC_BIND_ATLAS_TILES) readonly buffer AtlasTileBlock { uvec4 tiles[]; };
 
 uniform uint uTiles;
-uniform float uMinDepth;  // RenderOptions::waterMinDepthM
-uniform float uWetShare;  // influence::kWetShareMin
 
 void main() {
     const uint e = gl_WorkGroupID.y * gl_NumWorkGroups.x + gl_WorkGroupID.x;
@@ -41,9 +39,9 @@ void main() {
     if (tile.w != 0xffffffffu) {
         const uint w = tile.w * uint(2 * kAtlasPlane) + at;
         const float level = atlasWater[w], share = atlasWater[w + uint(kAtlasPlane)], d = level - z;
-        const bool wet = ok && !isnan(level) && share >= uWetShare;
-        if (wet && d > 0.0) depth = d;
-        if (wet && d > uMinDepth) water = level;
+        const bool wet = ok && !isnan(level) && wetShare(share);  // water_rule.h
+        if (wet && holdsDepth(d)) depth = d;
+        if (wet && drawsWater(d, frame.minDepthM)) water = level;
     }
     heights[cascades[k].waterOffset + t] = water;
     heights[cascades[k].depthOffset + t] = depth;

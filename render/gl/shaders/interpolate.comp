@@ -1,7 +1,7 @@
 #version 430
 // render/gl/shaders/interpolate.comp: out of core, the texels of a cascade finer than every level of the surface
-// pyramid, interpolated on the GPU from level 0's tiles resident there (the atlas, DESIGN.md section 10) as
-// PyramidInterpolator interpolates them on the CPU (render/src/approximate.cpp): the bicubic Catmull-Rom blend of the
+// pyramid, interpolated on the GPU from level 0's tiles resident there (the atlas, docs/design.md section 4) as
+// PyramidInterpolator interpolates them on the CPU (render/src/approximate_interpolate.cpp): the bicubic Catmull-Rom blend of the
 // 4 x 4 level-0 samples around each texel, in double, a column of samples blended vertically, then the columns, each
 // sum in the CPU's order, skipping zero weights as it does. Runs after assemble.comp (and atlas.comp), a work group per
 // block (detail::PyramidTiles::Block: one level-0 tile's footprint in texels, whose stencils lie in the 3 x 3 tiles
@@ -23,10 +23,8 @@ layout(std430, binding = HC_BIND_ATLAS_WATER) readonly buffer AtlasWaterBlock { 
 layout(std430, binding = HC_BIND_ATLAS_BLOCKS) readonly buffer AtlasBlockBlock { uint blocks[]; };
 
 uniform uint uBlocks;
-uniform float uMinDepth;  // RenderOptions::waterMinDepthM
-uniform float uWetShare;  // influence::kWetShareMin
 
-// Catmull-Rom weights at fraction f of the middle interval (catmullRom() in approximate.cpp): f has at most
+// Catmull-Rom weights at fraction f of the middle interval (catmullRom() in approximate_interpolate.cpp): f has at most
 // PyramidTiles::kMaxBlockUp bits, so every product and sum here is exact, in any order.
 dvec4 catmullRom(double f) {
     const double f2 = f * f, f3 = f2 * f;
@@ -74,10 +72,10 @@ void main() {
         heights[cascades[k].terrainOffset + t] = zf;
         if (frame.hasWater == 0) continue;
         float depth = 0.0, water = -kInf;
-        if (wet && float(share) >= uWetShare) {
+        if (wet && wetShare(float(share))) {  // water_rule.h
             const float lf = float(level), d = lf - zf;
-            if (d > 0.0) depth = d;
-            if (d > uMinDepth) water = lf;
+            if (holdsDepth(d)) depth = d;
+            if (drawsWater(d, frame.minDepthM)) water = lf;
         }
         heights[cascades[k].waterOffset + t] = water;
         heights[cascades[k].depthOffset + t] = depth;

@@ -1,5 +1,5 @@
 #version 430
-// render/gl/shaders/raycast.comp: one ray per pixel through the cascades (DESIGN.md section 5 step 4),
+// render/gl/shaders/raycast.comp: one ray per pixel through the cascades (docs/design.md section 5 step 4),
 // mirroring render/src/raycast.cpp: traverse() (hierarchical max-mipmap traversal, exact
 // ray/bilinear-patch intersection, the solid-terrain rules), hitIn() (a cascade's slab and texture
 // clip) and castRay() (near to far, blending in the overlaps). As on the CPU, terrain and water are
@@ -145,9 +145,9 @@ int patchTest(int k, bool water, int iu, int iv, TexelRay r, float t, float len,
 // intersected with each surface the ray comes down to there, the terrain first, then the water before the terrain's
 // hit (the water wins a tie: it lies on top). Texture coordinates u = (x - x0) / s, v = (y - y0) / s. The terrain is the
 // solid block of raycast.cpp, with its walls and bottom; res.underground when the ray starts inside it. Each surface
-// used to be walked on its own, the water up to the terrain's hit (on a flooded scene the water's walk was about half
-// of llvmpipe's ray casting, BENCHMARKS.md); a surface's patch test runs where that walk would have reached it, so the
-// hits are the same.
+// used to be walked on its own, the water up to the terrain's hit (on a flooded scene the water's walk was a large
+// share of llvmpipe's ray casting, docs/benchmarks.md); a surface's patch test runs where that walk would have reached
+// it, so the hits are the same.
 //
 // tFrom > tIn: a bound from the ray's beam (beams.comp) before which the ray stays above every node's maximum by more
 // than the slack below, so that the walk from tIn would skip every node before it without a contact. The walk then

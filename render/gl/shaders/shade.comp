@@ -1,6 +1,6 @@
 #version 430
-// render/gl/shaders/shade.comp: shading (DESIGN.md section 5 step 5), mirroring the shading loop and
-// drawLegend() of renderFrame() in render/src/renderer.cpp: hillshade light from the sun, elevation or
+// render/gl/shaders/shade.comp: shading (docs/design.md section 5 step 5), mirroring the shading loop and
+// drawLegend() of renderFrame() in render/src/shading.cpp: hillshade light from the sun, elevation or
 // water-depth colours, cell outlines, distance fog, the sky, and the legend's colour bar and labels.
 // Colours are blended in linear light; the sRGB transfer functions use the CPU's 4096-step
 // quantisation of their input so that both backends round to the same 8-bit levels.
@@ -22,7 +22,7 @@ float toSrgb8(float c) {
     return floor(s * 255.0 + 0.5);
 }
 
-// ramp() of renderer.cpp over the stops (t, r, g, b) in GpuFrame.
+// ramp() of shading.cpp over the stops (t, r, g, b) in GpuFrame.
 vec3 elevationColor(float t) {
     t = clamp(t, 0.0, 1.0);
     for (int i = 1; i < 5; ++i)
@@ -46,7 +46,7 @@ vec3 depthColor(float t) {
     return vec3(frame.depthRamp[9], frame.depthRamp[10], frame.depthRamp[11]);
 }
 
-// Is pixel (px, py) set by a legend label starting at (x, y)? drawText() of renderer.cpp.
+// Is pixel (px, py) set by a legend label starting at (x, y)? drawText() of shading.cpp.
 bool labelPixel(int px, int py, int x, int y, bool hi) {
     const int scale = frame.legendScale;
     const int len = hi ? frame.labelHiLen : frame.labelLoLen;

@@ -1,4 +1,4 @@
-// EGL headless contexts (DESIGN.md section 9: Mesa's surfaceless platform gives llvmpipe OpenGL 4.5
+// EGL headless contexts (docs/testing.md: Mesa's surfaceless platform gives llvmpipe OpenGL 4.5
 // core with no display; a GPU comes through EGL's device platform) and checks of the current context.
 #include "context.h"
 

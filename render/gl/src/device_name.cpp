@@ -1,5 +1,5 @@
 // isSoftwareRenderer: a GL_RENDERER string read as text, the same with and without the GL backend built
-// (hc-render and hc-view decide on it through apps/backend_choice.cpp), so one definition serves both builds.
+// (hc-render and hc-view decide on it through support/backend_choice.cpp), so one definition serves both builds.
 #include "heightcast/render/gl/gl_renderer.h"
 
 namespace hc::render {

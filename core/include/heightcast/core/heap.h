@@ -1,14 +1,14 @@
 // heightcast/core/heap.h: keep freed memory in the process, for programs that render frame after frame.
 //
-// A frame allocates and frees the same ~150 MB again and again (at 1920 x 1080: ten float layers of 8 MB, the
+// A frame allocates and frees the same buffers again and again (at 1920 x 1080: ten float layers of 8 MB, the
 // rays' directions, each cascade's textures and mipmaps). glibc's malloc serves blocks of a few MB by mmap, or gives
 // the top of its heap back to the kernel after a free, so each frame's buffers came back as fresh pages to fault in
-// and zero: 30-40 ms a frame on this 2-core machine, 12-15 % of a moving-camera frame (BENCHMARKS.md).
+// and zero: a measurable share of every moving-camera frame (docs/benchmarks.md).
 //
 // keepFreedMemory() tells malloc to serve blocks up to `mmapAboveBytes` from its heap and to keep up to `keepBytes`
 // free at the heap's top: a frame then reuses its predecessor's pages. The default covers a 3840 x 2160 frame (layers
 // of 33 MB, directions of 100 MB). Call it once, at the start of a program that renders several frames (hc-view,
-// hc-render's flights and water steps, hc-bench); peak memory grows by 1.5-4 %, and memory freed stays with the
+// hc-render's flights and water steps, hc-bench); peak memory grows a little, and memory freed stays with the
 // process until it exits.
 // A glibc that refuses the threshold asked for gets 32 MiB, the most every glibc takes. Returns false where the
 // allocator is not glibc's (nothing changed) or refused even that.

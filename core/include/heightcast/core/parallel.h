@@ -4,9 +4,9 @@
 // thrown by any worker is rethrown in the caller after all workers stop.
 //
 // The helper threads are kept between calls (one pool per process, grown to the most threads asked for): a frame
-// calls parallelFor some 50 times, and starting and joining threads each time cost milliseconds a frame at 16
-// threads (BENCHMARKS.md). A call made while the pool serves another (from one of its own workers, or from a second
-// thread of the caller's program) starts its own threads, as every call used to.
+// calls parallelFor some 50 times, and starting and joining threads each time cost a measurable share of a frame at
+// 16 threads (docs/benchmarks.md). A call made while the pool serves another (from one of its own workers, or from a
+// second thread of the caller's program) starts its own threads, as every call used to.
 #pragma once
 
 #include <algorithm>
@@ -25,7 +25,7 @@ void runOnThreads(unsigned threads, void (*fn)(void*, unsigned), void* ctx);
 }  // namespace detail
 
 // Number of worker threads for `requested` (0 = all hardware threads). The count is asked once: glibc reads it from
-// /sys at every call (6 us here, in every parallelFor of 0 threads, the renderer's default).
+// /sys at every call (a file read in every parallelFor of 0 threads, the renderer's default).
 inline unsigned resolveThreads(unsigned requested) {
     if (requested > 0) return requested;
     static const unsigned hw = std::max(1u, std::thread::hardware_concurrency());

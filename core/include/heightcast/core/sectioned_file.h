@@ -1,10 +1,10 @@
-// heightcast/core/sectioned_file.h: the container both heightcast formats share (.hcg grids,
-// .hci influence caches): a checksummed header, a section table, aligned sections.
+// heightcast/core/sectioned_file.h: the container the heightcast formats share (.hcg grids, .hci influence caches,
+// .hcp surface pyramids; byte tables in docs/formats/): a checksummed header, a section table, aligned sections.
 //
 //   offset  size  field
 //   0       8     magic (the format's)
 //   8       2     major version: a reader refuses a newer major
-//   10      2     minor version: a newer minor only adds sections (or keys) a reader may skip
+//   10      2     minor version: a newer minor is read (each format says what an older reader misses)
 //   12      4     header bytes (128)
 //   16      8     file bytes: must equal the file's length (truncation check)
 //   24      36    the format's own fields
@@ -17,7 +17,7 @@
 //                 nothing after the last one.
 // Every byte is covered: by a CRC, by the zero checks, or by the size check. Little-endian throughout.
 //
-// Block checksums (the formats' minors from FileFormat::blockChecksumsSince on: .hcg 1.2, .hci 1.1): the
+// Block checksums (the formats' minors from FileFormat::blockChecksumsSince on: .hcg 1.2, .hci 1.1, .hcp 1.0): the
 // last section, of the container's own kind kFileBlockChecksumsKind, holds a CRC-32 per block of every
 // section before it, so a reader checks exactly the blocks covering the bytes it reads:
 //   0       4     block bytes B (a power of two, 4 KiB .. 1 GiB; the writer uses kFileBlockBytes)
@@ -44,8 +44,8 @@ constexpr uint32_t kFileSectionAlign = 64;
 // The container's own section kind (formats use small kinds; the high bit is the container's).
 constexpr uint32_t kFileBlockChecksumsKind = 0x80000001u;
 // 1 MiB blocks: the table costs 4 bytes per MiB (5 KB for a 105 M-cell grid, read and checked at open);
-// a point lookup's binary search over a 1 GB section touches ~10 distinct blocks, 10 MiB of CRC at
-// ~2.4 GB/s (crc32's slicing-by-8, measured on the 2-core dev machine) = ~4 ms, well inside a 1 s probe;
+// a point lookup's binary search over a 1 GB section touches ~10 distinct blocks, 10 MiB of CRC
+// (crc32's slicing-by-8, its throughput in docs/benchmarks.md), well inside a 1 s probe;
 // smaller blocks would cut that but grow the table and the per-block bookkeeping, larger ones would make a
 // first touch cost more than the read it guards.
 constexpr uint32_t kFileBlockBytes = 1u << 20;
@@ -169,7 +169,7 @@ public:
     void commit(std::vector<std::byte> header);
     const std::string& path() const;
 
-    // Under mpirun (DESIGN.md section 13) other processes write parts of the placed sections straight into this
+    // Under mpirun (docs/design.md section 7) other processes write parts of the placed sections straight into this
     // writer's temporary (SectionedFilePart over placement()); addPieces() then takes their pieces' CRCs as if their
     // bytes had been append()ed: each piece must start where its section holds bytes up to so far.
     FilePlacement placement() const;

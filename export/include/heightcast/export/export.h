@@ -57,7 +57,7 @@ SampledRaster sampleSurface(const influence::SurfaceEvaluator& eval, const influ
                             double resolutionM, std::optional<BoxWorld> box, bool gradients, unsigned threads, bool progress,
                             size_t maxPixels = size_t{1} << 30);
 
-// The same out of core (DESIGN.md section 10): the raster is sampled a tile of kExportTileCells^2 finest cells (at
+// The same out of core (docs/design.md section 4): the raster is sampled a tile of kExportTileCells^2 finest cells (at
 // least a pixel) at a time, each from the cells whose kernels reach it, read from the file with their lists built on
 // the spot (influence/region.h) and dropped: memory follows the tile and the raster, not the grid. The same bits as
 // sampleSurface over the whole grid and its lists.

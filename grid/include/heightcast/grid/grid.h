@@ -3,7 +3,7 @@
 // Frames and units
 //   World: the grid's CRS (crsWkt), metres, x east, y north. Only doubles ever hold world values.
 //   Local: metres relative to the domain's south-west corner (originWorld), along the grid's own axes, which may be
-//          rotated against the CRS's by rotationDeg (a rotated quadtree model mesh: DESIGN.md section 11). Queries
+//          rotated against the CRS's by rotationDeg (a rotated quadtree model mesh: docs/design.md section 6). Queries
 //          take local coordinates, so no absolute coordinate (UTM northings are ~5e6 m) reaches float maths; every
 //          world <-> local mapping goes through worldToLocal / localToWorld.
 //   Finest units: integers, one per finest cell; cell (ix, iy) covers local
@@ -15,7 +15,7 @@
 // Storage: one sorted array of packed cell codes (morton.h) and one float32 array per layer,
 // 8 + 4 * layers bytes per cell (12 bytes for elevation alone). Layer 0 is always elevation.
 //
-// Water steps (DESIGN.md section 11): a flood scenario is one structure and terrain and any number of water
+// Water steps (docs/design.md section 6): a flood scenario is one structure and terrain and any number of water
 // steps. The layers from "water_depth" on (firstStepLayer()) are the step layers: in memory they hold ONE step,
 // the selected one (`step`), densely (0 where dry); `steps` describes every step of the scenario. Files store a
 // step sparsely, its wet cells only (grid_file.h). A grid with a water layer and no `steps` is one step at time 0.

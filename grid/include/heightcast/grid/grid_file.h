@@ -19,7 +19,7 @@
 //   88      32    reserved, zero
 //
 // Sections, in file order: CELLS (kind 2: u64 cell codes, sorted), LAYER (kind 3, index = layer:
-// float32 values, one section per layer), META (kind 1: u32-length-prefixed key/value strings:
+// float32 values, one section per layer), (1.3) STEP and STEPS (water steps), META (kind 1: u32-length-prefixed key/value strings:
 // crs_wkt, crs_name, layer.N.name, layer.N.units, layer.N.min, layer.N.max, summary.*, ingest.*), then
 // (1.2) the container's block checksums. Readers locate sections by the table, not by order. ingest.source_kind
 // ("UGRID mesh") is written only for a grid not made from a raster; its absence means a raster.
@@ -31,7 +31,7 @@
 //   layer.N.min, layer.N.max the least and greatest value of layer N (shortest exact decimal of the float32;
 //                            absent in an empty grid)
 //
-// Water steps (1.3, DESIGN.md section 11). The layers from water_depth on are the step layers (Grid::firstStepLayer);
+// Water steps (1.3, docs/design.md section 6). The layers from water_depth on are the step layers (Grid::firstStepLayer);
 // they are not LAYER sections. META holds step_layers (their count L) and step_layer.N.name / .units. Then:
 //   STEP  (kind 5, index = step k): the wet cells of step k (water_depth > 0), u32 ascending cell indices, then per
 //         step layer one f32 per wet cell (water_depth first): 4 * wet * (1 + L) bytes. Dry cells store nothing and
@@ -42,7 +42,8 @@
 // A reader selects one step and reads that step's section only (lazily: rendering step k touches step k). The header's
 // content hash is then Hash64 over the static grid's content hash and every step's (time, hash).
 //
-// Versions (a newer minor only adds what an older reader skips: sectioned_file.h):
+// Versions (byte tables: docs/formats/hcg.md). A newer minor is read; an older reader misses what it added, and a
+// 1.2 reader refuses a rotated 1.3 grid (reserved bytes) and a 1.3 grid with steps (its content hash):
 //   1.0  the layout above, META without crs_name
 //   1.1  META key crs_name (Grid::crsName); read from a 1.0 file as ""
 //   1.2  block checksums (sectioned_file.h: a CRC-32 per 1 MiB, checked when first read) and the summary
@@ -108,7 +109,7 @@ public:
     // into place.
     void commit(const IngestStats& stats);
 
-    // Under mpirun (DESIGN.md section 13) the other ranks write their own runs of cells, after this writer's own
+    // Under mpirun (docs/design.md section 7) the other ranks write their own runs of cells, after this writer's own
     // append()ed ones and in rank order, straight into its temporary (GridFilePart over placement(), which must lie on
     // a file system every rank sees). The hashes and the order check's seam run on from run to run: streamState() is
     // where the cells appended here leave them, for the first part to go on from; addPart() takes each part's result in
@@ -159,16 +160,17 @@ private:
 // Reads (memory-mapped) and fully validates a grid file: header, section table, every checksum,
 // every cell invariant, both hashes. Throws hc::Error naming the file, the byte offset and the problem.
 // `fileMinor`, when given, receives the file's minor version (a newer minor than kGridFileMinor is
-// read: it only adds sections this reader skips).
+// read, skipping the sections it does not know).
 // A file with water steps is read with step `step` selected (0 by default); the other steps' sections are not read.
 Grid readGrid(const std::string& path, uint16_t* fileMinor = nullptr, size_t step = 0);
 
 // Replaces the step layers of `grid` (read from `path` by readGrid) with step `step`'s, reading only that step's
 // section; checks the step's content hash. Switching steps of a grid in memory (hc-influence, hc-view) costs one
 // step's bytes, not the grid's. Throws hc::Error naming the file (and leaves `grid` as it was).
-// The check needs the grid's structure hash and its static layers' digests: passes over every cell (about 0.1 s per
-// million cells). A caller that switches often computes them once (staticDigestsOf, while the cells and static values
-// stay as read) and passes them as `known`; the step's content hash is then checked from them and the step's values.
+// The check needs the grid's structure hash and its static layers' digests: passes over every cell, the whole grid's
+// cost and not one step's. A caller that switches often computes them once (staticDigestsOf, while the cells and
+// static values stay as read) and passes them as `known`; the step's content hash is then checked from them and the
+// step's values.
 struct StaticDigests {
     uint64_t structureHash = 0;
     std::vector<std::pair<std::string, uint64_t>> layers;  // name and Hash64 digest of each static layer
@@ -209,9 +211,9 @@ GridFileInfo readGridInfo(const std::string& path, size_t step = 0);
 // the summary computed from the cells and the grid, with step `step` selected.
 GridFileInfo verifyGridFile(const std::string& path, size_t step = 0);
 
-// A grid file read a region at a time, never whole (out of core, DESIGN.md section 10): the tools that work on
+// A grid file read a region at a time, never whole (out of core, docs/design.md section 4): the tools that work on
 // part of a grid too large to hold (hc-probe, hc-render) keep one of these instead of the grid. Opening reads
-// what readGridInfo reads (milliseconds). A region reads the cells it returns and the codes its binary searches
+// only what readGridInfo reads. A region reads the cells it returns and the codes its binary searches
 // touch, checking the block checksums of exactly those bytes (each block once, sectioned_file.h), and validates
 // the cells it returns (Grid::validate). Thread-safe: regions may be read from several threads at once.
 class GridRegionReader {
@@ -246,7 +248,7 @@ public:
     uint64_t bytesChecked() const;
     // Drops the file's pages from this process's resident memory; they stay in the page cache, and a later region
     // reads them back from it. A builder that walks the grid a region at a time calls it between regions, so that
-    // its memory follows a region, not all of the file it has walked (hc-influence --no-lists: BENCHMARKS.md).
+    // its memory follows a region, not all of the file it has walked (hc-influence --no-lists: docs/benchmarks.md).
     void releasePages() const;
 
 private:

@@ -1,4 +1,4 @@
-// heightcast/influence/kernel.h: the truncated Gaussian of DESIGN.md section 4 (report eq. 1).
+// heightcast/influence/kernel.h: the truncated Gaussian of docs/design.md section 3 (report eq. 1).
 //
 //   w_i(p) = max(0, exp(-(|p_i - p| / c_i)^2 / (2 sigma^2)) - exp(-R^2 / 2))
 //

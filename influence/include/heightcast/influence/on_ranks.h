@@ -1,5 +1,5 @@
 // heightcast/influence/on_ranks.h: the influence lists and the surface pyramid built by the ranks of
-// `mpirun -np N hc-influence` (DESIGN.md section 13; core/ranks/ranks.h), the same bytes as one process builds.
+// `mpirun -np N hc-influence` (docs/design.md section 7; core/ranks/ranks.h), the same bytes as one process builds.
 //
 // No rank reads the whole grid. The domain is cut into the nodes of one quadtree level (partitionOf: the coarsest
 // level with enough nodes holding cells, never finer than the coarsest cell or a pyramid tile's node), and the nodes,
@@ -57,7 +57,7 @@ struct InfluenceListsPart {
     uint64_t firstCell = 0;
     std::vector<uint64_t> offsets;  // cellCount() + 1
     // The entries, node by node in order, each node's as built: not one buffer grown by copies, whose last growth held
-    // the old and the new buffer at once (up to 3 times the entries: 1784 MB against 1088 on the other rank, 9 M cells).
+    // the old and the new buffer at once (up to 3 times the entries: one rank's peak far above the other's).
     struct Entries {
         std::unique_ptr<uint32_t[]> indices;
         size_t count = 0;

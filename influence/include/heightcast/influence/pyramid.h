@@ -1,4 +1,4 @@
-// heightcast/influence/pyramid.h: the surface pyramid (DESIGN.md section 10) and its .hcp file.
+// heightcast/influence/pyramid.h: the surface pyramid (docs/design.md section 4) and its .hcp file.
 //
 // The exact smooth surface (surface.h) sampled on dyadic lattices aligned with the finest-cell lattice:
 // level t has spacing h_t = finestCellM * 2^t, and its sample (i, j) lies at local (i h_t, j h_t), a corner
@@ -10,7 +10,7 @@
 // larger than h_t (level <= t) reaches it: the square of half-side R sigma c about the cell's centre meets the tile's
 // node (the cell's own tile among them), and the node meets some cell (else every sample would be NaN). A cascade's
 // texels there are copies, where a rule of "the node holds such a cell" would leave those beside it, across a tile
-// edge from a river of fine cells, to the kernels (BENCHMARKS.md, "Tiles where a fine cell's kernel reaches"). The
+// edge from a river of fine cells, to the kernels (docs/benchmarks.md, "Tiles where a fine cell's kernel reaches"). The
 // top level (one tile covers the domain) is kept wherever there are cells, so every point over a cell has a coarsest
 // sample; a tile's parent is always kept (the same cell's reach meets the parent's node). Storage therefore follows
 // the cells (about 4/3 samples per cell where the tiles are full, plus the reach's band), not the area at the finest
@@ -23,7 +23,7 @@
 //               kWetShareMin and WaterLevel > Elevation (surface.h)
 // The water channels exist only for a grid with a water_depth layer.
 //
-// Water pyramids (a scenario of several water steps, DESIGN.md section 11): the terrain and the tree are the same in
+// Water pyramids (a scenario of several water steps, docs/design.md section 6): the terrain and the tree are the same in
 // every step, so only the first step's pyramid is whole (the base, 3 channels); each later step's holds its two water
 // channels (WaterLevel, WetShare, in that order) in the tiles where its water is drawn at some sample (waterPyramidOf).
 // A reader takes the elevation from the base and the water from the step's pyramid; a tile of the base that the

@@ -1,5 +1,5 @@
 // heightcast/influence/region.h: the exact smooth surface over part of a grid that is never held whole
-// (DESIGN.md section 10, out of core): the cells whose kernels reach a box, read from the grid file, with their
+// (docs/design.md section 4, out of core): the cells whose kernels reach a box, read from the grid file, with their
 // influence lists built on the spot. No whole-grid list cache is needed.
 //
 // Exactness: the weight of a cell is exactly 0 beyond its kernel radius (kernel.h), and a region holds every

@@ -1,4 +1,4 @@
-// heightcast/influence/surface.h: the exact smooth surface (DESIGN.md section 4), the reference
+// heightcast/influence/surface.h: the exact smooth surface (docs/design.md section 3), the reference
 // every faster path is tested against.
 //
 //   v(p) = sum_i w_i(p) v_i / sum_i w_i(p)     over the influence list of the cell containing p
@@ -20,7 +20,7 @@
 namespace hc::influence {
 
 // What to evaluate. Elevation and any other grid layer are smoothed cell values (section 4). With a
-// water_depth layer, water is the water level field of DESIGN.md section 12, built from wet cells only
+// water_depth layer, water is the water level field of docs/design.md section 6, built from wet cells only
 // (wet: depth > 0), normalised over the wet weights:
 //
 //   level(p) = sum_{wet i} w_i(p) (z_i + d_i) / sum_{wet i} w_i(p)
@@ -31,7 +31,7 @@ namespace hc::influence {
 //   - the level lies above the smooth terrain z(p) (section 4's elevation).
 // WaterSurface is level(p) there and undefined elsewhere; WaterDepth is level(p) - z(p) there and 0 on
 // dry land (undefined only in holes and outside the grid, like the elevation).
-// A further step layer (after water_depth: velocity magnitude, ..., DESIGN.md section 11) has values on wet cells
+// A further step layer (after water_depth: velocity magnitude, ..., docs/design.md section 6) has values on wet cells
 // only, so it is a WaterCells field: the wet cells' values normalised over the wet weights, as the level is,
 //
 //   u(p) = sum_{wet i} w_i(p) u_i / sum_{wet i} w_i(p)
@@ -47,7 +47,7 @@ struct Layer {
     static Layer byName(const Grid& grid, const std::string& name);
 };
 
-// The wet weight share from which water is drawn (DESIGN.md section 12): at least half the weight at a
+// The wet weight share from which water is drawn (docs/design.md section 6): at least half the weight at a
 // point comes from wet cells. Every evaluator (exact, batch, CPU and GL approximation) uses it.
 constexpr double kWetShareMin = 0.5;
 
@@ -64,8 +64,8 @@ public:
     std::optional<double> value(double xLocal, double yLocal, const Layer& layer) const;
     std::optional<ValueGradient> valueGradient(double xLocal, double yLocal, const Layer& layer) const;
     // Many points at once (what hc-probe does): each point is located, the points are evaluated in the
-    // grid's storage order (neighbouring points share cache lines of lists and cells: 2-3x faster than
-    // random order) on `threads` workers, and the results come back in the input order.
+    // grid's storage order (neighbouring points share cache lines of lists and cells: much faster than
+    // random order, docs/benchmarks.md) on `threads` workers, and the results come back in the input order.
     std::vector<std::optional<double>> values(std::span<const std::array<double, 2>> pointsLocal, const Layer& layer,
                                               unsigned threads = 0) const;
     // The same by brute force over every cell (tests only: O(n) per point).

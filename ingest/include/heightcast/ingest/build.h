@@ -1,4 +1,4 @@
-// heightcast/ingest/build.h: the error-bounded bottom-up quadtree build (DESIGN.md section 3).
+// heightcast/ingest/build.h: the error-bounded bottom-up quadtree build (docs/design.md section 2).
 //
 // Input: a terrain raster and optional water-depth raster of the same geometry (raster.h).
 // Every valid pixel starts as a level-0 cell (size = pixelSizeM). Four sibling cells merge into their
@@ -7,7 +7,7 @@
 //   - in every layer, the parent's value (the float32 mean of the four, i.e. the mean of every
 //     pixel it covers) lies within toleranceM of every pixel it covers;
 //   - for water, in every water step: all four are wet or all four are dry (depth 0), so merges never blur a
-//     wet/dry edge of any step, and the step's depth stays within toleranceM too (DESIGN.md section 11: one
+//     wet/dry edge of any step, and the step's depth stays within toleranceM too (docs/design.md section 6: one
 //     structure for every step).
 // Merging by the mean keeps volumes: a cell holds exactly the water its pixels held.
 // Guarantee (checked pixel by pixel, reported in Grid::stats): every valid pixel differs from the
@@ -29,8 +29,15 @@
 
 namespace hc::ingest {
 
+// The default of --tolerance [m]: the one place it is set (Options, BuildOptions and hc-ingest's --help use it).
+constexpr double kDefaultToleranceM = 0.25;
+
+// The one check of a tolerance [m]: throws hc::Error naming --tolerance unless it is a finite number >= 0. hc-ingest
+// checks its options with it before reading anything; the build checks its own with it (a library caller's).
+void checkToleranceM(double toleranceM);
+
 struct BuildOptions {
-    double toleranceM = 0.25;  // >= 0
+    double toleranceM = kDefaultToleranceM;  // >= 0
     int maxLevel = 0;          // coarsest cell = pixelSizeM * 2^maxLevel
     unsigned threads = 0;      // 0 = all cores
     bool progress = false;     // terminal progress on stderr
@@ -45,7 +52,7 @@ public:
     virtual ~CellSink() = default;
     virtual void begin(uint64_t cellCount) = 0;
     virtual void append(std::span<const uint64_t> codes, const std::vector<std::span<const float>>& values) = 0;
-    // Under mpirun (DESIGN.md section 13) every rank writes its own cells into the sink's file: the sink gives rank 0's
+    // Under mpirun (docs/design.md section 7) every rank writes its own cells into the sink's file: the sink gives rank 0's
     // writer after begin(), and every rank the file's shape for its GridFilePart. A sink without a file (a grid in
     // memory) is built by one process only.
     virtual GridFileWriter* sharedWriter() { return nullptr; }
@@ -80,7 +87,7 @@ struct WaterSteps {
 Grid buildGrid(const Raster& terrain, const Raster* waterDepth, const BuildOptions& options);
 
 // A working raster read window by window (hc-ingest under mpirun: each rank reads only the windows of its share, so
-// no rank holds the raster whole; DESIGN.md section 13).
+// no rank holds the raster whole; docs/design.md section 7).
 struct RasterWindows {
     Raster shape;        // geometry and CRS; values empty
     std::string source;  // the file, for messages

@@ -12,7 +12,7 @@
 //                   non-square, rotated, south-up     resampled / flipped north-up, never mis-placed
 //   loadWater     a water depth or water surface raster warped onto the terrain's working raster, or
 //                 a bathtub level flood-filled from the domain boundary; one per water step (a series of
-//                 rasters or of levels, DESIGN.md section 11)
+//                 rasters or of levels, docs/design.md section 6)
 //   buildGrid     the error-bounded quadtree (build.h)
 //   (check)       every valid source pixel against the cell covering its centre (LoadReport::sourceCheck)
 #pragma once
@@ -44,7 +44,7 @@ struct Options {
     std::string sourceSrs;              // --s_srs: CRS to assume for the input (overrides its own);
                                         // "local" = metres in a local frame, no CRS (no degree guess)
     std::string targetSrs;              // --t_srs: project into this CRS (GDAL/PROJ) instead of UTM
-    double toleranceM = 0.25;           // max |pixel - cell| [m], >= 0
+    double toleranceM = kDefaultToleranceM;  // max |pixel - cell| [m], >= 0
     std::optional<double> minCellM;     // finest cell [m]; default: source pixel size after projection
     std::optional<double> maxCellM;     // coarsest cell [m]; default: largest finest * 2^k <= 96 m
     WaterSource water = WaterSource::None;
@@ -97,7 +97,7 @@ struct LoadReport {
 void validateOptions(const Options& options);
 
 // A single water raster that holds a time series (a NetCDF variable with one more dimension than y and x, in CF time
-// units, as GDAL reads it: one band per time; DESIGN.md section 11) becomes one water step per time: waterPaths and
+// units, as GDAL reads it: one band per time; docs/design.md section 6) becomes one water step per time: waterPaths and
 // waterBands then name each step's band, and timesS holds the file's times in seconds since the units' reference
 // (unless times were given: those are kept, with a warning in `report`). Time units that are not CF's take the step
 // index as time, with a warning. Any other water raster of several bands is refused (which band is the water?),
@@ -116,6 +116,9 @@ Raster loadWater(const Options& options, const Raster& terrain, LoadReport& repo
 // Coarsest level for the working raster: --max-cell rounded down to finest * 2^k (default 96 m).
 // Throws if --max-cell is below the finest cell.
 int chooseMaxLevel(const Options& options, double pixelSizeM, LoadReport& report);
+// The build's options (build.h) for a working raster of pixelSizeM [m]: the one place Options map onto them, for
+// rasters and for sampled model meshes alike.
+BuildOptions buildOptions(const Options& options, double pixelSizeM, LoadReport& report);
 
 // All stages, the grid in memory (tests, small rasters). Throws hc::Error for bad input.
 Grid ingest(const Options& options, LoadReport& report);

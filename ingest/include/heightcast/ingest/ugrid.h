@@ -1,6 +1,6 @@
 // heightcast/ingest/ugrid.h: quadtree simulation meshes (CF UGRID-1.0 map files, as SFINCS and other quadtree flood
 // models write them) -> a grid with water steps, taken as they are: one cell per active face, no resampling
-// (DESIGN.md section 11).
+// (docs/design.md section 6).
 //
 // Read through GDAL's multidimensional API (GDALOpenEx with GDAL_OF_MULTIDIM_RASTER): the variable whose cf_role is
 // mesh_topology with topology_dimension 2, its node_coordinates (x y), its face_node_connectivity (start_index, fill

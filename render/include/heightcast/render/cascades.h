@@ -1,4 +1,4 @@
-// heightcast/render/cascades.h: cascade fitting (DESIGN.md section 5 step 1; report section 3).
+// heightcast/render/cascades.h: cascade fitting (docs/design.md section 5 step 1; report section 3).
 //
 // The view frustum is intersected with the scene's bounding box; the intersection's vertices,
 // projected to the ground plane, give a convex hull: the potentially visible area. Along the
@@ -37,6 +37,14 @@ struct ViewVolume {
     bool coarserTexels = false;     // with 1 step per octave: the smallest power of two not below the 8-step size, N texels
 };
 
+// An inclusive span [first, last] of texel columns in a row; empty when last < first. The one span type of render/:
+// a cascade's visible texels, and the texels a frame keeps, evaluates and copies (detail/frame.h).
+struct TexelSpan {
+    int first = 0, last = -1;
+    bool empty() const { return last < first; }
+    int count() const { return last < first ? 0 : last - first + 1; }
+};
+
 struct Cascade {
     double splitNear = 0, splitFar = 0;  // this cascade's share of [n, f] along d (offsets from the eye)
     double farWithOverlap = 0;           // splitFar widened into the next cascade (== splitFar for the last)
@@ -46,9 +54,7 @@ struct Cascade {
     std::vector<glm::dvec2> polygon;           // the hull's slab [splitNear, farWithOverlap], local xy
     // The visible texels: inside the polygon dilated by 1.5 texels. The polygon is convex, so they are one
     // span of each row: row j's are i in [rows[j].first, rows[j].last] (none when last < first).
-    struct RowSpan {
-        int first = 0, last = -1;
-    };
+    using RowSpan = TexelSpan;
     std::vector<RowSpan> rows;  // n entries
     bool empty() const { return polygon.size() < 3; }
     bool visible(int i, int j) const { return i >= rows[size_t(j)].first && i <= rows[size_t(j)].last; }

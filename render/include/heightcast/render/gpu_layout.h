@@ -1,5 +1,5 @@
 // heightcast/render/gpu_layout.h: the structs and constants that the CPU side and the GL compute
-// shaders share (DESIGN.md section 5: one header for both backends).
+// shaders share (docs/design.md section 5: one header for both backends).
 //
 // Written in the common subset of C++ and GLSL 4.30: scalar members (float, int, uint, double) and
 // fixed-size scalar arrays only, so the std430 layout the shaders see equals the C layout (std430
@@ -74,7 +74,7 @@ struct GpuCell {
 // One cascade (Cascade in cascades.h) as the shaders read it.
 struct GpuCascade {
     double x0;        // local position of texel (0, 0)'s centre [m]; double: texel centres are
-    double y0;        //   located in the grid exactly as the CPU does (approximate.cpp)
+    double y0;        //   located in the grid exactly as the CPU does (approximate_sum.cpp)
     double texelM;    // texel size s [m]
     float x0Eye;      // x0 - eye, y0 - eye [m]: the ray caster's frame
     float y0Eye;
@@ -163,7 +163,7 @@ struct GpuPixel {
 };
 
 #ifdef __cplusplus
-// Shading constants both backends use (renderer.cpp and shade.comp through GpuFrame).
+// Shading constants both backends use (shading.cpp and shade.comp through GpuFrame).
 // Colour ramps: stops (t, r, g, b), sRGB.
 inline constexpr double kElevationRamp[5][4] = {
     {0.0, 0.24, 0.47, 0.24}, {0.3, 0.59, 0.67, 0.35}, {0.55, 0.63, 0.51, 0.35}, {0.8, 0.6, 0.6, 0.6}, {1.0, 0.98, 0.98, 0.98}};

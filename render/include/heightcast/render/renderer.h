@@ -1,4 +1,4 @@
-// heightcast/render/renderer.h: the CPU renderer of the smooth surface (DESIGN.md section 5).
+// heightcast/render/renderer.h: the CPU renderer of the smooth surface (docs/design.md section 5).
 //
 // Per frame: fit cascades to the view (cascades.h), approximate the surface into each cascade's
 // texture (the Gaussian RBF sum at every visible texel), build max mipmaps, cast one ray per pixel
@@ -36,11 +36,11 @@ struct RenderOptions {
     // With a surface pyramid, texel sizes are its spacings (powers of two of the finest cell). false: the largest
     // not above the size without a pyramid, with up to 2N texels a side (never coarser, so the rendered error is
     // no worse); true: the smallest not below it, N texels (up to 2x coarser: faster, more texels copied, larger
-    // rendered error). BENCHMARKS.md measures both.
+    // rendered error). docs/benchmarks.md measures both.
     bool pyramidCoarseTexels = false;
     // With a surface pyramid: texels finer than every level stored around them (over cells at least twice their size,
     // no finer cell within a kernel's reach) are interpolated (bicubic) from the nearest coarser level stored, at most
-    // this many levels up, 0..8; 0 sums them from the kernels. BENCHMARKS.md measures the trade.
+    // this many levels up, 0..8; 0 sums them from the kernels. docs/benchmarks.md measures the trade.
     int pyramidInterpolateLevels = 3;
     // Colour by this grid layer instead ("" = by `color`): a further step layer (velocity, ...: a field of the wet
     // cells, influence::Layer::WaterCells) colours the water and leaves dry terrain grey; a static layer colours the
@@ -50,7 +50,7 @@ struct RenderOptions {
     // Both backends: the rays of each tile of beamTilePx x beamTilePx pixels start their walks where a march of the
     // tile's beam over the max mipmaps shows none of them can hit before (the same hits; the tiles' marches start from
     // their block's of 4 x 4 tiles; on the GL backend a pass of its own, beams.comp); 0 or 1: every ray walks from its
-    // cascade's start. 0..64. BENCHMARKS.md measures it.
+    // cascade's start. 0..64. docs/benchmarks.md measures it.
     int beamTilePx = 4;
     std::string validate() const; // "" or what is wrong
 };
@@ -125,8 +125,8 @@ struct Timings {
 
 // What a frame renders: the grid, its surface pyramid (optional) and how the kernels are reached.
 //   In memory: a grid with its influence lists and per-cell data prepared once for many frames (about 300 bytes
-//   per cell with the lists: up to ~10 M cells on a 24 GB machine).
-//   Out of core (DESIGN.md section 10): a grid file read a region at a time (GridRegionReader) and no lists: the
+//   per cell with the lists; docs/benchmarks.md gives the largest grids that fit).
+//   Out of core (docs/design.md section 4): a grid file read a region at a time (GridRegionReader) and no lists: the
 //   texels that need the kernels read the cells around them, build their lists and drop them, a block of texels
 //   at a time (influence/region.h), so memory follows the cascades, not the grid. The frames are the same bits.
 // With a surface pyramid (influence/pyramid.h) cascade texel sizes are the pyramid's spacings (powers of two of the
@@ -175,7 +175,7 @@ public:
     // The water colours' scale [m]: the largest depth of every water step of the scenario (Grid::steps), not only
     // the shown one's, so that a colour means the same depth in every step of a sequence.
     double depthColorMaxM = 0;
-    // The smooth terrain's height at a local point [m] (the RBF sum of DESIGN.md section 4 over the list of
+    // The smooth terrain's height at a local point [m] (the RBF sum of docs/design.md section 3 over the list of
     // the cell containing it, as the approximation evaluates it, in double), or nullopt outside every cell.
     std::optional<double> terrainAt(double xLocal, double yLocal) const;
     // The square of the cell containing a local point, or nullopt (holes, outside the domain).
@@ -198,7 +198,7 @@ private:
     mutable std::unique_ptr<influence::SurfaceEvaluator> evaluator_;
 };
 
-// Cascade textures kept from one frame to the next (DESIGN.md section 6, incremental cascades). Stable fitting
+// Cascade textures kept from one frame to the next (docs/design.md section 5, incremental cascades). Stable fitting
 // keeps a cascade's texel size and lattice while the camera moves a little, so most of a frame's visible texels
 // were visible in the last one: renderFrame() copies those and evaluates only the newly exposed ones. A cascade
 // is reused only with the same scene, texel size, texture side and water threshold; anything else starts afresh.

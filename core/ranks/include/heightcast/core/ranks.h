@@ -1,4 +1,4 @@
-// heightcast/core/ranks.h: the processes of one preprocessing run (DESIGN.md section 13).
+// heightcast/core/ranks.h: the processes of one preprocessing run (docs/design.md section 7).
 //
 // Started by `mpirun -np N`, hc-ingest and hc-influence run as N ranks that split the work; rank 0 opens and commits
 // each output file, and the ranks write their shares into it in place (GridFilePart, on_ranks.h's writers over

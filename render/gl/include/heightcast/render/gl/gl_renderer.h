@@ -1,4 +1,4 @@
-// heightcast/render/gl/gl_renderer.h: the OpenGL 4.3 compute backend (DESIGN.md sections 5 and 9).
+// heightcast/render/gl/gl_renderer.h: the OpenGL 4.3 compute backend (docs/design.md section 5).
 //
 // The same stages as the CPU backend (renderer.h): cascade fitting (on the CPU, shared code), then
 // approximation into the cascade textures (visible texels only; those the last frame saw too are kept on the GPU),

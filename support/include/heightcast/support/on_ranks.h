@@ -1,5 +1,5 @@
-// apps/on_ranks.h: main() of a tool that runs as one process or as the ranks of `mpirun -np N` (hc-ingest,
-// hc-influence; core/ranks/ranks.h, DESIGN.md section 13).
+// heightcast/support/on_ranks.h: main() of a tool that runs as one process or as the ranks of `mpirun -np N`
+// (hc-ingest, hc-influence; core/ranks/ranks.h, docs/design.md section 7).
 //
 // Under mpirun: rank 0 prints what one process prints (the other ranks' standard output is dropped; each says its
 // share once on stderr, "rank K/N"), an error every rank raised together (ranks::RanksError) is reported once by
@@ -10,7 +10,7 @@
 #include <cstdio>
 #include <functional>
 
-#include "cli.h"
+#include "heightcast/support/cli.h"
 #include "heightcast/core/ranks.h"
 
 namespace hc::cli {

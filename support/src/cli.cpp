@@ -1,4 +1,4 @@
-#include "cli.h"
+#include "heightcast/support/cli.h"
 
 #include <glob.h>
 

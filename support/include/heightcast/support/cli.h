@@ -1,4 +1,4 @@
-// apps/cli.h: self-describing command-line options (name, value, help with units and default),
+// heightcast/support/cli.h: self-describing command-line options (name, value, help with units and default),
 // shared by every heightcast tool so they parse, validate and explain themselves the same way.
 #pragma once
 

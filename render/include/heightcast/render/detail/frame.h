@@ -1,5 +1,6 @@
-// render/src/textures.h: per-cascade textures and the per-frame set-up shared by the CPU stages and the GL
-// backend (private to render/).
+// heightcast/render/detail/frame.h: the frame layer both backends fill: per-cascade textures and the per-frame
+// set-up shared by the CPU stages (render/src/) and the GL backend (render/gl/). Internal to render/: the GL backend
+// and the tests use it; tools use renderer.h.
 #pragma once
 
 #include <algorithm>
@@ -23,8 +24,8 @@ namespace hc::render::detail {
 
 // An allocator whose vectors leave new elements uninitialised where std::vector would zero them: a cascade's
 // textures are sized before every texel that is read is written (approximate(): copyReusedTexels writes every texel,
-// with RowFill spans every texel of a span, and no other is read), and zeroing them first took 0.15-0.25 ms a cascade
-// on one core (a 1344^2 texture is 7 MB) in every fresh frame.
+// with RowFill spans every texel of a span, and no other is read), and zeroing them first cost a measurable share of
+// every fresh frame (a 1344^2 texture is 7 MB; docs/benchmarks.md).
 template <class T>
 struct UninitialisedAllocator : std::allocator<T> {
     template <class U>
@@ -90,21 +91,21 @@ struct ApproximationWork {
 };
 
 // A cascade's row j as approximate() filled it for a caller that keeps the last frame's texels itself (the GL backend
-// out of core keeps them on the GPU): the texels [keptFirst, keptLast] are the last frame's (TexelReuse: texel i + di of
-// its row j + dj), the spans [a0, a1] and [b0, b1] were evaluated; every other texel has no surface. Empty spans end
+// out of core keeps them on the GPU): the texels `kept` are the last frame's (TexelReuse: texel i + di of
+// its row j + dj), the spans a and b were evaluated; every other texel has no surface. Empty spans end
 // below their start.
 struct RowFill {
-    int keptFirst = 0, keptLast = -1;
-    int a0 = 0, a1 = -1, b0 = 0, b1 = -1;
+    TexelSpan kept, a, b;
+    TexelSpan& span(int k) { return k == 0 ? a : b; }
+    const TexelSpan& span(int k) const { return k == 0 ? a : b; }
 };
 
 // Widens span `span` (0: a, 1: b) of `row` to hold texels lo .. hi (a span empty before becomes lo .. hi): a backend
 // that writes texels approximate() left to it into the textures after all (its atlas has no slot for their tile).
 inline void widenSpan(RowFill& row, int span, int lo, int hi) {
-    int& first = span == 0 ? row.a0 : row.b0;
-    int& last = span == 0 ? row.a1 : row.b1;
-    if (last < first) first = lo, last = hi;
-    else first = std::min(first, lo), last = std::max(last, hi);
+    TexelSpan& s = row.span(span);
+    if (s.empty()) s.first = lo, s.last = hi;
+    else s.first = std::min(s.first, lo), s.last = std::max(s.last, hi);
 }
 
 // The texels that approximate() with `tiles` leaves to the caller to copy from the surface pyramid (the GL backend out
@@ -122,7 +123,7 @@ struct PyramidTiles {
     std::vector<const float*> water;   // its water levels (wet shares a plane after): its own channels 1 and 2, or the
                                        // water pyramid's tile at the same place in a later step of a scenario; nullptr: dry
     std::vector<uint16_t> copied;      // per entry, `side` rows: bit c of row r set where sample (c, r) is copied to a texel
-    std::vector<RowFill> spans;        // per texel row: its spans to evaluate before the copies were taken out (a0 .. b1)
+    std::vector<RowFill> spans;        // per texel row: its spans to evaluate before the copies were taken out (a and b)
 
     // Texels finer than every level (the cascade's level t < 0) left to the caller to interpolate from level 0, `up` = -t
     // levels above, as PyramidInterpolator does (the GL backend does it on the GPU from its atlas: interpolate.comp), in
@@ -151,8 +152,8 @@ void forEachBlockRun(const PyramidTiles& tiles, const PyramidTiles::Block& block
     for (int64_t j = std::max<int64_t>(block.j0, 0); j <= std::min<int64_t>(block.j0 + side - 1, n - 1); ++j) {
         const RowFill& s = tiles.spans[size_t(j)];
         for (int span = 0; span < 2; ++span) {
-            const int64_t lo = std::max({int64_t(span == 0 ? s.a0 : s.b0), block.i0, int64_t{0}});
-            const int64_t hi = std::min({int64_t(span == 0 ? s.a1 : s.b1), block.i0 + side - 1, int64_t(n) - 1});
+            const int64_t lo = std::max({int64_t(s.span(span).first), block.i0, int64_t{0}});
+            const int64_t hi = std::min({int64_t(s.span(span).last), block.i0 + side - 1, int64_t(n) - 1});
             if (lo <= hi) fn(int(j), int(lo), int(hi), span);
         }
     }
@@ -206,7 +207,7 @@ struct Hit {
 // The unit normal (-gx, -gy, 1) / |(-gx, -gy, 1)| of a surface with slope (gx, gy) = (riseX, riseY) / texelM [m/m], in
 // the operations every hit's normal has always been computed with. IEEE square roots and divisions round the same in
 // any vector width; a multiply-add the compiler fuses in one loop and not in another could move a last bit (none did
-// in the renders BENCHMARKS.md compares).
+// in the renders docs/benchmarks.md compares).
 inline void normalOfSlope(double riseX, double riseY, double texelM, double& nx, double& ny, double& nz) {
     const double gx = riseX / texelM, gy = riseY / texelM;
     const double nl = std::sqrt(gx * gx + gy * gy + 1.0);
@@ -227,8 +228,8 @@ struct RayContext {
 // in a rectangle of the image plane, tau the depth along the camera's forward axis. A march of the beam over a
 // cascade's max mipmap finds, for the whole tile at once, a depth before which no ray of the tile comes down to any
 // maximum of that cascade; each ray's walk there starts at the patch under that depth instead of at the cascade's
-// start. The walk would have skipped every node before it, so the hit is the same (tests: render_test
-// "Beams"), and a ray makes a few visits near its hit instead of the descent from the top (BENCHMARKS.md).
+// start. The walk would have skipped every node before it, so the hit is the same (tests: render_hits_test,
+// "Beams"), and a ray makes a few visits near its hit instead of the descent from the top (docs/benchmarks.md).
 class Beam {
 public:
     // (sx0, sy0) and (sx1, sy1): opposite corners of the rectangle, in CameraBasis image-plane units (the pixels'
@@ -263,7 +264,7 @@ private:
 // and the depths where it crosses the cascade's highest point (without water and with it) and the block's bottom.
 // setUpRays() computes them for many rays at once in vector registers, in the operations a ray's walk used one at a
 // time (the same values up to how the compiler fuses multiply-adds: Render.RaySetupsAreTheWalksOwnClips): a dozen
-// divisions at the start of every walk, waited on before its first step (BENCHMARKS.md).
+// divisions at the start of every walk, waited on before its first step (docs/benchmarks.md).
 struct RaySetups {
     struct Cascade {
         double u0 = 0, v0 = 0;  // the eye in the cascade's texel coordinates

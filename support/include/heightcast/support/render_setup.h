@@ -1,4 +1,4 @@
-// apps/render_setup.h: what hc-render and hc-view share: their rendering and camera options (parsed,
+// heightcast/support/render_setup.h: what hc-render and hc-view share: their rendering and camera options (parsed,
 // explained and validated the same way), the grid + influence cache + scene loading, and the camera.
 #pragma once
 
@@ -6,7 +6,7 @@
 #include <optional>
 #include <string>
 
-#include "cli.h"
+#include "heightcast/support/cli.h"
 #include "heightcast/grid/grid.h"
 #include "heightcast/influence/influence.h"
 #include "heightcast/influence/pyramid.h"

@@ -1,7 +1,7 @@
-// apps/backend_choice.h: which backend renders, decided the same way in hc-render and hc-view.
+// heightcast/support/backend_choice.h: which backend renders, decided the same way in hc-render and hc-view.
 //
 // --backend cpu | gl | auto. auto takes the GL backend only on a GPU: on a software OpenGL (Mesa's llvmpipe) the CPU
-// backend is about twice as fast per frame (BENCHMARKS.md), so auto renders on the CPU there and says why. gl fails
+// backend is faster per frame (docs/benchmarks.md), so auto renders on the CPU there and says why. gl fails
 // with the reason when no OpenGL 4.3 context can be had, also in a build without the GL backend (-DHC_WITH_GL=OFF).
 #pragma once
 

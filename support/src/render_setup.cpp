@@ -1,4 +1,4 @@
-#include "render_setup.h"
+#include "heightcast/support/render_setup.h"
 
 #include <cmath>
 #include <cstdio>

@@ -1,4 +1,4 @@
-// apps/view_support.h: hc-view's pieces that need no window (and so are unit-tested): camera bookmarks
+// heightcast/support/view_support.h: hc-view's pieces that need no window (and so are unit-tested): camera bookmarks
 // as JSON, camera motions (fly, look, orbit), and text drawn with a built-in 5x7 bitmap font into an
 // RGBA overlay.
 #pragma once

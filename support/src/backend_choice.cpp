@@ -1,4 +1,4 @@
-#include "backend_choice.h"
+#include "heightcast/support/backend_choice.h"
 
 #include "heightcast/core/error.h"
 #include "heightcast/render/gl/gl_renderer.h"
@@ -42,7 +42,7 @@ BackendDecision decideBackend(Backend requested, const GlOnHand& gl) {
     const bool software = gl.unavailable.empty() && render::isSoftwareRenderer(gl.device);
     if (requested == Backend::Gl) {
         d.useGl = true;
-        // DESIGN.md section 9: without a GPU the CPU backend is the fast one.
+        // docs/testing.md: without a GPU the CPU backend is the fast one.
         if (software) d.note = "OpenGL here is software rendering (" + renderer + "); --backend cpu is about twice as fast";
     } else if (!gl.unavailable.empty()) {
         d.note = "the GL backend is not available (" + gl.unavailable + "): rendering on the CPU";

@@ -1,4 +1,4 @@
-#include "view_support.h"
+#include "heightcast/support/view_support.h"
 
 #include <algorithm>
 #include <cmath>
