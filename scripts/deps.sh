@@ -1,16 +1,22 @@
 #!/usr/bin/env bash
 # Installs heightcast's build and test dependencies from Debian/Ubuntu packages (only what is missing).
+#   bash scripts/deps.sh          what the build and the tests need (gcc)
+#   bash scripts/deps.sh clang    that, plus clang and libFuzzer (the sanitizer and fuzz build, scripts/build_sanitized.sh)
 set -euo pipefail
 
 # The GL backend and viewer: EGL + GL headers and Mesa's drivers (llvmpipe runs the GL tests headless; the DRI
 # drivers must be named, nothing pulls them in), GLFW, glslangValidator (shaders are checked at build time),
 # and Xvfb for the viewer's test on machines with no display. ffmpeg makes hc-render's videos of flood scenarios
 # (--steps A:B --video OUT.mp4). OpenMPI runs hc-ingest and hc-influence on several processes (mpirun -np N).
+# ccache: CI builds the toolkit twice with the same compiler and flags (build/, build-minimal/), and most objects
+# of the second come from the cache (scripts/build.sh uses it when installed).
 packages=(build-essential cmake pkg-config libgdal-dev gdal-bin libgtest-dev libopenexr-dev libopenvdb-dev
           libboost-iostreams-dev libtbb-dev libblosc-dev
           nlohmann-json3-dev libfmt-dev libglm-dev libproj-dev
           libegl-dev libopengl-dev libgl-dev libegl1 libegl-mesa0 libgl1-mesa-dri libglfw3-dev glslang-tools xvfb xauth ffmpeg
-          libopenmpi-dev openmpi-bin)
+          libopenmpi-dev openmpi-bin ccache)
+# clang 14, clang-format and libFuzzer (libclang-rt-14-dev on Debian 12): Debian 12's clang, the one CI builds with.
+[ "${1:-}" = clang ] && packages+=(clang clang-format libclang-rt-14-dev)
 installed() { dpkg-query -W -f='${Status}' "$1" 2>/dev/null | grep -q "install ok installed"; }
 
 missing=()
