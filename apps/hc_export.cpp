@@ -19,8 +19,8 @@ struct ExportArgs {
     std::optional<hc::exporting::BoxWorld> box;
     hc::influence::KernelParams params;
     unsigned threads = 0;
-    unsigned step = 0;  // --step
-    int startIndex = 0; // .nc: the UGRID connectivity's start_index
+    unsigned step = 0;   // --step
+    int startIndex = 0;  // .nc: the UGRID connectivity's start_index
     bool quiet = false;
     bool vdb() const { return ext == ".vdb"; }
     bool ugrid() const { return ext == ".nc"; }
@@ -29,29 +29,37 @@ struct ExportArgs {
 // The options, validated before any work; false after --help.
 bool parseOptions(int argc, char** argv, ExportArgs& a) {
     std::string bbox;
-    hc::cli::Parser p("hc-export", "GRID.hcg --resolution M -o OUT.tif|OUT.exr|OUT.vdb [options]  |  GRID.hcg -o MESH.nc",
-                      "Samples the exact smooth surface at the centres of a regular raster and writes it for other tools:\n"
-                      "  .tif  GeoTIFF (Float32; CRS, geotransform and nodata for holes) for QGIS, gdalinfo, ...\n"
-                      "  .exr  OpenEXR (the layer as a FLOAT channel, NaN and A = 0 where undefined; georeference\n"
-                      "        in heightcast.* header attributes)\n"
-                      "  .vdb  OpenVDB narrow-band level sets 'terrain' and, when the grid has water, 'water_surface'\n"
-                      "        (voxel = --resolution; georeference in grid metadata) for film and VFX tools\n"
-                      "and writes the grid's cells themselves (no sampling) as\n"
-                      "  .nc   a UGRID-1.0 mesh in NetCDF: one square face per cell, elevation zb, every water step's level\n"
-                      "        zs(time, face), as quadtree flood models (SFINCS) write theirs; hc-ingest reads it back");
+    hc::cli::Parser p(
+        "hc-export", "GRID.hcg --resolution M -o OUT.tif|OUT.exr|OUT.vdb [options]  |  GRID.hcg -o MESH.nc",
+        "Samples the exact smooth surface at the centres of a regular raster and writes it for other tools:\n"
+        "  .tif  GeoTIFF (Float32; CRS, geotransform and nodata for holes) for QGIS, gdalinfo, ...\n"
+        "  .exr  OpenEXR (the layer as a FLOAT channel, NaN and A = 0 where undefined; georeference\n"
+        "        in heightcast.* header attributes)\n"
+        "  .vdb  OpenVDB narrow-band level sets 'terrain' and, when the grid has water, 'water_surface'\n"
+        "        (voxel = --resolution; georeference in grid metadata) for film and VFX tools\n"
+        "and writes the grid's cells themselves (no sampling) as\n"
+        "  .nc   a UGRID-1.0 mesh in NetCDF: one square face per cell, elevation zb, every water step's level\n"
+        "        zs(time, face), as quadtree flood models (SFINCS) write theirs; hc-ingest reads it back");
     p.positional("GRID.hcg", "grid file", a.gridPath);
     p.option("--resolution", "M", "pixel (voxel) size, metres (required)", a.resolution);
     p.option("-o", "OUT", "output file; the format follows the extension .tif/.tiff, .exr or .vdb (required)", a.out);
     p.option("--bbox", "XMIN,YMIN,XMAX,YMAX", "area in the grid's CRS, metres (default: the grid's extent)", bbox);
-    p.option("--layer", "L", "elevation, water_depth, water_surface or another layer (default elevation; .vdb always\n"
+    p.option("--layer", "L",
+             "elevation, water_depth, water_surface or another layer (default elevation; .vdb always\n"
              "      writes terrain and, with water, the water surface). Water as hc-probe gives it: the wet cells'\n"
-             "      level where water is drawn, depth = level - elevation there and 0 on dry land [m]", a.layerName);
-    p.option("--cache", "C.hci", "read the whole grid and this influence cache (built if missing or stale; default: the grid's\n"
+             "      level where water is drawn, depth = level - elevation there and 0 on dry land [m]",
+             a.layerName);
+    p.option("--cache", "C.hci",
+             "read the whole grid and this influence cache (built if missing or stale; default: the grid's\n"
              "path with .hci when that exists); without one the grid is read a tile at a time (out of core,\n"
-             "the same values)", a.cachePath);
-    p.option("--step", "K", "water step to export, 0-based (default 0; hc-info lists a grid's steps and their times; a .nc\n"
-             "      holds every step)", a.step);
-    p.option("--start-index", "0|1", ".nc: the first node's index in the face connectivity (UGRID start_index, default 0)", a.startIndex);
+             "the same values)",
+             a.cachePath);
+    p.option("--step", "K",
+             "water step to export, 0-based (default 0; hc-info lists a grid's steps and their times; a .nc\n"
+             "      holds every step)",
+             a.step);
+    p.option("--start-index", "0|1",
+             ".nc: the first node's index in the face connectivity (UGRID start_index, default 0)", a.startIndex);
     p.option("--sigma", "S", "kernel width in cell sizes (default 1.0)", a.params.sigma);
     p.option("--truncation", "R", "kernel cut-off in sigmas (default 3.5)", a.params.truncation);
     p.option("--threads", "N", "worker threads (default 0 = all cores)", a.threads);
@@ -59,13 +67,17 @@ bool parseOptions(int argc, char** argv, ExportArgs& a) {
     if (!p.parse(argc, argv)) return false;
     if (a.out.empty()) throw hc::Error("no output file: give -o OUT.tif|OUT.exr|OUT.vdb|MESH.nc");
     a.ext = std::filesystem::path(a.out).extension().string();
-    std::transform(a.ext.begin(), a.ext.end(), a.ext.begin(), [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
+    std::transform(a.ext.begin(), a.ext.end(), a.ext.begin(),
+                   [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
     if (a.ext != ".tif" && a.ext != ".tiff" && a.ext != ".exr" && a.ext != ".vdb" && a.ext != ".nc")
         throw hc::Error(a.out + ": unknown output format '" + a.ext + "' (use .tif, .exr, .vdb or .nc)");
     if (a.ugrid()) {
         for (const char* o : {"--resolution", "--bbox", "--layer", "--step", "--cache"})
-            if (p.given(o)) throw hc::Error(std::string(o) + ": a .nc mesh holds the cells themselves, every layer and step, unsampled");
-        if (a.startIndex != 0 && a.startIndex != 1) throw hc::Error("--start-index " + std::to_string(a.startIndex) + ": use 0 or 1");
+            if (p.given(o))
+                throw hc::Error(std::string(o) +
+                                ": a .nc mesh holds the cells themselves, every layer and step, unsampled");
+        if (a.startIndex != 0 && a.startIndex != 1)
+            throw hc::Error("--start-index " + std::to_string(a.startIndex) + ": use 0 or 1");
         hc::cli::checkWritable(a.out, "export");
         hc::cli::checkNotSame(a.out, a.gridPath, "export");
         return true;
@@ -92,14 +104,16 @@ struct Exported {
 
 // Where the surface comes from: the whole grid and its lists, or (out of core) the grid file a band at a time.
 struct Source {
-    const hc::Grid& shape;  // geometry and layers
+    const hc::Grid& shape;                                  // geometry and layers
     const hc::influence::SurfaceEvaluator* eval = nullptr;  // in memory
-    const hc::GridRegionReader* file = nullptr;              // out of core
+    const hc::GridRegionReader* file = nullptr;             // out of core
     hc::influence::KernelParams params;
-    hc::exporting::SampledRaster sample(const ExportArgs& a, const hc::influence::Layer& layer, const std::string& name) const {
+    hc::exporting::SampledRaster sample(const ExportArgs& a, const hc::influence::Layer& layer,
+                                        const std::string& name) const {
         const bool grads = a.vdb();
         return eval ? hc::exporting::sampleSurface(*eval, layer, name, a.resolution, a.box, grads, a.threads, !a.quiet)
-                    : hc::exporting::sampleSurface(*file, params, layer, name, a.resolution, a.box, grads, a.threads, !a.quiet);
+                    : hc::exporting::sampleSurface(*file, params, layer, name, a.resolution, a.box, grads, a.threads,
+                                                   !a.quiet);
     }
 };
 
@@ -107,7 +121,8 @@ struct Source {
 Exported sampleAndWrite(const ExportArgs& a, const Source& src, const hc::influence::Layer& layer) {
     const bool vdb = a.vdb();
     Exported e{src.sample(a, layer, vdb ? "elevation" : a.layerName)};
-    if (e.raster.definedCount() == 0) throw hc::Error("the surface is undefined everywhere in the requested area (all holes)");
+    if (e.raster.definedCount() == 0)
+        throw hc::Error("the surface is undefined everywhere in the requested area (all holes)");
     if (vdb) {
         std::optional<hc::exporting::SampledRaster> water;
         if (src.shape.findLayer("water_depth") >= 0) {
@@ -126,8 +141,8 @@ Exported sampleAndWrite(const ExportArgs& a, const Source& src, const hc::influe
 void printSummary(const ExportArgs& a, const Exported& e, double seconds) {
     const hc::exporting::SampledRaster& raster = e.raster;
     std::printf("hc-export: %s -> %s\n", a.gridPath.c_str(), a.out.c_str());
-    std::printf("  raster       %zu x %zu px of %g m, west %.3f north %.3f\n", raster.width, raster.height, raster.pixelSizeM,
-                raster.westWorld, raster.northWorld);
+    std::printf("  raster       %zu x %zu px of %g m, west %.3f north %.3f\n", raster.width, raster.height,
+                raster.pixelSizeM, raster.westWorld, raster.northWorld);
     std::printf("  layer        %s [%s], defined at %zu of %zu samples\n", raster.layer.c_str(), raster.units.c_str(),
                 raster.definedCount(), raster.values.size());
     if (a.vdb()) std::printf("  water        %s\n", e.waterDefined ? "water_surface level set written" : "none");
@@ -144,8 +159,10 @@ int main(int argc, char** argv) {
         if (a.ugrid()) {
             const hc::exporting::UgridSummary m = hc::exporting::writeUgrid(a.gridPath, a.out, {a.startIndex});
             std::printf("hc-export: %s -> %s\n", a.gridPath.c_str(), a.out.c_str());
-            std::printf("  mesh         UGRID-1.0: %zu faces (one per cell), %zu nodes, start_index %d\n", m.faces, m.nodes, a.startIndex);
-            std::printf("  steps        %zu (zs over time; %llu wet faces in all)\n", m.steps, (unsigned long long)m.wetFaces);
+            std::printf("  mesh         UGRID-1.0: %zu faces (one per cell), %zu nodes, start_index %d\n", m.faces,
+                        m.nodes, a.startIndex);
+            std::printf("  steps        %zu (zs over time; %llu wet faces in all)\n", m.steps,
+                        (unsigned long long)m.wetFaces);
             std::printf("  time         %.3f s\n", clock.seconds());
             return 0;
         }
@@ -157,7 +174,9 @@ int main(int argc, char** argv) {
             const hc::GridRegionReader file(a.gridPath, a.step);
             hc::exporting::planRaster(file.info(), a.resolution, a.box);  // refuse a bad request before any real work
             const auto layer = hc::influence::Layer::byName(file.shape(), a.vdb() ? "elevation" : a.layerName);
-            std::fprintf(stderr, "hc-export: no influence cache at %s: the grid is read a tile at a time (out of core)\n", cachePath.c_str());
+            std::fprintf(stderr,
+                         "hc-export: no influence cache at %s: the grid is read a tile at a time (out of core)\n",
+                         cachePath.c_str());
             exported = sampleAndWrite(a, Source{file.shape(), nullptr, &file, a.params}, layer);
         } else {
             const hc::Grid grid = hc::readGrid(a.gridPath, nullptr, a.step);

@@ -18,32 +18,39 @@ struct ProbeArgs {
     std::string gridPath, cachePath, layerName = "elevation", pointsPath, xy, out;
     hc::influence::KernelParams params;
     unsigned threads = 0;
-    unsigned step = 0;       // --step
-    bool allSteps = false;   // --all-steps: the hydrograph
+    unsigned step = 0;      // --step
+    bool allSteps = false;  // --all-steps: the hydrograph
 };
 
 // The options, validated before any work; false after --help.
 bool parseOptions(int argc, char** argv, ProbeArgs& a) {
-    hc::cli::Parser p("hc-probe", "GRID.hcg [--cache C.hci] [--layer L] (--points IN.csv | --xy X,Y) [-o OUT.csv]",
-                      "Evaluates the exact smooth surface (double precision) at points given in the grid's CRS [m].\n"
-                      "Reads only the cells whose kernels reach the points (a group of points at a time), so one point\n"
-                      "of a 100 M-cell grid takes milliseconds and no influence cache.\n"
-                      "Prints or writes x,y,value with full precision; the value is empty where the surface is\n"
-                      "undefined (holes, outside the grid, or dry land for water_surface).\n"
-                      "Water (docs/design.md section 6): water_surface is the level of the wet cells alone (a level flood\n"
-                      "stays level), drawn where wet cells hold >= 1/2 of the kernel weight and the level is above the\n"
-                      "terrain; water_depth is that level - elevation there and 0 on dry land, in metres.");
+    hc::cli::Parser p(
+        "hc-probe", "GRID.hcg [--cache C.hci] [--layer L] (--points IN.csv | --xy X,Y) [-o OUT.csv]",
+        "Evaluates the exact smooth surface (double precision) at points given in the grid's CRS [m].\n"
+        "Reads only the cells whose kernels reach the points (a group of points at a time), so one point\n"
+        "of a 100 M-cell grid takes milliseconds and no influence cache.\n"
+        "Prints or writes x,y,value with full precision; the value is empty where the surface is\n"
+        "undefined (holes, outside the grid, or dry land for water_surface).\n"
+        "Water (docs/design.md section 6): water_surface is the level of the wet cells alone (a level flood\n"
+        "stays level), drawn where wet cells hold >= 1/2 of the kernel weight and the level is above the\n"
+        "terrain; water_depth is that level - elevation there and 0 on dry land, in metres.");
     p.positional("GRID.hcg", "grid file", a.gridPath);
-    p.option("--cache", "C.hci", "read the whole grid and this influence cache (built if missing or stale) instead of the cells\n"
+    p.option("--cache", "C.hci",
+             "read the whole grid and this influence cache (built if missing or stale) instead of the cells\n"
              "around the points (default: those cells only, read from the grid file with their lists built on\n"
-             "the spot: no cache needed, memory follows the points; the values are the same bits)", a.cachePath);
-    p.option("--layer", "L", "elevation, water_depth, water_surface or another layer of the grid (default elevation)", a.layerName);
+             "the spot: no cache needed, memory follows the points; the values are the same bits)",
+             a.cachePath);
+    p.option("--layer", "L", "elevation, water_depth, water_surface or another layer of the grid (default elevation)",
+             a.layerName);
     p.option("--points", "IN.csv", "CSV with a header line starting x,y and one point per line", a.pointsPath);
     p.option("--xy", "X,Y", "a single point", a.xy);
     p.option("-o", "OUT.csv", "output CSV (default: standard output)", a.out);
-    p.option("--step", "K", "water step to evaluate, 0-based (default 0; hc-info lists a grid's steps and their times)", a.step);
-    p.flag("--all-steps", "every water step, in order: each point's hydrograph as CSV x,y,step,time_s,value (time in seconds;\n"
-           "      the influence data is shared, each step reads its own water only)", a.allSteps);
+    p.option("--step", "K", "water step to evaluate, 0-based (default 0; hc-info lists a grid's steps and their times)",
+             a.step);
+    p.flag("--all-steps",
+           "every water step, in order: each point's hydrograph as CSV x,y,step,time_s,value (time in seconds;\n"
+           "      the influence data is shared, each step reads its own water only)",
+           a.allSteps);
     p.exclusive({"--step", "--all-steps"});
     p.option("--sigma", "S", "kernel width in cell sizes (default 1.0)", a.params.sigma);
     p.option("--truncation", "R", "kernel cut-off in sigmas (default 3.5)", a.params.truncation);
@@ -82,7 +89,8 @@ private:
     std::optional<hc::influence::InfluenceLists> lists_;
 };
 
-std::vector<std::optional<double>> Prober::values(const std::vector<std::array<double, 2>>& pts, size_t step, bool quiet) {
+std::vector<std::optional<double>> Prober::values(const std::vector<std::array<double, 2>>& pts, size_t step,
+                                                  bool quiet) {
     const ProbeArgs& a = a_;
     if (a.cachePath.empty()) {
         const hc::GridRegionReader file(a.gridPath, step);
@@ -94,10 +102,12 @@ std::vector<std::optional<double>> Prober::values(const std::vector<std::array<d
         auto values = hc::influence::valuesFromFile(file, local, layer, a.params, a.threads, &st);
         if (!quiet)
             std::fprintf(stderr,
-                     "hc-probe: read %llu of the grid's %llu cells around the points (%llu region%s, the largest %llu cells; "
-                     "%.1f MB of the file checked) and built their lists: no influence cache used\n",
-                     (unsigned long long)st.cellsRead, (unsigned long long)file.cellCount(), (unsigned long long)st.regions,
-                     st.regions == 1 ? "" : "s", (unsigned long long)st.largestRegion, double(file.bytesChecked()) / 1e6);
+                         "hc-probe: read %llu of the grid's %llu cells around the points (%llu region%s, the largest "
+                         "%llu cells; "
+                         "%.1f MB of the file checked) and built their lists: no influence cache used\n",
+                         (unsigned long long)st.cellsRead, (unsigned long long)file.cellCount(),
+                         (unsigned long long)st.regions, st.regions == 1 ? "" : "s",
+                         (unsigned long long)st.largestRegion, double(file.bytesChecked()) / 1e6);
         return values;
     }
     if (!grid_) {
@@ -173,7 +183,9 @@ int main(int argc, char** argv) {
                 text += '\n';
             }
         }
-        if (steps > 1) std::fprintf(stderr, "hc-probe: %zu steps, %zu point%s each\n", steps, pts.size(), pts.size() == 1 ? "" : "s");
+        if (steps > 1)
+            std::fprintf(stderr, "hc-probe: %zu steps, %zu point%s each\n", steps, pts.size(),
+                         pts.size() == 1 ? "" : "s");
         writeOutput(a.out, text);
         return 0;
     });

@@ -34,13 +34,13 @@ struct RenderArgs {
     std::string gridPath, out, exr, timingsPath, video;
     hc::cli::Backend backend = hc::cli::Backend::Auto;
     hc::cli::RenderSetup setup{"1280x720"};
-    bool sequence = false;        // --steps A:B: one image per step
+    bool sequence = false;  // --steps A:B: one image per step
     unsigned firstStep = 0, lastStep = 0;
-    unsigned flyFrames = 0;       // --fly N: one image per frame of a flight (0: no flight)
-    double flyStepM = 10;         // --fly-step M: metres forward per frame
-    bool flyFresh = false;        // --fly-fresh: every frame of the flight from scratch (no texels kept)
-    bool flyLastImage = false;    // --fly-last-image: only the last frame's outputs; GL frames before it left on the GPU
-    double fps = 4;               // --fps, of the --video
+    unsigned flyFrames = 0;     // --fly N: one image per frame of a flight (0: no flight)
+    double flyStepM = 10;       // --fly-step M: metres forward per frame
+    bool flyFresh = false;      // --fly-fresh: every frame of the flight from scratch (no texels kept)
+    bool flyLastImage = false;  // --fly-last-image: only the last frame's outputs; GL frames before it left on the GPU
+    double fps = 4;             // --fps, of the --video
     // The numbered images' first number and count (a sequence or a flight).
     unsigned firstImage() const { return sequence ? firstStep : 0; }
     unsigned imageCount() const { return sequence ? lastStep - firstStep + 1 : flyFrames; }
@@ -69,29 +69,49 @@ std::string onPath(const std::string& program) {
     }
 }
 
-// The numbered PNGs of a sequence's steps (or a flight's frames) as an H.264 MP4 (yuv420p, padded to even sizes) through ffmpeg, written to a
-// temporary name and renamed into place: no partial video survives a failure. Throws hc::Error.
+// The numbered PNGs of a sequence's steps (or a flight's frames) as an H.264 MP4 (yuv420p, padded to even sizes)
+// through ffmpeg, written to a temporary name and renamed into place: no partial video survives a failure. Throws
+// hc::Error.
 void writeVideo(const std::string& ffmpeg, const RenderArgs& a) {
     std::string pattern;
     for (char c : numbered(a.out, 0)) pattern += c == '%' ? std::string("%%") : std::string(1, c);
     pattern.replace(pattern.rfind("_0000"), 5, "_%04d");
     const std::string tmp = a.video + ".partial";
-    std::vector<std::string> args{ffmpeg, "-hide_banner", "-loglevel", "error", "-y", "-framerate", fmt::format("{:g}", a.fps),
-                                  "-start_number", std::to_string(a.firstImage()), "-i", pattern, "-frames:v",
-                                  std::to_string(a.imageCount()), "-vf", "pad=ceil(iw/2)*2:ceil(ih/2)*2",
-                                  "-c:v", "libx264", "-pix_fmt", "yuv420p", "-f", "mp4", tmp};
+    std::vector<std::string> args{ffmpeg,
+                                  "-hide_banner",
+                                  "-loglevel",
+                                  "error",
+                                  "-y",
+                                  "-framerate",
+                                  fmt::format("{:g}", a.fps),
+                                  "-start_number",
+                                  std::to_string(a.firstImage()),
+                                  "-i",
+                                  pattern,
+                                  "-frames:v",
+                                  std::to_string(a.imageCount()),
+                                  "-vf",
+                                  "pad=ceil(iw/2)*2:ceil(ih/2)*2",
+                                  "-c:v",
+                                  "libx264",
+                                  "-pix_fmt",
+                                  "yuv420p",
+                                  "-f",
+                                  "mp4",
+                                  tmp};
     std::vector<char*> argv;
     for (auto& s : args) argv.push_back(s.data());
     argv.push_back(nullptr);
     pid_t pid = 0;
-    if (posix_spawn(&pid, ffmpeg.c_str(), nullptr, nullptr, argv.data(), environ) != 0) throw hc::Error(ffmpeg + ": cannot be started");
+    if (posix_spawn(&pid, ffmpeg.c_str(), nullptr, nullptr, argv.data(), environ) != 0)
+        throw hc::Error(ffmpeg + ": cannot be started");
     int status = 0;
     waitpid(pid, &status, 0);
     std::error_code ec;
     if (!WIFEXITED(status) || WEXITSTATUS(status) != 0) {
         std::filesystem::remove(tmp, ec);
-        throw hc::Error(a.video + ": ffmpeg failed (exit status " + std::to_string(WIFEXITED(status) ? WEXITSTATUS(status) : -1) +
-                        "); the images are written");
+        throw hc::Error(a.video + ": ffmpeg failed (exit status " +
+                        std::to_string(WIFEXITED(status) ? WEXITSTATUS(status) : -1) + "); the images are written");
     }
     std::filesystem::rename(tmp, a.video, ec);
     if (ec) {
@@ -103,42 +123,61 @@ void writeVideo(const std::string& ffmpeg, const RenderArgs& a) {
 // The options, validated with the camera's numbers before any expensive work; false after --help.
 bool parseOptions(int argc, char** argv, RenderArgs& a) {
     std::string view, backendText = "auto";
-    hc::cli::Parser p("hc-render", "GRID.hcg -o OUT.png [--camera X,Y,Z,YAW,PITCH,FOV[,ROLL] | --look-at EX,EY,EZ,TX,TY,TZ[,FOV] | --view overview] [options]",
-                      "Ray-casts the smooth surface of a grid (terrain, and water where the grid has water_depth) into a PNG\n"
-                      "and optionally EXR layers, and prints per-stage timings. Coordinates in the grid's CRS [m]; angles in\n"
-                      "degrees: yaw 0 looks north, 90 east; pitch negative looks down. The terrain is drawn as a solid block:\n"
-                      "where its surface ends (holes, the domain's edge) a brown wall goes down to the lowest elevation.\n"
-                      "A camera below the terrain surface is refused (every ray would start inside it and see nothing), unless\n"
-                      "--near starts the rays farther out.");
+    hc::cli::Parser p(
+        "hc-render",
+        "GRID.hcg -o OUT.png [--camera X,Y,Z,YAW,PITCH,FOV[,ROLL] | --look-at EX,EY,EZ,TX,TY,TZ[,FOV] | --view "
+        "overview] [options]",
+        "Ray-casts the smooth surface of a grid (terrain, and water where the grid has water_depth) into a PNG\n"
+        "and optionally EXR layers, and prints per-stage timings. Coordinates in the grid's CRS [m]; angles in\n"
+        "degrees: yaw 0 looks north, 90 east; pitch negative looks down. The terrain is drawn as a solid block:\n"
+        "where its surface ends (holes, the domain's edge) a brown wall goes down to the lowest elevation.\n"
+        "A camera below the terrain surface is refused (every ray would start inside it and see nothing), unless\n"
+        "--near starts the rays farther out.");
     p.positional("GRID.hcg", "grid file", a.gridPath);
     p.option("-o", "OUT.png", "colour image, 8-bit sRGB PNG (required)", a.out);
     a.setup.addCameraOptions(p, "--view");
-    p.option("--view", "overview", "a camera framing the whole grid obliquely from the south-south-west (the default)", view);
+    p.option("--view", "overview", "a camera framing the whole grid obliquely from the south-south-west (the default)",
+             view);
     a.setup.addRenderOptions(p);
-    p.option("--exr", "OUT.exr", "also write float layers: Z, P.X/Y/Z, N.X/Y/Z, cascade, water_depth, wall (1 on hits on\n"
-             "the walls drawn at hole and domain edges, 0 elsewhere)", a.exr);
+    p.option("--exr", "OUT.exr",
+             "also write float layers: Z, P.X/Y/Z, N.X/Y/Z, cascade, water_depth, wall (1 on hits on\n"
+             "the walls drawn at hole and domain edges, 0 elsewhere)",
+             a.exr);
     p.option("--timings", "OUT.json", "also write the per-stage timings as JSON", a.timingsPath);
     std::string stepsText;
-    p.option("--steps", "A:B", "render water steps A..B (0-based, inclusive), one image each: OUT_0007.png for step 7 (likewise\n"
-             "      --exr and --timings); the camera is the same for every step, and only the water changes between them", stepsText);
-    p.option("--fly", "N", "render a flight of N >= 2 frames, one image each (OUT_0000.png ...; likewise --exr and --timings):\n"
-             "      the camera moves --fly-step metres forward (horizontally, along its yaw) each frame, and each frame\n"
-             "      keeps the texels the last one evaluated that it still sees (incremental cascades; the GL backend\n"
-             "      keeps them on the GPU); prints each frame's stage times\n"
-             "      (default 0: one image, no flight)", a.flyFrames);
+    p.option(
+        "--steps", "A:B",
+        "render water steps A..B (0-based, inclusive), one image each: OUT_0007.png for step 7 (likewise\n"
+        "      --exr and --timings); the camera is the same for every step, and only the water changes between them",
+        stepsText);
+    p.option(
+        "--fly", "N",
+        "render a flight of N >= 2 frames, one image each (OUT_0000.png ...; likewise --exr and --timings):\n"
+        "      the camera moves --fly-step metres forward (horizontally, along its yaw) each frame, and each frame\n"
+        "      keeps the texels the last one evaluated that it still sees (incremental cascades; the GL backend\n"
+        "      keeps them on the GPU); prints each frame's stage times\n"
+        "      (default 0: one image, no flight)",
+        a.flyFrames);
     p.option("--fly-step", "M", "metres the camera moves forward per --fly frame (default 10)", a.flyStepM);
     p.flag("--fly-fresh", "with --fly: evaluate every frame from scratch (no texels kept), to compare", a.flyFresh);
-    p.flag("--fly-last-image", "with --fly: write the last frame's image alone (and its --exr, --timings); the GL backend\n"
-           "      leaves the frames before it on the GPU, unread, back to back as the viewer draws them (for timing: nothing\n"
-           "      is read back or written between frames, during which the GPU would idle and lower its clock)", a.flyLastImage);
-    p.option("--video", "OUT.mp4", "with --steps or --fly: also an H.264 video of the images through ffmpeg (Debian package ffmpeg)", a.video);
+    p.flag("--fly-last-image",
+           "with --fly: write the last frame's image alone (and its --exr, --timings); the GL backend\n"
+           "      leaves the frames before it on the GPU, unread, back to back as the viewer draws them (for timing: "
+           "nothing\n"
+           "      is read back or written between frames, during which the GPU would idle and lower its clock)",
+           a.flyLastImage);
+    p.option("--video", "OUT.mp4",
+             "with --steps or --fly: also an H.264 video of the images through ffmpeg (Debian package ffmpeg)",
+             a.video);
     p.option("--fps", "F", "frames (steps) per second of the --video (default 4)", a.fps);
     p.exclusive({"--step", "--steps"});
     p.exclusive({"--steps", "--fly"});
-    p.option("--backend", "B", "gl (OpenGL 4.3 compute shaders; headless, no display needed), cpu, or auto: gl where an\n"
+    p.option("--backend", "B",
+             "gl (OpenGL 4.3 compute shaders; headless, no display needed), cpu, or auto: gl where an\n"
              "OpenGL 4.3 context on a GPU can be had, else cpu with a note saying why (no 4.3 context, or only\n"
              "software OpenGL such as Mesa's llvmpipe, which is slower than cpu) (default auto). --threads\n"
-             "applies to cpu only", backendText);
+             "applies to cpu only",
+             backendText);
     if (!p.parse(argc, argv)) return false;
     if (a.out.empty()) throw hc::Error("no output image: give -o OUT.png");
     if (!view.empty() && view != "overview") throw hc::Error("--view " + view + ": the only view is 'overview'");
@@ -155,15 +194,20 @@ bool parseOptions(int argc, char** argv, RenderArgs& a) {
         a.firstStep = unsigned(v[0]), a.lastStep = unsigned(v[1]);
         a.setup.step = a.firstStep;
         if (!a.setup.pyramidPath.empty())
-            throw hc::Error("--pyramid names one step's pyramid but --steps renders several: leave it out (each step's own is used)");
+            throw hc::Error(
+                "--pyramid names one step's pyramid but --steps renders several: leave it out (each step's own is "
+                "used)");
     }
-    if (a.flyFrames == 1 || a.flyFrames > 100000) throw hc::Error("--fly " + std::to_string(a.flyFrames) + ": a flight has 2 to 100000 frames");
+    if (a.flyFrames == 1 || a.flyFrames > 100000)
+        throw hc::Error("--fly " + std::to_string(a.flyFrames) + ": a flight has 2 to 100000 frames");
     if (!std::isfinite(a.flyStepM) || std::fabs(a.flyStepM) > 1e6)
         throw hc::Error("--fly-step " + fmt::format("{:g}", a.flyStepM) + ": metres per frame, at most 1e6 either way");
     if (a.flyFresh && !a.flyFrames) throw hc::Error("--fly-fresh needs --fly N");
     if (a.flyLastImage && !a.flyFrames) throw hc::Error("--fly-last-image needs --fly N");
-    if (a.flyLastImage && !a.video.empty()) throw hc::Error("--video needs every frame's image: leave out --fly-last-image");
-    if (!a.video.empty() && !a.sequence && !a.flyFrames) throw hc::Error("--video needs --steps A:B or --fly N (one image per frame)");
+    if (a.flyLastImage && !a.video.empty())
+        throw hc::Error("--video needs every frame's image: leave out --fly-last-image");
+    if (!a.video.empty() && !a.sequence && !a.flyFrames)
+        throw hc::Error("--video needs --steps A:B or --fly N (one image per frame)");
     if (!(a.fps > 0) || a.fps > 240) throw hc::Error("--fps " + fmt::format("{:g}", a.fps) + ": must be in (0, 240]");
     return true;
 }
@@ -183,8 +227,8 @@ void checkOutputs(const RenderArgs& a) {
     if (a.sequence) {
         const size_t steps = hc::readGridInfo(a.gridPath).shape.stepCount();
         if (a.lastStep >= std::max<size_t>(1, steps))
-            throw hc::Error("--steps " + std::to_string(a.firstStep) + ":" + std::to_string(a.lastStep) + ": " + a.gridPath + " has " +
-                            std::to_string(steps) + " water step" + (steps == 1 ? "" : "s"));
+            throw hc::Error("--steps " + std::to_string(a.firstStep) + ":" + std::to_string(a.lastStep) + ": " +
+                            a.gridPath + " has " + std::to_string(steps) + " water step" + (steps == 1 ? "" : "s"));
     }
 }
 
@@ -192,11 +236,12 @@ void checkOutputs(const RenderArgs& a) {
 void refuseCameraBelowTerrain(const hc::render::Scene& scene, const hc::render::Camera& camera) {
     if (const double below = hc::render::cameraBelowTerrainM(scene, camera); below > 0) {
         char b[400];
-        std::snprintf(b, sizeof b,
-                      "the camera at %.3f, %.3f, %.3f is %.2f m below the terrain surface (%.2f m there): every ray would "
-                      "start inside the terrain and see nothing; raise the camera above the surface, or give --near M to start "
-                      "the rays beyond the terrain in front of it",
-                      camera.xWorld, camera.yWorld, camera.zWorld, below, camera.zWorld + below);
+        std::snprintf(
+            b, sizeof b,
+            "the camera at %.3f, %.3f, %.3f is %.2f m below the terrain surface (%.2f m there): every ray would "
+            "start inside the terrain and see nothing; raise the camera above the surface, or give --near M to start "
+            "the rays beyond the terrain in front of it",
+            camera.xWorld, camera.yWorld, camera.zWorld, below, camera.zWorld + below);
         throw hc::Error(b);
     }
 }
@@ -208,8 +253,8 @@ struct Rendered {
 };
 
 // On the backend `decision` chose (GL in a headless context of its own), after printing its note.
-Rendered renderImage(const hc::cli::BackendDecision& decision, const hc::render::Scene& scene, const hc::render::Camera& camera,
-                     const hc::render::RenderOptions& options) {
+Rendered renderImage(const hc::cli::BackendDecision& decision, const hc::render::Scene& scene,
+                     const hc::render::Camera& camera, const hc::render::RenderOptions& options) {
     if (!decision.note.empty()) std::fprintf(stderr, "hc-render: note: %s\n", decision.note.c_str());
     Rendered r;
     if (decision.useGl) {
@@ -235,11 +280,13 @@ void writeOutputs(const RenderArgs& a, const Rendered& r, std::optional<unsigned
     }
 }
 
-void printSummary(const RenderArgs& a, const hc::cli::BackendDecision& decision, const hc::render::Camera& camera, const Rendered& r) {
-    std::printf("hc-render: %s -> %s%s%s\n", a.gridPath.c_str(), a.out.c_str(), a.exr.empty() ? "" : " + ", a.exr.c_str());
+void printSummary(const RenderArgs& a, const hc::cli::BackendDecision& decision, const hc::render::Camera& camera,
+                  const Rendered& r) {
+    std::printf("hc-render: %s -> %s%s%s\n", a.gridPath.c_str(), a.out.c_str(), a.exr.empty() ? "" : " + ",
+                a.exr.c_str());
     std::printf("  backend      %s (%s)\n", decision.useGl ? "gl" : "cpu", r.device.c_str());
-    std::printf("  camera       %.3f, %.3f, %.3f  yaw %.2f  pitch %.2f  fov %.1f  %dx%d", camera.xWorld, camera.yWorld, camera.zWorld,
-                camera.yawDeg, camera.pitchDeg, camera.fovYDeg, camera.width, camera.height);
+    std::printf("  camera       %.3f, %.3f, %.3f  yaw %.2f  pitch %.2f  fov %.1f  %dx%d", camera.xWorld, camera.yWorld,
+                camera.zWorld, camera.yawDeg, camera.pitchDeg, camera.fovYDeg, camera.width, camera.height);
     if (camera.rollDeg != 0) std::printf("  roll %.2f", camera.rollDeg);
     if (camera.nearM > 0) std::printf("  near %g m", camera.nearM);
     if (camera.farM > 0) std::printf("  far %g m", camera.farM);
@@ -256,7 +303,8 @@ void printSummary(const RenderArgs& a, const hc::cli::BackendDecision& decision,
 // --fly N: one renderer for the whole flight (GL: one context; out of core the CPU-filled cascades keep their texels
 // in it; CPU: a CascadeCache), one image per frame, each frame's stage times printed. The rendering's times exclude
 // writing the images; the GL backend's read-back is its own column.
-int fly(const RenderArgs& a, const hc::cli::BackendDecision& decision, const hc::render::Scene& scene, const hc::render::Camera& start) {
+int fly(const RenderArgs& a, const hc::cli::BackendDecision& decision, const hc::render::Scene& scene,
+        const hc::render::Camera& start) {
     for (unsigned k = 1; k < a.flyFrames; ++k) {  // every frame's camera checked before any is rendered
         try {
             refuseCameraBelowTerrain(scene, hc::render::flightFrame(start, a.flyStepM, k));
@@ -266,7 +314,8 @@ int fly(const RenderArgs& a, const hc::cli::BackendDecision& decision, const hc:
     }
     const std::string ffmpeg = a.video.empty() ? "" : onPath("ffmpeg");
     if (!a.video.empty() && ffmpeg.empty())
-        throw hc::Error("--video: ffmpeg is not installed (Debian: apt install ffmpeg); the images alone need no --video");
+        throw hc::Error(
+            "--video: ffmpeg is not installed (Debian: apt install ffmpeg); the images alone need no --video");
     if (!decision.note.empty()) std::fprintf(stderr, "hc-render: note: %s\n", decision.note.c_str());
     std::unique_ptr<hc::render::GlRenderer> gl;
     std::string device = "CPU, " + std::to_string(hc::resolveThreads(a.setup.options.threads)) + " threads";
@@ -275,11 +324,13 @@ int fly(const RenderArgs& a, const hc::cli::BackendDecision& decision, const hc:
         device = gl->deviceName();
     }
     hc::render::CascadeCache cache;
-    std::printf("hc-render: %s, a flight of %u frames, %g m a frame%s -> %s\n", a.gridPath.c_str(), a.flyFrames, a.flyStepM,
-                a.flyFresh ? ", every frame from scratch" : "", numbered(a.out, 0).c_str());
+    std::printf("hc-render: %s, a flight of %u frames, %g m a frame%s -> %s\n", a.gridPath.c_str(), a.flyFrames,
+                a.flyStepM, a.flyFresh ? ", every frame from scratch" : "", numbered(a.out, 0).c_str());
     std::printf("  backend      %s (%s)\n", decision.useGl ? "gl" : "cpu", device.c_str());
-    std::printf("  frame           x m           y m   approx ms  kept %%     fit ms     mip ms     ray ms   shade ms  render ms%s\n",
-                gl ? "  upload ms     GPU ms  readback ms" : "");
+    std::printf(
+        "  frame           x m           y m   approx ms  kept %%     fit ms     mip ms     ray ms   shade ms  render "
+        "ms%s\n",
+        gl ? "  upload ms     GPU ms  readback ms" : "");
     hc::Stopwatch total;
     std::vector<double> renderMs;
     for (unsigned k = 0; k < a.flyFrames; ++k) {
@@ -294,24 +345,26 @@ int fly(const RenderArgs& a, const hc::cli::BackendDecision& decision, const hc:
         if (gl && !outputs)
             gl->renderToTexture(camera, a.setup.options, r.timings);
         else
-            r.frame = gl ? gl->render(camera, a.setup.options, r.timings) : hc::render::renderFrame(scene, camera, a.setup.options, r.timings, &cache);
+            r.frame = gl ? gl->render(camera, a.setup.options, r.timings)
+                         : hc::render::renderFrame(scene, camera, a.setup.options, r.timings, &cache);
         if (outputs) writeOutputs(a, r, k);
         uint64_t kept = 0, visible = 0;
         for (const auto& c : r.timings.cascades) kept += c.reusedTexels, visible += c.visibleTexels;
         const double ms = r.timings.totalMs - r.timings.readbackMs;
         renderMs.push_back(ms);
-        std::printf("  %5u %13.3f %13.3f %11.2f %6.1f %10.2f %10.2f %10.2f %10.2f %10.2f", k, camera.xWorld, camera.yWorld,
-                    r.timings.approximationMs, visible ? 100.0 * double(kept) / double(visible) : 0.0, r.timings.fittingMs,
-                    r.timings.mipmapMs, r.timings.raycastMs, r.timings.shadingMs, ms);
+        std::printf("  %5u %13.3f %13.3f %11.2f %6.1f %10.2f %10.2f %10.2f %10.2f %10.2f", k, camera.xWorld,
+                    camera.yWorld, r.timings.approximationMs, visible ? 100.0 * double(kept) / double(visible) : 0.0,
+                    r.timings.fittingMs, r.timings.mipmapMs, r.timings.raycastMs, r.timings.shadingMs, ms);
         if (gl) std::printf(" %10.2f %10.2f %12.2f", r.timings.uploadMs, r.timings.gpuMs, r.timings.readbackMs);
         std::printf("\n");
     }
     // The frames after the first (which has nothing to keep): their median and slowest.
     std::vector<double> later(renderMs.begin() + 1, renderMs.end());
     std::sort(later.begin(), later.end());
-    std::printf("  frames 1..%u  render median %.2f ms, slowest %.2f ms; frame 0 %.2f ms; total %.3f s with the image%s\n",
-                a.flyFrames - 1, later[later.size() / 2], later.back(), renderMs[0], total.seconds(),
-                a.flyLastImage ? " (the last frame's alone)" : "s");
+    std::printf(
+        "  frames 1..%u  render median %.2f ms, slowest %.2f ms; frame 0 %.2f ms; total %.3f s with the image%s\n",
+        a.flyFrames - 1, later[later.size() / 2], later.back(), renderMs[0], total.seconds(),
+        a.flyLastImage ? " (the last frame's alone)" : "s");
     if (!a.video.empty()) {
         writeVideo(ffmpeg, a);
         std::printf("  video        %s (%g frames per second)\n", a.video.c_str(), a.fps);
@@ -329,14 +382,16 @@ int main(int argc, char** argv) {
         if (!a.setup.colorBy.empty()) hc::cli::requireCpu("--color-by " + a.setup.colorBy, a.backend, decision);
         checkOutputs(a);
         // Without a cache either backend reads the grid out of core (the GL one then evaluates the texels a frame newly
-        // sees on the CPU and keeps its cascades on the GPU, gl_renderer.h); --color-by needs the grid and its lists in memory (the exact evaluator at every hit).
+        // sees on the CPU and keeps its cascades on the GPU, gl_renderer.h); --color-by needs the grid and its lists in
+        // memory (the exact evaluator at every hit).
         auto loaded = hc::cli::loadScene("hc-render", a.gridPath, a.setup, a.setup.colorBy.empty());
         // Cell outlines on the GL backend need the cells on the GPU.
         if (loaded->scene->outOfCore() && a.setup.options.cellOutlines)
             hc::cli::requireCpu("--cells on a grid read out of core (no .hci cache)", a.backend, decision);
         const hc::render::Camera camera = hc::cli::initialCamera(a.setup, *loaded->scene);
         refuseCameraBelowTerrain(*loaded->scene, camera);
-        if (a.flyFrames || a.sequence) hc::keepFreedMemory();  // frame after frame: each reuses the last one's pages (core/heap.h)
+        if (a.flyFrames || a.sequence)
+            hc::keepFreedMemory();  // frame after frame: each reuses the last one's pages (core/heap.h)
         if (a.flyFrames) return fly(a, decision, *loaded->scene, camera);
         if (!a.sequence) {
             const Rendered rendered = renderImage(decision, *loaded->scene, camera, a.setup.options);
@@ -344,13 +399,15 @@ int main(int argc, char** argv) {
             printSummary(a, decision, camera, rendered);
             const hc::Grid& shape = loaded->file ? loaded->file->shape() : loaded->grid;
             if (shape.steps.size() > 1)
-                std::printf("  step         %u of %zu, at %.9g s\n", a.setup.step, shape.steps.size(), shape.stepTimeS());
+                std::printf("  step         %u of %zu, at %.9g s\n", a.setup.step, shape.steps.size(),
+                            shape.stepTimeS());
             return 0;
         }
         // A sequence: the same camera, one frame per step; only the water is read again between steps.
         const std::string ffmpeg = a.video.empty() ? "" : onPath("ffmpeg");
         if (!a.video.empty() && ffmpeg.empty())
-            throw hc::Error("--video: ffmpeg is not installed (Debian: apt install ffmpeg); the images alone need no --video");
+            throw hc::Error(
+                "--video: ffmpeg is not installed (Debian: apt install ffmpeg); the images alone need no --video");
         std::printf("hc-render: %s, steps %u..%u -> %s\n", a.gridPath.c_str(), a.firstStep, a.lastStep,
                     numbered(a.out, a.firstStep).c_str());
         std::printf("  step     time s   wet cells   switch ms    frame ms   image\n");
@@ -364,8 +421,8 @@ int main(int argc, char** argv) {
             writeOutputs(a, rendered, k);
             const hc::Grid& shape = loaded->file ? loaded->file->shape() : loaded->grid;
             std::printf("  %4u %10.6g %11llu %11.1f %11.1f   %s\n", k, shape.stepTimeS(),
-                        (unsigned long long)(shape.steps.empty() ? 0 : shape.steps[k].wetCells), switchMs, rendered.timings.totalMs,
-                        numbered(a.out, k).c_str());
+                        (unsigned long long)(shape.steps.empty() ? 0 : shape.steps[k].wetCells), switchMs,
+                        rendered.timings.totalMs, numbered(a.out, k).c_str());
         }
         std::printf("  total        %.3f s for %u steps\n", total.seconds(), a.lastStep - a.firstStep + 1);
         if (!a.video.empty()) {

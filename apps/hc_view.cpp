@@ -23,7 +23,7 @@ namespace {
 struct ViewArgs {
     std::string gridPath, screenshot;
     hc::cli::Backend backend = hc::cli::Backend::Auto;
-    int frames = 0;  // 0: interactive
+    int frames = 0;     // 0: interactive
     bool play = false;  // --play: scripted frames step through the water steps
     hc::cli::RenderSetup setup{"1280x720"};
 };
@@ -32,27 +32,39 @@ struct ViewArgs {
 bool parseOptions(int argc, char** argv, ViewArgs& a) {
     int bookmarkSlot = 0;
     std::string backendText = "auto";
-    hc::cli::Parser p("hc-view", "GRID.hcg [--camera X,Y,Z,YAW,PITCH,FOV[,ROLL] | --look-at EX,EY,EZ,TX,TY,TZ[,FOV]] [--backend gl|cpu|auto] [options]",
-                      "Opens a window on the smooth surface of a grid (terrain, and water where the grid has water_depth)\n"
-                      "and lets you fly over it (press H in the window for the controls); a HUD shows per-stage timings,\n"
-                      "the camera and the height above ground. Coordinates in the grid's CRS [m]; angles in degrees:\n"
-                      "yaw 0 looks north, 90 east; pitch negative looks down. Without a camera option: hc-render's\n"
-                      "overview. Bookmarks (Shift+1-9 saves, 1-9 loads) live in GRID.bookmarks.json beside the grid.\n"
-                      "Needs a display (DISPLAY); without one: xvfb-run -a hc-view GRID.hcg --frames 30 --screenshot OUT.png");
+    hc::cli::Parser p(
+        "hc-view",
+        "GRID.hcg [--camera X,Y,Z,YAW,PITCH,FOV[,ROLL] | --look-at EX,EY,EZ,TX,TY,TZ[,FOV]] [--backend gl|cpu|auto] "
+        "[options]",
+        "Opens a window on the smooth surface of a grid (terrain, and water where the grid has water_depth)\n"
+        "and lets you fly over it (press H in the window for the controls); a HUD shows per-stage timings,\n"
+        "the camera and the height above ground. Coordinates in the grid's CRS [m]; angles in degrees:\n"
+        "yaw 0 looks north, 90 east; pitch negative looks down. Without a camera option: hc-render's\n"
+        "overview. Bookmarks (Shift+1-9 saves, 1-9 loads) live in GRID.bookmarks.json beside the grid.\n"
+        "Needs a display (DISPLAY); without one: xvfb-run -a hc-view GRID.hcg --frames 30 --screenshot OUT.png");
     p.positional("GRID.hcg", "grid file", a.gridPath);
     a.setup.addCameraOptions(p, "--bookmark");
     p.option("--bookmark", "N", "first view: bookmark N (1..9) of GRID.bookmarks.json (default: none)", bookmarkSlot);
-    p.option("--backend", "gl|cpu|auto", "renderer: the OpenGL 4.3 compute backend, the CPU one, or GL when it runs on a GPU (CPU where\n"
-             "OpenGL 4.3 is missing or only software rendering such as llvmpipe) (default auto)", backendText);
+    p.option("--backend", "gl|cpu|auto",
+             "renderer: the OpenGL 4.3 compute backend, the CPU one, or GL when it runs on a GPU (CPU where\n"
+             "OpenGL 4.3 is missing or only software rendering such as llvmpipe) (default auto)",
+             backendText);
     a.setup.addRenderOptions(p);
-    p.option("--frames", "N", "render N frames of a short scripted camera motion ending at the given view, then exit (default 0 = interactive)", a.frames);
-    p.option("--screenshot", "OUT.png", "with --frames: write the window's last frame (image and HUD) as a PNG", a.screenshot);
-    p.flag("--play", "with --frames: each frame after the first shows the next water step (playback, wrapping around); the last\n"
-           "      frame's switch time is printed", a.play);
+    p.option("--frames", "N",
+             "render N frames of a short scripted camera motion ending at the given view, then exit (default 0 = "
+             "interactive)",
+             a.frames);
+    p.option("--screenshot", "OUT.png", "with --frames: write the window's last frame (image and HUD) as a PNG",
+             a.screenshot);
+    p.flag("--play",
+           "with --frames: each frame after the first shows the next water step (playback, wrapping around); the last\n"
+           "      frame's switch time is printed",
+           a.play);
     if (!p.parse(argc, argv)) return false;
     a.setup.finish();
     a.backend = hc::cli::parseBackend(backendText);
-    if (a.frames < 0 || a.frames > 100000) throw hc::Error("--frames " + std::to_string(a.frames) + " is outside 0..100000");
+    if (a.frames < 0 || a.frames > 100000)
+        throw hc::Error("--frames " + std::to_string(a.frames) + " is outside 0..100000");
     if (a.play && a.frames == 0) throw hc::Error("--play needs --frames N (interactively, Space plays the steps)");
     if (!a.screenshot.empty()) {
         if (a.frames == 0) throw hc::Error("--screenshot needs --frames N (the number of frames to render first)");
@@ -60,7 +72,8 @@ bool parseOptions(int argc, char** argv, ViewArgs& a) {
         hc::cli::checkNotSame(a.screenshot, a.gridPath, "screenshot");
     }
     if (p.given("--bookmark")) {  // before any work: the file and the slot must be there
-        if (bookmarkSlot < 1 || bookmarkSlot > 9) throw hc::Error("--bookmark " + std::to_string(bookmarkSlot) + " is outside 1..9");
+        if (bookmarkSlot < 1 || bookmarkSlot > 9)
+            throw hc::Error("--bookmark " + std::to_string(bookmarkSlot) + " is outside 1..9");
         const std::string path = hc::view::bookmarksPath(a.gridPath);
         const hc::view::Bookmarks marks = hc::view::readBookmarks(path);
         if (!marks[bookmarkSlot]) throw hc::Error(path + ": no bookmark " + std::to_string(bookmarkSlot));
@@ -76,8 +89,9 @@ void requireDisplay() {
     const char* display = std::getenv("DISPLAY");
     const char* wayland = std::getenv("WAYLAND_DISPLAY");
     if ((!display || !*display) && (!wayland || !*wayland))
-        throw hc::Error("no display: DISPLAY is not set (hc-view needs an X display; without one, run it under "
-                        "xvfb-run -a, or render images with hc-render)");
+        throw hc::Error(
+            "no display: DISPLAY is not set (hc-view needs an X display; without one, run it under "
+            "xvfb-run -a, or render images with hc-render)");
 }
 
 // The backend `decision` gave, made in the window's context (`gl`). Where the GL backend cannot be made there
@@ -119,13 +133,15 @@ private:
 
 // The last camera and the last frame's stage times, after a scripted run.
 void printSummary(const ViewArgs& a, const hc::view::Viewer& viewer) {
-    if (!a.screenshot.empty()) std::printf("hc-view: %s -> %s (%d frames)\n", a.gridPath.c_str(), a.screenshot.c_str(), a.frames);
+    if (!a.screenshot.empty())
+        std::printf("hc-view: %s -> %s (%d frames)\n", a.gridPath.c_str(), a.screenshot.c_str(), a.frames);
     const hc::render::Camera& c = viewer.camera();
-    std::printf("  camera       %.3f, %.3f, %.3f  yaw %.2f  pitch %.2f  fov %.1f  %dx%d\n", c.xWorld, c.yWorld, c.zWorld, c.yawDeg,
-                c.pitchDeg, c.fovYDeg, c.width, c.height);
+    std::printf("  camera       %.3f, %.3f, %.3f  yaw %.2f  pitch %.2f  fov %.1f  %dx%d\n", c.xWorld, c.yWorld,
+                c.zWorld, c.yawDeg, c.pitchDeg, c.fovYDeg, c.width, c.height);
     if (viewer.stepCount() > 1)
-        std::printf("  step         %zu of %zu (last switch %.1f ms: the step's water, its pyramid, a new scene and backend)\n", viewer.step(),
-                    viewer.stepCount(), viewer.lastSwitchMs());
+        std::printf(
+            "  step         %zu of %zu (last switch %.1f ms: the step's water, its pyramid, a new scene and backend)\n",
+            viewer.step(), viewer.stepCount(), viewer.lastSwitchMs());
     std::printf("%s", viewer.lastTimings().toTable().c_str());
 }
 
@@ -145,8 +161,9 @@ int main(int argc, char** argv) {
         auto maker = std::make_shared<BackendMaker>(a.backend, decision, window.gl(), a.setup.options.threads);
         auto backend = (*maker)(*loaded->scene);  // the first one; a new water step's scene gets a new one from `maker`
         window.show();
-        hc::view::Viewer viewer(window, *loaded, a.setup, a.gridPath, std::move(backend),
-                                [maker](const hc::render::Scene& scene) { return (*maker)(scene); }, maker->note());
+        hc::view::Viewer viewer(
+            window, *loaded, a.setup, a.gridPath, std::move(backend),
+            [maker](const hc::render::Scene& scene) { return (*maker)(scene); }, maker->note());
         if (a.frames == 0) {
             viewer.run();
             return 0;

@@ -69,7 +69,8 @@ inline std::vector<std::string> splitList(const std::string& text, const std::st
     while (at <= text.size()) {
         size_t comma = std::min(text.find(',', at), text.size());
         out.push_back(text.substr(at, comma - at));
-        if (out.back().empty()) throw hc::Error(what + " '" + text + "': empty entry (give a list separated by commas)");
+        if (out.back().empty())
+            throw hc::Error(what + " '" + text + "': empty entry (give a list separated by commas)");
         at = comma + 1;
     }
     return out;

@@ -69,7 +69,8 @@ std::vector<double> numberList(const std::string& text, const std::string& what,
     std::vector<double> out;
     for (const std::string& t : splitList(text, what)) {
         out.push_back(hc::cli::parseNumber(t, what));
-        if (!(out.back() >= above)) throw hc::Error(what + " " + t + ": must be at least " + fmt::format("{:g}", above));
+        if (!(out.back() >= above))
+            throw hc::Error(what + " " + t + ": must be at least " + fmt::format("{:g}", above));
     }
     return out;
 }
@@ -93,11 +94,38 @@ public:
     using Row = std::map<std::string, std::string>;
     void add(Row row) { rows_.push_back(std::move(row)); }
     void write(const std::string& path) const {
-        static const char* columns[] = {"table", "grid", "source", "tolerance_m", "sigma", "truncation", "max_cell_m", "threads",
-                                        "working_px", "pixel_m", "valid_px", "cells", "cells_per_valid_px", "min_cell_m",
-                                        "coarsest_cell_m", "build_ms", "m_cells_per_s", "entries_mean", "entries_p99", "entries_max",
-                                        "lists_mb", "order", "points", "defined_fraction", "eval_ms", "m_points_per_s", "grid_rms_m",
-                                        "grid_max_m", "surface_rms_m", "surface_max_m", "sampled", "target"};
+        static const char* columns[] = {"table",
+                                        "grid",
+                                        "source",
+                                        "tolerance_m",
+                                        "sigma",
+                                        "truncation",
+                                        "max_cell_m",
+                                        "threads",
+                                        "working_px",
+                                        "pixel_m",
+                                        "valid_px",
+                                        "cells",
+                                        "cells_per_valid_px",
+                                        "min_cell_m",
+                                        "coarsest_cell_m",
+                                        "build_ms",
+                                        "m_cells_per_s",
+                                        "entries_mean",
+                                        "entries_p99",
+                                        "entries_max",
+                                        "lists_mb",
+                                        "order",
+                                        "points",
+                                        "defined_fraction",
+                                        "eval_ms",
+                                        "m_points_per_s",
+                                        "grid_rms_m",
+                                        "grid_max_m",
+                                        "surface_rms_m",
+                                        "surface_max_m",
+                                        "sampled",
+                                        "target"};
         std::ofstream f(path);
         if (!f) throw hc::Error(path + ": cannot open for writing (--csv)");
         for (size_t c = 0; c < std::size(columns); ++c) f << (c ? "," : "") << columns[c];
@@ -134,7 +162,8 @@ hc::ingest::Raster syntheticRaster() {
     auto rough = [](size_t i) { return i % 256 >= 240; };  // the last 16 of every 256 pixels
     for (size_t row = 0; row < kSynthSide; ++row)
         for (size_t col = 0; col < kSynthSide; ++col) {
-            const double x = (static_cast<double>(col) + 0.5) * kSynthPixelM, y = side - (static_cast<double>(row) + 0.5) * kSynthPixelM;
+            const double x = (static_cast<double>(col) + 0.5) * kSynthPixelM,
+                         y = side - (static_cast<double>(row) + 0.5) * kSynthPixelM;
             double z = 100.0 + std::sin(k * x) * std::cos(k * y);
             if (rough(col) || rough(row)) z += ((col + row) & 1) ? 1.0 : -1.0;
             r.at(col, row) = static_cast<float>(z);
@@ -146,9 +175,9 @@ hc::ingest::Raster syntheticRaster() {
 
 struct alignas(64) Accum {  // one per worker, on its own cache line
     uint64_t defined = 0, undefined = 0;
-    double sum = 0;                                   // of values: keeps the work observable
-    double sumSq = 0, maxAbs = 0;                     // surface - pixel
-    double gridSumSq = 0, gridMaxAbs = 0;             // covering cell - pixel (cross-check of Grid::stats)
+    double sum = 0;                        // of values: keeps the work observable
+    double sumSq = 0, maxAbs = 0;          // surface - pixel
+    double gridSumSq = 0, gridMaxAbs = 0;  // covering cell - pixel (cross-check of Grid::stats)
 };
 
 Accum reduce(const std::vector<Accum>& parts) {
@@ -270,52 +299,73 @@ struct AccuracyRow {
 int main(int argc, char** argv) {
     return hc::cli::run("hc-bench-influence", [&] {
         std::string srtm = "../shared/data/N00E010.hgt";
-        std::string dems = "data/lidar1m_minnesota_utm15.tif,data/south_glacier_utm7.tif,data/kootenai_1m.asc,data/hef_srtm.tif,"
-                           "../shared/data/N00E010.hgt";
+        std::string dems =
+            "data/lidar1m_minnesota_utm15.tif,data/south_glacier_utm7.tif,data/kootenai_1m.asc,data/hef_srtm.tif,"
+            "../shared/data/N00E010.hgt";
         std::string tolerances = "0.1,0.5,2", sigmas = "0.5,1,1.5", csv, plot;
         double maxCellM = 768;
         int repeat = 3, points = 1000000, maxEvalPx = 2000000;
         unsigned threads = 0;
         bool quick = false;
-        hc::cli::Parser p("hc-bench-influence", "[options]",
-                          "Benchmarks the influence lists and the exact smooth surface (docs/design.md section 3).\n"
-                          "  1 build: buildInfluenceLists (sigma 1, R 3.5) on N00E010.hgt ingested at tolerances 0.5 and 2 m and\n"
-                          "    on a synthetic grid of cell sizes 0.75 .. 96 m (ratio 128); target >= 2 M cells/s on 2 cores.\n"
-                          "  2 evaluate: SurfaceEvaluator::value at uniform random points (defined ones counted), one thread\n"
-                          "    and all threads, on the N00E010 0.5 m grid and the synthetic grid; target >= 1 M points/s.\n"
-                          "  3 accuracy: real DEMs x tolerances x sigmas: grid-vs-source and smooth-surface-vs-source RMS and\n"
-                          "    max error at the working raster's valid pixel centres, entries per cell, evaluation time.\n"
-                          "Paths are relative to the current directory (run it from the repository root). MB = 10^6 bytes.");
-        p.option("--srtm", "FILE", "the SRTM tile for tables 1 and 2 (default ../shared/data/N00E010.hgt); rows are\n"
-                 "      skipped, saying so, when it is missing", srtm);
-        p.option("--dems", "LIST", "comma-separated rasters for table 3 (default data/lidar1m_minnesota_utm15.tif,\n"
-                 "      data/south_glacier_utm7.tif,data/kootenai_1m.asc,data/hef_srtm.tif,../shared/data/N00E010.hgt);\n"
-                 "      missing files are skipped, saying so", dems);
-        p.option("--tolerances", "LIST", "comma-separated ingest tolerances for table 3, metres >= 0 (default 0.1,0.5,2)", tolerances);
-        p.option("--sigmas", "LIST", "comma-separated kernel widths for table 3, in cell sizes; R stays 3.5 (default 0.5,1,1.5)", sigmas);
-        p.option("--max-cell", "M", "coarsest cell for every ingest, metres; rounded down to finest * 2^k (default 768, so\n"
-                 "      SRTM's 90 m pixels can merge and the tolerance matters)", maxCellM);
+        hc::cli::Parser p(
+            "hc-bench-influence", "[options]",
+            "Benchmarks the influence lists and the exact smooth surface (docs/design.md section 3).\n"
+            "  1 build: buildInfluenceLists (sigma 1, R 3.5) on N00E010.hgt ingested at tolerances 0.5 and 2 m and\n"
+            "    on a synthetic grid of cell sizes 0.75 .. 96 m (ratio 128); target >= 2 M cells/s on 2 cores.\n"
+            "  2 evaluate: SurfaceEvaluator::value at uniform random points (defined ones counted), one thread\n"
+            "    and all threads, on the N00E010 0.5 m grid and the synthetic grid; target >= 1 M points/s.\n"
+            "  3 accuracy: real DEMs x tolerances x sigmas: grid-vs-source and smooth-surface-vs-source RMS and\n"
+            "    max error at the working raster's valid pixel centres, entries per cell, evaluation time.\n"
+            "Paths are relative to the current directory (run it from the repository root). MB = 10^6 bytes.");
+        p.option("--srtm", "FILE",
+                 "the SRTM tile for tables 1 and 2 (default ../shared/data/N00E010.hgt); rows are\n"
+                 "      skipped, saying so, when it is missing",
+                 srtm);
+        p.option(
+            "--dems", "LIST",
+            "comma-separated rasters for table 3 (default data/lidar1m_minnesota_utm15.tif,\n"
+            "      data/south_glacier_utm7.tif,data/kootenai_1m.asc,data/hef_srtm.tif,../shared/data/N00E010.hgt);\n"
+            "      missing files are skipped, saying so",
+            dems);
+        p.option("--tolerances", "LIST",
+                 "comma-separated ingest tolerances for table 3, metres >= 0 (default 0.1,0.5,2)", tolerances);
+        p.option("--sigmas", "LIST",
+                 "comma-separated kernel widths for table 3, in cell sizes; R stays 3.5 (default 0.5,1,1.5)", sigmas);
+        p.option("--max-cell", "M",
+                 "coarsest cell for every ingest, metres; rounded down to finest * 2^k (default 768, so\n"
+                 "      SRTM's 90 m pixels can merge and the tolerance matters)",
+                 maxCellM);
         p.option("--repeat", "N", "runs per timed case in tables 1 and 2; times are the best run (default 3)", repeat);
         p.option("--points", "N", "random points per evaluator case in table 2 (default 1000000)", points);
-        p.option("--max-eval-px", "N", "table 3 evaluates every valid pixel of rasters with at most N valid pixels, and a fixed\n"
-                 "      random sample of min(N, 1000000) valid pixels of larger ones (default 2000000)", maxEvalPx);
-        p.option("--threads", "N", "worker threads for building, ingest and the all-threads cases (default 0 = all cores)", threads);
-        p.option("--csv", "OUT.csv", "also write every row of every table as CSV, with a 'table' column (default: none)", csv);
-        p.option("--plot", "OUT.svg", "also draw table 3 as an SVG plot: RMS error against the source for each DEM over the\n"
-                 "      tolerances, the grid's and the smooth surface's for each sigma (default: none)", plot);
-        p.flag("--quick", "smoke run: one tolerance (0.5 m, or the first of --tolerances), one sigma (1, or the first of\n"
-               "      --sigmas), the first two DEMs, 100000 points (unless --points is given)", quick);
+        p.option("--max-eval-px", "N",
+                 "table 3 evaluates every valid pixel of rasters with at most N valid pixels, and a fixed\n"
+                 "      random sample of min(N, 1000000) valid pixels of larger ones (default 2000000)",
+                 maxEvalPx);
+        p.option("--threads", "N",
+                 "worker threads for building, ingest and the all-threads cases (default 0 = all cores)", threads);
+        p.option("--csv", "OUT.csv",
+                 "also write every row of every table as CSV, with a 'table' column (default: none)", csv);
+        p.option("--plot", "OUT.svg",
+                 "also draw table 3 as an SVG plot: RMS error against the source for each DEM over the\n"
+                 "      tolerances, the grid's and the smooth surface's for each sigma (default: none)",
+                 plot);
+        p.flag("--quick",
+               "smoke run: one tolerance (0.5 m, or the first of --tolerances), one sigma (1, or the first of\n"
+               "      --sigmas), the first two DEMs, 100000 points (unless --points is given)",
+               quick);
         if (!p.parse(argc, argv)) return 0;
         if (repeat < 1) throw hc::Error("--repeat " + std::to_string(repeat) + ": must be at least 1");
         if (points < 1) throw hc::Error("--points " + std::to_string(points) + ": must be at least 1");
         if (maxEvalPx < 1) throw hc::Error("--max-eval-px " + std::to_string(maxEvalPx) + ": must be at least 1");
-        if (!(maxCellM > 0)) throw hc::Error("--max-cell " + fmt::format("{:g}", maxCellM) + ": must be a positive size in metres");
+        if (!(maxCellM > 0))
+            throw hc::Error("--max-cell " + fmt::format("{:g}", maxCellM) + ": must be a positive size in metres");
         std::vector<double> tols = numberList(tolerances, "--tolerances", 0.0);
         std::vector<double> sigmaList = numberList(sigmas, "--sigmas", 1e-9);
         for (double s : sigmaList) {
             KernelParams k;
             k.sigma = s;
-            if (std::string why = k.validate(); !why.empty()) throw hc::Error("--sigmas " + fmt::format("{:g}", s) + ": " + why);
+            if (std::string why = k.validate(); !why.empty())
+                throw hc::Error("--sigmas " + fmt::format("{:g}", s) + ": " + why);
         }
         std::vector<std::string> demList = splitList(dems, "--dems");
         if (quick) {
@@ -331,10 +381,11 @@ int main(int argc, char** argv) {
         const bool haveSrtm = fs::is_regular_file(srtm);
         Csv out;
 
-        std::printf("hc-bench-influence: %u worker thread%s (hardware threads: %u)%s\n", allThreads, allThreads == 1 ? "" : "s",
-                    std::thread::hardware_concurrency(), quick ? ", --quick" : "");
+        std::printf("hc-bench-influence: %u worker thread%s (hardware threads: %u)%s\n", allThreads,
+                    allThreads == 1 ? "" : "s", std::thread::hardware_concurrency(), quick ? ", --quick" : "");
         std::printf("load average (1 min) at start: %s\n", loadAverage().c_str());
-        if (!haveSrtm) std::printf("note: %s is missing: the N00E010 rows of tables 1 and 2 are skipped\n", srtm.c_str());
+        if (!haveSrtm)
+            std::printf("note: %s is missing: the N00E010 rows of tables 1 and 2 are skipped\n", srtm.c_str());
 
         // ---------------- table 1: influence build ----------------
         std::vector<Grid> srtmGrids;  // kept for table 2
@@ -357,10 +408,18 @@ int main(int argc, char** argv) {
             return hc::ingest::buildGrid(syntheticRaster(), nullptr, b);
         }();
         for (size_t i = 0; i < srtmGrids.size(); ++i)
-            buildRows.push_back({.name = fmt::format("N00E010 tol {:g}", kBuildTolerances[i]), .source = srtm, .toleranceM = kBuildTolerances[i],
-                                 .grid = &srtmGrids[i], .buildS = 1e300, .stats = {}});
-        buildRows.push_back({.name = "ratio-128 synthetic", .source = "synthetic 2048x2048 px of 0.75 m", .toleranceM = kSynthToleranceM,
-                             .grid = &synth, .buildS = 1e300, .stats = {}});
+            buildRows.push_back({.name = fmt::format("N00E010 tol {:g}", kBuildTolerances[i]),
+                                 .source = srtm,
+                                 .toleranceM = kBuildTolerances[i],
+                                 .grid = &srtmGrids[i],
+                                 .buildS = 1e300,
+                                 .stats = {}});
+        buildRows.push_back({.name = "ratio-128 synthetic",
+                             .source = "synthetic 2048x2048 px of 0.75 m",
+                             .toleranceM = kSynthToleranceM,
+                             .grid = &synth,
+                             .buildS = 1e300,
+                             .stats = {}});
 
         std::vector<InfluenceLists> builtLists;  // sigma 1, per build row: reused by table 2
         builtLists.reserve(buildRows.size());
@@ -369,28 +428,41 @@ int main(int argc, char** argv) {
             r.stats = builtLists.back().stats();
         }
 
-        std::printf("\n1. influence build: buildInfluenceLists, sigma %g, R %g, %u threads, best of %d; N00E010 ingested with\n"
-                    "max cell %g m (its coarsest level: %s); levels = smallest..largest cell present [m]; M cells/s = cells / best\n"
-                    "build time; entries = list length per cell (mean / p99 / max); MB = lists' offsets + indices\n\n",
-                    baseParams.sigma, baseParams.truncation, allThreads, repeat, maxCellM,
-                    srtmGrids.empty() ? "n/a" : fmt::format("{:.4g} m", srtmGrids[0].levelSizeM(srtmGrids[0].maxLevel)).c_str());
-        std::printf("%-20s %9s %13s %9s %9s %8s %6s %6s %8s %8s\n", "grid", "cells", "levels m", "build ms", "M cells/s",
-                    "mean", "p99", "max", "MB", "target");
+        std::printf(
+            "\n1. influence build: buildInfluenceLists, sigma %g, R %g, %u threads, best of %d; N00E010 ingested with\n"
+            "max cell %g m (its coarsest level: %s); levels = smallest..largest cell present [m]; M cells/s = cells / "
+            "best\n"
+            "build time; entries = list length per cell (mean / p99 / max); MB = lists' offsets + indices\n\n",
+            baseParams.sigma, baseParams.truncation, allThreads, repeat, maxCellM,
+            srtmGrids.empty() ? "n/a"
+                              : fmt::format("{:.4g} m", srtmGrids[0].levelSizeM(srtmGrids[0].maxLevel)).c_str());
+        std::printf("%-20s %9s %13s %9s %9s %8s %6s %6s %8s %8s\n", "grid", "cells", "levels m", "build ms",
+                    "M cells/s", "mean", "p99", "max", "MB", "target");
         for (const BuildRow& r : buildRows) {
             const bool met = r.mCellsPerS() >= kTargetBuildMCellsPerS;
-            std::printf("%-20s %9zu %13s %9.1f %9.2f %8.1f %6llu %6llu %8.1f %8s\n", r.name.c_str(), r.grid->cellCount(),
-                        levelRange(*r.grid).c_str(), r.buildS * 1e3, r.mCellsPerS(), r.stats.meanLength,
-                        (unsigned long long)r.stats.p99Length, (unsigned long long)r.stats.maxLength,
-                        static_cast<double>(r.stats.bytes) / 1e6, met ? "met" : "MISSED");
-            out.add({{"table", "build"}, {"grid", r.name}, {"source", r.source}, {"tolerance_m", fmt::format("{:g}", r.toleranceM)},
-                     {"sigma", fmt::format("{:g}", baseParams.sigma)}, {"truncation", fmt::format("{:g}", baseParams.truncation)},
-                     {"max_cell_m", fmt::format("{:g}", r.grid->levelSizeM(r.grid->maxLevel))}, {"threads", fmt::format("{}", allThreads)},
-                     {"cells", fmt::format("{}", r.grid->cellCount())}, {"min_cell_m", fmt::format("{:g}", r.grid->finestCellM)},
+            std::printf("%-20s %9zu %13s %9.1f %9.2f %8.1f %6llu %6llu %8.1f %8s\n", r.name.c_str(),
+                        r.grid->cellCount(), levelRange(*r.grid).c_str(), r.buildS * 1e3, r.mCellsPerS(),
+                        r.stats.meanLength, (unsigned long long)r.stats.p99Length,
+                        (unsigned long long)r.stats.maxLength, static_cast<double>(r.stats.bytes) / 1e6,
+                        met ? "met" : "MISSED");
+            out.add({{"table", "build"},
+                     {"grid", r.name},
+                     {"source", r.source},
+                     {"tolerance_m", fmt::format("{:g}", r.toleranceM)},
+                     {"sigma", fmt::format("{:g}", baseParams.sigma)},
+                     {"truncation", fmt::format("{:g}", baseParams.truncation)},
+                     {"max_cell_m", fmt::format("{:g}", r.grid->levelSizeM(r.grid->maxLevel))},
+                     {"threads", fmt::format("{}", allThreads)},
+                     {"cells", fmt::format("{}", r.grid->cellCount())},
+                     {"min_cell_m", fmt::format("{:g}", r.grid->finestCellM)},
                      {"coarsest_cell_m", levelRange(*r.grid).substr(levelRange(*r.grid).find("..") + 2)},
-                     {"build_ms", fmt::format("{:.3f}", r.buildS * 1e3)}, {"m_cells_per_s", fmt::format("{:.4f}", r.mCellsPerS())},
-                     {"entries_mean", fmt::format("{:.3f}", r.stats.meanLength)}, {"entries_p99", fmt::format("{}", r.stats.p99Length)},
+                     {"build_ms", fmt::format("{:.3f}", r.buildS * 1e3)},
+                     {"m_cells_per_s", fmt::format("{:.4f}", r.mCellsPerS())},
+                     {"entries_mean", fmt::format("{:.3f}", r.stats.meanLength)},
+                     {"entries_p99", fmt::format("{}", r.stats.p99Length)},
                      {"entries_max", fmt::format("{}", r.stats.maxLength)},
-                     {"lists_mb", fmt::format("{:.3f}", static_cast<double>(r.stats.bytes) / 1e6)}, {"target", met ? "met" : "MISSED"}});
+                     {"lists_mb", fmt::format("{:.3f}", static_cast<double>(r.stats.bytes) / 1e6)},
+                     {"target", met ? "met" : "MISSED"}});
         }
         {
             const auto per = synth.cellsPerLevel();
@@ -402,12 +474,16 @@ int main(int argc, char** argv) {
         std::printf("target: >= %.0f M cells/s on 2 cores (all cores here)\n", kTargetBuildMCellsPerS);
 
         // ---------------- table 2: evaluator ----------------
-        std::printf("\n2. evaluator: SurfaceEvaluator::value (elevation) at %d points, uniform over the grid's cell bounding box in\n"
-                    "random order; sigma %g, R %g; best of %d; defined = fraction of points inside a cell (the rest are holes\n"
-                    "and cost one failed locate each); M pts/s = defined points / time; order morton = the same points sorted\n"
-                    "into the grid's storage order (diagnostic: what cache locality is worth; the target is for random order)\n\n",
-                    points, baseParams.sigma, baseParams.truncation, repeat);
-        std::printf("%-20s %-7s %7s %9s %7s %9s %9s %8s\n", "grid", "order", "threads", "points", "defined", "ms", "M pts/s", "target");
+        std::printf(
+            "\n2. evaluator: SurfaceEvaluator::value (elevation) at %d points, uniform over the grid's cell bounding "
+            "box in\n"
+            "random order; sigma %g, R %g; best of %d; defined = fraction of points inside a cell (the rest are holes\n"
+            "and cost one failed locate each); M pts/s = defined points / time; order morton = the same points sorted\n"
+            "into the grid's storage order (diagnostic: what cache locality is worth; the target is for random "
+            "order)\n\n",
+            points, baseParams.sigma, baseParams.truncation, repeat);
+        std::printf("%-20s %-7s %7s %9s %7s %9s %9s %8s\n", "grid", "order", "threads", "points", "defined", "ms",
+                    "M pts/s", "target");
         for (size_t gi = 0; gi < buildRows.size(); ++gi) {
             const BuildRow& r = buildRows[gi];
             if (r.grid != &synth && r.toleranceM != kBuildTolerances[0]) continue;  // N00E010: its 0.5 m grid only
@@ -423,10 +499,13 @@ int main(int argc, char** argv) {
             // diagnostic for how much of the random-order time is cache misses, not arithmetic.
             std::vector<Point> sorted = pts;
             auto mortonOf = [&](const Point& q) {
-                return hc::mortonEncode(static_cast<uint32_t>(q.x / g.finestCellM), static_cast<uint32_t>(q.y / g.finestCellM));
+                return hc::mortonEncode(static_cast<uint32_t>(q.x / g.finestCellM),
+                                        static_cast<uint32_t>(q.y / g.finestCellM));
             };
-            std::sort(sorted.begin(), sorted.end(), [&](const Point& a, const Point& b) { return mortonOf(a) < mortonOf(b); });
-            const std::vector<unsigned> threadCounts = allThreads == 1 ? std::vector<unsigned>{1} : std::vector<unsigned>{1, allThreads};
+            std::sort(sorted.begin(), sorted.end(),
+                      [&](const Point& a, const Point& b) { return mortonOf(a) < mortonOf(b); });
+            const std::vector<unsigned> threadCounts =
+                allThreads == 1 ? std::vector<unsigned>{1} : std::vector<unsigned>{1, allThreads};
             // batch = SurfaceEvaluator::values() on the random points: it sorts them by cell itself (hc-probe's path).
             std::vector<std::array<double, 2>> asArrays(pts.size());
             for (size_t i = 0; i < pts.size(); ++i) asArrays[i] = {pts[i].x, pts[i].y};
@@ -451,13 +530,22 @@ int main(int argc, char** argv) {
                     // The target: random input on all cores, through the per-point call or the batch call.
                     const bool counts = t == allThreads && order[0] != 'm';
                     const char* target = counts ? (rate >= kTargetEvalMPointsPerS ? "met" : "MISSED") : "-";
-                    std::printf("%-20s %-7s %7u %9zu %7.3f %9.1f %9.2f %8s\n", r.name.c_str(), order, t, set.size(), fraction,
-                                best * 1e3, rate, target);
-                    out.add({{"table", "evaluate"}, {"grid", r.name}, {"source", r.source}, {"tolerance_m", fmt::format("{:g}", r.toleranceM)},
-                             {"order", order}, {"sigma", fmt::format("{:g}", baseParams.sigma)}, {"truncation", fmt::format("{:g}", baseParams.truncation)},
-                             {"threads", fmt::format("{}", t)}, {"cells", fmt::format("{}", g.cellCount())}, {"points", fmt::format("{}", set.size())},
-                             {"defined_fraction", fmt::format("{:.5f}", fraction)}, {"eval_ms", fmt::format("{:.3f}", best * 1e3)},
-                             {"m_points_per_s", fmt::format("{:.4f}", rate)}, {"target", counts ? target : ""}});
+                    std::printf("%-20s %-7s %7u %9zu %7.3f %9.1f %9.2f %8s\n", r.name.c_str(), order, t, set.size(),
+                                fraction, best * 1e3, rate, target);
+                    out.add({{"table", "evaluate"},
+                             {"grid", r.name},
+                             {"source", r.source},
+                             {"tolerance_m", fmt::format("{:g}", r.toleranceM)},
+                             {"order", order},
+                             {"sigma", fmt::format("{:g}", baseParams.sigma)},
+                             {"truncation", fmt::format("{:g}", baseParams.truncation)},
+                             {"threads", fmt::format("{}", t)},
+                             {"cells", fmt::format("{}", g.cellCount())},
+                             {"points", fmt::format("{}", set.size())},
+                             {"defined_fraction", fmt::format("{:.5f}", fraction)},
+                             {"eval_ms", fmt::format("{:.3f}", best * 1e3)},
+                             {"m_points_per_s", fmt::format("{:.4f}", rate)},
+                             {"target", counts ? target : ""}});
                 }
             }
         }
@@ -499,7 +587,8 @@ int main(int argc, char** argv) {
                     o.toleranceM = tol;
                     hc::ingest::LoadReport gridReport;
                     const Grid g = hc::ingest::ingest(o, gridReport);
-                    if (g.stats.sourceWidth != raster.width || g.stats.sourceHeight != raster.height || g.stats.validPixels != valid)
+                    if (g.stats.sourceWidth != raster.width || g.stats.sourceHeight != raster.height ||
+                        g.stats.validPixels != valid)
                         throw hc::Error(dem + ": the grid's working raster (" +
                                         fmt::format("{} x {}", g.stats.sourceWidth, g.stats.sourceHeight) +
                                         ") is not the one loadTerrain gave: the comparison would be meaningless");
@@ -536,13 +625,16 @@ int main(int argc, char** argv) {
                         r.checkRms = std::sqrt(a.gridSumSq / n);
                         r.checkMax = a.gridMaxAbs;
                         if (a.undefined)
-                            warnings.push_back(fmt::format("{} tol {:g} sigma {:g}: the surface is undefined at {} valid pixel centres",
-                                                           name, tol, sigma, a.undefined));
+                            warnings.push_back(fmt::format(
+                                "{} tol {:g} sigma {:g}: the surface is undefined at {} valid pixel centres", name, tol,
+                                sigma, a.undefined));
                         // Our own pixel-by-pixel grid error must match the ingest's (same pixels, same cells).
-                        if (!sampled && (std::abs(r.checkMax - r.gridMax) > 1e-4 || std::abs(r.checkRms - r.gridRms) > 1e-4))
-                            warnings.push_back(fmt::format("{} tol {:g}: grid error measured here (RMS {:.5f}, max {:.5f}) differs from "
-                                                           "Grid::stats (RMS {:.5f}, max {:.5f})",
-                                                           name, tol, r.checkRms, r.checkMax, r.gridRms, r.gridMax));
+                        if (!sampled &&
+                            (std::abs(r.checkMax - r.gridMax) > 1e-4 || std::abs(r.checkRms - r.gridRms) > 1e-4))
+                            warnings.push_back(fmt::format(
+                                "{} tol {:g}: grid error measured here (RMS {:.5f}, max {:.5f}) differs from "
+                                "Grid::stats (RMS {:.5f}, max {:.5f})",
+                                name, tol, r.checkRms, r.checkMax, r.gridRms, r.gridMax));
                         acc.push_back(r);
                     }
                 }
@@ -551,37 +643,61 @@ int main(int argc, char** argv) {
             }
         }
 
-        std::printf("\n3. speed / accuracy: every valid working-raster pixel (the raster the grid was built from) is compared with\n"
-                    "the grid (the ingest's own measurement, Grid::stats) and with the smooth surface at its centre; R %g; every\n"
-                    "ingest with max cell %g m (max cell = the coarsest level it allowed, capped by the raster's size); cells/px =\n"
-                    "cells per valid pixel; entries = mean list length; lists ms = buildInfluenceLists; eval ms = all %u threads\n"
-                    "over the evaluated pixels; RMS / max in metres\n\n",
-                    baseParams.truncation, maxCellM, allThreads);
-        std::printf("%-28s %9s %6s %5s %5s %6s %8s %6s %7s %7s %7s %7s %7s %8s %8s %7s\n", "dem", "px", "px m", "tol", "sigma", "max m",
-                    "cells", "cells/px", "grd RMS", "grd max", "srf RMS", "srf max", "entries", "lists ms", "eval ms", "M px/s");
+        std::printf(
+            "\n3. speed / accuracy: every valid working-raster pixel (the raster the grid was built from) is compared "
+            "with\n"
+            "the grid (the ingest's own measurement, Grid::stats) and with the smooth surface at its centre; R %g; "
+            "every\n"
+            "ingest with max cell %g m (max cell = the coarsest level it allowed, capped by the raster's size); "
+            "cells/px =\n"
+            "cells per valid pixel; entries = mean list length; lists ms = buildInfluenceLists; eval ms = all %u "
+            "threads\n"
+            "over the evaluated pixels; RMS / max in metres\n\n",
+            baseParams.truncation, maxCellM, allThreads);
+        std::printf("%-28s %9s %6s %5s %5s %6s %8s %6s %7s %7s %7s %7s %7s %8s %8s %7s\n", "dem", "px", "px m", "tol",
+                    "sigma", "max m", "cells", "cells/px", "grd RMS", "grd max", "srf RMS", "srf max", "entries",
+                    "lists ms", "eval ms", "M px/s");
         for (const AccuracyRow& r : acc) {
             const double rate = static_cast<double>(r.evaluated) / r.evalS / 1e6;
-            std::printf("%-28s %9s %6.3g %5.3g %5.3g %6.4g %8llu %6.3f %7.4f %7.4f %7.4f %7.4f %7.1f %8.1f %8.1f %7.2f%s\n",
-                        r.dem.c_str(), fmt::format("{}x{}", r.width, r.height).c_str(), r.pixelM, r.toleranceM, r.sigma, r.maxCellM,
-                        (unsigned long long)r.cells, static_cast<double>(r.cells) / static_cast<double>(r.validPx), r.gridRms, r.gridMax,
-                        r.surfRms, r.surfMax, r.entriesMean, r.buildS * 1e3, r.evalS * 1e3, rate, r.sampled ? " (sample)" : "");
-            out.add({{"table", "accuracy"}, {"grid", r.dem}, {"source", r.path}, {"tolerance_m", fmt::format("{:g}", r.toleranceM)},
-                     {"sigma", fmt::format("{:g}", r.sigma)}, {"truncation", fmt::format("{:g}", baseParams.truncation)}, {"max_cell_m", fmt::format("{:g}", r.maxCellM)},
-                     {"threads", fmt::format("{}", allThreads)}, {"working_px", fmt::format("{}x{}", r.width, r.height)}, {"pixel_m", fmt::format("{:.6g}", r.pixelM)},
-                     {"valid_px", fmt::format("{}", r.validPx)}, {"cells", fmt::format("{}", r.cells)},
-                     {"cells_per_valid_px", fmt::format("{:.5f}", static_cast<double>(r.cells) / static_cast<double>(r.validPx))},
-                     {"min_cell_m", fmt::format("{:.6g}", r.pixelM)}, {"coarsest_cell_m", r.levels.substr(r.levels.find("..") + 2)},
-                     {"build_ms", fmt::format("{:.3f}", r.buildS * 1e3)}, {"entries_mean", fmt::format("{:.3f}", r.entriesMean)},
-                     {"points", fmt::format("{}", r.evaluated)}, {"eval_ms", fmt::format("{:.3f}", r.evalS * 1e3)},
-                     {"m_points_per_s", fmt::format("{:.4f}", rate)}, {"grid_rms_m", fmt::format("{:.6g}", r.gridRms)}, {"grid_max_m", fmt::format("{:.6g}", r.gridMax)},
-                     {"surface_rms_m", fmt::format("{:.6g}", r.surfRms)}, {"surface_max_m", fmt::format("{:.6g}", r.surfMax)},
+            std::printf(
+                "%-28s %9s %6.3g %5.3g %5.3g %6.4g %8llu %6.3f %7.4f %7.4f %7.4f %7.4f %7.1f %8.1f %8.1f %7.2f%s\n",
+                r.dem.c_str(), fmt::format("{}x{}", r.width, r.height).c_str(), r.pixelM, r.toleranceM, r.sigma,
+                r.maxCellM, (unsigned long long)r.cells, static_cast<double>(r.cells) / static_cast<double>(r.validPx),
+                r.gridRms, r.gridMax, r.surfRms, r.surfMax, r.entriesMean, r.buildS * 1e3, r.evalS * 1e3, rate,
+                r.sampled ? " (sample)" : "");
+            out.add({{"table", "accuracy"},
+                     {"grid", r.dem},
+                     {"source", r.path},
+                     {"tolerance_m", fmt::format("{:g}", r.toleranceM)},
+                     {"sigma", fmt::format("{:g}", r.sigma)},
+                     {"truncation", fmt::format("{:g}", baseParams.truncation)},
+                     {"max_cell_m", fmt::format("{:g}", r.maxCellM)},
+                     {"threads", fmt::format("{}", allThreads)},
+                     {"working_px", fmt::format("{}x{}", r.width, r.height)},
+                     {"pixel_m", fmt::format("{:.6g}", r.pixelM)},
+                     {"valid_px", fmt::format("{}", r.validPx)},
+                     {"cells", fmt::format("{}", r.cells)},
+                     {"cells_per_valid_px",
+                      fmt::format("{:.5f}", static_cast<double>(r.cells) / static_cast<double>(r.validPx))},
+                     {"min_cell_m", fmt::format("{:.6g}", r.pixelM)},
+                     {"coarsest_cell_m", r.levels.substr(r.levels.find("..") + 2)},
+                     {"build_ms", fmt::format("{:.3f}", r.buildS * 1e3)},
+                     {"entries_mean", fmt::format("{:.3f}", r.entriesMean)},
+                     {"points", fmt::format("{}", r.evaluated)},
+                     {"eval_ms", fmt::format("{:.3f}", r.evalS * 1e3)},
+                     {"m_points_per_s", fmt::format("{:.4f}", rate)},
+                     {"grid_rms_m", fmt::format("{:.6g}", r.gridRms)},
+                     {"grid_max_m", fmt::format("{:.6g}", r.gridMax)},
+                     {"surface_rms_m", fmt::format("{:.6g}", r.surfRms)},
+                     {"surface_max_m", fmt::format("{:.6g}", r.surfMax)},
                      {"sampled", r.sampled ? "1" : "0"}});
         }
         bool anySampled = false;
         for (const AccuracyRow& r : acc) anySampled |= r.sampled;
         if (anySampled)
-            std::printf("(sample): more than %d valid pixels: errors and time over a fixed random sample of %d of them\n", maxEvalPx,
-                        std::min(maxEvalPx, 1000000));
+            std::printf(
+                "(sample): more than %d valid pixels: errors and time over a fixed random sample of %d of them\n",
+                maxEvalPx, std::min(maxEvalPx, 1000000));
         for (const std::string& s : skipped) std::printf("skipped %s: missing\n", s.c_str());
         for (const std::string& w : warnings) std::printf("warning: %s\n", w.c_str());
 
@@ -606,12 +722,17 @@ int main(int argc, char** argv) {
                 const std::string name = fs::path(demOrder[d]).stem().string();
                 hc::bench::LineSeries grid{name + ": grid (cells)", color, "1,3", {}};
                 for (const AccuracyRow& r : acc)
-                    if (r.dem == demOrder[d] && r.sigma == sigmaList.front()) grid.points.emplace_back(r.toleranceM, r.gridRms);
+                    if (r.dem == demOrder[d] && r.sigma == sigmaList.front())
+                        grid.points.emplace_back(r.toleranceM, r.gridRms);
                 lp.series.push_back(grid);
                 for (size_t k = 0; k < sigmaList.size(); ++k) {
-                    hc::bench::LineSeries surf{name + ": smooth surface, sigma " + fmt::format("{:g}", sigmaList[k]), color, dashes[std::min<size_t>(k, 3)], {}};
+                    hc::bench::LineSeries surf{name + ": smooth surface, sigma " + fmt::format("{:g}", sigmaList[k]),
+                                               color,
+                                               dashes[std::min<size_t>(k, 3)],
+                                               {}};
                     for (const AccuracyRow& r : acc)
-                        if (r.dem == demOrder[d] && r.sigma == sigmaList[k]) surf.points.emplace_back(r.toleranceM, r.surfRms);
+                        if (r.dem == demOrder[d] && r.sigma == sigmaList[k])
+                            surf.points.emplace_back(r.toleranceM, r.surfRms);
                     lp.series.push_back(surf);
                 }
             }

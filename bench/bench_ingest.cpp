@@ -59,10 +59,10 @@ constexpr double kTargetMpxPerS = 10.0;        // source pixels per second of in
 constexpr double kTargetRasterMultiple = 3.0;  // ingest RSS <= 3 x the source raster as float32
 
 struct Input {
-    char id;            // a, b, c
-    std::string file;   // path: the shared tile itself, or a file prepared in the work folder
-    std::string what;   // one line for the legend
-    bool projected;     // the speed target applies to this one
+    char id;           // a, b, c
+    std::string file;  // path: the shared tile itself, or a file prepared in the work folder
+    std::string what;  // one line for the legend
+    bool projected;    // the speed target applies to this one
 };
 
 // What a case child reports. Plain bytes through a pipe, so trivially copyable.
@@ -99,7 +99,8 @@ void prepareInputs(const fs::path& tile, const fs::path& east, const fs::path& w
 
     GDALDatasetH src = GDALOpen(tile.c_str(), GA_ReadOnly);
     if (!src) throw hc::Error(tile.string() + ": cannot open: " + gdalMessage());
-    std::vector<std::string> warpArgs{"-of", "GTiff", "-t_srs", "EPSG:32632", "-r", "bilinear", "-ot", "Float32", "-tr", "90", "90"};
+    std::vector<std::string> warpArgs{"-of", "GTiff",   "-t_srs", "EPSG:32632", "-r", "bilinear",
+                                      "-ot", "Float32", "-tr",    "90",         "90"};
     GDALWarpAppOptions* warpOptions = GDALWarpAppOptionsNew(argvOf(warpArgs).data(), nullptr);
     const std::string projected = (work / "N00E010_utm32n.tif").string();
     fs::remove(projected);  // GDALWarp would otherwise warp into the existing file
@@ -115,7 +116,8 @@ void prepareInputs(const fs::path& tile, const fs::path& east, const fs::path& w
     const char* sources0[2] = {names0[0].c_str(), names0[1].c_str()};
     GDALDatasetH vrt = GDALBuildVRT("", 2, nullptr, sources0, nullptr, &usageError);
     if (!vrt || usageError) throw hc::Error("GDALBuildVRT failed: " + gdalMessage());
-    std::vector<std::string> fineArgs{"-of", "GTiff", "-t_srs", "EPSG:32632", "-r", "bilinear", "-ot", "Float32", "-tr", "30", "30"};
+    std::vector<std::string> fineArgs{"-of", "GTiff",   "-t_srs", "EPSG:32632", "-r", "bilinear",
+                                      "-ot", "Float32", "-tr",    "30",         "30"};
     GDALWarpAppOptions* fineOptions = GDALWarpAppOptionsNew(argvOf(fineArgs).data(), nullptr);
     const std::string fine = (work / "N00E010+E011_utm32n_30m.tif").string();
     fs::remove(fine);
@@ -134,8 +136,8 @@ void prepareInputs(const fs::path& tile, const fs::path& east, const fs::path& w
 }
 
 // One run of one case, in its own child.
-RunResult runCase(const std::string& input, Path path, double toleranceM, std::optional<double> maxCellM, unsigned threads,
-                  const std::string& gridPath) {
+RunResult runCase(const std::string& input, Path path, double toleranceM, std::optional<double> maxCellM,
+                  unsigned threads, const std::string& gridPath) {
     return inChild<RunResult>(input, [&](RunResult& r) {
         GDALAllRegister();  // the baseline includes GDAL's drivers: they are not the ingest's memory
         {
@@ -189,7 +191,7 @@ struct Row {
     const Input* input;
     Path path;
     double toleranceM;
-    RunResult last;                  // sizes, cells and deviations (the same in every run)
+    RunResult last;  // sizes, cells and deviations (the same in every run)
     double ingestS = 1e300, writeS = 1e300, totalS = 1e300;
     uint64_t peakRss = 0, ingestRss = 0;
 
@@ -210,11 +212,11 @@ void printTable(const std::vector<Row>& rows) {
     for (const Row& r : rows) {
         // stream: the write happens inside ingest
         const std::string write = r.path == Path::Memory ? fmt::format("{:.1f}", r.writeS * 1e3) : "incl.";
-        std::printf("%-5c %-6s %5.3g %11s %11s %9llu %9.1f %8s %8.1f %12.2f %11.1f %13.1f %12.2f %9.4f %7.4f\n", r.input->id,
-                    pathName(r.path), r.toleranceM, dims(r.last.sourceWidth, r.last.sourceHeight).c_str(),
+        std::printf("%-5c %-6s %5.3g %11s %11s %9llu %9.1f %8s %8.1f %12.2f %11.1f %13.1f %12.2f %9.4f %7.4f\n",
+                    r.input->id, pathName(r.path), r.toleranceM, dims(r.last.sourceWidth, r.last.sourceHeight).c_str(),
                     dims(r.last.workingWidth, r.last.workingHeight).c_str(), (unsigned long long)r.last.cells,
-                    r.ingestS * 1e3, write.c_str(), r.totalS * 1e3, r.mpxPerS(), mb(r.peakRss), mb(r.ingestRss), r.rasterMultiple(),
-                    r.last.maxDevM, r.last.rmsDevM);
+                    r.ingestS * 1e3, write.c_str(), r.totalS * 1e3, r.mpxPerS(), mb(r.peakRss), mb(r.ingestRss),
+                    r.rasterMultiple(), r.last.maxDevM, r.last.rmsDevM);
     }
 }
 
@@ -222,27 +224,31 @@ void printTargets(const std::vector<Row>& rows) {
     std::printf("\ntargets\n  speed: >= %.0f M source pixels/s of ingest, projected input (b)\n", kTargetMpxPerS);
     for (const Row& r : rows)
         if (r.input->projected)
-            std::printf("    %c %-6s tol %-5.3g %7.2f Mpx/s   %s\n", r.input->id, pathName(r.path), r.toleranceM, r.mpxPerS(),
-                        r.meetsSpeed() ? "met" : "MISSED");
-    std::printf("  memory: ingest RSS <= %.0f x the source raster as float32 (source px x 4 bytes), every input\n", kTargetRasterMultiple);
+            std::printf("    %c %-6s tol %-5.3g %7.2f Mpx/s   %s\n", r.input->id, pathName(r.path), r.toleranceM,
+                        r.mpxPerS(), r.meetsSpeed() ? "met" : "MISSED");
+    std::printf("  memory: ingest RSS <= %.0f x the source raster as float32 (source px x 4 bytes), every input\n",
+                kTargetRasterMultiple);
     for (const Row& r : rows)
-        std::printf("    %c %-6s tol %-5.3g %7.1f MB = %5.2f x %6.1f MB   %s\n", r.input->id, pathName(r.path), r.toleranceM,
-                    mb(r.ingestRss), r.rasterMultiple(), r.sourcePixels() * 4 / 1e6, r.meetsMemory() ? "met" : "MISSED");
+        std::printf("    %c %-6s tol %-5.3g %7.1f MB = %5.2f x %6.1f MB   %s\n", r.input->id, pathName(r.path),
+                    r.toleranceM, mb(r.ingestRss), r.rasterMultiple(), r.sourcePixels() * 4 / 1e6,
+                    r.meetsMemory() ? "met" : "MISSED");
 }
 
 void writeCsv(const std::vector<Row>& rows, const std::string& path) {
     std::ofstream f(path);
     if (!f) throw hc::Error(path + ": cannot open for writing (--csv)");
     f << "input,file,path,tolerance_m,source_width,source_height,working_width,working_height,cells,ingest_ms,write_ms,"
-         "total_ms,source_mpx_per_s,peak_rss_mb,ingest_rss_mb,x_raster_f32,max_dev_m,rms_m,speed_target,memory_target\n";
+         "total_ms,source_mpx_per_s,peak_rss_mb,ingest_rss_mb,x_raster_f32,max_dev_m,rms_m,speed_target,memory_"
+         "target\n";
     for (const Row& r : rows) {
         // write_ms is empty for stream: the write happens inside ingest
         const std::string write = r.path == Path::Memory ? fmt::format("{:.3f}", r.writeS * 1e3) : "";
-        f << fmt::format("{},{},{},{:g},{},{},{},{},{},{:.3f},{},{:.3f},{:.4f},{:.2f},{:.2f},{:.4f},{:.6g},{:.6g},{},{}\n", r.input->id,
-                         r.input->file, pathName(r.path), r.toleranceM, r.last.sourceWidth, r.last.sourceHeight, r.last.workingWidth,
-                         r.last.workingHeight, r.last.cells, r.ingestS * 1e3, write, r.totalS * 1e3, r.mpxPerS(), mb(r.peakRss),
-                         mb(r.ingestRss), r.rasterMultiple(), r.last.maxDevM, r.last.rmsDevM,
-                         r.input->projected ? (r.meetsSpeed() ? "met" : "MISSED") : "n/a", r.meetsMemory() ? "met" : "MISSED");
+        f << fmt::format(
+            "{},{},{},{:g},{},{},{},{},{},{:.3f},{},{:.3f},{:.4f},{:.2f},{:.2f},{:.4f},{:.6g},{:.6g},{},{}\n",
+            r.input->id, r.input->file, pathName(r.path), r.toleranceM, r.last.sourceWidth, r.last.sourceHeight,
+            r.last.workingWidth, r.last.workingHeight, r.last.cells, r.ingestS * 1e3, write, r.totalS * 1e3,
+            r.mpxPerS(), mb(r.peakRss), mb(r.ingestRss), r.rasterMultiple(), r.last.maxDevM, r.last.rmsDevM,
+            r.input->projected ? (r.meetsSpeed() ? "met" : "MISSED") : "n/a", r.meetsMemory() ? "met" : "MISSED");
     }
     if (!f.flush()) throw hc::Error(path + ": write failed (--csv)");
 }
@@ -264,25 +270,41 @@ int main(int argc, char** argv) {
         std::optional<double> maxCellM;
         int repeat = 3;
         unsigned threads = 0;
-        hc::cli::Parser p("hc-bench-ingest", "[options]",
-                          "Benchmarks ingest (raster -> grid) on real SRTM3 data: (a) N00E010.hgt, geographic, projected\n"
-                          "to UTM by the ingest; (b) the same tile warped to UTM 32N, Float32, 90 m (the projected case);\n"
-                          "(c) the mosaic N00E010 + N00E011, 2401 x 1201. Each input, tolerance and path runs in fresh\n"
-                          "child processes; it prints best times, peak memory and achieved deviation, then checks the\n"
-                          "targets (>= 10 M source px/s for (b); ingest memory <= 3 x the raster as float32). MB = 10^6 bytes.");
-        p.option("--data", "DIR", "folder holding N00E010.hgt and N00E011.hgt.zip (default ../shared/data, from the current directory)", dataDir);
-        p.option("--work", "DIR", "folder for the prepared inputs and written grids; created if missing and kept\n"
-                 "      (default: a fresh /tmp/hc-bench-ingest-XXXXXX, removed at exit)", workDir);
-        p.option("--tolerances", "LIST", "comma-separated ingest tolerances, metres; one row per input and tolerance (default 0.25,1)", tolerances);
-        p.option("--paths", "LIST", "comma-separated: mem = ingest() then writeGrid(), the grid in memory; stream =\n"
-                 "      ingestToFile(), cells streamed into the file as hc-ingest does (default mem,stream)", paths);
-        p.option("--repeat", "N", "runs per case, each in a fresh process; times are the best run, memory the largest (default 3)", repeat);
-        p.option("--max-cell", "M", "coarsest cell, metres (default: the ingest's, largest finest * 2^k <= 96 m, which for\n"
-                 "      90 m SRTM pixels is the pixel itself: no cell merges and the tolerance changes nothing)", maxCellM);
+        hc::cli::Parser p(
+            "hc-bench-ingest", "[options]",
+            "Benchmarks ingest (raster -> grid) on real SRTM3 data: (a) N00E010.hgt, geographic, projected\n"
+            "to UTM by the ingest; (b) the same tile warped to UTM 32N, Float32, 90 m (the projected case);\n"
+            "(c) the mosaic N00E010 + N00E011, 2401 x 1201. Each input, tolerance and path runs in fresh\n"
+            "child processes; it prints best times, peak memory and achieved deviation, then checks the\n"
+            "targets (>= 10 M source px/s for (b); ingest memory <= 3 x the raster as float32). MB = 10^6 bytes.");
+        p.option("--data", "DIR",
+                 "folder holding N00E010.hgt and N00E011.hgt.zip (default ../shared/data, from the current directory)",
+                 dataDir);
+        p.option("--work", "DIR",
+                 "folder for the prepared inputs and written grids; created if missing and kept\n"
+                 "      (default: a fresh /tmp/hc-bench-ingest-XXXXXX, removed at exit)",
+                 workDir);
+        p.option("--tolerances", "LIST",
+                 "comma-separated ingest tolerances, metres; one row per input and tolerance (default 0.25,1)",
+                 tolerances);
+        p.option("--paths", "LIST",
+                 "comma-separated: mem = ingest() then writeGrid(), the grid in memory; stream =\n"
+                 "      ingestToFile(), cells streamed into the file as hc-ingest does (default mem,stream)",
+                 paths);
+        p.option("--repeat", "N",
+                 "runs per case, each in a fresh process; times are the best run, memory the largest (default 3)",
+                 repeat);
+        p.option("--max-cell", "M",
+                 "coarsest cell, metres (default: the ingest's, largest finest * 2^k <= 96 m, which for\n"
+                 "      90 m SRTM pixels is the pixel itself: no cell merges and the tolerance changes nothing)",
+                 maxCellM);
         p.option("--threads", "N", "ingest worker threads (default 0 = all cores)", threads);
         p.option("--csv", "OUT.csv", "also write the table's rows as CSV with a header line (default: none)", csv);
-        p.option("--plot", "PREFIX", "also draw the table as two SVG plots, PREFIX_speed.svg (source Mpx/s per row, the\n"
-                 "      10 Mpx/s target) and PREFIX_memory.svg (ingest RSS / raster float32 size, the 3x target) (default: none)", plot);
+        p.option("--plot", "PREFIX",
+                 "also draw the table as two SVG plots, PREFIX_speed.svg (source Mpx/s per row, the\n"
+                 "      10 Mpx/s target) and PREFIX_memory.svg (ingest RSS / raster float32 size, the 3x target) "
+                 "(default: none)",
+                 plot);
         if (!p.parse(argc, argv)) return 0;
         if (repeat < 1) throw hc::Error("--repeat " + std::to_string(repeat) + ": must be at least 1");
         std::vector<double> tols;
@@ -300,13 +322,16 @@ int main(int argc, char** argv) {
         const fs::path tile = fs::path(dataDir) / "N00E010.hgt", east = fs::path(dataDir) / "N00E011.hgt.zip";
         for (const fs::path& f : {tile, east})
             if (!fs::is_regular_file(f))
-                throw hc::Error(f.string() + ": missing (the SRTM tile this benchmark needs; point --data at the folder holding it)");
+                throw hc::Error(
+                    f.string() +
+                    ": missing (the SRTM tile this benchmark needs; point --data at the folder holding it)");
 
         TempDir temp;
         fs::path work;
         if (workDir.empty()) {
             std::string pattern = (fs::temp_directory_path() / "hc-bench-ingest-XXXXXX").string();
-            if (!mkdtemp(pattern.data())) throw hc::Error(pattern + ": cannot create a work folder: " + std::strerror(errno));
+            if (!mkdtemp(pattern.data()))
+                throw hc::Error(pattern + ": cannot create a work folder: " + std::strerror(errno));
             work = temp.path = pattern;
         } else {
             work = workDir;
@@ -318,10 +343,14 @@ int main(int argc, char** argv) {
         std::printf("preparing inputs in %s ...\n", work.c_str());
         inChild<Nothing>("preparing the inputs", [&](Nothing&) { prepareInputs(tile, east, work); });
         const std::vector<Input> inputs{
-            {'a', tile.string(), "N00E010.hgt: geographic Int16, projected to UTM 32N by the ingest (GeographicLib)", false},
-            {'b', (work / "N00E010_utm32n.tif").string(), "N00E010_utm32n.tif: warped by GDAL to EPSG:32632, Float32, 90 m, kept as is", true},
-            {'c', (work / "N00E010+E011.vrt").string(), "N00E010+E011.vrt: VRT mosaic of the two tiles, geographic, like a", false},
-            {'d', (work / "N00E010+E011_utm32n_30m.tif").string(), "N00E010+E011_utm32n_30m.tif: the mosaic warped to 30 m UTM 32N, Float32 (scaling)", true},
+            {'a', tile.string(), "N00E010.hgt: geographic Int16, projected to UTM 32N by the ingest (GeographicLib)",
+             false},
+            {'b', (work / "N00E010_utm32n.tif").string(),
+             "N00E010_utm32n.tif: warped by GDAL to EPSG:32632, Float32, 90 m, kept as is", true},
+            {'c', (work / "N00E010+E011.vrt").string(),
+             "N00E010+E011.vrt: VRT mosaic of the two tiles, geographic, like a", false},
+            {'d', (work / "N00E010+E011_utm32n_30m.tif").string(),
+             "N00E010+E011_utm32n_30m.tif: the mosaic warped to 30 m UTM 32N, Float32 (scaling)", true},
         };
 
         std::vector<Row> rows;
@@ -333,17 +362,21 @@ int main(int argc, char** argv) {
                     const std::string gridName = fmt::format("{}-{}-tol{:g}.hcg", in.id, pathName(path), tol);
                     for (int k = 0; k < repeat; ++k) {
                         if (interactive)
-                            std::fprintf(stderr, "\r%c %s tolerance %g m: run %d of %d ", in.id, pathName(path), tol, k + 1, repeat);
+                            std::fprintf(stderr, "\r%c %s tolerance %g m: run %d of %d ", in.id, pathName(path), tol,
+                                         k + 1, repeat);
                         RunResult r = runCase(in.file, path, tol, maxCellM, threads, (work / gridName).string());
                         if (k > 0 && r.cells != row.last.cells)
-                            std::fprintf(stderr, "\nhc-bench-ingest: warning: %c at %g m gave %llu cells, then %llu: not deterministic\n",
+                            std::fprintf(stderr,
+                                         "\nhc-bench-ingest: warning: %c at %g m gave %llu cells, then %llu: not "
+                                         "deterministic\n",
                                          in.id, tol, (unsigned long long)row.last.cells, (unsigned long long)r.cells);
                         row.last = r;
                         row.ingestS = std::min(row.ingestS, r.ingestS);
                         row.writeS = std::min(row.writeS, r.writeS);
                         row.totalS = std::min(row.totalS, r.ingestS + r.writeS);
                         row.peakRss = std::max(row.peakRss, r.peakRss);
-                        row.ingestRss = std::max(row.ingestRss, r.peakRss > r.baselineRss ? r.peakRss - r.baselineRss : 0);
+                        row.ingestRss =
+                            std::max(row.ingestRss, r.peakRss > r.baselineRss ? r.peakRss - r.baselineRss : 0);
                     }
                     rows.push_back(row);
                 }
@@ -352,11 +385,15 @@ int main(int argc, char** argv) {
         std::printf("\ninputs\n");
         for (const Input& in : inputs) std::printf("  %c  %s\n", in.id, in.what.c_str());
         const std::string maxCell = maxCellM ? fmt::format("{:g} m", *maxCellM) : "default";
-        std::printf("\nbest of %d run%s, ingest threads %s, max cell %s; paths: mem = ingest() then writeGrid(), stream =\n"
-                    "ingestToFile() (hc-ingest; its ingest ms includes writing); peak = max RSS of the run's process when ingest\n"
-                    "returned; ingest RSS = peak - RSS before ingest (after GDALAllRegister and a first CRS look-up); x raster f32 = ingest RSS / (source\n"
-                    "px x 4 B); total = best of ingest + write; source Mpx/s = source px / best ingest time; MB = 10^6 bytes\n\n",
-                    repeat, repeat == 1 ? "" : "s", threads ? std::to_string(threads).c_str() : "all cores", maxCell.c_str());
+        std::printf(
+            "\nbest of %d run%s, ingest threads %s, max cell %s; paths: mem = ingest() then writeGrid(), stream =\n"
+            "ingestToFile() (hc-ingest; its ingest ms includes writing); peak = max RSS of the run's process when "
+            "ingest\n"
+            "returned; ingest RSS = peak - RSS before ingest (after GDALAllRegister and a first CRS look-up); x raster "
+            "f32 = ingest RSS / (source\n"
+            "px x 4 B); total = best of ingest + write; source Mpx/s = source px / best ingest time; MB = 10^6 "
+            "bytes\n\n",
+            repeat, repeat == 1 ? "" : "s", threads ? std::to_string(threads).c_str() : "all cores", maxCell.c_str());
         printTable(rows);
         printTargets(rows);
         if (!csv.empty()) {
@@ -365,16 +402,19 @@ int main(int argc, char** argv) {
         }
         if (!plot.empty() && !rows.empty()) {
             hc::bench::BarPlot speed, memory;
-            speed.title = "hc-bench-ingest: source pixels per second of ingest (best of " + std::to_string(repeat) + ")";
+            speed.title =
+                "hc-bench-ingest: source pixels per second of ingest (best of " + std::to_string(repeat) + ")";
             speed.xLabel = "M source pixels / s";
             speed.segmentNames = {"Mpx/s"};
-            speed.markers = {{"target " + fmt::format("{:g}", kTargetMpxPerS) + " Mpx/s (projected input b)", kTargetMpxPerS}};
+            speed.markers = {
+                {"target " + fmt::format("{:g}", kTargetMpxPerS) + " Mpx/s (projected input b)", kTargetMpxPerS}};
             memory.title = "hc-bench-ingest: ingest memory as a multiple of the raster's float32 size";
             memory.xLabel = "ingest RSS / (source px x 4 bytes)";
             memory.segmentNames = {"x raster f32"};
             memory.markers = {{"target " + fmt::format("{:g}", kTargetRasterMultiple) + "x", kTargetRasterMultiple}};
             for (const Row& r : rows) {
-                const std::string label = std::string(1, r.input->id) + " " + pathName(r.path) + " tol " + fmt::format("{:g}", r.toleranceM);
+                const std::string label =
+                    std::string(1, r.input->id) + " " + pathName(r.path) + " tol " + fmt::format("{:g}", r.toleranceM);
                 speed.rows.push_back({label, {r.mpxPerS()}});
                 memory.rows.push_back({label, {r.rasterMultiple()}});
             }

@@ -78,22 +78,25 @@ int main(int argc, char** argv) {
                 for (const std::string& t : hc::bench::splitList(value(), "--threads")) {
                     char* end = nullptr;
                     const long n = std::strtol(t.c_str(), &end, 10);
-                    if (*end || n < 0 || n > 4096) throw hc::Error("--threads: '" + t + "' is not a thread count (0 .. 4096)");
+                    if (*end || n < 0 || n > 4096)
+                        throw hc::Error("--threads: '" + t + "' is not a thread count (0 .. 4096)");
                     threads.push_back(unsigned(n));
                 }
             } else if (a == "--calls") {
                 const std::string v = value();
                 char* end = nullptr;
                 const long n = std::strtol(v.c_str(), &end, 10);
-                if (v.empty() || *end || n < 10 || n > 100000000) throw hc::Error("--calls: '" + v + "' is not a count (10 .. 1e8)");
+                if (v.empty() || *end || n < 10 || n > 100000000)
+                    throw hc::Error("--calls: '" + v + "' is not a count (10 .. 1e8)");
                 calls = int(n);
             } else {
                 throw hc::Error("unknown option " + a + " (see --help)");
             }
         }
-        std::printf("hc-bench-parallel: %u hardware threads, load average %s, %d calls a run, best of 3\n", std::thread::hardware_concurrency(),
-                    hc::bench::loadAverage().c_str(), calls);
-        std::printf("%8s %16s %22s %22s\n", "threads", "back to back us", "after 20 us pauses us", "after 1 ms pauses us");
+        std::printf("hc-bench-parallel: %u hardware threads, load average %s, %d calls a run, best of 3\n",
+                    std::thread::hardware_concurrency(), hc::bench::loadAverage().c_str(), calls);
+        std::printf("%8s %16s %22s %22s\n", "threads", "back to back us", "after 20 us pauses us",
+                    "after 1 ms pauses us");
         for (const unsigned t : threads) {
             const double b2b = perCallUs(t, calls, std::chrono::microseconds(0));
             const double shortPause = perCallUs(t, calls, std::chrono::microseconds(20));

@@ -11,8 +11,8 @@
 // fixed oblique camera over the flood (hc::scenes::floodCamera). Before building the lists the child estimates
 // their size (hc::scenes::estimateInfluenceLists) plus what a render holds beside them; if that exceeds the memory
 // available (MemAvailable, or what ulimit -v leaves), it skips the lists and the frames and the tables say so, rather
-// than being killed for memory (today's lists take ~220 B a cell: 22 GB at 100 M cells). Stage times are the best over the repeats;
-// Gaussians/s = the cascades' kernel evaluations / approximation time; rays/s = pixels / ray casting time.
+// than being killed for memory (today's lists take ~220 B a cell: 22 GB at 100 M cells). Stage times are the best over
+// the repeats; Gaussians/s = the cascades' kernel evaluations / approximation time; rays/s = pixels / ray casting time.
 // Targets on this 2-core machine: approximation >= 2 G Gaussians/s; ray casting of 1920 x 1080 within 250 ms
 // (>= 8.29 M rays/s at other sizes).
 // Why a program and not a test: the figures depend on the machine; tests never time anything.
@@ -68,7 +68,7 @@ constexpr double kTargetRaycastMs = 250.0;    // ray casting of a 1920 x 1080 fr
 constexpr double kTargetRaysPerS = 1920.0 * 1080.0 / (kTargetRaycastMs / 1e3);  // the same as a rate (other sizes)
 constexpr double kTargetGlFrameMs = 8.0;  // GL backend on a GPU (issue 5): a whole 1920 x 1080 frame
 
-constexpr int kMaxLevels = 24;        // cells-per-level slots sent back from a child
+constexpr int kMaxLevels = 24;  // cells-per-level slots sent back from a child
 // The memory guard before building lists: cells sampled for their estimated size, and what a render holds beside
 // the grid and the lists: per cell (the Scene's arrays) and per cascade texel and pixel (the frame's buffers).
 // Measured as peak RSS - grid RSS - list bytes of two scenes (Petzenkirchen 1.84 M cells: 240 MB, Marchfeld 7.53 M:
@@ -83,8 +83,8 @@ constexpr double kRenderBytesPerTexelOrPixel = 40;
 struct CascadeOut {
     double nearM, farM, texelM, approximationMs;
     uint64_t visibleTexels, gaussians;
-    int pyramidLevel;        // -1: no pyramid level fits the cascade (or none was built)
-    uint64_t pyramidTexels;  // texels copied from the pyramid
+    int pyramidLevel;              // -1: no pyramid level fits the cascade (or none was built)
+    uint64_t pyramidTexels;        // texels copied from the pyramid
     uint64_t pyramidInterpolated;  // texels interpolated from a coarser pyramid level
 };
 
@@ -105,19 +105,21 @@ struct RunResult {
     double camera[6] = {};  // x, y, z (world), yaw, pitch, fov
     int width = 0, height = 0, repeats = 0;
     // Best over the repeats, per stage.
-    double fittingMs = 1e300, approximationMs = 1e300, mipmapMs = 1e300, raycastMs = 1e300, shadingMs = 1e300, totalMs = 1e300;
+    double fittingMs = 1e300, approximationMs = 1e300, mipmapMs = 1e300, raycastMs = 1e300, shadingMs = 1e300,
+           totalMs = 1e300;
     double worstApproximationMs = 0, worstRaycastMs = 0;
     double gpuMs = 1e300, readbackMs = 0;  // GL: best GPU span; one read-back of the frame to host memory
     uint64_t gaussians = 0, rays = 0, hits = 0, wetHits = 0;
     int cascadeCount = 0;
-    CascadeOut cascades[4] = {};  // of the run with the best approximation time
+    CascadeOut cascades[4] = {};                         // of the run with the best approximation time
     uint64_t baselineRss = 0, gridRss = 0, peakRss = 0;  // bytes: before generating; after the grid; at the end
-    char image[512] = {};         // the PNG written, or empty
-    char device[256] = {};        // what rendered: "CPU" or the GL renderer and version
+    char image[512] = {};                                // the PNG written, or empty
+    char device[256] = {};                               // what rendered: "CPU" or the GL renderer and version
     // --fly-frames: means over frames 2..N of a camera flying forward, without and with a CascadeCache.
     double flyApproxFreshMs = 0, flyApproxCachedMs = 0, flyTotalFreshMs = 0, flyTotalCachedMs = 0, flyKept = 0;
     double flyUploadFreshMs = 0, flyUploadCachedMs = 0, flyUploadFreshMB = 0, flyUploadCachedMB = 0;  // GL out of core
-    double flyCellsFresh = 0, flyCellsCached = 0;  // grid cells the approximation visited per frame (CascadeStats::cellsVisited)
+    double flyCellsFresh = 0,
+           flyCellsCached = 0;  // grid cells the approximation visited per frame (CascadeStats::cellsVisited)
     // --pyramid: the surface pyramid's build time and bytes.
     double pyramidMs = 0;
     uint64_t pyramidBytes = 0;
@@ -128,7 +130,7 @@ struct RunResult {
 
 struct Settings {
     double scale = 1;
-    double cells = 0;       // --cells: every scenario's target cell count (0: the report's count / scale)
+    double cells = 0;  // --cells: every scenario's target cell count (0: the report's count / scale)
     int width = 1920, height = 1080, repeat = 3;
     hc::render::RenderOptions options;
     std::string imagesDir;
@@ -138,14 +140,15 @@ struct Settings {
     double flyStepM = 10;   // metres forward per fly-through frame
     bool pyramid = false;   // build the surface pyramid and render from it (CPU: copies; texel sizes on its ladder)
     bool accuracy = false;  // measure the last frame's hits against the exact surface
-    bool outOfCore = false; // write the grid to a file and render from it out of core (render::Scene over a GridRegionReader)
+    bool outOfCore =
+        false;  // write the grid to a file and render from it out of core (render::Scene over a GridRegionReader)
 };
 
 // The rendered error (--accuracy): every terrain hit of the frame (not a wall, no water over it) against the exact
 // surface at the hit's position, in parallel; the quantity the issue 13 targets keep "no worse than today's".
 // `lists` null: out of core, the exact surface from the cells around the hits, read from `file`.
-void measureAccuracy(const hc::render::Frame& f, const Grid& g, const hc::influence::InfluenceLists* lists, const hc::GridRegionReader* file,
-                     unsigned threads, RunResult& r) {
+void measureAccuracy(const hc::render::Frame& f, const Grid& g, const hc::influence::InfluenceLists* lists,
+                     const hc::GridRegionReader* file, unsigned threads, RunResult& r) {
     std::vector<std::array<double, 2>> points;
     std::vector<double> heights;
     for (size_t i = 0; i < f.distanceM.size(); ++i) {
@@ -215,11 +218,13 @@ RunResult runScenario(const Scenario& sc, const Settings& set) {
             file = std::make_unique<hc::GridRegionReader>(written.path.string());
         } else {
             // Lists that would not fit are not built: the scenario reports its grid and skips the frames.
-            r.listsEstimateBytes = hc::scenes::estimateInfluenceLists(g, hc::influence::KernelParams{}, kListsEstimateSample).bytes;
-            const double texelsAndPixels = double(set.options.cascades) * double(set.options.texelsPerSide) * double(set.options.texelsPerSide) +
-                                           double(set.width) * double(set.height);
-            r.renderNeedBytes = r.listsEstimateBytes +
-                                uint64_t(kRenderBytesPerCellBesideLists * double(g.cellCount()) + kRenderBytesPerTexelOrPixel * texelsAndPixels);
+            r.listsEstimateBytes =
+                hc::scenes::estimateInfluenceLists(g, hc::influence::KernelParams{}, kListsEstimateSample).bytes;
+            const double texelsAndPixels =
+                double(set.options.cascades) * double(set.options.texelsPerSide) * double(set.options.texelsPerSide) +
+                double(set.width) * double(set.height);
+            r.renderNeedBytes = r.listsEstimateBytes + uint64_t(kRenderBytesPerCellBesideLists * double(g.cellCount()) +
+                                                                kRenderBytesPerTexelOrPixel * texelsAndPixels);
             r.memAvailableBytes = hc::bench::memoryAvailableBytes();
             if (r.renderNeedBytes > r.memAvailableBytes) {
                 r.renderSkipped = true;
@@ -247,13 +252,15 @@ RunResult runScenario(const Scenario& sc, const Settings& set) {
             r.pyramidBytes = pyramid->bytes();
         }
         const hc::influence::SurfacePyramid* pyr = pyramid ? &*pyramid : nullptr;
-        std::unique_ptr<hc::render::Scene> scenePtr = file ? std::make_unique<hc::render::Scene>(*file, hc::influence::KernelParams{}, pyr)
-                                                           : std::make_unique<hc::render::Scene>(g, *lists, pyr);
+        std::unique_ptr<hc::render::Scene> scenePtr =
+            file ? std::make_unique<hc::render::Scene>(*file, hc::influence::KernelParams{}, pyr)
+                 : std::make_unique<hc::render::Scene>(g, *lists, pyr);
         hc::render::Scene& scene = *scenePtr;
         if (file) {
             // The same view box as in memory (the summary bounds the water's top by max elevation + max depth only).
             double top = -HUGE_VAL;
-            for (size_t i = 0; i < g.cellCount(); ++i) top = std::max(top, double(g.values[0][i]) + std::max(0.0, double(g.values[1][i])));
+            for (size_t i = 0; i < g.cellCount(); ++i)
+                top = std::max(top, double(g.values[0][i]) + std::max(0.0, double(g.values[1][i])));
             scene.zMax = top;
         }
         const hc::render::Camera cam = hc::scenes::floodCamera(sc, g, set.width, set.height);
@@ -283,10 +290,12 @@ RunResult runScenario(const Scenario& sc, const Settings& set) {
         for (int k = 0; k < set.repeat; ++k) {
             say(fmt::format("rendering, frame {} of {} ...", k + 1, set.repeat).c_str());
             hc::render::Timings tm;
-            // GL: the measured frames end in the texture, as the viewer draws them; the picture is read back once below.
-            // Each from scratch: the renderer would keep the last frame's texels (the same camera: all).
-            if (gl) gl->forgetCascades(), gl->renderToTexture(cam, set.options, tm);
-            else frame = hc::render::renderFrame(scene, cam, set.options, tm);
+            // GL: the measured frames end in the texture, as the viewer draws them; the picture is read back once
+            // below. Each from scratch: the renderer would keep the last frame's texels (the same camera: all).
+            if (gl)
+                gl->forgetCascades(), gl->renderToTexture(cam, set.options, tm);
+            else
+                frame = hc::render::renderFrame(scene, cam, set.options, tm);
             r.gpuMs = std::min(r.gpuMs, tm.gpuMs);
             r.fittingMs = std::min(r.fittingMs, tm.fittingMs);
             r.mipmapMs = std::min(r.mipmapMs, tm.mipmapMs);
@@ -303,9 +312,9 @@ RunResult runScenario(const Scenario& sc, const Settings& set) {
                     const auto& cs = tm.cascades[c];
                     r.gaussians += cs.gaussians;
                     if (c < 4)
-                        r.cascades[c] = {cs.nearM,          cs.farM,          cs.texelM,      cs.approximationMs,
-                                         cs.visibleTexels, cs.gaussians,     cs.pyramidLevel, cs.pyramidTexels,
-                                         cs.pyramidInterpolated};
+                        r.cascades[c] = {cs.nearM,           cs.farM,          cs.texelM,
+                                         cs.approximationMs, cs.visibleTexels, cs.gaussians,
+                                         cs.pyramidLevel,    cs.pyramidTexels, cs.pyramidInterpolated};
                 }
             }
             r.rays = tm.rays;
@@ -321,7 +330,9 @@ RunResult runScenario(const Scenario& sc, const Settings& set) {
                 double approx = 0, total = 0, upload = 0;
                 uint64_t kept = 0, visible = 0, cells = 0, uploadBytes = 0;
                 for (int k = 0; k < set.flyFrames; ++k) {
-                    say(fmt::format("fly-through {}, frame {} of {} ...", cached ? "with the cache" : "fresh", k + 1, set.flyFrames).c_str());
+                    say(fmt::format("fly-through {}, frame {} of {} ...", cached ? "with the cache" : "fresh", k + 1,
+                                    set.flyFrames)
+                            .c_str());
                     const hc::render::Camera c = hc::render::flightFrame(cam, set.flyStepM, unsigned(k));
                     hc::render::Timings tm;
                     if (gl) {
@@ -331,8 +342,10 @@ RunResult runScenario(const Scenario& sc, const Settings& set) {
                         (void)hc::render::renderFrame(scene, c, set.options, tm, cached ? &cache : nullptr);
                     }
                     if (k == 0) continue;
-                    approx += tm.approximationMs, total += tm.totalMs, upload += tm.uploadMs, uploadBytes += tm.uploadBytes;
-                    for (const auto& cs : tm.cascades) kept += cs.reusedTexels, visible += cs.visibleTexels, cells += cs.cellsVisited;
+                    approx += tm.approximationMs, total += tm.totalMs, upload += tm.uploadMs,
+                        uploadBytes += tm.uploadBytes;
+                    for (const auto& cs : tm.cascades)
+                        kept += cs.reusedTexels, visible += cs.visibleTexels, cells += cs.cellsVisited;
                 }
                 const double frames = set.flyFrames - 1;
                 (cached ? r.flyApproxCachedMs : r.flyApproxFreshMs) = approx / frames;
@@ -346,7 +359,8 @@ RunResult runScenario(const Scenario& sc, const Settings& set) {
         if (gl) {
             say("reading the frame back ...");
             hc::render::Timings tm;
-            gl->forgetCascades();  // from scratch, as the measured frames (after a flight it would keep its last frame's texels)
+            gl->forgetCascades();  // from scratch, as the measured frames (after a flight it would keep its last
+                                   // frame's texels)
             frame = gl->render(cam, set.options, tm);
             r.readbackMs = tm.readbackMs;
         }
@@ -370,7 +384,9 @@ RunResult runScenario(const Scenario& sc, const Settings& set) {
 double mb(uint64_t bytes) { return double(bytes) / 1e6; }
 
 std::string sizesText(const RunResult& r) { return fmt::format("{:g} - {:g}", r.finestM, r.coarsestM); }
-std::string extentText(const RunResult& r) { return fmt::format("{:.1f} x {:.1f}", r.extentXM / 1e3, r.extentYM / 1e3); }
+std::string extentText(const RunResult& r) {
+    return fmt::format("{:.1f} x {:.1f}", r.extentXM / 1e3, r.extentYM / 1e3);
+}
 double gaussiansPerS(const RunResult& r) { return double(r.gaussians) / (r.approximationMs / 1e3); }
 double raysPerS(const RunResult& r) { return double(r.rays) / (r.raycastMs / 1e3); }
 bool approximationMet(const RunResult& r) { return gaussiansPerS(r) >= kTargetGaussiansPerS; }
@@ -384,7 +400,8 @@ double ms(double v) { return hc::rounded(v, std::chars_format::fixed, 3); }
 double sig6(double v) { return hc::rounded(v, std::chars_format::general, 6); }
 double fixed1(double v) { return hc::rounded(v, std::chars_format::fixed, 1); }
 
-void writeJson(const std::vector<const Scenario*>& scs, const std::vector<RunResult>& rs, const Settings& set, const std::string& path) {
+void writeJson(const std::vector<const Scenario*>& scs, const std::vector<RunResult>& rs, const Settings& set,
+               const std::string& path) {
     using Json = nlohmann::ordered_json;  // keys in the order written
     Json all = Json::array();
     for (size_t k = 0; k < rs.size(); ++k) {
@@ -409,7 +426,8 @@ void writeJson(const std::vector<const Scenario*>& scs, const std::vector<RunRes
         o["generation_s"] = ms(r.generationS);
         o["calibration_s"] = ms(r.calibrationS);
         Json perLevel = Json::array();
-        for (int l = 0; l <= int(std::lround(std::log2(r.coarsestM / r.finestM))) && l < kMaxLevels; ++l) perLevel.push_back(r.cellsPerLevel[l]);
+        for (int l = 0; l <= int(std::lround(std::log2(r.coarsestM / r.finestM))) && l < kMaxLevels; ++l)
+            perLevel.push_back(r.cellsPerLevel[l]);
         o["cells_per_level"] = perLevel;
         o["lists_ms"] = ms(r.listsMs);
         o["list_mean"] = ms(r.listMean);
@@ -417,8 +435,12 @@ void writeJson(const std::vector<const Scenario*>& scs, const std::vector<RunRes
         o["list_max"] = r.listMax;
         o["lists_mb"] = ms(mb(r.listBytes));
         auto degrees = [](double v) { return hc::rounded(v, std::chars_format::fixed, 4); };
-        o["camera"] = {{"x", ms(r.camera[0])}, {"y", ms(r.camera[1])}, {"z", ms(r.camera[2])},
-                       {"yaw_deg", degrees(r.camera[3])}, {"pitch_deg", degrees(r.camera[4])}, {"fov_y_deg", degrees(r.camera[5])}};
+        o["camera"] = {{"x", ms(r.camera[0])},
+                       {"y", ms(r.camera[1])},
+                       {"z", ms(r.camera[2])},
+                       {"yaw_deg", degrees(r.camera[3])},
+                       {"pitch_deg", degrees(r.camera[4])},
+                       {"fov_y_deg", degrees(r.camera[5])}};
         o["width"] = r.width;
         o["height"] = r.height;
         o["cascades_requested"] = set.options.cascades;
@@ -442,9 +464,14 @@ void writeJson(const std::vector<const Scenario*>& scs, const std::vector<RunRes
         Json cascades = Json::array();
         for (int c = 0; c < r.cascadeCount; ++c) {
             const CascadeOut& cs = r.cascades[c];
-            cascades.push_back({{"near_m", ms(cs.nearM)}, {"far_m", ms(cs.farM)}, {"texel_m", sig6(cs.texelM)},
-                                {"visible_texels", cs.visibleTexels}, {"gaussians", cs.gaussians}, {"approximation_ms", ms(cs.approximationMs)},
-                                {"pyramid_level", cs.pyramidLevel}, {"pyramid_texels", cs.pyramidTexels},
+            cascades.push_back({{"near_m", ms(cs.nearM)},
+                                {"far_m", ms(cs.farM)},
+                                {"texel_m", sig6(cs.texelM)},
+                                {"visible_texels", cs.visibleTexels},
+                                {"gaussians", cs.gaussians},
+                                {"approximation_ms", ms(cs.approximationMs)},
+                                {"pyramid_level", cs.pyramidLevel},
+                                {"pyramid_texels", cs.pyramidTexels},
                                 {"pyramid_interpolated", cs.pyramidInterpolated}});
         }
         o["cascades"] = cascades;
@@ -489,24 +516,30 @@ void writeJson(const std::vector<const Scenario*>& scs, const std::vector<RunRes
     if (!f.flush()) throw hc::Error(path + ": write failed (--json)");
 }
 
-void writeCsv(const std::vector<const Scenario*>& scs, const std::vector<RunResult>& rs, const Settings& set, const std::string& path) {
+void writeCsv(const std::vector<const Scenario*>& scs, const std::vector<RunResult>& rs, const Settings& set,
+              const std::string& path) {
     std::ofstream f(path);
     if (!f) throw hc::Error(path + ": cannot open for writing (--csv)");
-    f << "scenario,scale,extent_x_m,extent_y_m,finest_m,coarsest_m,target_cells,cells,wet_cells,threshold_m,generation_s,lists_ms,list_mean,"
-         "lists_mb,width,height,cascades,texels,fitting_ms,approximation_ms,mipmap_ms,raycast_ms,shading_ms,total_ms,gaussians,"
-         "gaussians_per_s,rays,rays_per_s,peak_rss_mb,gtx1080_approximation_ms,gtx1080_raycast_ms,approximation_target,raycast_target,"
+    f << "scenario,scale,extent_x_m,extent_y_m,finest_m,coarsest_m,target_cells,cells,wet_cells,threshold_m,generation_"
+         "s,lists_ms,list_mean,"
+         "lists_mb,width,height,cascades,texels,fitting_ms,approximation_ms,mipmap_ms,raycast_ms,shading_ms,total_ms,"
+         "gaussians,"
+         "gaussians_per_s,rays,rays_per_s,peak_rss_mb,gtx1080_approximation_ms,gtx1080_raycast_ms,approximation_target,"
+         "raycast_target,"
          "gpu_ms,readback_ms\n";
     for (size_t k = 0; k < rs.size(); ++k) {
         const Scenario& sc = *scs[k];
         const RunResult& r = rs[k];
-        f << fmt::format("{},{:g},{:.0f},{:.0f},{:g},{:g},{:.0f},{},{},{:.6g},{:.3f},{:.3f},{:.3f},{:.3f},{},{},{},{},{:.3f},{:.3f},{:.3f},{:.3f},{:.3f},{:.3f},{},{:.6g},{},{:.6g},"
-                 "{:.1f},{:.1f},{:.1f},{},{},{:.3f},{:.3f}\n",
-                 sc.name, set.scale, r.extentXM, r.extentYM, r.finestM, r.coarsestM, r.targetCells,
-                 r.cells, r.wetCells, r.thresholdM, r.generationS, r.listsMs, r.listMean,
-                 mb(r.listBytes), r.width, r.height, set.options.cascades, set.options.texelsPerSide, r.fittingMs, r.approximationMs,
-                 r.mipmapMs, r.raycastMs, r.shadingMs, r.totalMs, r.gaussians, gaussiansPerS(r),
-                 r.rays, raysPerS(r), mb(r.peakRss), sc.gpuApproxMs, sc.gpuRaycastMs,
-                 approximationMet(r) ? "met" : "MISSED", raycastMet(r) ? "met" : "MISSED", r.gpuMs < 1e300 ? r.gpuMs : 0.0, r.readbackMs);
+        f << fmt::format(
+            "{},{:g},{:.0f},{:.0f},{:g},{:g},{:.0f},{},{},{:.6g},{:.3f},{:.3f},{:.3f},{:.3f},{},{},{},{},{:.3f},{:.3f},"
+            "{:.3f},{:.3f},{:.3f},{:.3f},{},{:.6g},{},{:.6g},"
+            "{:.1f},{:.1f},{:.1f},{},{},{:.3f},{:.3f}\n",
+            sc.name, set.scale, r.extentXM, r.extentYM, r.finestM, r.coarsestM, r.targetCells, r.cells, r.wetCells,
+            r.thresholdM, r.generationS, r.listsMs, r.listMean, mb(r.listBytes), r.width, r.height,
+            set.options.cascades, set.options.texelsPerSide, r.fittingMs, r.approximationMs, r.mipmapMs, r.raycastMs,
+            r.shadingMs, r.totalMs, r.gaussians, gaussiansPerS(r), r.rays, raysPerS(r), mb(r.peakRss), sc.gpuApproxMs,
+            sc.gpuRaycastMs, approximationMet(r) ? "met" : "MISSED", raycastMet(r) ? "met" : "MISSED",
+            r.gpuMs < 1e300 ? r.gpuMs : 0.0, r.readbackMs);
     }
     if (!f.flush()) throw hc::Error(path + ": write failed (--csv)");
 }
@@ -517,71 +550,114 @@ int main(int argc, char** argv) {
     hc::keepFreedMemory();  // frames reuse the last one's pages, as in hc-view and hc-render's flights (core/heap.h)
     return hc::cli::run("hc-bench", [&] {
         Settings set;
-        std::string size = "1920x1080", scenarios = "Marchfeld,Petzenkirchen,Wachau,Florence", csv, json, plot, backendText = "cpu";
-        hc::cli::Parser p("hc-bench", "[options]",
-                          "Benchmarks the CPU renderer on synthetic stand-ins for the technical report's four flood scenes\n"
-                          "(Marchfeld 82.9 x 57.1 km, 3-96 m cells, 7.46 M cells; Petzenkirchen 15.4 x 16.0 km, 0.75-96 m, 1.81 M;\n"
-                          "Wachau 24.1 x 16.5 km, 3-96 m, 1.95 M; Florence 44.6 x 28.2 km, 3-96 m, 4.53 M): terrain with a meandering\n"
-                          "river valley and a flood (water_depth), generated deterministically as an adaptive quadtree with about\n"
-                          "the report's cell count. Each scenario runs in its own process: generate, build the influence lists\n"
-                          "(sigma 1, R 3.5), render --repeat frames from a fixed oblique camera over the flood; it prints the best\n"
-                          "stage times beside the report's GTX 1080 times, Gaussians/s, rays/s and peak RSS, then checks the\n"
-                          "targets (approximation >= 2 G Gaussians/s; ray casting of 1920x1080 within 250 ms). MB = 10^6 bytes.");
-        p.option("--scale", "F", "divide every scenario's cell count by F > 0; below 1 asks for more cells than the report's\n"
-                 "      (the refinement threshold follows; the finest size doubles where the forced wet-edge and bank cells alone\n"
-                 "      exceed the count, and halves where the domain holds fewer than 1.5 x the count at it) (default 1)", set.scale);
-        p.option("--cells", "N", "every scenario's target cell count instead (e.g. 1e8; scenarios whose influence lists and\n"
+        std::string size = "1920x1080", scenarios = "Marchfeld,Petzenkirchen,Wachau,Florence", csv, json, plot,
+                    backendText = "cpu";
+        hc::cli::Parser p(
+            "hc-bench", "[options]",
+            "Benchmarks the CPU renderer on synthetic stand-ins for the technical report's four flood scenes\n"
+            "(Marchfeld 82.9 x 57.1 km, 3-96 m cells, 7.46 M cells; Petzenkirchen 15.4 x 16.0 km, 0.75-96 m, 1.81 M;\n"
+            "Wachau 24.1 x 16.5 km, 3-96 m, 1.95 M; Florence 44.6 x 28.2 km, 3-96 m, 4.53 M): terrain with a "
+            "meandering\n"
+            "river valley and a flood (water_depth), generated deterministically as an adaptive quadtree with about\n"
+            "the report's cell count. Each scenario runs in its own process: generate, build the influence lists\n"
+            "(sigma 1, R 3.5), render --repeat frames from a fixed oblique camera over the flood; it prints the best\n"
+            "stage times beside the report's GTX 1080 times, Gaussians/s, rays/s and peak RSS, then checks the\n"
+            "targets (approximation >= 2 G Gaussians/s; ray casting of 1920x1080 within 250 ms). MB = 10^6 bytes.");
+        p.option(
+            "--scale", "F",
+            "divide every scenario's cell count by F > 0; below 1 asks for more cells than the report's\n"
+            "      (the refinement threshold follows; the finest size doubles where the forced wet-edge and bank cells "
+            "alone\n"
+            "      exceed the count, and halves where the domain holds fewer than 1.5 x the count at it) (default 1)",
+            set.scale);
+        p.option("--cells", "N",
+                 "every scenario's target cell count instead (e.g. 1e8; scenarios whose influence lists and\n"
                  "      frame would not fit in the memory available are generated but not rendered, and say so)\n"
-                 "      (default: the report's count / --scale)", set.cells);
-        p.option("--scenarios", "LIST", "comma-separated subset, in the order given (default Marchfeld,Petzenkirchen,Wachau,Florence)", scenarios);
+                 "      (default: the report's count / --scale)",
+                 set.cells);
+        p.option("--scenarios", "LIST",
+                 "comma-separated subset, in the order given (default Marchfeld,Petzenkirchen,Wachau,Florence)",
+                 scenarios);
         p.option("--size", "WxH", "image size in pixels (default 1920x1080)", size);
         p.option("--cascades", "K", "cascades per frame, 1..4 (default 3)", set.options.cascades);
         p.option("--texels", "N", "texels per cascade side, 16..8192 (default 1024)", set.options.texelsPerSide);
-        p.option("--repeat", "N", "frames rendered per scenario; each stage's time is the best frame's (default 3)", set.repeat);
-        p.option("--threads", "N", "worker threads for generation, lists and rendering (default 0 = all cores)", set.options.threads);
-        p.option("--images", "DIR", "also write each scenario's last frame as DIR/SCENARIO.png; DIR is created if missing\n"
-                 "      (default: none)", set.imagesDir);
-        p.option("--backend", "B", "cpu or gl: the OpenGL 4.3 compute backend in a headless context, stage times from GPU timer\n"
-                 "      queries, after one unmeasured warm-up frame (default cpu)", backendText);
+        p.option("--repeat", "N", "frames rendered per scenario; each stage's time is the best frame's (default 3)",
+                 set.repeat);
+        p.option("--threads", "N", "worker threads for generation, lists and rendering (default 0 = all cores)",
+                 set.options.threads);
+        p.option("--images", "DIR",
+                 "also write each scenario's last frame as DIR/SCENARIO.png; DIR is created if missing\n"
+                 "      (default: none)",
+                 set.imagesDir);
+        p.option("--backend", "B",
+                 "cpu or gl: the OpenGL 4.3 compute backend in a headless context, stage times from GPU timer\n"
+                 "      queries, after one unmeasured warm-up frame (default cpu)",
+                 backendText);
         p.option("--csv", "OUT.csv", "also write one row per scenario as CSV with a header line (default: none)", csv);
-        p.option("--json", "OUT.json", "also write a JSON array, one object per scenario (scenario, cells, approximation_ms,\n"
-                 "      raycast_ms, gaussians_per_s, rays_per_s, peak_rss_mb, and more) (default: none)", json);
-        p.option("--fly-frames", "N", "after the timed frames, fly the camera forward for N frames, each evaluated afresh and\n"
-                 "      then with incremental cascades (texels kept from the last frame); prints both (default 0: off). GL:\n"
-                 "      frames back to back into the texture, the texels kept on the GPU (in memory and --out-of-core)", set.flyFrames);
+        p.option("--json", "OUT.json",
+                 "also write a JSON array, one object per scenario (scenario, cells, approximation_ms,\n"
+                 "      raycast_ms, gaussians_per_s, rays_per_s, peak_rss_mb, and more) (default: none)",
+                 json);
+        p.option("--fly-frames", "N",
+                 "after the timed frames, fly the camera forward for N frames, each evaluated afresh and\n"
+                 "      then with incremental cascades (texels kept from the last frame); prints both (default 0: "
+                 "off). GL:\n"
+                 "      frames back to back into the texture, the texels kept on the GPU (in memory and --out-of-core)",
+                 set.flyFrames);
         p.option("--fly-step", "M", "metres the camera moves forward per fly-through frame (default 10)", set.flyStepM);
-        p.flag("--pyramid", "also build the surface pyramid (hc-influence's .hcp, docs/design.md section 4) and render from it:\n"
-               "      texel sizes on its ladder (powers of two of the finest cell), texels it holds copied (CPU)", set.pyramid);
-        p.flag("--pyramid-coarse", "with --pyramid: texels up to 2x coarser than without it (N a side) instead of up to\n"
-               "      2x finer (up to 2N a side)", set.options.pyramidCoarseTexels);
-        p.option("--pyramid-interpolate", "L", "with --pyramid: texels finer than every level stored around them interpolated\n"
-                 "      (bicubic) from a coarser stored level, at most L levels up; 0 sums them from the kernels (default 3)",
+        p.flag("--pyramid",
+               "also build the surface pyramid (hc-influence's .hcp, docs/design.md section 4) and render from it:\n"
+               "      texel sizes on its ladder (powers of two of the finest cell), texels it holds copied (CPU)",
+               set.pyramid);
+        p.flag("--pyramid-coarse",
+               "with --pyramid: texels up to 2x coarser than without it (N a side) instead of up to\n"
+               "      2x finer (up to 2N a side)",
+               set.options.pyramidCoarseTexels);
+        p.option("--pyramid-interpolate", "L",
+                 "with --pyramid: texels finer than every level stored around them interpolated\n"
+                 "      (bicubic) from a coarser stored level, at most L levels up; 0 sums them from the kernels "
+                 "(default 3)",
                  set.options.pyramidInterpolateLevels);
-        p.option("--beam-tile", "P", "ray casting, both backends: tiles of P x P pixels march their beam first and start their rays'\n"
-                 "      walks there (the same hits); 0 walks every ray from its cascade's start (default 4)", set.options.beamTilePx);
-        p.flag("--out-of-core", "write each grid to a temporary .hcg and render out of core from it, without lists\n"
-               "      (render::Scene over a GridRegionReader; with --pyramid the texels it holds need no cell; GL: the\n"
-               "      texels a frame newly sees evaluated on the CPU, the cascades kept on the GPU, the mipmaps, ray\n"
-               "      casting and shading there)", set.outOfCore);
-        p.flag("--accuracy", "measure the last frame's terrain hits against the exact surface: max, p99 and RMS of\n"
-               "      |hit height - exact height| [m] (walls and water aside)", set.accuracy);
-        p.option("--plot", "OUT.svg", "also draw each scenario's best stage times as stacked bars with the targets, SVG\n"
-                 "      (default: none)", plot);
+        p.option("--beam-tile", "P",
+                 "ray casting, both backends: tiles of P x P pixels march their beam first and start their rays'\n"
+                 "      walks there (the same hits); 0 walks every ray from its cascade's start (default 4)",
+                 set.options.beamTilePx);
+        p.flag(
+            "--out-of-core",
+            "write each grid to a temporary .hcg and render out of core from it, without lists\n"
+            "      (render::Scene over a GridRegionReader; with --pyramid the texels it holds need no cell; GL: the\n"
+            "      texels a frame newly sees evaluated on the CPU, the cascades kept on the GPU, the mipmaps, ray\n"
+            "      casting and shading there)",
+            set.outOfCore);
+        p.flag("--accuracy",
+               "measure the last frame's terrain hits against the exact surface: max, p99 and RMS of\n"
+               "      |hit height - exact height| [m] (walls and water aside)",
+               set.accuracy);
+        p.option("--plot", "OUT.svg",
+                 "also draw each scenario's best stage times as stacked bars with the targets, SVG\n"
+                 "      (default: none)",
+                 plot);
         if (!p.parse(argc, argv)) return 0;
-        if (!(set.scale > 0) || !std::isfinite(set.scale)) throw hc::Error("--scale " + fmt::format("{:g}", set.scale) + ": must be a number > 0");
+        if (!(set.scale > 0) || !std::isfinite(set.scale))
+            throw hc::Error("--scale " + fmt::format("{:g}", set.scale) + ": must be a number > 0");
         if (!(set.cells >= 0) || !std::isfinite(set.cells) || (set.cells > 0 && set.cells < 1000) || set.cells >= 4e9)
-            throw hc::Error("--cells " + fmt::format("{:g}", set.cells) + ": must be a count in 1000 .. 4e9 (a grid holds fewer than 2^32 cells)");
+            throw hc::Error("--cells " + fmt::format("{:g}", set.cells) +
+                            ": must be a count in 1000 .. 4e9 (a grid holds fewer than 2^32 cells)");
         if (set.cells > 0 && set.scale != 1) throw hc::Error("--cells and --scale: give one of them");
         if (set.repeat < 1) throw hc::Error("--repeat " + std::to_string(set.repeat) + ": must be at least 1");
         set.backend = hc::cli::parseBackend(backendText);
-        if (set.backend == hc::cli::Backend::Auto) throw hc::Error("--backend auto: a benchmark names its backend, cpu or gl");
-        if (set.flyFrames < 0 || set.flyFrames == 1) throw hc::Error("--fly-frames " + std::to_string(set.flyFrames) + ": 0 (off) or at least 2");
-        if (!(set.flyStepM >= 0) || !std::isfinite(set.flyStepM)) throw hc::Error("--fly-step " + fmt::format("{:g}", set.flyStepM) + ": metres >= 0");
+        if (set.backend == hc::cli::Backend::Auto)
+            throw hc::Error("--backend auto: a benchmark names its backend, cpu or gl");
+        if (set.flyFrames < 0 || set.flyFrames == 1)
+            throw hc::Error("--fly-frames " + std::to_string(set.flyFrames) + ": 0 (off) or at least 2");
+        if (!(set.flyStepM >= 0) || !std::isfinite(set.flyStepM))
+            throw hc::Error("--fly-step " + fmt::format("{:g}", set.flyStepM) + ": metres >= 0");
         if (std::string why = set.options.validate(); !why.empty()) throw hc::Error(why);
         {
             auto x = size.find('x');
             if (x == std::string::npos) throw hc::Error("--size " + size + ": expected WxH, e.g. 1920x1080");
-            const double w = hc::cli::parseNumber(size.substr(0, x), "--size"), h = hc::cli::parseNumber(size.substr(x + 1), "--size");
+            const double w = hc::cli::parseNumber(size.substr(0, x), "--size"),
+                         h = hc::cli::parseNumber(size.substr(x + 1), "--size");
             if (w != std::floor(w) || h != std::floor(h) || w < 1 || h < 1 || w > 16384 || h > 16384)
                 throw hc::Error("--size " + size + ": width and height must be whole numbers in 1..16384");
             set.width = int(w), set.height = int(h);
@@ -589,7 +665,9 @@ int main(int argc, char** argv) {
         std::vector<const Scenario*> chosen;
         for (const std::string& name : splitList(scenarios, "--scenarios")) {
             const Scenario* found = hc::scenes::findScenario(name);
-            if (!found) throw hc::Error("--scenarios " + name + ": not a scenario (Marchfeld, Petzenkirchen, Wachau or Florence)");
+            if (!found)
+                throw hc::Error("--scenarios " + name +
+                                ": not a scenario (Marchfeld, Petzenkirchen, Wachau or Florence)");
             chosen.push_back(found);
         }
         for (const std::string* o : {&csv, &json, &plot})
@@ -597,15 +675,19 @@ int main(int argc, char** argv) {
         if (!set.imagesDir.empty()) {
             std::error_code ec;
             fs::create_directories(set.imagesDir, ec);
-            if (!fs::is_directory(set.imagesDir)) throw hc::Error(set.imagesDir + ": cannot create the image folder (--images)");
+            if (!fs::is_directory(set.imagesDir))
+                throw hc::Error(set.imagesDir + ": cannot create the image folder (--images)");
         }
         set.interactive = isatty(STDERR_FILENO);
         const unsigned threads = hc::resolveThreads(set.options.threads);
 
-        const std::string sizeText = set.cells > 0 ? fmt::format("{:g} cells each", set.cells) : fmt::format("scale {:g}", set.scale);
-        std::printf("hc-bench: %u worker thread%s (hardware threads: %u), %s, %dx%d, %d cascade%s of %d^2 texels, best of %d\n",
-                    threads, threads == 1 ? "" : "s", std::thread::hardware_concurrency(), sizeText.c_str(), set.width, set.height,
-                    set.options.cascades, set.options.cascades == 1 ? "" : "s", set.options.texelsPerSide, set.repeat);
+        const std::string sizeText =
+            set.cells > 0 ? fmt::format("{:g} cells each", set.cells) : fmt::format("scale {:g}", set.scale);
+        std::printf(
+            "hc-bench: %u worker thread%s (hardware threads: %u), %s, %dx%d, %d cascade%s of %d^2 texels, best of %d\n",
+            threads, threads == 1 ? "" : "s", std::thread::hardware_concurrency(), sizeText.c_str(), set.width,
+            set.height, set.options.cascades, set.options.cascades == 1 ? "" : "s", set.options.texelsPerSide,
+            set.repeat);
         std::printf("load average (1 min) at start: %s\n", loadAverage().c_str());
         const hc::Stopwatch wall;
         std::vector<RunResult> results;
@@ -614,20 +696,26 @@ int main(int argc, char** argv) {
         const double wallS = wall.seconds();
 
         // ---- table 1: the grids ----
-        std::printf("\n1. grids: synthetic, deterministic; extent rounded to whole 96 m cells; target = the report's cells / scale;\n"
-                    "T = calibrated refinement threshold [m]; wet = cells with water; calib s = finding T, build s = building the\n"
-                    "grid (neither is part of a frame); lists = buildInfluenceLists (sigma 1, R 3.5, all threads, one run): time,\n"
-                    "mean / p99 / max entries per cell, offsets + indices\n\n");
-        std::printf("%-14s %13s %10s %10s %10s %7s %8s %6s %7s %7s %9s %6s %5s %5s %8s\n", "scenario", "extents km", "cells m", "target",
-                    "cells", "diff %", "T m", "wet %", "calib s", "build s", "lists ms", "mean", "p99", "max", "lists MB");
+        std::printf(
+            "\n1. grids: synthetic, deterministic; extent rounded to whole 96 m cells; target = the report's cells / "
+            "scale;\n"
+            "T = calibrated refinement threshold [m]; wet = cells with water; calib s = finding T, build s = building "
+            "the\n"
+            "grid (neither is part of a frame); lists = buildInfluenceLists (sigma 1, R 3.5, all threads, one run): "
+            "time,\n"
+            "mean / p99 / max entries per cell, offsets + indices\n\n");
+        std::printf("%-14s %13s %10s %10s %10s %7s %8s %6s %7s %7s %9s %6s %5s %5s %8s\n", "scenario", "extents km",
+                    "cells m", "target", "cells", "diff %", "T m", "wet %", "calib s", "build s", "lists ms", "mean",
+                    "p99", "max", "lists MB");
         for (size_t k = 0; k < results.size(); ++k) {
             const RunResult& r = results[k];
             const double target = r.targetCells;
-            std::printf("%-14s %13s %10s %10.0f %10llu %+7.1f %8.3g %6.1f %7.1f %7.1f %9.1f %6.1f %5llu %5llu %8.1f\n", chosen[k]->name,
-                        extentText(r).c_str(), sizesText(r).c_str(), target, (unsigned long long)r.cells, (double(r.cells) / target - 1) * 100,
-                        r.thresholdM, 100.0 * double(r.wetCells) / double(r.cells), r.calibrationS, r.generationS - r.calibrationS,
-                        r.listsMs, r.listMean,
-                        (unsigned long long)r.listP99, (unsigned long long)r.listMax, mb(r.listBytes));
+            std::printf("%-14s %13s %10s %10.0f %10llu %+7.1f %8.3g %6.1f %7.1f %7.1f %9.1f %6.1f %5llu %5llu %8.1f\n",
+                        chosen[k]->name, extentText(r).c_str(), sizesText(r).c_str(), target,
+                        (unsigned long long)r.cells, (double(r.cells) / target - 1) * 100, r.thresholdM,
+                        100.0 * double(r.wetCells) / double(r.cells), r.calibrationS, r.generationS - r.calibrationS,
+                        r.listsMs, r.listMean, (unsigned long long)r.listP99, (unsigned long long)r.listMax,
+                        mb(r.listBytes));
         }
         for (size_t k = 0; k < results.size(); ++k) {
             const RunResult& r = results[k];
@@ -651,83 +739,113 @@ int main(int argc, char** argv) {
                     rendered.push_back(r);
                     continue;
                 }
-                std::printf("%-14s RENDERING SKIPPED: influence lists ~%.1f GB (estimated) + frame ~%.1f GB need %.1f GB; %.1f GB available"
-                            " (MemAvailable, or what ulimit -v leaves); grid generated in %.1f s, peak RSS %.0f MB\n",
-                            chosen[k]->name, double(r.listsEstimateBytes) / 1e9, double(r.renderNeedBytes - r.listsEstimateBytes) / 1e9,
-                            double(r.renderNeedBytes) / 1e9, double(r.memAvailableBytes) / 1e9, r.generationS, mb(r.peakRss));
+                std::printf(
+                    "%-14s RENDERING SKIPPED: influence lists ~%.1f GB (estimated) + frame ~%.1f GB need %.1f GB; %.1f "
+                    "GB available"
+                    " (MemAvailable, or what ulimit -v leaves); grid generated in %.1f s, peak RSS %.0f MB\n",
+                    chosen[k]->name, double(r.listsEstimateBytes) / 1e9,
+                    double(r.renderNeedBytes - r.listsEstimateBytes) / 1e9, double(r.renderNeedBytes) / 1e9,
+                    double(r.memAvailableBytes) / 1e9, r.generationS, mb(r.peakRss));
             }
             chosen = std::move(renderedScenarios);
             results = std::move(rendered);
         }
 
         // ---- table 2: the renderer, in the report's form ----
-        std::printf("\n2. rendering with the %s backend (%s): %dx%d, %d cascade%s of %d^2 texels, best of %d frames per stage (worst in brackets); camera 1.5 km\n"
-                    "above the river 10 %% downstream, looking along it, pitch -20, fov 50; G Gauss/s = kernel evaluations in\n"
-                    "the approximation / its time; M rays/s = pixels / ray casting time; peak RSS = the scenario's process\n"
-                    "(getrusage) at the end; GTX 1080 = the report's times for the real data\n\n",
-                    hc::cli::backendName(set.backend), results.empty() ? "-" : results[0].device, set.width, set.height, set.options.cascades, set.options.cascades == 1 ? "" : "s", set.options.texelsPerSide,
-                    set.repeat);
-        std::printf("%-14s %13s %10s %7s %19s %19s %8s %7s %8s %8s %11s %10s %8s %11s %11s\n", "scenario", "extents km", "cells m",
-                    "cells M", "approximation ms", "ray casting ms", "fit ms", "mip ms", "shade ms", "total ms", "G Gauss/s",
-                    "M rays/s", "peak MB", "GTX appr ms", "GTX ray ms");
+        std::printf(
+            "\n2. rendering with the %s backend (%s): %dx%d, %d cascade%s of %d^2 texels, best of %d frames per stage "
+            "(worst in brackets); camera 1.5 km\n"
+            "above the river 10 %% downstream, looking along it, pitch -20, fov 50; G Gauss/s = kernel evaluations in\n"
+            "the approximation / its time; M rays/s = pixels / ray casting time; peak RSS = the scenario's process\n"
+            "(getrusage) at the end; GTX 1080 = the report's times for the real data\n\n",
+            hc::cli::backendName(set.backend), results.empty() ? "-" : results[0].device, set.width, set.height,
+            set.options.cascades, set.options.cascades == 1 ? "" : "s", set.options.texelsPerSide, set.repeat);
+        std::printf("%-14s %13s %10s %7s %19s %19s %8s %7s %8s %8s %11s %10s %8s %11s %11s\n", "scenario", "extents km",
+                    "cells m", "cells M", "approximation ms", "ray casting ms", "fit ms", "mip ms", "shade ms",
+                    "total ms", "G Gauss/s", "M rays/s", "peak MB", "GTX appr ms", "GTX ray ms");
         for (size_t k = 0; k < results.size(); ++k) {
             const RunResult& r = results[k];
-            std::printf("%-14s %13s %10s %7.2f %8.1f (%8.1f) %8.1f (%8.1f) %8.2f %7.1f %8.1f %8.1f %11.3f %10.2f %8.0f %11.1f %11.1f\n",
-                        chosen[k]->name, extentText(r).c_str(), sizesText(r).c_str(), double(r.cells) / 1e6, r.approximationMs,
-                        r.worstApproximationMs, r.raycastMs, r.worstRaycastMs, r.fittingMs, r.mipmapMs, r.shadingMs, r.totalMs,
-                        gaussiansPerS(r) / 1e9, raysPerS(r) / 1e6, mb(r.peakRss), chosen[k]->gpuApproxMs, chosen[k]->gpuRaycastMs);
+            std::printf(
+                "%-14s %13s %10s %7.2f %8.1f (%8.1f) %8.1f (%8.1f) %8.2f %7.1f %8.1f %8.1f %11.3f %10.2f %8.0f %11.1f "
+                "%11.1f\n",
+                chosen[k]->name, extentText(r).c_str(), sizesText(r).c_str(), double(r.cells) / 1e6, r.approximationMs,
+                r.worstApproximationMs, r.raycastMs, r.worstRaycastMs, r.fittingMs, r.mipmapMs, r.shadingMs, r.totalMs,
+                gaussiansPerS(r) / 1e9, raysPerS(r) / 1e6, mb(r.peakRss), chosen[k]->gpuApproxMs,
+                chosen[k]->gpuRaycastMs);
         }
         if (set.backend == hc::cli::Backend::Gl) {
-            std::printf("\nGL frames: total = wall time of a frame ending in the texture, as hc-view draws it (fitting and visible spans on\n"
-                        "the CPU, uploads, the GPU's stages, waiting for its timers); GPU = its span from the first stage's start to\n"
-                        "shading's end; read back = copying one finished frame to host memory (hc-render's path, not the viewer's)\n");
+            std::printf(
+                "\nGL frames: total = wall time of a frame ending in the texture, as hc-view draws it (fitting and "
+                "visible spans on\n"
+                "the CPU, uploads, the GPU's stages, waiting for its timers); GPU = its span from the first stage's "
+                "start to\n"
+                "shading's end; read back = copying one finished frame to host memory (hc-render's path, not the "
+                "viewer's)\n");
             for (size_t k = 0; k < results.size(); ++k)
-                std::printf("  %-14s total %7.2f ms   GPU %7.2f ms   CPU and waiting %7.2f ms   read back %7.2f ms\n", chosen[k]->name,
-                            results[k].totalMs, results[k].gpuMs, results[k].totalMs - results[k].gpuMs, results[k].readbackMs);
+                std::printf("  %-14s total %7.2f ms   GPU %7.2f ms   CPU and waiting %7.2f ms   read back %7.2f ms\n",
+                            chosen[k]->name, results[k].totalMs, results[k].gpuMs,
+                            results[k].totalMs - results[k].gpuMs, results[k].readbackMs);
         }
-        std::printf("\ncascades (best approximation frame): offsets along the view [m], texel [m], visible texels, Gaussians, ms\n");
+        std::printf(
+            "\ncascades (best approximation frame): offsets along the view [m], texel [m], visible texels, Gaussians, "
+            "ms\n");
         for (size_t k = 0; k < results.size(); ++k) {
             const RunResult& r = results[k];
             for (int c = 0; c < r.cascadeCount; ++c) {
                 const CascadeOut& cs = r.cascades[c];
-                std::printf("  %-14s %d  %8.0f..%-8.0f %8.3g %9llu %11llu %8.1f", chosen[k]->name, c, cs.nearM, cs.farM, cs.texelM,
-                            (unsigned long long)cs.visibleTexels, (unsigned long long)cs.gaussians, cs.approximationMs);
-                if (cs.pyramidLevel >= 0) std::printf("   %llu copied from pyramid level %d", (unsigned long long)cs.pyramidTexels, cs.pyramidLevel);
-                if (cs.pyramidInterpolated) std::printf(", %llu interpolated", (unsigned long long)cs.pyramidInterpolated);
+                std::printf("  %-14s %d  %8.0f..%-8.0f %8.3g %9llu %11llu %8.1f", chosen[k]->name, c, cs.nearM, cs.farM,
+                            cs.texelM, (unsigned long long)cs.visibleTexels, (unsigned long long)cs.gaussians,
+                            cs.approximationMs);
+                if (cs.pyramidLevel >= 0)
+                    std::printf("   %llu copied from pyramid level %d", (unsigned long long)cs.pyramidTexels,
+                                cs.pyramidLevel);
+                if (cs.pyramidInterpolated)
+                    std::printf(", %llu interpolated", (unsigned long long)cs.pyramidInterpolated);
                 std::printf("\n");
             }
             if (set.pyramid)
-                std::printf("  %-14s    surface pyramid built in %.1f s (not part of a frame), %.1f MB = %.1f bytes per cell\n", chosen[k]->name,
-                            r.pyramidMs / 1e3, mb(r.pyramidBytes), double(r.pyramidBytes) / double(r.cells));
+                std::printf(
+                    "  %-14s    surface pyramid built in %.1f s (not part of a frame), %.1f MB = %.1f bytes per cell\n",
+                    chosen[k]->name, r.pyramidMs / 1e3, mb(r.pyramidBytes), double(r.pyramidBytes) / double(r.cells));
             if (set.accuracy)
-                std::printf("  %-14s    rendered error (terrain hits vs exact surface, %llu hits): max %.3g m, p99 %.3g m, RMS %.3g m\n",
-                            chosen[k]->name, (unsigned long long)r.accuracySamples, r.accuracyMaxM, r.accuracyP99M, r.accuracyRmsM);
-            std::printf("  %-14s    hits %.1f %% of pixels, water %.1f %%; camera %.0f, %.0f, %.0f yaw %.1f\n", chosen[k]->name,
-                        100.0 * double(r.hits) / double(r.rays), 100.0 * double(r.wetHits) / double(r.rays), r.camera[0], r.camera[1],
-                        r.camera[2], r.camera[3]);
+                std::printf(
+                    "  %-14s    rendered error (terrain hits vs exact surface, %llu hits): max %.3g m, p99 %.3g m, RMS "
+                    "%.3g m\n",
+                    chosen[k]->name, (unsigned long long)r.accuracySamples, r.accuracyMaxM, r.accuracyP99M,
+                    r.accuracyRmsM);
+            std::printf("  %-14s    hits %.1f %% of pixels, water %.1f %%; camera %.0f, %.0f, %.0f yaw %.1f\n",
+                        chosen[k]->name, 100.0 * double(r.hits) / double(r.rays),
+                        100.0 * double(r.wetHits) / double(r.rays), r.camera[0], r.camera[1], r.camera[2], r.camera[3]);
         }
 
         if (set.flyFrames > 1) {
-            std::printf("\nincremental cascades: the camera flies forward %g m a frame for %d frames; means over frames 2..%d,\n"
-                        "every frame evaluated afresh against frames through a CascadeCache (texels kept from the last frame);\n"
-                        "cells = grid cells the approximation visited per frame\n\n",
-                        set.flyStepM, set.flyFrames, set.flyFrames);
-            std::printf("%-14s %16s %16s %6s %14s %14s %14s %12s %12s\n", "scenario", "approx ms fresh", "approx ms cache", "x", "frame ms fresh",
-                        "frame ms cache", "texels kept %", "cells fresh", "cells cache");
+            std::printf(
+                "\nincremental cascades: the camera flies forward %g m a frame for %d frames; means over frames "
+                "2..%d,\n"
+                "every frame evaluated afresh against frames through a CascadeCache (texels kept from the last "
+                "frame);\n"
+                "cells = grid cells the approximation visited per frame\n\n",
+                set.flyStepM, set.flyFrames, set.flyFrames);
+            std::printf("%-14s %16s %16s %6s %14s %14s %14s %12s %12s\n", "scenario", "approx ms fresh",
+                        "approx ms cache", "x", "frame ms fresh", "frame ms cache", "texels kept %", "cells fresh",
+                        "cells cache");
             for (size_t k = 0; k < results.size(); ++k) {
                 const RunResult& r = results[k];
-                std::printf("%-14s %16.1f %16.1f %6.1f %14.1f %14.1f %14.1f %12.0f %12.0f\n", chosen[k]->name, r.flyApproxFreshMs, r.flyApproxCachedMs,
-                            r.flyApproxCachedMs > 0 ? r.flyApproxFreshMs / r.flyApproxCachedMs : 0.0, r.flyTotalFreshMs, r.flyTotalCachedMs,
-                            100 * r.flyKept, r.flyCellsFresh, r.flyCellsCached);
+                std::printf("%-14s %16.1f %16.1f %6.1f %14.1f %14.1f %14.1f %12.0f %12.0f\n", chosen[k]->name,
+                            r.flyApproxFreshMs, r.flyApproxCachedMs,
+                            r.flyApproxCachedMs > 0 ? r.flyApproxFreshMs / r.flyApproxCachedMs : 0.0, r.flyTotalFreshMs,
+                            r.flyTotalCachedMs, 100 * r.flyKept, r.flyCellsFresh, r.flyCellsCached);
             }
             bool uploads = false;
             for (const RunResult& r : results) uploads = uploads || r.flyUploadFreshMB > 0;
-            if (uploads) {  // the GL backend: the cascades' rows and (out of core) the texels the CPU evaluated (Timings::uploadMs)
-                std::printf("\n%-14s %16s %16s %16s %16s\n", "GL upload", "ms fresh", "ms cache", "MB fresh", "MB cache");
+            if (uploads) {  // the GL backend: the cascades' rows and (out of core) the texels the CPU evaluated
+                            // (Timings::uploadMs)
+                std::printf("\n%-14s %16s %16s %16s %16s\n", "GL upload", "ms fresh", "ms cache", "MB fresh",
+                            "MB cache");
                 for (size_t k = 0; k < results.size(); ++k) {
                     const RunResult& r = results[k];
-                    std::printf("%-14s %16.2f %16.2f %16.2f %16.3f\n", chosen[k]->name, r.flyUploadFreshMs, r.flyUploadCachedMs, r.flyUploadFreshMB,
-                                r.flyUploadCachedMB);
+                    std::printf("%-14s %16.2f %16.2f %16.2f %16.3f\n", chosen[k]->name, r.flyUploadFreshMs,
+                                r.flyUploadCachedMs, r.flyUploadFreshMB, r.flyUploadCachedMB);
                 }
             }
         }
@@ -736,30 +854,33 @@ int main(int argc, char** argv) {
         const bool glRun = set.backend == hc::cli::Backend::Gl;
         std::printf("\ntargets%s\n", glRun ? "" : " (2 cores)");
         if (glRun) {
-            std::printf("  GL whole frame (issue 5, on a GPU): 1920x1080, 3 x 1024^2 cascades, within %.0f ms%s\n", kTargetGlFrameMs,
-                        set.width == 1920 && set.height == 1080 ? "" : " (this run is another size)");
+            std::printf("  GL whole frame (issue 5, on a GPU): 1920x1080, 3 x 1024^2 cascades, within %.0f ms%s\n",
+                        kTargetGlFrameMs, set.width == 1920 && set.height == 1080 ? "" : " (this run is another size)");
             for (size_t k = 0; k < results.size(); ++k)
-                std::printf("    %-14s %8.2f ms   %s\n", chosen[k]->name, results[k].totalMs, glFrameMet(results[k]) ? "met" : "MISSED");
+                std::printf("    %-14s %8.2f ms   %s\n", chosen[k]->name, results[k].totalMs,
+                            glFrameMet(results[k]) ? "met" : "MISSED");
         }
         std::printf("  approximation: >= %.0f G Gaussians/s\n", kTargetGaussiansPerS / 1e9);
         for (size_t k = 0; k < results.size(); ++k)
-            std::printf("    %-14s %7.3f G Gaussians/s (%5.1f %% of the target), %8.1f ms vs GTX 1080 %5.1f ms   %s\n", chosen[k]->name,
-                        gaussiansPerS(results[k]) / 1e9, 100 * gaussiansPerS(results[k]) / kTargetGaussiansPerS,
-                        results[k].approximationMs, chosen[k]->gpuApproxMs, approximationMet(results[k]) ? "met" : "MISSED");
+            std::printf("    %-14s %7.3f G Gaussians/s (%5.1f %% of the target), %8.1f ms vs GTX 1080 %5.1f ms   %s\n",
+                        chosen[k]->name, gaussiansPerS(results[k]) / 1e9,
+                        100 * gaussiansPerS(results[k]) / kTargetGaussiansPerS, results[k].approximationMs,
+                        chosen[k]->gpuApproxMs, approximationMet(results[k]) ? "met" : "MISSED");
         if (set.width == 1920 && set.height == 1080)
             std::printf("  ray casting: 1920x1080 within %.0f ms\n", kTargetRaycastMs);
         else
-            std::printf("  ray casting: >= %.2f M rays/s (1920x1080 within %.0f ms; this run is %dx%d)\n", kTargetRaysPerS / 1e6,
-                        kTargetRaycastMs, set.width, set.height);
+            std::printf("  ray casting: >= %.2f M rays/s (1920x1080 within %.0f ms; this run is %dx%d)\n",
+                        kTargetRaysPerS / 1e6, kTargetRaycastMs, set.width, set.height);
         for (size_t k = 0; k < results.size(); ++k)
-            std::printf("    %-14s %8.1f ms, %6.2f M rays/s (%5.1f %% of the target rate), vs GTX 1080 %4.1f ms   %s\n", chosen[k]->name,
-                        results[k].raycastMs, raysPerS(results[k]) / 1e6, 100 * raysPerS(results[k]) / kTargetRaysPerS,
-                        chosen[k]->gpuRaycastMs, raycastMet(results[k]) ? "met" : "MISSED");
+            std::printf("    %-14s %8.1f ms, %6.2f M rays/s (%5.1f %% of the target rate), vs GTX 1080 %4.1f ms   %s\n",
+                        chosen[k]->name, results[k].raycastMs, raysPerS(results[k]) / 1e6,
+                        100 * raysPerS(results[k]) / kTargetRaysPerS, chosen[k]->gpuRaycastMs,
+                        raycastMet(results[k]) ? "met" : "MISSED");
 
         for (size_t k = 0; k < results.size(); ++k)
             if (results[k].image[0]) std::printf("\nimage: %s", results[k].image);
-        std::printf("%swall time %.1f s; load average (1 min) at the end: %s\n", set.imagesDir.empty() ? "\n" : "\n\n", wallS,
-                    loadAverage().c_str());
+        std::printf("%swall time %.1f s; load average (1 min) at the end: %s\n", set.imagesDir.empty() ? "\n" : "\n\n",
+                    wallS, loadAverage().c_str());
         if (!csv.empty()) {
             writeCsv(chosen, results, set, csv);
             std::printf("rows written to %s\n", csv.c_str());
@@ -771,19 +892,27 @@ int main(int argc, char** argv) {
         if (!plot.empty()) {
             const bool gl = set.backend == hc::cli::Backend::Gl;
             hc::bench::BarPlot bp;
-            bp.title = std::string("hc-bench, ") + (gl ? "GL" : "CPU") + " backend: best stage times of a " + std::to_string(set.width) + "x" +
-                       std::to_string(set.height) + " frame, " + std::to_string(set.options.cascades) + " cascades of " +
-                       std::to_string(set.options.texelsPerSide) + "^2" + (set.cells > 0 || set.scale != 1 ? ", " + sizeText : "");
+            bp.title = std::string("hc-bench, ") + (gl ? "GL" : "CPU") + " backend: best stage times of a " +
+                       std::to_string(set.width) + "x" + std::to_string(set.height) + " frame, " +
+                       std::to_string(set.options.cascades) + " cascades of " +
+                       std::to_string(set.options.texelsPerSide) + "^2" +
+                       (set.cells > 0 || set.scale != 1 ? ", " + sizeText : "");
             bp.xLabel = "milliseconds";
             // Ray casting first, so its bar ends where the ray casting target's line can meet it.
             bp.segmentNames = {"ray casting", "approximation", "mipmaps", "shading", "fitting"};
             for (size_t k = 0; k < results.size(); ++k) {
                 const RunResult& r = results[k];
                 if (r.totalMs >= 1e300) continue;  // the scenario failed
-                bp.rows.push_back({chosen[k]->name, {r.raycastMs, r.approximationMs, r.mipmapMs, r.shadingMs, r.fittingMs}});
+                bp.rows.push_back(
+                    {chosen[k]->name, {r.raycastMs, r.approximationMs, r.mipmapMs, r.shadingMs, r.fittingMs}});
             }
-            if (gl) bp.markers.push_back({"whole-frame target " + fmt::format("{:g}", kTargetGlFrameMs) + " ms", kTargetGlFrameMs});
-            else if (set.width == 1920 && set.height == 1080) bp.markers.push_back({"ray casting target " + fmt::format("{:g}", kTargetRaycastMs) + " ms (first segment)", kTargetRaycastMs});
+            if (gl)
+                bp.markers.push_back(
+                    {"whole-frame target " + fmt::format("{:g}", kTargetGlFrameMs) + " ms", kTargetGlFrameMs});
+            else if (set.width == 1920 && set.height == 1080)
+                bp.markers.push_back(
+                    {"ray casting target " + fmt::format("{:g}", kTargetRaycastMs) + " ms (first segment)",
+                     kTargetRaycastMs});
             if (!bp.rows.empty()) {
                 hc::bench::writeSvg(plot, bp.svg());
                 std::printf("plot written to %s\n", plot.c_str());

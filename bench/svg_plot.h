@@ -18,17 +18,22 @@ namespace hc::bench {
 
 // Distinct colours that stay apart for colour-blind readers (Okabe-Ito), then repeat.
 inline const char* plotColor(size_t i) {
-    static const char* colors[] = {"#0072B2", "#D55E00", "#009E73", "#CC79A7", "#E69F00", "#56B4E9", "#000000", "#F0E442"};
+    static const char* colors[] = {"#0072B2", "#D55E00", "#009E73", "#CC79A7",
+                                   "#E69F00", "#56B4E9", "#000000", "#F0E442"};
     return colors[i % (sizeof colors / sizeof *colors)];
 }
 
 inline std::string svgEscape(const std::string& s) {
     std::string out;
     for (char c : s) {
-        if (c == '<') out += "&lt;";
-        else if (c == '>') out += "&gt;";
-        else if (c == '&') out += "&amp;";
-        else out += c;
+        if (c == '<')
+            out += "&lt;";
+        else if (c == '>')
+            out += "&gt;";
+        else if (c == '&')
+            out += "&amp;";
+        else
+            out += c;
     }
     return out;
 }
@@ -62,9 +67,10 @@ inline void writeSvg(const std::string& path, const std::string& svg) {
 
 struct LineSeries {
     std::string name;
-    std::string color;         // empty: plotColor(index)
-    std::string dash;          // SVG stroke-dasharray ("6,4", "2,3"); empty: solid
-    std::vector<std::pair<double, double>> points;  // drawn in this order; non-finite or (on log axes) non-positive skipped
+    std::string color;  // empty: plotColor(index)
+    std::string dash;   // SVG stroke-dasharray ("6,4", "2,3"); empty: solid
+    std::vector<std::pair<double, double>>
+        points;  // drawn in this order; non-finite or (on log axes) non-positive skipped
 };
 
 struct LinePlot {
@@ -75,11 +81,14 @@ struct LinePlot {
     std::string svg() const {
         const double W = 1100, H = 560, left = 80, right = 400, top = 50, bottom = 60;
         const double pw = W - left - right, ph = H - top - bottom;
-        auto usable = [&](double x, double y) { return std::isfinite(x) && std::isfinite(y) && (!logX || x > 0) && (!logY || y > 0); };
+        auto usable = [&](double x, double y) {
+            return std::isfinite(x) && std::isfinite(y) && (!logX || x > 0) && (!logY || y > 0);
+        };
         double x0 = HUGE_VAL, x1 = -HUGE_VAL, y0 = HUGE_VAL, y1 = -HUGE_VAL;
         for (const LineSeries& s : series)
             for (auto [x, y] : s.points)
-                if (usable(x, y)) x0 = std::min(x0, x), x1 = std::max(x1, x), y0 = std::min(y0, y), y1 = std::max(y1, y);
+                if (usable(x, y))
+                    x0 = std::min(x0, x), x1 = std::max(x1, x), y0 = std::min(y0, y), y1 = std::max(y1, y);
         if (!(x0 <= x1)) throw Error("plot '" + title + "': no data point to draw");
         auto expand = [](double& lo, double& hi, bool log) {
             if (log) {
@@ -113,20 +122,23 @@ struct LinePlot {
         };
         std::string o = svgStart(W, H, left, title);
         for (double t : ticks(x0, x1, logX)) {
-            o += "<line x1=\"" + svgNum(px(t)) + "\" y1=\"" + svgNum(top) + "\" x2=\"" + svgNum(px(t)) + "\" y2=\"" + svgNum(top + ph) +
-                 "\" stroke=\"#ddd\"/>\n";
-            o += "<text x=\"" + svgNum(px(t)) + "\" y=\"" + svgNum(top + ph + 16) + "\" text-anchor=\"middle\">" + tickLabel(t) + "</text>\n";
+            o += "<line x1=\"" + svgNum(px(t)) + "\" y1=\"" + svgNum(top) + "\" x2=\"" + svgNum(px(t)) + "\" y2=\"" +
+                 svgNum(top + ph) + "\" stroke=\"#ddd\"/>\n";
+            o += "<text x=\"" + svgNum(px(t)) + "\" y=\"" + svgNum(top + ph + 16) + "\" text-anchor=\"middle\">" +
+                 tickLabel(t) + "</text>\n";
         }
         for (double t : ticks(y0, y1, logY)) {
-            o += "<line x1=\"" + svgNum(left) + "\" y1=\"" + svgNum(py(t)) + "\" x2=\"" + svgNum(left + pw) + "\" y2=\"" + svgNum(py(t)) +
-                 "\" stroke=\"#ddd\"/>\n";
-            o += "<text x=\"" + svgNum(left - 6) + "\" y=\"" + svgNum(py(t) + 4) + "\" text-anchor=\"end\">" + tickLabel(t) + "</text>\n";
+            o += "<line x1=\"" + svgNum(left) + "\" y1=\"" + svgNum(py(t)) + "\" x2=\"" + svgNum(left + pw) +
+                 "\" y2=\"" + svgNum(py(t)) + "\" stroke=\"#ddd\"/>\n";
+            o += "<text x=\"" + svgNum(left - 6) + "\" y=\"" + svgNum(py(t) + 4) + "\" text-anchor=\"end\">" +
+                 tickLabel(t) + "</text>\n";
         }
-        o += "<rect x=\"" + svgNum(left) + "\" y=\"" + svgNum(top) + "\" width=\"" + svgNum(pw) + "\" height=\"" + svgNum(ph) +
-             "\" fill=\"none\" stroke=\"#333\"/>\n";
-        o += "<text x=\"" + svgNum(left + pw / 2) + "\" y=\"" + svgNum(H - 18) + "\" text-anchor=\"middle\">" + svgEscape(xLabel) + "</text>\n";
-        o += "<text transform=\"translate(20," + svgNum(top + ph / 2) + ") rotate(-90)\" text-anchor=\"middle\">" + svgEscape(yLabel) +
-             "</text>\n";
+        o += "<rect x=\"" + svgNum(left) + "\" y=\"" + svgNum(top) + "\" width=\"" + svgNum(pw) + "\" height=\"" +
+             svgNum(ph) + "\" fill=\"none\" stroke=\"#333\"/>\n";
+        o += "<text x=\"" + svgNum(left + pw / 2) + "\" y=\"" + svgNum(H - 18) + "\" text-anchor=\"middle\">" +
+             svgEscape(xLabel) + "</text>\n";
+        o += "<text transform=\"translate(20," + svgNum(top + ph / 2) + ") rotate(-90)\" text-anchor=\"middle\">" +
+             svgEscape(yLabel) + "</text>\n";
         for (size_t i = 0; i < series.size(); ++i) {
             const LineSeries& s = series[i];
             const std::string color = s.color.empty() ? plotColor(i) : s.color;
@@ -137,11 +149,15 @@ struct LinePlot {
             o += "<polyline points=\"" + path + "\" fill=\"none\" stroke=\"" + color + "\" stroke-width=\"1.8\"" +
                  (s.dash.empty() ? "" : " stroke-dasharray=\"" + s.dash + "\"") + "/>\n";
             for (auto [x, y] : s.points)
-                if (usable(x, y)) o += "<circle cx=\"" + svgNum(px(x)) + "\" cy=\"" + svgNum(py(y)) + "\" r=\"3\" fill=\"" + color + "\"/>\n";
+                if (usable(x, y))
+                    o += "<circle cx=\"" + svgNum(px(x)) + "\" cy=\"" + svgNum(py(y)) + "\" r=\"3\" fill=\"" + color +
+                         "\"/>\n";
             const double ly = top + 10 + 18 * double(i);
-            o += "<line x1=\"" + svgNum(left + pw + 14) + "\" y1=\"" + svgNum(ly) + "\" x2=\"" + svgNum(left + pw + 40) + "\" y2=\"" + svgNum(ly) +
-                 "\" stroke=\"" + color + "\" stroke-width=\"2\"" + (s.dash.empty() ? "" : " stroke-dasharray=\"" + s.dash + "\"") + "/>\n";
-            o += "<text x=\"" + svgNum(left + pw + 46) + "\" y=\"" + svgNum(ly + 4) + "\">" + svgEscape(s.name) + "</text>\n";
+            o += "<line x1=\"" + svgNum(left + pw + 14) + "\" y1=\"" + svgNum(ly) + "\" x2=\"" +
+                 svgNum(left + pw + 40) + "\" y2=\"" + svgNum(ly) + "\" stroke=\"" + color + "\" stroke-width=\"2\"" +
+                 (s.dash.empty() ? "" : " stroke-dasharray=\"" + s.dash + "\"") + "/>\n";
+            o += "<text x=\"" + svgNum(left + pw + 46) + "\" y=\"" + svgNum(ly + 4) + "\">" + svgEscape(s.name) +
+                 "</text>\n";
         }
         return o + "</svg>\n";
     }
@@ -175,33 +191,39 @@ struct BarPlot {
         std::string o = svgStart(W, H, left, title);
         const double bottom = top + double(rows.size()) * (barH + gap);
         for (double t : linearTicks(0, xMax)) {
-            o += "<line x1=\"" + svgNum(px(t)) + "\" y1=\"" + svgNum(top) + "\" x2=\"" + svgNum(px(t)) + "\" y2=\"" + svgNum(bottom) +
-                 "\" stroke=\"#ddd\"/>\n";
-            o += "<text x=\"" + svgNum(px(t)) + "\" y=\"" + svgNum(bottom + 16) + "\" text-anchor=\"middle\">" + tickLabel(t) + "</text>\n";
+            o += "<line x1=\"" + svgNum(px(t)) + "\" y1=\"" + svgNum(top) + "\" x2=\"" + svgNum(px(t)) + "\" y2=\"" +
+                 svgNum(bottom) + "\" stroke=\"#ddd\"/>\n";
+            o += "<text x=\"" + svgNum(px(t)) + "\" y=\"" + svgNum(bottom + 16) + "\" text-anchor=\"middle\">" +
+                 tickLabel(t) + "</text>\n";
         }
         for (size_t r = 0; r < rows.size(); ++r) {
             const double y = top + double(r) * (barH + gap) + gap / 2;
-            o += "<text x=\"" + svgNum(left - 8) + "\" y=\"" + svgNum(y + barH / 2 + 4) + "\" text-anchor=\"end\">" + svgEscape(rows[r].label) +
-                 "</text>\n";
+            o += "<text x=\"" + svgNum(left - 8) + "\" y=\"" + svgNum(y + barH / 2 + 4) + "\" text-anchor=\"end\">" +
+                 svgEscape(rows[r].label) + "</text>\n";
             double x = 0;
             for (size_t s = 0; s < rows[r].segments.size(); ++s) {
                 const double v = std::max(0.0, rows[r].segments[s]);
-                o += "<rect x=\"" + svgNum(px(x)) + "\" y=\"" + svgNum(y) + "\" width=\"" + svgNum(px(x + v) - px(x)) + "\" height=\"" +
-                     svgNum(barH) + "\" fill=\"" + plotColor(s) + "\"/>\n";
+                o += "<rect x=\"" + svgNum(px(x)) + "\" y=\"" + svgNum(y) + "\" width=\"" + svgNum(px(x + v) - px(x)) +
+                     "\" height=\"" + svgNum(barH) + "\" fill=\"" + plotColor(s) + "\"/>\n";
                 x += v;
             }
-            o += "<text x=\"" + svgNum(px(x) + 4) + "\" y=\"" + svgNum(y + barH / 2 + 4) + "\">" + tickLabel(x) + "</text>\n";
+            o += "<text x=\"" + svgNum(px(x) + 4) + "\" y=\"" + svgNum(y + barH / 2 + 4) + "\">" + tickLabel(x) +
+                 "</text>\n";
         }
         for (const auto& [label, x] : markers) {
-            o += "<line x1=\"" + svgNum(px(x)) + "\" y1=\"" + svgNum(top - 6) + "\" x2=\"" + svgNum(px(x)) + "\" y2=\"" + svgNum(bottom) +
-                 "\" stroke=\"#c00\" stroke-dasharray=\"5,3\"/>\n";
-            o += "<text x=\"" + svgNum(px(x) + 3) + "\" y=\"" + svgNum(top - 8) + "\" fill=\"#c00\">" + svgEscape(label) + "</text>\n";
+            o += "<line x1=\"" + svgNum(px(x)) + "\" y1=\"" + svgNum(top - 6) + "\" x2=\"" + svgNum(px(x)) +
+                 "\" y2=\"" + svgNum(bottom) + "\" stroke=\"#c00\" stroke-dasharray=\"5,3\"/>\n";
+            o += "<text x=\"" + svgNum(px(x) + 3) + "\" y=\"" + svgNum(top - 8) + "\" fill=\"#c00\">" +
+                 svgEscape(label) + "</text>\n";
         }
-        o += "<text x=\"" + svgNum(left + pw / 2) + "\" y=\"" + svgNum(H - 14) + "\" text-anchor=\"middle\">" + svgEscape(xLabel) + "</text>\n";
+        o += "<text x=\"" + svgNum(left + pw / 2) + "\" y=\"" + svgNum(H - 14) + "\" text-anchor=\"middle\">" +
+             svgEscape(xLabel) + "</text>\n";
         for (size_t s = 0; s < segmentNames.size(); ++s) {
             const double ly = top + 18 * double(s);
-            o += "<rect x=\"" + svgNum(left + pw + 40) + "\" y=\"" + svgNum(ly) + "\" width=\"14\" height=\"12\" fill=\"" + plotColor(s) + "\"/>\n";
-            o += "<text x=\"" + svgNum(left + pw + 60) + "\" y=\"" + svgNum(ly + 10) + "\">" + svgEscape(segmentNames[s]) + "</text>\n";
+            o += "<rect x=\"" + svgNum(left + pw + 40) + "\" y=\"" + svgNum(ly) +
+                 "\" width=\"14\" height=\"12\" fill=\"" + plotColor(s) + "\"/>\n";
+            o += "<text x=\"" + svgNum(left + pw + 60) + "\" y=\"" + svgNum(ly + 10) + "\">" +
+                 svgEscape(segmentNames[s]) + "</text>\n";
         }
         return o + "</svg>\n";
     }

@@ -27,18 +27,22 @@ struct RawSection {
     std::vector<std::byte> bytes;
 };
 
-inline bool splitContainer(const uint8_t* data, size_t size, std::vector<std::byte>& header, std::vector<RawSection>& sections) {
+inline bool splitContainer(const uint8_t* data, size_t size, std::vector<std::byte>& header,
+                           std::vector<RawSection>& sections) {
     if (size < kFileHeaderBytes) return false;
-    const std::vector<std::byte> b(reinterpret_cast<const std::byte*>(data), reinterpret_cast<const std::byte*>(data) + size);
+    const std::vector<std::byte> b(reinterpret_cast<const std::byte*>(data),
+                                   reinterpret_cast<const std::byte*>(data) + size);
     const uint32_t count = bytes::load<uint32_t>(b.data() + 60);
     if (count > 64 || kFileHeaderBytes + uint64_t{count} * kFileSectionEntryBytes > size) return false;
     header.assign(b.begin(), b.begin() + kFileHeaderBytes);
     sections.clear();
     for (uint32_t s = 0; s < count; ++s) {
         const size_t at = kFileHeaderBytes + size_t{s} * kFileSectionEntryBytes;
-        const uint64_t offset = bytes::load<uint64_t>(b.data() + at + 8), length = bytes::load<uint64_t>(b.data() + at + 16);
+        const uint64_t offset = bytes::load<uint64_t>(b.data() + at + 8),
+                       length = bytes::load<uint64_t>(b.data() + at + 16);
         if (offset > size || length > size - offset) return false;
-        sections.push_back({bytes::load<uint32_t>(b.data() + at), bytes::load<uint32_t>(b.data() + at + 4),
+        sections.push_back({bytes::load<uint32_t>(b.data() + at),
+                            bytes::load<uint32_t>(b.data() + at + 4),
                             {b.begin() + static_cast<long>(offset), b.begin() + static_cast<long>(offset + length)}});
     }
     return true;
@@ -64,9 +68,23 @@ inline std::vector<std::byte> joinContainer(std::vector<std::byte> header, const
 }
 
 inline uint64_t interesting(std::minstd_rand& rng, uint64_t old, uint64_t fileSize) {
-    const uint64_t values[] = {0, 1, 2, old + 1, old - 1, uint64_t{1} << 31, uint64_t{1} << 32, uint64_t{1} << 61,
-                               uint64_t{1} << 62, uint64_t{1} << 63, ~uint64_t{0}, fileSize, fileSize / 4, fileSize / 8,
-                               fileSize / 12, (uint64_t{1} << 62) + old, (uint64_t{1} << 61) + old};
+    const uint64_t values[] = {0,
+                               1,
+                               2,
+                               old + 1,
+                               old - 1,
+                               uint64_t{1} << 31,
+                               uint64_t{1} << 32,
+                               uint64_t{1} << 61,
+                               uint64_t{1} << 62,
+                               uint64_t{1} << 63,
+                               ~uint64_t{0},
+                               fileSize,
+                               fileSize / 4,
+                               fileSize / 8,
+                               fileSize / 12,
+                               (uint64_t{1} << 62) + old,
+                               (uint64_t{1} << 61) + old};
     return values[rng() % std::size(values)];
 }
 
@@ -76,8 +94,11 @@ inline size_t mutateContainer(uint8_t* data, size_t size, size_t maxSize, unsign
     std::vector<RawSection> sections;
     if (rng() % 2 == 0 || !splitContainer(data, size, header, sections)) return LLVMFuzzerMutate(data, size, maxSize);
     auto setWord = [&](std::vector<std::byte>& b, size_t at, bool wide) {
-        if (wide) bytes::store<uint64_t>(b, at, interesting(rng, bytes::load<uint64_t>(b.data() + at), size));
-        else bytes::store<uint32_t>(b, at, static_cast<uint32_t>(interesting(rng, bytes::load<uint32_t>(b.data() + at), size)));
+        if (wide)
+            bytes::store<uint64_t>(b, at, interesting(rng, bytes::load<uint64_t>(b.data() + at), size));
+        else
+            bytes::store<uint32_t>(b, at,
+                                   static_cast<uint32_t>(interesting(rng, bytes::load<uint32_t>(b.data() + at), size)));
     };
     RawSection* sec = sections.empty() ? nullptr : &sections[rng() % sections.size()];
     switch (rng() % 9) {
@@ -112,8 +133,10 @@ inline size_t mutateContainer(uint8_t* data, size_t size, size_t maxSize, unsign
             }
             break;
         case 4:  // dropped or duplicated
-            if (sec && rng() % 2) sections.erase(sections.begin() + (sec - sections.data()));
-            else if (sec) sections.push_back(*sec);
+            if (sec && rng() % 2)
+                sections.erase(sections.begin() + (sec - sections.data()));
+            else if (sec)
+                sections.push_back(*sec);
             break;
         case 5:  // retyped or re-indexed
             if (sec) (rng() % 2 ? sec->kind : sec->index) = static_cast<uint32_t>(rng() % 5);
@@ -122,7 +145,8 @@ inline size_t mutateContainer(uint8_t* data, size_t size, size_t maxSize, unsign
             if (sec && !sec->bytes.empty()) {
                 const size_t n = sec->bytes.size();
                 sec->bytes.resize(n * 2 + 16);
-                sec->bytes.resize(LLVMFuzzerMutate(reinterpret_cast<uint8_t*>(sec->bytes.data()), n, sec->bytes.size()));
+                sec->bytes.resize(
+                    LLVMFuzzerMutate(reinterpret_cast<uint8_t*>(sec->bytes.data()), n, sec->bytes.size()));
             }
             break;
     }

@@ -8,7 +8,8 @@
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
     try {
-        const hc::view::Bookmarks b = hc::view::bookmarksFromJson(std::string_view(reinterpret_cast<const char*>(data), size));
+        const hc::view::Bookmarks b =
+            hc::view::bookmarksFromJson(std::string_view(reinterpret_cast<const char*>(data), size));
         const std::string again = hc::view::bookmarksToJson(b);
         if (hc::view::bookmarksToJson(hc::view::bookmarksFromJson(again)) != again) __builtin_trap();
     } catch (const hc::Error&) {

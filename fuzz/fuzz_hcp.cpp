@@ -18,7 +18,8 @@ const hc::Grid& grid() {
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
     static hc::fuzz::MemoryFile file;
     const hc::Grid& g = grid();
-    std::vector<std::byte> bytes(reinterpret_cast<const std::byte*>(data), reinterpret_cast<const std::byte*>(data) + size);
+    std::vector<std::byte> bytes(reinterpret_cast<const std::byte*>(data),
+                                 reinterpret_cast<const std::byte*>(data) + size);
     hc::fuzz::fixContainer(bytes);
     hc::influence::KernelParams params;
     if (bytes.size() >= hc::kFileHeaderBytes) {

@@ -4,8 +4,8 @@
 // CRC matches is the bug. A fuzzer that mutates bytes almost never keeps the CRCs right, so it would only
 // ever test the CRC check. fixContainer() therefore rewrites, before parsing, what the container derives
 // from the rest: the declared file size, the block checksums (where their section fits), every section's CRC
-// (where its placement is in the file), the section table's CRC and the header CRC. The CRC and size checks themselves are covered by the unit tests
-// (every flipped byte, every truncation); the fuzzer explores everything behind them.
+// (where its placement is in the file), the section table's CRC and the header CRC. The CRC and size checks themselves
+// are covered by the unit tests (every flipped byte, every truncation); the fuzzer explores everything behind them.
 #pragma once
 
 #include <sys/mman.h>
@@ -31,7 +31,9 @@ namespace hc::fuzz {
 inline void fixBlockChecksums(std::vector<std::byte>& b, uint32_t count) {
     if (count == 0) return;
     const uint64_t size = b.size();
-    auto entry = [&](uint32_t s, size_t field) { return bytes::load<uint64_t>(b.data() + kFileHeaderBytes + size_t{s} * kFileSectionEntryBytes + field); };
+    auto entry = [&](uint32_t s, size_t field) {
+        return bytes::load<uint64_t>(b.data() + kFileHeaderBytes + size_t{s} * kFileSectionEntryBytes + field);
+    };
     const size_t last = kFileHeaderBytes + size_t{count - 1} * kFileSectionEntryBytes;
     if (bytes::load<uint32_t>(b.data() + last) != kFileBlockChecksumsKind) return;
     const uint64_t at = entry(count - 1, 8), length = entry(count - 1, 16);
@@ -48,7 +50,8 @@ inline void fixBlockChecksums(std::vector<std::byte>& b, uint32_t count) {
     uint64_t crcAt = at + 8;
     for (uint32_t s = 0; s + 1 < count; ++s)
         for (uint64_t from = 0, offset = entry(s, 8), n = entry(s, 16); from < n; from += blockBytes, crcAt += 4)
-            bytes::store<uint32_t>(b, crcAt, crc32(std::span<const std::byte>(b.data() + offset + from, std::min(blockBytes, n - from))));
+            bytes::store<uint32_t>(
+                b, crcAt, crc32(std::span<const std::byte>(b.data() + offset + from, std::min(blockBytes, n - from))));
 }
 
 // Offsets of the container's header (core/sectioned_file.h).
@@ -62,11 +65,13 @@ inline void fixContainer(std::vector<std::byte>& b) {
         fixBlockChecksums(b, count);
         for (uint32_t s = 0; s < count; ++s) {
             const size_t at = kFileHeaderBytes + size_t{s} * kFileSectionEntryBytes;
-            const uint64_t offset = bytes::load<uint64_t>(b.data() + at + 8), length = bytes::load<uint64_t>(b.data() + at + 16);
+            const uint64_t offset = bytes::load<uint64_t>(b.data() + at + 8),
+                           length = bytes::load<uint64_t>(b.data() + at + 16);
             if (offset <= size && length <= size - offset)
                 bytes::store<uint32_t>(b, at + 24, crc32(std::span<const std::byte>(b.data() + offset, length)));
         }
-        bytes::store<uint32_t>(b, 120, crc32(std::span<const std::byte>(b.data() + kFileHeaderBytes, tableEnd - kFileHeaderBytes)));
+        bytes::store<uint32_t>(
+            b, 120, crc32(std::span<const std::byte>(b.data() + kFileHeaderBytes, tableEnd - kFileHeaderBytes)));
     }
     bytes::store<uint32_t>(b, 124, crc32(std::span<const std::byte>(b.data(), 124)));
 }
@@ -79,7 +84,8 @@ public:
         if (fd_ < 0) std::abort();
     }
     const std::string& write(std::span<const std::byte> bytes) {
-        if (::ftruncate(fd_, 0) != 0 || ::pwrite(fd_, bytes.data(), bytes.size(), 0) != static_cast<ssize_t>(bytes.size()))
+        if (::ftruncate(fd_, 0) != 0 ||
+            ::pwrite(fd_, bytes.data(), bytes.size(), 0) != static_cast<ssize_t>(bytes.size()))
             std::abort();
         return path_;
     }

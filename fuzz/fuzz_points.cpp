@@ -8,7 +8,8 @@
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
     try {
-        for (const auto& p : hc::cli::parsePointsCsv(std::string_view(reinterpret_cast<const char*>(data), size), "points.csv"))
+        for (const auto& p :
+             hc::cli::parsePointsCsv(std::string_view(reinterpret_cast<const char*>(data), size), "points.csv"))
             if (!std::isfinite(p[0]) || !std::isfinite(p[1])) __builtin_trap();
     } catch (const hc::Error&) {
     }

@@ -86,7 +86,8 @@ bool writeMesh(Bytes in, const std::string& path) {
     std::unique_ptr<GDALDataset> ds(driver ? driver->CreateMultiDimensional(path.c_str(), nullptr, nullptr) : nullptr);
     if (!ds) return false;
     auto root = ds->GetRootGroup();
-    auto nNodes = root->CreateDimension("nNodes", "", "", nodes), nFaces = root->CreateDimension("nFaces", "", "", faces);
+    auto nNodes = root->CreateDimension("nNodes", "", "", nodes),
+         nFaces = root->CreateDimension("nFaces", "", "", faces);
     auto nMax = root->CreateDimension("nMax", "", "", 4);
     auto text = [](const std::shared_ptr<GDALMDArray>& a, const char* k, const char* v) {
         return a->CreateAttribute(k, {}, GDALExtendedDataType::CreateString())->Write(v);
@@ -104,14 +105,15 @@ bool writeMesh(Bytes in, const std::string& path) {
         !fn->CreateAttribute("start_index", {}, GDALExtendedDataType::Create(GDT_Int32))->WriteInt(start))
         return false;
     if ((flags & 16) && !zbVar->SetNoDataValue(-99.0)) return false;
-    if (!writeAll(nx, x, GDT_Float64) || !writeAll(ny, y, GDT_Float64) || !writeAll(fn, conn, GDT_Int32) || !writeAll(zbVar, zb, GDT_Float64))
+    if (!writeAll(nx, x, GDT_Float64) || !writeAll(ny, y, GDT_Float64) || !writeAll(fn, conn, GDT_Int32) ||
+        !writeAll(zbVar, zb, GDT_Float64))
         return false;
     if (water) {
         auto time = root->CreateDimension("time", "", "", steps);
         auto tv = root->CreateMDArray("time", {time}, GDALExtendedDataType::Create(GDT_Float64));
         auto zsVar = root->CreateMDArray("zs", {time, nFaces}, GDALExtendedDataType::Create(GDT_Float64));
-        if (!tv || !zsVar || !text(tv, "units", "hours since 2024-01-01 00:00:00") || !zsVar->SetNoDataValue(-99999.0) ||
-            !writeAll(tv, times, GDT_Float64) || !writeAll(zsVar, zs, GDT_Float64))
+        if (!tv || !zsVar || !text(tv, "units", "hours since 2024-01-01 00:00:00") ||
+            !zsVar->SetNoDataValue(-99999.0) || !writeAll(tv, times, GDT_Float64) || !writeAll(zsVar, zs, GDT_Float64))
             return false;
     }
     return true;

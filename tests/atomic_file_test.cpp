@@ -66,7 +66,8 @@ TEST_F(AtomicFile, NextWriteRemovesAKilledWritersTemporary) {
         w.write(std::as_bytes(std::span(bytes.data(), bytes.size())));
         w.commit();
     }
-    EXPECT_EQ(names(d), (std::vector<std::string>{"g.hcg", "g.hcg.tmp.Ab12Cd.bak", "g.hcg.tmp.short", "h.hcg.tmp.Ab12Cd"}));
+    EXPECT_EQ(names(d),
+              (std::vector<std::string>{"g.hcg", "g.hcg.tmp.Ab12Cd.bak", "g.hcg.tmp.short", "h.hcg.tmp.Ab12Cd"}));
 
     writeText(d / "e.tif.tmp.Zz9Yy8", "half a GeoTIFF");
     { hc::AtomicPath p((d / "e.tif").string()); }  // destroyed without commit: its own temporary goes too

@@ -92,7 +92,8 @@ TEST(BackendChoice, ProbeOfThisBuild) {
 #if HC_WITH_GL
     EXPECT_NE(gl.unavailable.empty(), gl.device.empty()) << gl.unavailable << " / " << gl.device;
 #else
-    EXPECT_NE(gl.unavailable.find("built without the OpenGL backend (-DHC_WITH_GL=OFF"), std::string::npos) << gl.unavailable;
+    EXPECT_NE(gl.unavailable.find("built without the OpenGL backend (-DHC_WITH_GL=OFF"), std::string::npos)
+        << gl.unavailable;
     EXPECT_THROW(decideBackend(Backend::Gl, gl), hc::Error);
     EXPECT_FALSE(decideBackend(Backend::Auto, gl).useGl);
 #endif

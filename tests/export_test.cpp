@@ -63,7 +63,8 @@ protected:
 
 SampledRaster sample(const std::string& layer, double res, bool gradients = false) {
     Scene& s = scene();
-    return hc::exporting::sampleSurface(*s.eval, hc::influence::Layer::byName(s.grid, layer), layer, res, std::nullopt, gradients, 0, false);
+    return hc::exporting::sampleSurface(*s.eval, hc::influence::Layer::byName(s.grid, layer), layer, res, std::nullopt,
+                                        gradients, 0, false);
 }
 
 TEST_F(Export, SamplesAreTheExactSurfaceAtPixelCentres) {
@@ -88,10 +89,13 @@ TEST_F(Export, SamplesAreTheExactSurfaceAtPixelCentres) {
 TEST_F(Export, RefusesAbsurdRequests) {
     Scene& s = scene();
     auto layer = hc::influence::Layer{};
-    EXPECT_THROW(hc::exporting::sampleSurface(*s.eval, layer, "elevation", 0, std::nullopt, false, 0, false), hc::Error);
-    EXPECT_THROW(hc::exporting::sampleSurface(*s.eval, layer, "elevation", 0.001, std::nullopt, false, 0, false), hc::Error)
+    EXPECT_THROW(hc::exporting::sampleSurface(*s.eval, layer, "elevation", 0, std::nullopt, false, 0, false),
+                 hc::Error);
+    EXPECT_THROW(hc::exporting::sampleSurface(*s.eval, layer, "elevation", 0.001, std::nullopt, false, 0, false),
+                 hc::Error)
         << "a raster of 6e14 pixels must be refused before any allocation";
-    EXPECT_THROW(hc::exporting::sampleSurface(*s.eval, layer, "elevation", 10, hc::exporting::BoxWorld{5, 5, 1, 1}, false, 0, false),
+    EXPECT_THROW(hc::exporting::sampleSurface(*s.eval, layer, "elevation", 10, hc::exporting::BoxWorld{5, 5, 1, 1},
+                                              false, 0, false),
                  hc::Error);
 }
 
@@ -120,7 +124,8 @@ TEST_F(Export, GeoTiffReadsBackThroughGdal) {
     const double nd = b->GetNoDataValue(&has);
     ASSERT_TRUE(has);
     std::vector<float> v(r.values.size());
-    ASSERT_EQ(b->RasterIO(GF_Read, 0, 0, int(r.width), int(r.height), v.data(), int(r.width), int(r.height), GDT_Float32, 0, 0, nullptr),
+    ASSERT_EQ(b->RasterIO(GF_Read, 0, 0, int(r.width), int(r.height), v.data(), int(r.width), int(r.height),
+                          GDT_Float32, 0, 0, nullptr),
               CE_None);
     for (size_t i = 0; i < v.size(); ++i) {
         if (std::isnan(r.values[i])) {
@@ -191,7 +196,8 @@ TEST_F(Export, VdbLevelSetsCrossZeroOnTheSurface) {
         EXPECT_EQ(grid->metaValue<double>("heightcast.gridOriginX"), r.originWorldX);
         EXPECT_EQ(grid->metaValue<double>("heightcast.gridOriginY"), r.originWorldY);
         EXPECT_EQ(grid->metaValue<double>("heightcast.rasterSouthWestX"), r.westWorld);
-        EXPECT_NEAR(grid->metaValue<double>("heightcast.rasterSouthWestY"), r.northWorld - double(r.height) * 100.0, 1e-6);
+        EXPECT_NEAR(grid->metaValue<double>("heightcast.rasterSouthWestY"), r.northWorld - double(r.height) * 100.0,
+                    1e-6);
         EXPECT_NEAR(grid->voxelSize()[0], 100.0, 1e-12);
         auto acc = grid->getConstAccessor();
         size_t checked = 0;
@@ -201,7 +207,8 @@ TEST_F(Export, VdbLevelSetsCrossZeroOnTheSurface) {
                 if (std::isnan(h)) continue;
                 const int i = int(col), j = int(r.height - 1 - row);
                 const int k = int(std::floor(h / 100.0));
-                const float below = acc.getValue(openvdb::Coord(i, j, k)), above = acc.getValue(openvdb::Coord(i, j, k + 1));
+                const float below = acc.getValue(openvdb::Coord(i, j, k)),
+                            above = acc.getValue(openvdb::Coord(i, j, k + 1));
                 ASSERT_LE(below, 0.0f) << grid->getName() << " col " << col << " row " << row;
                 ASSERT_GT(above, 0.0f);
                 // The zero crossing, interpolated between the two voxels, lies at the surface height,
@@ -242,8 +249,10 @@ TEST_F(Export, GridOriginAndRasterCornersAreDistinctAttributes) {
     const double res = 100, offX = 1200, offY = 700;  // the raster's south-west corner, local [m]
     const size_t cols = 20, rows = 15;
     const hc::exporting::BoxWorld box{s.grid.originWorldX + offX, s.grid.originWorldY + offY,
-                                      s.grid.originWorldX + offX + double(cols) * res, s.grid.originWorldY + offY + double(rows) * res};
-    SampledRaster r = hc::exporting::sampleSurface(*s.eval, hc::influence::Layer{}, "elevation", res, box, true, 0, false);
+                                      s.grid.originWorldX + offX + double(cols) * res,
+                                      s.grid.originWorldY + offY + double(rows) * res};
+    SampledRaster r =
+        hc::exporting::sampleSurface(*s.eval, hc::influence::Layer{}, "elevation", res, box, true, 0, false);
     ASSERT_EQ(r.width, cols);
     ASSERT_EQ(r.height, rows);
 
@@ -301,7 +310,8 @@ std::vector<float> readGeoTiff(const std::string& path, const SampledRaster& r) 
     const float nd = static_cast<float>(b->GetNoDataValue(&has));
     EXPECT_TRUE(has);
     std::vector<float> v(r.width * r.height);
-    EXPECT_EQ(b->RasterIO(GF_Read, 0, 0, int(r.width), int(r.height), v.data(), int(r.width), int(r.height), GDT_Float32, 0, 0, nullptr),
+    EXPECT_EQ(b->RasterIO(GF_Read, 0, 0, int(r.width), int(r.height), v.data(), int(r.width), int(r.height),
+                          GDT_Float32, 0, 0, nullptr),
               CE_None);
     for (float& x : v)
         if (x == nd) x = std::numeric_limits<float>::quiet_NaN();
@@ -360,10 +370,12 @@ TEST_F(ExportWater, BathtubFloodExportsFlatWithDepthToTheTerrain) {
         for (size_t col = 0; col < water.width; col += 2) {
             if (std::isnan(water.values[row * water.width + col])) continue;
             const int i = int(col), j = int(water.height - 1 - row), k = int(std::floor(level / res));
-            const float below = acc.getValue(openvdb::Coord(i, j, k)), above = acc.getValue(openvdb::Coord(i, j, k + 1));
+            const float below = acc.getValue(openvdb::Coord(i, j, k)),
+                        above = acc.getValue(openvdb::Coord(i, j, k + 1));
             ASSERT_LE(below, 0.0f);
             ASSERT_GT(above, 0.0f);
-            ASSERT_NEAR(k * res + res * (-below) / (above - below), level, 1e-3 * res) << "col " << col << " row " << row;
+            ASSERT_NEAR(k * res + res * (-below) / (above - below), level, 1e-3 * res)
+                << "col " << col << " row " << row;
             ++checked;
         }
     EXPECT_GT(checked, 100u);

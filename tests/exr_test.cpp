@@ -52,7 +52,8 @@ TEST_F(Exr, ChannelsAndTypedAttributesReadBack) {
     ASSERT_EQ(dw.max.x - dw.min.x + 1, int(width));
     ASSERT_EQ(dw.max.y - dw.min.y + 1, int(height));
     int count = 0;
-    for (auto c = h.channels().begin(); c != h.channels().end(); ++c, ++count) EXPECT_EQ(c.channel().type, Imf::FLOAT) << c.name();
+    for (auto c = h.channels().begin(); c != h.channels().end(); ++c, ++count)
+        EXPECT_EQ(c.channel().type, Imf::FLOAT) << c.name();
     EXPECT_EQ(count, 2);
     std::vector<float> zBack(z.size(), 42.0f), aBack(a.size(), 42.0f);
     Imf::FrameBuffer fb;
@@ -68,7 +69,8 @@ TEST_F(Exr, ChannelsAndTypedAttributesReadBack) {
             EXPECT_EQ(zBack[i], z[i]) << i;
         EXPECT_EQ(aBack[i], a[i]) << i;
     }
-    EXPECT_EQ(std::distance(fs::directory_iterator(dir), fs::directory_iterator()), 1) << "a temporary was left beside t.exr";
+    EXPECT_EQ(std::distance(fs::directory_iterator(dir), fs::directory_iterator()), 1)
+        << "a temporary was left beside t.exr";
 }
 
 TEST_F(Exr, FailedWriteNamesTheFileAndLeavesNothing) {

@@ -150,8 +150,16 @@ void fixHeaderCrc(std::vector<char>& b) {
 // Rewrites every checksum a 1.2 file derives from its bytes (block CRCs, section CRCs, table and header CRCs)
 // after an edit, to reach the content checks behind them. Container layout: sectioned_file.h.
 void fixAllChecksums(std::vector<char>& b) {
-    auto load32 = [&](size_t at) { uint32_t v; std::memcpy(&v, b.data() + at, 4); return v; };
-    auto load64 = [&](size_t at) { uint64_t v; std::memcpy(&v, b.data() + at, 8); return v; };
+    auto load32 = [&](size_t at) {
+        uint32_t v;
+        std::memcpy(&v, b.data() + at, 4);
+        return v;
+    };
+    auto load64 = [&](size_t at) {
+        uint64_t v;
+        std::memcpy(&v, b.data() + at, 8);
+        return v;
+    };
     auto crcOf = [&](uint64_t at, uint64_t n) { return hc::crc32(std::as_bytes(std::span(b.data() + at, n))); };
     const uint32_t count = load32(60);
     const size_t last = 128 + 32 * size_t{count - 1};
@@ -377,7 +385,10 @@ TEST(Checksum, KnownValues) {
     EXPECT_EQ(hc::crc32(std::span(data).subspan(333), hc::crc32(std::span(data).first(333))), whole);
     // Combined from the parts' CRCs alone (the writer's section CRCs from its block CRCs), any split.
     for (size_t cut : {size_t{0}, size_t{1}, size_t{333}, size_t{999}, size_t{1000}})
-        EXPECT_EQ(hc::crc32Combine(hc::crc32(std::span(data).first(cut)), hc::crc32(std::span(data).subspan(cut)), 1000 - cut), whole) << cut;
+        EXPECT_EQ(hc::crc32Combine(hc::crc32(std::span(data).first(cut)), hc::crc32(std::span(data).subspan(cut)),
+                                   1000 - cut),
+                  whole)
+            << cut;
     hc::Hash64 a, b;
     a.update(data);
     b.update(std::span(data).first(5));
@@ -412,7 +423,9 @@ TEST_F(GridFile, StreamedWriteEqualsWholeWrite) {
 
 TEST_F(GridFile, StreamedWriteRefusesBadStreams) {
     Grid g = tinyGrid();
-    auto values = [&](size_t i, size_t n) { return std::vector<std::span<const float>>{std::span<const float>(g.values[0]).subspan(i, n)}; };
+    auto values = [&](size_t i, size_t n) {
+        return std::vector<std::span<const float>>{std::span<const float>(g.values[0]).subspan(i, n)};
+    };
     {  // too few cells: commit refuses and nothing is left
         hc::GridFileWriter w(path("short.hcg"), g, g.cellCount(), 1);
         w.append(std::span(g.codes).first(3), values(0, 3));
@@ -473,7 +486,9 @@ TEST_F(GridFile, HugeCellCountsBehindValidChecksumsAreRefused) {
     };
     for (uint64_t count : {uint64_t{1} << 62, uint64_t{1} << 61, uint64_t{1} << 63, ~uint64_t{0}, uint64_t{1} << 40}) {
         const std::string m = message(count);
-        EXPECT_EQ(m.rfind(path("huge.hcg") + ": at byte offset 24: header declares " + std::to_string(count) + " cells", 0), 0u)
+        EXPECT_EQ(
+            m.rfind(path("huge.hcg") + ": at byte offset 24: header declares " + std::to_string(count) + " cells", 0),
+            0u)
             << count << ": " << m;
     }
     // A count the file could hold gets to the section sizes, which must then disagree with it.
@@ -491,14 +506,17 @@ TEST_F(GridFile, FuzzFindingCellCountWrappingToTheSectionSizes) {
         hc::readGrid(file);
         FAIL() << "accepted";
     } catch (const hc::Error& e) {
-        EXPECT_EQ(std::string(e.what()).rfind(file + ": at byte offset 24: header declares 4611686018427388112 cells", 0), 0u) << e.what();
+        EXPECT_EQ(
+            std::string(e.what()).rfind(file + ": at byte offset 24: header declares 4611686018427388112 cells", 0), 0u)
+            << e.what();
     }
 }
 
 // ------------------------------------------------------------------ block checksums and the stored summary
 
 // The container as the .hcg reader sees it (grid_file_internal.h), to read sections in parts.
-const hc::FileFormat kGridFormat12{{'\x89', 'H', 'C', 'G', 'R', 'I', 'D', '\n'}, 1, 2, "heightcast grid (.hcg)", {1, 2, 3}, 2};
+const hc::FileFormat kGridFormat12{
+    {'\x89', 'H', 'C', 'G', 'R', 'I', 'D', '\n'}, 1, 2, "heightcast grid (.hcg)", {1, 2, 3}, 2};
 
 // 300 k level-0 cells: CELLS spans 3 blocks of 1 MiB (2.4 MB), the elevation layer 2.
 Grid threeBlockGrid() {
@@ -530,7 +548,8 @@ TEST_F(GridFile, AFlippedByteIsCaughtByReadingItsBlockOnly) {
     EXPECT_NO_THROW(r.read(cells, 0, 8));
     EXPECT_NO_THROW(r.read(cells, hc::kFileBlockBytes - 4, 8));  // blocks 0 and 1
     EXPECT_EQ(r.bytesChecked(), 2 * uint64_t{hc::kFileBlockBytes}) << "exactly the two blocks touched are checked";
-    const std::string want = path("bad.hcg") + ": at byte offset " + std::to_string(block2) + ": checksum mismatch in section 0, block 2";
+    const std::string want =
+        path("bad.hcg") + ": at byte offset " + std::to_string(block2) + ": checksum mismatch in section 0, block 2";
     try {
         r.read(cells, 2 * uint64_t{hc::kFileBlockBytes} + 100000, 8);
         FAIL() << "a flipped byte in block 2 went unnoticed when block 2 was read";
@@ -543,7 +562,8 @@ TEST_F(GridFile, AFlippedByteIsCaughtByReadingItsBlockOnly) {
     EXPECT_FALSE(info.verified);
     EXPECT_EQ(info.cellCount, 300000u);
     EXPECT_LT(info.bytesChecked, 4096u) << "readGridInfo read more than META";
-    for (auto read : {+[](const std::string& p) { hc::readGrid(p); }, +[](const std::string& p) { hc::verifyGridFile(p); }}) {
+    for (auto read :
+         {+[](const std::string& p) { hc::readGrid(p); }, +[](const std::string& p) { hc::verifyGridFile(p); }}) {
         try {
             read(path("bad.hcg"));
             FAIL() << "full verification missed the flipped byte";
@@ -570,7 +590,7 @@ TEST_F(GridFile, OldMinorSectionsAreCheckedWholeAtFirstTouch) {
     std::vector<char> b = readBytes(std::string(HC_GOLDEN_DIR) + "/tiny_v1_1.hcg");
     uint64_t layerOffset;
     std::memcpy(&layerOffset, b.data() + 128 + 32 + 8, 8);  // section 1 = LAYER 0
-    b[layerOffset + 20] ^= 0x01;                             // the sixth value, not the first
+    b[layerOffset + 20] ^= 0x01;                            // the sixth value, not the first
     writeBytes(path("old.hcg"), b, b.size());
     const hc::SectionedFileReader r(path("old.hcg"), kGridFormat12);
     EXPECT_EQ(r.blockBytes(), 0u);
@@ -580,8 +600,10 @@ TEST_F(GridFile, OldMinorSectionsAreCheckedWholeAtFirstTouch) {
         r.read(r.sections()[1], 0, 4);
         FAIL() << "reading the first value of a damaged 1.1 section did not check the whole section";
     } catch (const hc::Error& e) {
-        EXPECT_NE(std::string(e.what()).find("at byte offset " + std::to_string(layerOffset) + ": checksum mismatch in section 1"),
-                  std::string::npos) << e.what();
+        EXPECT_NE(std::string(e.what()).find("at byte offset " + std::to_string(layerOffset) +
+                                             ": checksum mismatch in section 1"),
+                  std::string::npos)
+            << e.what();
     }
 }
 
@@ -615,8 +637,7 @@ TEST_F(GridFile, SummaryEqualsAFullPass) {
         uint64_t sectionBytes = 0;
         const hc::SectionedFileReader reader(path("t.hcg"), kGridFormat12);
         for (const hc::FileSection& sec : reader.sections()) sectionBytes += sec.bytes;
-        EXPECT_EQ(full.bytesChecked, sectionBytes)
-            << "verification checks every section byte";
+        EXPECT_EQ(full.bytesChecked, sectionBytes) << "verification checks every section byte";
     }
 }
 
@@ -650,7 +671,9 @@ TEST_F(GridFile, ALyingSummaryIsCaughtByVerification) {
         hc::readGridInfo(path("lie.hcg"));
         FAIL() << "a summary of 7 cells in a 6-cell file was accepted";
     } catch (const hc::Error& e) {
-        EXPECT_NE(std::string(e.what()).find("META summary.cells_per_level does not fit the header's 6 cells"), std::string::npos) << e.what();
+        EXPECT_NE(std::string(e.what()).find("META summary.cells_per_level does not fit the header's 6 cells"),
+                  std::string::npos)
+            << e.what();
     }
 }
 
@@ -660,7 +683,7 @@ TEST_F(GridFile, ALyingSummaryIsCaughtByVerification) {
 
 // tinyGrid's water as three steps: dry, the tiny grid's own water, and every cell wet. Velocity is a step layer.
 struct Scenario {
-    Grid shape;                               // tinyGrid with a velocity layer; its step layers hold step 0
+    Grid shape;  // tinyGrid with a velocity layer; its step layers hold step 0
     std::vector<hc::WaterStepData> steps;
 };
 Scenario tinyScenario() {
@@ -728,7 +751,8 @@ TEST_F(GridFile, WaterStepsRoundTripStepByStep) {
         const hc::GridRegionReader reader(path("flood.hcg"), k);
         const Grid region = reader.region({0, 0, reader.shape().domainSizeM(), reader.shape().domainSizeM()});
         ASSERT_EQ(region.codes, want.codes);
-        for (size_t l = 0; l < want.layers.size(); ++l) EXPECT_EQ(region.values[l], want.values[l]) << want.layers[l].name;
+        for (size_t l = 0; l < want.layers.size(); ++l)
+            EXPECT_EQ(region.values[l], want.values[l]) << want.layers[l].name;
     }
     // Steps differ, so do their hashes; the lists' key (the structure) does not.
     EXPECT_NE(info.shape.steps[1].contentHash, info.shape.steps[2].contentHash);
@@ -768,7 +792,8 @@ TEST_F(GridFile, SwitchingStepsWithKnownDigests) {
     for (size_t k : {2u, 1u, 0u, 2u}) {
         hc::readGridStep(path("flood.hcg"), g, k, &known);
         expectEqualGrids(scenarioAt(s, k), g);
-        EXPECT_EQ(g.contentHash(), g.steps[k].contentHash) << "the table's hash is the grid's: what a Scene may be given";
+        EXPECT_EQ(g.contentHash(), g.steps[k].contentHash)
+            << "the table's hash is the grid's: what a Scene may be given";
     }
     hc::StaticDigests wrong = known;
     ++wrong.structureHash;
@@ -802,15 +827,15 @@ TEST_F(GridFile, StepsAreReadLazilyAndCheckedWhenRead) {
     expectEqualGrids(scenarioAt(s, 1), hc::readGrid(path("bad.hcg"), nullptr, 1));
     const std::string where = "at byte offset " + std::to_string(offset);
     for (auto read : std::vector<std::function<void()>>{[&] { hc::readGrid(path("bad.hcg"), nullptr, 2); },
-                                                       [&] { hc::verifyGridFile(path("bad.hcg"), 0); },
-                                                       [&] {
-                                                           Grid g = hc::readGrid(path("bad.hcg"));
-                                                           hc::readGridStep(path("bad.hcg"), g, 2);
-                                                       },
-                                                       [&] {
-                                                           const hc::GridRegionReader r(path("bad.hcg"), 2);
-                                                           r.region({0, 0, 10, 10});
-                                                       }}) {
+                                                        [&] { hc::verifyGridFile(path("bad.hcg"), 0); },
+                                                        [&] {
+                                                            Grid g = hc::readGrid(path("bad.hcg"));
+                                                            hc::readGridStep(path("bad.hcg"), g, 2);
+                                                        },
+                                                        [&] {
+                                                            const hc::GridRegionReader r(path("bad.hcg"), 2);
+                                                            r.region({0, 0, 10, 10});
+                                                        }}) {
         try {
             read();
             ADD_FAILURE() << "a damaged step was read";
@@ -825,11 +850,11 @@ TEST_F(GridFile, StepsAreReadLazilyAndCheckedWhenRead) {
     EXPECT_THROW(hc::verifyGridFile(path("bad2.hcg"), 0), hc::Error);
 }
 
-// Writing by parts (under mpirun each rank writes its own run of cells into rank 0's file, docs/design.md section 7), run
-// here in one process: rank 0's writer appends cells [0, a), two parts write [a, b) and [b, n) straight into its
+// Writing by parts (under mpirun each rank writes its own run of cells into rank 0's file, docs/design.md section 7),
+// run here in one process: rank 0's writer appends cells [0, a), two parts write [a, b) and [b, n) straight into its
 // temporary (the second before the first, as ranks race), checking and summarising them as they go, then hash them in
-// turn, read back from the file, from the state the run before left. The file must be the very bytes writeGrid() writes: cuts inside checksum blocks, a second
-// static layer, 300 k cells over three 1 MiB blocks of CELLS.
+// turn, read back from the file, from the state the run before left. The file must be the very bytes writeGrid()
+// writes: cuts inside checksum blocks, a second static layer, 300 k cells over three 1 MiB blocks of CELLS.
 namespace {
 
 Grid twoLayerThreeBlockGrid() {
@@ -859,7 +884,9 @@ TEST_F(GridFile, WritingByPartsEqualsWholeWrite) {
         w.append(std::span(g.codes).first(a), valuesOf(g, 0, a));
         const std::vector<std::byte> where = w.placement();
         hc::GridFilePart p1(where, g, a), p2(where, g, b);
-        for (size_t i = b; i < n; i += 50000) p2.append(std::span(g.codes).subspan(i, std::min<size_t>(50000, n - i)), valuesOf(g, i, std::min<size_t>(50000, n - i)));
+        for (size_t i = b; i < n; i += 50000)
+            p2.append(std::span(g.codes).subspan(i, std::min<size_t>(50000, n - i)),
+                      valuesOf(g, i, std::min<size_t>(50000, n - i)));
         p1.append(std::span(g.codes).subspan(a, b - a), valuesOf(g, a, b - a));
         p1.resume(w.streamState());
         p1.follow();
@@ -894,7 +921,8 @@ TEST_F(GridFile, WritingByPartsRefusesPartsOutOfTurnAndLeavesNothing) {
         const uint64_t backwards[2] = {g.codes[b + 1], g.codes[b]};
         const float zeros[2] = {0, 0};
         EXPECT_THROW(p3.append(backwards, {std::span<const float>(zeros), std::span<const float>(zeros)}), hc::Error);
-        // A part whose first cell overlaps the last cell before it (the writer's cell a - 1 again) is refused at the seam.
+        // A part whose first cell overlaps the last cell before it (the writer's cell a - 1 again) is refused at the
+        // seam.
         hc::GridFilePart seam(where, g, a);
         seam.append(std::span(g.codes).subspan(a - 1, 2), valuesOf(g, a - 1, 2));
         EXPECT_THROW(seam.resume(w.streamState()), hc::Error);
@@ -912,7 +940,7 @@ TEST_F(GridFile, WritingByPartsRefusesPartsOutOfTurnAndLeavesNothing) {
         p2.resume(p1.state());
         p2.follow();
         const std::vector<std::byte> r1 = p1.finish(), r2 = p2.finish();
-        EXPECT_THROW(w.addPart(r2), hc::Error);  // out of turn: the writer needs cell a next
+        EXPECT_THROW(w.addPart(r2), hc::Error);      // out of turn: the writer needs cell a next
         EXPECT_THROW(w.commit(g.stats), hc::Error);  // cells missing
         // A state from another grid (one layer fewer) is refused.
         hc::GridFilePart other(where, g, a);

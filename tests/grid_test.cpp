@@ -61,8 +61,10 @@ struct Case {
 std::vector<Case> realGrids() {
     std::vector<Case> out;
     out.push_back({"ratio128", ratio128Grid()});
-    for (auto [file, tol] : {std::pair{"lidar1m_minnesota_utm15.tif", 0.25}, {"tin_valid_3857.tif", 0.25},
-                             {"lux_elev.tif", 5.0}, {"west_bijou_gully_3m.asc", 0.5}}) {
+    for (auto [file, tol] : {std::pair{"lidar1m_minnesota_utm15.tif", 0.25},
+                             {"tin_valid_3857.tif", 0.25},
+                             {"lux_elev.tif", 5.0},
+                             {"west_bijou_gully_3m.asc", 0.5}}) {
         std::string p = hc::test::dataFile(file);
         if (!p.empty()) out.push_back({file, ingestFile(p, tol)});
     }
@@ -160,7 +162,8 @@ TEST(GridQueries, NeighboursMatchBruteForce) {
             auto qi = g.cellSquare(i);
             std::vector<uint32_t> want;
             for (size_t j = 0; j < g.cellCount(); ++j)
-                if (j != i && meetsBox(g.cellSquare(j), qi.x0, qi.y0, qi.x1, qi.y1)) want.push_back(static_cast<uint32_t>(j));
+                if (j != i && meetsBox(g.cellSquare(j), qi.x0, qi.y0, qi.x1, qi.y1))
+                    want.push_back(static_cast<uint32_t>(j));
             ASSERT_EQ(got, want) << "cell " << i;
             // Neighbours touch but never overlap.
             for (uint32_t j : got) {
@@ -184,15 +187,16 @@ TEST(GridValidate, CatchesBrokenInvariants) {
     Grid misaligned = g;
     size_t big = 0;
     while (hc::codeLevel(misaligned.codes[big]) == 0) ++big;
-    misaligned.codes[big] = hc::makeCellCode(hc::codeKey(misaligned.codes[big]) + 1, hc::codeLevel(misaligned.codes[big]));
+    misaligned.codes[big] =
+        hc::makeCellCode(hc::codeKey(misaligned.codes[big]) + 1, hc::codeLevel(misaligned.codes[big]));
     EXPECT_THAT(misaligned.validate(), HasSubstr("cell " + std::to_string(big) + " is not aligned to its level"));
     Grid nonFinite = g;
     nonFinite.values[0][5] = NAN;
     EXPECT_THAT(nonFinite.validate(), HasSubstr("cell 5 has a non-finite elevation value"));
     Grid shortLayer = g;
     shortLayer.values[0].pop_back();
-    EXPECT_THAT(shortLayer.validate(), HasSubstr("layer elevation has " + std::to_string(g.codes.size() - 1) + " values for " +
-                                                 std::to_string(g.codes.size()) + " cells"));
+    EXPECT_THAT(shortLayer.validate(), HasSubstr("layer elevation has " + std::to_string(g.codes.size() - 1) +
+                                                 " values for " + std::to_string(g.codes.size()) + " cells"));
 }
 
 TEST(GridHashes, StructureIgnoresValuesContentDoesNot) {

@@ -67,16 +67,18 @@ TEST(Heap, FramesReuseTheirPredecessorsPages) {
     const bool large = mallopt(M_MMAP_THRESHOLD, 256 << 20) == 1;
     for (auto [width, height] : {std::pair<size_t, size_t>{1920, 1080}, {3840, 2160}}) {
         if (width > 1920 && !large) {
-            std::printf("this glibc caps the threshold at 32 MiB: 3840 x 2160 frames fault their layers in every time\n");
+            std::printf(
+                "this glibc caps the threshold at 32 MiB: 3840 x 2160 frames fault their layers in every time\n");
             continue;
         }
         const auto [first, later] = faultsOfFrames(width, height);
         // A frame touches 55 bytes a pixel and 12.6 MB of textures: at 1920 x 1080 about 31,000 pages of 4 KiB the
         // first time, at least the ten layers' 40 bytes a pixel. Reused, it faults at most a few pages (the vectors'
         // bookkeeping, a neighbour's growth); 1 % of the first frame's faults leaves room for those.
-        EXPECT_GT(first, long(width * height * 40 / 4096)) << width << " x " << height << ": the first frame should fault its pages in";
-        EXPECT_LT(later, first / 100) << width << " x " << height << ": frames after the second faulted " << later << " pages against "
-                                      << first << " for the first";
+        EXPECT_GT(first, long(width * height * 40 / 4096))
+            << width << " x " << height << ": the first frame should fault its pages in";
+        EXPECT_LT(later, first / 100) << width << " x " << height << ": frames after the second faulted " << later
+                                      << " pages against " << first << " for the first";
     }
 #else
     EXPECT_FALSE(hc::keepFreedMemory());

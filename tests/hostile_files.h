@@ -16,8 +16,10 @@ namespace hc::hostile {
 
 // The formats' container parameters (grid_file_internal.h, cache_file.cpp), repeated here on purpose: a test that
 // borrowed the readers' own constants would not notice if they changed.
-inline const FileFormat kGridFormat{{'\x89', 'H', 'C', 'G', 'R', 'I', 'D', '\n'}, 1, 0, "heightcast grid (.hcg)", {1, 2, 3}};
-inline const FileFormat kCacheFormat{{'\x89', 'H', 'C', 'I', 'N', 'F', 'L', '\n'}, 1, 0, "heightcast influence cache (.hci)", {1, 2}};
+inline const FileFormat kGridFormat{
+    {'\x89', 'H', 'C', 'G', 'R', 'I', 'D', '\n'}, 1, 0, "heightcast grid (.hcg)", {1, 2, 3}};
+inline const FileFormat kCacheFormat{
+    {'\x89', 'H', 'C', 'I', 'N', 'F', 'L', '\n'}, 1, 0, "heightcast influence cache (.hci)", {1, 2}};
 enum : uint32_t { kGridMeta = 1, kGridCells = 2, kGridLayer = 3, kCacheOffsets = 1, kCacheIndices = 2 };
 // Header fields (grid_file.h, cache_file.cpp).
 constexpr size_t kGridCellCountAt = 24, kCacheCellCountAt = 24, kCacheEntryCountAt = 32;

@@ -43,8 +43,10 @@ struct Case {
 std::vector<Case> grids() {
     std::vector<Case> out;
     out.push_back({"ratio128", ratio128Grid()});
-    for (auto [file, tol] : {std::pair{"tin_valid_3857.tif", 0.25}, {"west_bijou_gully_3m.asc", 0.25},
-                             {"lux_elev.tif", 5.0}, {"lidar1m_minnesota_utm15.tif", 0.25}}) {
+    for (auto [file, tol] : {std::pair{"tin_valid_3857.tif", 0.25},
+                             {"west_bijou_gully_3m.asc", 0.25},
+                             {"lux_elev.tif", 5.0},
+                             {"lidar1m_minnesota_utm15.tif", 0.25}}) {
         std::string p = hc::test::dataFile(file);
         if (!p.empty()) out.push_back({file, ingestFile(p, tol)});
     }
@@ -336,8 +338,9 @@ TEST(Surface, BathtubFloodIsLevelWhereverWaterIsDrawn) {
         const auto od = eval.value(pts[i][0], pts[i][1], oldDepth);
         if (*od > 0) oldWorst = std::max(oldWorst, std::abs(*z[i] + *od - level));
     }
-    std::printf("%zu points with water, %zu dry: level field within %.2e m of %.0f m; old surface off by up to %.2f m\n", drawn, dry, worst,
-                level, oldWorst);
+    std::printf(
+        "%zu points with water, %zu dry: level field within %.2e m of %.0f m; old surface off by up to %.2f m\n", drawn,
+        dry, worst, level, oldWorst);
     EXPECT_GT(drawn, 3000u);
     EXPECT_GT(dry, 3000u);
     EXPECT_LE(worst, 0.01);
@@ -400,8 +403,8 @@ TEST(Surface, WaterRuleAgainstEveryCell) {
             ASSERT_EQ(*db, 0.0);
         }
     }
-    std::printf("%zu drawn, %zu dry (%zu by the wet share, %zu with the level below the terrain), %zu ambiguous\n", drawn, dry, byShare,
-                byLevel, ambiguous);
+    std::printf("%zu drawn, %zu dry (%zu by the wet share, %zu with the level below the terrain), %zu ambiguous\n",
+                drawn, dry, byShare, byLevel, ambiguous);
     EXPECT_GT(drawn, 50u);
     EXPECT_GT(byShare, 50u);
     EXPECT_GT(byLevel, 0u) << "no point tested the level-above-terrain half of the rule";
@@ -543,7 +546,8 @@ TEST_F(CacheFile, EveryTruncationAndEveryFlippedByteIsRefused) {
     std::vector<char> bytes = readBytes(path("t.hci"));
     for (size_t n = 0; n < bytes.size(); ++n) {
         writeBytes(path("cut.hci"), bytes, n);
-        EXPECT_THROW(hc::influence::readInfluenceCache(path("cut.hci"), g, KernelParams{}), hc::Error) << "cut to " << n;
+        EXPECT_THROW(hc::influence::readInfluenceCache(path("cut.hci"), g, KernelParams{}), hc::Error)
+            << "cut to " << n;
     }
     for (size_t i = 0; i < bytes.size(); ++i) {
         std::vector<char> bad = bytes;
@@ -603,7 +607,9 @@ TEST_F(CacheFile, HugeCountsBehindValidChecksumsAreRefused) {
     for (uint64_t count : {uint64_t{1} << 62, uint64_t{1} << 63, ~uint64_t{0}, uint64_t{1} << 40}) {
         hc::hostile::cacheWithEntryCount(path("t.hci"), path("huge.hci"), count);
         const std::string m = message();
-        EXPECT_EQ(m.rfind(path("huge.hci") + ": at byte offset 32: header declares " + std::to_string(count) + " entries", 0), 0u)
+        EXPECT_EQ(
+            m.rfind(path("huge.hci") + ": at byte offset 32: header declares " + std::to_string(count) + " entries", 0),
+            0u)
             << count << ": " << m;
     }
     for (uint64_t count : {uint64_t{1} << 61, ~uint64_t{0}}) {
@@ -611,7 +617,9 @@ TEST_F(CacheFile, HugeCountsBehindValidChecksumsAreRefused) {
         hc::bytes::store<uint64_t>(c.header, hc::hostile::kCacheCellCountAt, count);
         hc::hostile::writeContainer(c, path("huge.hci"), hc::hostile::kCacheFormat);
         const std::string m = message();
-        EXPECT_EQ(m.rfind(path("huge.hci") + ": at byte offset 24: header declares " + std::to_string(count) + " cells", 0), 0u)
+        EXPECT_EQ(
+            m.rfind(path("huge.hci") + ": at byte offset 24: header declares " + std::to_string(count) + " cells", 0),
+            0u)
             << count << ": " << m;
     }
 }
@@ -644,7 +652,8 @@ TEST_F(CacheFile, FuzzFindingListPastTheEntryCount) {
         hc::influence::readInfluenceCache(dir + "fuzz_hci_list_past_end.hci", g, params);
         FAIL() << "accepted";
     } catch (const hc::Error& e) {
-        EXPECT_NE(std::string(e.what()).find(": at byte offset 360: OFFSETS exceed the entry count 2307 at cell 20"), std::string::npos)
+        EXPECT_NE(std::string(e.what()).find(": at byte offset 360: OFFSETS exceed the entry count 2307 at cell 20"),
+                  std::string::npos)
             << e.what();
     }
 }

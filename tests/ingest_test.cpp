@@ -111,7 +111,8 @@ void checkSameAsGdalRead(const std::string& path, const Raster& r) {
     EXPECT_EQ(r.pixelSizeM, gt[1]);
     std::vector<double> v(r.width * r.height);
     GDALRasterBand* b = ds->GetRasterBand(1);
-    ASSERT_EQ(b->RasterIO(GF_Read, 0, 0, int(r.width), int(r.height), v.data(), int(r.width), int(r.height), GDT_Float64, 0, 0, nullptr),
+    ASSERT_EQ(b->RasterIO(GF_Read, 0, 0, int(r.width), int(r.height), v.data(), int(r.width), int(r.height),
+                          GDT_Float64, 0, 0, nullptr),
               CE_None);
     int has = 0;
     double nd = b->GetNoDataValue(&has);
@@ -152,7 +153,8 @@ void checkSameAsProj(const std::string& path, const std::string& sourceSrs, cons
     double maxDiff = 0;
     for (size_t row = 0; row < r.height; ++row)
         for (size_t col = 0; col < r.width; ++col) {
-            double x = r.westWorld + (double(col) + 0.5) * r.pixelSizeM, y = r.northWorld - (double(row) + 0.5) * r.pixelSizeM, z = 0;
+            double x = r.westWorld + (double(col) + 0.5) * r.pixelSizeM,
+                   y = r.northWorld - (double(row) + 0.5) * r.pixelSizeM, z = 0;
             int ok = 0;
             GDALGenImgProjTransform(tr, TRUE, 1, &x, &y, &z, &ok);  // -> source pixel coordinates
             double u = x - 0.5, v = y - 0.5;
@@ -163,7 +165,8 @@ void checkSameAsProj(const std::string& path, const std::string& sourceSrs, cons
                 continue;
             }
             auto at = [&](long i, long j) {
-                return src[size_t(std::clamp<long>(j, 0, sh - 1)) * size_t(sw) + size_t(std::clamp<long>(i, 0, sw - 1))];
+                return src[size_t(std::clamp<long>(j, 0, sh - 1)) * size_t(sw) +
+                           size_t(std::clamp<long>(i, 0, sw - 1))];
             };
             long i0 = long(std::floor(u)), j0 = long(std::floor(v));
             double fx = u - double(i0), fy = v - double(j0);
@@ -185,9 +188,9 @@ struct RasterCase {
     const char* file;
     double tol;
     const char* sourceSrs;
-    bool projectedAsIs;    // check against a plain GDAL read
-    bool geographic;       // check against gdalwarp
-    double minValidFrac;   // sanity: fraction of valid pixels expected at least
+    bool projectedAsIs;   // check against a plain GDAL read
+    bool geographic;      // check against gdalwarp
+    double minValidFrac;  // sanity: fraction of valid pixels expected at least
     double maxValidFrac;
 };
 
@@ -229,23 +232,23 @@ TEST_P(IngestRaster, GuaranteeHoldsPixelByPixel) {
 INSTANTIATE_TEST_SUITE_P(
     RealData, IngestRaster,
     ::testing::Values(
-        RasterCase{"hef_srtm.tif", 0.25, "", false, true, 0.8, 1.0},               // GTiff Int16, EPSG:4326 -> UTM 32N
-        RasterCase{"lidar1m_minnesota_utm15.tif", 0.25, "", true, false, 1, 1},     // 1 m LiDAR, NAD83 / UTM 15N
-        RasterCase{"N00E010.hgt", 0.5, "", false, true, 0.95, 1.0},                 // SRTMHGT at the equator
-        RasterCase{"N00E011.hgt.zip", 0.5, "", false, true, 0.95, 1.0},             // zipped SRTMHGT
-        RasterCase{"buscot_50m.asc", 0.05, "", false, false, 1, 1},                 // ESRI ASCII, flat floodplain, no CRS
-        RasterCase{"buscot_50m.asc", 0.1, "EPSG:27700", true, false, 1, 1},         // same, CRS named by --s_srs
-        RasterCase{"west_bijou_gully_3m.asc", 0.25, "", false, false, 0.2, 0.4},    // NODATA_value 0, 72 % holes
-        RasterCase{"kilauea_utm.nc", 1.0, "", true, false, 0.9, 1.0},               // NetCDF, UTM 5N, ocean nodata
+        RasterCase{"hef_srtm.tif", 0.25, "", false, true, 0.8, 1.0},              // GTiff Int16, EPSG:4326 -> UTM 32N
+        RasterCase{"lidar1m_minnesota_utm15.tif", 0.25, "", true, false, 1, 1},   // 1 m LiDAR, NAD83 / UTM 15N
+        RasterCase{"N00E010.hgt", 0.5, "", false, true, 0.95, 1.0},               // SRTMHGT at the equator
+        RasterCase{"N00E011.hgt.zip", 0.5, "", false, true, 0.95, 1.0},           // zipped SRTMHGT
+        RasterCase{"buscot_50m.asc", 0.05, "", false, false, 1, 1},               // ESRI ASCII, flat floodplain, no CRS
+        RasterCase{"buscot_50m.asc", 0.1, "EPSG:27700", true, false, 1, 1},       // same, CRS named by --s_srs
+        RasterCase{"west_bijou_gully_3m.asc", 0.25, "", false, false, 0.2, 0.4},  // NODATA_value 0, 72 % holes
+        RasterCase{"kilauea_utm.nc", 1.0, "", true, false, 0.9, 1.0},             // NetCDF, UTM 5N, ocean nodata
         // NetCDF with NaN holes and no CRS, but CF units degrees_east: taken as WGS 84 and projected to UTM
         // (issue 11: degree grids were built as metres); the valid share drops from 0.81 to 0.77 with the
         // projected footprint's empty corners.
         RasterCase{"earth_relief_20m_holes.grd", 1.0, "", false, false, 0.7, 0.85},
-        RasterCase{"south_glacier_utm7.tif", 0.25, "", true, false, 1, 1},          // Float64 samples
-        RasterCase{"olinda_utm25s.tif", 0.25, "", true, false, 1, 1},               // UTM 25S, northing 9.1e6
-        RasterCase{"tin_valid_3857.tif", 0.25, "", true, false, 0.85, 0.9},         // Web Mercator, x = -1.36e7
-        RasterCase{"lux_elev.tif", 1.0, "", false, true, 0.4, 0.6},                 // geographic, 46 % nodata
-        RasterCase{"boulder_srtmgl3.asc", 0.5, "EPSG:4326", false, true, 0.95, 1.0} // degrees in an .asc, --s_srs
+        RasterCase{"south_glacier_utm7.tif", 0.25, "", true, false, 1, 1},           // Float64 samples
+        RasterCase{"olinda_utm25s.tif", 0.25, "", true, false, 1, 1},                // UTM 25S, northing 9.1e6
+        RasterCase{"tin_valid_3857.tif", 0.25, "", true, false, 0.85, 0.9},          // Web Mercator, x = -1.36e7
+        RasterCase{"lux_elev.tif", 1.0, "", false, true, 0.4, 0.6},                  // geographic, 46 % nodata
+        RasterCase{"boulder_srtmgl3.asc", 0.5, "EPSG:4326", false, true, 0.95, 1.0}  // degrees in an .asc, --s_srs
         ),
     [](const ::testing::TestParamInfo<RasterCase>& p) {
         std::string n = p.param.file;
@@ -268,7 +271,8 @@ TEST_F(Ingest, TerrainRgbDecodesLikeTheReference) {
     ASSERT_EQ(r.width, want.width);
     ASSERT_EQ(r.height, want.height);
     double maxDiff = 0;
-    for (size_t i = 0; i < r.values.size(); ++i) maxDiff = std::max(maxDiff, std::abs(double(r.values[i]) - want.values[i]));
+    for (size_t i = 0; i < r.values.size(); ++i)
+        maxDiff = std::max(maxDiff, std::abs(double(r.values[i]) - want.values[i]));
     EXPECT_LE(maxDiff, 1e-3);  // both are the 0.1 m steps rounded to float32
     Grid g = hc::ingest::ingest(o, rep);
     checkGuarantee(r, nullptr, g, o.toleranceM);
@@ -294,7 +298,9 @@ TEST_F(Ingest, SouthUpAndRotatedRastersLandWhereTheyBelong) {
         std::vector<float> v(w * h);
         for (size_t j = 0; j < h; ++j)
             for (size_t i = 0; i < w; ++i) v[j * w + i] = value(i, j);
-        EXPECT_EQ(ds->GetRasterBand(1)->RasterIO(GF_Write, 0, 0, int(w), int(h), v.data(), int(w), int(h), GDT_Float32, 0, 0, nullptr), CE_None);
+        EXPECT_EQ(ds->GetRasterBand(1)->RasterIO(GF_Write, 0, 0, int(w), int(h), v.data(), int(w), int(h), GDT_Float32,
+                                                 0, 0, nullptr),
+                  CE_None);
         return p;
     };
     // South-up: row 0 is the southern-most row.
@@ -315,7 +321,8 @@ TEST_F(Ingest, SouthUpAndRotatedRastersLandWhereTheyBelong) {
         EXPECT_NEAR(r.northWorld, y0, 1e-6);
         EXPECT_EQ(r.pixelSizeM, c);
         double maxDiff = 0;
-        for (size_t i = 0; i < r.values.size(); ++i) maxDiff = std::max(maxDiff, std::abs(double(r.values[i]) - ref.values[i]));
+        for (size_t i = 0; i < r.values.size(); ++i)
+            maxDiff = std::max(maxDiff, std::abs(double(r.values[i]) - ref.values[i]));
         EXPECT_LE(maxDiff, 1e-3) << "pixels moved (resampling at exact pixel centres must reproduce them)";
     }
 }
@@ -335,7 +342,8 @@ TEST_F(Ingest, RotatedByThirtyDegreesLandsWhereItBelongs) {
     GDALAllRegister();
     const std::string path = (dir_ / "rotated30.tif").string();
     {
-        std::unique_ptr<GDALDataset> ds(GetGDALDriverManager()->GetDriverByName("GTiff")->Create(path.c_str(), W, H, 1, GDT_Float32, nullptr));
+        std::unique_ptr<GDALDataset> ds(
+            GetGDALDriverManager()->GetDriverByName("GTiff")->Create(path.c_str(), W, H, 1, GDT_Float32, nullptr));
         ds->SetGeoTransform(const_cast<double*>(gt));
         OGRSpatialReference srs;
         srs.importFromEPSG(32633);
@@ -343,10 +351,12 @@ TEST_F(Ingest, RotatedByThirtyDegreesLandsWhereItBelongs) {
         std::vector<float> v(size_t(W) * H);
         for (int j = 0; j < H; ++j)
             for (int i = 0; i < W; ++i) {
-                const double x = gt[0] + (i + 0.5) * gt[1] + (j + 0.5) * gt[2], y = gt[3] + (i + 0.5) * gt[4] + (j + 0.5) * gt[5];
+                const double x = gt[0] + (i + 0.5) * gt[1] + (j + 0.5) * gt[2],
+                             y = gt[3] + (i + 0.5) * gt[4] + (j + 0.5) * gt[5];
                 v[size_t(j) * W + size_t(i)] = float(plane(x, y));
             }
-        ASSERT_EQ(ds->GetRasterBand(1)->RasterIO(GF_Write, 0, 0, W, H, v.data(), W, H, GDT_Float32, 0, 0, nullptr), CE_None);
+        ASSERT_EQ(ds->GetRasterBand(1)->RasterIO(GF_Write, 0, 0, W, H, v.data(), W, H, GDT_Float32, 0, 0, nullptr),
+                  CE_None);
     }
     Options o;
     o.input = path;
@@ -369,8 +379,10 @@ TEST_F(Ingest, RotatedByThirtyDegreesLandsWhereItBelongs) {
             if (!std::isnan(v)) {
                 ++valid;
                 const double err = std::abs(double(v) - plane(x, y));
-                if (col >= 0.5 && col <= W - 0.5 && row >= 0.5 && row <= H - 0.5) worst = std::max(worst, err);
-                else worstRim = std::max(worstRim, err);
+                if (col >= 0.5 && col <= W - 0.5 && row >= 0.5 && row <= H - 0.5)
+                    worst = std::max(worst, err);
+                else
+                    worstRim = std::max(worstRim, err);
             }
             if (wellInside) {
                 ++inside;
@@ -407,7 +419,8 @@ TEST_F(Ingest, NearlySquarePixelsAreKeptOthersResampled) {
         ds->SetSpatialRef(&srs);
         std::vector<float> v(200);
         for (size_t i = 0; i < v.size(); ++i) v[i] = 100.0f + float(i % 20) + 10.0f * float(i / 20);  // a plane
-        EXPECT_EQ(ds->GetRasterBand(1)->RasterIO(GF_Write, 0, 0, 20, 10, v.data(), 20, 10, GDT_Float32, 0, 0, nullptr), CE_None);
+        EXPECT_EQ(ds->GetRasterBand(1)->RasterIO(GF_Write, 0, 0, 20, 10, v.data(), 20, 10, GDT_Float32, 0, 0, nullptr),
+                  CE_None);
         return p;
     };
     Options o;
@@ -435,7 +448,8 @@ TEST_F(Ingest, SinglePixelAndAllNodata) {
         std::ofstream one(d / "one.asc");
         one << "ncols 1\nnrows 1\nxllcorner 500\nyllcorner 700\ncellsize 10\nNODATA_value -9999\n42.5\n";
         std::ofstream none(d / "none.asc");
-        none << "ncols 2\nnrows 2\nxllcorner 0\nyllcorner 0\ncellsize 10\nNODATA_value -9999\n-9999 -9999\n-9999 -9999\n";
+        none << "ncols 2\nnrows 2\nxllcorner 0\nyllcorner 0\ncellsize 10\nNODATA_value -9999\n-9999 -9999\n-9999 "
+                "-9999\n";
     }
     Options o;
     o.input = (d / "one.asc").string();
@@ -489,7 +503,8 @@ TEST_F(Ingest, FeetAreConvertedToMetres) {
     GDALAllRegister();
     fs::path p = dir_ / "feet.tif";
     std::unique_ptr<GDALDataset> src(GDALDataset::Open(path.c_str(), GDAL_OF_RASTER));
-    std::unique_ptr<GDALDataset> dst(GetGDALDriverManager()->GetDriverByName("GTiff")->CreateCopy(p.string().c_str(), src.get(), false, nullptr, nullptr, nullptr));
+    std::unique_ptr<GDALDataset> dst(GetGDALDriverManager()->GetDriverByName("GTiff")->CreateCopy(
+        p.string().c_str(), src.get(), false, nullptr, nullptr, nullptr));
     OGRSpatialReference ft;
     ft.importFromEPSG(2243);  // NAD83 / Idaho West (ftUS)
     dst->SetSpatialRef(&ft);
@@ -517,7 +532,7 @@ TEST_F(Water, BathtubFillsFromTheBoundaryOnly) {
     for (size_t r = 5; r < 25; ++r)
         for (size_t c = 0; c < 15; ++c) t.at(c, r) = 5.0f + 0.1f * float(c);  // open basin
     for (size_t r = 10; r < 20; ++r)
-        for (size_t c = 25; c < 35; ++c) t.at(c, r) = 2.0f;                   // closed pit
+        for (size_t c = 25; c < 35; ++c) t.at(c, r) = 2.0f;  // closed pit
     Options o;
     o.water = hc::ingest::WaterSource::Level;
     o.waterLevelM = 10;
@@ -543,18 +558,21 @@ TEST_F(Water, DepthAndSurfaceRastersMatchTheBathtub) {
     GDALDriver* gtiff = GetGDALDriverManager()->GetDriverByName("GTiff");
     const int w = src->GetRasterXSize(), h = src->GetRasterYSize();
     std::vector<float> z(size_t(w) * h);
-    ASSERT_EQ(src->GetRasterBand(1)->RasterIO(GF_Read, 0, 0, w, h, z.data(), w, h, GDT_Float32, 0, 0, nullptr), CE_None);
+    ASSERT_EQ(src->GetRasterBand(1)->RasterIO(GF_Read, 0, 0, w, h, z.data(), w, h, GDT_Float32, 0, 0, nullptr),
+              CE_None);
     auto make = [&](const std::string& name, auto&& f) {
         std::string p = (dir_ / name).string();
         std::unique_ptr<GDALDataset> ds(gtiff->CreateCopy(p.c_str(), src.get(), false, nullptr, nullptr, nullptr));
         std::vector<float> v(z.size());
         for (size_t i = 0; i < v.size(); ++i) v[i] = f(z[i]);
-        EXPECT_EQ(ds->GetRasterBand(1)->RasterIO(GF_Write, 0, 0, w, h, v.data(), w, h, GDT_Float32, 0, 0, nullptr), CE_None);
+        EXPECT_EQ(ds->GetRasterBand(1)->RasterIO(GF_Write, 0, 0, w, h, v.data(), w, h, GDT_Float32, 0, 0, nullptr),
+                  CE_None);
         return p;
     };
     std::string depth = make("depth.tif", [](float zz) { return std::max(0.0f, 395.0f - zz); });
     std::string surface = make("surface.tif", [](float) { return 395.0f; });
-    for (auto [mode, file] : {std::pair{hc::ingest::WaterSource::Depth, depth}, {hc::ingest::WaterSource::Surface, surface}}) {
+    for (auto [mode, file] :
+         {std::pair{hc::ingest::WaterSource::Depth, depth}, {hc::ingest::WaterSource::Surface, surface}}) {
         Options o;
         o.input = path;
         o.water = mode;
@@ -583,11 +601,17 @@ TEST(Options, AbsurdValuesAreRefused) {
     };
     refused([](Options& o) { o.toleranceM = -1; });
     refused([](Options& o) { o.toleranceM = NAN; });
-    refused([](Options& o) { o.minCellM = 10; o.maxCellM = 5; });
+    refused([](Options& o) {
+        o.minCellM = 10;
+        o.maxCellM = 5;
+    });
     refused([](Options& o) { o.minCellM = 0; });
     refused([](Options& o) { o.band = 0; });
     refused([](Options& o) { o.zScale = 0; });
-    refused([](Options& o) { o.terrainRgb = true; o.band = 2; });
+    refused([](Options& o) {
+        o.terrainRgb = true;
+        o.band = 2;
+    });
     refused([](Options& o) { o.water = hc::ingest::WaterSource::Depth; });
     HC_REQUIRE_DATA(path, "hef_srtm.tif");
     Options o;
@@ -676,7 +700,8 @@ protected:
 };
 
 bool hasWarning(const LoadReport& r, const std::string& text) {
-    return std::any_of(r.warnings.begin(), r.warnings.end(), [&](const std::string& w) { return w.find(text) != std::string::npos; });
+    return std::any_of(r.warnings.begin(), r.warnings.end(),
+                       [&](const std::string& w) { return w.find(text) != std::string::npos; });
 }
 
 // Issue 11, "Tolerance checked in float32": a Float64 source at a tight tolerance reported 0 m, its values
@@ -693,8 +718,10 @@ TEST_F(Issue11, Float64SourceCheckedInItsOwnPrecision) {
     {
         std::unique_ptr<GDALDataset> ds(GDALDataset::Open(p.c_str(), GDAL_OF_RASTER | GDAL_OF_READONLY));
         src.resize(size_t(ds->GetRasterXSize()) * size_t(ds->GetRasterYSize()));
-        ASSERT_EQ(ds->GetRasterBand(1)->RasterIO(GF_Read, 0, 0, ds->GetRasterXSize(), ds->GetRasterYSize(), src.data(),
-                                                 ds->GetRasterXSize(), ds->GetRasterYSize(), GDT_Float64, 0, 0, nullptr), CE_None);
+        ASSERT_EQ(
+            ds->GetRasterBand(1)->RasterIO(GF_Read, 0, 0, ds->GetRasterXSize(), ds->GetRasterYSize(), src.data(),
+                                           ds->GetRasterXSize(), ds->GetRasterYSize(), GDT_Float64, 0, 0, nullptr),
+            CE_None);
     }
     for (double tol : {0.0, 1e-5, 0.01}) {
         Options o;
@@ -715,14 +742,16 @@ TEST_F(Issue11, Float64SourceCheckedInItsOwnPrecision) {
                 maxDev = std::max(maxDev, dev);
                 if (hc::codeLevel(l.grid.codes[*cell]) > 0) {
                     ++merged;
-                    ASSERT_LE(dev, tol) << "a merged cell broke the tolerance against the Float64 source at " << col << "," << row;
+                    ASSERT_LE(dev, tol) << "a merged cell broke the tolerance against the Float64 source at " << col
+                                        << "," << row;
                 } else {
                     // Half a float32 ulp at these elevations (~400 m: ulp 3.05e-5 m).
                     ASSERT_LE(dev, std::max(tol, std::abs(exact - double(static_cast<float>(exact)))));
                 }
             }
         // 1e-12 m: the build keeps the Float64 remainder as a float32 (relative error 6e-8 of a few micrometres).
-        EXPECT_NEAR(l.grid.stats.maxDevM, maxDev, 1e-12) << "the reported maximum is not the one against the Float64 source";
+        EXPECT_NEAR(l.grid.stats.maxDevM, maxDev, 1e-12)
+            << "the reported maximum is not the one against the Float64 source";
         EXPECT_GT(l.grid.stats.maxDevM, 0.0) << "float32 rounding of a Float64 source cannot vanish";
         if (tol >= 0.01) {
             EXPECT_GT(merged, 0u);
@@ -783,7 +812,8 @@ Band64 readBand64(const std::string& path) {
     if (!ds) throw hc::Error(path + ": cannot open");
     b.w = ds->GetRasterXSize(), b.h = ds->GetRasterYSize();
     b.v.resize(size_t(b.w) * size_t(b.h));
-    if (ds->GetRasterBand(1)->RasterIO(GF_Read, 0, 0, b.w, b.h, b.v.data(), b.w, b.h, GDT_Float64, 0, 0, nullptr) != CE_None)
+    if (ds->GetRasterBand(1)->RasterIO(GF_Read, 0, 0, b.w, b.h, b.v.data(), b.w, b.h, GDT_Float64, 0, 0, nullptr) !=
+        CE_None)
         throw hc::Error(path + ": cannot read band 1");
     b.nodata = ds->GetRasterBand(1)->GetNoDataValue(&b.hasNodata);
     ds->GetGeoTransform(b.gt);
@@ -809,7 +839,8 @@ TEST_F(Issue11, SourceCheckMatchesAnIndependentOne) {
     size_t found = 0, missed = 0;
     for (int row = 0; row < h; ++row)
         for (int col = 0; col < w; ++col) {
-            const double x = gt[0] + (col + 0.5) * gt[1] - g.originWorldX, y = gt[3] + (row + 0.5) * gt[5] - g.originWorldY;
+            const double x = gt[0] + (col + 0.5) * gt[1] - g.originWorldX,
+                         y = gt[3] + (row + 0.5) * gt[5] - g.originWorldY;
             auto cell = g.locate(x, y);
             if (!cell) {
                 ++missed;
@@ -870,8 +901,9 @@ TEST_F(Issue11, SourceCheckOfGeographicInputMatchesProj) {
             maxDev = std::max(maxDev, std::abs(z - double(g.values[0][*cell])));
         }
     }
-    std::printf("hef_srtm: %llu checked, %llu missed, max %.4f m (PROJ) vs %llu, %llu, %.4f m (ingest)\n", (unsigned long long)found,
-                (unsigned long long)missed, maxDev, (unsigned long long)rep.sourceCheck.checked, (unsigned long long)rep.sourceCheck.missed,
+    std::printf("hef_srtm: %llu checked, %llu missed, max %.4f m (PROJ) vs %llu, %llu, %.4f m (ingest)\n",
+                (unsigned long long)found, (unsigned long long)missed, maxDev,
+                (unsigned long long)rep.sourceCheck.checked, (unsigned long long)rep.sourceCheck.missed,
                 rep.sourceCheck.maxDevM);
     EXPECT_EQ(rep.sourceCheck.checked, found);
     EXPECT_EQ(rep.sourceCheck.missed, missed);

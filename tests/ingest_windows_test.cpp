@@ -72,8 +72,8 @@ size_t compareWindows(const fs::path& dir, const Options& o, const std::string& 
             for (size_t c = 0; c < w; ++c) {
                 const float a = values[r * w + c], b = whole.at(c0 + c, r0 + r);
                 if (!sameBits(a, b) && mismatches++ < 5)
-                    ADD_FAILURE() << "pixel " << c0 + c << "," << r0 + r << " of window " << c0 << "," << r0 << " " << w << "x" << h
-                                  << ": " << a << " read by window, " << b << " read whole";
+                    ADD_FAILURE() << "pixel " << c0 + c << "," << r0 + r << " of window " << c0 << "," << r0 << " " << w
+                                  << "x" << h << ": " << a << " read by window, " << b << " read whole";
                 if (count && !std::isnan(b)) ++valid;
             }
     };
@@ -120,7 +120,8 @@ void copyWithGeoTransform(const std::string& src, const std::string& path, const
     ASSERT_TRUE(in);
     double gt[6];
     ASSERT_EQ(in->GetGeoTransform(gt), CE_None);
-    GDALDatasetUniquePtr ds(GetGDALDriverManager()->GetDriverByName("GTiff")->CreateCopy(path.c_str(), in.get(), FALSE, nullptr, nullptr, nullptr));
+    GDALDatasetUniquePtr ds(GetGDALDriverManager()->GetDriverByName("GTiff")->CreateCopy(path.c_str(), in.get(), FALSE,
+                                                                                         nullptr, nullptr, nullptr));
     ASSERT_TRUE(ds);
     change(gt);
     ASSERT_EQ(ds->SetGeoTransform(gt), CE_None);
@@ -130,7 +131,8 @@ void copyWithGeoTransform(const std::string& src, const std::string& path, const
 void copyWithHole(const std::string& src, const std::string& path) {
     GDALDatasetUniquePtr in(GDALDataset::Open(src.c_str(), GDAL_OF_RASTER | GDAL_OF_READONLY));
     ASSERT_TRUE(in);
-    GDALDatasetUniquePtr ds(GetGDALDriverManager()->GetDriverByName("GTiff")->CreateCopy(path.c_str(), in.get(), FALSE, nullptr, nullptr, nullptr));
+    GDALDatasetUniquePtr ds(GetGDALDriverManager()->GetDriverByName("GTiff")->CreateCopy(path.c_str(), in.get(), FALSE,
+                                                                                         nullptr, nullptr, nullptr));
     ASSERT_TRUE(ds);
     GDALRasterBand* b = ds->GetRasterBand(1);
     ASSERT_EQ(b->SetNoDataValue(-32768), CE_None);
@@ -232,7 +234,9 @@ TEST_F(IngestWindows, WarpInterpolatesAcrossTheSeams) {
         double gt[6];
         ds->GetGeoTransform(gt);
         std::vector<float> v(w * h);
-        EXPECT_EQ(ds->GetRasterBand(1)->RasterIO(GF_Read, 0, 0, int(w), int(h), v.data(), int(w), int(h), GDT_Float32, 0, 0), CE_None);
+        EXPECT_EQ(
+            ds->GetRasterBand(1)->RasterIO(GF_Read, 0, 0, int(w), int(h), v.data(), int(w), int(h), GDT_Float32, 0, 0),
+            CE_None);
         const double first = gt[0] + gt[1] / 2;  // column 0's centre; columns repeat every 360
         const size_t i1 = (i0 + 1) % period;
         size_t found = 0;
@@ -241,7 +245,8 @@ TEST_F(IngestWindows, WarpInterpolatesAcrossTheSeams) {
         std::vector<int> ok(r.width);
         for (size_t row = 0; row < r.height; ++row) {
             for (size_t col = 0; col < r.width; ++col)
-                xs[col] = r.westWorld + (double(col) + 0.5) * r.pixelSizeM, ys[col] = r.northWorld - (double(row) + 0.5) * r.pixelSizeM;
+                xs[col] = r.westWorld + (double(col) + 0.5) * r.pixelSizeM,
+                ys[col] = r.northWorld - (double(row) + 0.5) * r.pixelSizeM;
             back->Transform(int(r.width), xs.data(), ys.data(), nullptr, ok.data());
             for (size_t col = 0; col < r.width; ++col) {
                 const double x = xs[col], y = ys[col];

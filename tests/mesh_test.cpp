@@ -1,6 +1,6 @@
-// UGRID quadtree meshes (docs/design.md section 6) and rotated grids: meshes written by hc-export's writer (and by hand,
-// through GDAL's multidimensional API, for what the writer never writes) read back by hc-ingest's reader; a rotated
-// grid probed and rendered as the same grid unrotated seen from a turned camera.
+// UGRID quadtree meshes (docs/design.md section 6) and rotated grids: meshes written by hc-export's writer (and by
+// hand, through GDAL's multidimensional API, for what the writer never writes) read back by hc-ingest's reader; a
+// rotated grid probed and rendered as the same grid unrotated seen from a turned camera.
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -120,7 +120,8 @@ TEST_F(Mesh, RotatedQuadtreeIsTakenWithItsRotation) {
             EXPECT_EQ(back.rotationDeg, 0.0);
             EXPECT_EQ(back.cellCount(), hc::readGrid(path("turned.hcg")).cellCount());
         }
-        EXPECT_NE(rep.method.find(deg == 30.0 || deg == -17.25 ? "turned" : "no resampling"), std::string::npos) << rep.method;
+        EXPECT_NE(rep.method.find(deg == 30.0 || deg == -17.25 ? "turned" : "no resampling"), std::string::npos)
+            << rep.method;
     }
 }
 
@@ -131,7 +132,8 @@ TEST_F(Mesh, RotatedGridProbesAsTheUnrotatedOne) {
     writeRotated(path("flood.hcg"), path("turned.hcg"), 30.0);
     const Grid a = hc::readGrid(path("flood.hcg"), nullptr, 2), b = hc::readGrid(path("turned.hcg"), nullptr, 2);
     const hc::influence::KernelParams params;
-    const auto la = hc::influence::buildInfluenceLists(a, params, 0, false), lb = hc::influence::buildInfluenceLists(b, params, 0, false);
+    const auto la = hc::influence::buildInfluenceLists(a, params, 0, false),
+               lb = hc::influence::buildInfluenceLists(b, params, 0, false);
     const hc::influence::SurfaceEvaluator ea(a, la), eb(b, lb);
     const auto water = hc::influence::Layer::byName(a, "water_surface");
     size_t wet = 0;
@@ -154,7 +156,8 @@ TEST_F(Mesh, RotatedGridProbesAsTheUnrotatedOne) {
     EXPECT_GT(wet, 5u) << "the points must reach the water for the water half to mean anything";
     // An export samples a world-aligned raster: each pixel is the turned grid's surface at that world point, the
     // rotated grid's extent is the box around its turned bounds.
-    const hc::exporting::SampledRaster r = hc::exporting::sampleSurface(eb, hc::influence::Layer{}, "elevation", 7.0, std::nullopt, true, 0, false);
+    const hc::exporting::SampledRaster r =
+        hc::exporting::sampleSurface(eb, hc::influence::Layer{}, "elevation", 7.0, std::nullopt, true, 0, false);
     double x0, y0, x1, y1;
     b.boundsLocal(x0, y0, x1, y1);
     double ex = 0, ey = 0;  // the turned bounds' top-right corner in the world: inside the raster
@@ -164,7 +167,8 @@ TEST_F(Mesh, RotatedGridProbesAsTheUnrotatedOne) {
     size_t defined = 0;
     for (size_t row = 0; row < r.height; row += 3)
         for (size_t col = 0; col < r.width; col += 3) {
-            const double wx = r.westWorld + (double(col) + 0.5) * r.pixelSizeM, wy = r.northWorld - (double(row) + 0.5) * r.pixelSizeM;
+            const double wx = r.westWorld + (double(col) + 0.5) * r.pixelSizeM,
+                         wy = r.northWorld - (double(row) + 0.5) * r.pixelSizeM;
             double lx = 0, ly = 0;
             b.worldToLocal(wx, wy, lx, ly);
             const auto v = eb.value(lx, ly, hc::influence::Layer{});
@@ -176,7 +180,8 @@ TEST_F(Mesh, RotatedGridProbesAsTheUnrotatedOne) {
             }
         }
     EXPECT_GT(defined, 100u);
-    EXPECT_LT(defined, r.width * r.height / 9 + 1) << "the corners of the box around a turned square lie outside the grid";
+    EXPECT_LT(defined, r.width * r.height / 9 + 1)
+        << "the corners of the box around a turned square lie outside the grid";
 }
 
 // Rendering a rotated grid from the turned camera gives the unrotated grid's picture (the rays are cast in the local
@@ -187,7 +192,8 @@ TEST_F(Mesh, RotatedGridRendersAsTheUnrotatedOneFromATurnedCamera) {
     writeRotated(path("flood.hcg"), path("turned.hcg"), 30.0);
     const Grid a = hc::readGrid(path("flood.hcg"), nullptr, 1), b = hc::readGrid(path("turned.hcg"), nullptr, 1);
     const hc::influence::KernelParams params;
-    const auto la = hc::influence::buildInfluenceLists(a, params, 0, false), lb = hc::influence::buildInfluenceLists(b, params, 0, false);
+    const auto la = hc::influence::buildInfluenceLists(a, params, 0, false),
+               lb = hc::influence::buildInfluenceLists(b, params, 0, false);
     const hc::render::Scene sa(a, la), sb(b, lb);
     hc::render::Camera ca = hc::render::overviewCamera(sa, 160, 100);
     hc::render::Camera cb = ca;
@@ -198,7 +204,8 @@ TEST_F(Mesh, RotatedGridRendersAsTheUnrotatedOneFromATurnedCamera) {
     hc::render::RenderOptions opt;
     opt.texelsPerSide = 128;
     hc::render::Timings ta, tb;
-    const hc::render::Frame fa = hc::render::renderFrame(sa, ca, opt, ta), fb = hc::render::renderFrame(sb, cb, opt, tb);
+    const hc::render::Frame fa = hc::render::renderFrame(sa, ca, opt, ta),
+                            fb = hc::render::renderFrame(sb, cb, opt, tb);
     ASSERT_GT(ta.hits, 1000u);
     size_t differ = 0, hits = 0;
     for (size_t i = 0; i < fa.distanceM.size(); ++i) {
@@ -226,13 +233,14 @@ struct HandMesh {
     std::vector<double> zb;
     std::optional<double> zbFill;  // zb's _FillValue
     std::vector<double> times;
-    std::vector<std::vector<double>> zs;  // per time, per face
-    std::vector<std::vector<double>> vel; // per time, per face: a further face variable "vel" [m/s] (empty: none)
+    std::vector<std::vector<double>> zs;   // per time, per face
+    std::vector<std::vector<double>> vel;  // per time, per face: a further face variable "vel" [m/s] (empty: none)
 };
 
 void writeHandMesh(const HandMesh& m, const std::string& path) {
     GDALAllRegister();
-    std::unique_ptr<GDALDataset> ds(GetGDALDriverManager()->GetDriverByName("netCDF")->CreateMultiDimensional(path.c_str(), nullptr, nullptr));
+    std::unique_ptr<GDALDataset> ds(
+        GetGDALDriverManager()->GetDriverByName("netCDF")->CreateMultiDimensional(path.c_str(), nullptr, nullptr));
     ASSERT_TRUE(ds);
     auto root = ds->GetRootGroup();
     auto nodes = root->CreateDimension("nNodes", "", "", m.x.size());
@@ -291,8 +299,11 @@ HandMesh goodMesh() {
     for (int j = 0; j <= 2; ++j)
         for (int i = 0; i <= 4; ++i) m.x.push_back(1000.0 + i), m.y.push_back(2000.0 + j);
     auto n = [](int i, int j) { return j * 5 + i; };
-    m.faces = {{n(0, 0), n(2, 0), n(2, 2), n(0, 2)}, {n(2, 0), n(3, 0), n(3, 1), n(2, 1)}, {n(3, 0), n(4, 0), n(4, 1), n(3, 1)},
-               {n(2, 1), n(3, 1), n(3, 2), n(2, 2)}, {n(3, 1), n(4, 1), n(4, 2), n(3, 2)}};
+    m.faces = {{n(0, 0), n(2, 0), n(2, 2), n(0, 2)},
+               {n(2, 0), n(3, 0), n(3, 1), n(2, 1)},
+               {n(3, 0), n(4, 0), n(4, 1), n(3, 1)},
+               {n(2, 1), n(3, 1), n(3, 2), n(2, 2)},
+               {n(3, 1), n(4, 1), n(4, 2), n(3, 2)}};
     m.zb = {10, 11, 12, 13, 14};
     m.times = {0, 1.5};
     m.zs = {{-99999, 11.5, -99999, 12.0, 15}, {10.25, 12, 13, 14, 15}};
@@ -392,7 +403,8 @@ TEST_F(Mesh, StepLayerIsAFieldOfTheWetCells) {
         const auto w = e.value(p[0], p[1], water), v = e.value(p[0], p[1], vel);
         ASSERT_EQ(w.has_value(), v.has_value()) << p[0] << "," << p[1];
         if (v) {
-            EXPECT_EQ(*v, 0.75) << "a constant on the wet cells stays exactly constant (values relative to a wet cell's)";
+            EXPECT_EQ(*v, 0.75)
+                << "a constant on the wet cells stays exactly constant (values relative to a wet cell's)";
         }
         drawn += v.has_value();
         dry += !v.has_value();

@@ -31,7 +31,8 @@ void checkOneCall(size_t count, size_t chunk, unsigned threads) {
     });
     EXPECT_FALSE(outOfRange);
     EXPECT_FALSE(overlap);
-    for (size_t i = 0; i < count; ++i) ASSERT_EQ(seen[i].load(), 1) << "item " << i << " of " << count << " on " << threads << " threads";
+    for (size_t i = 0; i < count; ++i)
+        ASSERT_EQ(seen[i].load(), 1) << "item " << i << " of " << count << " on " << threads << " threads";
 }
 
 }  // namespace
@@ -55,7 +56,9 @@ TEST(Parallel, NestedCallsRunOnThreadsOfTheirOwn) {
     std::atomic<size_t> total{0};
     hc::parallelFor(8, 1, 4, [&](size_t b, size_t e, unsigned) {
         for (size_t i = b; i < e; ++i)
-            hc::parallelFor(100, 7, 3, [&](size_t b2, size_t e2, unsigned) { total += e2 - b2; });  // in a worker and in the caller's share
+            hc::parallelFor(100, 7, 3, [&](size_t b2, size_t e2, unsigned) {
+                total += e2 - b2;
+            });  // in a worker and in the caller's share
     });
     EXPECT_EQ(total.load(), 800u);
 }

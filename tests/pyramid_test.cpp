@@ -59,7 +59,8 @@ void expectSamplesExact(const Grid& g, const SurfacePyramid& p) {
         const double x = double(i) * p.spacingM(t), y = double(j) * p.spacingM(t);
         const auto want = exact.value(x, y, elevation);
         if (!want) {
-            EXPECT_TRUE(std::isnan(v)) << "level " << t << " sample " << i << "," << j << " outside every cell holds " << v;
+            EXPECT_TRUE(std::isnan(v)) << "level " << t << " sample " << i << "," << j << " outside every cell holds "
+                                       << v;
             ++undefined;
             return;
         }
@@ -108,29 +109,37 @@ TEST(SurfacePyramid, TilesAreStoredWhereAFineEnoughCellsKernelReaches) {
         }
         // Completeness: every lattice point in a reach box, over a cell.
         for (const auto& [cx, cy, r] : fine) {
-            const uint64_t i0 = uint64_t(std::max(0.0, std::ceil((cx - r) / h))), i1 = std::min(perSide - 1, uint64_t(std::floor((cx + r) / h)));
-            const uint64_t j0 = uint64_t(std::max(0.0, std::ceil((cy - r) / h))), j1 = std::min(perSide - 1, uint64_t(std::floor((cy + r) / h)));
+            const uint64_t i0 = uint64_t(std::max(0.0, std::ceil((cx - r) / h))),
+                           i1 = std::min(perSide - 1, uint64_t(std::floor((cx + r) / h)));
+            const uint64_t j0 = uint64_t(std::max(0.0, std::ceil((cy - r) / h))),
+                           j1 = std::min(perSide - 1, uint64_t(std::floor((cy + r) / h)));
             for (uint64_t j = j0; j <= j1; ++j)
                 for (uint64_t i = i0; i <= i1; ++i) {
                     if (!g.locate(double(i) * h, double(j) * h)) continue;
                     ++reachedPoints;
-                    const bool ownTile = uint64_t(cx / tileM) == i / uint64_t(L.tileSide) && uint64_t(cy / tileM) == j / uint64_t(L.tileSide);
+                    const bool ownTile = uint64_t(cx / tileM) == i / uint64_t(L.tileSide) &&
+                                         uint64_t(cy / tileM) == j / uint64_t(L.tileSide);
                     beyondOwnTile += !ownTile;
                     ASSERT_TRUE(p.sample(t, i, j, PyramidChannel::Elevation).has_value())
-                        << "level " << t << ": sample " << i << "," << j << " lies within reach of a fine cell at " << cx << "," << cy << " but is not stored";
+                        << "level " << t << ": sample " << i << "," << j << " lies within reach of a fine cell at "
+                        << cx << "," << cy << " but is not stored";
                 }
         }
         // Minimality: every stored tile is met by a reach box and has a defined sample.
         const size_t plane = size_t(L.tileSide) * size_t(L.tileSide);
         for (size_t tile = 0; tile < L.tileCount(); ++tile) {
-            const double x0 = double(hc::mortonX(L.keys[tile])) * g.finestCellM, y0 = double(hc::mortonY(L.keys[tile])) * g.finestCellM;
+            const double x0 = double(hc::mortonX(L.keys[tile])) * g.finestCellM,
+                         y0 = double(hc::mortonY(L.keys[tile])) * g.finestCellM;
             const bool reached = std::any_of(fine.begin(), fine.end(), [&](const auto& f) {
                 return f[0] + f[2] >= x0 && f[0] - f[2] < x0 + tileM && f[1] + f[2] >= y0 && f[1] - f[2] < y0 + tileM;
             });
-            EXPECT_TRUE(reached) << "level " << t << ": tile at " << x0 << "," << y0 << " is stored, but no cell of level <= " << t << " reaches it";
+            EXPECT_TRUE(reached) << "level " << t << ": tile at " << x0 << "," << y0
+                                 << " is stored, but no cell of level <= " << t << " reaches it";
             const float* s = &L.samples[tile * size_t(p.channels) * plane];
-            EXPECT_TRUE(std::any_of(s, s + plane, [](float v) { return !std::isnan(v); })) << "level " << t << ": tile at " << x0 << "," << y0 << " is all NaN";
-            EXPECT_GE(p.tileAt(t + 1, hc::mortonX(L.keys[tile]) >> (t + 1), hc::mortonY(L.keys[tile]) >> (t + 1)), 0) << "level " << t << ": a parent missing";
+            EXPECT_TRUE(std::any_of(s, s + plane, [](float v) { return !std::isnan(v); }))
+                << "level " << t << ": tile at " << x0 << "," << y0 << " is all NaN";
+            EXPECT_GE(p.tileAt(t + 1, hc::mortonX(L.keys[tile]) >> (t + 1), hc::mortonY(L.keys[tile]) >> (t + 1)), 0)
+                << "level " << t << ": a parent missing";
         }
         if (t == 0) finestTiles = L.tileCount();
     }
@@ -161,7 +170,8 @@ TEST(SurfacePyramid, CursorReadsWhatSampleReadsWalkingRowsAndColumns) {
     ASSERT_GT(p.levels[0].tileCount(), 128u) << "the table's slots must be shared for this test to mean anything";
     uint64_t stored = 0, reads = 0;
     for (int t = 0; t <= p.topLevel(); ++t) {
-        const uint64_t side = uint64_t{1} << (g.rootLevel - t), rows = std::min<uint64_t>(side, 160);  // the data and above
+        const uint64_t side = uint64_t{1} << (g.rootLevel - t),
+                       rows = std::min<uint64_t>(side, 160);  // the data and above
         SurfacePyramid::Cursor byRow(p, t), byColumn(p, t);
         auto check = [&](SurfacePyramid::Cursor& c, uint64_t i, uint64_t j) {
             const float* got = c.find(i, j);
@@ -170,7 +180,8 @@ TEST(SurfacePyramid, CursorReadsWhatSampleReadsWalkingRowsAndColumns) {
             ASSERT_EQ(got != nullptr, want.has_value()) << "level " << t << " sample " << i << "," << j;
             if (!got) return;
             ++stored;
-            ASSERT_EQ(std::bit_cast<uint32_t>(*got), std::bit_cast<uint32_t>(*want)) << "level " << t << " sample " << i << "," << j;
+            ASSERT_EQ(std::bit_cast<uint32_t>(*got), std::bit_cast<uint32_t>(*want))
+                << "level " << t << " sample " << i << "," << j;
         };
         // Every 3rd row whole, each read followed by one 2 tile rows further (another row parity, then the same);
         // every 3rd column whole.
@@ -240,7 +251,8 @@ TEST(SurfacePyramid, WaterChannelsFollowTheExactWaterRule) {
     uint64_t wet = 0, dry = 0, undecidable = 0;
     forEachSample(p, PyramidChannel::Elevation, [&](int t, uint64_t i, uint64_t j, float z) {
         if (std::isnan(z)) return;
-        const float level = *p.sample(t, i, j, PyramidChannel::WaterLevel), share = *p.sample(t, i, j, PyramidChannel::WetShare);
+        const float level = *p.sample(t, i, j, PyramidChannel::WaterLevel),
+                    share = *p.sample(t, i, j, PyramidChannel::WetShare);
         ASSERT_TRUE(share >= 0 && share <= 1) << share;
         const double x = double(i) * p.spacingM(t), y = double(j) * p.spacingM(t);
         const auto want = exact.value(x, y, surface);
@@ -277,11 +289,13 @@ TEST(SurfacePyramid, WaterPyramidBuiltWhereWaterReachesEqualsTheWholeOnesWater) 
         for (size_t i = 0; i < g.cellCount(); ++i) {
             double cx, cy;
             g.cellCenterLocal(i, cx, cy);
-            const double level = corner ? (cx - x0 < 40 && cy - y0 < 40 ? 415.0 : 0.0) : 395.0 + 4.0 * (cx - x0) / (x1 - x0);
+            const double level =
+                corner ? (cx - x0 < 40 && cy - y0 < 40 ? 415.0 : 0.0) : 395.0 + 4.0 * (cx - x0) / (x1 - x0);
             g.values[size_t(depth)][i] = static_cast<float>(std::max(0.0, level - double(g.values[0][i])));
         }
         const SurfacePyramid whole = hc::influence::buildSurfacePyramid(g, KernelParams{});
-        const SurfacePyramid want = hc::influence::waterPyramidOf(whole), got = hc::influence::buildWaterPyramid(g, KernelParams{});
+        const SurfacePyramid want = hc::influence::waterPyramidOf(whole),
+                             got = hc::influence::buildWaterPyramid(g, KernelParams{});
         ASSERT_EQ(got.channels, 2);
         ASSERT_EQ(got.levels.size(), want.levels.size());
         uint64_t tiles = 0, wholeTiles = 0;
@@ -293,7 +307,8 @@ TEST(SurfacePyramid, WaterPyramidBuiltWhereWaterReachesEqualsTheWholeOnesWater) 
             ASSERT_EQ(a.parentErrorM.size(), b.parentErrorM.size());
             if (a.keys.empty()) continue;  // a level without water (its spans' data() may be null: no memcmp)
             EXPECT_EQ(0, std::memcmp(a.samples.data(), b.samples.data(), a.samples.size_bytes())) << "level " << t;
-            EXPECT_EQ(0, std::memcmp(a.parentErrorM.data(), b.parentErrorM.data(), a.parentErrorM.size_bytes())) << "level " << t;
+            EXPECT_EQ(0, std::memcmp(a.parentErrorM.data(), b.parentErrorM.data(), a.parentErrorM.size_bytes()))
+                << "level " << t;
             tiles += b.tileCount(), wholeTiles += whole.levels[t].tileCount();
         }
         EXPECT_GT(tiles, 0u);
@@ -317,9 +332,12 @@ TEST_F(PyramidFile, RoundTripsAndRefusesForeignGridsAndDamage) {
     const SurfacePyramid read = hc::influence::readSurfacePyramid(path("g.hcp"), g, KernelParams{});
     ASSERT_EQ(read.levels.size(), built.levels.size());
     for (size_t t = 0; t < built.levels.size(); ++t) {
-        EXPECT_TRUE(std::equal(read.levels[t].keys.begin(), read.levels[t].keys.end(), built.levels[t].keys.begin(), built.levels[t].keys.end()));
-        EXPECT_EQ(0, std::memcmp(read.levels[t].samples.data(), built.levels[t].samples.data(), built.levels[t].samples.size_bytes()));
-        EXPECT_TRUE(std::equal(read.levels[t].parentErrorM.begin(), read.levels[t].parentErrorM.end(), built.levels[t].parentErrorM.begin()));
+        EXPECT_TRUE(std::equal(read.levels[t].keys.begin(), read.levels[t].keys.end(), built.levels[t].keys.begin(),
+                               built.levels[t].keys.end()));
+        EXPECT_EQ(0, std::memcmp(read.levels[t].samples.data(), built.levels[t].samples.data(),
+                                 built.levels[t].samples.size_bytes()));
+        EXPECT_TRUE(std::equal(read.levels[t].parentErrorM.begin(), read.levels[t].parentErrorM.end(),
+                               built.levels[t].parentErrorM.begin()));
     }
     // Another sigma, other values on the same tree: refused, saying so.
     KernelParams wide;

@@ -77,7 +77,8 @@ TEST(GridRegionReader, RegionIsExactlyTheCellsWithinTheirMarginOfTheBox) {
     size_t nonEmpty = 0;
     for (int trial = 0; trial < 60; ++trial) {
         const double bx = ux(rng), by = uy(rng);
-        const Grid::Square box{bx, by, bx + (trial % 3 == 0 ? 0.0 : size(rng)), by + (trial % 3 == 0 ? 0.0 : size(rng))};
+        const Grid::Square box{bx, by, bx + (trial % 3 == 0 ? 0.0 : size(rng)),
+                               by + (trial % 3 == 0 ? 0.0 : size(rng))};
         const Grid r = file.region(box, margin);
         std::vector<size_t> want;
         for (size_t i = 0; i < g.cellCount(); ++i)
@@ -216,12 +217,14 @@ TEST(Region, OutOfCoreFramesEqualInMemoryOnes) {
         EXPECT_EQ(outOfCore.elevationMin, memory.elevationMin);
         EXPECT_EQ(outOfCore.depthMax, memory.depthMax);
         EXPECT_GE(outOfCore.zMax, memory.zMax);  // the summary bounds the water's top by max elevation + max depth
-        outOfCore.zMax = memory.zMax;             // the same view box, so that the same cascades are fitted
+        outOfCore.zMax = memory.zMax;            // the same view box, so that the same cascades are fitted
         hc::render::RenderOptions o;
         o.texelsPerSide = 256;
         for (int view = 0; view < 2; ++view) {
             hc::render::Camera c = hc::render::overviewCamera(memory, 320, 200);
-            if (view == 1) c = hc::render::Camera::lookAt({c.xWorld + 8000, c.yWorld + 9000, 3400}, {c.xWorld + 12000, c.yWorld + 13000, 2700}, 50, 320, 200);
+            if (view == 1)
+                c = hc::render::Camera::lookAt({c.xWorld + 8000, c.yWorld + 9000, 3400},
+                                               {c.xWorld + 12000, c.yWorld + 13000, 2700}, 50, 320, 200);
             hc::render::Timings tm, to;
             const hc::render::Frame a = hc::render::renderFrame(memory, c, o, tm);
             const hc::render::Frame b = hc::render::renderFrame(outOfCore, c, o, to);
@@ -240,7 +243,8 @@ TEST(Region, OutOfCoreFramesEqualInMemoryOnes) {
                 }
                 if (!ha) continue;
                 ++hits;
-                // Texels agree to float rounding of the height (1e-6 relative); a hit moves by that over the ray's slope.
+                // Texels agree to float rounding of the height (1e-6 relative); a hit moves by that over the ray's
+                // slope.
                 if (std::abs(a.distanceM[i] - b.distanceM[i]) > 1e-3 * a.distanceM[i]) ++differ;
             }
             EXPECT_GT(hits, 10000u);
@@ -267,7 +271,8 @@ TEST(Region, OutOfCoreInterpolatesThePyramidsTexelsAsInMemory) {
     double mx, my;
     g.localToWorld(0.5 * (memory.xMin + memory.xMax), 0.5 * (memory.yMin + memory.yMax), mx, my);
     const double mz = 0.5 * (memory.zMin + memory.zMax);
-    c.xWorld = mx + 0.35 * (c.xWorld - mx), c.yWorld = my + 0.35 * (c.yWorld - my), c.zWorld = mz + 0.35 * (c.zWorld - mz);
+    c.xWorld = mx + 0.35 * (c.xWorld - mx), c.yWorld = my + 0.35 * (c.yWorld - my),
+    c.zWorld = mz + 0.35 * (c.zWorld - mz);
     hc::render::RenderOptions o;
     o.texelsPerSide = 256;
     hc::render::Timings tm, to;
@@ -336,7 +341,8 @@ TEST(GridRegionReader, ReleasedPagesLeaveResidentMemoryAndReadBackTheSame) {
     ASSERT_GE(touched, 0) << "no RssFile in /proc/self/status";
     // The cells (8 bytes of code and 4 of each layer's value a cell) leave resident memory, give or take a page.
     const long cellsKb = long(d.grid.cellCount() * (8 + 4 * d.grid.layerCount()) / 1024);
-    EXPECT_GE(touched - released, cellsKb - 8) << "touched " << touched << " kB, after the release " << released << " kB";
+    EXPECT_GE(touched - released, cellsKb - 8)
+        << "touched " << touched << " kB, after the release " << released << " kB";
     const Grid again = file.region(all);
     EXPECT_EQ(again.codes, first.codes);
     EXPECT_EQ(again.values, first.values);
@@ -372,7 +378,8 @@ TEST(Ranks, PartitionPutsEveryCellInOneNodeAndBalancesTheRanks) {
                 largest = std::max(largest, p.cells[j]);
             }
             for (int r = 0; r < ranks; ++r)
-                EXPECT_LE(double(perRank[size_t(r)]), double(g.cellCount()) / ranks + double(largest)) << ranks << " ranks, rank " << r;
+                EXPECT_LE(double(perRank[size_t(r)]), double(g.cellCount()) / ranks + double(largest))
+                    << ranks << " ranks, rank " << r;
         }
     }
 }
@@ -412,7 +419,8 @@ TEST(Ranks, BuildFromRegionsEqualsTheWholeGridsBitForBit) {
         EXPECT_EQ(stats.maxLength, wantStats.maxLength);
         fs::remove(byParts), fs::remove(whole);
         for (bool waterOnly : {false, true}) {
-            const inf::SurfacePyramid a = waterOnly ? inf::buildWaterPyramid(g, params) : inf::buildSurfacePyramid(g, params);
+            const inf::SurfacePyramid a =
+                waterOnly ? inf::buildWaterPyramid(g, params) : inf::buildSurfacePyramid(g, params);
             const inf::SurfacePyramid b = inf::buildPyramidOnRanks(file, params, 2, false, waterOnly);
             ASSERT_EQ(a.channels, b.channels);
             ASSERT_EQ(a.levels.size(), b.levels.size());
@@ -425,11 +433,13 @@ TEST(Ranks, BuildFromRegionsEqualsTheWholeGridsBitForBit) {
                 if (x.keys.empty()) continue;  // empty spans' data() may be null: no memcmp
                 EXPECT_TRUE(std::equal(x.keys.begin(), x.keys.end(), y.keys.begin())) << "level " << t;
                 EXPECT_EQ(0, std::memcmp(x.samples.data(), y.samples.data(), x.samples.size_bytes())) << "level " << t;
-                EXPECT_EQ(0, std::memcmp(x.parentErrorM.data(), y.parentErrorM.data(), x.parentErrorM.size_bytes())) << "level " << t;
+                EXPECT_EQ(0, std::memcmp(x.parentErrorM.data(), y.parentErrorM.data(), x.parentErrorM.size_bytes()))
+                    << "level " << t;
             }
             EXPECT_GT(tiles, 10u);
             // Written by parts (one process: the whole), writeSurfacePyramid's bytes.
-            const fs::path pyramidByParts = d->path.string() + ".parts.hcp", pyramidWhole = d->path.string() + ".whole.hcp";
+            const fs::path pyramidByParts = d->path.string() + ".parts.hcp",
+                           pyramidWhole = d->path.string() + ".whole.hcp";
             inf::writePyramidOnRanks(b, pyramidByParts.string());
             inf::writeSurfacePyramid(a, pyramidWhole.string());
             EXPECT_EQ(fileBytes(pyramidByParts), fileBytes(pyramidWhole)) << (waterOnly ? "water pyramid" : "pyramid");

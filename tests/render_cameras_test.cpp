@@ -1,7 +1,7 @@
 // The CPU renderer's cameras (split from render_test, see render_world.h): near and far planes, roll, the extremes of
-// docs/design.md section 8 (inside the terrain, straight down and up, grazing, 100 km up, looking out of the domain, a split
-// near 0, a grid shifted by 1e7 m, a cell-size ratio of 128, a single cell, holes next to the camera) and the cameras
-// and options refused.
+// docs/design.md section 8 (inside the terrain, straight down and up, grazing, 100 km up, looking out of the domain, a
+// split near 0, a grid shifted by 1e7 m, a cell-size ratio of 128, a single cell, holes next to the camera) and the
+// cameras and options refused.
 #include <gtest/gtest.h>
 
 #include <algorithm>

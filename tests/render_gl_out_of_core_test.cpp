@@ -1,7 +1,8 @@
 // The GL backend out of core (a Scene over the grid file: no cells or lists in memory) and with its cascades kept on
 // the GPU from frame to frame, against the CPU backend: the same pictures, texels copied and interpolated from the
 // surface pyramid bit for bit (or within a float rounding where the GPU fuses), and a moving camera that uploads and
-// sums only the texels it newly sees. Headless as render_gl_test.cpp (HC_GL_TESTS=skip where no OpenGL 4.3 is expected).
+// sums only the texels it newly sees. Headless as render_gl_test.cpp (HC_GL_TESTS=skip where no OpenGL 4.3 is
+// expected).
 #include "render_gl_world.h"
 
 namespace {
@@ -22,9 +23,9 @@ struct GridOnDisk {
 
 // Out of core (a Scene over the grid file: no cells or lists in memory, as for 100 M cells) the GL backend fills the
 // cascades on the CPU as renderFrame() does and casts and shades on the GPU: the same picture as the CPU backend on the
-// same scene, the same texels copied from the pyramid, interpolated and summed (the Gaussians counted exactly), with and
-// without a pyramid; a moving camera keeps texels from its last frame; cell outlines, which need the cells on the GPU,
-// are refused with the file named.
+// same scene, the same texels copied from the pyramid, interpolated and summed (the Gaussians counted exactly), with
+// and without a pyramid; a moving camera keeps texels from its last frame; cell outlines, which need the cells on the
+// GPU, are refused with the file named.
 TEST_F(RenderGl, OutOfCoreFillsTheCascadesOnTheCpuAndCastsOnTheGpu) {
     World& w = hef();
     HC_REQUIRE_GL(w);
@@ -33,7 +34,8 @@ TEST_F(RenderGl, OutOfCoreFillsTheCascadesOnTheCpuAndCastsOnTheGpu) {
     const hc::influence::SurfacePyramid& pyramid = disk.pyramid;
     {
         const hc::GridRegionReader file(path.string());
-        for (const hc::influence::SurfacePyramid* p : {static_cast<const hc::influence::SurfacePyramid*>(nullptr), &pyramid}) {
+        for (const hc::influence::SurfacePyramid* p :
+             {static_cast<const hc::influence::SurfacePyramid*>(nullptr), &pyramid}) {
             const std::string tag = p ? "with the pyramid" : "without a pyramid";
             const Scene scene(file, {}, p);
             ASSERT_TRUE(scene.outOfCore());
@@ -43,19 +45,24 @@ TEST_F(RenderGl, OutOfCoreFillsTheCascadesOnTheCpuAndCastsOnTheGpu) {
             coarse.texelsPerSide = 128;  // texels as large as the cells (hef's are 64-254 m): copies where a pyramid is
             Camera moving = lowOblique(scene, 320, 200);
             uint64_t copied = 0, interpolated = 0, read = 0;
-            for (const auto& [cam, opt] : {std::pair{overviewCamera(scene, 320, 200), o}, {lowOblique(scene, 320, 200), o},
+            for (const auto& [cam, opt] : {std::pair{overviewCamera(scene, 320, 200), o},
+                                           {lowOblique(scene, 320, 200), o},
                                            {overviewCamera(scene, 320, 200), coarse}}) {
                 Timings tc, tg;
                 const Frame cpu = renderFrame(scene, cam, opt, tc);
-                gl->forgetCascades();  // fresh as the CPU's frame (the counts below): the coarse frame would keep texels of the one before
+                gl->forgetCascades();  // fresh as the CPU's frame (the counts below): the coarse frame would keep
+                                       // texels of the one before
                 const Frame g = gl->render(cam, opt, tg);
                 expectSameFrames(cpu, g, tc, tg, "hef_out_of_core " + tag);
                 for (size_t k = 0; k < tc.cascades.size(); ++k) {
                     EXPECT_EQ(tc.cascades[k].visibleTexels, tg.cascades[k].visibleTexels) << tag << " cascade " << k;
                     EXPECT_EQ(tc.cascades[k].pyramidTexels, tg.cascades[k].pyramidTexels) << tag << " cascade " << k;
-                    EXPECT_EQ(tc.cascades[k].pyramidInterpolated, tg.cascades[k].pyramidInterpolated) << tag << " cascade " << k;
-                    EXPECT_EQ(tc.cascades[k].texelM, tg.cascades[k].texelM) << tag << " cascade " << k << ": the pyramid's ladder";
-                    copied += tg.cascades[k].pyramidTexels, interpolated += tg.cascades[k].pyramidInterpolated, read += tg.cascades[k].cellsRead;
+                    EXPECT_EQ(tc.cascades[k].pyramidInterpolated, tg.cascades[k].pyramidInterpolated)
+                        << tag << " cascade " << k;
+                    EXPECT_EQ(tc.cascades[k].texelM, tg.cascades[k].texelM)
+                        << tag << " cascade " << k << ": the pyramid's ladder";
+                    copied += tg.cascades[k].pyramidTexels, interpolated += tg.cascades[k].pyramidInterpolated,
+                        read += tg.cascades[k].cellsRead;
                 }
                 EXPECT_GT(tg.approximationMs, 0.0);
             }
@@ -78,7 +85,8 @@ TEST_F(RenderGl, OutOfCoreFillsTheCascadesOnTheCpuAndCastsOnTheGpu) {
             gl->forgetCascades();
             Timings t2;
             (void)gl->render(moving, o, t2);
-            for (const CascadeStats& cs : t2.cascades) EXPECT_EQ(cs.reusedTexels, 0u) << tag << ": forgetCascades() starts afresh";
+            for (const CascadeStats& cs : t2.cascades)
+                EXPECT_EQ(cs.reusedTexels, 0u) << tag << ": forgetCascades() starts afresh";
             const Comparison c = compare(cpu, g, "hef_out_of_core_moved " + tag);
             EXPECT_GE(double(c.agree) / double(c.pixels), 0.995) << tag;
             EXPECT_GE(c.psnr, 35.0) << tag;
@@ -106,7 +114,8 @@ TEST_F(RenderGl, OutOfCoreFillsTheCascadesOnTheCpuAndCastsOnTheGpu) {
 struct TexelDiff {
     size_t differ = 0, first = SIZE_MAX, rounded = 0;
 };
-TexelDiff diffTextures(const hc::render::detail::CascadeTextures& cpu, const GlRenderer::CascadeTexels& gpu, float minDepth, bool gpuInterpolated) {
+TexelDiff diffTextures(const hc::render::detail::CascadeTextures& cpu, const GlRenderer::CascadeTexels& gpu,
+                       float minDepth, bool gpuInterpolated) {
     TexelDiff d;
     const auto bits = [](float v) { return std::bit_cast<uint32_t>(v); };
     for (size_t i = 0; i < cpu.terrain.h.size(); ++i) {
@@ -116,7 +125,8 @@ TexelDiff diffTextures(const hc::render::detail::CascadeTextures& cpu, const GlR
         const float scale = std::max({std::abs(z), std::isfinite(water) ? std::abs(water) : 0.0f, 1.0f});
         const float ulp = std::nextafter(scale, INFINITY) - scale, tol = 2 * ulp;
         const bool near = std::abs(z - gz) <= ulp && std::abs(depth - gDepth) <= tol &&
-                          (bits(water) == bits(gWater) || (std::isfinite(water) && std::isfinite(gWater) && std::abs(water - gWater) <= tol) ||
+                          (bits(water) == bits(gWater) ||
+                           (std::isfinite(water) && std::isfinite(gWater) && std::abs(water - gWater) <= tol) ||
                            std::abs(depth - minDepth) <= tol);
         if (near && gpuInterpolated) {
             ++d.rounded;
@@ -167,46 +177,53 @@ TEST_F(RenderGl, OutOfCoreKeepsTheCascadesOnTheGpuAndUploadsOnlyNewTexels) {
             RenderOptions o = smallOptions();
             o.texelsPerSide = flight.texels;
             Camera cam = lowOblique(scene, 320, 200);
-            // East (x) and up (z) [m] before each frame. The climbing frames grow the cascades: with the pyramid a cascade's
-            // side follows its extent in steps of 64 texels, so some keep the texels of a last-frame cascade of another side.
+            // East (x) and up (z) [m] before each frame. The climbing frames grow the cascades: with the pyramid a
+            // cascade's side follows its extent in steps of 64 texels, so some keep the texels of a last-frame cascade
+            // of another side.
             struct Move {
                 double dx, dz;
             };
-            const Move moves[] = {{0, 0},   {20, 0},  {20, 0},  {2000, 0}, {20, 0},  {-2000, 0}, {20, 0},  {20, 0},  {20, 0},
-                                  {30, 40}, {30, 40}, {30, 40}, {30, 40},  {30, 40}, {30, 40},   {30, 40}, {30, 40}, {0, 0}};
+            const Move moves[] = {{0, 0},   {20, 0},  {20, 0},  {2000, 0}, {20, 0},  {-2000, 0},
+                                  {20, 0},  {20, 0},  {20, 0},  {30, 40},  {30, 40}, {30, 40},
+                                  {30, 40}, {30, 40}, {30, 40}, {30, 40},  {30, 40}, {0, 0}};
             const size_t failedBefore = 8;  // a frame that fails after the swap comes before this one
             int sideChanges = 0;
             uint64_t freshBytes = 0, onGpuInterpolated = 0, roundedOtherwise = 0, interpolated = 0;
             std::vector<Cascade> lastCascades;  // the reference's last frame
             std::vector<detail::CascadeTextures> lastTextures;
             for (size_t f = 0; f < std::size(moves); ++f) {
-                const std::string tag = "frame " + std::to_string(f) + ", " + std::to_string(flight.texels) + " texels" +
-                                        (atlasTiles ? ", an atlas of 40 tiles" : "");
+                const std::string tag = "frame " + std::to_string(f) + ", " + std::to_string(flight.texels) +
+                                        " texels" + (atlasTiles ? ", an atlas of 40 tiles" : "");
                 cam.xWorld += moves[f].dx, cam.zWorld += moves[f].dz;
                 const bool fresh = f == 0 || f + 1 == std::size(moves) || f == failedBefore;
                 if (f == failedBefore) {
                     RenderOptions huge = o;
-                    huge.cascades = 4, huge.texelsPerSide = 8192;  // over 2^31 bytes of textures: more than a storage block holds (llvmpipe 128 MiB, NVIDIA 2 GiB)
+                    huge.cascades = 4, huge.texelsPerSide = 8192;  // over 2^31 bytes of textures: more than a storage
+                                                                   // block holds (llvmpipe 128 MiB, NVIDIA 2 GiB)
                     Timings th;
                     EXPECT_THROW((void)gl->render(cam, huge, th), hc::Error) << tag;
                 }
                 if (fresh) lastCascades.clear(), lastTextures.clear();
-                if (fresh && f != failedBefore) gl->forgetCascades();  // after the failure the renderer must start afresh itself
+                if (fresh && f != failedBefore)
+                    gl->forgetCascades();  // after the failure the renderer must start afresh itself
                 Timings t;
                 (void)gl->render(cam, o, t);
                 uint64_t kept = 0, visible = 0;
-                for (const CascadeStats& cs : t.cascades) kept += cs.reusedTexels, visible += cs.visibleTexels, interpolated += cs.pyramidInterpolated;
+                for (const CascadeStats& cs : t.cascades)
+                    kept += cs.reusedTexels, visible += cs.visibleTexels, interpolated += cs.pyramidInterpolated;
                 onGpuInterpolated += t.atlasInterpolated;
                 if (fresh) {
                     EXPECT_EQ(kept, 0u) << tag << ": a fresh frame";
                     if (f == 0) freshBytes = t.uploadBytes;
                     if (flight.texels == 128) {
-                        EXPECT_GT(t.atlasTexels, 0u) << tag << ": a fresh frame copies texels from the pyramid's tiles on the GPU";
+                        EXPECT_GT(t.atlasTexels, 0u)
+                            << tag << ": a fresh frame copies texels from the pyramid's tiles on the GPU";
                     }
                     if (f == 0 && flight.texels == 128) {
                         EXPECT_GT(t.atlasTilesUploaded, 0u) << tag;
                         if (atlasTiles) {
-                            EXPECT_EQ(t.atlasTilesUploaded, 2 * atlasTiles) << tag << ": every slot of both atlases (elevation, water) taken";
+                            EXPECT_EQ(t.atlasTilesUploaded, 2 * atlasTiles)
+                                << tag << ": every slot of both atlases (elevation, water) taken";
                         }
                     }
                 } else if (moves[f].dx == 20 && moves[f].dz == 0) {
@@ -215,8 +232,9 @@ TEST_F(RenderGl, OutOfCoreKeepsTheCascadesOnTheGpuAndUploadsOnlyNewTexels) {
                         EXPECT_LT(t.uploadBytes, freshBytes / 10) << tag << ": and uploads few";
                     }
                 }
-                // The reference: this frame's cascades on the CPU, each keeping the texels of the last frame's cascade of the
-                // same texel size and lattice placed nearest to it, whatever its side (renderer.cpp's reusableCascade).
+                // The reference: this frame's cascades on the CPU, each keeping the texels of the last frame's cascade
+                // of the same texel size and lattice placed nearest to it, whatever its side (renderer.cpp's
+                // reusableCascade).
                 const detail::FrameSetup setup = detail::setUpFrame(scene, cam);
                 Timings tf;
                 const CascadeFit fit = detail::fitFrame(scene, cam, setup, o, tf);
@@ -237,15 +255,20 @@ TEST_F(RenderGl, OutOfCoreKeepsTheCascadesOnTheGpuAndUploadsOnlyNewTexels) {
                         const double fi = (c.x0 - old.x0) / c.texelM, fj = (c.y0 - old.y0) / c.texelM;
                         if (std::abs(fi - std::round(fi)) >= 1e-6 || std::abs(fj - std::round(fj)) >= 1e-6) continue;
                         const detail::TexelReuse r{&old, &lastTextures[e], int(std::round(fi)), int(std::round(fj))};
-                        if (!reuse || std::max(std::abs(r.di), std::abs(r.dj)) < std::max(std::abs(reuse->di), std::abs(reuse->dj))) reuse = r, from = e;
+                        if (!reuse || std::max(std::abs(r.di), std::abs(r.dj)) <
+                                          std::max(std::abs(reuse->di), std::abs(reuse->dj)))
+                            reuse = r, from = e;
                     }
                     if (reuse) taken[from] = true, sideChanges += reuse->cascade->n != c.n;
                     detail::CascadeTextures& cpu = textures[k];
-                    keptOnCpu += detail::approximate(scene, c, cpu, o.waterMinDepthM, 0, reuse ? &*reuse : nullptr, o.pyramidInterpolateLevels).reusedTexels;
+                    keptOnCpu += detail::approximate(scene, c, cpu, o.waterMinDepthM, 0, reuse ? &*reuse : nullptr,
+                                                     o.pyramidInterpolateLevels)
+                                     .reusedTexels;
                     const TexelDiff d = diffTextures(cpu, onGpu[k], float(o.waterMinDepthM), t.atlasInterpolated > 0);
                     roundedOtherwise += d.rounded;
                     const size_t differ = d.differ, first = d.first;
-                    EXPECT_EQ(differ, 0u) << tag << " cascade " << k << ": first at texel " << first << " of " << cpu.terrain.h.size() << " (n " << c.n << ")";
+                    EXPECT_EQ(differ, 0u) << tag << " cascade " << k << ": first at texel " << first << " of "
+                                          << cpu.terrain.h.size() << " (n " << c.n << ")";
                 }
                 EXPECT_EQ(keptOnCpu, kept) << tag << ": the GPU kept what the CPU keeps";
                 lastCascades = fit.cascades;
@@ -253,16 +276,22 @@ TEST_F(RenderGl, OutOfCoreKeepsTheCascadesOnTheGpuAndUploadsOnlyNewTexels) {
             }
             EXPECT_GT(sideChanges, 0) << "no frame kept texels of a cascade of another side: the climb checks nothing";
             std::printf("%d cascades kept texels of a last-frame cascade of another side\n", sideChanges);
-            if (flight.texels == 512) {  // texels finer than level 0: those in blocks of level-0 tiles interpolated on the GPU
+            if (flight.texels ==
+                512) {  // texels finer than level 0: those in blocks of level-0 tiles interpolated on the GPU
                 EXPECT_GT(onGpuInterpolated, 0u) << "atlas " << atlasTiles;
                 // The rest where level 0 is not stored (hef's finest cells are few), from levels above, on the CPU.
                 EXPECT_LT(onGpuInterpolated, interpolated) << "atlas " << atlasTiles;
-                if (!atlasTiles) onGpuWithWholeAtlas = onGpuInterpolated;
-                else EXPECT_LT(onGpuInterpolated, onGpuWithWholeAtlas) << "an atlas of 40 tiles leaves blocks to the CPU";
+                if (!atlasTiles)
+                    onGpuWithWholeAtlas = onGpuInterpolated;
+                else
+                    EXPECT_LT(onGpuInterpolated, onGpuWithWholeAtlas)
+                        << "an atlas of 40 tiles leaves blocks to the CPU";
             }
-            std::printf("%d texels, atlas %u: %llu texels interpolated, %llu on the GPU, %llu of them rounded otherwise than on the CPU\n",
-                        flight.texels, atlasTiles, (unsigned long long)interpolated, (unsigned long long)onGpuInterpolated,
-                        (unsigned long long)roundedOtherwise);
+            std::printf(
+                "%d texels, atlas %u: %llu texels interpolated, %llu on the GPU, %llu of them rounded otherwise than "
+                "on the CPU\n",
+                flight.texels, atlasTiles, (unsigned long long)interpolated, (unsigned long long)onGpuInterpolated,
+                (unsigned long long)roundedOtherwise);
         }
     }
 }
@@ -286,8 +315,10 @@ TEST_F(RenderGlWater, OutOfCoreWaterStepInterpolatedOnTheGpuAsOnTheCpu) {
     hc::ingest::LoadReport rep;
     hc::ingest::ingestToFile(in, path.string(), rep);
     const hc::influence::KernelParams params{};
-    const hc::influence::SurfacePyramid base = hc::influence::buildSurfacePyramid(hc::readGrid(path.string(), nullptr, 0), params);
-    const hc::influence::SurfacePyramid water = hc::influence::buildWaterPyramid(hc::readGrid(path.string(), nullptr, 2), params);
+    const hc::influence::SurfacePyramid base =
+        hc::influence::buildSurfacePyramid(hc::readGrid(path.string(), nullptr, 0), params);
+    const hc::influence::SurfacePyramid water =
+        hc::influence::buildWaterPyramid(hc::readGrid(path.string(), nullptr, 2), params);
     const hc::GridRegionReader file(path.string(), 2);
     const Scene scene(file, params, &base, &water);
     ASSERT_TRUE(scene.outOfCore() && scene.hasWater());
@@ -309,16 +340,20 @@ TEST_F(RenderGlWater, OutOfCoreWaterStepInterpolatedOnTheGpuAsOnTheCpu) {
             const Cascade& c = fit.cascades[k];
             if (c.empty()) continue;
             detail::CascadeTextures cpu;
-            const detail::ApproximationWork work = detail::approximate(scene, c, cpu, o.waterMinDepthM, 0, nullptr, o.pyramidInterpolateLevels);
+            const detail::ApproximationWork work =
+                detail::approximate(scene, c, cpu, o.waterMinDepthM, 0, nullptr, o.pyramidInterpolateLevels);
             const TexelDiff d = diffTextures(cpu, textures[k], float(o.waterMinDepthM), t.atlasInterpolated > 0);
             EXPECT_EQ(d.differ, 0u) << "cascade " << k << ": first at texel " << d.first << " (n " << c.n << ")";
             rounded += d.rounded;
             if (work.pyramidLevel < 0 && work.pyramidInterpolated > 0)
-                for (size_t i = 0; i < cpu.water.h.size(); ++i) wetInterpolated += std::isfinite(cpu.water.h[i]) && cpu.depth[i] > 0;
+                for (size_t i = 0; i < cpu.water.h.size(); ++i)
+                    wetInterpolated += std::isfinite(cpu.water.h[i]) && cpu.depth[i] > 0;
         }
     }
-    std::printf("%llu texels interpolated on the GPU, %llu of them rounded otherwise than on the CPU; %llu wet texels in cascades finer than level 0\n",
-                (unsigned long long)onGpu, (unsigned long long)rounded, (unsigned long long)wetInterpolated);
+    std::printf(
+        "%llu texels interpolated on the GPU, %llu of them rounded otherwise than on the CPU; %llu wet texels in "
+        "cascades finer than level 0\n",
+        (unsigned long long)onGpu, (unsigned long long)rounded, (unsigned long long)wetInterpolated);
     EXPECT_GT(onGpu, 0u);
     EXPECT_GT(wetInterpolated, 0u) << "the flood must lie in the fine cascades for the comparison to mean anything";
 }
@@ -346,7 +381,8 @@ TEST_F(RenderGl, InMemoryMovingCameraSumsOnlyTheNewTexels) {
         Timings t;
         const Frame g = w.gl->render(cam, o, t);
         uint64_t kept = 0, visible = 0, gaussians = 0;
-        for (const CascadeStats& cs : t.cascades) kept += cs.reusedTexels, visible += cs.visibleTexels, gaussians += cs.gaussians;
+        for (const CascadeStats& cs : t.cascades)
+            kept += cs.reusedTexels, visible += cs.visibleTexels, gaussians += cs.gaussians;
         EXPECT_GT(kept, visible * 9 / 10) << tag;
         EXPECT_LT(gaussians, fresh / 10) << tag;
         const std::vector<GlRenderer::CascadeTexels> moving = w.gl->cascadeTexturesForTest();
@@ -365,10 +401,13 @@ TEST_F(RenderGl, InMemoryMovingCameraSumsOnlyTheNewTexels) {
             size_t surfaceDiffers = 0;
             double worst = 0;
             for (size_t i = 0; i < moving[k].terrain.size(); ++i) {
-                for (const auto& [ma, aa] : {std::pair{&moving[k].terrain, &again[k].terrain}, {&moving[k].water, &again[k].water}}) {
+                for (const auto& [ma, aa] :
+                     {std::pair{&moving[k].terrain, &again[k].terrain}, {&moving[k].water, &again[k].water}}) {
                     const float a = (*ma)[i], b = (*aa)[i];
-                    if (std::isfinite(a) != std::isfinite(b)) ++surfaceDiffers;
-                    else if (std::isfinite(a)) worst = std::max(worst, double(std::abs(a - b)));
+                    if (std::isfinite(a) != std::isfinite(b))
+                        ++surfaceDiffers;
+                    else if (std::isfinite(a))
+                        worst = std::max(worst, double(std::abs(a - b)));
                 }
                 worst = std::max(worst, double(std::abs(moving[k].depth[i] - again[k].depth[i])));
             }

@@ -32,29 +32,40 @@ TEST_F(RenderGl, Std430LayoutsAgreeWithTheCppStructs) {
     const long cas = long(offsetof(gpu::FrameBlock, cascades));
 #define HC_FRAME(m) expectAt("shade", "frame." #m, long(offsetof(gpu::GpuFrame, m)))
 #define HC_FRAME_ARRAY(m) expectAt("shade", "frame." #m "[0]", long(offsetof(gpu::GpuFrame, m)))
-    HC_FRAME(eyeX), HC_FRAME(eyeY), HC_FRAME(finestM), HC_FRAME(domainM), HC_FRAME(eyeZ), HC_FRAME(tanHalfX), HC_FRAME(tanHalfY);
+    HC_FRAME(eyeX), HC_FRAME(eyeY), HC_FRAME(finestM), HC_FRAME(domainM), HC_FRAME(eyeZ), HC_FRAME(tanHalfX),
+        HC_FRAME(tanHalfY);
     HC_FRAME(nearM), HC_FRAME(farM), HC_FRAME(dirX), HC_FRAME(dirY), HC_FRAME(tail);
     HC_FRAME_ARRAY(forward), HC_FRAME_ARRAY(right), HC_FRAME_ARRAY(up), HC_FRAME_ARRAY(sun);
     HC_FRAME(width), HC_FRAME(height), HC_FRAME(cascades), HC_FRAME(hasWater), HC_FRAME(cellCount), HC_FRAME(rootLevel);
     HC_FRAME(indexChunkShift);
-    HC_FRAME(minDepthM), HC_FRAME(fogDistM), HC_FRAME(elevationMin), HC_FRAME(zRange), HC_FRAME(dRange), HC_FRAME(pixelAngle);
+    HC_FRAME(minDepthM), HC_FRAME(fogDistM), HC_FRAME(elevationMin), HC_FRAME(zRange), HC_FRAME(dRange),
+        HC_FRAME(pixelAngle);
     HC_FRAME(colorMode), HC_FRAME(cellOutlines), HC_FRAME(legendRamp), HC_FRAME(legendX0), HC_FRAME(legendY0);
     HC_FRAME(legendBarW), HC_FRAME(legendBarH), HC_FRAME(legendScale), HC_FRAME(labelHiLen), HC_FRAME(labelLoLen);
     HC_FRAME_ARRAY(labelHi), HC_FRAME_ARRAY(labelLo), HC_FRAME_ARRAY(elevationRamp), HC_FRAME_ARRAY(depthRamp);
-    HC_FRAME_ARRAY(skyHorizon), HC_FRAME_ARRAY(skyZenith), HC_FRAME_ARRAY(dryColor), HC_FRAME(zFloor), HC_FRAME_ARRAY(wallColor), HC_FRAME(beamTile);
-#define HC_CASCADE(m) expectAt("raycast", "cascades[0]." #m, cas + long(offsetof(gpu::GpuCascade, m)), long(sizeof(gpu::GpuCascade)))
-#define HC_CASCADE_ARRAY(m) expectAt("raycast", "cascades[0]." #m "[0]", cas + long(offsetof(gpu::GpuCascade, m)), long(sizeof(gpu::GpuCascade)))
-    HC_CASCADE(x0Eye), HC_CASCADE(y0Eye), HC_CASCADE(texelF), HC_CASCADE(n), HC_CASCADE(splitNear), HC_CASCADE(splitFar);
-    HC_CASCADE(farWithOverlap), HC_CASCADE(levels), HC_CASCADE(terrainOffset), HC_CASCADE(waterOffset), HC_CASCADE(depthOffset);
+    HC_FRAME_ARRAY(skyHorizon), HC_FRAME_ARRAY(skyZenith), HC_FRAME_ARRAY(dryColor), HC_FRAME(zFloor),
+        HC_FRAME_ARRAY(wallColor), HC_FRAME(beamTile);
+#define HC_CASCADE(m) \
+    expectAt("raycast", "cascades[0]." #m, cas + long(offsetof(gpu::GpuCascade, m)), long(sizeof(gpu::GpuCascade)))
+#define HC_CASCADE_ARRAY(m)                                                                \
+    expectAt("raycast", "cascades[0]." #m "[0]", cas + long(offsetof(gpu::GpuCascade, m)), \
+             long(sizeof(gpu::GpuCascade)))
+    HC_CASCADE(x0Eye), HC_CASCADE(y0Eye), HC_CASCADE(texelF), HC_CASCADE(n), HC_CASCADE(splitNear),
+        HC_CASCADE(splitFar);
+    HC_CASCADE(farWithOverlap), HC_CASCADE(levels), HC_CASCADE(terrainOffset), HC_CASCADE(waterOffset),
+        HC_CASCADE(depthOffset);
     HC_CASCADE_ARRAY(terrainMip), HC_CASCADE_ARRAY(waterMip), HC_CASCADE_ARRAY(mipSide);
     // The double members and the visibility offset are read by the approximation.
-    for (auto [name, off] : {std::pair{"x0", offsetof(gpu::GpuCascade, x0)}, {"y0", offsetof(gpu::GpuCascade, y0)},
-                             {"texelM", offsetof(gpu::GpuCascade, texelM)}, {"visibleOffset", offsetof(gpu::GpuCascade, visibleOffset)}})
+    for (auto [name, off] : {std::pair{"x0", offsetof(gpu::GpuCascade, x0)},
+                             {"y0", offsetof(gpu::GpuCascade, y0)},
+                             {"texelM", offsetof(gpu::GpuCascade, texelM)},
+                             {"visibleOffset", offsetof(gpu::GpuCascade, visibleOffset)}})
         expectAt("approximate", std::string("cascades[0].") + name, cas + long(off), long(sizeof(gpu::GpuCascade)));
 #define HC_CELL(m) expectAt("approximate", "cells[0]." #m, long(offsetof(gpu::GpuCell, m)), long(sizeof(gpu::GpuCell)))
     HC_CELL(ix), HC_CELL(iy), HC_CELL(level), HC_CELL(listBegin), HC_CELL(a), HC_CELL(r2), HC_CELL(z), HC_CELL(depth);
 #define HC_PIXEL(m) expectAt("shade", "pixels[0]." #m, long(offsetof(gpu::GpuPixel, m)), long(sizeof(gpu::GpuPixel)))
-    HC_PIXEL(t), HC_PIXEL(relX), HC_PIXEL(relY), HC_PIXEL(relZ), HC_PIXEL(nx), HC_PIXEL(ny), HC_PIXEL(nz), HC_PIXEL(depth);
+    HC_PIXEL(t), HC_PIXEL(relX), HC_PIXEL(relY), HC_PIXEL(relZ), HC_PIXEL(nx), HC_PIXEL(ny), HC_PIXEL(nz),
+        HC_PIXEL(depth);
     HC_PIXEL(cascade), HC_PIXEL(water), HC_PIXEL(wall);
     // Whole sizes: the frame block, and (through the unsized arrays' strides above) each struct.
     EXPECT_EQ(gl.bufferBlockSize("shade", "FrameBlock"), long(sizeof(gpu::FrameBlock)));
@@ -79,7 +90,8 @@ TEST_F(RenderGl, SameAsCpuOnTheAlpineDemFromFourCameras) {
     double x = 0, y = 0;
     g.cellCenterLocal(deepest, x, y);
     const double z = g.values[0][deepest] + g.values[size_t(layer)][deepest];
-    const Camera water = Camera::lookAt({g.originWorldX + x, g.originWorldY + y - 1500, z + 800}, {g.originWorldX + x, g.originWorldY + y, z}, 50, 320, 200);
+    const Camera water = Camera::lookAt({g.originWorldX + x, g.originWorldY + y - 1500, z + 800},
+                                        {g.originWorldX + x, g.originWorldY + y, z}, 50, 320, 200);
     RenderOptions o = smallOptions();
     o.color = ColorMode::WaterDepth;
     expectSame(w, water, "hef_water", o);
@@ -126,8 +138,10 @@ TEST_F(RenderGl, StageTimesAreConsistent) {
     const Camera cam = overviewCamera(*w.scene, 320, 200);
     for (bool readBack : {false, true}) {
         Timings t;
-        if (readBack) w.gl->render(cam, smallOptions(), t);
-        else w.gl->renderToTexture(cam, smallOptions(), t);
+        if (readBack)
+            w.gl->render(cam, smallOptions(), t);
+        else
+            w.gl->renderToTexture(cam, smallOptions(), t);
         SCOPED_TRACE(readBack ? "render()" : "renderToTexture()");
         ASSERT_EQ(t.cascades.size(), size_t(smallOptions().cascades));
         double cascadeSum = 0;
@@ -210,7 +224,8 @@ TEST_F(RenderGl, CameraInsideTheTerrainSeesNothing) {
 // GL hits (not walls, not water) more than max(3x the discretisation bound, 1 m) above the exact surface: the
 // floating pixels of a blend between two surfaces. The bound as render_hits_test's: twice bilinearBound()
 // (surface_bound.h) with the coarser cascade's texel of a blended pixel; no claim next to a hole.
-size_t floatingPixels(const World& w, const hc::influence::SurfaceEvaluator& eval, const Frame& f, const Timings& t, double& worst) {
+size_t floatingPixels(const World& w, const hc::influence::SurfaceEvaluator& eval, const Frame& f, const Timings& t,
+                      double& worst) {
     size_t floating = 0;
     for (size_t i = 0; i < f.distanceM.size(); ++i) {
         if (!std::isfinite(f.distanceM[i]) || f.wall[i] != 0 || f.waterDepthM[i] > 0) continue;
@@ -218,7 +233,8 @@ size_t floatingPixels(const World& w, const hc::influence::SurfaceEvaluator& eva
         const auto exact = eval.value(x, y, {});
         if (!exact) continue;
         const size_t k = size_t(f.cascade[i]);
-        const double s = k + 1 < t.cascades.size() ? std::max(t.cascades[k].texelM, t.cascades[k + 1].texelM) : t.cascades[k].texelM;
+        const double s =
+            k + 1 < t.cascades.size() ? std::max(t.cascades[k].texelM, t.cascades[k + 1].texelM) : t.cascades[k].texelM;
         const std::optional<double> claim = hc::test::bilinearBound(eval, {}, x, y, s);
         if (!claim) continue;
         const double bound = 2 * *claim;
@@ -245,7 +261,8 @@ TEST_F(RenderGl, WallsBlendsAndCameraBelowAsOnTheCpu) {
     RenderOptions o;
     o.texelsPerSide = 256;
     while (frames < 8) {
-        const double x = s.xMin + (0.2 + 0.6 * u(rng)) * (s.xMax - s.xMin), y = s.yMin + (0.2 + 0.6 * u(rng)) * (s.yMax - s.yMin);
+        const double x = s.xMin + (0.2 + 0.6 * u(rng)) * (s.xMax - s.xMin),
+                     y = s.yMin + (0.2 + 0.6 * u(rng)) * (s.yMax - s.yMin);
         const auto ground = eval.value(x, y, {});
         if (!ground) continue;
         Camera c;
@@ -260,7 +277,8 @@ TEST_F(RenderGl, WallsBlendsAndCameraBelowAsOnTheCpu) {
     auto sameWalls = [](World& world, const Camera& c, const std::string& name) {
         expectSame(world, c, name, smallOptions(), false);
         Timings tc, tg;
-        const Frame cpu = renderFrame(*world.scene, c, smallOptions(), tc), gl = world.gl->render(c, smallOptions(), tg);
+        const Frame cpu = renderFrame(*world.scene, c, smallOptions(), tc),
+                    gl = world.gl->render(c, smallOptions(), tg);
         size_t same = 0, walls = 0;
         for (size_t i = 0; i < cpu.wall.size(); ++i) same += cpu.wall[i] == gl.wall[i], walls += gl.wall[i] != 0;
         EXPECT_GE(double(same), 0.995 * double(cpu.wall.size())) << name << ": the wall flag differs";
@@ -294,7 +312,8 @@ TEST_F(RenderGl, WallsBlendsAndCameraBelowAsOnTheCpu) {
     sameWalls(gully, hole, "gully_in_a_hole");
 
     Camera below = overviewCamera(s, 64, 48);
-    below.xWorld = w.grid.originWorldX + 0.5 * (s.xMin + s.xMax), below.yWorld = w.grid.originWorldY + 0.5 * (s.yMin + s.yMax);
+    below.xWorld = w.grid.originWorldX + 0.5 * (s.xMin + s.xMax),
+    below.yWorld = w.grid.originWorldY + 0.5 * (s.yMin + s.yMax);
     below.zWorld = eval.value(0.5 * (s.xMin + s.xMax), 0.5 * (s.yMin + s.yMax), {}).value() - 50;
     Timings t;
     const Frame f = w.gl->render(below, smallOptions(), t);
@@ -356,7 +375,8 @@ TEST_F(RenderGl, BadShaderGivesTheDriversLog) {
     World& w = lidar();
     HC_REQUIRE_GL(w);
     try {
-        w.gl->compileForTest("broken.comp", "#version 430\nlayout(local_size_x = 1) in;\nvoid main() { undeclaredThing = 1; }\n");
+        w.gl->compileForTest("broken.comp",
+                             "#version 430\nlayout(local_size_x = 1) in;\nvoid main() { undeclaredThing = 1; }\n");
         FAIL() << "a shader with an undeclared identifier compiled";
     } catch (const hc::Error& e) {
         const std::string m = e.what();
@@ -419,9 +439,10 @@ void expectLevelWater(World& w, const Camera& cam, double level, const std::stri
         onLevel += std::abs(err) <= tol;
         above += err > tol;
     }
-    const size_t glWater = size_t(std::count_if(gl.waterDepthM.begin(), gl.waterDepthM.end(), [](float d) { return d > 0; }));
-    std::printf("[ %s ] %zu water pixels, %zu water in both, GL water on the level %zu of %zu\n", name.c_str(), water, bothWater, onLevel,
-                glWater);
+    const size_t glWater =
+        size_t(std::count_if(gl.waterDepthM.begin(), gl.waterDepthM.end(), [](float d) { return d > 0; }));
+    std::printf("[ %s ] %zu water pixels, %zu water in both, GL water on the level %zu of %zu\n", name.c_str(), water,
+                bothWater, onLevel, glWater);
     EXPECT_GT(water, gl.waterDepthM.size() / 20) << name << ": the camera sees the flood";
     EXPECT_GE(double(bothWater), 0.995 * double(water)) << name;
     EXPECT_GE(double(onLevel), 0.999 * double(glWater)) << name;
@@ -455,16 +476,17 @@ TEST_F(RenderGlWater, BathtubFloodAsOnTheCpuAndOnItsLevel) {
 
 // ------------------------------------------------------------------------- the GL walk's beams
 
-// raycast.comp's beams (RenderOptions::beamTilePx): each tile of P x P pixels marches its rays' beam over each cascade's
-// max mipmaps first (beams.comp), and its rays start their walks where the march stopped, at the t the walk from
-// the cascade's start enters that patch with; a cascade whose slab the march passed whole is not walked. The march passes
-// only depths where every ray of the tile stays above every node's maximum by more than the walk's slack, so the walk
-// from the start would have skipped every node there, and the hits are the same. Compared pixel by pixel, beams against
-// none, from random cameras (rolled, with a near plane, straight down) on the flooded alpine DEM, the flooded LiDAR tile
-// (shores everywhere: the water rules) and the gully with holes (walls), from outside the domain, level and looking up,
-// for tiles of 2, 5 and 16 pixels (the image's edge, 100 x 70 pixels, cuts tiles; a 3 x 4 image is one tile of 5). In float a ray running exactly through a patch corner may be found entering by the other
-// edge and round its hit differently: allowed in one pixel in 10^3, within 1e-5 of its distance; anything else is a
-// wrong march. (With its margin made negative, 5 m too bold, it fails: checked when this test was written.)
+// raycast.comp's beams (RenderOptions::beamTilePx): each tile of P x P pixels marches its rays' beam over each
+// cascade's max mipmaps first (beams.comp), and its rays start their walks where the march stopped, at the t the walk
+// from the cascade's start enters that patch with; a cascade whose slab the march passed whole is not walked. The march
+// passes only depths where every ray of the tile stays above every node's maximum by more than the walk's slack, so the
+// walk from the start would have skipped every node there, and the hits are the same. Compared pixel by pixel, beams
+// against none, from random cameras (rolled, with a near plane, straight down) on the flooded alpine DEM, the flooded
+// LiDAR tile (shores everywhere: the water rules) and the gully with holes (walls), from outside the domain, level and
+// looking up, for tiles of 2, 5 and 16 pixels (the image's edge, 100 x 70 pixels, cuts tiles; a 3 x 4 image is one tile
+// of 5). In float a ray running exactly through a patch corner may be found entering by the other edge and round its
+// hit differently: allowed in one pixel in 10^3, within 1e-5 of its distance; anything else is a wrong march. (With its
+// margin made negative, 5 m too bold, it fails: checked when this test was written.)
 TEST_F(RenderGl, BeamsGiveTheSameHits) {
     World gully;
     gully.grid = hc::test::ingestFile(hc::test::dataFile("west_bijou_gully_3m.asc"), 0.25);
@@ -474,20 +496,22 @@ TEST_F(RenderGl, BeamsGiveTheSameHits) {
     for (World* w : {&hef(), &lidarFlood(), &gully}) {
         HC_REQUIRE_GL(*w);
         const Scene& s = *w->scene;
-        auto randomCamera = [&](std::mt19937_64& r) {  // 2 m .. half the extent above the top, looking down 3-83 degrees
-            std::uniform_real_distribution<double> u(0, 1);
-            Camera c;
-            const double x = s.xMin + u(r) * (s.xMax - s.xMin), y = s.yMin + u(r) * (s.yMax - s.yMin);
-            const double extent = std::max(s.xMax - s.xMin, s.yMax - s.yMin);
-            c.xWorld = w->grid.originWorldX + x, c.yWorld = w->grid.originWorldY + y;
-            c.zWorld = s.zMax + std::exp(std::log(2.0) + u(r) * std::log(extent / 2.0));
-            c.yawDeg = 360 * u(r), c.pitchDeg = -3 - 80 * u(r), c.fovYDeg = 30 + 40 * u(r);
-            c.width = 100, c.height = 70;
-            return c;
-        };
+        auto randomCamera =
+            [&](std::mt19937_64& r) {  // 2 m .. half the extent above the top, looking down 3-83 degrees
+                std::uniform_real_distribution<double> u(0, 1);
+                Camera c;
+                const double x = s.xMin + u(r) * (s.xMax - s.xMin), y = s.yMin + u(r) * (s.yMax - s.yMin);
+                const double extent = std::max(s.xMax - s.xMin, s.yMax - s.yMin);
+                c.xWorld = w->grid.originWorldX + x, c.yWorld = w->grid.originWorldY + y;
+                c.zWorld = s.zMax + std::exp(std::log(2.0) + u(r) * std::log(extent / 2.0));
+                c.yawDeg = 360 * u(r), c.pitchDeg = -3 - 80 * u(r), c.fovYDeg = 30 + 40 * u(r);
+                c.width = 100, c.height = 70;
+                return c;
+            };
         std::vector<Camera> cameras = hc::test::beamTestCameras(s, w->grid, 8, rng, randomCamera);
         cameras.push_back(lowOblique(s, 100, 70));
-        Camera level = lowOblique(s, 100, 70), up = level;  // rays level with the eye at the image's centre row, and rising
+        Camera level = lowOblique(s, 100, 70),
+               up = level;  // rays level with the eye at the image's centre row, and rising
         level.pitchDeg = 0, level.zWorld = s.elevationMin + 0.7 * (s.zMax - s.elevationMin);
         up.pitchDeg = 25, up.zWorld = level.zWorld;
         cameras.push_back(level), cameras.push_back(up);

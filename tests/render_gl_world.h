@@ -76,11 +76,11 @@ inline bool skipWanted() {
 }
 
 // Ends the test where there is no GL renderer: a failure, or a skip where HC_GL_TESTS=skip.
-#define HC_REQUIRE_GL(w)                                                                                  \
-    if (!(w).gl) {                                                                                        \
-        if (skipWanted()) {                                                                               \
-            GTEST_SKIP() << "no OpenGL 4.3 context (HC_GL_TESTS=skip): " << (w).glError;                  \
-        }                                                                                                 \
+#define HC_REQUIRE_GL(w)                                                                                        \
+    if (!(w).gl) {                                                                                              \
+        if (skipWanted()) {                                                                                     \
+            GTEST_SKIP() << "no OpenGL 4.3 context (HC_GL_TESTS=skip): " << (w).glError;                        \
+        }                                                                                                       \
         FAIL() << "no OpenGL 4.3 context: " << (w).glError << " (set HC_GL_TESTS=skip where that is expected)"; \
     }
 
@@ -131,16 +131,22 @@ inline Comparison compare(const Frame& cpu, const Frame& gl, const std::string& 
             if (!std::isfinite((*v)[i])) ++c.nonFinite;
         if (std::isnan(gl.distanceM[i]) || (std::isinf(gl.distanceM[i]) && gl.distanceM[i] < 0)) ++c.nonFinite;
         uint8_t* d = &diff.rgb[i * 3];
-        for (int k = 0; k < 3; ++k) d[k] = uint8_t(std::min(255, 8 * std::abs(int(cpu.rgb[i * 3 + size_t(k)]) - int(gl.rgb[i * 3 + size_t(k)]))));
-        if (hc == hg) ++c.agree;
-        else d[0] = 255, d[1] = 0, d[2] = 255;  // hit/miss disagreement: magenta
+        for (int k = 0; k < 3; ++k)
+            d[k] =
+                uint8_t(std::min(255, 8 * std::abs(int(cpu.rgb[i * 3 + size_t(k)]) - int(gl.rgb[i * 3 + size_t(k)]))));
+        if (hc == hg)
+            ++c.agree;
+        else
+            d[0] = 255, d[1] = 0, d[2] = 255;  // hit/miss disagreement: magenta
         if (hc && hg) {
             ++c.bothHit;
             const double t = cpu.distanceM[i], err = std::abs(double(gl.distanceM[i]) - t);
             rel.push_back(err / t);
             c.worstDepthRatio = std::max(c.worstDepthRatio, err / depthTolerance(t));
-            if (err <= depthTolerance(t)) ++c.depthOk;
-            else d[0] = 255, d[1] = 255, d[2] = 0;  // depth beyond the tolerance: yellow
+            if (err <= depthTolerance(t))
+                ++c.depthOk;
+            else
+                d[0] = 255, d[1] = 255, d[2] = 0;  // depth beyond the tolerance: yellow
         }
     }
     if (!rel.empty()) {
@@ -148,7 +154,8 @@ inline Comparison compare(const Frame& cpu, const Frame& gl, const std::string& 
         c.medianRelDepth = rel[rel.size() / 2];
     }
     c.psnr = hc::test::psnr(cpu, gl);
-    const bool bad = c.agree * 1000 < c.pixels * 995 || c.depthOk * 1000 < c.bothHit * 995 || c.psnr < 35 || c.nonFinite > 0;
+    const bool bad =
+        c.agree * 1000 < c.pixels * 995 || c.depthOk * 1000 < c.bothHit * 995 || c.psnr < 35 || c.nonFinite > 0;
     if (bad) {
         c.diffPng = (std::filesystem::path(testing::TempDir()) / ("gl_vs_cpu_" + name + ".png")).string();
         writePng(diff, c.diffPng);
@@ -159,12 +166,17 @@ inline Comparison compare(const Frame& cpu, const Frame& gl, const std::string& 
 }
 
 // The CPU's frame `cpu` and the GL backend's `gl` of the same scene, camera and options show the same picture.
-inline void expectSameFrames(const Frame& cpu, const Frame& gl, const Timings& tc, const Timings& tg, const std::string& name, bool mustSeeTerrain = true) {
+inline void expectSameFrames(const Frame& cpu, const Frame& gl, const Timings& tc, const Timings& tg,
+                             const std::string& name, bool mustSeeTerrain = true) {
     const Comparison c = compare(cpu, gl, name);
-    const double agree = double(c.agree) / double(c.pixels), depthOk = c.bothHit ? double(c.depthOk) / double(c.bothHit) : 1.0;
-    std::printf("[ %s ] hit/miss agree %.4f%%, depth within tolerance %.4f%% of %zu (median |dt|/t %.2e, worst %.1fx tolerance), PSNR %.2f dB\n",
-                name.c_str(), 100 * agree, 100 * depthOk, c.bothHit, c.medianRelDepth, c.worstDepthRatio, c.psnr);
-    const std::string where = c.diffPng.empty() ? "" : " (diff image: " + c.diffPng + ", magenta = hit/miss, yellow = depth)";
+    const double agree = double(c.agree) / double(c.pixels),
+                 depthOk = c.bothHit ? double(c.depthOk) / double(c.bothHit) : 1.0;
+    std::printf(
+        "[ %s ] hit/miss agree %.4f%%, depth within tolerance %.4f%% of %zu (median |dt|/t %.2e, worst %.1fx "
+        "tolerance), PSNR %.2f dB\n",
+        name.c_str(), 100 * agree, 100 * depthOk, c.bothHit, c.medianRelDepth, c.worstDepthRatio, c.psnr);
+    const std::string where =
+        c.diffPng.empty() ? "" : " (diff image: " + c.diffPng + ", magenta = hit/miss, yellow = depth)";
     if (mustSeeTerrain) {
         EXPECT_GT(c.bothHit, c.pixels / 4) << name << ": the camera should see the terrain" << where;
     } else {
@@ -172,17 +184,21 @@ inline void expectSameFrames(const Frame& cpu, const Frame& gl, const Timings& t
         EXPECT_LT(c.bothHit, c.pixels) << name << ": some rays go into the holes" << where;
     }
     EXPECT_GE(agree, 0.995) << name << ": hit/miss agree on " << c.agree << " of " << c.pixels << where;
-    EXPECT_GE(depthOk, 0.995) << name << ": depth within 1e-5 t + 1 cm on " << c.depthOk << " of " << c.bothHit << where;
+    EXPECT_GE(depthOk, 0.995) << name << ": depth within 1e-5 t + 1 cm on " << c.depthOk << " of " << c.bothHit
+                              << where;
     EXPECT_GE(c.psnr, 35.0) << name << where;
     EXPECT_EQ(c.nonFinite, 0u) << name << ": NaN or infinite position/normal/depth values" << where;
     // The same work: the Gaussians evaluated agree exactly (the same visible texels, the same lists).
     ASSERT_EQ(tc.cascades.size(), tg.cascades.size());
-    for (size_t k = 0; k < tc.cascades.size(); ++k) EXPECT_EQ(tc.cascades[k].gaussians, tg.cascades[k].gaussians) << name << " cascade " << k;
-    const uint64_t hitsGl = uint64_t(std::count_if(gl.distanceM.begin(), gl.distanceM.end(), [](float d) { return std::isfinite(d); }));
+    for (size_t k = 0; k < tc.cascades.size(); ++k)
+        EXPECT_EQ(tc.cascades[k].gaussians, tg.cascades[k].gaussians) << name << " cascade " << k;
+    const uint64_t hitsGl =
+        uint64_t(std::count_if(gl.distanceM.begin(), gl.distanceM.end(), [](float d) { return std::isfinite(d); }));
     EXPECT_EQ(tg.hits, hitsGl) << "the hit counter counts the hits read back";
 }
 
-inline void expectSame(World& w, const Camera& cam, const std::string& name, const RenderOptions& o = {}, bool mustSeeTerrain = true) {
+inline void expectSame(World& w, const Camera& cam, const std::string& name, const RenderOptions& o = {},
+                       bool mustSeeTerrain = true) {
     Timings tc, tg;
     const Frame cpu = renderFrame(*w.scene, cam, o, tc);
     w.gl->forgetCascades();  // both from scratch: the same work (the Gaussians) is compared too

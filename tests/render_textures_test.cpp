@@ -246,9 +246,9 @@ TEST_F(Render, PyramidTexelsAreCopiesOfTheExactSurface) {
 // The tolerance: an interpolated texel of a cascade whose texels came from up to `up` levels higher must err no more
 // than a bilinear patch at that level's spacing s = 2^up texels would (s^2 / 8 (|v_xx| + |v_yy|), the bound of the
 // hits tests, from the exact surface's curvature): what the cascade would give with texels that coarse, which
-// --pyramid-coarse accepts; the rendered error (hc-bench --accuracy, docs/benchmarks.md) stays that of the finer texels.
-// A wrong stencil (a sample off by one, a swapped weight) errs by the relief between samples, above that bound. The
-// water depth is level minus terrain, each interpolated: within the two bounds where both this texel and the exact
+// --pyramid-coarse accepts; the rendered error (hc-bench --accuracy, docs/benchmarks.md) stays that of the finer
+// texels. A wrong stencil (a sample off by one, a swapped weight) errs by the relief between samples, above that bound.
+// The water depth is level minus terrain, each interpolated: within the two bounds where both this texel and the exact
 // surface hold water; where only one does (the edge moved by the interpolation) it is counted and must be rare.
 // Every other texel is the kernel path's to the bit: holes' and floods' edges are left to the kernels.
 TEST_F(Render, InterpolatedPyramidTexelsStayWithinACoarserPatchError) {

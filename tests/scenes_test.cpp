@@ -135,7 +135,8 @@ TEST(Scenes, CameraAboveTheTerrainLooksDownOnTheFlood) {
     ASSERT_TRUE(g.locate(hitX, hitY).has_value()) << "the centre ray leaves the grid at " << hitX << ", " << hitY;
     double yRiver, dydx;
     terrain.centreline(hitX, yRiver, dydx);
-    EXPECT_LT(std::abs(hitY - yRiver), sc.land.floorHalfWidth + sc.land.sideWidth) << "the centre ray misses the valley";
+    EXPECT_LT(std::abs(hitY - yRiver), sc.land.floorHalfWidth + sc.land.sideWidth)
+        << "the centre ray misses the valley";
 }
 
 TEST(Scenes, AskedForCellCountIsMet) {
@@ -145,7 +146,8 @@ TEST(Scenes, AskedForCellCountIsMet) {
     const double target = 100000;
     const Generated gen = generateCells(*sc, target, 0);
     EXPECT_EQ(gen.grid.validate(), "");
-    EXPECT_NEAR(double(gen.grid.cellCount()) / target, 1.0, kCellCountTolerance) << gen.grid.cellCount() << " cells for " << target;
+    EXPECT_NEAR(double(gen.grid.cellCount()) / target, 1.0, kCellCountTolerance)
+        << gen.grid.cellCount() << " cells for " << target;
     EXPECT_DOUBLE_EQ(targetCells(*sc, 2.0), sc->reportCellsM * 1e6 / 2);
 }
 
@@ -161,7 +163,8 @@ TEST(Scenes, MoreCellsThanTheFinestSizeHoldsLowersIt) {
     EXPECT_FALSE(gen.finestRaised);
     EXPECT_EQ(gen.grid.finestCellM, 1.5);
     EXPECT_EQ(gen.grid.levelSizeM(gen.grid.maxLevel), kCoarsestM);
-    EXPECT_NEAR(double(gen.grid.cellCount()) / target, 1.0, kCellCountTolerance) << gen.grid.cellCount() << " cells for " << target;
+    EXPECT_NEAR(double(gen.grid.cellCount()) / target, 1.0, kCellCountTolerance)
+        << gen.grid.cellCount() << " cells for " << target;
 }
 
 TEST(Scenes, ListsEstimateMatchesTheBuiltLists) {
@@ -174,6 +177,7 @@ TEST(Scenes, ListsEstimateMatchesTheBuiltLists) {
     const hc::influence::KernelParams params;
     const ListsEstimate est = estimateInfluenceLists(g, params, 20000);
     const auto built = hc::influence::buildInfluenceLists(g, params, 0).stats();
-    EXPECT_NEAR(double(est.bytes) / double(built.bytes), 1.0, kListsEstimateTolerance) << est.bytes << " estimated, " << built.bytes << " built";
+    EXPECT_NEAR(double(est.bytes) / double(built.bytes), 1.0, kListsEstimateTolerance)
+        << est.bytes << " estimated, " << built.bytes << " built";
     EXPECT_NEAR(est.meanLength / built.meanLength, 1.0, kListsEstimateTolerance);
 }

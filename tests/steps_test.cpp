@@ -1,4 +1,5 @@
-// Flood scenarios over time (docs/design.md section 6): ingest of water steps into one structure, and reading them back.
+// Flood scenarios over time (docs/design.md section 6): ingest of water steps into one structure, and reading them
+// back.
 //
 // The structure a scenario shares must keep every step's wet/dry edges and depth tolerance; the build reaches it
 // through per-step merge masks (ingest/src/build.cpp). These tests compare it with the rule written out directly
@@ -62,7 +63,8 @@ Raster tub(const Raster& t, double level) {
 // The merge rule of build.h written out directly: a node is one cell when its four children are, it is no coarser
 // than maxLevel, and for the terrain and for every step the float mean of the children's means holds every pixel
 // within the tolerance; for every step the four are all wet or all dry. Returns the cell codes in Morton order.
-std::vector<uint64_t> referenceCells(const Raster& t, const std::vector<Raster>& steps, double tol, int maxLevel, int rootLevel) {
+std::vector<uint64_t> referenceCells(const Raster& t, const std::vector<Raster>& steps, double tol, int maxLevel,
+                                     int rootLevel) {
     struct Node {
         bool leaf = false;
         std::vector<float> mean, lo, hi;  // terrain, then each step
@@ -108,7 +110,8 @@ std::vector<uint64_t> referenceCells(const Raster& t, const std::vector<Raster>&
         }
         if (level == 0) return;
         const uint32_t h = uint32_t{1} << (level - 1);
-        emit(ix, iy, level - 1), emit(ix + h, iy, level - 1), emit(ix, iy + h, level - 1), emit(ix + h, iy + h, level - 1);
+        emit(ix, iy, level - 1), emit(ix + h, iy, level - 1), emit(ix, iy + h, level - 1),
+            emit(ix + h, iy + h, level - 1);
     };
     emit(0, 0, rootLevel);
     return codes;
@@ -173,7 +176,8 @@ TEST_F(Steps, OneStructureKeepsEveryStepsEdgesAndIsNoFinerThanTheRule) {
     EXPECT_EQ(hc::readGrid(path("one.hcg")).contentHash(), alone.contentHash());
     // A scenario is coarser than the union of nothing: fewer cells than pixels, more than the dry terrain alone.
     const Grid dry = hc::ingest::buildGrid(t, nullptr, b);
-    EXPECT_GT(first.cellCount(), dry.cellCount()) << "the wet/dry edges of step 1 and 2 split cells the terrain alone merges";
+    EXPECT_GT(first.cellCount(), dry.cellCount())
+        << "the wet/dry edges of step 1 and 2 split cells the terrain alone merges";
 }
 
 TEST_F(Steps, UnsortedTimesAndMismatchedStepsAreRefusedAndNothingIsWritten) {
@@ -224,14 +228,16 @@ TEST_F(Steps, RasterSeriesFromRealData) {
     ASSERT_TRUE(src);
     const int w = src->GetRasterXSize(), h = src->GetRasterYSize();
     std::vector<float> z(size_t(w) * h);
-    ASSERT_EQ(src->GetRasterBand(1)->RasterIO(GF_Read, 0, 0, w, h, z.data(), w, h, GDT_Float32, 0, 0, nullptr), CE_None);
+    ASSERT_EQ(src->GetRasterBand(1)->RasterIO(GF_Read, 0, 0, w, h, z.data(), w, h, GDT_Float32, 0, 0, nullptr),
+              CE_None);
     GDALDriver* gtiff = GetGDALDriverManager()->GetDriverByName("GTiff");
     auto make = [&](const std::string& name, double level, double shiftX) {
         const std::string p = path(name);
         std::unique_ptr<GDALDataset> ds(gtiff->CreateCopy(p.c_str(), src.get(), false, nullptr, nullptr, nullptr));
         std::vector<float> v(z.size());
         for (size_t i = 0; i < v.size(); ++i) v[i] = std::max(0.0f, float(level) - z[i]);
-        EXPECT_EQ(ds->GetRasterBand(1)->RasterIO(GF_Write, 0, 0, w, h, v.data(), w, h, GDT_Float32, 0, 0, nullptr), CE_None);
+        EXPECT_EQ(ds->GetRasterBand(1)->RasterIO(GF_Write, 0, 0, w, h, v.data(), w, h, GDT_Float32, 0, 0, nullptr),
+                  CE_None);
         if (shiftX != 0) {
             double gt[6];
             ds->GetGeoTransform(gt);

@@ -19,6 +19,6 @@ inline std::string dataFile(const std::string& name) {
 }  // namespace hc::test
 
 // Skips the test (saying why) when a raster is absent, e.g. baltoro_srtm.tif on a fresh clone without ../shared.
-#define HC_REQUIRE_DATA(var, name)                                                              \
-    const std::string var = ::hc::test::dataFile(name);                                         \
+#define HC_REQUIRE_DATA(var, name)                      \
+    const std::string var = ::hc::test::dataFile(name); \
     if (var.empty()) GTEST_SKIP() << name << " is in none of data/, build/data, ../shared/data; skipped"

@@ -13,7 +13,8 @@ namespace hc::test {
 
 // A raster ingested with the tool's defaults except the tolerance, an optional bathtub water level
 // and an optional source CRS.
-inline Grid ingestFile(const std::string& path, double toleranceM, double waterLevelM = NAN, const std::string& sourceSrs = "") {
+inline Grid ingestFile(const std::string& path, double toleranceM, double waterLevelM = NAN,
+                       const std::string& sourceSrs = "") {
     ingest::Options o;
     o.input = path;
     o.toleranceM = toleranceM;
@@ -26,7 +27,8 @@ inline Grid ingestFile(const std::string& path, double toleranceM, double waterL
 // A raster of width x height pixels of pixelSizeM [m], its north-west corner at (westWorld, northWorld), pixel
 // (col, row) = value(col, row), row 0 north; value is called row by row, west to east.
 template <typename F>
-inline ingest::Raster makeRaster(size_t width, size_t height, double pixelSizeM, double westWorld, double northWorld, F&& value) {
+inline ingest::Raster makeRaster(size_t width, size_t height, double pixelSizeM, double westWorld, double northWorld,
+                                 F&& value) {
     ingest::Raster r;
     r.width = width;
     r.height = height;

@@ -75,25 +75,31 @@ TEST_F(Bookmarks, BrokenFilesAreRefusedSayingWhy) {
     const std::string ok = R"({"slot": 2, "x": 1, "y": 2, "z": 3, "yaw": 4, "pitch": -5, "fov": 50})";
     EXPECT_EQ(errorOf(head + ok + "]}"), "");
     EXPECT_NE(errorOf(""), "");
-    EXPECT_NE(errorOf(head + ok).find("at byte"), std::string::npos);                     // truncated
+    EXPECT_NE(errorOf(head + ok).find("at byte"), std::string::npos);  // truncated
     EXPECT_NE(errorOf(head + ok + "]} x").find("after the JSON value"), std::string::npos);
     EXPECT_NE(errorOf("[]").find("not a JSON object"), std::string::npos);
     EXPECT_NE(errorOf(R"({"format": "other", "version": 1, "bookmarks": []})").find("format"), std::string::npos);
-    EXPECT_NE(errorOf(R"({"format": "heightcast-bookmarks", "version": 2, "bookmarks": []})").find("version"), std::string::npos);
+    EXPECT_NE(errorOf(R"({"format": "heightcast-bookmarks", "version": 2, "bookmarks": []})").find("version"),
+              std::string::npos);
     EXPECT_NE(errorOf(R"({"format": "heightcast-bookmarks", "version": 1})").find("\"bookmarks\""), std::string::npos);
-    EXPECT_NE(errorOf(head + R"({"slot": 0, "x": 1, "y": 2, "z": 3, "yaw": 4, "pitch": -5, "fov": 50}]})").find("outside 1..9"),
+    EXPECT_NE(errorOf(head + R"({"slot": 0, "x": 1, "y": 2, "z": 3, "yaw": 4, "pitch": -5, "fov": 50}]})")
+                  .find("outside 1..9"),
               std::string::npos);
     EXPECT_NE(errorOf(head + ok + "," + ok + "]}").find("given twice"), std::string::npos);
-    EXPECT_NE(errorOf(head + R"({"slot": 2, "x": 1, "y": 2, "yaw": 4, "pitch": -5, "fov": 50}]})").find("\"z\" is missing"),
-              std::string::npos);
-    EXPECT_NE(errorOf(head + R"({"slot": 2, "x": "1", "y": 2, "z": 3, "yaw": 4, "pitch": -5, "fov": 50}]})").find("\"x\""),
-              std::string::npos);
-    EXPECT_NE(errorOf(head + R"({"slot": 2, "x": 1e999, "y": 2, "z": 3, "yaw": 4, "pitch": -5, "fov": 50}]})").find("finite"),
-              std::string::npos);
+    EXPECT_NE(
+        errorOf(head + R"({"slot": 2, "x": 1, "y": 2, "yaw": 4, "pitch": -5, "fov": 50}]})").find("\"z\" is missing"),
+        std::string::npos);
+    EXPECT_NE(
+        errorOf(head + R"({"slot": 2, "x": "1", "y": 2, "z": 3, "yaw": 4, "pitch": -5, "fov": 50}]})").find("\"x\""),
+        std::string::npos);
+    EXPECT_NE(
+        errorOf(head + R"({"slot": 2, "x": 1e999, "y": 2, "z": 3, "yaw": 4, "pitch": -5, "fov": 50}]})").find("finite"),
+        std::string::npos);
     EXPECT_NE(errorOf(head + R"({"slot": 2, "x": 1, "y": 2, "z": 3, "yaw": 4, "pitch": -5, "fov": 180}]})").find("fov"),
               std::string::npos);
-    EXPECT_NE(errorOf(head + R"({"slot": 2, "x": 1, "y": 2, "z": 3, "yaw": 4, "pitch": -95, "fov": 50}]})").find("pitch"),
-              std::string::npos);
+    EXPECT_NE(
+        errorOf(head + R"({"slot": 2, "x": 1, "y": 2, "z": 3, "yaw": 4, "pitch": -95, "fov": 50}]})").find("pitch"),
+        std::string::npos);
     // Every truncation of a valid file is refused (none crashes or reads past the end).
     const std::string full = bookmarksToJson(bookmarksFromJson(head + ok + "]}"));
     const size_t whole = full.find_last_of('}') + 1;  // what follows is whitespace

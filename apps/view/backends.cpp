@@ -22,7 +22,8 @@ using render::Timings;
 // Tints each pixel by the cascade that gave its hit (the Frame's cascade index): near red, then green,
 // blue, yellow.
 void tintCascades(Frame& f) {
-    static const float kTint[4][3] = {{1.0f, 0.35f, 0.3f}, {0.35f, 1.0f, 0.4f}, {0.35f, 0.55f, 1.0f}, {1.0f, 0.9f, 0.3f}};
+    static const float kTint[4][3] = {
+        {1.0f, 0.35f, 0.3f}, {0.35f, 1.0f, 0.4f}, {0.35f, 0.55f, 1.0f}, {1.0f, 0.9f, 0.3f}};
     const size_t n = size_t(f.width) * size_t(f.height);
     for (size_t i = 0; i < n && i < f.cascade.size(); ++i) {
         const int c = int(f.cascade[i]);
@@ -117,8 +118,10 @@ private:
             }
             l.lock();
             running_ = false;
-            if (!error.empty()) error_ = error;
-            else result_ = std::move(r);
+            if (!error.empty())
+                error_ = error;
+            else
+                result_ = std::move(r);
             done_.notify_all();
         }
     }
@@ -140,7 +143,8 @@ private:
 // tinted and uploaded like CPU frames. Renders synchronously in submit(): never busy.
 class GlBackend final : public ViewBackend {
 public:
-    GlBackend(std::unique_ptr<render::GlRenderer> r, bool outOfCore) : r_(std::move(r)), tintTexture_(makeTexture()), outOfCore_(outOfCore) {}
+    GlBackend(std::unique_ptr<render::GlRenderer> r, bool outOfCore)
+        : r_(std::move(r)), tintTexture_(makeTexture()), outOfCore_(outOfCore) {}
     bool busy() const override { return false; }
     void submit(const Camera& c, const RenderOptions& o, bool full, bool cascadeTint) override {
         Shown s;

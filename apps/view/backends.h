@@ -16,10 +16,10 @@ namespace hc::view {
 // One rendered image, ready to draw.
 struct Shown {
     GLuint texture = 0;
-    bool flipY = true;                 // row 0 at the top (CPU frames) or at the bottom (GL textures)
-    int width = 0, height = 0;         // [pixels]
+    bool flipY = true;          // row 0 at the top (CPU frames) or at the bottom (GL textures)
+    int width = 0, height = 0;  // [pixels]
     render::Camera camera;
-    bool full = false;                 // rendered at the window's full resolution
+    bool full = false;  // rendered at the window's full resolution
     render::Timings timings;
     float centreDistanceM = INFINITY;  // along the centre pixel's ray; +inf on a miss or when unknown
 };

@@ -38,7 +38,9 @@ double Ground::speed(const render::Camera& c) const {
 std::array<double, 3> Ground::pickCentre(const render::Camera& c, double centreDistanceM) const {
     const render::CameraBasis b = render::basisOf(c);
     const auto& f = b.forward;
-    auto along = [&](double t) { return std::array<double, 3>{c.xWorld + f[0] * t, c.yWorld + f[1] * t, c.zWorld + f[2] * t}; };
+    auto along = [&](double t) {
+        return std::array<double, 3>{c.xWorld + f[0] * t, c.yWorld + f[1] * t, c.zWorld + f[2] * t};
+    };
     if (std::isfinite(centreDistanceM)) return along(centreDistanceM);
     const render::Scene& scene = *loaded_.scene;
     const double diag = std::hypot(scene.xMax - scene.xMin, scene.yMax - scene.yMin, scene.zMax - scene.zMin);
@@ -57,8 +59,10 @@ std::array<double, 3> Ground::pickCentre(const render::Camera& c, double centreD
             double lo = prevT, hi = t;  // bisect the crossing
             for (int k = 0; k < 20; ++k) {
                 const double m = 0.5 * (lo + hi);
-                if (below(m)) hi = m;
-                else lo = m;
+                if (below(m))
+                    hi = m;
+                else
+                    lo = m;
             }
             return along(hi);
         }

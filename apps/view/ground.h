@@ -35,7 +35,8 @@ public:
 
 private:
     const cli::LoadedScene& loaded_;
-    std::optional<influence::SurfaceEvaluator> evaluator_;  // in memory; out of core the scene reads the cells around each point
+    std::optional<influence::SurfaceEvaluator>
+        evaluator_;  // in memory; out of core the scene reads the cells around each point
     influence::Layer elevation_;
 };
 

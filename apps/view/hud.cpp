@@ -51,22 +51,25 @@ bool Hud::compose(const HudStatus& s, int fw, int fh) {
     const Toggles& t = s.toggles;
     std::vector<std::pair<std::string, uint32_t>> lines;
     if (t.hud) {
-        lines.push_back({fmt::format("hc-view  {}   backend {} ({})", s.gridPath, s.backendName, s.backendDevice), kText});
+        lines.push_back(
+            {fmt::format("hc-view  {}   backend {} ({})", s.gridPath, s.backendName, s.backendDevice), kText});
         if (!s.backendNote.empty()) lines.push_back({s.backendNote, kWarn});
         if (s.backendDevice != s.contextInfo) lines.push_back({"display: " + s.contextInfo, kDim});
         const render::Timings& ms = s.timings;
-        lines.push_back({fmt::format("{:.1f} fps   frame {}x{}{}   total {:.1f} ms", s.framesPerSecond, s.frameWidth, s.frameHeight,
-                                     s.frameFull ? "" : " (moving: reduced)", ms.totalMs),
+        lines.push_back({fmt::format("{:.1f} fps   frame {}x{}{}   total {:.1f} ms", s.framesPerSecond, s.frameWidth,
+                                     s.frameHeight, s.frameFull ? "" : " (moving: reduced)", ms.totalMs),
                          kText});
-        lines.push_back({fmt::format("fitting {:.1f}  approximation {:.1f}  mipmaps {:.1f}  ray casting {:.1f}  shading {:.1f} ms",
-                                     ms.fittingMs, ms.approximationMs, ms.mipmapMs, ms.raycastMs, ms.shadingMs),
-                         kText});
+        lines.push_back(
+            {fmt::format("fitting {:.1f}  approximation {:.1f}  mipmaps {:.1f}  ray casting {:.1f}  shading {:.1f} ms",
+                         ms.fittingMs, ms.approximationMs, ms.mipmapMs, ms.raycastMs, ms.shadingMs),
+             kText});
         const render::Camera& c = s.camera;
-        lines.push_back({fmt::format("camera {:.1f}, {:.1f}, {:.1f} m  yaw {:.1f}  pitch {:.1f}  fov {:.1f} deg", c.xWorld, c.yWorld,
-                                     c.zWorld, c.yawDeg, c.pitchDeg, c.fovYDeg),
+        lines.push_back({fmt::format("camera {:.1f}, {:.1f}, {:.1f} m  yaw {:.1f}  pitch {:.1f}  fov {:.1f} deg",
+                                     c.xWorld, c.yWorld, c.zWorld, c.yawDeg, c.pitchDeg, c.fovYDeg),
                          kText});
-        lines.push_back({(s.heightAboveGroundM ? fmt::format("height above ground {:.1f} m", *s.heightAboveGroundM)
-                                               : fmt::format("outside the grid, {:.1f} m above its highest point", s.aboveHighestM)) +
+        lines.push_back({(s.heightAboveGroundM
+                              ? fmt::format("height above ground {:.1f} m", *s.heightAboveGroundM)
+                              : fmt::format("outside the grid, {:.1f} m above its highest point", s.aboveHighestM)) +
                              fmt::format("   speed {:.0f} m/s", s.speedMps),
                          kText});
         if (!s.stepLine.empty()) lines.push_back({s.stepLine, kText});
@@ -79,8 +82,10 @@ bool Hud::compose(const HudStatus& s, int fw, int fh) {
     for (const auto& l : lines) key += l.first + "\n";
     if (key == key_) return false;
     key_ = key;
-    if (overlay_.width != fw || overlay_.height != fh) overlay_.resize(fw, fh);
-    else overlay_.clear();
+    if (overlay_.width != fw || overlay_.height != fh)
+        overlay_.resize(fw, fh);
+    else
+        overlay_.clear();
     int widest = 0;
     for (const auto& l : lines) widest = std::max(widest, int(l.first.size()));
     if (!lines.empty()) {
@@ -91,8 +96,10 @@ bool Hud::compose(const HudStatus& s, int fw, int fh) {
     if (t.help) {
         int rows = 1, cols = 0, col = 0;
         for (const char* p = kHelp; *p; ++p)
-            if (*p == '\n') ++rows, col = 0;
-            else cols = std::max(cols, ++col);
+            if (*p == '\n')
+                ++rows, col = 0;
+            else
+                cols = std::max(cols, ++col);
         const int w = cols * kGlyphW * scale + 4 * pad, h = rows * lineH + 4 * pad;
         const int x = (fw - w) / 2, y = (fh - h) / 2;
         overlay_.fillRect(x, y, w, h, 0x000000C8);
@@ -106,8 +113,10 @@ std::string nextScreenshotPath(const std::string& gridPath) {
     if (base.size() > 4 && base.compare(base.size() - 4, 4, ".hcg") == 0) base.resize(base.size() - 4);
     for (int i = 1;; ++i) {
         std::string p = fmt::format("{}.view{:03d}.png", base, i);
-        if (std::FILE* f = std::fopen(p.c_str(), "rb")) std::fclose(f);
-        else return p;
+        if (std::FILE* f = std::fopen(p.c_str(), "rb"))
+            std::fclose(f);
+        else
+            return p;
     }
 }
 

@@ -22,8 +22,8 @@ struct Toggles {
 // What the HUD reports; filled by the viewer for each draw.
 struct HudStatus {
     std::string gridPath, backendName, backendDevice;
-    std::string backendNote;              // the backend choice's note, "" when none
-    std::string contextInfo;              // the window's GL context, shown when it is not the backend's device
+    std::string backendNote;  // the backend choice's note, "" when none
+    std::string contextInfo;  // the window's GL context, shown when it is not the backend's device
     double framesPerSecond = 0;
     int frameWidth = 0, frameHeight = 0;  // of the image on screen [pixels]
     bool frameFull = false;               // false: a reduced frame while moving
@@ -33,7 +33,7 @@ struct HudStatus {
     double aboveHighestM = 0;
     double speedMps = 0;
     Toggles toggles;
-    std::string stepLine;                 // the water step, its time and playback; "" without steps
+    std::string stepLine;  // the water step, its time and playback; "" without steps
 };
 
 class Hud {

@@ -14,10 +14,13 @@ Viewer* viewerOf(GLFWwindow* w) { return static_cast<Viewer*>(glfwGetWindowUserP
 void Viewer::installCallbacks() {
     GLFWwindow* w = window_.handle();
     glfwSetWindowUserPointer(w, this);
-    glfwSetKeyCallback(w, [](GLFWwindow* win, int key, int, int action, int mods) { viewerOf(win)->onKey(key, action, mods); });
+    glfwSetKeyCallback(
+        w, [](GLFWwindow* win, int key, int, int action, int mods) { viewerOf(win)->onKey(key, action, mods); });
     glfwSetScrollCallback(w, [](GLFWwindow* win, double, double dy) { viewerOf(win)->onScroll(dy); });
-    glfwSetMouseButtonCallback(w, [](GLFWwindow* win, int button, int action, int) { viewerOf(win)->onButton(button, action); });
-    glfwSetFramebufferSizeCallback(w, [](GLFWwindow* win, int width, int height) { viewerOf(win)->onResize(width, height); });
+    glfwSetMouseButtonCallback(
+        w, [](GLFWwindow* win, int button, int action, int) { viewerOf(win)->onButton(button, action); });
+    glfwSetFramebufferSizeCallback(
+        w, [](GLFWwindow* win, int width, int height) { viewerOf(win)->onResize(width, height); });
 }
 
 // The window outlives the viewer: no callback may reach it afterwards.
@@ -33,25 +36,36 @@ Viewer::~Viewer() {
 void Viewer::onKey(int key, int action, int mods) {
     if (action != GLFW_PRESS) return;
     switch (key) {
-        case GLFW_KEY_ESCAPE: window_.close(); break;
-        case GLFW_KEY_F: toggles_.water = !toggles_.water, changed(), flash(toggles_.water ? "water on" : "water off"); break;
+        case GLFW_KEY_ESCAPE:
+            window_.close();
+            break;
+        case GLFW_KEY_F:
+            toggles_.water = !toggles_.water, changed(), flash(toggles_.water ? "water on" : "water off");
+            break;
         case GLFW_KEY_C:
             if (!backend_->drawsCellOutlines()) {
-                flash("cell outlines need the cells: not on the GL backend out of core (--backend cpu, or an .hci cache)");
+                flash(
+                    "cell outlines need the cells: not on the GL backend out of core (--backend cpu, or an .hci "
+                    "cache)");
                 break;
             }
-            toggles_.cells = !toggles_.cells, changed(), flash(toggles_.cells ? "cell outlines on" : "cell outlines off");
+            toggles_.cells = !toggles_.cells, changed(),
+            flash(toggles_.cells ? "cell outlines on" : "cell outlines off");
             break;
         case GLFW_KEY_K:
             toggles_.cascadeTint = !toggles_.cascadeTint, changed();
-            flash(toggles_.cascadeTint ? "cascade colouring on (near red, then green, blue, yellow)" : "cascade colouring off");
+            flash(toggles_.cascadeTint ? "cascade colouring on (near red, then green, blue, yellow)"
+                                       : "cascade colouring off");
             break;
-        case GLFW_KEY_H: toggles_.help = !toggles_.help; break;
+        case GLFW_KEY_H:
+            toggles_.help = !toggles_.help;
+            break;
         case GLFW_KEY_RIGHT_BRACKET:
         case GLFW_KEY_LEFT_BRACKET:
             if (stepCount_ > 1) {
                 playing_ = false;
-                const size_t next = key == GLFW_KEY_RIGHT_BRACKET ? (step_ + 1) % stepCount_ : (step_ + stepCount_ - 1) % stepCount_;
+                const size_t next =
+                    key == GLFW_KEY_RIGHT_BRACKET ? (step_ + 1) % stepCount_ : (step_ + stepCount_ - 1) % stepCount_;
                 try {
                     showStep(next);
                 } catch (const Error& e) {
@@ -60,18 +74,25 @@ void Viewer::onKey(int key, int action, int mods) {
             }
             break;
         case GLFW_KEY_SPACE:
-            if (stepCount_ > 1) playing_ = !playing_, stepShownAt_ = Clock::now(), flash(playing_ ? "playing" : "paused");
+            if (stepCount_ > 1)
+                playing_ = !playing_, stepShownAt_ = Clock::now(), flash(playing_ ? "playing" : "paused");
             break;
         case GLFW_KEY_EQUAL:
         case GLFW_KEY_KP_ADD:
-            stepsPerSecond_ = std::min(30.0, stepsPerSecond_ * 2), flash(fmt::format("{:g} steps per second", stepsPerSecond_));
+            stepsPerSecond_ = std::min(30.0, stepsPerSecond_ * 2),
+            flash(fmt::format("{:g} steps per second", stepsPerSecond_));
             break;
         case GLFW_KEY_MINUS:
         case GLFW_KEY_KP_SUBTRACT:
-            stepsPerSecond_ = std::max(0.125, stepsPerSecond_ / 2), flash(fmt::format("{:g} steps per second", stepsPerSecond_));
+            stepsPerSecond_ = std::max(0.125, stepsPerSecond_ / 2),
+            flash(fmt::format("{:g} steps per second", stepsPerSecond_));
             break;
-        case GLFW_KEY_U: toggles_.hud = !toggles_.hud; break;
-        case GLFW_KEY_R: camera_ = withSize(home_), changed(), flash("first view"); break;
+        case GLFW_KEY_U:
+            toggles_.hud = !toggles_.hud;
+            break;
+        case GLFW_KEY_R:
+            camera_ = withSize(home_), changed(), flash("first view");
+            break;
         case GLFW_KEY_P: {
             const std::string path = nextScreenshotPath(gridPath_);
             try {
@@ -127,8 +148,10 @@ void Viewer::pollMotion(double dt) {
     GLFWwindow* w = window_.handle();
     auto down = [&](int k) { return glfwGetKey(w, k) == GLFW_PRESS; };
     const bool fast = down(GLFW_KEY_LEFT_SHIFT) || down(GLFW_KEY_RIGHT_SHIFT);
-    const double fwd = (down(GLFW_KEY_W) || down(GLFW_KEY_UP) ? 1 : 0) - (down(GLFW_KEY_S) || down(GLFW_KEY_DOWN) ? 1 : 0);
-    const double right = (down(GLFW_KEY_D) || down(GLFW_KEY_RIGHT) ? 1 : 0) - (down(GLFW_KEY_A) || down(GLFW_KEY_LEFT) ? 1 : 0);
+    const double fwd =
+        (down(GLFW_KEY_W) || down(GLFW_KEY_UP) ? 1 : 0) - (down(GLFW_KEY_S) || down(GLFW_KEY_DOWN) ? 1 : 0);
+    const double right =
+        (down(GLFW_KEY_D) || down(GLFW_KEY_RIGHT) ? 1 : 0) - (down(GLFW_KEY_A) || down(GLFW_KEY_LEFT) ? 1 : 0);
     const double up = (down(GLFW_KEY_E) ? 1 : 0) - (down(GLFW_KEY_Q) ? 1 : 0);
     if (fwd != 0 || right != 0 || up != 0) {
         const double step = ground_.speed(camera_) * (fast ? 4 : 1) * dt;

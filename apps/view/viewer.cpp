@@ -17,15 +17,25 @@ using render::RenderOptions;
 
 Viewer::Viewer(Window& window, cli::LoadedScene& loaded, const cli::RenderSetup& setup, std::string gridPath,
                std::unique_ptr<ViewBackend> backend, BackendFactory makeBackend, std::string backendNote)
-    : window_(window), loaded_(loaded), setup_(setup), makeBackend_(std::move(makeBackend)), ground_(loaded), options_(setup.options),
-      gridPath_(std::move(gridPath)), backend_(std::move(backend)), backendNote_(std::move(backendNote)), hudTexture_(makeTexture()) {
+    : window_(window),
+      loaded_(loaded),
+      setup_(setup),
+      makeBackend_(std::move(makeBackend)),
+      ground_(loaded),
+      options_(setup.options),
+      gridPath_(std::move(gridPath)),
+      backend_(std::move(backend)),
+      backendNote_(std::move(backendNote)),
+      hudTexture_(makeTexture()) {
     const Grid& shape = loaded_.file ? loaded_.file->shape() : loaded_.grid;
     step_ = shape.step;
     stepCount_ = shape.stepCount();
     for (const StepInfo& s : shape.steps) stepTimesS_.push_back(s.timeS);
     toggles_.cells = options_.cellOutlines && backend_->drawsCellOutlines();
     if (options_.cellOutlines && !toggles_.cells) {
-        const std::string why = "--cells: cell outlines need the cells, not on the GL backend out of core (--backend cpu, or an .hci cache)";
+        const std::string why =
+            "--cells: cell outlines need the cells, not on the GL backend out of core (--backend cpu, or an .hci "
+            "cache)";
         std::fprintf(stderr, "hc-view: note: %s\n", why.c_str());
         flash(why);
     }
@@ -58,8 +68,10 @@ void Viewer::run() {
         window_.swapBuffers();
         // Wait in the event queue, never spin: the CPU backend needs the cores. Input wakes it at once;
         // otherwise ~60 Hz while frames are coming or keys are held, 2 Hz when all is still.
-        if (backend_->busy() || moving() || !shownCurrent()) window_.waitEvents(1.0 / 60);
-        else window_.waitEvents(0.5);
+        if (backend_->busy() || moving() || !shownCurrent())
+            window_.waitEvents(1.0 / 60);
+        else
+            window_.waitEvents(0.5);
     }
 }
 
@@ -115,9 +127,12 @@ std::string Viewer::stepLine() const {
     if (stepCount_ < 2) return "";
     const double t = step_ < stepTimesS_.size() ? stepTimesS_[step_] : 0.0;
     const long whole = std::lround(std::floor(std::abs(t)));
-    const std::string clock = fmt::format("{}{}:{:02}:{:02}", t < 0 ? "-" : "", whole / 3600, (whole / 60) % 60, whole % 60);
-    return fmt::format("step {}/{}  t {} ({:g} s)  {}  switch {:.0f} ms   [ ] step  Space play/pause  - + speed", step_, stepCount_ - 1,
-                       clock, t, playing_ ? fmt::format("playing {:g}/s", stepsPerSecond_) : std::string("paused"), lastSwitchMs_);
+    const std::string clock =
+        fmt::format("{}{}:{:02}:{:02}", t < 0 ? "-" : "", whole / 3600, (whole / 60) % 60, whole % 60);
+    return fmt::format("step {}/{}  t {} ({:g} s)  {}  switch {:.0f} ms   [ ] step  Space play/pause  - + speed", step_,
+                       stepCount_ - 1, clock, t,
+                       playing_ ? fmt::format("playing {:g}/s", stepsPerSecond_) : std::string("paused"),
+                       lastSwitchMs_);
 }
 
 bool Viewer::moving() const { return Clock::now() - lastChange_ < std::chrono::milliseconds(250); }
@@ -149,7 +164,9 @@ bool Viewer::shownCurrent() const {
     return submitted_ && submittedFull_ && sameView(submittedCamera_, camera_) && submittedToggles_ == togglesKey();
 }
 
-int Viewer::togglesKey() const { return (toggles_.water ? 1 : 0) | (toggles_.cells ? 2 : 0) | (toggles_.cascadeTint ? 4 : 0); }
+int Viewer::togglesKey() const {
+    return (toggles_.water ? 1 : 0) | (toggles_.cells ? 2 : 0) | (toggles_.cascadeTint ? 4 : 0);
+}
 
 // The frame on screen's distance along the centre ray when it was rendered from this camera's position and
 // direction; +inf otherwise (Ground::pickCentre then marches the surface).
@@ -165,7 +182,8 @@ double Viewer::centreDistanceM() const {
 void Viewer::schedule(bool force) {
     if (backend_->busy()) return;
     const bool still = !moving();
-    if (!force && submitted_ && sameView(submittedCamera_, camera_) && submittedToggles_ == togglesKey() && (submittedFull_ || !still))
+    if (!force && submitted_ && sameView(submittedCamera_, camera_) && submittedToggles_ == togglesKey() &&
+        (submittedFull_ || !still))
         return;
     Camera c = camera_;
     bool full = still;
@@ -202,7 +220,8 @@ void Viewer::frameDone() {
     if (shown_.timings.totalMs > 0 && pixels > 0) msPerPixel_ = shown_.timings.totalMs / pixels;
     const auto now = Clock::now();
     frameTimes_.push_back(now);
-    while (!frameTimes_.empty() && now - frameTimes_.front() > std::chrono::seconds(2)) frameTimes_.erase(frameTimes_.begin());
+    while (!frameTimes_.empty() && now - frameTimes_.front() > std::chrono::seconds(2))
+        frameTimes_.erase(frameTimes_.begin());
 }
 
 // Frames finished per second over the last two seconds while frames keep coming; otherwise what the last

@@ -42,8 +42,8 @@ public:
     // the first shows the next water step (wrapping around), as playback does.
     void runScripted(int frames, const std::string& screenshot, bool play = false);
 
-    // Water steps (docs/design.md section 6): the one shown, how many, and how long the last switch took [ms] (reading the
-    // step, its pyramid, the new scene and backend; the frame after it is timed as any frame).
+    // Water steps (docs/design.md section 6): the one shown, how many, and how long the last switch took [ms] (reading
+    // the step, its pyramid, the new scene and backend; the frame after it is timed as any frame).
     size_t step() const { return step_; }
     size_t stepCount() const { return stepCount_; }
     double lastSwitchMs() const { return lastSwitchMs_; }
@@ -71,8 +71,8 @@ private:
     void schedule(bool force);
     void frameDone();
     double framesPerSecond() const;
-    void showStep(size_t step);       // switches the water step (waits for the frame in flight)
-    void advancePlayback();           // playing: the next step once the current one is on screen and its time is up
+    void showStep(size_t step);  // switches the water step (waits for the frame in flight)
+    void advancePlayback();      // playing: the next step once the current one is on screen and its time is up
     std::string stepLine() const;
     void draw();
     void flash(const std::string& text) { hud_.flash(text); }

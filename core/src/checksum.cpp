@@ -36,9 +36,8 @@ uint32_t crc32(std::span<const std::byte> bytes, uint32_t crc) {
         std::memcpy(&lo, p, 4);
         std::memcpy(&hi, p + 4, 4);
         lo ^= c;
-        c = kCrc.t[7][lo & 0xFF] ^ kCrc.t[6][(lo >> 8) & 0xFF] ^ kCrc.t[5][(lo >> 16) & 0xFF] ^
-            kCrc.t[4][lo >> 24] ^ kCrc.t[3][hi & 0xFF] ^ kCrc.t[2][(hi >> 8) & 0xFF] ^
-            kCrc.t[1][(hi >> 16) & 0xFF] ^ kCrc.t[0][hi >> 24];
+        c = kCrc.t[7][lo & 0xFF] ^ kCrc.t[6][(lo >> 8) & 0xFF] ^ kCrc.t[5][(lo >> 16) & 0xFF] ^ kCrc.t[4][lo >> 24] ^
+            kCrc.t[3][hi & 0xFF] ^ kCrc.t[2][(hi >> 8) & 0xFF] ^ kCrc.t[1][(hi >> 16) & 0xFF] ^ kCrc.t[0][hi >> 24];
         p += 8;
         n -= 8;
     }
@@ -77,7 +76,7 @@ struct X2nTable {
 
 uint32_t crc32Combine(uint32_t crcA, uint32_t crcB, uint64_t bytesB) {
     static const X2nTable x2n;
-    uint32_t p = 1u << 31;  // x^0
+    uint32_t p = 1u << 31;                           // x^0
     for (unsigned k = 3; bytesB; bytesB >>= 1, ++k)  // x^(8 bytesB) = product of x^(2^k) over B's bits, k from 3
         if (bytesB & 1) p = multModP(x2n.t[k & 31], p);
     return multModP(p, crcA) ^ crcB;

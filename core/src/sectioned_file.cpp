@@ -22,7 +22,8 @@ namespace hc {
 namespace {
 
 namespace off {
-constexpr size_t major = 8, minor = 10, headerBytes = 12, fileBytes = 16, sectionCount = 60, tableCrc = 120, headerCrc = 124;
+constexpr size_t major = 8, minor = 10, headerBytes = 12, fileBytes = 16, sectionCount = 60, tableCrc = 120,
+                 headerCrc = 124;
 }
 
 uint64_t alignUp(uint64_t v) { return (v + kFileSectionAlign - 1) / kFileSectionAlign * kFileSectionAlign; }
@@ -37,10 +38,10 @@ uint64_t blockCount(uint64_t bytes, uint64_t blockBytes) { return bytes / blockB
 
 struct SectionedFileReader::Checks {
     struct Section {
-        uint64_t blockBytes = 0;           // the whole section for a file without block checksums
+        uint64_t blockBytes = 0;  // the whole section for a file without block checksums
         uint64_t blocks = 0;
-        const std::byte* crcs = nullptr;   // its block CRCs in the mapping; nullptr: the table CRC, one block
-        uint64_t firstBit = 0;             // its first block's bit in `checked`
+        const std::byte* crcs = nullptr;  // its block CRCs in the mapping; nullptr: the table CRC, one block
+        uint64_t firstBit = 0;            // its first block's bit in `checked`
     };
     std::vector<Section> sections;
     std::unique_ptr<std::atomic<uint64_t>[]> checked;  // one bit per block, set once its CRC matched
@@ -63,11 +64,11 @@ MappedFile::MappedFile(const std::string& path) {
     // Fuzz builds (HC_FUZZ, fuzz/): the file goes into a heap block of exactly its size, so AddressSanitizer
     // reports a read past its end; a mapping would quietly return the zeros at the end of its last page.
     if (size_ > 0) {
-        auto* p = static_cast<std::byte*>(::operator new(size_, std::align_val_t{kFileSectionAlign}));
+        auto* p = static_cast<std::byte*>(::operator new (size_, std::align_val_t{kFileSectionAlign}));
         for (size_t done = 0; done < size_;) {
             const ssize_t n = ::pread(fd, p + done, size_ - done, static_cast<off_t>(done));
             if (n <= 0) {
-                ::operator delete(p, std::align_val_t{kFileSectionAlign});
+                ::operator delete (p, std::align_val_t{kFileSectionAlign});
                 ::close(fd);
                 throw Error(path + ": cannot read");
             }
@@ -97,7 +98,7 @@ void MappedFile::releasePages() const {
 
 MappedFile::~MappedFile() {
 #ifdef HC_FUZZ_HEAP_FILES
-    if (data_) ::operator delete(const_cast<std::byte*>(data_), std::align_val_t{kFileSectionAlign});
+    if (data_) ::operator delete (const_cast<std::byte*>(data_), std::align_val_t{kFileSectionAlign});
 #else
     if (data_) ::munmap(const_cast<std::byte*>(data_), size_);
 #endif
@@ -114,23 +115,25 @@ SectionedFileReader::SectionedFileReader(const std::string& path, const FileForm
     const uint64_t size = bytes.size();
     const std::byte* h = bytes.data();
     if (size < kFileHeaderBytes)
-        failFile("truncated: " + std::to_string(size) + " bytes, the header alone is " + std::to_string(kFileHeaderBytes) +
-                 " (not a " + format.what + " file?)");
+        failFile("truncated: " + std::to_string(size) + " bytes, the header alone is " +
+                 std::to_string(kFileHeaderBytes) + " (not a " + format.what + " file?)");
     if (std::memcmp(h, format.magic.data(), 8) != 0) fail(0, std::string("bad magic: not a ") + format.what + " file");
     const auto major = bytes::load<uint16_t>(h + off::major);
     minor_ = bytes::load<uint16_t>(h + off::minor);
     const std::string version = std::to_string(major) + "." + std::to_string(minor_);
     if (major > format.major)
-        fail(off::major, "format version " + version + " is newer than this reader (" + std::to_string(format.major) + "." +
-                             std::to_string(format.minor) + "); upgrade heightcast to read it");
+        fail(off::major, "format version " + version + " is newer than this reader (" + std::to_string(format.major) +
+                             "." + std::to_string(format.minor) + "); upgrade heightcast to read it");
     if (major != format.major) fail(off::major, "unknown format version " + version);
-    if (bytes::load<uint32_t>(h + off::headerCrc) != crc32(std::span(h, off::headerCrc))) fail(off::headerCrc, "header checksum mismatch (corrupt header)");
+    if (bytes::load<uint32_t>(h + off::headerCrc) != crc32(std::span(h, off::headerCrc)))
+        fail(off::headerCrc, "header checksum mismatch (corrupt header)");
     if (bytes::load<uint32_t>(h + off::headerBytes) != kFileHeaderBytes)
-        fail(off::headerBytes, "header size " + std::to_string(bytes::load<uint32_t>(h + off::headerBytes)) + " is not " + std::to_string(kFileHeaderBytes));
+        fail(off::headerBytes, "header size " + std::to_string(bytes::load<uint32_t>(h + off::headerBytes)) +
+                                   " is not " + std::to_string(kFileHeaderBytes));
     const uint64_t declared = bytes::load<uint64_t>(h + off::fileBytes);
     if (declared != size)
-        fail(off::fileBytes, "header declares " + std::to_string(declared) + " bytes but the file has " + std::to_string(size) +
-                                 (size < declared ? " (truncated)" : " (trailing data)"));
+        fail(off::fileBytes, "header declares " + std::to_string(declared) + " bytes but the file has " +
+                                 std::to_string(size) + (size < declared ? " (truncated)" : " (trailing data)"));
     const uint32_t count = bytes::load<uint32_t>(h + off::sectionCount);
     const uint64_t tableEnd = kFileHeaderBytes + uint64_t{count} * kFileSectionEntryBytes;
     if (count > 4096 || tableEnd > size)
@@ -149,8 +152,8 @@ SectionedFileReader::SectionedFileReader(const std::string& path, const FileForm
         e.crc = bytes::load<uint32_t>(h + at + 24);
         if (bytes::load<uint32_t>(h + at + 28) != 0) fail(at + 28, "reserved section-table field is not zero");
         if (e.offset % kFileSectionAlign != 0 || e.offset < cursor || e.offset > size || e.bytes > size - e.offset)
-            fail(at + 8, "section " + std::to_string(s) + " (offset " + std::to_string(e.offset) + ", " + std::to_string(e.bytes) +
-                             " bytes) is misplaced or runs past the end of the file");
+            fail(at + 8, "section " + std::to_string(s) + " (offset " + std::to_string(e.offset) + ", " +
+                             std::to_string(e.bytes) + " bytes) is misplaced or runs past the end of the file");
         for (uint64_t p = cursor; p < e.offset; ++p)
             if (h[p] != std::byte{0}) fail(p, "padding byte is not zero");
         bool known = e.kind == kFileBlockChecksumsKind;
@@ -166,34 +169,40 @@ SectionedFileReader::SectionedFileReader(const std::string& path, const FileForm
     // blocks' CRCs combined, so a reader of an older minor (table CRCs) and this one agree on every file.
     const bool hasBlocks = !all.empty() && all.back().kind == kFileBlockChecksumsKind;
     if (!hasBlocks && minor_ >= format.blockChecksumsSince)
-        fail(kFileHeaderBytes, "format version " + version + " requires a block checksum section, and the file has none");
+        fail(kFileHeaderBytes,
+             "format version " + version + " requires a block checksum section, and the file has none");
     checks_ = std::make_unique<Checks>();
     uint64_t bits = 0;
     if (hasBlocks) {
         const FileSection t = all.back();
         all.pop_back();
         const uint64_t tableAt = entryOffset(all.size());
-        if (crc32(std::span(h + t.offset, t.bytes)) != t.crc) fail(t.offset, "checksum mismatch in the block checksum section (corrupt data)");
-        if (t.bytes < kBlockTableHead) fail(tableAt + 16, "block checksum section of " + std::to_string(t.bytes) + " bytes is too short");
+        if (crc32(std::span(h + t.offset, t.bytes)) != t.crc)
+            fail(t.offset, "checksum mismatch in the block checksum section (corrupt data)");
+        if (t.bytes < kBlockTableHead)
+            fail(tableAt + 16, "block checksum section of " + std::to_string(t.bytes) + " bytes is too short");
         blockBytes_ = bytes::load<uint32_t>(h + t.offset);
         if (!std::has_single_bit(blockBytes_) || blockBytes_ < kMinBlockBytes || blockBytes_ > kMaxBlockBytes)
             fail(t.offset, "block size " + std::to_string(blockBytes_) + " is not a power of two from 4 KiB to 1 GiB");
-        if (bytes::load<uint32_t>(h + t.offset + 4) != 0) fail(t.offset + 4, "reserved block-checksum field is not zero");
+        if (bytes::load<uint32_t>(h + t.offset + 4) != 0)
+            fail(t.offset + 4, "reserved block-checksum field is not zero");
         // Each count is at most size / 4 KiB: the sum cannot wrap.
         uint64_t crcBytes = kBlockTableHead;
         for (const FileSection& e : all) crcBytes += 4 * blockCount(e.bytes, blockBytes_);
         if (crcBytes != t.bytes)
-            fail(tableAt + 16, "block checksum section holds " + std::to_string(t.bytes) + " bytes, the sections' blocks need " +
-                                   std::to_string(crcBytes));
+            fail(tableAt + 16, "block checksum section holds " + std::to_string(t.bytes) +
+                                   " bytes, the sections' blocks need " + std::to_string(crcBytes));
         const std::byte* crcs = h + t.offset + kBlockTableHead;
         for (size_t s = 0; s < all.size(); ++s) {
             const FileSection& e = all[s];
             Checks::Section c{blockBytes_, blockCount(e.bytes, blockBytes_), crcs, bits};
             uint32_t combined = 0;
             for (uint64_t b = 0; b < c.blocks; ++b)
-                combined = crc32Combine(combined, bytes::load<uint32_t>(crcs + 4 * b), std::min(blockBytes_, e.bytes - b * blockBytes_));
+                combined = crc32Combine(combined, bytes::load<uint32_t>(crcs + 4 * b),
+                                        std::min(blockBytes_, e.bytes - b * blockBytes_));
             if (combined != e.crc)
-                fail(entryOffset(s) + 24, "section " + std::to_string(s) + "'s checksum disagrees with its block checksums");
+                fail(entryOffset(s) + 24,
+                     "section " + std::to_string(s) + "'s checksum disagrees with its block checksums");
             crcs += 4 * c.blocks;
             bits += c.blocks;
             checks_->sections.push_back(c);
@@ -201,7 +210,8 @@ SectionedFileReader::SectionedFileReader(const std::string& path, const FileForm
     } else {
         for (size_t s = 0; s < all.size(); ++s) {
             const FileSection& e = all[s];
-            if (e.bytes == 0 && e.crc != 0) fail(e.offset, "checksum mismatch in section " + std::to_string(s) + " (corrupt data)");
+            if (e.bytes == 0 && e.crc != 0)
+                fail(e.offset, "checksum mismatch in section " + std::to_string(s) + " (corrupt data)");
             checks_->sections.push_back({e.bytes, e.bytes > 0 ? 1u : 0u, nullptr, bits});
             bits += e.bytes > 0;
         }
@@ -223,24 +233,27 @@ void SectionedFileReader::checkBlock(size_t s, uint64_t b) const {
     const uint32_t want = c.crcs ? bytes::load<uint32_t>(c.crcs + 4 * b) : e.crc;
     if (crc32(map_->bytes().subspan(e.offset + from, bytes)) != want) {
         if (c.crcs)
-            fail(e.offset + from, "checksum mismatch in section " + std::to_string(s) + ", block " + std::to_string(b) + " (" +
-                                      std::to_string(bytes) + " bytes) (corrupt data)");
+            fail(e.offset + from, "checksum mismatch in section " + std::to_string(s) + ", block " + std::to_string(b) +
+                                      " (" + std::to_string(bytes) + " bytes) (corrupt data)");
         fail(e.offset, "checksum mismatch in section " + std::to_string(s) + " (corrupt data)");
     }
-    if (!(word.fetch_or(mask, std::memory_order_acq_rel) & mask)) checks_->bytesChecked.fetch_add(bytes, std::memory_order_relaxed);
+    if (!(word.fetch_or(mask, std::memory_order_acq_rel) & mask))
+        checks_->bytesChecked.fetch_add(bytes, std::memory_order_relaxed);
 }
 
 std::span<const std::byte> SectionedFileReader::read(const FileSection& s, uint64_t offset, uint64_t bytes) const {
     // std::less: a total order even for a pointer into another reader's table.
-    if (sections_.empty() || std::less<const FileSection*>{}(&s, sections_.data()) || std::less<const FileSection*>{}(&sections_.back(), &s))
+    if (sections_.empty() || std::less<const FileSection*>{}(&s, sections_.data()) ||
+        std::less<const FileSection*>{}(&sections_.back(), &s))
         failFile("internal error: a section of another file");
     const auto index = static_cast<size_t>(&s - sections_.data());
     if (offset > s.bytes || bytes > s.bytes - offset)
-        fail(s.offset, "a read of " + std::to_string(bytes) + " bytes at " + std::to_string(offset) + " runs past section " +
-                           std::to_string(index) + " (" + std::to_string(s.bytes) + " bytes)");
+        fail(s.offset, "a read of " + std::to_string(bytes) + " bytes at " + std::to_string(offset) +
+                           " runs past section " + std::to_string(index) + " (" + std::to_string(s.bytes) + " bytes)");
     if (bytes > 0) {
         const uint64_t blockBytes = checks_->sections[index].blockBytes;
-        for (uint64_t b = offset / blockBytes, last = (offset + bytes - 1) / blockBytes; b <= last; ++b) checkBlock(index, b);
+        for (uint64_t b = offset / blockBytes, last = (offset + bytes - 1) / blockBytes; b <= last; ++b)
+            checkBlock(index, b);
     }
     return map_->bytes().subspan(s.offset + offset, bytes);
 }
@@ -256,7 +269,7 @@ struct SectionedFileWriter::Impl {
     AtomicFileWriter out;
     FileFormat format;
     std::vector<FileSection> sections;
-    std::vector<uint64_t> written;  // bytes appended so far, per section
+    std::vector<uint64_t> written;                 // bytes appended so far, per section
     std::vector<std::vector<uint32_t>> blockCrcs;  // per section: CRC of each complete block so far
     std::vector<uint32_t> partialCrc;              // per section: CRC of its block being appended
     bool blockTable = false;  // the format's minor has block checksums: the writer adds them as a last section
@@ -264,8 +277,8 @@ struct SectionedFileWriter::Impl {
     uint64_t end = 0;  // end of the last placed section
 };
 
-SectionedFileWriter::SectionedFileWriter(const std::string& path, const FileFormat& format, std::vector<FileSection> layout,
-                                         size_t laterSections)
+SectionedFileWriter::SectionedFileWriter(const std::string& path, const FileFormat& format,
+                                         std::vector<FileSection> layout, size_t laterSections)
     : impl_(std::make_unique<Impl>(path, format)) {
     impl_->blockTable = format.minor >= format.blockChecksumsSince;
     impl_->tableEntries = layout.size() + laterSections + impl_->blockTable;
@@ -289,7 +302,8 @@ const FileSection& SectionedFileWriter::section(size_t s) const { return impl_->
 void SectionedFileWriter::append(size_t s, std::span<const std::byte> bytes) {
     Impl& w = *impl_;
     FileSection& sec = w.sections.at(s);
-    if (bytes.size() > sec.bytes - w.written[s]) throw Error(path() + ": section " + std::to_string(s) + " overflows its declared size");
+    if (bytes.size() > sec.bytes - w.written[s])
+        throw Error(path() + ": section " + std::to_string(s) + " overflows its declared size");
     w.out.writeAt(sec.offset + w.written[s], bytes);
     // Block CRCs as the data passes (the section's own CRC is combined from them at commit).
     while (!bytes.empty()) {
@@ -324,16 +338,19 @@ FilePlacement SectionedFileWriter::placement() const {
 void SectionedFileWriter::addPieces(std::span<const FilePiece> pieces) {
     Impl& w = *impl_;
     for (const FilePiece& p : pieces) {
-        if (p.section >= w.sections.size()) throw Error(path() + ": a part names section " + std::to_string(p.section) + ", which it does not have");
+        if (p.section >= w.sections.size())
+            throw Error(path() + ": a part names section " + std::to_string(p.section) + ", which it does not have");
         const size_t s = p.section;
         const FileSection& sec = w.sections[s];
         if (p.offset != w.written[s])
-            throw Error(path() + ": a part of section " + std::to_string(s) + " starts at byte " + std::to_string(p.offset) + ", where " +
-                        std::to_string(w.written[s]) + " bytes are written so far");
-        if (p.bytes > sec.bytes - w.written[s]) throw Error(path() + ": section " + std::to_string(s) + " overflows its declared size");
+            throw Error(path() + ": a part of section " + std::to_string(s) + " starts at byte " +
+                        std::to_string(p.offset) + ", where " + std::to_string(w.written[s]) +
+                        " bytes are written so far");
+        if (p.bytes > sec.bytes - w.written[s])
+            throw Error(path() + ": section " + std::to_string(s) + " overflows its declared size");
         if (p.bytes == 0 || p.offset % kFileBlockBytes + p.bytes > kFileBlockBytes || p.crc > UINT32_MAX)
-            throw Error(path() + ": a part's piece of section " + std::to_string(s) + " at byte " + std::to_string(p.offset) +
-                        " is empty, crosses a checksum block or has no CRC-32");
+            throw Error(path() + ": a part's piece of section " + std::to_string(s) + " at byte " +
+                        std::to_string(p.offset) + " is empty, crosses a checksum block or has no CRC-32");
         // As append() does with the bytes themselves.
         w.partialCrc[s] = crc32Combine(w.partialCrc[s], uint32_t(p.crc), p.bytes);
         w.written[s] += p.bytes;
@@ -402,7 +419,8 @@ FilePlacement FilePlacement::decode(std::span<const std::byte> in) {
 SectionedFilePart::SectionedFilePart(FilePlacement placement) : placement_(std::move(placement)) {
     fd_ = ::open(placement_.temporaryPath.c_str(), O_RDWR | O_CLOEXEC);
     if (fd_ < 0)
-        throw Error(placement_.path + ": cannot open the temporary " + placement_.temporaryPath + " that rank 1 writes (" + std::strerror(errno) +
+        throw Error(placement_.path + ": cannot open the temporary " + placement_.temporaryPath +
+                    " that rank 1 writes (" + std::strerror(errno) +
                     "): under mpirun the output's folder must be one that every rank sees");
 }
 
@@ -412,14 +430,17 @@ SectionedFilePart::~SectionedFilePart() {
 
 void SectionedFilePart::writeAt(size_t s, uint64_t at, std::span<const std::byte> bytes) {
     if (fd_ < 0) throw Error(placement_.path + ": a part written after it was finished");
-    if (s >= placement_.sections.size()) throw Error(placement_.path + ": a part of section " + std::to_string(s) + ", which is not placed");
+    if (s >= placement_.sections.size())
+        throw Error(placement_.path + ": a part of section " + std::to_string(s) + ", which is not placed");
     const FileSection& sec = placement_.sections[s];
-    if (at > sec.bytes || bytes.size() > sec.bytes - at) throw Error(placement_.path + ": a part overflows section " + std::to_string(s));
+    if (at > sec.bytes || bytes.size() > sec.bytes - at)
+        throw Error(placement_.path + ": a part overflows section " + std::to_string(s));
     uint64_t offset = sec.offset + at;
     for (std::span<const std::byte> left = bytes; !left.empty();) {
         const ssize_t n = ::pwrite(fd_, left.data(), left.size(), static_cast<off_t>(offset));
         if (n < 0 && errno == EINTR) continue;
-        if (n <= 0) throw Error(placement_.path + ": write failed (" + placement_.temporaryPath + "): " + std::strerror(errno));
+        if (n <= 0)
+            throw Error(placement_.path + ": write failed (" + placement_.temporaryPath + "): " + std::strerror(errno));
         left = left.subspan(size_t(n));
         offset += uint64_t(n);
     }
@@ -441,14 +462,18 @@ void SectionedFilePart::writeAt(size_t s, uint64_t at, std::span<const std::byte
 
 void SectionedFilePart::readAt(size_t s, uint64_t at, std::span<std::byte> out) const {
     if (fd_ < 0) throw Error(placement_.path + ": a part read after it was finished");
-    if (s >= placement_.sections.size()) throw Error(placement_.path + ": a part of section " + std::to_string(s) + ", which is not placed");
+    if (s >= placement_.sections.size())
+        throw Error(placement_.path + ": a part of section " + std::to_string(s) + ", which is not placed");
     const FileSection& sec = placement_.sections[s];
-    if (at > sec.bytes || out.size() > sec.bytes - at) throw Error(placement_.path + ": a read past section " + std::to_string(s));
+    if (at > sec.bytes || out.size() > sec.bytes - at)
+        throw Error(placement_.path + ": a read past section " + std::to_string(s));
     uint64_t offset = sec.offset + at;
     for (std::span<std::byte> left = out; !left.empty();) {
         const ssize_t n = ::pread(fd_, left.data(), left.size(), static_cast<off_t>(offset));
         if (n < 0 && errno == EINTR) continue;
-        if (n <= 0) throw Error(placement_.path + ": cannot read back " + placement_.temporaryPath + ": " + (n == 0 ? "it ends early" : std::strerror(errno)));
+        if (n <= 0)
+            throw Error(placement_.path + ": cannot read back " + placement_.temporaryPath + ": " +
+                        (n == 0 ? "it ends early" : std::strerror(errno)));
         left = left.subspan(size_t(n));
         offset += uint64_t(n);
     }
@@ -461,23 +486,26 @@ std::vector<FilePiece> SectionedFilePart::finish() {
     const bool synced = ::fsync(fd) == 0;
     const int err = errno;
     if (::close(fd) != 0 || !synced)
-        throw Error(placement_.path + ": cannot flush " + placement_.temporaryPath + ": " + std::strerror(synced ? errno : err));
+        throw Error(placement_.path + ": cannot flush " + placement_.temporaryPath + ": " +
+                    std::strerror(synced ? errno : err));
     return std::move(pieces_);
 }
 
 void SectionedFileWriter::commit(std::vector<std::byte> header) {
     Impl& w = *impl_;
     const size_t dataSections = w.tableEntries - w.blockTable;
-    if (w.sections.size() != dataSections) throw Error(path() + ": " + std::to_string(w.sections.size()) + " sections of " + std::to_string(dataSections));
+    if (w.sections.size() != dataSections)
+        throw Error(path() + ": " + std::to_string(w.sections.size()) + " sections of " + std::to_string(dataSections));
     // Each section's CRC is its block CRCs combined (the last block may be short).
     auto finishBlocks = [&](size_t s) {
         if (w.written[s] != w.sections[s].bytes)
-            throw Error(path() + ": section " + std::to_string(s) + " has " + std::to_string(w.written[s]) + " of its " +
-                        std::to_string(w.sections[s].bytes) + " bytes");
+            throw Error(path() + ": section " + std::to_string(s) + " has " + std::to_string(w.written[s]) +
+                        " of its " + std::to_string(w.sections[s].bytes) + " bytes");
         if (w.written[s] % kFileBlockBytes != 0) w.blockCrcs[s].push_back(w.partialCrc[s]);
         uint32_t crc = 0;
         for (size_t b = 0; b < w.blockCrcs[s].size(); ++b)
-            crc = crc32Combine(crc, w.blockCrcs[s][b], std::min<uint64_t>(kFileBlockBytes, w.written[s] - b * kFileBlockBytes));
+            crc = crc32Combine(crc, w.blockCrcs[s][b],
+                               std::min<uint64_t>(kFileBlockBytes, w.written[s] - b * kFileBlockBytes));
         w.sections[s].crc = crc;
     };
     for (size_t s = 0; s < dataSections; ++s) finishBlocks(s);

@@ -29,8 +29,9 @@ void writeGeoTiff(const SampledRaster& r, const std::string& path) {
     const char* options[] = {"COMPRESS=DEFLATE", "PREDICTOR=3", "TILED=YES", "BIGTIFF=IF_SAFER", nullptr};
     CPLErrorReset();
     {
-        std::unique_ptr<GDALDataset> ds(drv->Create(out.temp().c_str(), static_cast<int>(r.width), static_cast<int>(r.height), 1,
-                                                    GDT_Float32, const_cast<char**>(options)));
+        std::unique_ptr<GDALDataset> ds(drv->Create(out.temp().c_str(), static_cast<int>(r.width),
+                                                    static_cast<int>(r.height), 1, GDT_Float32,
+                                                    const_cast<char**>(options)));
         if (!ds) throw Error(path + ": cannot create a GeoTIFF: " + gdalMessage());
         double gt[6] = {r.westWorld, r.pixelSizeM, 0, r.northWorld, 0, -r.pixelSizeM};
         ds->SetGeoTransform(gt);
@@ -49,8 +50,8 @@ void writeGeoTiff(const SampledRaster& r, const std::string& path) {
                 float v = r.values[y * r.width + x];
                 row[x] = std::isnan(v) ? static_cast<float>(kNodata) : v;
             }
-            if (band->RasterIO(GF_Write, 0, static_cast<int>(y), static_cast<int>(r.width), 1, row.data(), static_cast<int>(r.width), 1,
-                               GDT_Float32, 0, 0, nullptr) != CE_None)
+            if (band->RasterIO(GF_Write, 0, static_cast<int>(y), static_cast<int>(r.width), 1, row.data(),
+                               static_cast<int>(r.width), 1, GDT_Float32, 0, 0, nullptr) != CE_None)
                 throw Error(path + ": write failed: " + gdalMessage());
         }
         ds->SetMetadataItem("heightcast_layer", r.layer.c_str());

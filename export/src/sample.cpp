@@ -19,9 +19,10 @@ size_t SampledRaster::definedCount() const {
 namespace {
 
 // The request checked against the cells' bounding box (local frame [m]) of the grid `g` (geometry only).
-SampledRaster planIn(const Grid& g, double bx0, double by0, double bx1, double by1, double resolutionM, std::optional<BoxWorld> box,
-                     size_t maxPixels) {
-    if (!(resolutionM > 0) || !std::isfinite(resolutionM)) throw Error("--resolution must be a positive number of metres");
+SampledRaster planIn(const Grid& g, double bx0, double by0, double bx1, double by1, double resolutionM,
+                     std::optional<BoxWorld> box, size_t maxPixels) {
+    if (!(resolutionM > 0) || !std::isfinite(resolutionM))
+        throw Error("--resolution must be a positive number of metres");
     // The cells' bounds in the world: for a rotated grid the box around the rotated bounds.
     if (g.rotationDeg != 0) {
         double wx0 = HUGE_VAL, wy0 = HUGE_VAL, wx1 = -HUGE_VAL, wy1 = -HUGE_VAL;
@@ -38,8 +39,9 @@ SampledRaster planIn(const Grid& g, double bx0, double by0, double bx1, double b
     const double w = std::ceil((box->xMax - box->xMin) / resolutionM - 1e-9);
     const double h = std::ceil((box->yMax - box->yMin) / resolutionM - 1e-9);
     if (w * h > static_cast<double>(maxPixels))
-        throw Error("the export would be " + std::to_string(static_cast<long long>(w)) + " x " + std::to_string(static_cast<long long>(h)) +
-                    " pixels, more than " + std::to_string(maxPixels) + ": choose a coarser --resolution or a smaller --bbox");
+        throw Error("the export would be " + std::to_string(static_cast<long long>(w)) + " x " +
+                    std::to_string(static_cast<long long>(h)) + " pixels, more than " + std::to_string(maxPixels) +
+                    ": choose a coarser --resolution or a smaller --bbox");
     // Does the box meet the grid at all?
     if (box->xMax <= g.originWorldX + bx0 || box->xMin >= g.originWorldX + bx1 || box->yMax <= g.originWorldY + by0 ||
         box->yMin >= g.originWorldY + by1)
@@ -58,8 +60,8 @@ SampledRaster planIn(const Grid& g, double bx0, double by0, double bx1, double b
 
 // Rows [b, e), columns [c0, c1) of r from `eval` (pixel centres; offsets of the first from the grid's origin along
 // the CRS's axes: x0, y0; each turned into the grid's local frame, and gradients back to the CRS's axes).
-void sampleRows(const influence::SurfaceEvaluator& eval, const influence::Layer& layer, bool gradients, double x0, double y0, size_t b,
-                size_t e, size_t c0, size_t c1, SampledRaster& r) {
+void sampleRows(const influence::SurfaceEvaluator& eval, const influence::Layer& layer, bool gradients, double x0,
+                double y0, size_t b, size_t e, size_t c0, size_t c1, SampledRaster& r) {
     const double res = r.pixelSizeM;
     const Grid& g = eval.grid();
     for (size_t row = b; row < e; ++row) {
@@ -85,7 +87,8 @@ void sampleRows(const influence::SurfaceEvaluator& eval, const influence::Layer&
 }
 
 // Every value NaN (undefined until sampled), the gradients too if asked; the layer's name and units.
-void prepare(SampledRaster& r, const Grid& g, const influence::Layer& layer, const std::string& layerName, bool gradients) {
+void prepare(SampledRaster& r, const Grid& g, const influence::Layer& layer, const std::string& layerName,
+             bool gradients) {
     r.layer = layerName;
     r.units = layer.kind == influence::Layer::Cells ? g.layers[layer.index].units : "m";
     const float nan = std::numeric_limits<float>::quiet_NaN();
@@ -107,12 +110,13 @@ SampledRaster planRaster(const Grid& g, double resolutionM, std::optional<BoxWor
 SampledRaster planRaster(const GridFileInfo& file, double resolutionM, std::optional<BoxWorld> box, size_t maxPixels) {
     const auto& b = file.summary.boundsFinest;
     const double f = file.shape.finestCellM;
-    return planIn(file.shape, double(b[0]) * f, double(b[1]) * f, double(b[2]) * f, double(b[3]) * f, resolutionM, box, maxPixels);
+    return planIn(file.shape, double(b[0]) * f, double(b[1]) * f, double(b[2]) * f, double(b[3]) * f, resolutionM, box,
+                  maxPixels);
 }
 
-SampledRaster sampleSurface(const influence::SurfaceEvaluator& eval, const influence::Layer& layer, const std::string& layerName,
-                            double resolutionM, std::optional<BoxWorld> box, bool gradients, unsigned threads, bool progress,
-                            size_t maxPixels) {
+SampledRaster sampleSurface(const influence::SurfaceEvaluator& eval, const influence::Layer& layer,
+                            const std::string& layerName, double resolutionM, std::optional<BoxWorld> box,
+                            bool gradients, unsigned threads, bool progress, size_t maxPixels) {
     const Grid& g = eval.grid();
     SampledRaster r = planRaster(g, resolutionM, box, maxPixels);
     prepare(r, g, layer, layerName, gradients);
@@ -128,9 +132,10 @@ SampledRaster sampleSurface(const influence::SurfaceEvaluator& eval, const influ
     return r;
 }
 
-SampledRaster sampleSurface(const GridRegionReader& file, const influence::KernelParams& params, const influence::Layer& layer,
-                            const std::string& layerName, double resolutionM, std::optional<BoxWorld> box, bool gradients, unsigned threads,
-                            bool progress, size_t maxPixels) {
+SampledRaster sampleSurface(const GridRegionReader& file, const influence::KernelParams& params,
+                            const influence::Layer& layer, const std::string& layerName, double resolutionM,
+                            std::optional<BoxWorld> box, bool gradients, unsigned threads, bool progress,
+                            size_t maxPixels) {
     const Grid& g = file.shape();
     SampledRaster r = planRaster(file.info(), resolutionM, box, maxPixels);
     prepare(r, g, layer, layerName, gradients);
@@ -138,7 +143,8 @@ SampledRaster sampleSurface(const GridRegionReader& file, const influence::Kerne
     const double y0 = r.northWorld - g.originWorldY - 0.5 * resolutionM;
     // Tiles of kExportTileCells^2 finest cells (at least one pixel): a region of at most ~65 k cells plus its kernel
     // margin, whatever the resolution.
-    const size_t side = size_t(std::clamp(std::floor(double(kExportTileCells) * g.finestCellM / resolutionM), 1.0, 4096.0));
+    const size_t side =
+        size_t(std::clamp(std::floor(double(kExportTileCells) * g.finestCellM / resolutionM), 1.0, 4096.0));
     Progress bar("sampling " + layerName + " out of core", r.height, progress);
     for (size_t band = 0; band < r.height; band += side) {
         const size_t end = std::min(r.height, band + side);
@@ -148,14 +154,16 @@ SampledRaster sampleSurface(const GridRegionReader& file, const influence::Kerne
             Grid::Square area{HUGE_VAL, HUGE_VAL, -HUGE_VAL, -HUGE_VAL};
             for (int corner = 0; corner < 4; ++corner) {
                 double x = 0, y = 0;
-                g.worldToLocalDir(x0 + double(corner & 1 ? c1 - 1 : c0) * resolutionM, y0 - double(corner & 2 ? end - 1 : band) * resolutionM, x, y);
+                g.worldToLocalDir(x0 + double(corner & 1 ? c1 - 1 : c0) * resolutionM,
+                                  y0 - double(corner & 2 ? end - 1 : band) * resolutionM, x, y);
                 area = {std::min(area.x0, x), std::min(area.y0, y), std::max(area.x1, x), std::max(area.y1, y)};
             }
             const influence::SurfaceRegion region = influence::readSurfaceRegion(file, area, params, threads);
             if (region.grid.cellCount() == 0) continue;
             const influence::SurfaceEvaluator eval(region.grid, region.lists);
-            parallelFor(end - band, 4, threads,
-                        [&](size_t b, size_t e, unsigned) { sampleRows(eval, layer, gradients, x0, y0, band + b, band + e, c0, c1, r); });
+            parallelFor(end - band, 4, threads, [&](size_t b, size_t e, unsigned) {
+                sampleRows(eval, layer, gradients, x0, y0, band + b, band + e, c0, c1, r);
+            });
         }
         bar.advance(end - band);
     }

@@ -27,14 +27,16 @@ struct Writer {
         if (!d) throw Error(path + ": cannot create the NetCDF dimension " + name + ": " + CPLGetLastErrorMsg());
         return d;
     }
-    std::shared_ptr<GDALMDArray> array(const std::string& name, const std::vector<std::shared_ptr<GDALDimension>>& dims, GDALDataType type) {
+    std::shared_ptr<GDALMDArray> array(const std::string& name, const std::vector<std::shared_ptr<GDALDimension>>& dims,
+                                       GDALDataType type) {
         auto a = root->CreateMDArray(name, dims, GDALExtendedDataType::Create(type));
         if (!a) throw Error(path + ": cannot create the NetCDF variable " + name + ": " + CPLGetLastErrorMsg());
         return a;
     }
     void text(const std::shared_ptr<GDALMDArray>& a, const std::string& key, const std::string& value) {
         auto at = a->CreateAttribute(key, {}, GDALExtendedDataType::CreateString());
-        if (!at || !at->Write(value.c_str())) throw Error(path + ": cannot write the attribute " + a->GetName() + ":" + key);
+        if (!at || !at->Write(value.c_str()))
+            throw Error(path + ": cannot write the attribute " + a->GetName() + ":" + key);
     }
     void integer(const std::shared_ptr<GDALMDArray>& a, const std::string& key, int value) {
         auto at = a->CreateAttribute(key, {}, GDALExtendedDataType::Create(GDT_Int32));
@@ -95,7 +97,8 @@ UgridSummary writeUgrid(const std::string& gridPath, const std::string& path, co
 
         auto mesh = w.array("mesh2d", {}, GDT_Int32);
         w.text(mesh, "cf_role", "mesh_topology");
-        w.text(mesh, "long_name", "quadtree mesh written by heightcast from " + std::filesystem::path(gridPath).filename().string());
+        w.text(mesh, "long_name",
+               "quadtree mesh written by heightcast from " + std::filesystem::path(gridPath).filename().string());
         w.integer(mesh, "topology_dimension", 2);
         w.text(mesh, "node_coordinates", "mesh2d_node_x mesh2d_node_y");
         w.text(mesh, "face_node_connectivity", "mesh2d_face_nodes");
@@ -108,8 +111,10 @@ UgridSummary writeUgrid(const std::string& gridPath, const std::string& path, co
         }
         auto x = w.array("mesh2d_node_x", {nodes}, GDT_Float64);
         auto y = w.array("mesh2d_node_y", {nodes}, GDT_Float64);
-        w.text(x, "standard_name", "projection_x_coordinate"), w.text(x, "units", "m"), w.text(x, "mesh", "mesh2d"), w.text(x, "location", "node");
-        w.text(y, "standard_name", "projection_y_coordinate"), w.text(y, "units", "m"), w.text(y, "mesh", "mesh2d"), w.text(y, "location", "node");
+        w.text(x, "standard_name", "projection_x_coordinate"), w.text(x, "units", "m"), w.text(x, "mesh", "mesh2d"),
+            w.text(x, "location", "node");
+        w.text(y, "standard_name", "projection_y_coordinate"), w.text(y, "units", "m"), w.text(y, "mesh", "mesh2d"),
+            w.text(y, "location", "node");
         w.write(x, nodeX, GDT_Float64);
         w.write(y, nodeY, GDT_Float64);
         auto fn = w.array("mesh2d_face_nodes", {faceDim, corners}, GDT_Int32);
@@ -118,10 +123,11 @@ UgridSummary writeUgrid(const std::string& gridPath, const std::string& path, co
         fn->SetNoDataValue(double(kNodeFill));
         w.write(fn, faces, GDT_Int32);
 
-        auto faceVar = [&](const std::string& name, std::vector<std::shared_ptr<GDALDimension>> dims, const std::string& units,
-                           const std::string& longName) {
+        auto faceVar = [&](const std::string& name, std::vector<std::shared_ptr<GDALDimension>> dims,
+                           const std::string& units, const std::string& longName) {
             auto a = w.array(name, dims, GDT_Float64);
-            w.text(a, "mesh", "mesh2d"), w.text(a, "location", "face"), w.text(a, "units", units), w.text(a, "long_name", longName);
+            w.text(a, "mesh", "mesh2d"), w.text(a, "location", "face"), w.text(a, "units", units),
+                w.text(a, "long_name", longName);
             if (crs) w.text(a, "grid_mapping", "crs");
             return a;
         };
@@ -140,7 +146,8 @@ UgridSummary writeUgrid(const std::string& gridPath, const std::string& path, co
         if (first < g.layers.size()) {
             // The water level (zs) and every further step layer, per step; fill where dry.
             std::vector<std::shared_ptr<GDALMDArray>> vars{faceVar("zs", {time, faceDim}, "m", "water level")};
-            for (size_t l = first + 1; l < g.layers.size(); ++l) vars.push_back(faceVar(g.layers[l].name, {time, faceDim}, g.layers[l].units, g.layers[l].name));
+            for (size_t l = first + 1; l < g.layers.size(); ++l)
+                vars.push_back(faceVar(g.layers[l].name, {time, faceDim}, g.layers[l].units, g.layers[l].name));
             for (auto& v : vars) v->SetNoDataValue(kFill);
             std::vector<std::vector<double>> values(vars.size(), std::vector<double>(times.size() * n, kFill));
             for (size_t k = 0; k < times.size(); ++k) {
@@ -150,7 +157,8 @@ UgridSummary writeUgrid(const std::string& gridPath, const std::string& path, co
                     if (!(depth[i] > 0)) continue;
                     ++out.wetFaces;
                     values[0][k * n + i] = double(g.values[0][i]) + double(depth[i]);
-                    for (size_t l = first + 1; l < g.layers.size(); ++l) values[l - first][k * n + i] = double(g.values[l][i]);
+                    for (size_t l = first + 1; l < g.layers.size(); ++l)
+                        values[l - first][k * n + i] = double(g.values[l][i]);
                 }
             }
             for (size_t v = 0; v < vars.size(); ++v) w.write(vars[v], values[v], GDT_Float64);

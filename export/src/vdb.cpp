@@ -48,7 +48,8 @@ openvdb::FloatGrid::Ptr levelSet(const SampledRaster& r, const std::string& name
     grid->insertMeta("heightcast.gridOriginX", openvdb::DoubleMetadata(r.originWorldX));
     grid->insertMeta("heightcast.gridOriginY", openvdb::DoubleMetadata(r.originWorldY));
     grid->insertMeta("heightcast.rasterSouthWestX", openvdb::DoubleMetadata(r.westWorld));
-    grid->insertMeta("heightcast.rasterSouthWestY", openvdb::DoubleMetadata(r.northWorld - static_cast<double>(r.height) * v));
+    grid->insertMeta("heightcast.rasterSouthWestY",
+                     openvdb::DoubleMetadata(r.northWorld - static_cast<double>(r.height) * v));
     grid->insertMeta("heightcast.crsWkt", openvdb::StringMetadata(r.crsWkt));
     grid->insertMeta("heightcast.layer", openvdb::StringMetadata(r.layer));
     grid->pruneGrid();

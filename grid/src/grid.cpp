@@ -133,7 +133,9 @@ void Grid::visitNodes(Pred&& nodeMeets, Emit&& emit, std::vector<uint32_t>& out)
     detail::walkQuadtree(
         0, rootLevel, 0, codes.size(), [&](size_t i) { return codes[i]; },
         [&](size_t lo, size_t hi, uint64_t code) {
-            return size_t(std::lower_bound(codes.begin() + std::ptrdiff_t(lo), codes.begin() + std::ptrdiff_t(hi), code) - codes.begin());
+            return size_t(
+                std::lower_bound(codes.begin() + std::ptrdiff_t(lo), codes.begin() + std::ptrdiff_t(hi), code) -
+                codes.begin());
         },
         [&](uint64_t key, int lv) { return nodeMeets(squareOf(key, lv)); },
         [&](size_t lo, size_t hi) {
@@ -234,7 +236,8 @@ std::vector<Hash64::State> GridHasher::save() const {
 
 void GridHasher::resume(const std::vector<Hash64::State>& states) {
     if (states.size() != 1 + layers_.size())
-        throw Error("grid hashes: " + std::to_string(states.size()) + " states for " + std::to_string(layers_.size()) + " layers");
+        throw Error("grid hashes: " + std::to_string(states.size()) + " states for " + std::to_string(layers_.size()) +
+                    " layers");
     structure_ = Hash64::resume(states[0]);
     for (size_t l = 0; l < layers_.size(); ++l) layers_[l] = Hash64::resume(states[1 + l]);
 }
@@ -309,26 +312,34 @@ std::string CellStreamCheck::next(uint64_t code, const float* layerValues) {
 
 std::string Grid::validateShape() const {
     std::ostringstream err;
-    if (!(finestCellM > 0) || !std::isfinite(finestCellM)) err << "finest cell size " << finestCellM << " m is not positive";
-    else if (!std::isfinite(originWorldX) || !std::isfinite(originWorldY)) err << "origin is not finite";
-    else if (!(rotationDeg > -180 && rotationDeg <= 180)) err << "rotation " << rotationDeg << " degrees is outside (-180, 180]";
-    else if (rootLevel < 0 || rootLevel > kMaxRootLevel) err << "root level " << rootLevel << " outside 0.." << kMaxRootLevel;
+    if (!(finestCellM > 0) || !std::isfinite(finestCellM))
+        err << "finest cell size " << finestCellM << " m is not positive";
+    else if (!std::isfinite(originWorldX) || !std::isfinite(originWorldY))
+        err << "origin is not finite";
+    else if (!(rotationDeg > -180 && rotationDeg <= 180))
+        err << "rotation " << rotationDeg << " degrees is outside (-180, 180]";
+    else if (rootLevel < 0 || rootLevel > kMaxRootLevel)
+        err << "root level " << rootLevel << " outside 0.." << kMaxRootLevel;
     else if (minLevel < 0 || minLevel > maxLevel || maxLevel > rootLevel)
         err << "level range " << minLevel << ".." << maxLevel << " invalid for root level " << rootLevel;
-    else if (layers.empty() || layers[0].name != "elevation") err << "layer 0 must be elevation";
-    else if (layers.size() > 255) err << layers.size() << " layers (at most 255)";
+    else if (layers.empty() || layers[0].name != "elevation")
+        err << "layer 0 must be elevation";
+    else if (layers.size() > 255)
+        err << layers.size() << " layers (at most 255)";
     if (!err.str().empty()) return err.str();
     for (size_t l = 0; l < layers.size(); ++l)
         for (size_t m = 0; m < l; ++m)
             if (layers[m].name == layers[l].name) return "layer name " + layers[l].name + " appears twice";
     if (!steps.empty()) {
-        if (firstStepLayer() >= layers.size()) return std::to_string(steps.size()) + " water steps but no water_depth layer";
-        if (step >= steps.size()) return "selected step " + std::to_string(step) + " of " + std::to_string(steps.size());
+        if (firstStepLayer() >= layers.size())
+            return std::to_string(steps.size()) + " water steps but no water_depth layer";
+        if (step >= steps.size())
+            return "selected step " + std::to_string(step) + " of " + std::to_string(steps.size());
         for (size_t k = 0; k < steps.size(); ++k) {
             if (!std::isfinite(steps[k].timeS)) return "step " + std::to_string(k) + " has a time that is not finite";
             if (k > 0 && !(steps[k].timeS > steps[k - 1].timeS))
-                return "step times are not strictly increasing: step " + std::to_string(k) + " at " + std::to_string(steps[k].timeS) +
-                       " s follows " + std::to_string(steps[k - 1].timeS) + " s";
+                return "step times are not strictly increasing: step " + std::to_string(k) + " at " +
+                       std::to_string(steps[k].timeS) + " s follows " + std::to_string(steps[k - 1].timeS) + " s";
         }
     } else if (step != 0) {
         return "selected step " + std::to_string(step) + " of a grid without steps";

@@ -27,7 +27,8 @@ namespace {
 // checks it against the header: counts per level add up to the cell count, only at levels in range, a
 // bounding box inside the domain, a finite min <= max per layer. Whether it matches the cells is left to
 // checkSummary() (a full pass).
-void parseMeta(const SectionedFileReader& file, const FileSection& s, Grid& g, uint64_t cellCount, GridSummary* summary) {
+void parseMeta(const SectionedFileReader& file, const FileSection& s, Grid& g, uint64_t cellCount,
+               GridSummary* summary) {
     auto fail = [&](uint64_t at, const std::string& what) { file.fail(at, what); };
     const std::byte* d = file.data(s).data() - s.offset;  // file bytes, so offsets stay absolute (checked: data())
     std::map<std::string, std::string> kv;
@@ -66,14 +67,18 @@ void parseMeta(const SectionedFileReader& file, const FileSection& s, Grid& g, u
         g.layers[l].name = need("layer." + std::to_string(l) + ".name");
         g.layers[l].units = need("layer." + std::to_string(l) + ".units");
         if (file.minor() >= kStepsSince && g.layers[l].name == "water_depth")
-            fail(s.offset, "META layer " + std::to_string(l) + " is water_depth: from format 1.3 on water is stored as steps");
+            fail(s.offset,
+                 "META layer " + std::to_string(l) + " is water_depth: from format 1.3 on water is stored as steps");
     }
     if (file.minor() >= kStepsSince && kv.count("step_layers")) {
         size_t n = 0;
         number("step_layers", n);
-        if (n < 1 || n > 255 - staticLayers) fail(s.offset, "META step_layers is " + std::to_string(n) + ", not 1.." + std::to_string(255 - staticLayers));
+        if (n < 1 || n > 255 - staticLayers)
+            fail(s.offset,
+                 "META step_layers is " + std::to_string(n) + ", not 1.." + std::to_string(255 - staticLayers));
         for (size_t l = 0; l < n; ++l)
-            g.layers.push_back({need("step_layer." + std::to_string(l) + ".name"), need("step_layer." + std::to_string(l) + ".units")});
+            g.layers.push_back({need("step_layer." + std::to_string(l) + ".name"),
+                                need("step_layer." + std::to_string(l) + ".units")});
         if (g.layers[staticLayers].name != "water_depth")
             fail(s.offset, "META step_layer.0.name is '" + g.layers[staticLayers].name + "', not water_depth");
     }
@@ -101,8 +106,10 @@ void parseMeta(const SectionedFileReader& file, const FileSection& s, Grid& g, u
             if (r.ec != std::errc()) break;
             out.push_back(x);
             c = r.ptr;
-            if (c < e && *c == ' ') ++c;
-            else if (c < e) break;
+            if (c < e && *c == ' ')
+                ++c;
+            else if (c < e)
+                break;
         }
         if (out.size() != count || c != e)
             fail(s.offset, "META value of '" + k + "' is not " + std::to_string(count) + " numbers: '" + v + "'");
@@ -113,14 +120,18 @@ void parseMeta(const SectionedFileReader& file, const FileSection& s, Grid& g, u
     for (size_t l = 0; l < summary->cellsPerLevel.size(); ++l) {
         const uint64_t n = summary->cellsPerLevel[l];
         if (n > cellCount - sum || (n > 0 && static_cast<int>(l) < g.minLevel))
-            fail(s.offset, "META summary.cells_per_level does not fit the header's " + std::to_string(cellCount) + " cells and levels");
+            fail(s.offset, "META summary.cells_per_level does not fit the header's " + std::to_string(cellCount) +
+                               " cells and levels");
         sum += n;
     }
-    if (sum != cellCount) fail(s.offset, "META summary.cells_per_level adds up to " + std::to_string(sum) + " cells, the header declares " + std::to_string(cellCount));
+    if (sum != cellCount)
+        fail(s.offset, "META summary.cells_per_level adds up to " + std::to_string(sum) +
+                           " cells, the header declares " + std::to_string(cellCount));
     const auto b = numbers("summary.bounds_finest", 4);
     const uint64_t side = uint64_t{1} << g.rootLevel;
     if (b[0] > b[2] || b[1] > b[3] || b[2] > side || b[3] > side || (cellCount > 0 && (b[0] == b[2] || b[1] == b[3])))
-        fail(s.offset, "META summary.bounds_finest is not a box in the domain of " + std::to_string(side) + " finest cells");
+        fail(s.offset,
+             "META summary.bounds_finest is not a box in the domain of " + std::to_string(side) + " finest cells");
     std::copy(b.begin(), b.end(), summary->boundsFinest.begin());
     summary->layerMin.clear();
     summary->layerMax.clear();
@@ -146,7 +157,8 @@ GridSummary summarise(const Grid& g) {
 }
 
 bool operator==(const GridSummary& a, const GridSummary& b) {
-    return a.cellsPerLevel == b.cellsPerLevel && a.boundsFinest == b.boundsFinest && a.layerMin == b.layerMin && a.layerMax == b.layerMax;
+    return a.cellsPerLevel == b.cellsPerLevel && a.boundsFinest == b.boundsFinest && a.layerMin == b.layerMin &&
+           a.layerMax == b.layerMax;
 }
 
 // The header's fields into `g` (no cells) and the sections located and sized: no section data read.
@@ -158,7 +170,8 @@ Located parseHeader(const SectionedFileReader& file, Grid& g) {
         if (h[i] != std::byte{0}) fail(i, "reserved header byte is not zero");
     if (file.minor() >= kRotationSince) {
         g.rotationDeg = bytes::load<double>(h + off::rotation);
-        if (!(g.rotationDeg > -180 && g.rotationDeg <= 180)) fail(off::rotation, "rotation is not a number of degrees in (-180, 180]");
+        if (!(g.rotationDeg > -180 && g.rotationDeg <= 180))
+            fail(off::rotation, "rotation is not a number of degrees in (-180, 180]");
     }
     const uint64_t cellCount = bytes::load<uint64_t>(h + off::cellCount);
     g.originWorldX = bytes::load<double>(h + off::originX);
@@ -169,16 +182,20 @@ Located parseHeader(const SectionedFileReader& file, Grid& g) {
     g.maxLevel = static_cast<int>(bytes::load<uint8_t>(h + off::maxLevel));
     const unsigned layerCount = bytes::load<uint8_t>(h + off::layerCount);
     if (!std::isfinite(g.originWorldX) || !std::isfinite(g.originWorldY)) fail(off::originX, "origin is not finite");
-    if (!(g.finestCellM > 0) || !std::isfinite(g.finestCellM)) fail(off::finestCell, "finest cell size is not a positive number");
-    if (g.rootLevel > kMaxRootLevel) fail(off::rootLevel, "root level " + std::to_string(g.rootLevel) + " exceeds " + std::to_string(kMaxRootLevel));
-    if (g.minLevel > g.maxLevel || g.maxLevel > g.rootLevel) fail(off::minLevel, "level range is inconsistent with the root level");
+    if (!(g.finestCellM > 0) || !std::isfinite(g.finestCellM))
+        fail(off::finestCell, "finest cell size is not a positive number");
+    if (g.rootLevel > kMaxRootLevel)
+        fail(off::rootLevel, "root level " + std::to_string(g.rootLevel) + " exceeds " + std::to_string(kMaxRootLevel));
+    if (g.minLevel > g.maxLevel || g.maxLevel > g.rootLevel)
+        fail(off::minLevel, "level range is inconsistent with the root level");
     if (layerCount < 1) fail(off::layerCount, "no layers (elevation is required)");
     // Every cell takes 8 bytes of CELLS and 4 of each LAYER: a count the file cannot hold is refused here,
     // before any size is computed from it (issue 11: 2^62 cells times 8 wrapped to 0 and passed the checks).
     const uint64_t fileBytes = file.mapping()->bytes().size();
     if (cellCount > fileBytes / (8 + 4 * uint64_t{layerCount}))
-        fail(off::cellCount, "header declares " + std::to_string(cellCount) + " cells of " + std::to_string(8 + 4 * layerCount) +
-                                 " bytes each, more than the " + std::to_string(fileBytes) + "-byte file holds");
+        fail(off::cellCount, "header declares " + std::to_string(cellCount) + " cells of " +
+                                 std::to_string(8 + 4 * layerCount) + " bytes each, more than the " +
+                                 std::to_string(fileBytes) + "-byte file holds");
 
     const FileSection* meta = nullptr;
     const FileSection* cells = nullptr;
@@ -200,7 +217,8 @@ Located parseHeader(const SectionedFileReader& file, Grid& g) {
                                   std::to_string(cellCount) + " cells");
             cells = &e;
         } else if (e.kind == kLayer) {
-            if (e.index >= layerCount || layerSec[e.index]) fail(at + 4, "LAYER section index " + std::to_string(e.index) + " is out of range or repeated");
+            if (e.index >= layerCount || layerSec[e.index])
+                fail(at + 4, "LAYER section index " + std::to_string(e.index) + " is out of range or repeated");
             if (e.bytes % 4 != 0 || e.bytes / 4 != cellCount)
                 fail(at + 16, "LAYER section holds " + std::to_string(e.bytes) + " bytes, expected 4 for each of " +
                                   std::to_string(cellCount) + " cells");
@@ -232,7 +250,8 @@ void parseSteps(const SectionedFileReader& file, Located& at, Grid& g) {
     g.steps.clear();
     g.step = 0;
     if (L == 0) {
-        if (at.stepsTable) fail(at.stepsTable->offset, "STEPS section in a grid without step layers (META step_layers)");
+        if (at.stepsTable)
+            fail(at.stepsTable->offset, "STEPS section in a grid without step layers (META step_layers)");
         if (!at.steps.empty()) file.failFile("STEP section in a grid without step layers (META step_layers)");
         return;
     }
@@ -241,10 +260,13 @@ void parseSteps(const SectionedFileReader& file, Located& at, Grid& g) {
     const FileSection& t = *at.stepsTable;
     const uint64_t record = 24 + 8 * uint64_t(L);
     if (t.bytes == 0 || t.bytes % record != 0)
-        fail(t.offset, "STEPS section holds " + std::to_string(t.bytes) + " bytes, not a positive multiple of " + std::to_string(record));
+        fail(t.offset, "STEPS section holds " + std::to_string(t.bytes) + " bytes, not a positive multiple of " +
+                           std::to_string(record));
     const uint64_t count = t.bytes / record;
     if (at.cellCount > UINT32_MAX) fail(t.offset, "a grid with water steps holds at most 2^32 - 1 cells");
-    if (at.steps.size() != count) file.failFile("STEPS lists " + std::to_string(count) + " steps, the file has " + std::to_string(at.steps.size()) + " STEP sections");
+    if (at.steps.size() != count)
+        file.failFile("STEPS lists " + std::to_string(count) + " steps, the file has " +
+                      std::to_string(at.steps.size()) + " STEP sections");
     const std::byte* d = file.data(t).data();
     for (uint64_t k = 0; k < count; ++k) {
         const std::byte* r = d + k * record;
@@ -255,17 +277,24 @@ void parseSteps(const SectionedFileReader& file, Located& at, Grid& g) {
         s.contentHash = bytes::load<uint64_t>(r + 16);
         const std::string name = "step " + std::to_string(k);
         if (!std::isfinite(s.timeS)) fail(where, name + ": time is not finite");
-        if (k > 0 && !(s.timeS > g.steps.back().timeS)) fail(where, name + ": time " + fmtDouble(s.timeS) + " s does not follow " + fmtDouble(g.steps.back().timeS) + " s");
-        if (s.wetCells > at.cellCount) fail(where + 8, name + ": " + std::to_string(s.wetCells) + " wet cells of " + std::to_string(at.cellCount));
+        if (k > 0 && !(s.timeS > g.steps.back().timeS))
+            fail(where, name + ": time " + fmtDouble(s.timeS) + " s does not follow " +
+                            fmtDouble(g.steps.back().timeS) + " s");
+        if (s.wetCells > at.cellCount)
+            fail(where + 8, name + ": " + std::to_string(s.wetCells) + " wet cells of " + std::to_string(at.cellCount));
         if (!at.steps[k]) file.failFile("no STEP section for " + name);
         const FileSection& sec = *at.steps[k];
         if (sec.bytes % (4 * (1 + L)) != 0 || sec.bytes / (4 * (1 + L)) != s.wetCells)
-            fail(sec.offset, "STEP section of " + name + " holds " + std::to_string(sec.bytes) + " bytes, expected " + std::to_string(4 * (1 + L)) +
-                                 " for each of " + std::to_string(s.wetCells) + " wet cells");
+            fail(sec.offset, "STEP section of " + name + " holds " + std::to_string(sec.bytes) + " bytes, expected " +
+                                 std::to_string(4 * (1 + L)) + " for each of " + std::to_string(s.wetCells) +
+                                 " wet cells");
         for (size_t l = 0; l < L; ++l) {
             const float lo = bytes::load<float>(r + 24 + 8 * l), hi = bytes::load<float>(r + 28 + 8 * l);
-            const bool ok = s.wetCells == 0 ? (lo == 0 && hi == 0) : (std::isfinite(lo) && std::isfinite(hi) && lo <= hi && (l > 0 || lo > 0));
-            if (!ok) fail(where + 24 + 8 * l, name + ": range of " + g.layers[firstStep + l].name + " is not finite min <= max (min > 0 for water_depth)");
+            const bool ok = s.wetCells == 0 ? (lo == 0 && hi == 0)
+                                            : (std::isfinite(lo) && std::isfinite(hi) && lo <= hi && (l > 0 || lo > 0));
+            if (!ok)
+                fail(where + 24 + 8 * l, name + ": range of " + g.layers[firstStep + l].name +
+                                             " is not finite min <= max (min > 0 for water_depth)");
             if (s.wetCells > 0) {
                 s.layerMin.push_back(lo);
                 s.layerMax.push_back(hi);
@@ -286,26 +315,30 @@ WaterStepData loadStep(const SectionedFileReader& file, const Located& at, const
     out.timeS = info.timeS;
     out.wet.resize(w);
     out.values.assign(L, std::vector<float>(w));
-    if (w > 0) {  // a dry step (none wet: a simulation's first time) has empty vectors, whose data() memcpy must not see
+    if (w >
+        0) {  // a dry step (none wet: a simulation's first time) has empty vectors, whose data() memcpy must not see
         std::memcpy(out.wet.data(), d, 4 * w);
         for (size_t l = 0; l < L; ++l) std::memcpy(out.values[l].data(), d + 4 * w * (1 + l), 4 * w);
     }
     const std::string name = "step " + std::to_string(k);
     for (uint64_t j = 0; j < w; ++j)
         if (out.wet[j] >= at.cellCount || (j > 0 && out.wet[j] <= out.wet[j - 1]))
-            file.fail(sec.offset + 4 * j, name + ": wet cell index " + std::to_string(out.wet[j]) + " is not ascending below the cell count");
+            file.fail(sec.offset + 4 * j, name + ": wet cell index " + std::to_string(out.wet[j]) +
+                                              " is not ascending below the cell count");
     for (size_t l = 0; l < L; ++l) {
         float lo = HUGE_VALF, hi = -HUGE_VALF;
         for (uint64_t j = 0; j < w; ++j) {
             const float v = out.values[l][j];
             if (!std::isfinite(v) || (l == 0 && !(v > 0)))
-                file.fail(sec.offset + 4 * w * (1 + l) + 4 * j, name + ": " + g.layers[g.firstStepLayer() + l].name + " value is not finite" +
-                                                                  (l == 0 ? " and > 0" : ""));
+                file.fail(sec.offset + 4 * w * (1 + l) + 4 * j, name + ": " + g.layers[g.firstStepLayer() + l].name +
+                                                                    " value is not finite" +
+                                                                    (l == 0 ? " and > 0" : ""));
             lo = std::min(lo, v);
             hi = std::max(hi, v);
         }
         if (w > 0 && (lo != info.layerMin[l] || hi != info.layerMax[l]))
-            file.fail(sec.offset, name + ": the range of " + g.layers[g.firstStepLayer() + l].name + " does not match STEPS");
+            file.fail(sec.offset,
+                      name + ": the range of " + g.layers[g.firstStepLayer() + l].name + " does not match STEPS");
     }
     return out;
 }
@@ -345,7 +378,8 @@ uint64_t staticContentHash(const Grid& g) { return combineContentHash(g.structur
 uint64_t stepContentHash(const Grid& g, const WaterStepData& data, const StaticDigests* known = nullptr) {
     auto parts = known ? known->layers : staticDigests(g);
     for (size_t l = 0; l < data.values.size(); ++l)
-        parts.emplace_back(g.layers[g.firstStepLayer() + l].name, sparseLayerDigest(g.cellCount(), data.wet, data.values[l]));
+        parts.emplace_back(g.layers[g.firstStepLayer() + l].name,
+                           sparseLayerDigest(g.cellCount(), data.wet, data.values[l]));
     return combineContentHash(known ? known->structureHash : g.structureHash(), parts);
 }
 
@@ -353,8 +387,9 @@ uint64_t stepContentHash(const Grid& g, const WaterStepData& data, const StaticD
 void checkStepIndex(const SectionedFileReader& file, const Grid& g, size_t step) {
     const size_t n = g.steps.empty() ? 1 : g.steps.size();
     if (step >= n)
-        file.failFile("has no step " + std::to_string(step) + ": it holds " + std::to_string(g.stepCount()) + " water step" +
-                      (g.stepCount() == 1 ? "" : "s") + (g.stepCount() ? " (0.." + std::to_string(g.stepCount() - 1) + ")" : ""));
+        file.failFile("has no step " + std::to_string(step) + ": it holds " + std::to_string(g.stepCount()) +
+                      " water step" + (g.stepCount() == 1 ? "" : "s") +
+                      (g.stepCount() ? " (0.." + std::to_string(g.stepCount() - 1) + ")" : ""));
 }
 
 Grid parseGrid(const SectionedFileReader& file, size_t step, Located* located = nullptr) {
@@ -380,12 +415,15 @@ Grid parseGrid(const SectionedFileReader& file, size_t step, Located* located = 
     if (!g.steps.empty()) selectStep(g, loadStep(file, at, g, step), step);
     std::string problem = g.validate();
     if (!problem.empty()) fail(cells->offset, "invalid grid: " + problem);
-    if (g.structureHash() != bytes::load<uint64_t>(h + off::structureHash)) fail(off::structureHash, "structure hash does not match the cells");
+    if (g.structureHash() != bytes::load<uint64_t>(h + off::structureHash))
+        fail(off::structureHash, "structure hash does not match the cells");
     if (g.steps.empty()) {
-        if (g.contentHash() != bytes::load<uint64_t>(h + off::contentHash)) fail(off::contentHash, "content hash does not match the cells and values");
+        if (g.contentHash() != bytes::load<uint64_t>(h + off::contentHash))
+            fail(off::contentHash, "content hash does not match the cells and values");
     } else {
         if (g.contentHash() != g.steps[step].contentHash)
-            fail(at.stepsTable->offset, "step " + std::to_string(step) + ": content hash does not match the cells and values");
+            fail(at.stepsTable->offset,
+                 "step " + std::to_string(step) + ": content hash does not match the cells and values");
         if (scenarioHash(staticContentHash(g), g.steps) != bytes::load<uint64_t>(h + off::contentHash))
             fail(off::contentHash, "content hash does not match the cells, values and steps");
     }
@@ -457,7 +495,8 @@ void readGridStep(const std::string& path, Grid& grid, size_t step, const Static
     parseSteps(reader, at, g);
     checkStepIndex(reader, g, step);
     if (at.cellCount != grid.cellCount() ||
-        bytes::load<uint64_t>(reader.header() + off::structureHash) != (known ? known->structureHash : grid.structureHash()) ||
+        bytes::load<uint64_t>(reader.header() + off::structureHash) !=
+            (known ? known->structureHash : grid.structureHash()) ||
         g.layers.size() != grid.layers.size())
         reader.failFile("is not the grid in memory (its cells or layers differ): cannot switch its step");
     if (g.steps.empty()) {  // one step only: the grid already holds it
@@ -466,7 +505,8 @@ void readGridStep(const std::string& path, Grid& grid, size_t step, const Static
     }
     const WaterStepData data = loadStep(reader, at, g, step);
     if (stepContentHash(grid, data, known) != g.steps[step].contentHash)  // checked before `grid` changes
-        reader.fail(at.steps[step]->offset, "step " + std::to_string(step) + ": content hash does not match the cells and values");
+        reader.fail(at.steps[step]->offset,
+                    "step " + std::to_string(step) + ": content hash does not match the cells and values");
     grid.steps = g.steps;
     selectStep(grid, data, step);
 }
@@ -519,7 +559,8 @@ GridFileInfo verifyGridFile(const std::string& path, size_t step) {
     for (size_t k = 0; k < g.steps.size(); ++k) {
         if (k == step) continue;
         if (stepContentHash(g, loadStep(reader, at, g, k)) != g.steps[k].contentHash)
-            reader.fail(at.steps[k]->offset, "step " + std::to_string(k) + ": content hash does not match the cells and values");
+            reader.fail(at.steps[k]->offset,
+                        "step " + std::to_string(k) + ": content hash does not match the cells and values");
     }
     GridFileInfo info;
     info.fileMinor = reader.minor();

@@ -22,15 +22,17 @@ namespace hc::detail {
 
 enum SectionKind : uint32_t { kMeta = 1, kCells = 2, kLayer = 3, kSteps = 4, kStep = 5 };
 
-const FileFormat kFormat{{'\x89', 'H', 'C', 'G', 'R', 'I', 'D', '\n'}, kGridFileMajor, kGridFileMinor,
-                         "heightcast grid (.hcg)", {kMeta, kCells, kLayer, kSteps, kStep}, /*blockChecksumsSince=*/2};
+const FileFormat kFormat{
+    {'\x89', 'H', 'C', 'G', 'R', 'I', 'D', '\n'}, kGridFileMajor,           kGridFileMinor, "heightcast grid (.hcg)",
+    {kMeta, kCells, kLayer, kSteps, kStep},       /*blockChecksumsSince=*/2};
 constexpr uint16_t kSummarySince = 2;  // the minor from which META holds the summary (GridSummary)
 constexpr uint16_t kStepsSince = 3;    // the minor from which water is stored as steps (STEP, STEPS)
 
 // The grid's own header fields (grid_file.h); pinned by the golden-bytes test.
 namespace off {
 constexpr size_t cellCount = 24, originX = 32, originY = 40, finestCell = 48, rootLevel = 56, minLevel = 57,
-                 maxLevel = 58, layerCount = 59, contentHash = 64, structureHash = 72, rotation = 80, reserved = 80, reservedEnd = 120;
+                 maxLevel = 58, layerCount = 59, contentHash = 64, structureHash = 72, rotation = 80, reserved = 80,
+                 reservedEnd = 120;
 }
 constexpr uint16_t kRotationSince = 3;  // from 1.3 on bytes 80..87 hold the rotation (f64 degrees); before, zero
 static_assert(kGridHeaderBytes == kFileHeaderBytes);
@@ -50,7 +52,9 @@ inline std::string fmtFloat(float v) {
 // The summary of cells in memory (what the writer computes as they stream past).
 class SummaryBuilder {
 public:
-    SummaryBuilder(int maxLevel, size_t layers) : layers_(layers) { s_.cellsPerLevel.assign(static_cast<size_t>(maxLevel) + 1, 0); }
+    SummaryBuilder(int maxLevel, size_t layers) : layers_(layers) {
+        s_.cellsPerLevel.assign(static_cast<size_t>(maxLevel) + 1, 0);
+    }
     // Cells already checked (CellStreamCheck or Grid::validate): levels in range, values finite.
     void add(std::span<const uint64_t> codes, const std::vector<std::span<const float>>& values) {
         for (uint64_t c : codes) {
@@ -58,8 +62,8 @@ public:
             ++s_.cellsPerLevel[static_cast<size_t>(level)];
             const uint64_t key = codeKey(c), x = mortonX(key), y = mortonY(key), span = uint64_t{1} << level;
             if (first_) s_.boundsFinest = {x, y, x + span, y + span};
-            s_.boundsFinest = {std::min(s_.boundsFinest[0], x), std::min(s_.boundsFinest[1], y), std::max(s_.boundsFinest[2], x + span),
-                               std::max(s_.boundsFinest[3], y + span)};
+            s_.boundsFinest = {std::min(s_.boundsFinest[0], x), std::min(s_.boundsFinest[1], y),
+                               std::max(s_.boundsFinest[2], x + span), std::max(s_.boundsFinest[3], y + span)};
             first_ = false;
         }
         if (codes.empty()) return;
@@ -128,7 +132,7 @@ struct Located {
     uint64_t cellCount = 0;
     const FileSection* meta = nullptr;
     const FileSection* cells = nullptr;
-    std::vector<const FileSection*> layers;  // the static LAYER sections
+    std::vector<const FileSection*> layers;   // the static LAYER sections
     const FileSection* stepsTable = nullptr;  // STEPS (1.3 files with water)
     std::vector<const FileSection*> steps;    // STEP sections by step index (sized by parseSteps)
 };

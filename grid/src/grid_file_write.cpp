@@ -61,7 +61,8 @@ std::vector<std::byte> encodeMeta(const Grid& g, const GridSummary& summary) {
     const IngestStats& s = g.stats;
     kv.emplace_back("ingest.source", s.sourcePath);
     kv.emplace_back("ingest.source_crs", s.sourceCrsName);
-    if (!s.sourceKind.empty()) kv.emplace_back("ingest.source_kind", s.sourceKind);  // absent for rasters (older files too)
+    if (!s.sourceKind.empty())
+        kv.emplace_back("ingest.source_kind", s.sourceKind);  // absent for rasters (older files too)
     if (!s.sourceFormat.empty()) kv.emplace_back("ingest.source_format", s.sourceFormat);  // flood model results only
     if (s.latticeResidualM >= 0) kv.emplace_back("ingest.lattice_residual_m", fmtDouble(s.latticeResidualM));
     kv.emplace_back("ingest.source_width", std::to_string(s.sourceWidth));
@@ -100,7 +101,8 @@ std::vector<uint64_t> words(std::span<const std::byte> bytes, const std::string&
     return w;
 }
 
-CellStreamCheck::State resumeStream(std::span<const std::byte> bytes, GridHasher& hasher, size_t layers, const std::string& what) {
+CellStreamCheck::State resumeStream(std::span<const std::byte> bytes, GridHasher& hasher, size_t layers,
+                                    const std::string& what) {
     const std::vector<uint64_t> w = words(bytes, what + ": the cells' running state from the ranks before");
     if (w.size() != 4 + 4 * (1 + layers) || w[0] != kStreamStateTag || w[1] != layers)
         throw Error(what + ": the cells' running state from the ranks before is not one of this grid");
@@ -137,20 +139,28 @@ WaterStepData sparseStep(const Grid& g) {
         }
         // A step stores its wet cells only: a value on a dry cell would be lost, so it is refused.
         if (depth[i] < 0)
-            throw Error("cell " + std::to_string(i) + " has water_depth " + fmtFloat(depth[i]) + ": depths are >= 0 (0 = dry)");
+            throw Error("cell " + std::to_string(i) + " has water_depth " + fmtFloat(depth[i]) +
+                        ": depths are >= 0 (0 = dry)");
         for (size_t l = first + 1; l < g.layers.size(); ++l)
             if (g.values[l][i] != 0)
-                throw Error("cell " + std::to_string(i) + " is dry (water_depth " + fmtFloat(depth[i]) + ") but its step layer " + g.layers[l].name +
-                            " is " + fmtFloat(g.values[l][i]) + ": step layers (water_depth and the layers after it) are stored on wet cells "
+                throw Error("cell " + std::to_string(i) + " is dry (water_depth " + fmtFloat(depth[i]) +
+                            ") but its step layer " + g.layers[l].name + " is " + fmtFloat(g.values[l][i]) +
+                            ": step layers (water_depth and the layers after it) are stored on wet cells "
                             "only; put a layer that does not change with the water before water_depth");
     }
     return out;
 }
 
 struct GridFileWriter::Impl {
-    Impl(const std::string& path, const Grid& gridShape, uint64_t cells, std::vector<FileSection> layout, size_t stepsAnnounced)
-        : out(path, kFormat, std::move(layout), 1 + (stepsAnnounced ? stepsAnnounced + 1 : 0)), shape(gridShape), staticShape(staticShapeOf(gridShape)),
-          cellCount(cells), stepCount(stepsAnnounced), check(staticShape), hasher(staticShape, cells),
+    Impl(const std::string& path, const Grid& gridShape, uint64_t cells, std::vector<FileSection> layout,
+         size_t stepsAnnounced)
+        : out(path, kFormat, std::move(layout), 1 + (stepsAnnounced ? stepsAnnounced + 1 : 0)),
+          shape(gridShape),
+          staticShape(staticShapeOf(gridShape)),
+          cellCount(cells),
+          stepCount(stepsAnnounced),
+          check(staticShape),
+          hasher(staticShape, cells),
           summary(staticShape.maxLevel, staticShape.layers.size()) {}
     SectionedFileWriter out;
     Grid shape;        // geometry, CRS and layers (step layers too); no cells
@@ -176,7 +186,8 @@ GridFileWriter::GridFileWriter(const std::string& path, const Grid& shape, uint6
     bare.step = 0;
     // Layout: CELLS, static LAYER..., then the STEP sections, STEPS and META as they become known.
     std::vector<FileSection> layout{{kCells, 0, 0, cellCount * 8, 0}};
-    for (size_t l = 0; l < shape.firstStepLayer(); ++l) layout.push_back({kLayer, static_cast<uint32_t>(l), 0, cellCount * 4, 0});
+    for (size_t l = 0; l < shape.firstStepLayer(); ++l)
+        layout.push_back({kLayer, static_cast<uint32_t>(l), 0, cellCount * 4, 0});
     impl_ = std::make_unique<Impl>(path, bare, cellCount, std::move(layout), stepCount);
 }
 
@@ -185,16 +196,19 @@ GridFileWriter::~GridFileWriter() = default;
 namespace {
 
 // The shape of a batch of cells: a value array per static layer, each as long as the codes.
-void checkBatchShape(const std::string& path, std::span<const uint64_t> codes, const std::vector<std::span<const float>>& layerValues, size_t layers) {
+void checkBatchShape(const std::string& path, std::span<const uint64_t> codes,
+                     const std::vector<std::span<const float>>& layerValues, size_t layers) {
     if (layerValues.size() != layers)
-        throw Error(path + ": " + std::to_string(layerValues.size()) + " value arrays for " + std::to_string(layers) + " static layers");
+        throw Error(path + ": " + std::to_string(layerValues.size()) + " value arrays for " + std::to_string(layers) +
+                    " static layers");
     for (const auto& v : layerValues)
         if (v.size() != codes.size()) throw Error(path + ": layer values and cells differ in number");
 }
 
 // Every cell's rules (CellStreamCheck), then the cells into the summary.
-void checkCells(const std::string& path, std::span<const uint64_t> codes, const std::vector<std::span<const float>>& layerValues,
-                CellStreamCheck& check, SummaryBuilder& summary) {
+void checkCells(const std::string& path, std::span<const uint64_t> codes,
+                const std::vector<std::span<const float>>& layerValues, CellStreamCheck& check,
+                SummaryBuilder& summary) {
     const size_t layers = layerValues.size();
     float v[256];
     for (size_t i = 0; i < codes.size(); ++i) {
@@ -205,7 +219,8 @@ void checkCells(const std::string& path, std::span<const uint64_t> codes, const 
     summary.add(codes, layerValues);
 }
 
-void hashCells(std::span<const uint64_t> codes, const std::vector<std::span<const float>>& layerValues, GridHasher& hasher) {
+void hashCells(std::span<const uint64_t> codes, const std::vector<std::span<const float>>& layerValues,
+               GridHasher& hasher) {
     hasher.addCodes(codes);
     for (size_t l = 0; l < layerValues.size(); ++l) hasher.addValues(l, layerValues[l]);
 }
@@ -217,7 +232,8 @@ void GridFileWriter::append(std::span<const uint64_t> codes, const std::vector<s
     const size_t layers = w.staticShape.layers.size();
     const std::string& path = w.out.path();
     checkBatchShape(path, codes, layerValues, layers);
-    if (codes.size() > w.cellCount - w.written) throw Error(path + ": more cells than the " + std::to_string(w.cellCount) + " announced");
+    if (codes.size() > w.cellCount - w.written)
+        throw Error(path + ": more cells than the " + std::to_string(w.cellCount) + " announced");
     checkCells(path, codes, layerValues, w.check, w.summary);
     hashCells(codes, layerValues, w.hasher);
     w.out.append(0, std::as_bytes(codes));
@@ -242,12 +258,13 @@ std::vector<std::byte> GridFileWriter::streamState() const {
 }
 
 // A part for addPart: five 64-bit words (first cell, cells, the bytes of its state, of its summary, the pieces' count),
-// then the state after its cells (saveStream), its cells' summary (SummaryBuilder::save), the pieces (FilePiece, 32 bytes
-// each).
+// then the state after its cells (saveStream), its cells' summary (SummaryBuilder::save), the pieces (FilePiece, 32
+// bytes each).
 void GridFileWriter::addPart(std::span<const std::byte> part) {
     Impl& w = *impl_;
     const std::string& path = w.out.path();
-    if (part.size() < 40) throw Error(path + ": a rank's part of " + std::to_string(part.size()) + " bytes is cut short");
+    if (part.size() < 40)
+        throw Error(path + ": a rank's part of " + std::to_string(part.size()) + " bytes is cut short");
     uint64_t head[5];
     std::memcpy(head, part.data(), sizeof head);
     const auto [first, cells, stateBytes, summaryBytes, pieces] = head;
@@ -256,12 +273,14 @@ void GridFileWriter::addPart(std::span<const std::byte> part) {
         40 + stateBytes + summaryBytes + pieces * sizeof(FilePiece) != part.size())
         throw Error(path + ": a rank's part is malformed");
     if (first != w.written || cells > w.cellCount - w.written)
-        throw Error(path + ": a rank's part holds cells " + std::to_string(first) + ".." + std::to_string(first + cells) + " where cell " +
-                    std::to_string(w.written) + " comes next of " + std::to_string(w.cellCount));
+        throw Error(path + ": a rank's part holds cells " + std::to_string(first) + ".." +
+                    std::to_string(first + cells) + " where cell " + std::to_string(w.written) + " comes next of " +
+                    std::to_string(w.cellCount));
     std::vector<FilePiece> table(pieces);
     if (pieces) std::memcpy(table.data(), part.data() + 40 + stateBytes + summaryBytes, pieces * sizeof(FilePiece));
     w.out.addPieces(table);
-    const CellStreamCheck::State after = resumeStream(part.subspan(40, stateBytes), w.hasher, w.staticShape.layers.size(), path);
+    const CellStreamCheck::State after =
+        resumeStream(part.subspan(40, stateBytes), w.hasher, w.staticShape.layers.size(), path);
     w.check.resume(after);
     SummaryBuilder theirs(w.staticShape.maxLevel, w.staticShape.layers.size());
     const std::vector<uint64_t> sw = words(part.subspan(40 + stateBytes, summaryBytes), path + ": a rank's summary");
@@ -269,13 +288,19 @@ void GridFileWriter::addPart(std::span<const std::byte> part) {
     w.summary.merge(theirs);
     w.written += cells;
     if (after.count != w.written)
-        throw Error(path + ": a rank's part ends at cell " + std::to_string(after.count) + ", not at the " + std::to_string(w.written) + " written");
+        throw Error(path + ": a rank's part ends at cell " + std::to_string(after.count) + ", not at the " +
+                    std::to_string(w.written) + " written");
 }
 
 struct GridFilePart::Impl {
     Impl(FilePlacement placement, const Grid& gridShape, uint64_t cells, uint64_t firstCell)
-        : out(std::move(placement)), staticShape(staticShapeOf(gridShape)), cellCount(cells), first(firstCell), check(staticShape),
-          hasher(staticShape, cells), summary(staticShape.maxLevel, staticShape.layers.size()) {
+        : out(std::move(placement)),
+          staticShape(staticShapeOf(gridShape)),
+          cellCount(cells),
+          first(firstCell),
+          check(staticShape),
+          hasher(staticShape, cells),
+          summary(staticShape.maxLevel, staticShape.layers.size()) {
         check.resume({0, first});  // cells are numbered as in the file; the first one's order is checked by resume()
     }
     SectionedFilePart out;
@@ -284,16 +309,16 @@ struct GridFilePart::Impl {
     CellStreamCheck check;  // this run's cells among themselves, as they are appended
     GridHasher hasher;
     SummaryBuilder summary;
-    uint64_t written = 0, followed = 0;  // cells of this run written, and hashed
-    uint64_t firstKey = 0;               // of the run's first cell
+    uint64_t written = 0, followed = 0;            // cells of this run written, and hashed
+    uint64_t firstKey = 0;                         // of the run's first cell
     std::optional<CellStreamCheck::State> before;  // where the runs before leave the order check (resume)
     std::string path;
 
     // The run's first cell after the cells before it (CellStreamCheck's rule across the seam).
     void checkSeam() const {
         if (before && written > 0 && first > 0 && firstKey < before->nextFree)
-            throw Error(path + ": refusing to write an invalid grid: cell " + std::to_string(first) + " overlaps or precedes cell " +
-                        std::to_string(first - 1));
+            throw Error(path + ": refusing to write an invalid grid: cell " + std::to_string(first) +
+                        " overlaps or precedes cell " + std::to_string(first - 1));
     }
 };
 
@@ -315,9 +340,11 @@ void GridFilePart::append(std::span<const uint64_t> codes, const std::vector<std
     const size_t layers = w.staticShape.layers.size();
     checkBatchShape(w.path, codes, layerValues, layers);
     const uint64_t at = w.first + w.written;
-    if (codes.size() > w.cellCount - at) throw Error(w.path + ": more cells than the " + std::to_string(w.cellCount) + " announced");
+    if (codes.size() > w.cellCount - at)
+        throw Error(w.path + ": more cells than the " + std::to_string(w.cellCount) + " announced");
     if (codes.empty()) return;
-    // Checked and summarised here, each rank its own run at once; only the seam and the hashes wait for the ranks before.
+    // Checked and summarised here, each rank its own run at once; only the seam and the hashes wait for the ranks
+    // before.
     checkCells(w.path, codes, layerValues, w.check, w.summary);
     if (w.written == 0) w.firstKey = codeKey(codes[0]);
     w.out.writeAt(0, 8 * at, std::as_bytes(codes));
@@ -330,8 +357,8 @@ void GridFilePart::resume(std::span<const std::byte> state) {
     Impl& w = *impl_;
     const CellStreamCheck::State before = resumeStream(state, w.hasher, w.staticShape.layers.size(), w.path);
     if (before.count != w.first)
-        throw Error(w.path + ": the ranks before this one wrote " + std::to_string(before.count) + " cells, but its own begin at cell " +
-                    std::to_string(w.first));
+        throw Error(w.path + ": the ranks before this one wrote " + std::to_string(before.count) +
+                    " cells, but its own begin at cell " + std::to_string(w.first));
     w.before = before;
     w.checkSeam();
 }
@@ -359,9 +386,11 @@ void GridFilePart::follow() {
 std::vector<std::byte> GridFilePart::state() const {
     const Impl& w = *impl_;
     if (!w.before || w.followed != w.written)
-        throw Error(w.path + ": a rank's state asked for with " + std::to_string(w.followed) + " of its " + std::to_string(w.written) + " cells hashed");
+        throw Error(w.path + ": a rank's state asked for with " + std::to_string(w.followed) + " of its " +
+                    std::to_string(w.written) + " cells hashed");
     // The order check goes on from this run's last cell, or from the runs before where this one is empty.
-    const CellStreamCheck::State after{w.written > 0 ? w.check.save().nextFree : w.before->nextFree, w.first + w.written};
+    const CellStreamCheck::State after{w.written > 0 ? w.check.save().nextFree : w.before->nextFree,
+                                       w.first + w.written};
     return saveStream(after, w.hasher, w.staticShape.layers.size());
 }
 
@@ -377,7 +406,8 @@ std::vector<std::byte> GridFilePart::finish() {
     std::memcpy(out.data(), head, sizeof head);
     std::memcpy(out.data() + 40, s.data(), s.size());
     std::memcpy(out.data() + 40 + s.size(), summary.data(), summaryBytes);
-    if (!pieces.empty()) std::memcpy(out.data() + 40 + s.size() + summaryBytes, pieces.data(), pieces.size() * sizeof(FilePiece));
+    if (!pieces.empty())
+        std::memcpy(out.data() + 40 + s.size() + summaryBytes, pieces.data(), pieces.size() * sizeof(FilePiece));
     return out;
 }
 
@@ -389,12 +419,15 @@ void GridFileWriter::appendStep(const WaterStepData& step) {
     if (w.written != w.cellCount) throw Error(name + " comes before all " + std::to_string(w.cellCount) + " cells");
     if (k >= w.stepCount) throw Error(name + ": more steps than the " + std::to_string(w.stepCount) + " announced");
     const size_t first = w.shape.firstStepLayer(), L = w.shape.layers.size() - first;
-    if (step.values.size() != L) throw Error(name + ": " + std::to_string(step.values.size()) + " value arrays for " + std::to_string(L) + " step layers");
+    if (step.values.size() != L)
+        throw Error(name + ": " + std::to_string(step.values.size()) + " value arrays for " + std::to_string(L) +
+                    " step layers");
     for (const auto& v : step.values)
         if (v.size() != step.wet.size()) throw Error(name + ": step values and wet cells differ in number");
     if (!std::isfinite(step.timeS)) throw Error(name + ": time is not finite");
     if (k > 0 && !(step.timeS > w.steps.back().timeS))
-        throw Error(name + ": times must increase strictly, " + fmtDouble(step.timeS) + " s follows " + fmtDouble(w.steps.back().timeS) + " s");
+        throw Error(name + ": times must increase strictly, " + fmtDouble(step.timeS) + " s follows " +
+                    fmtDouble(w.steps.back().timeS) + " s");
     const size_t n = step.wet.size();
     for (size_t j = 0; j < n; ++j)
         if (step.wet[j] >= w.cellCount || (j > 0 && step.wet[j] <= step.wet[j - 1]))
@@ -408,7 +441,8 @@ void GridFileWriter::appendStep(const WaterStepData& step) {
         float lo = HUGE_VALF, hi = -HUGE_VALF;
         for (float v : step.values[l]) {
             if (!std::isfinite(v) || (l == 0 && !(v > 0)))
-                throw Error(name + ": " + w.shape.layers[first + l].name + " values must be finite" + (l == 0 ? " and > 0 (only wet cells are stored)" : ""));
+                throw Error(name + ": " + w.shape.layers[first + l].name + " values must be finite" +
+                            (l == 0 ? " and > 0 (only wet cells are stored)" : ""));
             lo = std::min(lo, v);
             hi = std::max(hi, v);
         }
@@ -428,9 +462,11 @@ void GridFileWriter::appendStep(const WaterStepData& step) {
 void GridFileWriter::commit(const IngestStats& stats) {
     Impl& w = *impl_;
     if (w.written != w.cellCount)
-        throw Error(w.out.path() + ": " + std::to_string(w.written) + " cells written of " + std::to_string(w.cellCount) + " announced");
+        throw Error(w.out.path() + ": " + std::to_string(w.written) + " cells written of " +
+                    std::to_string(w.cellCount) + " announced");
     if (w.steps.size() != w.stepCount)
-        throw Error(w.out.path() + ": " + std::to_string(w.steps.size()) + " water steps written of " + std::to_string(w.stepCount) + " announced");
+        throw Error(w.out.path() + ": " + std::to_string(w.steps.size()) + " water steps written of " +
+                    std::to_string(w.stepCount) + " announced");
     w.shape.stats = stats;
     uint64_t contentHash = w.hasher.contentHash();
     if (w.stepCount > 0) {

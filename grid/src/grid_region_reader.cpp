@@ -28,8 +28,10 @@ struct GridRegionReader::Impl {
     uint64_t lowerBound(uint64_t code, uint64_t lo, uint64_t hi) const {
         while (lo < hi) {
             const uint64_t mid = lo + (hi - lo) / 2;
-            if (codeAt(mid) < code) lo = mid + 1;
-            else hi = mid;
+            if (codeAt(mid) < code)
+                lo = mid + 1;
+            else
+                hi = mid;
         }
         return lo;
     }
@@ -40,8 +42,10 @@ struct GridRegionReader::Impl {
         uint64_t lo = 0, hi = info.shape.steps[info.shape.step].wetCells;
         while (lo < hi) {
             const uint64_t mid = lo + (hi - lo) / 2;
-            if (bytes::load<uint32_t>(file.read(sec, 4 * mid, 4).data()) < cell) lo = mid + 1;
-            else hi = mid;
+            if (bytes::load<uint32_t>(file.read(sec, 4 * mid, 4).data()) < cell)
+                lo = mid + 1;
+            else
+                hi = mid;
         }
         return lo;
     }
@@ -70,21 +74,25 @@ std::optional<Grid::Square> GridRegionReader::cellSquareAt(double xLocal, double
 }
 
 uint64_t GridRegionReader::cellsInNode(uint64_t key, int level) const {
-    const uint64_t lo = impl_->lowerBound(makeCellCode(key, 0)), hi = impl_->lowerBound(makeCellCode(key + mortonSpan(level), 0));
+    const uint64_t lo = impl_->lowerBound(makeCellCode(key, 0)),
+                   hi = impl_->lowerBound(makeCellCode(key + mortonSpan(level), 0));
     if (lo > 0) {
         // A cell coarser than the node, starting before it, may contain it.
         const uint64_t code = impl_->codeAt(lo - 1);
-        if (codeKey(code) + mortonSpan(std::min(codeLevel(code), impl_->info.shape.rootLevel)) > key) return hi - lo + 1;
+        if (codeKey(code) + mortonSpan(std::min(codeLevel(code), impl_->info.shape.rootLevel)) > key)
+            return hi - lo + 1;
     }
     return hi - lo;
 }
 
 void GridRegionReader::codesInNode(uint64_t key, int level, std::vector<uint64_t>& out) const {
-    const uint64_t lo = impl_->lowerBound(makeCellCode(key, 0)), hi = impl_->lowerBound(makeCellCode(key + mortonSpan(level), 0));
+    const uint64_t lo = impl_->lowerBound(makeCellCode(key, 0)),
+                   hi = impl_->lowerBound(makeCellCode(key + mortonSpan(level), 0));
     for (uint64_t k = lo; k < hi; ++k) out.push_back(impl_->codeAt(k));
 }
 
-Grid GridRegionReader::region(const Grid::Square& box, std::span<const double> marginM, std::vector<std::pair<uint64_t, uint64_t>>* runsOut) const {
+Grid GridRegionReader::region(const Grid::Square& box, std::span<const double> marginM,
+                              std::vector<std::pair<uint64_t, uint64_t>>* runsOut) const {
     const Impl& r = *impl_;
     const Grid& shape = r.info.shape;
     Grid g = shapeOf(shape);
@@ -99,8 +107,8 @@ Grid GridRegionReader::region(const Grid::Square& box, std::span<const double> m
     }
     auto square = [&](uint64_t key, int level) {
         const uint64_t ix = mortonX(key), iy = mortonY(key), span = uint64_t{1} << level;
-        return Grid::Square{double(ix) * shape.finestCellM, double(iy) * shape.finestCellM, double(ix + span) * shape.finestCellM,
-                            double(iy + span) * shape.finestCellM};
+        return Grid::Square{double(ix) * shape.finestCellM, double(iy) * shape.finestCellM,
+                            double(ix + span) * shape.finestCellM, double(iy + span) * shape.finestCellM};
     };
     auto meets = [&](const Grid::Square& q, double m) {
         if (q.x1 < box.x0 - m || q.x0 > box.x1 + m || q.y1 < box.y0 - m || q.y0 > box.y1 + m) return 0;
@@ -111,13 +119,16 @@ Grid GridRegionReader::region(const Grid::Square& box, std::span<const double> m
     auto take = [&](uint64_t lo, uint64_t hi) {
         if (!runs.empty()) lo = std::max(lo, runs.back().second);  // a coarse cell over two start nodes comes once
         if (lo >= hi) return;
-        if (!runs.empty() && runs.back().second == lo) runs.back().second = hi;
-        else runs.push_back({lo, hi});
+        if (!runs.empty() && runs.back().second == lo)
+            runs.back().second = hi;
+        else
+            runs.push_back({lo, hi});
     };
     auto takeCell = [&](size_t i) {
         const uint64_t code = r.codeAt(i);
         const int level = codeLevel(code);
-        if (level >= levels || meets(square(codeKey(code), level), margin[size_t(level)]) != 0) take(i, i + 1);  // bad level: validate() names it
+        if (level >= levels || meets(square(codeKey(code), level), margin[size_t(level)]) != 0)
+            take(i, i + 1);  // bad level: validate() names it
     };
     // The walk starts at the few nodes that cover the box grown by the largest margin, not at the root: a binary search
     // over all cells for each child boundary of the root's descendants would check blocks all over the file (647 MB of
@@ -137,7 +148,8 @@ Grid GridRegionReader::region(const Grid::Square& box, std::span<const double> m
             starts.push_back(mortonEncode(uint32_t(ix << start), uint32_t(iy << start)));
     std::sort(starts.begin(), starts.end());
     for (const uint64_t key : starts) {
-        const uint64_t lo = r.lowerBound(makeCellCode(key, 0)), hi = r.lowerBound(makeCellCode(key + mortonSpan(start), 0));
+        const uint64_t lo = r.lowerBound(makeCellCode(key, 0)),
+                       hi = r.lowerBound(makeCellCode(key + mortonSpan(start), 0));
         if (lo > 0) {
             // A cell before the node may contain it (a cell coarser than the node).
             const uint64_t code = r.codeAt(lo - 1);
@@ -176,17 +188,18 @@ Grid GridRegionReader::region(const Grid::Square& box, std::span<const double> m
             for (uint64_t j = 0; j < j1 - j0; ++j) {
                 const uint32_t cell = bytes::load<uint32_t>(idx.data() + 4 * j);
                 const float v = bytes::load<float>(vals.data() + 4 * j);
-                if (cell < lo || cell >= hi || (j > 0 && cell <= bytes::load<uint32_t>(idx.data() + 4 * (j - 1))) || !std::isfinite(v) ||
-                    (l == 0 && !(v > 0)))
-                    r.file.fail(sec.offset + 4 * (j0 + j), "step " + std::to_string(shape.step) + ": wet cell " + std::to_string(j0 + j) +
-                                                               " is out of order or its value is not finite (water_depth > 0)");
+                if (cell < lo || cell >= hi || (j > 0 && cell <= bytes::load<uint32_t>(idx.data() + 4 * (j - 1))) ||
+                    !std::isfinite(v) || (l == 0 && !(v > 0)))
+                    r.file.fail(sec.offset + 4 * (j0 + j),
+                                "step " + std::to_string(shape.step) + ": wet cell " + std::to_string(j0 + j) +
+                                    " is out of order or its value is not finite (water_depth > 0)");
                 g.values[first + l][at + (cell - lo)] = v;
             }
         }
     }
-    if (std::string problem = g.validate(); !problem.empty()) r.file.fail(r.at.cells->offset, "invalid grid: " + problem);
+    if (std::string problem = g.validate(); !problem.empty())
+        r.file.fail(r.at.cells->offset, "invalid grid: " + problem);
     return g;
 }
-
 
 }  // namespace hc

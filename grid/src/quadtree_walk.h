@@ -17,10 +17,11 @@ namespace hc::detail {
 // nodeMeets(key, level) -> 0: the node is disjoint from the query, 1: partly inside, 2: inside (every cell in it
 // is taken); emitRange(lo, hi) takes cells [lo, hi) of a node inside; emitCell(i) decides for one cell of a node
 // partly inside that holds a single cell (or is the cell). Ranges and cells come in ascending order.
-// The walk starts at the node (startKey, startLevel) whose cells are [lo, hi): the root and every cell for a whole grid.
+// The walk starts at the node (startKey, startLevel) whose cells are [lo, hi): the root and every cell for a whole
+// grid.
 template <typename CodeAt, typename LowerBound, typename Meets, typename EmitRange, typename EmitCell>
-void walkQuadtree(uint64_t startKey, int startLevel, size_t lo, size_t hi, CodeAt&& codeAt, LowerBound&& lowerBound, Meets&& nodeMeets,
-                  EmitRange&& emitRange, EmitCell&& emitCell) {
+void walkQuadtree(uint64_t startKey, int startLevel, size_t lo, size_t hi, CodeAt&& codeAt, LowerBound&& lowerBound,
+                  Meets&& nodeMeets, EmitRange&& emitRange, EmitCell&& emitCell) {
     struct Node {
         uint64_t key;
         int level;
@@ -47,9 +48,11 @@ void walkQuadtree(uint64_t startKey, int startLevel, size_t lo, size_t hi, CodeA
         size_t bounds[5];
         bounds[0] = n.lo;
         bounds[4] = n.hi;
-        for (int q = 1; q < 4; ++q) bounds[q] = lowerBound(bounds[q - 1], n.hi, makeCellCode(n.key + quarter * static_cast<uint64_t>(q), 0));
+        for (int q = 1; q < 4; ++q)
+            bounds[q] = lowerBound(bounds[q - 1], n.hi, makeCellCode(n.key + quarter * static_cast<uint64_t>(q), 0));
         for (int q = 3; q >= 0; --q)  // pushed in reverse so children pop in Morton order
-            if (bounds[q] < bounds[q + 1]) stack.push_back({n.key + quarter * static_cast<uint64_t>(q), n.level - 1, bounds[q], bounds[q + 1]});
+            if (bounds[q] < bounds[q + 1])
+                stack.push_back({n.key + quarter * static_cast<uint64_t>(q), n.level - 1, bounds[q], bounds[q + 1]});
     }
 }
 

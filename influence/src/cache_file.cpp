@@ -30,14 +30,17 @@ namespace hc::influence {
 namespace {
 
 enum : uint32_t { kOffsets = 1, kIndices = 2 };
-const FileFormat kFormat{{'\x89', 'H', 'C', 'I', 'N', 'F', 'L', '\n'}, 1, 1, "heightcast influence cache (.hci)", {kOffsets, kIndices},
-                        /*blockChecksumsSince=*/1};
+const FileFormat kFormat{{'\x89', 'H', 'C', 'I', 'N', 'F', 'L', '\n'},
+                         1,
+                         1,
+                         "heightcast influence cache (.hci)",
+                         {kOffsets, kIndices},
+                         /*blockChecksumsSince=*/1};
 
 namespace off {
 constexpr size_t cellCount = 24, entryCount = 32, structureHash = 40, contentHash = 48, kernelId = 56, sigma = 64,
                  truncation = 72, longest = 80, reserved = 84, reservedEnd = 120;
 }
-
 
 std::string hex(uint64_t v) {
     char b[24];
@@ -55,8 +58,8 @@ std::vector<FileSection> influenceCacheLayout(uint64_t cells, uint64_t entries) 
     return {{kOffsets, 0, 0, (cells + 1) * 8, 0}, {kIndices, 0, 0, entries * 4, 0}};
 }
 
-std::vector<std::byte> influenceCacheHeader(uint64_t cells, uint64_t entries, uint64_t longest, const KernelParams& params,
-                                            uint64_t structureHash, uint64_t contentHash) {
+std::vector<std::byte> influenceCacheHeader(uint64_t cells, uint64_t entries, uint64_t longest,
+                                            const KernelParams& params, uint64_t structureHash, uint64_t contentHash) {
     std::vector<std::byte> head(kFileHeaderBytes, std::byte{0});
     bytes::store(head, off::cellCount, cells);
     bytes::store(head, off::entryCount, entries);
@@ -77,8 +80,8 @@ void writeInfluenceCache(const InfluenceLists& lists, const std::string& path) {
     SectionedFileWriter out(path, kFormat, detail::influenceCacheLayout(lists.cellCount(), lists.entryCount()));
     out.append(0, std::as_bytes(offsets));
     out.append(1, std::as_bytes(indices));
-    out.commit(detail::influenceCacheHeader(lists.cellCount(), lists.entryCount(), lists.stats().maxLength, lists.params(),
-                                            lists.gridStructureHash(), lists.gridContentHash()));
+    out.commit(detail::influenceCacheHeader(lists.cellCount(), lists.entryCount(), lists.stats().maxLength,
+                                            lists.params(), lists.gridStructureHash(), lists.gridContentHash()));
 }
 
 InfluenceLists readInfluenceCache(const std::string& path, const Grid& grid, const KernelParams& params) {
@@ -92,26 +95,30 @@ InfluenceLists readInfluenceCache(const std::string& path, const Grid& grid, con
     stored.kernelId = bytes::load<uint32_t>(h + off::kernelId);
     stored.sigma = bytes::load<double>(h + off::sigma);
     stored.truncation = bytes::load<double>(h + off::truncation);
-    const uint64_t structure = bytes::load<uint64_t>(h + off::structureHash), content = bytes::load<uint64_t>(h + off::contentHash);
+    const uint64_t structure = bytes::load<uint64_t>(h + off::structureHash),
+                   content = bytes::load<uint64_t>(h + off::contentHash);
     // Declared counts against the bytes present, before any size is computed from them (issue 11: 2^62
     // entries times 4 wrapped to 0, passed the section size check, and the list walk read past the file).
     const uint64_t fileBytes = file.mapping()->bytes().size();
     if (n >= fileBytes / 8)
-        file.fail(off::cellCount, "header declares " + std::to_string(n) + " cells, more than the " + std::to_string(fileBytes) +
-                                      "-byte file holds (8 bytes of OFFSETS each)");
+        file.fail(off::cellCount, "header declares " + std::to_string(n) + " cells, more than the " +
+                                      std::to_string(fileBytes) + "-byte file holds (8 bytes of OFFSETS each)");
     if (m > fileBytes / 4)
-        file.fail(off::entryCount, "header declares " + std::to_string(m) + " entries, more than the " + std::to_string(fileBytes) +
-                                       "-byte file holds (4 bytes of INDICES each)");
+        file.fail(off::entryCount, "header declares " + std::to_string(m) + " entries, more than the " +
+                                       std::to_string(fileBytes) + "-byte file holds (4 bytes of INDICES each)");
 
     // Whose cache is it? Say exactly what differs.
     if (structure != grid.structureHash() || n != grid.cellCount())
-        throw Error(path + ": stale or foreign cache: built for a grid of " + std::to_string(n) + " cells with structure hash " +
-                    hex(structure) + ", this grid has " + std::to_string(grid.cellCount()) + " cells and " + hex(grid.structureHash()));
+        throw Error(path + ": stale or foreign cache: built for a grid of " + std::to_string(n) +
+                    " cells with structure hash " + hex(structure) + ", this grid has " +
+                    std::to_string(grid.cellCount()) + " cells and " + hex(grid.structureHash()));
     if (stored.kernelId != params.kernelId)
-        throw Error(path + ": cache built for kernel " + std::to_string(stored.kernelId) + ", wanted " + std::to_string(params.kernelId));
+        throw Error(path + ": cache built for kernel " + std::to_string(stored.kernelId) + ", wanted " +
+                    std::to_string(params.kernelId));
     if (stored.sigma != params.sigma || stored.truncation != params.truncation)
-        throw Error(path + ": cache built for sigma " + std::to_string(stored.sigma) + ", R " + std::to_string(stored.truncation) +
-                    "; wanted sigma " + std::to_string(params.sigma) + ", R " + std::to_string(params.truncation));
+        throw Error(path + ": cache built for sigma " + std::to_string(stored.sigma) + ", R " +
+                    std::to_string(stored.truncation) + "; wanted sigma " + std::to_string(params.sigma) + ", R " +
+                    std::to_string(params.truncation));
 
     const FileSection* offs = nullptr;
     const FileSection* idx = nullptr;
@@ -121,8 +128,12 @@ InfluenceLists readInfluenceCache(const std::string& path, const Grid& grid, con
     }
     if (!offs || !idx) file.failFile("lacks its OFFSETS or INDICES section");
     // n and m are bounded by the file size above: these products cannot wrap.
-    if (offs->bytes != (n + 1) * 8) file.fail(offs->offset, "OFFSETS holds " + std::to_string(offs->bytes) + " bytes, expected " + std::to_string((n + 1) * 8));
-    if (idx->bytes != m * 4) file.fail(idx->offset, "INDICES holds " + std::to_string(idx->bytes) + " bytes, expected " + std::to_string(m * 4));
+    if (offs->bytes != (n + 1) * 8)
+        file.fail(offs->offset,
+                  "OFFSETS holds " + std::to_string(offs->bytes) + " bytes, expected " + std::to_string((n + 1) * 8));
+    if (idx->bytes != m * 4)
+        file.fail(idx->offset,
+                  "INDICES holds " + std::to_string(idx->bytes) + " bytes, expected " + std::to_string(m * 4));
     // 64-byte aligned in a page-aligned mapping: the spans are properly aligned for u64 and u32.
     std::span<const uint64_t> o(reinterpret_cast<const uint64_t*>(file.data(*offs).data()), n + 1);
     std::span<const uint32_t> ix(reinterpret_cast<const uint32_t*>(file.data(*idx).data()), m);
@@ -131,7 +142,8 @@ InfluenceLists readInfluenceCache(const std::string& path, const Grid& grid, con
         if (o[k + 1] < o[k]) file.fail(offs->offset + 8 * (k + 1), "OFFSETS decrease at cell " + std::to_string(k));
         // o[n] == m alone does not bound the lists before it (0, 100, 5 with m = 5 would read 95 indices past the end).
         if (o[k + 1] > m)
-            file.fail(offs->offset + 8 * (k + 1), "OFFSETS exceed the entry count " + std::to_string(m) + " at cell " + std::to_string(k));
+            file.fail(offs->offset + 8 * (k + 1),
+                      "OFFSETS exceed the entry count " + std::to_string(m) + " at cell " + std::to_string(k));
         bool self = false;
         for (uint64_t e = o[k]; e < o[k + 1]; ++e) {
             if (ix[e] >= n) file.fail(idx->offset + 4 * e, "index " + std::to_string(ix[e]) + " is not a cell");
@@ -148,8 +160,8 @@ std::string defaultCachePath(const std::string& gridPath) {
     return p.string();
 }
 
-InfluenceLists loadOrBuildCache(const Grid& grid, const KernelParams& params, const std::string& cachePath, unsigned threads,
-                                bool progress, std::string& note) {
+InfluenceLists loadOrBuildCache(const Grid& grid, const KernelParams& params, const std::string& cachePath,
+                                unsigned threads, bool progress, std::string& note) {
     std::error_code ec;
     if (std::filesystem::exists(cachePath, ec)) {
         try {

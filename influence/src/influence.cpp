@@ -14,14 +14,24 @@
 
 namespace hc::influence {
 
-InfluenceLists::InfluenceLists(KernelParams params, uint64_t structureHash, uint64_t contentHash, std::vector<uint64_t> offsets,
-                               std::unique_ptr<uint32_t[]> indices, size_t entryCount)
-    : params_(params), structureHash_(structureHash), contentHash_(contentHash), ownedOffsets_(std::move(offsets)),
-      ownedIndices_(std::move(indices)), offsets_(ownedOffsets_), indices_(ownedIndices_.get(), entryCount) {}
+InfluenceLists::InfluenceLists(KernelParams params, uint64_t structureHash, uint64_t contentHash,
+                               std::vector<uint64_t> offsets, std::unique_ptr<uint32_t[]> indices, size_t entryCount)
+    : params_(params),
+      structureHash_(structureHash),
+      contentHash_(contentHash),
+      ownedOffsets_(std::move(offsets)),
+      ownedIndices_(std::move(indices)),
+      offsets_(ownedOffsets_),
+      indices_(ownedIndices_.get(), entryCount) {}
 
-InfluenceLists::InfluenceLists(KernelParams params, uint64_t structureHash, uint64_t contentHash, std::span<const uint64_t> offsets,
-                               std::span<const uint32_t> indices, std::shared_ptr<const MappedFile> mapping)
-    : params_(params), structureHash_(structureHash), contentHash_(contentHash), mapping_(std::move(mapping)), offsets_(offsets),
+InfluenceLists::InfluenceLists(KernelParams params, uint64_t structureHash, uint64_t contentHash,
+                               std::span<const uint64_t> offsets, std::span<const uint32_t> indices,
+                               std::shared_ptr<const MappedFile> mapping)
+    : params_(params),
+      structureHash_(structureHash),
+      contentHash_(contentHash),
+      mapping_(std::move(mapping)),
+      offsets_(offsets),
       indices_(indices) {}
 
 InfluenceLists::Stats InfluenceLists::stats() const {
@@ -82,7 +92,8 @@ ListPart buildListPart(const ListIndex& index, const std::vector<NodeRange>& sup
         for (size_t b = b0; b < b1; ++b) {
             const NodeRange& sb = superBlocks[b];
             at[b - b0] = offsets[sb.lo - base];
-            for (size_t k = sb.lo; k < sb.hi; ++k) offsets[k + 1 - base] = offsets[k - base] + batchLengths[b - b0][k - sb.lo];
+            for (size_t k = sb.lo; k < sb.hi; ++k)
+                offsets[k + 1 - base] = offsets[k - base] + batchLengths[b - b0][k - sb.lo];
         }
         const size_t needed = offsets[superBlocks[b1 - 1].hi - base];
         if (b0 == s0 && superBlocks[b1 - 1].hi - base < n) {
@@ -104,7 +115,8 @@ ListPart buildListPart(const ListIndex& index, const std::vector<NodeRange>& sup
             indices = std::move(bigger);
         }
         parallelFor(b1 - b0, 4, threads, [&](size_t bb, size_t be, unsigned) {
-            for (size_t b = bb; b < be; ++b) std::copy(batchEntries[b].begin(), batchEntries[b].end(), indices.get() + at[b]);
+            for (size_t b = bb; b < be; ++b)
+                std::copy(batchEntries[b].begin(), batchEntries[b].end(), indices.get() + at[b]);
         });
         used = needed;
         bar.advance(superBlocks[b1 - 1].hi - superBlocks[b0].lo);
@@ -116,7 +128,8 @@ ListPart buildListPart(const ListIndex& index, const std::vector<NodeRange>& sup
 
 void checkListInputs(const Grid& g, const KernelParams& params) {
     if (std::string why = params.validate(); !why.empty()) throw Error("influence parameters: " + why);
-    if (g.cellCount() >= std::numeric_limits<uint32_t>::max()) throw Error("grid has too many cells for 32-bit influence indices");
+    if (g.cellCount() >= std::numeric_limits<uint32_t>::max())
+        throw Error("grid has too many cells for 32-bit influence indices");
 }
 
 }  // namespace detail
@@ -130,7 +143,8 @@ InfluenceLists buildInfluenceLists(const Grid& g, const KernelParams& params, un
     detail::ListPart part = detail::buildListPart(index, superBlocks, 0, superBlocks.size(), threads, bar);
     bar.finish();
     if (part.offsets.size() != g.cellCount() + 1) part.offsets.assign(g.cellCount() + 1, 0);  // no cells
-    return InfluenceLists(params, g.structureHash(), g.contentHash(), std::move(part.offsets), std::move(part.indices), part.entries);
+    return InfluenceLists(params, g.structureHash(), g.contentHash(), std::move(part.offsets), std::move(part.indices),
+                          part.entries);
 }
 
 }  // namespace hc::influence

@@ -24,8 +24,19 @@ inline double expNonPositive(double x) {
     const double n = t - kShifter;
     const double r = (x - n * kLn2Hi) - n * kLn2Lo;
     const double p =
-        1.0 + r * (1.0 + r * (0.5 + r * (1.0 / 6 + r * (1.0 / 24 + r * (1.0 / 120 + r * (1.0 / 720 + r * (1.0 / 5040 + r * (1.0 / 40320 +
-        r * (1.0 / 362880 + r * (1.0 / 3628800 + r * (1.0 / 39916800 + r * (1.0 / 479001600 + r * (1.0 / 6227020800.0)))))))))))));
+        1.0 +
+        r * (1.0 +
+             r * (0.5 +
+                  r * (1.0 / 6 +
+                       r * (1.0 / 24 +
+                            r * (1.0 / 120 +
+                                 r * (1.0 / 720 +
+                                      r * (1.0 / 5040 +
+                                           r * (1.0 / 40320 +
+                                                r * (1.0 / 362880 + r * (1.0 / 3628800 +
+                                                                         r * (1.0 / 39916800 +
+                                                                              r * (1.0 / 479001600 +
+                                                                                   r * (1.0 / 6227020800.0)))))))))))));
     const int64_t bits = (std::bit_cast<int64_t>(t) - std::bit_cast<int64_t>(kShifter) + 1023) << 52;
     return p * std::bit_cast<double>(bits);
 }

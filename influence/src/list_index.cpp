@@ -11,8 +11,8 @@ namespace {
 
 // keep[c] = kernelReaches(cx[c], cy[c], r2[c], square) for every candidate, in a form the compiler
 // vectorises (no aliasing, selects instead of branches).
-void reachMask(const double* __restrict cx, const double* __restrict cy, const double* __restrict r2, size_t m, double x0, double y0,
-               double x1, double y1, uint8_t* __restrict keep) {
+void reachMask(const double* __restrict cx, const double* __restrict cy, const double* __restrict r2, size_t m,
+               double x0, double y0, double x1, double y1, uint8_t* __restrict keep) {
     for (size_t c = 0; c < m; ++c) {
         const double ax = x0 - cx[c], bx = cx[c] - x1, ay = y0 - cy[c], by = cy[c] - y1;
         double dx = ax > bx ? ax : bx;
@@ -50,11 +50,13 @@ std::vector<NodeRange> splitNodes(const Grid& g, NodeRange start, size_t maxCell
         const uint64_t quarter = mortonSpan(n.level - 1);
         size_t bounds[5] = {n.lo, 0, 0, 0, n.hi};
         for (int q = 1; q < 4; ++q)
-            bounds[q] = static_cast<size_t>(std::lower_bound(g.codes.begin() + static_cast<std::ptrdiff_t>(bounds[q - 1]),
-                                                             g.codes.begin() + static_cast<std::ptrdiff_t>(n.hi),
-                                                             makeCellCode(n.key + quarter * static_cast<uint64_t>(q), 0)) -
-                                            g.codes.begin());
-        for (int q = 3; q >= 0; --q) stack.push_back({n.key + quarter * static_cast<uint64_t>(q), n.level - 1, bounds[q], bounds[q + 1]});
+            bounds[q] =
+                static_cast<size_t>(std::lower_bound(g.codes.begin() + static_cast<std::ptrdiff_t>(bounds[q - 1]),
+                                                     g.codes.begin() + static_cast<std::ptrdiff_t>(n.hi),
+                                                     makeCellCode(n.key + quarter * static_cast<uint64_t>(q), 0)) -
+                                    g.codes.begin());
+        for (int q = 3; q >= 0; --q)
+            stack.push_back({n.key + quarter * static_cast<uint64_t>(q), n.level - 1, bounds[q], bounds[q + 1]});
     }
     return out;
 }
@@ -106,7 +108,8 @@ void ListIndex::candidatesFor(const Grid::Square& box, Scratch& s) const {
     }
 }
 
-void ListIndex::listsFor(const NodeRange& node, Scratch& s, std::vector<uint32_t>& entries, std::vector<uint32_t>& lengths) const {
+void ListIndex::listsFor(const NodeRange& node, Scratch& s, std::vector<uint32_t>& entries,
+                         std::vector<uint32_t>& lengths) const {
     if (node.lo == node.hi) return;
     const Grid::Square box = boundsOf(g_, node.lo, node.hi);
     candidatesFor(box, s);
@@ -114,7 +117,8 @@ void ListIndex::listsFor(const NodeRange& node, Scratch& s, std::vector<uint32_t
         // The node's candidates narrowed to the block, then every one of those against each cell.
         const Grid::Square bbox = boundsOf(g_, blk.lo, blk.hi);
         s.keep.resize(s.index.size());
-        reachMask(s.cx.data(), s.cy.data(), s.r2.data(), s.index.size(), bbox.x0, bbox.y0, bbox.x1, bbox.y1, s.keep.data());
+        reachMask(s.cx.data(), s.cy.data(), s.r2.data(), s.index.size(), bbox.x0, bbox.y0, bbox.x1, bbox.y1,
+                  s.keep.data());
         s.ncx.clear(), s.ncy.clear(), s.nr2.clear(), s.nindex.clear();
         for (size_t c = 0; c < s.index.size(); ++c)
             if (s.keep[c]) {

@@ -55,18 +55,19 @@ public:
     void candidatesFor(const Grid::Square& box, Scratch& s) const;
     // Appends the lists of the cells of `node` (at most a few hundred cells: one range query per level
     // serves them all) to `entries`, one length per cell to `lengths`, in cell order.
-    void listsFor(const NodeRange& node, Scratch& s, std::vector<uint32_t>& entries, std::vector<uint32_t>& lengths) const;
+    void listsFor(const NodeRange& node, Scratch& s, std::vector<uint32_t>& entries,
+                  std::vector<uint32_t>& lengths) const;
 
 private:
     const Grid& g_;
     KernelParams params_;
-    std::vector<Grid> byLevel_;                   // one query index per level: that level's codes only
+    std::vector<Grid> byLevel_;                      // one query index per level: that level's codes only
     std::vector<std::vector<uint32_t>> levelIndex_;  // their cell indices in g
 };
 
-// The lists of the cells of super-blocks [s0, s1) of `superBlocks` (splitNodes of the whole grid): offsets from the first
-// of those cells (firstCell; offsets.size() = their cell count + 1) into `entries` indices. A whole-grid build is the
-// part of every super-block; a rank of mpirun builds its share (influence/src/on_ranks.cpp).
+// The lists of the cells of super-blocks [s0, s1) of `superBlocks` (splitNodes of the whole grid): offsets from the
+// first of those cells (firstCell; offsets.size() = their cell count + 1) into `entries` indices. A whole-grid build is
+// the part of every super-block; a rank of mpirun builds its share (influence/src/on_ranks.cpp).
 struct ListPart {
     size_t firstCell = 0;
     std::vector<uint64_t> offsets;

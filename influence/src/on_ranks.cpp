@@ -24,16 +24,16 @@ namespace hc::influence {
 
 namespace {
 
-constexpr int kNodesPerRank = 16;   // enough nodes to balance cell counts between ranks
-constexpr int kMaxPartitionDepth = 6;  // at most 4^6 nodes looked at
+constexpr int kNodesPerRank = 16;                      // enough nodes to balance cell counts between ranks
+constexpr int kMaxPartitionDepth = 6;                  // at most 4^6 nodes looked at
 constexpr uint64_t kMaxNodeCells = uint64_t{1} << 22;  // a node's cells, read at once: its region's memory
 
 // Keeps the grid file's pages that many small regions touch from piling up in resident memory: they are released
 // (GridRegionReader::releasePages) every 32 regions, and sooner once the regions read since the last release hold about
-// 64 MB of the file (their cells at 8 bytes of code and 4 of each value, and the blocks their reads checksummed, a block
-// whole). A region's binary searches touch pages beyond its cells: without this, the coarse tiles' many small regions
-// left far more of the file resident than the cells they read. Any thread may call after(); a region read meanwhile
-// reads its pages back from the page cache.
+// 64 MB of the file (their cells at 8 bytes of code and 4 of each value, and the blocks their reads checksummed, a
+// block whole). A region's binary searches touch pages beyond its cells: without this, the coarse tiles' many small
+// regions left far more of the file resident than the cells they read. Any thread may call after(); a region read
+// meanwhile reads its pages back from the page cache.
 class PageReleaser {
 public:
     explicit PageReleaser(const GridRegionReader& file) : file_(file), checkedAt_(file.bytesChecked()) {}
@@ -41,7 +41,8 @@ public:
         const uint64_t bytes = region.cellCount() * (8 + 4 * uint64_t(std::max<size_t>(1, region.values.size())));
         const uint64_t touched = touched_.fetch_add(bytes) + bytes;
         const uint64_t checked = file_.bytesChecked();
-        if (++regions_ % kRegions != 0 && touched + (checked - std::min(checked, checkedAt_.load())) < kBytes) return;  // min: a race
+        if (++regions_ % kRegions != 0 && touched + (checked - std::min(checked, checkedAt_.load())) < kBytes)
+            return;  // min: a race
         touched_ = 0, checkedAt_ = checked;
         file_.releasePages();
     }
@@ -65,8 +66,8 @@ struct IndexedRegion {
     size_t lo = 0, hi = 0;            // the region cells inside the node it was read for
 };
 
-IndexedRegion readIndexed(const GridRegionReader& file, const Grid::Square& box, const std::vector<double>& margins, uint64_t key, int level,
-                          bool wantIndex) {
+IndexedRegion readIndexed(const GridRegionReader& file, const Grid::Square& box, const std::vector<double>& margins,
+                          uint64_t key, int level, bool wantIndex) {
     IndexedRegion r;
     std::vector<std::pair<uint64_t, uint64_t>> runs;
     r.grid = file.region(box, margins, &runs);
@@ -88,13 +89,13 @@ std::vector<size_t> myNodes(const RankPartition& part) {
     return out;
 }
 
-
-// The tiles of fine levels (tiles inside a partition node) that other ranks hold beside this rank's nodes, as the parent
-// level's tiles its own tiles' parent errors read (detail::finishPyramid's halo): each rank shares the first row and
-// column of its tiles on the low x or low y edge of their node (the samples a tile in the node to their -x, -y or -x-y
-// reads as parent samples), and keeps of the others' those beside its own nodes; their other samples are NaN, never read.
-SurfacePyramid haloOf(const RankPartition& part, const Grid& shape, const SurfacePyramid::Storage& owned, const std::vector<int>& sides,
-                      int channels) {
+// The tiles of fine levels (tiles inside a partition node) that other ranks hold beside this rank's nodes, as the
+// parent level's tiles its own tiles' parent errors read (detail::finishPyramid's halo): each rank shares the first row
+// and column of its tiles on the low x or low y edge of their node (the samples a tile in the node to their -x, -y or
+// -x-y reads as parent samples), and keeps of the others' those beside its own nodes; their other samples are NaN,
+// never read.
+SurfacePyramid haloOf(const RankPartition& part, const Grid& shape, const SurfacePyramid::Storage& owned,
+                      const std::vector<int>& sides, int channels) {
     const int rank = ranks::rank(), top = int(sides.size()) - 1;
     const uint64_t nodeSide = uint64_t{1} << part.level;  // in finest cells
     auto rankOf = [&](uint64_t key) {
@@ -125,12 +126,14 @@ SurfacePyramid haloOf(const RankPartition& part, const Grid& shape, const Surfac
         const uint64_t span = uint64_t(side) << t;  // a tile's side in finest cells
         for (size_t r = 0; r < allKeys.size(); ++r) {
             if (int(r) == rank) continue;
-            if (allEdges[r].size() != allKeys[r].size() * ch * 2 * side) throw Error("rank " + std::to_string(r + 1) + " sent a halo of another size");
+            if (allEdges[r].size() != allKeys[r].size() * ch * 2 * side)
+                throw Error("rank " + std::to_string(r + 1) + " sent a halo of another size");
             for (size_t i = 0; i < allKeys[r].size(); ++i) {
                 const uint64_t key = allKeys[r][i], x = mortonX(key), y = mortonY(key);
-                const bool beside = (x >= span && rankOf(mortonEncode(uint32_t(x - span), uint32_t(y))) == rank) ||
-                                    (y >= span && rankOf(mortonEncode(uint32_t(x), uint32_t(y - span))) == rank) ||
-                                    (x >= span && y >= span && rankOf(mortonEncode(uint32_t(x - span), uint32_t(y - span))) == rank);
+                const bool beside =
+                    (x >= span && rankOf(mortonEncode(uint32_t(x - span), uint32_t(y))) == rank) ||
+                    (y >= span && rankOf(mortonEncode(uint32_t(x), uint32_t(y - span))) == rank) ||
+                    (x >= span && y >= span && rankOf(mortonEncode(uint32_t(x - span), uint32_t(y - span))) == rank);
                 if (!beside) continue;
                 halo->keys[size_t(t)].push_back(key);
                 auto& out = halo->samples[size_t(t)];
@@ -173,8 +176,8 @@ struct Run {
 // rank sees), then rank 0 takes their pieces' CRCs in rank order, as if it had appended their bytes, and commits with
 // `header` (rank 0's). A failure on any rank stops every rank at the next step and leaves no file (rank 0's writer
 // removes its temporary).
-void writeByParts(const std::string& path, const FileFormat& format, std::vector<FileSection> layout, const std::vector<Run>& runs,
-                  std::vector<std::byte> header) {
+void writeByParts(const std::string& path, const FileFormat& format, std::vector<FileSection> layout,
+                  const std::vector<Run>& runs, std::vector<std::byte> header) {
     const int rank = ranks::rank(), count = ranks::count();
     std::unique_ptr<SectionedFileWriter> out;
     std::vector<std::byte> where;
@@ -245,10 +248,11 @@ RankPartition partitionOf(const GridRegionReader& file, int ranks) {
     return p;
 }
 
-InfluenceListsPart buildInfluenceListsOnRanks(const GridRegionReader& file, const KernelParams& params, unsigned threads, bool progress,
-                                              RankShare* share) {
+InfluenceListsPart buildInfluenceListsOnRanks(const GridRegionReader& file, const KernelParams& params,
+                                              unsigned threads, bool progress, RankShare* share) {
     if (std::string why = params.validate(); !why.empty()) throw Error("influence parameters: " + why);
-    if (file.cellCount() >= std::numeric_limits<uint32_t>::max()) throw Error("grid has too many cells for 32-bit influence indices");
+    if (file.cellCount() >= std::numeric_limits<uint32_t>::max())
+        throw Error("grid has too many cells for 32-bit influence indices");
     const Stopwatch clock;
     const int rank = ranks::rank(), count = ranks::count();
     const RankPartition part = partitionOf(file, count);
@@ -263,12 +267,16 @@ InfluenceListsPart buildInfluenceListsOnRanks(const GridRegionReader& file, cons
     ranks::together([&] {
         Progress bar("influence lists", myCells, progress && rank == 0);
         for (size_t j : mine) {
-            const IndexedRegion r = readIndexed(file, nodeSquare(file.shape(), part.keys[j], part.level), margins, part.keys[j], part.level, true);
+            const IndexedRegion r = readIndexed(file, nodeSquare(file.shape(), part.keys[j], part.level), margins,
+                                                part.keys[j], part.level, true);
             const detail::ListIndex index(r.grid, params);
-            const auto blocks = detail::splitNodes(r.grid, {part.keys[j], part.level, r.lo, r.hi}, detail::kSuperBlockCells);
+            const auto blocks =
+                detail::splitNodes(r.grid, {part.keys[j], part.level, r.lo, r.hi}, detail::kSuperBlockCells);
             detail::ListPart lists = detail::buildListPart(index, blocks, 0, blocks.size(), threads, bar);
-            for (size_t k = 0; k + 1 < lists.offsets.size(); ++k) lengths.push_back(uint32_t(lists.offsets[k + 1] - lists.offsets[k]));
-            for (size_t e = 0; e < lists.entries; ++e) lists.indices[e] = r.fileIndex[lists.indices[e]];  // region -> file index
+            for (size_t k = 0; k + 1 < lists.offsets.size(); ++k)
+                lengths.push_back(uint32_t(lists.offsets[k + 1] - lists.offsets[k]));
+            for (size_t e = 0; e < lists.entries; ++e)
+                lists.indices[e] = r.fileIndex[lists.indices[e]];  // region -> file index
             entryCount += lists.entries;
             entries.push_back({std::move(lists.indices), lists.entries});
             s.nodes += 1, s.cells += r.hi - r.lo, s.cellsRead += r.grid.cellCount();
@@ -289,7 +297,8 @@ InfluenceListsPart buildInfluenceListsOnRanks(const GridRegionReader& file, cons
         if (r < rank) out.firstCell += counts[size_t(r)][0], firstEntry += counts[size_t(r)][1];
     }
     if (out.totalCells != file.cellCount())
-        throw Error("the ranks built lists of " + std::to_string(out.totalCells) + " cells, not " + std::to_string(file.cellCount()));
+        throw Error("the ranks built lists of " + std::to_string(out.totalCells) + " cells, not " +
+                    std::to_string(file.cellCount()));
     out.offsets.resize(lengths.size() + 1);
     out.offsets[0] = firstEntry;
     for (size_t k = 0; k < lengths.size(); ++k) out.offsets[k + 1] = out.offsets[k] + lengths[k];
@@ -317,7 +326,8 @@ InfluenceLists::Stats writeInfluenceCacheOnRanks(const InfluenceListsPart& part,
     if (n > 0) {
         stats.meanLength = double(m) / double(n);
         stats.maxLength = whole.size() - 1;
-        const uint64_t at = std::min(n - 1, n * 99 / 100);  // the element nth_element puts there (InfluenceLists::stats)
+        const uint64_t at =
+            std::min(n - 1, n * 99 / 100);  // the element nth_element puts there (InfluenceLists::stats)
         uint64_t seen = 0;
         for (size_t l = 0; l < whole.size(); ++l)
             if ((seen += whole[l]) > at) {
@@ -337,13 +347,14 @@ InfluenceLists::Stats writeInfluenceCacheOnRanks(const InfluenceListsPart& part,
         runs.push_back({1, at * 4, std::as_bytes(std::span<const uint32_t>(e.indices.get(), e.count))});
         at += e.count;
     }
-    writeByParts(path, detail::influenceCacheFormat(), detail::influenceCacheLayout(n, m), runs,
-                 detail::influenceCacheHeader(n, m, stats.maxLength, part.params, part.structureHash, part.contentHash));
+    writeByParts(
+        path, detail::influenceCacheFormat(), detail::influenceCacheLayout(n, m), runs,
+        detail::influenceCacheHeader(n, m, stats.maxLength, part.params, part.structureHash, part.contentHash));
     return stats;
 }
 
-SurfacePyramid buildPyramidOnRanks(const GridRegionReader& file, const KernelParams& params, unsigned threads, bool progress,
-                                   bool waterOnly, RankShare* share) {
+SurfacePyramid buildPyramidOnRanks(const GridRegionReader& file, const KernelParams& params, unsigned threads,
+                                   bool progress, bool waterOnly, RankShare* share) {
     if (std::string why = params.validate(); !why.empty()) throw Error("influence parameters: " + why);
     const Grid& shape = file.shape();
     const int depthLayer = shape.findLayer("water_depth");
@@ -357,8 +368,9 @@ SurfacePyramid buildPyramidOnRanks(const GridRegionReader& file, const KernelPar
     const int top = int(sides.size()) - 1;
     auto nodeLevelOf = [&](int t) { return t + std::countr_zero(unsigned(sides[size_t(t)])); };
     auto planeOf = [&](int t) { return size_t(sides[size_t(t)]) * size_t(sides[size_t(t)]); };
-    // Margins: every cell whose kernel reaches the node; for a water pyramid also those one tile further (the tiles a wet
-    // cell marks are grown by one: wetMarkedTiles), a tile of a level inside the node being at most the node's side.
+    // Margins: every cell whose kernel reaches the node; for a water pyramid also those one tile further (the tiles a
+    // wet cell marks are grown by one: wetMarkedTiles), a tile of a level inside the node being at most the node's
+    // side.
     std::vector<double> margins = kernelReachM(shape, params);
     if (waterOnly)
         for (double& m : margins) m += shape.levelSizeM(part.level);
@@ -376,15 +388,19 @@ SurfacePyramid buildPyramidOnRanks(const GridRegionReader& file, const KernelPar
         std::vector<detail::PyramidWorkspace> scratch(threads);
         for (size_t j : mine) {
             const uint64_t nodeKey = part.keys[j];
-            const IndexedRegion r = readIndexed(file, nodeSquare(shape, nodeKey, part.level), margins, nodeKey, part.level, false);
+            const IndexedRegion r =
+                readIndexed(file, nodeSquare(shape, nodeKey, part.level), margins, nodeKey, part.level, false);
             const detail::ListIndex index(r.grid, params);
             for (int t = 0; t <= top; ++t) {
                 const int side = sides[size_t(t)];
                 std::vector<uint64_t> k;
-                if (nodeLevelOf(t) > part.level) {  // a coarse tile: decided once every node has spoken for its own cells
+                if (nodeLevelOf(t) >
+                    part.level) {  // a coarse tile: decided once every node has spoken for its own cells
                     detail::tileKeysOfCells(r.grid, params, r.lo, r.hi, t, top, side, k);
                     coarseKept[size_t(t)].insert(coarseKept[size_t(t)].end(), k.begin(), k.end());
-                    if (waterOnly) detail::wetMarkedTiles(r.grid, params, depthLayer, r.lo, r.hi, t, side, coarseMarked[size_t(t)]);
+                    if (waterOnly)
+                        detail::wetMarkedTiles(r.grid, params, depthLayer, r.lo, r.hi, t, side,
+                                               coarseMarked[size_t(t)]);
                     continue;
                 }
                 // A tile inside the node: kept by a cell of the node or of its margin, whose kernel may reach into it.
@@ -393,7 +409,8 @@ SurfacePyramid buildPyramidOnRanks(const GridRegionReader& file, const KernelPar
                 std::erase_if(k, [&](uint64_t key) { return (key & nodeMask) != nodeKey; });
                 std::sort(k.begin(), k.end());
                 k.erase(std::unique(k.begin(), k.end()), k.end());
-                std::erase_if(k, [&](uint64_t key) { return file.cellsInNode(key, nodeLevelOf(t)) == 0; });  // all NaN there
+                std::erase_if(
+                    k, [&](uint64_t key) { return file.cellsInNode(key, nodeLevelOf(t)) == 0; });  // all NaN there
                 if (waterOnly) {
                     std::vector<uint64_t> marked, kept;
                     detail::wetMarkedTiles(r.grid, params, depthLayer, 0, r.grid.cellCount(), t, side, marked);
@@ -405,8 +422,8 @@ SurfacePyramid buildPyramidOnRanks(const GridRegionReader& file, const KernelPar
                 samples[size_t(t)].resize(at + k.size() * floats);
                 parallelFor(k.size(), 4, threads, [&](size_t b, size_t e, unsigned worker) {
                     for (size_t i = b; i < e; ++i)
-                        detail::buildTile(r.grid, index, params, t, side, k[i], channels, depthLayer, &samples[size_t(t)][at + i * floats],
-                                          scratch[worker], -1);
+                        detail::buildTile(r.grid, index, params, t, side, k[i], channels, depthLayer,
+                                          &samples[size_t(t)][at + i * floats], scratch[worker], -1);
                 });
                 keys[size_t(t)].insert(keys[size_t(t)].end(), k.begin(), k.end());
                 s.tiles += k.size();
@@ -418,8 +435,8 @@ SurfacePyramid buildPyramidOnRanks(const GridRegionReader& file, const KernelPar
         bar.finish();
     });
 
-    // The coarse tiles: kept where some node keeps them (and, for water, some wet cell marks them), then shared out one by
-    // one; each of their blocks is sampled from a region read around the block.
+    // The coarse tiles: kept where some node keeps them (and, for water, some wet cell marks them), then shared out one
+    // by one; each of their blocks is sampled from a region read around the block.
     struct CoarseTile {
         int t;
         uint64_t key;
@@ -455,7 +472,8 @@ SurfacePyramid buildPyramidOnRanks(const GridRegionReader& file, const KernelPar
         std::vector<Job> jobs;
         std::vector<size_t> at(ours.size());
         for (size_t i = 0; i < ours.size(); ++i) {
-            const int t = ours[i].t, block = detail::pyramidBlockSide(shape, params, t), blocks = (sides[size_t(t)] + block - 1) / block;
+            const int t = ours[i].t, block = detail::pyramidBlockSide(shape, params, t),
+                      blocks = (sides[size_t(t)] + block - 1) / block;
             at[i] = samples[size_t(t)].size();
             samples[size_t(t)].resize(at[i] + size_t(channels) * planeOf(t));
             keys[size_t(t)].push_back(ours[i].key);
@@ -468,18 +486,20 @@ SurfacePyramid buildPyramidOnRanks(const GridRegionReader& file, const KernelPar
         parallelFor(jobs.size(), 1, threads, [&](size_t b, size_t e, unsigned worker) {
             for (size_t q = b; q < e; ++q) {
                 const CoarseTile& c = ours[jobs[q].tile];
-                const int side = sides[size_t(c.t)], block = detail::pyramidBlockSide(shape, params, c.t), blocks = (side + block - 1) / block;
+                const int side = sides[size_t(c.t)], block = detail::pyramidBlockSide(shape, params, c.t),
+                          blocks = (side + block - 1) / block;
                 const int bi = (jobs[q].block % blocks) * block, bj = (jobs[q].block / blocks) * block;
                 const int bi1 = std::min(side, bi + block), bj1 = std::min(side, bj + block);
                 const double h = shape.levelSizeM(c.t);
-                const double x0 = double(mortonX(c.key)) * shape.finestCellM, y0 = double(mortonY(c.key)) * shape.finestCellM;
+                const double x0 = double(mortonX(c.key)) * shape.finestCellM,
+                             y0 = double(mortonY(c.key)) * shape.finestCellM;
                 const Grid::Square box{x0 + bi * h, y0 + bj * h, x0 + (bi1 - 1) * h, y0 + (bj1 - 1) * h};
                 const Grid region = file.region(box, reach);
                 readPerWorker[worker] += region.cellCount();
                 release.after(region);
                 const detail::ListIndex index(region, params);
-                detail::buildTile(region, index, params, c.t, side, c.key, channels, depthLayer, &samples[size_t(c.t)][at[jobs[q].tile]],
-                                  scratch[worker], jobs[q].block);
+                detail::buildTile(region, index, params, c.t, side, c.key, channels, depthLayer,
+                                  &samples[size_t(c.t)][at[jobs[q].tile]], scratch[worker], jobs[q].block);
             }
         });
         for (uint64_t n : readPerWorker) s.cellsRead += n;
@@ -504,7 +524,8 @@ SurfacePyramid buildPyramidOnRanks(const GridRegionReader& file, const KernelPar
             for (size_t i = 0; i < k[r].size(); ++i) order.push_back({k[r][i], {r, i}});
         std::sort(order.begin(), order.end());
         for (size_t i = 1; i < order.size(); ++i)
-            if (order[i].first == order[i - 1].first) throw Error("two ranks sampled the same pyramid tile of level " + std::to_string(t));
+            if (order[i].first == order[i - 1].first)
+                throw Error("two ranks sampled the same pyramid tile of level " + std::to_string(t));
         auto& outKeys = owned->keys[size_t(t)];
         auto& outSamples = owned->samples[size_t(t)];
         outSamples.resize(order.size() * floats);
@@ -536,12 +557,14 @@ void writePyramidOnRanks(const SurfacePyramid& part, const std::string& path) {
     std::vector<uint64_t> tiles(levels);
     std::vector<int> sides(levels);
     for (size_t t = 0; t < levels; ++t) tiles[t] = part.levels[t].tileCount(), sides[t] = part.levels[t].tileSide;
-    // Every rank's tiles per level: where each rank's run of each section starts (rank 0's first; ranks in Morton order).
+    // Every rank's tiles per level: where each rank's run of each section starts (rank 0's first; ranks in Morton
+    // order).
     const auto perRank = ranks::allGatherVectors(tiles);
     std::vector<uint64_t> total(levels, 0), before(levels, 0);
     for (int r = 0; r < count; ++r)
         for (size_t t = 0; t < levels; ++t) {
-            if (perRank[size_t(r)].size() != levels) throw Error("rank " + std::to_string(r + 1) + " holds a pyramid of another height");
+            if (perRank[size_t(r)].size() != levels)
+                throw Error("rank " + std::to_string(r + 1) + " holds a pyramid of another height");
             total[t] += perRank[size_t(r)][t];
             if (r < rank) before[t] += perRank[size_t(r)][t];
         }

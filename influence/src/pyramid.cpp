@@ -56,14 +56,16 @@ std::optional<float> SurfacePyramid::sample(int t, uint64_t i, uint64_t j, Pyram
 
 SurfacePyramid::Cursor::Cursor(const SurfacePyramid& p, int t)
     : p_(p), t_(t), side_(size_t(p.levels[size_t(t)].tileSide)), shift_(std::countr_zero(side_)) {
-    if (!std::has_single_bit(side_)) throw Error("surface pyramid: a tile side of " + std::to_string(side_) + " samples is not a power of two");
+    if (!std::has_single_bit(side_))
+        throw Error("surface pyramid: a tile side of " + std::to_string(side_) + " samples is not a power of two");
 }
 
 void SurfacePyramid::Cursor::seek(uint64_t i, uint64_t j) {
     const bool first = tileI_ == ~uint64_t{0};
     tileI_ = i >> shift_, tileJ_ = j >> shift_;
     if (!first && table_.empty()) table_.resize(kRemembered);
-    Remembered* slot = table_.empty() ? nullptr : &table_[(tileI_ & (kRemembered / 2 - 1)) | (tileJ_ & 1) * (kRemembered / 2)];
+    Remembered* slot =
+        table_.empty() ? nullptr : &table_[(tileI_ & (kRemembered / 2 - 1)) | (tileJ_ & 1) * (kRemembered / 2)];
     if (slot && slot->tileI == tileI_ && slot->tileJ == tileJ_) {
         tile_ = slot->tile;
         return;
@@ -113,7 +115,8 @@ bool nodeMeetsCells(const Grid& g, uint64_t key, int level) {
 
 // The tiles of each level (pyramid.h's rule: tileKeysOfCells over every cell, less those whose node meets no cell:
 // all their samples would be NaN), ascending.
-std::vector<std::vector<uint64_t>> tileKeys(const Grid& g, const KernelParams& params, int top, const std::vector<int>& sides) {
+std::vector<std::vector<uint64_t>> tileKeys(const Grid& g, const KernelParams& params, int top,
+                                            const std::vector<int>& sides) {
     std::vector<std::vector<uint64_t>> keys(size_t(top) + 1);
     for (int t = 0; t <= top; ++t) {
         std::vector<uint64_t>& k = keys[size_t(t)];
@@ -130,7 +133,8 @@ std::vector<std::vector<uint64_t>> tileKeys(const Grid& g, const KernelParams& p
 
 namespace detail {
 
-void tileKeysOfCells(const Grid& g, const KernelParams& params, size_t lo, size_t hi, int t, int top, int side, std::vector<uint64_t>& out) {
+void tileKeysOfCells(const Grid& g, const KernelParams& params, size_t lo, size_t hi, int t, int top, int side,
+                     std::vector<uint64_t>& out) {
     if (t >= top) {  // the top: the tiles holding any cell
         const uint64_t mask = ~(mortonSpan(t + std::countr_zero(unsigned(side))) - 1);
         for (size_t i = lo; i < hi; ++i) {
@@ -149,21 +153,27 @@ void tileKeysOfCells(const Grid& g, const KernelParams& params, size_t lo, size_
         double cx = 0, cy = 0;
         g.cellCenterLocal(i, cx, cy);
         const double r = params.radiusM(g.cellSizeM(i));
-        const long tx0 = std::max(0L, long(std::floor((cx - r) / tileM))), tx1 = std::min(perSide - 1, long(std::floor((cx + r) / tileM)));
-        const long ty0 = std::max(0L, long(std::floor((cy - r) / tileM))), ty1 = std::min(perSide - 1, long(std::floor((cy + r) / tileM)));
-        if (tx0 == last[0] && tx1 == last[1] && ty0 == last[2] && ty1 == last[3]) continue;  // neighbours in Morton order
+        const long tx0 = std::max(0L, long(std::floor((cx - r) / tileM))),
+                   tx1 = std::min(perSide - 1, long(std::floor((cx + r) / tileM)));
+        const long ty0 = std::max(0L, long(std::floor((cy - r) / tileM))),
+                   ty1 = std::min(perSide - 1, long(std::floor((cy + r) / tileM)));
+        if (tx0 == last[0] && tx1 == last[1] && ty0 == last[2] && ty1 == last[3])
+            continue;  // neighbours in Morton order
         last[0] = tx0, last[1] = tx1, last[2] = ty0, last[3] = ty1;
         for (long ty = ty0; ty <= ty1; ++ty)
-            for (long tx = tx0; tx <= tx1; ++tx) out.push_back(mortonEncode(uint32_t(uint64_t(tx) * span), uint32_t(uint64_t(ty) * span)));
+            for (long tx = tx0; tx <= tx1; ++tx)
+                out.push_back(mortonEncode(uint32_t(uint64_t(tx) * span), uint32_t(uint64_t(ty) * span)));
     }
 }
 
 int pyramidBlockSide(const Grid& shape, const KernelParams& params, int t) {
-    return shape.levelSizeM(t) >= params.radiusM(shape.levelSizeM(std::clamp(shape.maxLevel, 0, shape.rootLevel))) ? 1 : kPyramidBlock;
+    return shape.levelSizeM(t) >= params.radiusM(shape.levelSizeM(std::clamp(shape.maxLevel, 0, shape.rootLevel)))
+               ? 1
+               : kPyramidBlock;
 }
 
-void buildTile(const Grid& g, const ListIndex& index, const KernelParams& params, int t, int side, uint64_t key, int channels,
-               int depthLayer, float* out, PyramidWorkspace& w, int onlyBlock) {
+void buildTile(const Grid& g, const ListIndex& index, const KernelParams& params, int t, int side, uint64_t key,
+               int channels, int depthLayer, float* out, PyramidWorkspace& w, int onlyBlock) {
     const int block = pyramidBlockSide(g, params, t);
     const double h = g.levelSizeM(t);
     const double x0 = double(mortonX(key)) * g.finestCellM, y0 = double(mortonY(key)) * g.finestCellM;
@@ -224,7 +234,8 @@ void measureParentErrorsInto(const SurfacePyramid& p, std::vector<std::vector<fl
         const SurfacePyramid::Level& L = p.levels[size_t(t)];
         const size_t side = size_t(L.tileSide), plane = side * side;
         parallelFor(L.tileCount(), 16, threads, [&](size_t b, size_t e, unsigned) {
-            SurfacePyramid::Cursor parent(p, t + 1);  // a tile's parent samples lie in one parent tile (the far edges: its neighbours)
+            SurfacePyramid::Cursor parent(
+                p, t + 1);  // a tile's parent samples lie in one parent tile (the far edges: its neighbours)
             std::optional<SurfacePyramid::Cursor> beside;
             if (halo) beside.emplace(*halo, t + 1);
             for (size_t tile = b; tile < e; ++tile) {
@@ -271,12 +282,16 @@ void wetMarkedTiles(const Grid& g, const KernelParams& params, int depthLayer, s
         double cx = 0, cy = 0;
         g.cellCenterLocal(i, cx, cy);
         const double r = params.radiusM(g.cellSizeM(i));
-        const long tx0 = std::max(0L, long(std::floor((cx - r) / tileM)) - 1), tx1 = std::min(perSide - 1, long(std::floor((cx + r) / tileM)) + 1);
-        const long ty0 = std::max(0L, long(std::floor((cy - r) / tileM)) - 1), ty1 = std::min(perSide - 1, long(std::floor((cy + r) / tileM)) + 1);
-        if (tx0 == last[0] && tx1 == last[1] && ty0 == last[2] && ty1 == last[3]) continue;  // neighbours in Morton order
+        const long tx0 = std::max(0L, long(std::floor((cx - r) / tileM)) - 1),
+                   tx1 = std::min(perSide - 1, long(std::floor((cx + r) / tileM)) + 1);
+        const long ty0 = std::max(0L, long(std::floor((cy - r) / tileM)) - 1),
+                   ty1 = std::min(perSide - 1, long(std::floor((cy + r) / tileM)) + 1);
+        if (tx0 == last[0] && tx1 == last[1] && ty0 == last[2] && ty1 == last[3])
+            continue;  // neighbours in Morton order
         last[0] = tx0, last[1] = tx1, last[2] = ty0, last[3] = ty1;
         for (long ty = ty0; ty <= ty1; ++ty)
-            for (long tx = tx0; tx <= tx1; ++tx) marked.push_back(mortonEncode(uint32_t(uint64_t(tx) * span), uint32_t(uint64_t(ty) * span)));
+            for (long tx = tx0; tx <= tx1; ++tx)
+                marked.push_back(mortonEncode(uint32_t(uint64_t(tx) * span), uint32_t(uint64_t(ty) * span)));
     }
 }
 
@@ -288,7 +303,8 @@ namespace {
 // sample with any wet weight, so every other tile draws no water; the dilation keeps beside each kept tile the
 // parent-level tiles whose samples the parent-error pass (measureParentErrorsInto) reads at its far edges (a kept
 // tile's parent is kept: its node holds the child's).
-std::vector<std::vector<uint64_t>> wetReachedKeys(const Grid& g, const KernelParams& params, const std::vector<std::vector<uint64_t>>& keys,
+std::vector<std::vector<uint64_t>> wetReachedKeys(const Grid& g, const KernelParams& params,
+                                                  const std::vector<std::vector<uint64_t>>& keys,
                                                   const std::vector<int>& sides, int depthLayer) {
     std::vector<std::vector<uint64_t>> out(keys.size());
     for (size_t t = 0; t < keys.size(); ++t) {
@@ -312,8 +328,8 @@ std::vector<int> pyramidTileSides(const Grid& shape) {
     return sides;
 }
 
-SurfacePyramid finishPyramid(SurfacePyramid p, std::shared_ptr<SurfacePyramid::Storage> owned, const std::vector<int>& sides,
-                             unsigned threads, const SurfacePyramid* halo) {
+SurfacePyramid finishPyramid(SurfacePyramid p, std::shared_ptr<SurfacePyramid::Storage> owned,
+                             const std::vector<int>& sides, unsigned threads, const SurfacePyramid* halo) {
     const size_t levels = sides.size();
     owned->errors.resize(levels);
     p.levels.resize(levels);
@@ -336,9 +352,11 @@ SurfacePyramid finishPyramid(SurfacePyramid p, std::shared_ptr<SurfacePyramid::S
 namespace {
 
 // The tiles of every level of `g` (tileKeys), or only those a wet cell's kernel reaches (wetReachedKeys), sampled.
-SurfacePyramid buildPyramid(const Grid& g, const KernelParams& params, unsigned threads, bool progress, bool wetReachedOnly) {
+SurfacePyramid buildPyramid(const Grid& g, const KernelParams& params, unsigned threads, bool progress,
+                            bool wetReachedOnly) {
     if (std::string why = params.validate(); !why.empty()) throw Error("influence parameters: " + why);
-    if (g.cellCount() >= std::numeric_limits<uint32_t>::max()) throw Error("grid has too many cells for 32-bit cell indices");
+    if (g.cellCount() >= std::numeric_limits<uint32_t>::max())
+        throw Error("grid has too many cells for 32-bit cell indices");
     threads = resolveThreads(threads);
     SurfacePyramid p;
     p.finestCellM = g.finestCellM;
@@ -408,7 +426,8 @@ SurfacePyramid waterPyramidOf(const SurfacePyramid& whole) {
             if (!drawn) continue;
             owned->keys[t].push_back(L.keys[tile]);
             owned->samples[t].insert(owned->samples[t].end(), level, level + 2 * plane);
-            const float* errors = L.parentErrorM.data() + tile * 3;  // pointers: [tile * 3 + 3] is one past the last tile's
+            const float* errors =
+                L.parentErrorM.data() + tile * 3;  // pointers: [tile * 3 + 3] is one past the last tile's
             owned->errors[t].insert(owned->errors[t].end(), errors + 1, errors + 3);
         }
         p.levels[t].keys = owned->keys[t];

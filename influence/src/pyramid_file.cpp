@@ -34,12 +34,17 @@ namespace hc::influence {
 namespace {
 
 enum : uint32_t { kKeys = 1, kErrors = 2, kSamples = 3 };
-const FileFormat kFormat{{'\x89', 'H', 'C', 'P', 'Y', 'R', 'A', '\n'}, 1, 0, "heightcast surface pyramid (.hcp)", {kKeys, kErrors, kSamples},
+const FileFormat kFormat{{'\x89', 'H', 'C', 'P', 'Y', 'R', 'A', '\n'},
+                         1,
+                         0,
+                         "heightcast surface pyramid (.hcp)",
+                         {kKeys, kErrors, kSamples},
                          0};  // block checksums from the first version (core/sectioned_file.h)
 
 namespace off {
-constexpr size_t structureHash = 24, contentHash = 32, finestCellM = 40, rootLevel = 48, channels = 49, tileLog2 = 50, levelCount = 51,
-                 kernelId = 52, reserved0 = 56, sigma = 64, truncation = 72, reserved1 = 80, reservedEnd = 120;
+constexpr size_t structureHash = 24, contentHash = 32, finestCellM = 40, rootLevel = 48, channels = 49, tileLog2 = 50,
+                 levelCount = 51, kernelId = 52, reserved0 = 56, sigma = 64, truncation = 72, reserved1 = 80,
+                 reservedEnd = 120;
 }
 
 }  // namespace
@@ -48,7 +53,8 @@ namespace detail {
 
 const FileFormat& pyramidFileFormat() { return kFormat; }
 
-std::vector<FileSection> pyramidFileLayout(const std::vector<uint64_t>& tiles, const std::vector<int>& sides, int channels) {
+std::vector<FileSection> pyramidFileLayout(const std::vector<uint64_t>& tiles, const std::vector<int>& sides,
+                                           int channels) {
     std::vector<FileSection> layout;
     for (size_t t = 0; t < tiles.size(); ++t) {
         const uint64_t n = tiles[t], plane = uint64_t(sides[t]) * uint64_t(sides[t]);
@@ -97,8 +103,8 @@ SurfacePyramid readSurfacePyramid(const std::string& path, const GridFileInfo& g
     return readSurfacePyramid(path, grid.shape, grid.structureHash, grid.contentHash, params);
 }
 
-SurfacePyramid readSurfacePyramid(const std::string& path, const Grid& grid, uint64_t structureHash, uint64_t contentHash,
-                                  const KernelParams& params) {
+SurfacePyramid readSurfacePyramid(const std::string& path, const Grid& grid, uint64_t structureHash,
+                                  uint64_t contentHash, const KernelParams& params) {
     SectionedFileReader file(path, kFormat);
     const std::byte* h = file.header();
     for (size_t i : {off::reserved0, off::reserved0 + 1, off::reserved0 + 2, off::reserved0 + 3})
@@ -119,30 +125,41 @@ SurfacePyramid readSurfacePyramid(const std::string& path, const Grid& grid, uin
 
     // Whose pyramid is it? Say exactly what differs.
     if (p.structureHash != structureHash || p.contentHash != contentHash)
-        throw Error(path + ": stale or foreign surface pyramid: built for another grid (or other values on this grid's tree)");
-    if (p.params.kernelId != params.kernelId || p.params.sigma != params.sigma || p.params.truncation != params.truncation)
+        throw Error(path +
+                    ": stale or foreign surface pyramid: built for another grid (or other values on this grid's tree)");
+    if (p.params.kernelId != params.kernelId || p.params.sigma != params.sigma ||
+        p.params.truncation != params.truncation)
         throw Error(path + ": surface pyramid built for sigma " + std::to_string(p.params.sigma) + ", R " +
                     std::to_string(p.params.truncation) + "; wanted sigma " + std::to_string(params.sigma) + ", R " +
                     std::to_string(params.truncation));
     // The grid's geometry, field by field (a file whose hashes match may still declare another root level,
     // from which every size below would be computed).
-    if (p.rootLevel != grid.rootLevel) file.fail(off::rootLevel, "root level " + std::to_string(p.rootLevel) + ", the grid's is " + std::to_string(grid.rootLevel));
+    if (p.rootLevel != grid.rootLevel)
+        file.fail(off::rootLevel,
+                  "root level " + std::to_string(p.rootLevel) + ", the grid's is " + std::to_string(grid.rootLevel));
     if (p.finestCellM != grid.finestCellM) file.fail(off::finestCellM, "finest cell size differs from the grid's");
     // The rest of the shape must be what this reader builds.
     const bool water = grid.findLayer("water_depth") >= 0;
     if (water ? p.channels != 3 && p.channels != 2 : p.channels != 1)
-        file.fail(off::channels, "declares " + std::to_string(p.channels) + " channels, expected " + (water ? "3 (or 2: water only)" : "1"));
-    if (tileLog2 != kPyramidTileLog2) file.fail(off::tileLog2, "tile side 2^" + std::to_string(tileLog2) + ", this reader uses 2^" + std::to_string(kPyramidTileLog2));
+        file.fail(off::channels, "declares " + std::to_string(p.channels) + " channels, expected " +
+                                     (water ? "3 (or 2: water only)" : "1"));
+    if (tileLog2 != kPyramidTileLog2)
+        file.fail(off::tileLog2, "tile side 2^" + std::to_string(tileLog2) + ", this reader uses 2^" +
+                                     std::to_string(kPyramidTileLog2));
     if (levelCount != std::max(0, p.rootLevel - kPyramidTileLog2) + 1)
-        file.fail(off::levelCount, "declares " + std::to_string(levelCount) + " levels, a root level of " + std::to_string(p.rootLevel) +
-                                       " has " + std::to_string(std::max(0, p.rootLevel - kPyramidTileLog2) + 1));
+        file.fail(off::levelCount, "declares " + std::to_string(levelCount) + " levels, a root level of " +
+                                       std::to_string(p.rootLevel) + " has " +
+                                       std::to_string(std::max(0, p.rootLevel - kPyramidTileLog2) + 1));
 
     std::vector<const FileSection*> found(size_t(levelCount) * 3, nullptr);
     for (const FileSection& s : file.sections()) {
         if (s.kind < kKeys || s.kind > kSamples) continue;  // a newer minor's section: skipped
-        if (s.index >= uint32_t(levelCount)) file.fail(s.offset, "section for level " + std::to_string(s.index) + ", beyond the top");
+        if (s.index >= uint32_t(levelCount))
+            file.fail(s.offset, "section for level " + std::to_string(s.index) + ", beyond the top");
         const FileSection*& slot = found[size_t(s.index) * 3 + (s.kind - 1)];
-        if (slot) file.fail(s.offset, "second section of kind " + std::to_string(s.kind) + " for level " + std::to_string(s.index));
+        if (slot)
+            file.fail(s.offset,
+                      "second section of kind " + std::to_string(s.kind) + " for level " + std::to_string(s.index));
         slot = &s;
     }
     p.levels.resize(size_t(levelCount));
@@ -150,15 +167,24 @@ SurfacePyramid readSurfacePyramid(const std::string& path, const Grid& grid, uin
         const FileSection* keys = found[size_t(t) * 3];
         const FileSection* errors = found[size_t(t) * 3 + 1];
         const FileSection* samples = found[size_t(t) * 3 + 2];
-        if (!keys || !errors || !samples) file.failFile("lacks a KEYS, ERRORS or SAMPLES section for level " + std::to_string(t));
+        if (!keys || !errors || !samples)
+            file.failFile("lacks a KEYS, ERRORS or SAMPLES section for level " + std::to_string(t));
         SurfacePyramid::Level& L = p.levels[size_t(t)];
         L.level = t;
         L.tileSide = std::min(kPyramidTileSide, 1 << (p.rootLevel - t));
-        if (keys->bytes % 8) file.fail(keys->offset, "KEYS of level " + std::to_string(t) + " is not a whole number of u64");
-        const uint64_t n = keys->bytes / 8, ch = uint64_t(p.channels), plane = uint64_t(L.tileSide) * uint64_t(L.tileSide);
+        if (keys->bytes % 8)
+            file.fail(keys->offset, "KEYS of level " + std::to_string(t) + " is not a whole number of u64");
+        const uint64_t n = keys->bytes / 8, ch = uint64_t(p.channels),
+                       plane = uint64_t(L.tileSide) * uint64_t(L.tileSide);
         // n <= file size / 8, so these products cannot wrap.
-        if (errors->bytes != n * ch * 4) file.fail(errors->offset, "ERRORS of level " + std::to_string(t) + " holds " + std::to_string(errors->bytes) + " bytes, expected " + std::to_string(n * ch * 4));
-        if (samples->bytes != n * ch * plane * 4) file.fail(samples->offset, "SAMPLES of level " + std::to_string(t) + " holds " + std::to_string(samples->bytes) + " bytes, expected " + std::to_string(n * ch * plane * 4));
+        if (errors->bytes != n * ch * 4)
+            file.fail(errors->offset, "ERRORS of level " + std::to_string(t) + " holds " +
+                                          std::to_string(errors->bytes) + " bytes, expected " +
+                                          std::to_string(n * ch * 4));
+        if (samples->bytes != n * ch * plane * 4)
+            file.fail(samples->offset, "SAMPLES of level " + std::to_string(t) + " holds " +
+                                           std::to_string(samples->bytes) + " bytes, expected " +
+                                           std::to_string(n * ch * plane * 4));
         // 64-byte aligned in a page-aligned mapping: the spans are properly aligned.
         L.keys = {reinterpret_cast<const uint64_t*>(file.data(*keys).data()), n};
         L.parentErrorM = {reinterpret_cast<const float*>(file.data(*errors).data()), n * ch};
@@ -167,7 +193,8 @@ SurfacePyramid readSurfacePyramid(const std::string& path, const Grid& grid, uin
         const uint64_t span = mortonSpan(nodeLevel), domain = mortonSpan(p.rootLevel);
         for (uint64_t k = 0; k < n; ++k) {
             if (L.keys[k] % span || L.keys[k] >= domain)
-                file.fail(keys->offset + 8 * k, "tile key " + std::to_string(L.keys[k]) + " is not a level-" + std::to_string(nodeLevel) + " node of the domain");
+                file.fail(keys->offset + 8 * k, "tile key " + std::to_string(L.keys[k]) + " is not a level-" +
+                                                    std::to_string(nodeLevel) + " node of the domain");
             if (k && L.keys[k] <= L.keys[k - 1]) file.fail(keys->offset + 8 * k, "tile keys do not ascend");
         }
         for (uint64_t k = 0; k < n * ch; ++k)

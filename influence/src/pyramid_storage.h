@@ -12,10 +12,10 @@
 namespace hc::influence {
 
 struct SurfacePyramid::Storage {
-    std::vector<std::vector<uint64_t>> keys;     // per level (built)
-    std::vector<std::vector<float>> samples;     // per level (built)
-    std::vector<std::vector<float>> errors;      // per level (built)
-    std::shared_ptr<const MappedFile> mapping;   // read
+    std::vector<std::vector<uint64_t>> keys;    // per level (built)
+    std::vector<std::vector<float>> samples;    // per level (built)
+    std::vector<std::vector<float>> errors;     // per level (built)
+    std::shared_ptr<const MappedFile> mapping;  // read
 };
 
 }  // namespace hc::influence

@@ -14,7 +14,8 @@ std::vector<double> kernelReachM(const Grid& shape, const KernelParams& params) 
     return reach;
 }
 
-SurfaceRegion readSurfaceRegion(const GridRegionReader& file, const Grid::Square& box, const KernelParams& params, unsigned threads) {
+SurfaceRegion readSurfaceRegion(const GridRegionReader& file, const Grid::Square& box, const KernelParams& params,
+                                unsigned threads) {
     if (std::string why = params.validate(); !why.empty()) throw Error("kernel parameters: " + why);
     SurfaceRegion r;
     r.grid = file.region(box, kernelReachM(file.shape(), params));
@@ -22,7 +23,8 @@ SurfaceRegion readSurfaceRegion(const GridRegionReader& file, const Grid::Square
     return r;
 }
 
-std::vector<std::optional<double>> valuesFromFile(const GridRegionReader& file, std::span<const std::array<double, 2>> pointsLocal,
+std::vector<std::optional<double>> valuesFromFile(const GridRegionReader& file,
+                                                  std::span<const std::array<double, 2>> pointsLocal,
                                                   const Layer& layer, const KernelParams& params, unsigned threads,
                                                   RegionReadStats* stats) {
     const Grid& shape = file.shape();
@@ -33,7 +35,8 @@ std::vector<std::optional<double>> valuesFromFile(const GridRegionReader& file, 
     std::vector<std::pair<uint64_t, uint32_t>> keyed;  // (key, point index), sorted
     keyed.reserve(pointsLocal.size());
     for (size_t p = 0; p < pointsLocal.size(); ++p)
-        if (const auto key = shape.finestKeyAt(pointsLocal[p][0], pointsLocal[p][1])) keyed.push_back({*key, uint32_t(p)});
+        if (const auto key = shape.finestKeyAt(pointsLocal[p][0], pointsLocal[p][1]))
+            keyed.push_back({*key, uint32_t(p)});
     std::sort(keyed.begin(), keyed.end());
     struct Node {
         uint64_t key;
@@ -48,7 +51,8 @@ std::vector<std::optional<double>> valuesFromFile(const GridRegionReader& file, 
         if (n.lo == n.hi) continue;
         // The smallest node holding these points: counting its cells searches next to the points (a node much larger
         // than they would send the count's binary searches, and the blocks they check, far across the file).
-        while (n.level > 0 && (keyed[n.lo].first >> (2 * (n.level - 1))) == (keyed[n.hi - 1].first >> (2 * (n.level - 1)))) {
+        while (n.level > 0 &&
+               (keyed[n.lo].first >> (2 * (n.level - 1))) == (keyed[n.hi - 1].first >> (2 * (n.level - 1)))) {
             --n.level;
             n.key = keyed[n.lo].first & ~(mortonSpan(n.level) - 1);
         }
@@ -58,7 +62,8 @@ std::vector<std::optional<double>> valuesFromFile(const GridRegionReader& file, 
             const uint64_t quarter = mortonSpan(n.level - 1);
             size_t b[5] = {n.lo, 0, 0, 0, n.hi};
             for (int q = 1; q < 4; ++q)
-                b[q] = size_t(std::lower_bound(keyed.begin() + std::ptrdiff_t(b[q - 1]), keyed.begin() + std::ptrdiff_t(n.hi),
+                b[q] = size_t(std::lower_bound(keyed.begin() + std::ptrdiff_t(b[q - 1]),
+                                               keyed.begin() + std::ptrdiff_t(n.hi),
                                                std::pair<uint64_t, uint32_t>{n.key + quarter * uint64_t(q), 0}) -
                               keyed.begin());
             for (int q = 3; q >= 0; --q) stack.push_back({n.key + quarter * uint64_t(q), n.level - 1, b[q], b[q + 1]});

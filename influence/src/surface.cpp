@@ -56,8 +56,8 @@ SurfaceEvaluator::SurfaceEvaluator(const Grid& grid, const InfluenceLists& lists
 // Equal to the plain weighted mean in exact arithmetic, but a constant field comes out exactly
 // constant, and centimetre relief at 8000 m keeps its digits (no large products to cancel). The water
 // level's base is a wet cell's level (levelBase), so a constant level stays exactly constant too.
-void SurfaceEvaluator::sums(size_t k, double x, double y, size_t l, const float* depth, bool addDepth, double base, double& num,
-                            double& den, double* dnum, double* dden) const {
+void SurfaceEvaluator::sums(size_t k, double x, double y, size_t l, const float* depth, bool addDepth, double base,
+                            double& num, double& den, double* dnum, double* dden) const {
     const float* v = grid_.values[l].data();
     num = den = 0;
     double gnx = 0, gny = 0, gdx = 0, gdy = 0;
@@ -148,8 +148,8 @@ std::optional<ValueGradient> SurfaceEvaluator::valueGradient(double x, double y,
     return evaluate(x, y, layer, true);
 }
 
-std::vector<std::optional<double>> SurfaceEvaluator::values(std::span<const std::array<double, 2>> pts, const Layer& layer,
-                                                            unsigned threads) const {
+std::vector<std::optional<double>> SurfaceEvaluator::values(std::span<const std::array<double, 2>> pts,
+                                                            const Layer& layer, unsigned threads) const {
     std::vector<std::optional<double>> out(pts.size());
     if (layer.kind == Layer::WaterCells) {  // rare (a probe of velocity): one point at a time, as value() does
         parallelFor(pts.size(), 1024, threads, [&](size_t b, size_t e, unsigned) {
@@ -213,8 +213,10 @@ std::vector<std::optional<double>> SurfaceEvaluator::values(std::span<const std:
                 // The water rule of surface.h, as in evaluate().
                 const double level = base1 + n1 / dw;
                 const bool drawn = dw > 0 && dw >= kWetShareMin * d && level > z;
-                if (layer.kind == Layer::WaterDepth) out[p] = drawn ? level - z : 0.0;
-                else if (drawn) out[p] = level;
+                if (layer.kind == Layer::WaterDepth)
+                    out[p] = drawn ? level - z : 0.0;
+                else if (drawn)
+                    out[p] = level;
             }
         }
     });

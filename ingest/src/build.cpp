@@ -6,25 +6,25 @@
 // each tile's pyramid (cheap, cache-resident) and writes its cells straight into the final arrays:
 // no sort, no reallocation, and memory beyond the raster and the grid stays at a few hundred kB.
 //
-// Shares (core/ranks/ranks.h; docs/design.md section 7): the raster is cut into share nodes (quadtree nodes no finer than a
-// tile or the coarsest cell), and under mpirun each rank takes a run of them in Morton order, about equal in area: the
-// tiles of pass A and the units of pass C inside its nodes. The roots are exchanged between the two passes. Rank 0 opens
-// the file; the other ranks write their cells into it at their place (GridFilePart), check and hash them in turn, and
-// send rank 0 their block checksums and statistics; with a trace to paint they send rank 0 their cells instead, which it
-// writes. A raster read window by window (RasterWindows) is read by each rank only over its own nodes, in maximal
-// aligned squares: no rank holds it whole. The file is the same bytes for any number of ranks and threads: the squared
-// deviations are summed per unit, then over the units in Morton order.
+// Shares (core/ranks/ranks.h; docs/design.md section 7): the raster is cut into share nodes (quadtree nodes no finer
+// than a tile or the coarsest cell), and under mpirun each rank takes a run of them in Morton order, about equal in
+// area: the tiles of pass A and the units of pass C inside its nodes. The roots are exchanged between the two passes.
+// Rank 0 opens the file; the other ranks write their cells into it at their place (GridFilePart), check and hash them
+// in turn, and send rank 0 their block checksums and statistics; with a trace to paint they send rank 0 their cells
+// instead, which it writes. A raster read window by window (RasterWindows) is read by each rank only over its own
+// nodes, in maximal aligned squares: no rank holds it whole. The file is the same bytes for any number of ranks and
+// threads: the squared deviations are summed per unit, then over the units in Morton order.
 //
-// Water (docs/design.md section 6): every step's depth raster is read once before the build, one at a time, into a merge
-// mask (a byte per quadtree node: may these four cells merge, for every step?), so the terrain build keeps every
+// Water (docs/design.md section 6): every step's depth raster is read once before the build, one at a time, into a
+// merge mask (a byte per quadtree node: may these four cells merge, for every step?), so the terrain build keeps every
 // step's wet/dry edges and depth tolerance. After the cells are written, each step is read again and its depth per
 // cell computed exactly as a merge would (the float mean of the four children's means, bottom up): with one step the
-// cells and depths are those of a build over both layers at once. Under mpirun every rank computes the depths of its own
-// cells (their codes kept as it writes them) and sends rank 0 the wet ones, in rank order, which is the cells' order:
-// no rank holds every cell's code. With a raster read window by window, each rank reads only its windows of each step
-// (RasterWindows::readStep, or a level's bathtub flooded over its windows and joined across the ranks: bathtubBlocks)
-// and keeps the merge masks of its own windows; the levels above the tiles, where every rank merges every node, are
-// combined over the ranks.
+// cells and depths are those of a build over both layers at once. Under mpirun every rank computes the depths of its
+// own cells (their codes kept as it writes them) and sends rank 0 the wet ones, in rank order, which is the cells'
+// order: no rank holds every cell's code. With a raster read window by window, each rank reads only its windows of each
+// step (RasterWindows::readStep, or a level's bathtub flooded over its windows and joined across the ranks:
+// bathtubBlocks) and keeps the merge masks of its own windows; the levels above the tiles, where every rank merges
+// every node, are combined over the ranks.
 //
 // The files: the algorithm here (the merge rule, the tiles' pyramids, the passes of Builder::run); its distribution
 // over the ranks in build_on_ranks.cpp; the entry points and the water steps' masks and depths in build_grid.cpp; what
@@ -100,8 +100,8 @@ const Node& Builder::buildTile(size_t tx, size_t ty, std::vector<std::vector<Nod
         for (size_t y = 0; y < side; ++y)
             for (size_t x = 0; x < side; ++x) {
                 size_t c = 2 * y * childSide + 2 * x;
-                cur[y * side + x] = merge(ch[c], ch[c + 1], ch[c + childSide], ch[c + childSide + 1], l, ((tx * tile_) >> l) + x,
-                                          ((ty * tile_) >> l) + y);
+                cur[y * side + x] = merge(ch[c], ch[c + 1], ch[c + childSide], ch[c + childSide + 1], l,
+                                          ((tx * tile_) >> l) + x, ((ty * tile_) >> l) + y);
             }
     }
     return scratch[static_cast<size_t>(tileLevel_)][0];
@@ -141,8 +141,10 @@ Stats Builder::run(CellSink& sink) {
     // Ranks write into a file, never into a grid in memory, and paint no trace (the tools read rasters by windows under
     // mpirun, and a trace is painted without windows only): the same answer on every rank, so all of them throw.
     if (rs.rankCount > 1 && (!sink.fileShape() || opt_.cellElevations))
-        throw Error("internal: under mpirun the grid is built into a file (each rank writes its own cells there) and without a trace of "
-                    "the source; an in-memory grid or a trace is built by one process");
+        throw Error(
+            "internal: under mpirun the grid is built into a file (each rank writes its own cells there) and without a "
+            "trace of "
+            "the source; an in-memory grid or a trace is built by one process");
     const auto rankStart = Stopwatch();
     takeShare(rs);
     if (windows_ && !windows_->stepTimesS.empty()) maskOwnNodes(rs.root);
@@ -207,7 +209,7 @@ void Builder::buildCoarseLevels(RunState& rs) const {
     std::vector<std::pair<size_t, size_t>> dims{{ntx_, nty_}};
     for (int l = tileLevel_ + 1; l <= rootLevel_; ++l) {
         const size_t cw = dims.back().first, chh = dims.back().second;  // not a structured binding: the lambda below
-                                                                         // captures them (clang 14 cannot)
+                                                                        // captures them (clang 14 cannot)
         size_t nw = (cw + 1) / 2, nh = (chh + 1) / 2;
         const auto& ch = coarse.back();
         std::vector<Node> cur(nw * nh);
@@ -277,7 +279,8 @@ Stats Builder::writeUnits(RunState& rs, CellSink& sink, GridFilePart* part, std:
                 std::vector<std::span<const float>> values(batch.values.begin(), batch.values.end());
                 sink.append(batch.codes, values);
             } else {  // into the file at its place; read back for the hashes (nothing held)
-                part->append(batch.codes, std::vector<std::span<const float>>(batch.values.begin(), batch.values.end()));
+                part->append(batch.codes,
+                             std::vector<std::span<const float>>(batch.values.begin(), batch.values.end()));
                 sink.keepOwn(batch.codes);
             }
             u0 = u1;
@@ -339,7 +342,8 @@ double Builder::measure(const Batch& b, size_t begin, size_t end, Stats& a, bool
                 const size_t idx = px.index(ix, iy);
                 const double exact = static_cast<double>(px.values[idx]) + (px.rounding ? px.rounding[idx] : 0.0);
                 const double dz = exact - z;
-                if (paintElevations && opt_.cellElevations) (*opt_.cellElevations)[(t_.height - 1 - iy) * t_.width + ix] = b.values[0][i];
+                if (paintElevations && opt_.cellElevations)
+                    (*opt_.cellElevations)[(t_.height - 1 - iy) * t_.width + ix] = b.values[0][i];
                 sumSq += dz * dz;
                 a.maxDev = std::max(a.maxDev, std::abs(dz));
                 ++a.pixels;

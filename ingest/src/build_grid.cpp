@@ -98,14 +98,16 @@ void restrictByStep(const Block& d, double tolerance, int maxLevel, unsigned thr
                         const Depth& r = ch[c + cn];
                         const Depth& s = ch[c + cn + 1];
                         Depth out;
-                        const bool same = p.state != 0 && p.state == q.state && q.state == r.state && r.state == s.state;
+                        const bool same =
+                            p.state != 0 && p.state == q.state && q.state == r.state && r.state == s.state;
                         const bool anyData = p.state || q.state || r.state || s.state;
                         if (same) {
                             const double sum = static_cast<double>(p.mean) + q.mean + r.mean + s.mean;
                             out.mean = static_cast<float>(sum * 0.25);
                             out.lo = std::min({p.lo, q.lo, r.lo, s.lo});
                             out.hi = std::max({p.hi, q.hi, r.hi, s.hi});
-                            if (static_cast<double>(out.hi) - out.mean <= tolerance && out.mean - static_cast<double>(out.lo) <= tolerance)
+                            if (static_cast<double>(out.hi) - out.mean <= tolerance &&
+                                out.mean - static_cast<double>(out.lo) <= tolerance)
                                 out.state = p.state;
                         }
                         if (out.state == 0 && anyData)
@@ -127,8 +129,10 @@ using detail::restrictByStep;
 
 // The grid's geometry for a raster: origin at its south-west corner, finest cell = its pixel.
 // `windowed`: the raster's values are read window by window (RasterWindows), not held in terrain.values.
-Grid shapeFor(const Raster& terrain, bool water, const BuildOptions& options, int& rootLevel, int& maxLevel, bool windowed = false) {
-    if (terrain.width == 0 || terrain.height == 0 || (!windowed && terrain.values.size() != terrain.width * terrain.height))
+Grid shapeFor(const Raster& terrain, bool water, const BuildOptions& options, int& rootLevel, int& maxLevel,
+              bool windowed = false) {
+    if (terrain.width == 0 || terrain.height == 0 ||
+        (!windowed && terrain.values.size() != terrain.width * terrain.height))
         throw Error("raster is empty or inconsistent");
     checkToleranceM(options.toleranceM);
     if (!(terrain.pixelSizeM > 0)) throw Error("pixel size must be positive");
@@ -136,8 +140,9 @@ Grid shapeFor(const Raster& terrain, bool water, const BuildOptions& options, in
         throw Error("terrain rounding does not match the terrain raster");
     rootLevel = 0;
     while ((size_t{1} << rootLevel) < std::max(terrain.width, terrain.height)) ++rootLevel;
-    if (rootLevel > kMaxRootLevel) throw Error("raster of " + std::to_string(terrain.width) + " x " +
-                                               std::to_string(terrain.height) + " pixels is too large for one grid");
+    if (rootLevel > kMaxRootLevel)
+        throw Error("raster of " + std::to_string(terrain.width) + " x " + std::to_string(terrain.height) +
+                    " pixels is too large for one grid");
     if (options.maxLevel < 0) throw Error("coarsest level " + std::to_string(options.maxLevel) + " is negative");
     // A coarsest level above the root's (--max-cell wider than the domain) changes nothing: no cell is larger than the
     // root node, and the grid records the level its cells can reach.
@@ -184,8 +189,8 @@ std::optional<MergeMask> maskOf(const Raster& terrain, const WaterSteps* steps, 
 // One step's depth per cell (cellMean) for the cells `codes`: the wet ones (> 0) in stored form, and the largest
 // |pixel - cell depth| over the pixels the cells cover. viewOf(ix, iy): the depths (the whole raster, or the rank's
 // block) holding the cell whose south-west pixel is (ix, iy), and so all its pixels.
-WaterStepData stepValues(const std::function<const Block&(size_t ix, size_t iy)>& viewOf, std::span<const uint64_t> codes, double timeS,
-                         unsigned threads, double& maxDev) {
+WaterStepData stepValues(const std::function<const Block&(size_t ix, size_t iy)>& viewOf,
+                         std::span<const uint64_t> codes, double timeS, unsigned threads, double& maxDev) {
     struct Part {
         std::vector<uint32_t> wet;
         std::vector<float> depth;
@@ -290,13 +295,15 @@ Grid buildGrid(const Raster& terrain, const Raster* waterDepth, const BuildOptio
     }
     const std::optional<MergeMask> mask = maskOf(terrain, waterDepth ? &one : nullptr, options, maxLevel);
     GridSink sink(g);
-    if (options.cellElevations) options.cellElevations->assign(terrain.values.size(), std::numeric_limits<float>::quiet_NaN());
+    if (options.cellElevations)
+        options.cellElevations->assign(terrain.values.size(), std::numeric_limits<float>::quiet_NaN());
     Stats st = Builder(terrain, nullptr, mask ? &*mask : nullptr, options, rootLevel, maxLevel).run(sink);
     if (g.cellCount() == 0) throw Error("the raster holds no valid pixel (all nodata): nothing to build");
     if (waterDepth) {
         g.values[1].clear();
         const Block whole = wholeOf(*waterDepth);
-        const WaterStepData data = stepValues([&](size_t, size_t) -> const Block& { return whole; }, g.codes, 0.0, options.threads, st.maxDev);
+        const WaterStepData data =
+            stepValues([&](size_t, size_t) -> const Block& { return whole; }, g.codes, 0.0, options.threads, st.maxDev);
         selectStep(g, data, 0);
     }
     fillStats(st, g.stats);
@@ -307,16 +314,18 @@ Grid buildGrid(const Raster& terrain, const Raster* waterDepth, const BuildOptio
 namespace {
 
 // buildGridFile, its pixels from terrain.values or read window by window (`windows`; without water steps).
-BuildSummary buildFile(const Raster& terrain, const RasterWindows* windows, const WaterSteps* steps, const BuildOptions& options,
-                       const std::string& path, const IngestStats& extraStats) {
+BuildSummary buildFile(const Raster& terrain, const RasterWindows* windows, const WaterSteps* steps,
+                       const BuildOptions& options, const std::string& path, const IngestStats& extraStats) {
     const Stopwatch clock;
     int rootLevel = 0, maxLevel = 0;
     const size_t stepCount = steps ? steps->count : 0;
-    if (steps && steps->timesS.size() != stepCount) throw Error("water steps: " + std::to_string(steps->timesS.size()) + " times for " + std::to_string(stepCount) + " steps");
+    if (steps && steps->timesS.size() != stepCount)
+        throw Error("water steps: " + std::to_string(steps->timesS.size()) + " times for " + std::to_string(stepCount) +
+                    " steps");
     for (size_t k = 1; k < stepCount; ++k)
         if (!(steps->timesS[k] > steps->timesS[k - 1]))
-            throw Error("water step times must increase strictly: step " + std::to_string(k) + " at " + std::to_string(steps->timesS[k]) +
-                        " s follows " + std::to_string(steps->timesS[k - 1]) + " s");
+            throw Error("water step times must increase strictly: step " + std::to_string(k) + " at " +
+                        std::to_string(steps->timesS[k]) + " s follows " + std::to_string(steps->timesS[k - 1]) + " s");
     BuildSummary out;
     if (windows && options.cellElevations) throw Error("internal: a raster read by windows is built without a trace");
     out.shape = shapeFor(terrain, stepCount > 0, options, rootLevel, maxLevel, windows != nullptr);
@@ -324,13 +333,14 @@ BuildSummary buildFile(const Raster& terrain, const RasterWindows* windows, cons
     const std::optional<MergeMask> mask = windows ? std::nullopt : maskOf(terrain, steps, options, maxLevel);
     FileSink sink(path, out.shape, stepCount);
     const bool root = ranks::rank() == 0;  // under mpirun, rank 0 commits the file (Builder::run)
-    if (options.cellElevations && root) options.cellElevations->assign(terrain.values.size(), std::numeric_limits<float>::quiet_NaN());
+    if (options.cellElevations && root)
+        options.cellElevations->assign(terrain.values.size(), std::numeric_limits<float>::quiet_NaN());
     Builder builder(terrain, windows, mask ? &*mask : nullptr, options, rootLevel, maxLevel);
     Stats st = builder.run(sink);
     for (uint64_t c : st.perLevel) out.cellCount += c;  // on rank 0 every rank's cells, on another its share
     if (stepCount > 0) {
-        // Each step's depth per cell: every rank over its own cells (the codes its sink kept), the wet ones sent to rank 0
-        // in rank order, which is the cells' order.
+        // Each step's depth per cell: every rank over its own cells (the codes its sink kept), the wet ones sent to
+        // rank 0 in rank order, which is the cells' order.
         if (sink.codes.size() < st.ownCells) throw Error("internal: a rank kept fewer codes than it has cells");
         const std::span<const uint64_t> own = std::span<const uint64_t>(sink.codes).first(st.ownCells);
         const Stopwatch stepClock;
@@ -342,13 +352,16 @@ BuildSummary buildFile(const Raster& terrain, const RasterWindows* windows, cons
                 if (windows) {  // the same windows of the step as of the terrain: every own cell lies in one
                     std::vector<std::vector<float>> storage;
                     const std::vector<Block> views = builder.stepBlocks(k, storage, false);
-                    auto viewOf = [&](size_t ix, size_t iy) -> const Block& { return views[builder.blockIndexAt(ix, iy)]; };
+                    auto viewOf = [&](size_t ix, size_t iy) -> const Block& {
+                        return views[builder.blockIndexAt(ix, iy)];
+                    };
                     data = stepValues(viewOf, own, steps->timesS[k], options.threads, maxDev);
                 } else {
                     const Raster d = steps->load(k);
                     checkStepRaster(terrain, d, k);
                     const Block whole = wholeOf(d);
-                    data = stepValues([&](size_t, size_t) -> const Block& { return whole; }, own, steps->timesS[k], options.threads, maxDev);
+                    data = stepValues([&](size_t, size_t) -> const Block& { return whole; }, own, steps->timesS[k],
+                                      options.threads, maxDev);
                 }
                 for (uint32_t& i : data.wet) i = uint32_t(i + st.firstCell);  // < 2^32: FileSink::begin
             });
@@ -365,7 +378,9 @@ BuildSummary buildFile(const Raster& terrain, const RasterWindows* windows, cons
                 const std::vector<float> depth = ranks::receiveVectorFrom<float>(r);
                 const std::vector<double> dev = ranks::receiveVectorFrom<double>(r);
                 if (depth.size() != wet.size() || dev.size() != 1) {
-                    if (bad.empty()) bad = fmt::format("rank {} sent {} depths for {} wet cells of water step {}", r + 1, depth.size(), wet.size(), k);
+                    if (bad.empty())
+                        bad = fmt::format("rank {} sent {} depths for {} wet cells of water step {}", r + 1,
+                                          depth.size(), wet.size(), k);
                     continue;
                 }
                 data.wet.insert(data.wet.end(), wet.begin(), wet.end());
@@ -383,8 +398,8 @@ BuildSummary buildFile(const Raster& terrain, const RasterWindows* windows, cons
         }
         progress.finish();
         if (ranks::distributed())
-            ranks::log("hc-ingest", fmt::format("water steps: the depths of its {} cells in {} step{}, {:.3f} s", own.size(), stepCount,
-                                                stepCount == 1 ? "" : "s", stepClock.seconds()));
+            ranks::log("hc-ingest", fmt::format("water steps: the depths of its {} cells in {} step{}, {:.3f} s",
+                                                own.size(), stepCount, stepCount == 1 ? "" : "s", stepClock.seconds()));
     }
     if (!root) return out;
     IngestStats stats = extraStats;
@@ -403,12 +418,13 @@ BuildSummary buildFile(const Raster& terrain, const RasterWindows* windows, cons
 
 }  // namespace
 
-BuildSummary buildGridFile(const Raster& terrain, const WaterSteps* steps, const BuildOptions& options, const std::string& path,
-                           const IngestStats& extraStats) {
+BuildSummary buildGridFile(const Raster& terrain, const WaterSteps* steps, const BuildOptions& options,
+                           const std::string& path, const IngestStats& extraStats) {
     return buildFile(terrain, nullptr, steps, options, path, extraStats);
 }
 
-BuildSummary buildGridFile(const RasterWindows& terrain, const BuildOptions& options, const std::string& path, const IngestStats& extraStats) {
+BuildSummary buildGridFile(const RasterWindows& terrain, const BuildOptions& options, const std::string& path,
+                           const IngestStats& extraStats) {
     if (!terrain.read) throw Error("internal: raster windows without a reader");
     WaterSteps steps;  // read by the builder through terrain.readStep
     steps.count = terrain.stepTimesS.size();

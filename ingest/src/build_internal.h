@@ -25,11 +25,11 @@
 
 namespace hc::ingest::detail {
 
-constexpr int kTileLevelMax = 6;    // 64 x 64 pixel tiles: a pyramid fits in L2
+constexpr int kTileLevelMax = 6;  // 64 x 64 pixel tiles: a pyramid fits in L2
 
 struct Node {
     std::array<float, 1> mean{}, lo{}, hi{};  // elevation
-    bool leaf = false;  // a single cell covers the whole node
+    bool leaf = false;                        // a single cell covers the whole node
 };
 
 // Which quadtree nodes the water steps let merge: per level 1..maxLevel, a byte per node (node (x, y) of level l covers
@@ -43,9 +43,13 @@ public:
     }
     // Over `windows` (rectangles of pixels whose corners lie on the lattice of 2^windowLevel) for levels up to fineTop;
     // windowOf: per node of 2^windowLevel (windowNx a row) the window holding it, or -1.
-    MergeMask(size_t width, size_t height, int maxLevel, int fineTop, const std::vector<std::array<size_t, 4>>& windows, int windowLevel,
-              std::vector<int32_t> windowOf, size_t windowNx)
-        : levels_(size_t(maxLevel) + 1), fineTop_(fineTop), windowLevel_(windowLevel), windowOf_(std::move(windowOf)), windowNx_(windowNx) {
+    MergeMask(size_t width, size_t height, int maxLevel, int fineTop, const std::vector<std::array<size_t, 4>>& windows,
+              int windowLevel, std::vector<int32_t> windowOf, size_t windowNx)
+        : levels_(size_t(maxLevel) + 1),
+          fineTop_(fineTop),
+          windowLevel_(windowLevel),
+          windowOf_(std::move(windowOf)),
+          windowNx_(windowNx) {
         for (int l = 1; l <= maxLevel; ++l) {
             if (l > fineTop) {
                 levels_[size_t(l)].push_back(Level::over(0, 0, width, height, l));
@@ -125,11 +129,19 @@ class Builder {
 public:
     // `terrain` gives the geometry, and the pixels unless `windows` reads them (RasterWindows: each rank then reads
     // only the windows of its share).
-    Builder(const Raster& terrain, const RasterWindows* windows, const MergeMask* mask, const BuildOptions& opt, int rootLevel,
-            int maxLevel)
-        : t_(terrain), windows_(windows), mask_(mask), opt_(opt), layers_(1), rootLevel_(rootLevel), maxLevel_(maxLevel),
-          tileLevel_(std::min(rootLevel, kTileLevelMax)), tile_(size_t{1} << tileLevel_),
-          ntx_((terrain.width + tile_ - 1) / tile_), nty_((terrain.height + tile_ - 1) / tile_) {
+    Builder(const Raster& terrain, const RasterWindows* windows, const MergeMask* mask, const BuildOptions& opt,
+            int rootLevel, int maxLevel)
+        : t_(terrain),
+          windows_(windows),
+          mask_(mask),
+          opt_(opt),
+          layers_(1),
+          rootLevel_(rootLevel),
+          maxLevel_(maxLevel),
+          tileLevel_(std::min(rootLevel, kTileLevelMax)),
+          tile_(size_t{1} << tileLevel_),
+          ntx_((terrain.width + tile_ - 1) / tile_),
+          nty_((terrain.height + tile_ - 1) / tile_) {
         // Share nodes: never finer than a tile or the coarsest cell (so every unit of pass C lies in one), and at most
         // 4^11 of them over the root square (the share table stays small).
         shareLevel_ = std::min(rootLevel_, std::max({tileLevel_, maxLevel_, rootLevel_ - 11}));
@@ -161,17 +173,17 @@ private:
         unsigned threads = 0;
         int rank = 0, rankCount = 1;
         bool root = true;
-        std::vector<uint64_t> cuts;       // the shares: rank r's share nodes are codes [cuts[r], cuts[r + 1])
-        std::vector<size_t> myTiles;      // pass A's tiles of this rank
-        uint64_t pixelsRead = 0;          // pixels this rank read (windows_)
+        std::vector<uint64_t> cuts;   // the shares: rank r's share nodes are codes [cuts[r], cuts[r + 1])
+        std::vector<size_t> myTiles;  // pass A's tiles of this rank
+        uint64_t pixelsRead = 0;      // pixels this rank read (windows_)
         std::vector<std::vector<std::vector<Node>>> scratch;  // per worker: a tile's pyramid
-        std::vector<Node> roots;          // per tile (ty * ntx + tx): its pyramid's root
-        std::vector<uint32_t> leafCount;  // per tile: its cells
-        std::vector<std::vector<Node>> coarse;        // pass B: the levels from the tiles' up to the root
-        std::vector<std::pair<size_t, size_t>> dims;  // their sizes in nodes
-        std::vector<Unit> units;          // pass C: in Morton order
-        size_t total = 0;                 // the cells of all units
-        size_t myU0 = 0, myU1 = 0;        // this rank's units
+        std::vector<Node> roots;                              // per tile (ty * ntx + tx): its pyramid's root
+        std::vector<uint32_t> leafCount;                      // per tile: its cells
+        std::vector<std::vector<Node>> coarse;                // pass B: the levels from the tiles' up to the root
+        std::vector<std::pair<size_t, size_t>> dims;          // their sizes in nodes
+        std::vector<Unit> units;                              // pass C: in Morton order
+        size_t total = 0;                                     // the cells of all units
+        size_t myU0 = 0, myU1 = 0;                            // this rank's units
         size_t offsetOf(size_t u) const { return u < units.size() ? units[u].offset : total; }
         size_t myCells() const { return offsetOf(myU1) - offsetOf(myU0); }
     };
@@ -195,7 +207,9 @@ private:
     // The block holding pixel (ix, iy) of the raster.
     const Block& blockAt(size_t ix, size_t iy) const {
         const int32_t b = blockOf_[(iy >> shareLevel_) * nbx_ + (ix >> shareLevel_)];
-        if (b < 0) throw Error("internal: pixel " + std::to_string(ix) + ", " + std::to_string(iy) + " lies outside this rank's share");
+        if (b < 0)
+            throw Error("internal: pixel " + std::to_string(ix) + ", " + std::to_string(iy) +
+                        " lies outside this rank's share");
         return blocks_[size_t(b)];
     }
 
@@ -226,9 +240,10 @@ private:
     // The guarantee, measured: every valid pixel under cells [begin, end) of the batch against the stored value of its
     // cell (largest deviation, pixels and cells per level into acc); returns the sum of the squared deviations.
     double measure(const Batch& b, size_t begin, size_t end, Stats& acc, bool paintElevations) const;
-    // Under mpirun every rank writes its own cells into rank 0's file (GridFilePart); then a rank other than 0 sends its
-    // part's result (GridFilePart::finish) and its statistics (per-unit sums of squares) to rank 0, which receives every
-    // other rank's in order, hands each part to its writer (GridFileWriter::addPart) and adds the statistics into `sum`.
+    // Under mpirun every rank writes its own cells into rank 0's file (GridFilePart); then a rank other than 0 sends
+    // its part's result (GridFilePart::finish) and its statistics (per-unit sums of squares) to rank 0, which receives
+    // every other rank's in order, hands each part to its writer (GridFileWriter::addPart) and adds the statistics into
+    // `sum`.
     void sendShare(const Stats& sum, const std::vector<double>& unitSumSq, const std::vector<std::byte>& part) const;
     void receiveShares(CellSink& sink, Stats& sum, std::vector<double>& unitSumSq) const;
 
@@ -241,9 +256,9 @@ private:
     int rootLevel_, maxLevel_, tileLevel_;
     size_t tile_, ntx_, nty_;
     int shareLevel_ = 0;
-    size_t nbx_ = 0, nby_ = 0;        // share nodes over the raster
-    std::vector<Block> blocks_;       // the pixels this rank holds
-    std::vector<int32_t> blockOf_;    // per share node (y * nbx + x): its block, or -1
+    size_t nbx_ = 0, nby_ = 0;                                       // share nodes over the raster
+    std::vector<Block> blocks_;                                      // the pixels this rank holds
+    std::vector<int32_t> blockOf_;                                   // per share node (y * nbx + x): its block, or -1
     std::vector<std::vector<float>> windowValues_, windowRounding_;  // the windows' pixels (windows_ only)
 };
 

@@ -32,7 +32,8 @@ std::vector<uint64_t> Builder::shareCuts(int rankCount) const {
     for (uint64_t m = 0; m < codes && r < rankCount; ++m) {
         while (r < rankCount && before >= ranks::shareBegin(total, r, rankCount)) cut[size_t(r++)] = m;
         const size_t x = mortonX(m), y = mortonY(m);
-        if (x < nbx_ && y < nby_) before += uint64_t(std::min(side, t_.width - x * side)) * std::min(side, t_.height - y * side);
+        if (x < nbx_ && y < nby_)
+            before += uint64_t(std::min(side, t_.width - x * side)) * std::min(side, t_.height - y * side);
     }
     return cut;
 }
@@ -53,7 +54,8 @@ uint64_t Builder::holdPixels(uint64_t c0, uint64_t c1) {
     blockOf_.assign(nbx_ * nby_, -1);
     blocks_.clear();
     if (!windows_) {
-        blocks_.push_back({0, 0, t_.width, t_.height, t_.values.data(), t_.roundingM.empty() ? nullptr : t_.roundingM.data()});
+        blocks_.push_back(
+            {0, 0, t_.width, t_.height, t_.values.data(), t_.roundingM.empty() ? nullptr : t_.roundingM.data()});
         std::fill(blockOf_.begin(), blockOf_.end(), 0);
         return 0;
     }
@@ -65,7 +67,8 @@ uint64_t Builder::holdPixels(uint64_t c0, uint64_t c1) {
     std::vector<Square> squares;
     for (uint64_t m = c0; m < c1;) {
         int k = 0;
-        while (shareLevel_ + k < rootLevel_ && m % (uint64_t{4} << (2 * k)) == 0 && m + (uint64_t{4} << (2 * k)) <= c1) ++k;
+        while (shareLevel_ + k < rootLevel_ && m % (uint64_t{4} << (2 * k)) == 0 && m + (uint64_t{4} << (2 * k)) <= c1)
+            ++k;
         squares.push_back({m, k});
         m += uint64_t{1} << (2 * k);
     }
@@ -85,7 +88,8 @@ uint64_t Builder::holdPixels(uint64_t c0, uint64_t c1) {
         b.rounding = windowRounding_.back().empty() ? nullptr : windowRounding_.back().data();
         read += uint64_t(b.w) * b.h;
         for (size_t y = y0 >> shareLevel_; y < std::min(nby_, (y0 + side) >> shareLevel_); ++y)
-            for (size_t x = x0 >> shareLevel_; x < std::min(nbx_, (x0 + side) >> shareLevel_); ++x) blockOf_[y * nbx_ + x] = int32_t(blocks_.size());
+            for (size_t x = x0 >> shareLevel_; x < std::min(nbx_, (x0 + side) >> shareLevel_); ++x)
+                blockOf_[y * nbx_ + x] = int32_t(blocks_.size());
         blocks_.push_back(b);
     }
     progress.finish();
@@ -102,7 +106,8 @@ void Builder::takeShare(RunState& rs) {
     ranks::together([&] { rs.pixelsRead = holdPixels(cuts[size_t(rank)], cuts[size_t(rank) + 1]); });
     if (windows_ && windows_->checkHeld) {
         uint64_t valid = 0;
-        for (const Block& b : blocks_) valid += uint64_t(std::count_if(b.values, b.values + b.w * b.h, [](float v) { return !std::isnan(v); }));
+        for (const Block& b : blocks_)
+            valid += uint64_t(std::count_if(b.values, b.values + b.w * b.h, [](float v) { return !std::isnan(v); }));
         uint64_t all = 0;
         for (const auto& v : ranks::allGatherVectors(std::vector<uint64_t>{valid})) all += v.empty() ? 0 : v[0];
         ranks::together([&] { windows_->checkHeld(all); });
@@ -120,7 +125,8 @@ void Builder::maskOwnNodes(bool root) {
         ownMask_.emplace(t_.width, t_.height, maxLevel_, tileLevel_, windows, shareLevel_, blockOf_, nbx_);
         for (size_t k = 0; k < steps; ++k) {
             std::vector<std::vector<float>> storage;
-            for (const Block& b : stepBlocks(k, storage, true)) restrictByStep(b, opt_.toleranceM, maxLevel_, opt_.threads, *ownMask_);
+            for (const Block& b : stepBlocks(k, storage, true))
+                restrictByStep(b, opt_.toleranceM, maxLevel_, opt_.threads, *ownMask_);
             progress.advance(1);
         }
     });
@@ -147,9 +153,10 @@ void Builder::gatherTileRoots(RunState& rs) const {
         if (r == rank) continue;
         const std::vector<size_t> theirs = tilesOf(cuts[size_t(r)], cuts[size_t(r) + 1]);
         if (allRoots[size_t(r)].size() != theirs.size() || allCounts[size_t(r)].size() != theirs.size())
-            throw Error("rank " + std::to_string(r + 1) + " sent " + std::to_string(allRoots[size_t(r)].size()) + " tile roots, not " +
-                        std::to_string(theirs.size()));
-        for (size_t k = 0; k < theirs.size(); ++k) roots[theirs[k]] = allRoots[size_t(r)][k], leafCount[theirs[k]] = allCounts[size_t(r)][k];
+            throw Error("rank " + std::to_string(r + 1) + " sent " + std::to_string(allRoots[size_t(r)].size()) +
+                        " tile roots, not " + std::to_string(theirs.size()));
+        for (size_t k = 0; k < theirs.size(); ++k)
+            roots[theirs[k]] = allRoots[size_t(r)][k], leafCount[theirs[k]] = allCounts[size_t(r)][k];
     }
 }
 
@@ -161,9 +168,12 @@ void Builder::findOwnUnits(RunState& rs) const {
     const int rank = rs.rank, rankCount = rs.rankCount;
     const int shareLevel = shareLevel_;  // captured by value below
     auto firstUnit = [&](int r) {
-        return size_t(std::lower_bound(units.begin(), units.end(), cuts[size_t(r)], [shareLevel](const Unit& u, uint64_t c) {
-                          return mortonEncode(uint32_t((u.x << u.level) >> shareLevel), uint32_t((u.y << u.level) >> shareLevel)) < c;
-                      }) - units.begin());
+        return size_t(std::lower_bound(units.begin(), units.end(), cuts[size_t(r)],
+                                       [shareLevel](const Unit& u, uint64_t c) {
+                                           return mortonEncode(uint32_t((u.x << u.level) >> shareLevel),
+                                                               uint32_t((u.y << u.level) >> shareLevel)) < c;
+                                       }) -
+                      units.begin());
     };
     rs.myU0 = firstUnit(rank), rs.myU1 = rank + 1 == rankCount ? units.size() : firstUnit(rank + 1);
 }
@@ -190,12 +200,14 @@ std::unique_ptr<GridFilePart> Builder::openPart(const RunState& rs, CellSink& si
 // What this rank read, built and wrote, into the ranks' log.
 void Builder::logShare(const RunState& rs, const Stopwatch& rankStart) const {
     const uint64_t pixelsRead = rs.pixelsRead;
-    const std::string reads = windows_ ? fmt::format("{} window{} read, {} px ({:.1f} % of the raster), ", blocks_.size(), blocks_.size() == 1 ? "" : "s", pixelsRead,
+    const std::string reads = windows_ ? fmt::format("{} window{} read, {} px ({:.1f} % of the raster), ",
+                                                     blocks_.size(), blocks_.size() == 1 ? "" : "s", pixelsRead,
                                                      100.0 * double(pixelsRead) / double(t_.width * t_.height))
                                        : std::string("the whole raster held, ");
-    ranks::log("hc-ingest", fmt::format("{}{} tiles of {}^2 px built, {} units, {} cells written, {:.3f} s, peak {:.1f} MB resident", reads,
-                                        rs.myTiles.size(), 1u << tileLevel_, rs.myU1 - rs.myU0, rs.myCells(),
-                                        rankStart.seconds(), double(peakRssBytes()) / 1e6));
+    ranks::log("hc-ingest",
+               fmt::format("{}{} tiles of {}^2 px built, {} units, {} cells written, {:.3f} s, peak {:.1f} MB resident",
+                           reads, rs.myTiles.size(), 1u << tileLevel_, rs.myU1 - rs.myU0, rs.myCells(),
+                           rankStart.seconds(), double(peakRssBytes()) / 1e6));
 }
 
 // Under mpirun, the hashes (one stream over the whole file) and the order check's seam go on from rank to rank in
@@ -227,7 +239,8 @@ std::vector<std::byte> Builder::hashInTurn(const RunState& rs, CellSink& sink, G
         if (part) partResult = part->finish();
     });
     if (!root)
-        ranks::log("hc-ingest", fmt::format("its {} cells ({:.1f} MB) written into the output in place; hashes in turn {:.3f} s (all ranks), flush {:.3f} s",
+        ranks::log("hc-ingest", fmt::format("its {} cells ({:.1f} MB) written into the output in place; hashes in turn "
+                                            "{:.3f} s (all ranks), flush {:.3f} s",
                                             rs.myCells(), double(rs.myCells()) * double(8 + 4 * layers_) / 1e6, inTurn,
                                             chain.seconds() - inTurn));
     return partResult;
@@ -242,7 +255,8 @@ std::vector<Block> Builder::stepBlocks(size_t k, std::vector<std::vector<float>>
     for (size_t i = 0; i < blocks_.size(); ++i) {
         const Block& b = blocks_[i];
         if (!levels) windows_->readStep(k, b.x0, t_.height - (b.y0 + b.h), b.w, b.h, b.values, storage[i], first);
-        if (storage[i].size() != b.w * b.h) throw Error("internal: a water step's window read the wrong number of pixels");
+        if (storage[i].size() != b.w * b.h)
+            throw Error("internal: a water step's window read the wrong number of pixels");
         out.push_back({b.x0, b.y0, b.w, b.h, storage[i].data(), nullptr});
     }
     return out;
@@ -280,7 +294,8 @@ struct BlockLabels {
 // appended to `edges` (Builder::bathtubBlocks).
 void labelBelow(const Block& b, double level, size_t W, size_t H, BlockLabels& L, std::vector<int64_t>& edges) {
     const size_t n = b.w * b.h;
-    if (n > size_t(std::numeric_limits<int32_t>::max())) throw Error("internal: a window of more than 2^31 pixels for the bathtub");
+    if (n > size_t(std::numeric_limits<int32_t>::max()))
+        throw Error("internal: a window of more than 2^31 pixels for the bathtub");
     auto below = [&](size_t p) { return !std::isnan(b.values[p]) && b.values[p] < level; };
     DisjointSets<int32_t> sets;  // the pixels below the level; the others -1
     std::vector<int32_t>& parent = sets.parent;
@@ -303,7 +318,8 @@ void labelBelow(const Block& b, double level, size_t W, size_t H, BlockLabels& L
             // A neighbour outside the raster, or a hole inside this block: a seed (neighbours in other blocks: below).
             const bool edge = ix == 0 || iy == 0 || ix + 1 >= W || iy + 1 >= H;
             const bool hole = (c > 0 && std::isnan(b.values[p - 1])) || (c + 1 < b.w && std::isnan(b.values[p + 1])) ||
-                              (r > 0 && std::isnan(b.values[p - b.w])) || (r + 1 < b.h && std::isnan(b.values[p + b.w]));
+                              (r > 0 && std::isnan(b.values[p - b.w])) ||
+                              (r + 1 < b.h && std::isnan(b.values[p + b.w]));
             if (edge || hole) L.seed[size_t(parent[p])] = 1;
         }
     L.root = std::move(parent);  // every pixel below the level points at its root now
@@ -353,7 +369,8 @@ void Builder::bathtubBlocks(double level, std::vector<std::vector<float>>& stora
     std::vector<int32_t> owner(nbx_ * nby_, -1);  // share node -> the block holding it
     for (size_t g = 0; g < blocks.size(); ++g)
         for (size_t y = blocks[g].y0 >> shareLevel_; y <= (blocks[g].y0 + blocks[g].h - 1) >> shareLevel_; ++y)
-            for (size_t x = blocks[g].x0 >> shareLevel_; x <= (blocks[g].x0 + blocks[g].w - 1) >> shareLevel_; ++x) owner[y * nbx_ + x] = int32_t(g);
+            for (size_t x = blocks[g].x0 >> shareLevel_; x <= (blocks[g].x0 + blocks[g].w - 1) >> shareLevel_; ++x)
+                owner[y * nbx_ + x] = int32_t(g);
     // The state of pixel (ix, iy), which lies on an edge of its block.
     auto stateAt = [&](size_t ix, size_t iy) {
         const int32_t g = owner[(iy >> shareLevel_) * nbx_ + (ix >> shareLevel_)];
@@ -376,9 +393,10 @@ void Builder::bathtubBlocks(double level, std::vector<std::vector<float>>& stora
     };
     std::vector<int64_t> seeds;
     auto meet = [&](size_t g, int64_t s, size_t ix, size_t iy) {  // s: a below pixel of block g; (ix, iy) its neighbour
-        if (ix >= W || iy >= H) return;  // outside the raster: seeded in its block already
+        if (ix >= W || iy >= H) return;                           // outside the raster: seeded in its block already
         const auto [h, t] = stateAt(ix, iy);
-        if (t == kHole) seeds.push_back(id(g, s));
+        if (t == kHole)
+            seeds.push_back(id(g, s));
         else if (t >= 0) {
             const int64_t a = id(g, s), c = id(h, t);  // numbered in this order
             joins.join(a, c);
@@ -408,7 +426,8 @@ void Builder::bathtubBlocks(double level, std::vector<std::vector<float>>& stora
         d.assign(b.w * b.h, 0.0f);
         for (size_t p = 0; p < d.size(); ++p)  // each component's answer once, at its root (its least pixel: first)
             if (L.root[p] == int32_t(p) && !L.seed[p] && !seeds.empty())
-                if (const auto it = ids.find(key(mine + i, int64_t(p) * 2)); it != ids.end()) L.seed[p] = wet[size_t(joins.find(it->second))];
+                if (const auto it = ids.find(key(mine + i, int64_t(p) * 2)); it != ids.end())
+                    L.seed[p] = wet[size_t(joins.find(it->second))];
         for (size_t p = 0; p < d.size(); ++p) {
             if (std::isnan(b.values[p])) {
                 d[p] = std::numeric_limits<float>::quiet_NaN();
@@ -420,9 +439,11 @@ void Builder::bathtubBlocks(double level, std::vector<std::vector<float>>& stora
     }
 }
 
-void Builder::sendShare(const Stats& sum, const std::vector<double>& unitSumSq, const std::vector<std::byte>& part) const {
+void Builder::sendShare(const Stats& sum, const std::vector<double>& unitSumSq,
+                        const std::vector<std::byte>& part) const {
     ranks::sendToRoot(part);
-    std::vector<double> table{sum.maxDev, double(sum.pixels), double(sum.wetCells)};  // then cells per level, then the unit sums
+    std::vector<double> table{sum.maxDev, double(sum.pixels),
+                              double(sum.wetCells)};  // then cells per level, then the unit sums
     for (uint64_t c : sum.perLevel) table.push_back(double(c));
     table.insert(table.end(), unitSumSq.begin(), unitSumSq.end());
     ranks::sendToRoot(table);

@@ -62,7 +62,8 @@ std::string listSubdatasets(GDALDataset& ds, size_t& count) {
         const char* name = CSLFetchNameValue(md, ("SUBDATASET_" + std::to_string(i) + "_NAME").c_str());
         if (!name) break;
         const char* desc = CSLFetchNameValue(md, ("SUBDATASET_" + std::to_string(i) + "_DESC").c_str());
-        if (++count <= 12) out += std::string(count > 1 ? ", " : "") + "'" + name + "'" + (desc ? std::string(" (") + desc + ")" : "");
+        if (++count <= 12)
+            out += std::string(count > 1 ? ", " : "") + "'" + name + "'" + (desc ? std::string(" (") + desc + ")" : "");
     }
     if (count > 12) out += ", ... (" + std::to_string(count - 12) + " more)";
     return out;
@@ -80,7 +81,8 @@ DatasetPtr openRaster(const std::string& path, const std::string& role) {
         if (file.rfind("/vsi", 0) != 0 && !std::filesystem::exists(file, ec))
             throw Error(path + ": no such file " + file + " (" + role + ")");
     }
-    if (onDisk && std::filesystem::is_directory(path, ec)) throw Error(path + ": is a directory, not a raster (" + role + ")");
+    if (onDisk && std::filesystem::is_directory(path, ec))
+        throw Error(path + ": is a directory, not a raster (" + role + ")");
     CPLErrorReset();
     auto* ds = GDALDataset::Open(path.c_str(), GDAL_OF_RASTER | GDAL_OF_READONLY | GDAL_OF_VERBOSE_ERROR);
     if (!ds) {
@@ -100,10 +102,12 @@ DatasetPtr openRaster(const std::string& path, const std::string& role) {
         size_t count = 0;
         std::string list = listSubdatasets(*ds, count);
         if (count == 0) throw Error(path + ": has no raster band (" + role + ")");
-        throw Error(path + ": has no raster band of its own but " + std::to_string(count) + " variables (subdatasets) (" + role +
+        throw Error(path + ": has no raster band of its own but " + std::to_string(count) +
+                    " variables (subdatasets) (" + role +
                     "); give one of them as the input, quoted for the shell: " + list);
     }
-    if (ds->GetRasterXSize() < 1 || ds->GetRasterYSize() < 1) throw Error(path + ": raster has no pixels (" + role + ")");
+    if (ds->GetRasterXSize() < 1 || ds->GetRasterYSize() < 1)
+        throw Error(path + ": raster has no pixels (" + role + ")");
     return owned;
 }
 
@@ -189,10 +193,12 @@ void WindowWarp::into(size_t c0, size_t r0, size_t w, size_t h, float* out) cons
     const std::string sc = fmt(scale, 17);
     wo->papszWarpOptions = CSLSetNameValue(wo->papszWarpOptions, "XSCALE", sc.c_str());
     wo->papszWarpOptions = CSLSetNameValue(wo->papszWarpOptions, "YSCALE", sc.c_str());
-    wo->papszWarpOptions = CSLSetNameValue(wo->papszWarpOptions, "NUM_THREADS", std::to_string(resolveThreads(threads)).c_str());
+    wo->papszWarpOptions =
+        CSLSetNameValue(wo->papszWarpOptions, "NUM_THREADS", std::to_string(resolveThreads(threads)).c_str());
     GDALWarpOperation op;
     CPLErrorReset();
-    if (op.Initialize(wo) != CE_None || op.WarpRegionToBuffer(int(c0), int(r0), int(w), int(h), out, GDT_Float32) != CE_None)
+    if (op.Initialize(wo) != CE_None ||
+        op.WarpRegionToBuffer(int(c0), int(r0), int(w), int(h), out, GDT_Float32) != CE_None)
         throw Error(warpError + ": " + lastGdalError());
 }
 

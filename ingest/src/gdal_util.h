@@ -41,7 +41,8 @@ struct WindowWarp {
     double srcNoData = 0;  // the source's nodata value (NaN for none in a float source)
     double gt[6] = {0, 1, 0, 0, 0, -1};
     size_t width = 0, height = 0;
-    std::string dstSrs;  // the target CRS as the transformer takes it (DST_SRS: PROJ text or WKT); empty: the source's frame
+    std::string
+        dstSrs;  // the target CRS as the transformer takes it (DST_SRS: PROJ text or WKT); empty: the source's frame
     std::string dstWkt;  // the same as WKT, for the virtual raster; empty with dstSrs
     double scale = 1;
     unsigned threads = 0;

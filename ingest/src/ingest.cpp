@@ -25,7 +25,8 @@ std::string fmtM(double v) { return fmt::format("{:.6g}", v); }
 int chooseMaxLevel(const Options& opt, double pixelSizeM, LoadReport&) {
     const double target = opt.maxCellM ? *opt.maxCellM : 96.0;  // the report's coarsest cell
     if (opt.maxCellM && *opt.maxCellM < pixelSizeM * (1 - 1e-9))
-        throw Error("--max-cell " + fmtM(*opt.maxCellM) + " m is smaller than the finest cell (" + fmtM(pixelSizeM) + " m)");
+        throw Error("--max-cell " + fmtM(*opt.maxCellM) + " m is smaller than the finest cell (" + fmtM(pixelSizeM) +
+                    " m)");
     int level = 0;
     while (pixelSizeM * std::ldexp(1.0, level + 1) <= target * (1 + 1e-9) && level < kMaxLevel) ++level;
     return level;
@@ -50,10 +51,10 @@ namespace {
 // Loads terrain (and water) and chooses the build options: the shared first half of both jobs.
 struct Prepared {
     Raster terrain;
-    WaterSteps water;                   // count 0 without water
-    std::vector<Raster> waterCache;     // each step's raster, kept from its first load while they fit (kWaterCacheBytes)
+    WaterSteps water;                // count 0 without water
+    std::vector<Raster> waterCache;  // each step's raster, kept from its first load while they fit (kWaterCacheBytes)
     BuildOptions build;
-    detail::SourceTrace trace;     // the source, when the working raster is not the source itself
+    detail::SourceTrace trace;          // the source, when the working raster is not the source itself
     std::vector<float> cellElevations;  // filled by the build when trace holds a source
 };
 
@@ -62,10 +63,12 @@ Prepared prepare(const Options& opt, LoadReport& report) {
     p.terrain = detail::loadTerrainTraced(opt, report, &p.trace);
     if (p.terrain.validCount() == 0) {
         if (report.sourceValidPixels == 0) throw Error(opt.input + ": every pixel is nodata: nothing to ingest");
-        const double w = double(p.terrain.width) * p.terrain.pixelSizeM, h = double(p.terrain.height) * p.terrain.pixelSizeM;
-        throw Error(opt.input + ": none of the " + std::to_string(p.terrain.width) + " x " + std::to_string(p.terrain.height) +
-                    " working pixels of " + fmtM(p.terrain.pixelSizeM) + " m has its centre on valid data (the raster covers about " +
-                    fmtM(w) + " x " + fmtM(h) + " m, with " + std::to_string(report.sourceValidPixels) + " valid pixels)" +
+        const double w = double(p.terrain.width) * p.terrain.pixelSizeM,
+                     h = double(p.terrain.height) * p.terrain.pixelSizeM;
+        throw Error(opt.input + ": none of the " + std::to_string(p.terrain.width) + " x " +
+                    std::to_string(p.terrain.height) + " working pixels of " + fmtM(p.terrain.pixelSizeM) +
+                    " m has its centre on valid data (the raster covers about " + fmtM(w) + " x " + fmtM(h) +
+                    " m, with " + std::to_string(report.sourceValidPixels) + " valid pixels)" +
                     (opt.minCellM ? ": choose a --min-cell well below the raster's size" : ""));
     }
     p.water.count = waterStepCount(opt);
@@ -89,7 +92,9 @@ void bindWater(Prepared& p, const Options& opt, LoadReport& report) {
     };
 }
 
-void setBuild(Prepared& p, const Options& opt, LoadReport& report) { p.build = buildOptions(opt, p.terrain.pixelSizeM, report); }
+void setBuild(Prepared& p, const Options& opt, LoadReport& report) {
+    p.build = buildOptions(opt, p.terrain.pixelSizeM, report);
+}
 
 void finishSourceCheck(const detail::SourceCheckSums& sums, LoadReport& report);
 
@@ -105,19 +110,20 @@ void checkAgainstSource(const detail::SourceTrace& trace, const Raster& working,
         std::vector<int> ok;
     };
     std::vector<Acc> acc(trace.rowToWorldThreadSafe ? resolveThreads(threads) : 1);
-    parallelFor(src.height, 16, trace.rowToWorldThreadSafe ? threads : 1, [&](size_t begin, size_t end, unsigned worker) {
-        Acc& a = acc[worker];
-        a.x.resize(src.width), a.y.resize(src.width), a.ok.resize(src.width);
-        for (size_t row = begin; row < end; ++row) {
-            trace.rowToWorld(row, a.x, a.y, a.ok);
-            for (size_t c = 0; c < src.width; ++c) {
-                const size_t i = row * src.width + c;
-                if (std::isnan(src.values[i])) continue;
-                const int64_t at = detail::workingPixelAt(working, a.x[c], a.y[c], a.ok[c]);
-                a.sums.addPixel(src.exact(i), at < 0 ? NAN : cellZ[size_t(at)]);
-            }
-        }
-    });
+    parallelFor(src.height, 16, trace.rowToWorldThreadSafe ? threads : 1,
+                [&](size_t begin, size_t end, unsigned worker) {
+                    Acc& a = acc[worker];
+                    a.x.resize(src.width), a.y.resize(src.width), a.ok.resize(src.width);
+                    for (size_t row = begin; row < end; ++row) {
+                        trace.rowToWorld(row, a.x, a.y, a.ok);
+                        for (size_t c = 0; c < src.width; ++c) {
+                            const size_t i = row * src.width + c;
+                            if (std::isnan(src.values[i])) continue;
+                            const int64_t at = detail::workingPixelAt(working, a.x[c], a.y[c], a.ok[c]);
+                            a.sums.addPixel(src.exact(i), at < 0 ? NAN : cellZ[size_t(at)]);
+                        }
+                    }
+                });
     detail::SourceCheckSums sums;
     for (const Acc& a : acc) sums.add(a.sums);
     finishSourceCheck(sums, report);
@@ -136,9 +142,10 @@ void finishSourceCheck(const detail::SourceCheckSums& sums, LoadReport& report) 
     const uint64_t valid = out.checked + out.missed;
     // Resampling loses a few pixels at the edges of holes and of the raster; more is lost data.
     if (valid > 0 && double(out.missed) > 0.005 * double(valid))
-        report.warnings.push_back(std::to_string(out.missed) + " of " + std::to_string(valid) + " valid source pixels (" +
-                                  fmtM(100.0 * double(out.missed) / double(valid)) +
-                                  " %) reached no cell: their centre falls outside the grid or on a hole of the working raster");
+        report.warnings.push_back(
+            std::to_string(out.missed) + " of " + std::to_string(valid) + " valid source pixels (" +
+            fmtM(100.0 * double(out.missed) / double(valid)) +
+            " %) reached no cell: their centre falls outside the grid or on a hole of the working raster");
 }
 
 // The build's own figure, said plainly when float32 storage cannot hold the tolerance.
@@ -168,7 +175,8 @@ Grid ingest(const Options& opt, LoadReport& report) {
     const Stopwatch clock;
     if (!opt.waterMesh.empty()) throw Error("--water-mesh needs ingestToFile (hc-ingest)");
     if (waterStepCount(opt) > 1)
-        throw Error("an in-memory grid holds one water step; " + std::to_string(waterStepCount(opt)) + " need ingestToFile (hc-ingest)");
+        throw Error("an in-memory grid holds one water step; " + std::to_string(waterStepCount(opt)) +
+                    " need ingestToFile (hc-ingest)");
     Prepared p = prepare(opt, report);
     setBuild(p, opt, report);
     traceBuild(p);
@@ -196,16 +204,15 @@ detail::SourceCheckSums allRanksCheck(const detail::SourceCheckSums& mine) {
 }
 
 // Under mpirun, a terrain and its water steps read window by window: every rank reads only the windows of its share
-// (buildGridFile over RasterWindows), each step's raster warped onto the same windows (or a level's bathtub flooded over
-// them by the builder), the readers' counts are added over the ranks, and rank 0 reports them.
+// (buildGridFile over RasterWindows), each step's raster warped onto the same windows (or a level's bathtub flooded
+// over them by the builder), the readers' counts are added over the ranks, and rank 0 reports them.
 BuildSummary ingestByWindows(const Options& opt, const std::string& path, LoadReport& report, const Stopwatch& clock) {
     std::unique_ptr<detail::TerrainWindows> windows = detail::openTerrainWindows(opt, report);
     RasterWindows w;
     w.shape = windows->shape();
     w.source = opt.input;
-    w.read = [&](size_t c0, size_t r0, size_t width, size_t height, std::vector<float>& values, std::vector<float>& rounding) {
-        windows->read(c0, r0, width, height, values, rounding);
-    };
+    w.read = [&](size_t c0, size_t r0, size_t width, size_t height, std::vector<float>& values,
+                 std::vector<float>& rounding) { windows->read(c0, r0, width, height, values, rounding); };
     w.checkHeld = [&](uint64_t valid) { windows->checkValid(valid); };
     // Water steps from rasters: each window of a step warped onto the working raster as the whole would be
     // (detail::WaterStepWarp), step by step (the builder reads every window of step k before step k + 1).
@@ -217,7 +224,8 @@ BuildSummary ingestByWindows(const Options& opt, const std::string& path, LoadRe
     if (opt.water == WaterSource::Level)  // bathtubs: flooded by the builder over the ranks' windows
         w.stepLevelsM = opt.waterLevelsM.empty() ? std::vector<double>{opt.waterLevelM} : opt.waterLevelsM;
     else if (stepCount > 0)
-        w.readStep = [&](size_t k, size_t c0, size_t r0, size_t width, size_t height, const float* terrain, std::vector<float>& depth, bool first) {
+        w.readStep = [&](size_t k, size_t c0, size_t r0, size_t width, size_t height, const float* terrain,
+                         std::vector<float>& depth, bool first) {
             if (!stepWarp || warpStep != k) {
                 LoadReport again;  // the step's warnings once, from its first reads
                 stepWarp = std::make_unique<detail::WaterStepWarp>(opt, w.shape, k, first ? report : again);
@@ -242,8 +250,10 @@ BuildSummary ingestByWindows(const Options& opt, const std::string& path, LoadRe
     const Stopwatch checking;
     ranks::together([&] { mine = windows->checkAgainst(path); });
     if (mine)
-        ranks::log("hc-ingest", fmt::format("{} source pixels of its rows checked against the cells under them (and counted), {:.3f} s",
-                                            mine->checked + mine->missed, checking.seconds()));
+        ranks::log(
+            "hc-ingest",
+            fmt::format("{} source pixels of its rows checked against the cells under them (and counted), {:.3f} s",
+                        mine->checked + mine->missed, checking.seconds()));
     // The whole raster's counts (valid pixels, +-inf, sentinels): every rank's windows added.
     detail::SourceTally all;
     for (const auto& t : ranks::allGatherVectors(std::vector<detail::SourceTally>{windows->tally()})) {
@@ -257,7 +267,9 @@ BuildSummary ingestByWindows(const Options& opt, const std::string& path, LoadRe
         for (const auto& r : negatives) n += k < r.size() ? r[k] : 0;
         if (n > 0) report.warnings.push_back(detail::negativeDepthWarning(detail::waterStepName(opt, k), n));
     }
-    if (mine) finishSourceCheck(allRanksCheck(*mine), report);  // its report (and warning) after the reading's, as in one process
+    if (mine)
+        finishSourceCheck(allRanksCheck(*mine),
+                          report);  // its report (and warning) after the reading's, as in one process
     if (ranks::rank() == 0) noteStorage(b.shape.stats, report.sourcePrecisionDouble, report);
     return b;
 }
@@ -266,7 +278,8 @@ BuildSummary ingestByWindows(const Options& opt, const std::string& path, LoadRe
 
 BuildSummary ingestToFile(const Options& opt, const std::string& path, LoadReport& report) {
     const Stopwatch clock;
-    if (ranks::distributed() && !opt.waterMesh.empty()) throw Error("--water-mesh runs in one process: run hc-ingest without mpirun");
+    if (ranks::distributed() && !opt.waterMesh.empty())
+        throw Error("--water-mesh runs in one process: run hc-ingest without mpirun");
     if (ranks::distributed()) return ingestByWindows(opt, path, report, clock);  // each rank its own windows
     Prepared p = prepare(opt, report);
     setBuild(p, opt, report);

@@ -56,7 +56,8 @@ struct Resampling {
     double maxErrorPx = 1e-9;
     bool sayLattice = false;  // UTM: the method names the lattice step (", map exact every N px") and then methodTail
     std::string methodTail;
-    std::function<void(size_t row, std::vector<double>& x, std::vector<double>& y, std::vector<int>& ok)> rowToWorld;  // SourceTrace's
+    std::function<void(size_t row, std::vector<double>& x, std::vector<double>& y, std::vector<int>& ok)>
+        rowToWorld;                    // SourceTrace's
     bool rowToWorldThreadSafe = true;  // false for PROJ's transformations (--t_srs)
 };
 
@@ -78,8 +79,10 @@ Raster projectToUtm(SourceBand&& src, const GeoTransform& gt, const OGRSpatialRe
 // Columns [c0, c0 + width) of the source: one piece of a source split at 180 degrees.
 class SourceDataset final : public GDALDataset {
 public:
-    using Fill = std::function<void(size_t col0, size_t row0, size_t w, size_t h, float* out)>;  // source columns, row-major
-    SourceDataset(size_t c0, size_t width, size_t height, const GeoTransform& gt, const OGRSpatialReference* srs, Fill fill)
+    using Fill =
+        std::function<void(size_t col0, size_t row0, size_t w, size_t h, float* out)>;  // source columns, row-major
+    SourceDataset(size_t c0, size_t width, size_t height, const GeoTransform& gt, const OGRSpatialReference* srs,
+                  Fill fill)
         : gt_(gt), fill_(std::move(fill)) {
         nRasterXSize = int(width);
         nRasterYSize = int(height);
@@ -110,7 +113,8 @@ private:
         }
         CPLErr IReadBlock(int bx, int by, void* image) override {
             const size_t x0 = size_t(bx) * size_t(nBlockXSize), y0 = size_t(by) * size_t(nBlockYSize);
-            const size_t w = std::min(size_t(nBlockXSize), size_t(nRasterXSize) - x0), h = std::min(size_t(nBlockYSize), size_t(nRasterYSize) - y0);
+            const size_t w = std::min(size_t(nBlockXSize), size_t(nRasterXSize) - x0),
+                         h = std::min(size_t(nBlockYSize), size_t(nRasterYSize) - y0);
             auto* out = static_cast<float*>(image);
             std::fill(out, out + size_t(nBlockXSize) * size_t(nBlockYSize), kNaN);
             try {
@@ -148,30 +152,33 @@ private:
 // (tests/ingest_windows_test.cpp).
 struct WarpPlan {
     std::vector<std::unique_ptr<SourceDataset>> sources;  // one per piece of the source (two when split at 180 degrees)
-    std::unique_ptr<detail::WarpSeams> seams;             // pixels between the pieces' columns, interpolated across (or null)
-    std::string note;                                     // for the report's method
-    std::shared_ptr<OGRCoordinateTransformation> ct;       // source CRS -> target CRS (PROJ, exact)
+    std::unique_ptr<detail::WarpSeams> seams;  // pixels between the pieces' columns, interpolated across (or null)
+    std::string note;                          // for the report's method
+    std::shared_ptr<OGRCoordinateTransformation> ct;  // source CRS -> target CRS (PROJ, exact)
     OGRSpatialReference target;
     std::string targetText, targetWkt, input;  // the target as given (--t_srs) and as WKT
-    double ext[4] = {0, 0, 0, 0};  // west, south, east, north [target units]
+    double ext[4] = {0, 0, 0, 0};              // west, south, east, north [target units]
     double cell = 1, scale = 1;    // output pixel [target units]; output pixels per source pixel (the kernel's)
     size_t width = 0, height = 0;  // output pixels
     unsigned threads = 0;
 
-    // The warped raster's valid pixels, counted over all of it (every window): an error where none is valid, or where the
-    // halves of a source split at 180 degrees do not meet (in a map whose own edge is at 180, EPSG:3857 say, they land
-    // at its opposite edges, a world apart, with nothing between).
+    // The warped raster's valid pixels, counted over all of it (every window): an error where none is valid, or where
+    // the halves of a source split at 180 degrees do not meet (in a map whose own edge is at 180, EPSG:3857 say, they
+    // land at its opposite edges, a world apart, with nothing between).
     void checkValid(uint64_t valid) const {
         const double all = double(width) * double(height);
         if (valid == 0)
-            throw Error(input + ": projected to " + targetText + " on " + std::to_string(width) + " x " + std::to_string(height) +
-                        " pixels of " + fmt(cell, 6) + " (CRS units), no pixel centre falls inside the data: " +
+            throw Error(input + ": projected to " + targetText + " on " + std::to_string(width) + " x " +
+                        std::to_string(height) + " pixels of " + fmt(cell, 6) +
+                        " (CRS units), no pixel centre falls inside the data: " +
                         "the footprint is too thin for that resolution; give a finer one with --min-cell");
         if (sources.size() == 2 && double(valid) < 0.1 * all)
-            throw Error(input + ": crosses 180 degrees of longitude, which is an edge of " + targetText + ": its two halves would lie at " +
-                        "the map's opposite edges (" + fmt(100.0 * double(valid) / all, 3) + " % of a " + std::to_string(width) +
+            throw Error(input + ": crosses 180 degrees of longitude, which is an edge of " + targetText +
+                        ": its two halves would lie at " + "the map's opposite edges (" +
+                        fmt(100.0 * double(valid) / all, 3) + " % of a " + std::to_string(width) +
                         " px wide raster); choose a --t_srs whose central meridian is near the data (e.g. " +
-                        "EPSG:3832, PDC Mercator, or '+proj=laea +lon_0=180 +lat_0=...') or leave --t_srs out for its UTM zone");
+                        "EPSG:3832, PDC Mercator, or '+proj=laea +lon_0=180 +lat_0=...') or leave --t_srs out for its "
+                        "UTM zone");
     }
 
     GeoTransform outputGt() const {

@@ -64,7 +64,8 @@ Raster bathtub(const Raster& t, double level) {
 }
 
 // Steps of one series must be one simulation's output: the same raster size, georeferencing and CRS as the first.
-void checkAgreesWithFirst(GDALDataset& ds, const std::string& path, const std::string& firstPath, const std::string& role) {
+void checkAgreesWithFirst(GDALDataset& ds, const std::string& path, const std::string& firstPath,
+                          const std::string& role) {
     detail::DatasetPtr first = detail::openRaster(firstPath, role);
     auto fail = [&](const std::string& what) {
         throw Error(path + ": " + what + " differs from the series' first step " + firstPath +
@@ -76,7 +77,8 @@ void checkAgreesWithFirst(GDALDataset& ds, const std::string& path, const std::s
     const bool ga = ds.GetGeoTransform(a.data()) == CE_None, gb = first->GetGeoTransform(b.data()) == CE_None;
     if (ga != gb) fail("having a georeferencing");
     for (int i = 0; ga && i < 6; ++i)
-        if (std::abs(a[size_t(i)] - b[size_t(i)]) > 1e-9 * std::max({1.0, std::abs(a[size_t(i)]), std::abs(b[size_t(i)])}))
+        if (std::abs(a[size_t(i)] - b[size_t(i)]) >
+            1e-9 * std::max({1.0, std::abs(a[size_t(i)]), std::abs(b[size_t(i)])}))
             fail("the georeferencing (geotransform)");
     const OGRSpatialReference* sa = ds.GetSpatialRef();
     const OGRSpatialReference* sb = first->GetSpatialRef();
@@ -89,7 +91,8 @@ void checkAgreesWithFirst(GDALDataset& ds, const std::string& path, const std::s
 namespace detail {
 
 WaterStepWarp::WaterStepWarp(const Options& opt, const Raster& frame, size_t step, LoadReport& report) {
-    if (opt.water != WaterSource::Depth && opt.water != WaterSource::Surface) throw Error("internal: a water step warp without a water raster");
+    if (opt.water != WaterSource::Depth && opt.water != WaterSource::Surface)
+        throw Error("internal: a water step warp without a water raster");
     surface_ = opt.water == WaterSource::Surface;
     const std::string role = surface_ ? "water surface raster" : "water depth raster";
     const std::string& path = opt.waterPaths.empty() ? opt.waterPath : opt.waterPaths[step];
@@ -101,7 +104,8 @@ WaterStepWarp::WaterStepWarp(const Options& opt, const Raster& frame, size_t ste
     const OGRSpatialReference* srs = ds_->GetSpatialRef();
     const bool waterHasCrs = srs && !srs->IsEmpty();
     if (waterHasCrs != !frame.crsWkt.empty())
-        report.warnings.push_back(what_ + ": " + (waterHasCrs ? "the terrain has no CRS" : "has no CRS") + "; both taken to be in the same frame");
+        report.warnings.push_back(what_ + ": " + (waterHasCrs ? "the terrain has no CRS" : "has no CRS") +
+                                  "; both taken to be in the same frame");
     const std::string dstWkt = waterHasCrs && !frame.crsWkt.empty() ? frame.crsWkt : std::string();
     // The kernel's scale, fixed for the whole raster (GDAL's XSCALE, YSCALE): working pixels per water pixel, at most 1
     // (a water raster coarser than the working pixel is interpolated, a finer one averaged over the kernel's width).
@@ -112,7 +116,8 @@ WaterStepWarp::WaterStepWarp(const Options& opt, const Raster& frame, size_t ste
     if (!tr) throw Error(what_ + ": cannot transform onto the terrain: " + lastGdalError());
     double sg[6];
     int pw = 0, ph = 0;
-    const CPLErr e = GDALSuggestedWarpOutput(GDALDataset::ToHandle(ds_.get()), GDALGenImgProjTransform, tr, sg, &pw, &ph);
+    const CPLErr e =
+        GDALSuggestedWarpOutput(GDALDataset::ToHandle(ds_.get()), GDALGenImgProjTransform, tr, sg, &pw, &ph);
     GDALDestroyGenImgProjTransformer(tr);
     if (e != CE_None) throw Error(what_ + ": cannot resample onto the terrain: " + lastGdalError());
     int has = 0;
@@ -137,7 +142,8 @@ void WaterStepWarp::warp(size_t c0, size_t r0, size_t w, size_t h, float* out) c
     ds_->FlushCache(false);  // drops its blocks from GDAL's cache: the next window reads what it reaches
 }
 
-void WaterStepWarp::depth(size_t c0, size_t r0, size_t w, size_t h, const float* terrainZ, float* out, uint64_t& negative) const {
+void WaterStepWarp::depth(size_t c0, size_t r0, size_t w, size_t h, const float* terrainZ, float* out,
+                          uint64_t& negative) const {
     warp(c0, r0, w, h, out);
     for (size_t i = 0; i < w * h; ++i) {
         const float z = terrainZ[i], v = out[i];
@@ -167,8 +173,10 @@ std::string negativeDepthWarning(const std::string& what, uint64_t negative) {
 }  // namespace detail
 
 Raster loadWater(const Options& opt, const Raster& terrain, LoadReport& report, size_t step) {
-    if (step >= waterStepCount(opt)) throw Error("water step " + std::to_string(step) + " of " + std::to_string(waterStepCount(opt)));
-    if (opt.water == WaterSource::Level) return bathtub(terrain, opt.waterLevelsM.empty() ? opt.waterLevelM : opt.waterLevelsM[step]);
+    if (step >= waterStepCount(opt))
+        throw Error("water step " + std::to_string(step) + " of " + std::to_string(waterStepCount(opt)));
+    if (opt.water == WaterSource::Level)
+        return bathtub(terrain, opt.waterLevelsM.empty() ? opt.waterLevelM : opt.waterLevelsM[step]);
     // Warped in strips of rows, as a rank warps its windows (WaterStepWarp): the same bits.
     const detail::WaterStepWarp warp(opt, terrain, step, report);
     Raster d = terrain;
@@ -187,7 +195,8 @@ size_t expandWaterTimeSeries(Options& o, LoadReport& report) {
     if (o.waterPaths.size() > 1) {  // a list of files: one step each, each of one band
         for (const std::string& p : o.waterPaths)
             if (int n = detail::openRaster(p, "water raster")->GetRasterCount(); n != 1)
-                throw Error(p + ": has " + std::to_string(n) + " bands: each file of a series of water rasters is one step of one band");
+                throw Error(p + ": has " + std::to_string(n) +
+                            " bands: each file of a series of water rasters is one step of one band");
         return 0;
     }
     const std::string path = o.waterPaths.empty() ? o.waterPath : o.waterPaths[0];
@@ -196,15 +205,18 @@ size_t expandWaterTimeSeries(Options& o, LoadReport& report) {
     // GDAL's netCDF driver lists a variable's dimensions beyond y and x as NETCDF_DIM_EXTRA "{time}", and gives each
     // band its coordinate there (band metadata NETCDF_DIM_time) and the dimension's units (time#units).
     std::string extra = ds->GetMetadataItem("NETCDF_DIM_EXTRA") ? ds->GetMetadataItem("NETCDF_DIM_EXTRA") : "";
-    extra.erase(std::remove_if(extra.begin(), extra.end(), [](char c) { return c == '{' || c == '}' || c == ' '; }), extra.end());
+    extra.erase(std::remove_if(extra.begin(), extra.end(), [](char c) { return c == '{' || c == '}' || c == ' '; }),
+                extra.end());
     if (extra.empty()) {
         if (bands > 1)
-            throw Error(path + ": has " + std::to_string(bands) + " bands and no time dimension: which is the water? Give one band per file " +
+            throw Error(path + ": has " + std::to_string(bands) +
+                        " bands and no time dimension: which is the water? Give one band per file " +
                         "(gdal_translate -b N), or a NetCDF variable over time (one step per time)");
         return 0;
     }
     if (extra.find(',') != std::string::npos)
-        throw Error(path + ": the variable has dimensions " + extra + " beside y and x: only one, time, can make water steps " +
+        throw Error(path + ": the variable has dimensions " + extra +
+                    " beside y and x: only one, time, can make water steps " +
                     "(take a slice with gdal_translate -b N)");
     const std::string dim = extra;
     const char* unitsItem = ds->GetMetadataItem((dim + "#units").c_str());
@@ -214,15 +226,18 @@ size_t expandWaterTimeSeries(Options& o, LoadReport& report) {
         const char* v = ds->GetRasterBand(b)->GetMetadataItem(("NETCDF_DIM_" + dim).c_str());
         char* end = nullptr;
         const double t = v ? std::strtod(v, &end) : 0.0;
-        if (!v || end == v || !std::isfinite(t)) throw Error(path + ": band " + std::to_string(b) + " has no " + dim + " coordinate");
+        if (!v || end == v || !std::isfinite(t))
+            throw Error(path + ": band " + std::to_string(b) + " has no " + dim + " coordinate");
         times.push_back(unit > 0 ? t * unit : double(b - 1));
     }
     for (size_t k = 1; k < times.size(); ++k)
         if (!(times[k] > times[k - 1]))
-            throw Error(fmt::format("{}: the times of its {} dimension do not increase: step {} at {:.9g} s follows {:.9g} s", path, dim, k,
-                                    times[k], times[k - 1]));
+            throw Error(
+                fmt::format("{}: the times of its {} dimension do not increase: step {} at {:.9g} s follows {:.9g} s",
+                            path, dim, k, times[k], times[k - 1]));
     if (unit == 0)
-        report.warnings.push_back(path + ": the " + dim + " dimension has no CF time units (" + (unitsItem ? unitsItem : "none") +
+        report.warnings.push_back(path + ": the " + dim + " dimension has no CF time units (" +
+                                  (unitsItem ? unitsItem : "none") +
                                   "): the step index is taken as time (--times sets the times)");
     if (o.timesS.empty()) {
         if (unit > 0) o.timesS = times;

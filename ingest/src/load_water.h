@@ -11,16 +11,16 @@
 namespace hc::ingest::detail {
 
 // One water step's raster (a depth or surface raster, or one band of a series) warped onto the working raster's lattice
-// (bilinear, GDAL's exact transformer). Any window is computed with the whole raster's pixel coordinates and the kernel's
-// scale fixed, so it holds the same bits as the whole: one process reads it in strips of rows (loadWater), and under
-// mpirun each rank reads only its own windows.
+// (bilinear, GDAL's exact transformer). Any window is computed with the whole raster's pixel coordinates and the
+// kernel's scale fixed, so it holds the same bits as the whole: one process reads it in strips of rows (loadWater), and
+// under mpirun each rank reads only its own windows.
 class WaterStepWarp {
 public:
     // `frame`: the working raster's geometry and CRS (its values are not read). Adds the CRS warnings to `report`.
     WaterStepWarp(const Options& opt, const Raster& frame, size_t step, LoadReport& report);
-    // Depth [m] at the working pixels [c0, c0 + w) x [r0, r0 + h) (row 0 the northern-most, row-major), from the terrain's
-    // elevations there (terrainZ, the same layout): NaN where the terrain has a hole, 0 where dry or where the water
-    // raster has no data; a negative depth (a depth raster) is counted in `negative` and taken as dry.
+    // Depth [m] at the working pixels [c0, c0 + w) x [r0, r0 + h) (row 0 the northern-most, row-major), from the
+    // terrain's elevations there (terrainZ, the same layout): NaN where the terrain has a hole, 0 where dry or where
+    // the water raster has no data; a negative depth (a depth raster) is counted in `negative` and taken as dry.
     void depth(size_t c0, size_t r0, size_t w, size_t h, const float* terrainZ, float* out, uint64_t& negative) const;
     const std::string& what() const { return what_; }  // the file (and band), for messages
 

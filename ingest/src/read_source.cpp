@@ -1,6 +1,6 @@
-// BandReader: one band of a raster file -> floats, every kind of nodata as NaN, window by window (loadTerrain's first step).
-// Also where the file's silent conventions are caught: +-inf pixels, undeclared nodata sentinels (-9999,
-// -32768, ...), RGB images read as elevations, elevation units, and what float32 loses of a Float64 source.
+// BandReader: one band of a raster file -> floats, every kind of nodata as NaN, window by window (loadTerrain's first
+// step). Also where the file's silent conventions are caught: +-inf pixels, undeclared nodata sentinels (-9999, -32768,
+// ...), RGB images read as elevations, elevation units, and what float32 loses of a Float64 source.
 #include <algorithm>
 #include <cmath>
 #include <limits>
@@ -19,7 +19,9 @@ constexpr float kNaN = std::numeric_limits<float>::quiet_NaN();
 double verticalUnitScale(GDALRasterBand* band, std::string& unitName) {
     unitName = band->GetUnitType() ? band->GetUnitType() : "";
     std::string u = lower(unitName);
-    if (u.find("us") != std::string::npos && (u.find("ft") != std::string::npos || u.find("foot") != std::string::npos || u.find("feet") != std::string::npos))
+    if (u.find("us") != std::string::npos &&
+        (u.find("ft") != std::string::npos || u.find("foot") != std::string::npos ||
+         u.find("feet") != std::string::npos))
         return 1200.0 / 3937.0;
     if (u == "ft" || u == "foot" || u == "feet" || u.find("international foot") != std::string::npos) return 0.3048;
     return 1.0;
@@ -31,8 +33,13 @@ struct Sentinel {
     double value;
     bool impossible;
 };
-constexpr Sentinel kSentinels[] = {{-9999, false}, {-99999, true}, {-32768, true}, {-32767, true},
-                                   {-3.4028234663852886e38, true}, {-3.4e38, true}, {9.969209968386869e36, true}};
+constexpr Sentinel kSentinels[] = {{-9999, false},
+                                   {-99999, true},
+                                   {-32768, true},
+                                   {-32767, true},
+                                   {-3.4028234663852886e38, true},
+                                   {-3.4e38, true},
+                                   {9.969209968386869e36, true}};
 constexpr size_t kSentinelCount = sizeof kSentinels / sizeof kSentinels[0];
 
 // Index into kSentinels of a value (compared in float32 too: an .asc's -3.4e38 and a Float32 file's
@@ -46,7 +53,8 @@ size_t sentinelIndex(double v) {
 
 }  // namespace
 
-BandReader::BandReader(GDALDataset& ds, const Options& opt, LoadReport& report, double zCrs, const std::string& zCrsUnit)
+BandReader::BandReader(GDALDataset& ds, const Options& opt, LoadReport& report, double zCrs,
+                       const std::string& zCrsUnit)
     : ds_(ds), opt_(opt) {
     width_ = static_cast<size_t>(ds.GetRasterXSize());
     height_ = static_cast<size_t>(ds.GetRasterYSize());
@@ -59,9 +67,10 @@ BandReader::BandReader(GDALDataset& ds, const Options& opt, LoadReport& report, 
     band_ = ds.GetRasterBand(opt.terrainRgb ? 1 : opt.band);
     auto isByte = [&](int b) { return ds.GetRasterBand(b)->GetRasterDataType() == GDT_Byte; };
     if (!opt.terrainRgb && !opt.bandGiven && bandCount >= 3 && isByte(1) && isByte(2) && isByte(3))
-        throw Error(opt.input + ": has " + std::to_string(bandCount) + " 8-bit bands, an RGB" + (bandCount > 3 ? "A" : "") +
-                    " image: read as elevations, band 1 would make a terrain of 0..255 m steps; if it is a Terrain-RGB tile "
-                    "(Mapbox, MapTiler) add --terrain-rgb, or name the band that holds elevations with --band N");
+        throw Error(
+            opt.input + ": has " + std::to_string(bandCount) + " 8-bit bands, an RGB" + (bandCount > 3 ? "A" : "") +
+            " image: read as elevations, band 1 would make a terrain of 0..255 m steps; if it is a Terrain-RGB tile "
+            "(Mapbox, MapTiler) add --terrain-rgb, or name the band that holds elevations with --band N");
     if (opt.terrainRgb)
         for (int b = 1; b <= 3; ++b)
             if (ds.GetRasterBand(b)->GetRasterDataType() != GDT_Byte)
@@ -78,16 +87,19 @@ BandReader::BandReader(GDALDataset& ds, const Options& opt, LoadReport& report, 
     useMask_ = !(maskFlags & GMF_ALL_VALID) && !(maskFlags & GMF_NODATA) && (maskFlags & (GMF_PER_DATASET | GMF_ALPHA));
     std::string unitName;
     double zUnit = opt.terrainRgb ? 1.0 : verticalUnitScale(band_, unitName);
-    if (zUnit != 1.0) report.warnings.push_back("elevations are in '" + unitName + "': converted to metres (x" + fmt(zUnit, 10) + ")");
+    if (zUnit != 1.0)
+        report.warnings.push_back("elevations are in '" + unitName + "': converted to metres (x" + fmt(zUnit, 10) +
+                                  ")");
     if (!opt.terrainRgb && unitName.empty() && zCrs != 1.0) {
         zUnit = zCrs;
         report.warnings.push_back("the band declares no unit; the CRS's vertical unit is " + zCrsUnit +
-                                  ": elevations converted to metres (x" + fmt(zCrs, 10) + "; if they are metres after all, add --z-scale " +
-                                  fmt(1.0 / zCrs, 10) + ")");
+                                  ": elevations converted to metres (x" + fmt(zCrs, 10) +
+                                  "; if they are metres after all, add --z-scale " + fmt(1.0 / zCrs, 10) + ")");
     }
     zScale_ = zUnit * opt.zScale;
     const GDALDataType sampleType = band_->GetRasterDataType();
-    exactInFloat_ = sampleType == GDT_Byte || sampleType == GDT_UInt16 || sampleType == GDT_Int16 || sampleType == GDT_Float32;
+    exactInFloat_ =
+        sampleType == GDT_Byte || sampleType == GDT_UInt16 || sampleType == GDT_Int16 || sampleType == GDT_Float32;
     report.sourcePrecisionDouble = !opt.terrainRgb && !exactInFloat_;
 }
 
@@ -98,22 +110,23 @@ void SourceTally::add(const SourceTally& o) {
     maxOther = std::max(maxOther, o.maxOther);
 }
 
-void BandReader::read(size_t c0, size_t r0, size_t w, size_t h, float* dst, std::vector<float>& residual, size_t residualAt,
-                      size_t residualSize, SourceTally& tally) {
+void BandReader::read(size_t c0, size_t r0, size_t w, size_t h, float* dst, std::vector<float>& residual,
+                      size_t residualAt, size_t residualSize, SourceTally& tally) {
     static_assert(kSentinelCount <= SourceTally::kSentinelSlots);
     const size_t n = w * h;
     if (n == 0) return;
     auto rasterIO = [&](GDALRasterBand* b, void* to, GDALDataType type) {
         CPLErrorReset();
-        if (b->RasterIO(GF_Read, static_cast<int>(c0), static_cast<int>(r0), static_cast<int>(w), static_cast<int>(h), to,
-                        static_cast<int>(w), static_cast<int>(h), type, 0, 0, nullptr) != CE_None)
+        if (b->RasterIO(GF_Read, static_cast<int>(c0), static_cast<int>(r0), static_cast<int>(w), static_cast<int>(h),
+                        to, static_cast<int>(w), static_cast<int>(h), type, 0, 0, nullptr) != CE_None)
             throw Error(opt_.input + ": cannot read rows " + std::to_string(r0) + ".." + std::to_string(r0 + h - 1) +
                         (w == width_ ? "" : ", columns " + std::to_string(c0) + ".." + std::to_string(c0 + w - 1)) +
                         " (truncated or corrupt file?): " + detail::lastGdalError());
     };
     if (opt_.terrainRgb) {
         rgb_.resize(3 * n);
-        for (int b = 0; b < 3; ++b) rasterIO(ds_.GetRasterBand(b + 1), rgb_.data() + static_cast<size_t>(b) * n, GDT_Byte);
+        for (int b = 0; b < 3; ++b)
+            rasterIO(ds_.GetRasterBand(b + 1), rgb_.data() + static_cast<size_t>(b) * n, GDT_Byte);
         for (size_t i = 0; i < n; ++i) {
             double v = -10000.0 + 0.1 * (rgb_[i] * 65536.0 + rgb_[n + i] * 256.0 + rgb_[2 * n + i]);
             dst[i] = static_cast<float>(v * zScale_);
@@ -129,9 +142,12 @@ void BandReader::read(size_t c0, size_t r0, size_t w, size_t h, float* dst, std:
         }
         for (size_t i = 0; i < n; ++i) {
             double v = exactInFloat_ ? static_cast<double>(dst[i]) : buf_[i];
-            bool isNodata = std::isnan(v) || (hasNodata_ && (v == nodata_ || static_cast<float>(v) == static_cast<float>(nodata_))) ||
-                            // --nodata: in float32 for float32 data (as the user reads it), exactly otherwise
-                            (opt_.nodata && (v == *opt_.nodata || (exactInFloat_ && static_cast<float>(v) == static_cast<float>(*opt_.nodata))));
+            bool isNodata =
+                std::isnan(v) ||
+                (hasNodata_ && (v == nodata_ || static_cast<float>(v) == static_cast<float>(nodata_))) ||
+                // --nodata: in float32 for float32 data (as the user reads it), exactly otherwise
+                (opt_.nodata &&
+                 (v == *opt_.nodata || (exactInFloat_ && static_cast<float>(v) == static_cast<float>(*opt_.nodata))));
             if (!isNodata && std::isinf(v)) {
                 ++tally.infPixels;
                 isNodata = true;
@@ -143,9 +159,12 @@ void BandReader::read(size_t c0, size_t r0, size_t w, size_t h, float* dst, std:
             const double exact = v * zScale_;
             dst[i] = static_cast<float>(exact);
             if (!std::isfinite(dst[i]))
-                throw Error(opt_.input + ": elevation " + fmt(v) + " x " + fmt(zScale_) + " is beyond the float32 range");
-            if (size_t k = sentinelIndex(v); k < kSentinelCount) ++tally.sentinels[k];
-            else tally.maxOther = std::max(tally.maxOther, exact);
+                throw Error(opt_.input + ": elevation " + fmt(v) + " x " + fmt(zScale_) +
+                            " is beyond the float32 range");
+            if (size_t k = sentinelIndex(v); k < kSentinelCount)
+                ++tally.sentinels[k];
+            else
+                tally.maxOther = std::max(tally.maxOther, exact);
             const float lost = static_cast<float>(exact - static_cast<double>(dst[i]));
             if (lost != 0.0f) {
                 if (residual.empty()) residual.assign(residualSize, 0.0f);
@@ -179,10 +198,14 @@ void BandReader::finish(const SourceTally& tally, LoadReport& report) const {
         const double share = tally.validPixels ? double(count) / double(tally.validPixels) : 0.0;
         if (count == 0 || (!kSentinels[k].impossible && share < 1e-3)) continue;
         const double z = kSentinels[k].value * zScale_;
-        std::string cliff = std::isfinite(tally.maxOther) ? " (cliffs of up to " + fmt(std::abs(tally.maxOther - z) / 1000.0, 3) + " km)" : "";
-        report.warnings.push_back(std::to_string(count) + " pixels (" + fmt(100.0 * share, 3) + " % of the valid ones) hold " +
-                                  fmt(kSentinels[k].value, 9) + ", a classic nodata sentinel, but the file declares no such nodata value: " +
-                                  "they are taken as elevations" + cliff + "; if they are nodata, add --nodata " + fmt(kSentinels[k].value, 9));
+        std::string cliff = std::isfinite(tally.maxOther)
+                                ? " (cliffs of up to " + fmt(std::abs(tally.maxOther - z) / 1000.0, 3) + " km)"
+                                : "";
+        report.warnings.push_back(std::to_string(count) + " pixels (" + fmt(100.0 * share, 3) +
+                                  " % of the valid ones) hold " + fmt(kSentinels[k].value, 9) +
+                                  ", a classic nodata sentinel, but the file declares no such nodata value: " +
+                                  "they are taken as elevations" + cliff + "; if they are nodata, add --nodata " +
+                                  fmt(kSentinels[k].value, 9));
     }
 }
 

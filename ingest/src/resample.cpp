@@ -13,7 +13,8 @@ namespace {
 constexpr float kNaN = std::numeric_limits<float>::quiet_NaN();
 
 float sampleBilinear(const SourceView& s, double col, double row) {
-    if (!(col >= 0 && row >= 0 && col < static_cast<double>(s.width) && row < static_cast<double>(s.height))) return kNaN;
+    if (!(col >= 0 && row >= 0 && col < static_cast<double>(s.width) && row < static_cast<double>(s.height)))
+        return kNaN;
     // Pixel centres sit at +0.5; clamp the 2x2 stencil to the raster at its edges.
     double u = col - 0.5, v = row - 0.5;
     auto i0 = static_cast<long>(std::floor(u)), j0 = static_cast<long>(std::floor(v));
@@ -49,7 +50,8 @@ void centre(const Raster& t, double c, double r, double& x, double& y) {
 }
 
 // Lattice nodes (step-th rows and columns of the whole target) of rows j0..j1 and columns i0..i1: the map exactly.
-std::vector<Node> nodesOf(const Raster& t, const TargetToSource& map, size_t step, size_t i0, size_t i1, size_t j0, size_t j1, unsigned threads) {
+std::vector<Node> nodesOf(const Raster& t, const TargetToSource& map, size_t step, size_t i0, size_t i1, size_t j0,
+                          size_t j1, unsigned threads) {
     const size_t lw = i1 - i0 + 1;
     std::vector<Node> nodes((j1 - j0 + 1) * lw);
     parallelFor(j1 - j0 + 1, 8, threads, [&](size_t b, size_t e, unsigned) {
@@ -67,8 +69,8 @@ std::vector<Node> nodesOf(const Raster& t, const TargetToSource& map, size_t ste
 // The source position of target pixel (c, r) of a window whose lattice nodes are `nodes` (columns i0.., rows j0..,
 // lw a row): the exact map at a node, bilinear between four nodes, exact again where a node lies outside the map's
 // domain. False where the pixel has no source position.
-bool sourceOf(const Raster& t, const TargetToSource& map, size_t step, const std::vector<Node>& nodes, size_t i0, size_t j0, size_t lw, size_t c,
-              size_t r, double& col, double& row) {
+bool sourceOf(const Raster& t, const TargetToSource& map, size_t step, const std::vector<Node>& nodes, size_t i0,
+              size_t j0, size_t lw, size_t c, size_t r, double& col, double& row) {
     const size_t j = r / step, i = c / step;
     const double fy = static_cast<double>(r - j * step) / static_cast<double>(step);
     const double fx = static_cast<double>(c - i * step) / static_cast<double>(step);
@@ -92,7 +94,8 @@ bool sourceOf(const Raster& t, const TargetToSource& map, size_t step, const std
 }
 
 // The lattice rows and columns a window of the target needs: every pixel's four nodes.
-void windowLattice(size_t step, size_t col0, size_t row0, size_t w, size_t h, size_t& i0, size_t& i1, size_t& j0, size_t& j1) {
+void windowLattice(size_t step, size_t col0, size_t row0, size_t w, size_t h, size_t& i0, size_t& i1, size_t& j0,
+                   size_t& j1) {
     i0 = col0 / step, i1 = (col0 + w - 1) / step + 1;
     j0 = row0 / step, j1 = (row0 + h - 1) / step + 1;
 }
@@ -118,7 +121,8 @@ int latticeStep(const Raster& target, const TargetToSource& map, int lattice, do
                     double x, y, col, row;
                     centre(target, double(i * step) + 0.5 * double(step), double(j * step) + 0.5 * double(step), x, y);
                     if (!map(x, y, col, row)) continue;
-                    double ic = 0.25 * (a->col + bb->col + c->col + d->col), ir = 0.25 * (a->row + bb->row + c->row + d->row);
+                    double ic = 0.25 * (a->col + bb->col + c->col + d->col),
+                           ir = 0.25 * (a->row + bb->row + c->row + d->row);
                     worst[worker] = std::max({worst[worker], std::abs(ic - col), std::abs(ir - row)});
                 }
                 rows.swap(next);
@@ -133,9 +137,10 @@ namespace {
 
 // The source pixels [c0, c1] x [r0, r1] that target pixels [col0, col0 + w) x [row0, row0 + h) read, from the window's
 // lattice nodes (columns i0..i1, rows j0..j1); false when none lies on the source.
-bool sourceWindowOf(const Raster& target, const TargetToSource& map, size_t s, const std::vector<Node>& nodes, size_t i0, size_t i1, size_t j0,
-                    size_t j1, size_t col0, size_t row0, size_t w, size_t h, size_t sourceWidth, size_t sourceHeight, size_t& c0, size_t& r0,
-                    size_t& c1, size_t& r1, unsigned threads) {
+bool sourceWindowOf(const Raster& target, const TargetToSource& map, size_t s, const std::vector<Node>& nodes,
+                    size_t i0, size_t i1, size_t j0, size_t j1, size_t col0, size_t row0, size_t w, size_t h,
+                    size_t sourceWidth, size_t sourceHeight, size_t& c0, size_t& r0, size_t& c1, size_t& r1,
+                    unsigned threads) {
     if (sourceWidth == 0 || sourceHeight == 0) return false;
     struct Box {
         double cMin = HUGE_VAL, cMax = -HUGE_VAL, rMin = HUGE_VAL, rMax = -HUGE_VAL;
@@ -152,7 +157,8 @@ bool sourceWindowOf(const Raster& target, const TargetToSource& map, size_t s, c
         };
         for (size_t j = b; j < e; ++j)
             for (size_t i = 0; i + 1 < lw; ++i) {
-                const Node* n[4] = {&nodes[j * lw + i], &nodes[j * lw + i + 1], &nodes[(j + 1) * lw + i], &nodes[(j + 1) * lw + i + 1]};
+                const Node* n[4] = {&nodes[j * lw + i], &nodes[j * lw + i + 1], &nodes[(j + 1) * lw + i],
+                                    &nodes[(j + 1) * lw + i + 1]};
                 if (n[0]->ok && n[1]->ok && n[2]->ok && n[3]->ok) {
                     for (const Node* q : n) add(q->col, q->row);
                     continue;
@@ -169,7 +175,8 @@ bool sourceWindowOf(const Raster& target, const TargetToSource& map, size_t s, c
     });
     Box all;
     for (const Box& b : boxes)
-        all.cMin = std::min(all.cMin, b.cMin), all.cMax = std::max(all.cMax, b.cMax), all.rMin = std::min(all.rMin, b.rMin), all.rMax = std::max(all.rMax, b.rMax);
+        all.cMin = std::min(all.cMin, b.cMin), all.cMax = std::max(all.cMax, b.cMax),
+        all.rMin = std::min(all.rMin, b.rMin), all.rMax = std::max(all.rMax, b.rMax);
     // Clipped to the source: positions outside it read nothing (sampleBilinear gives NaN there).
     all.cMin = std::max(all.cMin, 0.0), all.rMin = std::max(all.rMin, 0.0);
     all.cMax = std::min(all.cMax, std::nextafter(double(sourceWidth), 0.0));
@@ -186,8 +193,9 @@ bool sourceWindowOf(const Raster& target, const TargetToSource& map, size_t s, c
 
 }  // namespace
 
-void resampleWindow(const TargetToSource& map, const Raster& target, int step, size_t col0, size_t row0, size_t w, size_t h, size_t sourceWidth,
-                    size_t sourceHeight, const std::function<SourceView(size_t c0, size_t r0, size_t c1, size_t r1)>& read, float* out,
+void resampleWindow(const TargetToSource& map, const Raster& target, int step, size_t col0, size_t row0, size_t w,
+                    size_t h, size_t sourceWidth, size_t sourceHeight,
+                    const std::function<SourceView(size_t c0, size_t r0, size_t c1, size_t r1)>& read, float* out,
                     unsigned threads) {
     std::fill(out, out + w * h, kNaN);
     if (w == 0 || h == 0) return;
@@ -196,7 +204,9 @@ void resampleWindow(const TargetToSource& map, const Raster& target, int step, s
     windowLattice(s, col0, row0, w, h, i0, i1, j0, j1);
     const std::vector<Node> nodes = nodesOf(target, map, s, i0, i1, j0, j1, threads);
     size_t c0 = 0, r0 = 0, c1 = 0, r1 = 0;
-    if (!sourceWindowOf(target, map, s, nodes, i0, i1, j0, j1, col0, row0, w, h, sourceWidth, sourceHeight, c0, r0, c1, r1, threads)) return;
+    if (!sourceWindowOf(target, map, s, nodes, i0, i1, j0, j1, col0, row0, w, h, sourceWidth, sourceHeight, c0, r0, c1,
+                        r1, threads))
+        return;
     const SourceView source = read(c0, r0, c1, r1);
     parallelFor(h, 32, threads, [&](size_t b, size_t e, unsigned) {
         for (size_t r = row0 + b; r < row0 + e; ++r)
@@ -208,12 +218,14 @@ void resampleWindow(const TargetToSource& map, const Raster& target, int step, s
     });
 }
 
-int resample(const SourceBand& source, const TargetToSource& map, Raster& target, int lattice, double maxErrorPx, unsigned threads) {
+int resample(const SourceBand& source, const TargetToSource& map, Raster& target, int lattice, double maxErrorPx,
+             unsigned threads) {
     const int step = latticeStep(target, map, lattice, maxErrorPx, threads);
     target.values.assign(target.width * target.height, kNaN);
     const SourceView whole{source.values.data(), 0, 0, source.width, source.width, source.height};
-    resampleWindow(map, target, step, 0, 0, target.width, target.height, source.width, source.height,
-                   [&](size_t, size_t, size_t, size_t) { return whole; }, target.values.data(), threads);
+    resampleWindow(
+        map, target, step, 0, 0, target.width, target.height, source.width, source.height,
+        [&](size_t, size_t, size_t, size_t) { return whole; }, target.values.data(), threads);
     return step;
 }
 

@@ -92,15 +92,15 @@ Raster loadTerrainTraced(const Options& opt, LoadReport& report, SourceTrace* tr
 // between; the lattice is refined (halved) until that interpolation is within maxErrorPx of the
 // exact map at every lattice-cell centre. Returns the lattice step used.
 //
-// The same in pieces, for a target filled window by window (each rank its own, docs/design.md section 7): latticeStep over
-// the whole target (the map only, no pixel; two rows of nodes held at a time), then resampleWindow per window, which
-// asks for the source pixels it reads. The lattice is the whole target's, so a window's pixels are the same bits as
-// resample() gives them (resample() is latticeStep and one window over the whole target).
+// The same in pieces, for a target filled window by window (each rank its own, docs/design.md section 7): latticeStep
+// over the whole target (the map only, no pixel; two rows of nodes held at a time), then resampleWindow per window,
+// which asks for the source pixels it reads. The lattice is the whole target's, so a window's pixels are the same bits
+// as resample() gives them (resample() is latticeStep and one window over the whole target).
 int resample(const SourceBand& source, const TargetToSource& map, Raster& target, int lattice, double maxErrorPx,
              unsigned threads);
 
-// A source raster or a window of it: source pixel (col, row) at values[(row - r0) * w + (col - c0)]; width x height is the
-// whole source's size (the bounds and edge clamps are the whole source's).
+// A source raster or a window of it: source pixel (col, row) at values[(row - r0) * w + (col - c0)]; width x height is
+// the whole source's size (the bounds and edge clamps are the whole source's).
 struct SourceView {
     const float* values = nullptr;
     size_t c0 = 0, r0 = 0, w = 0;
@@ -112,8 +112,9 @@ int latticeStep(const Raster& target, const TargetToSource& map, int lattice, do
 // Target pixels [col0, col0 + w) x [row0, row0 + h) into out (w h, row-major, NaN = nodata). read(c0, r0, c1, r1) is
 // asked once, for the source pixels [c0, c1] x [r0, r1] the window's map reaches (not at all when it reaches none:
 // every pixel is then nodata), and returns a view holding at least those; sourceWidth x sourceHeight: the whole source.
-void resampleWindow(const TargetToSource& map, const Raster& target, int step, size_t col0, size_t row0, size_t w, size_t h, size_t sourceWidth,
-                    size_t sourceHeight, const std::function<SourceView(size_t c0, size_t r0, size_t c1, size_t r1)>& read, float* out,
+void resampleWindow(const TargetToSource& map, const Raster& target, int step, size_t col0, size_t row0, size_t w,
+                    size_t h, size_t sourceWidth, size_t sourceHeight,
+                    const std::function<SourceView(size_t c0, size_t r0, size_t c1, size_t r1)>& read, float* out,
                     unsigned threads);
 
 }  // namespace hc::ingest::detail

@@ -27,8 +27,8 @@ namespace hc::ingest::detail {
 // Longitudes may run 0..360 or anywhere past 180: every longitude below is taken on the circle,
 // relative to the raster's centre, so 234..238 E is the same as 126..122 W, and a raster across the
 // antimeridian stays whole (its UTM zone sits across 180).
-Resampling planUtm(const GeoTransform& gt, size_t width, size_t height, const OGRSpatialReference& geo, const Options& opt,
-                   LoadReport& report, bool whole) {
+Resampling planUtm(const GeoTransform& gt, size_t width, size_t height, const OGRSpatialReference& geo,
+                   const Options& opt, LoadReport& report, bool whole) {
     using GeographicLib::Math;
     const double degPerUnit = geo.GetAngularUnits() * 180.0 / M_PI;
     const double pm = geo.GetPrimeMeridian();  // degrees east of Greenwich
@@ -55,17 +55,21 @@ Resampling planUtm(const GeoTransform& gt, size_t width, size_t height, const OG
             latMax = std::max(latMax, lat);
         }
     }
-    auto hint = std::string("; choose a projection with --t_srs (for example a Lambert azimuthal equal-area CRS centred on the data)");
+    auto hint = std::string(
+        "; choose a projection with --t_srs (for example a Lambert azimuthal equal-area CRS centred on the data)");
     if (latMin < -80.0 || latMax > 84.0 || lonMax - lonMin >= 180.0)
-        throw Error(opt.input + ": spans longitude " + fmt(lonMin) + ".." + fmt(lonMax) + " and latitude " + fmt(latMin) + ".." +
-                    fmt(latMax) + " degrees: no UTM zone holds it (UTM covers 80S..84N, and a zone at most a few degrees either side of its meridian)" + hint);
+        throw Error(opt.input + ": spans longitude " + fmt(lonMin) + ".." + fmt(lonMax) + " and latitude " +
+                    fmt(latMin) + ".." + fmt(latMax) +
+                    " degrees: no UTM zone holds it (UTM covers 80S..84N, and a zone at most a few degrees either side "
+                    "of its meridian)" +
+                    hint);
     int zone = GeographicLib::UTMUPS::StandardZone(latC, Math::AngNormalize(lonC));
     const double lon0 = 6.0 * zone - 183.0;
     double maxOff = 0;
     for (auto [lon, lat] : outline) maxOff = std::max(maxOff, std::abs(Math::AngDiff(lon0, lon)));
     if (maxOff > 12.0)
-        throw Error(opt.input + ": spans longitude " + fmt(lonMin) + ".." + fmt(lonMax) + " degrees, up to " + fmt(maxOff, 3) +
-                    " degrees from the central meridian of UTM zone " + std::to_string(zone) +
+        throw Error(opt.input + ": spans longitude " + fmt(lonMin) + ".." + fmt(lonMax) + " degrees, up to " +
+                    fmt(maxOff, 3) + " degrees from the central meridian of UTM zone " + std::to_string(zone) +
                     " (at most 12 are accepted: distortion grows fast beyond)" + hint);
     const bool north = latC >= 0;
     const double a = geo.GetSemiMajor();
@@ -100,7 +104,9 @@ Resampling planUtm(const GeoTransform& gt, size_t width, size_t height, const OG
         ymin = std::min(ymin, y);
         ymax = std::max(ymax, y);
     }
-    if (whole) checkWorkingSize(std::ceil((xmax - xmin) / r.pixelSizeM), std::ceil((ymax - ymin) / r.pixelSizeM), r.pixelSizeM, opt);
+    if (whole)
+        checkWorkingSize(std::ceil((xmax - xmin) / r.pixelSizeM), std::ceil((ymax - ymin) / r.pixelSizeM), r.pixelSizeM,
+                         opt);
     r.width = static_cast<size_t>(std::ceil((xmax - xmin) / r.pixelSizeM - 1e-9));
     r.height = static_cast<size_t>(std::ceil((ymax - ymin) / r.pixelSizeM - 1e-9));
     r.westWorld = xmin;
@@ -109,7 +115,8 @@ Resampling planUtm(const GeoTransform& gt, size_t width, size_t height, const OG
     OGRSpatialReference utm;
     utm.CopyGeogCSFrom(&geo);
     utm.SetUTM(zone, north);
-    std::string projName = std::string(geo.GetName() ? geo.GetName() : "unnamed") + " / UTM zone " + std::to_string(zone) + (north ? "N" : "S");
+    std::string projName = std::string(geo.GetName() ? geo.GetName() : "unnamed") + " / UTM zone " +
+                           std::to_string(zone) + (north ? "N" : "S");
     utm.SetProjCS(projName.c_str());
     utm.SetLinearUnits(SRS_UL_METER, 1.0);
     utm.AutoIdentifyEPSG();
@@ -123,8 +130,8 @@ Resampling planUtm(const GeoTransform& gt, size_t width, size_t height, const OG
     double inv[6];
     if (!gt.invert(inv)) throw Error(opt.input + ": geotransform cannot be inverted (degenerate pixel size)");
     // Everything by value: the map outlives this function (window by window).
-    p.map = [tm, lon0, fe, fn, lonC, pm, degPerUnit, i0 = inv[0], i1 = inv[1], i2 = inv[2], i3 = inv[3], i4 = inv[4], i5 = inv[5]](
-                double x, double y, double& col, double& row) {
+    p.map = [tm, lon0, fe, fn, lonC, pm, degPerUnit, i0 = inv[0], i1 = inv[1], i2 = inv[2], i3 = inv[3], i4 = inv[4],
+             i5 = inv[5]](double x, double y, double& col, double& row) {
         double lat, lon;
         tm.Reverse(lon0, x - fe, y - fn, lat, lon);
         lon = lonC + Math::AngDiff(lonC, lon);  // back into the source's own longitude range
@@ -136,8 +143,8 @@ Resampling planUtm(const GeoTransform& gt, size_t width, size_t height, const OG
     // 1e-5 pixel: at slopes of 100 m per pixel (alpine SRTM) that is 1 mm of elevation.
     p.lattice = 16, p.maxErrorPx = 1e-5, p.sayLattice = true;
     if (std::abs(lonC - Math::AngNormalize(lonC)) > 1e-9)
-        p.methodTail = "; longitudes " + fmt(lonMin) + ".." + fmt(lonMax) + " read as " + fmt(Math::AngNormalize(lonMin)) + ".." +
-                       fmt(Math::AngNormalize(lonMin) + (lonMax - lonMin));
+        p.methodTail = "; longitudes " + fmt(lonMin) + ".." + fmt(lonMax) + " read as " +
+                       fmt(Math::AngNormalize(lonMin)) + ".." + fmt(Math::AngNormalize(lonMin) + (lonMax - lonMin));
     {
         // Outlives this function: everything by value. The projection of every source pixel centre was most of
         // the check's time (geographic SRTM ingest 2.8-3.2x slower, docs/benchmarks.md): along a row the map is
@@ -145,8 +152,8 @@ Resampling planUtm(const GeoTransform& gt, size_t width, size_t height, const OG
         // such nodes in between, checked against an exact projection in each 16-column span: kept where the
         // check is within 1e-6 m (the residual, cubic between the nodes, peaks at most 1.2x the check point's),
         // else that span is projected exactly, column by column.
-        p.rowToWorld = [gt, degPerUnit, pm, tm, lon0, fe, fn](size_t row, std::vector<double>& x, std::vector<double>& y,
-                                                              std::vector<int>& ok) {
+        p.rowToWorld = [gt, degPerUnit, pm, tm, lon0, fe, fn](size_t row, std::vector<double>& x,
+                                                              std::vector<double>& y, std::vector<int>& ok) {
             const double rc = static_cast<double>(row) + 0.5;
             auto exact = [&](size_t c, double& ox, double& oy) {
                 double lon, lat;
@@ -171,10 +178,12 @@ Resampling planUtm(const GeoTransform& gt, size_t width, size_t height, const OG
                 lastX = nx[2], lastY = ny[2], lastOk = end, haveLast = true;
                 bool good = first && exact(c0 + kHalf, nx[1], ny[1]) && end;
                 auto para = [&](const double* n, size_t c) {
-                    const double s = (static_cast<double>(c - c0) - double(kHalf)) / double(kHalf);  // -1, 0, 1 at the nodes
+                    const double s =
+                        (static_cast<double>(c - c0) - double(kHalf)) / double(kHalf);  // -1, 0, 1 at the nodes
                     return n[1] + 0.5 * s * (n[2] - n[0]) + 0.5 * s * s * (n[2] - 2 * n[1] + n[0]);
                 };
-                good = good && exact(c0 + 5, qx, qy) && std::abs(para(nx, c0 + 5) - qx) <= kMaxErrM && std::abs(para(ny, c0 + 5) - qy) <= kMaxErrM;
+                good = good && exact(c0 + 5, qx, qy) && std::abs(para(nx, c0 + 5) - qx) <= kMaxErrM &&
+                       std::abs(para(ny, c0 + 5) - qy) <= kMaxErrM;
                 for (size_t c = c0; c < c0 + kSpan; ++c) {
                     if (good) {
                         x[c] = para(nx, c), y[c] = para(ny, c), ok[c] = 1;
@@ -204,8 +213,9 @@ Raster projectToUtm(SourceBand&& src, const GeoTransform& gt, const OGRSpatialRe
 
 // The output lattice of --t_srs for a source of width x height pixels on gtIn (no pixel read: `fill` gives them when a
 // window is warped), the pieces, and the report's method note.
-WarpPlan planWarp(const GeoTransform& gtIn, size_t width, size_t height, const OGRSpatialReference& srs, const OGRSpatialReference& target,
-                  const Options& opt, LoadReport& report, const SourceDataset::Fill& fill) {
+WarpPlan planWarp(const GeoTransform& gtIn, size_t width, size_t height, const OGRSpatialReference& srs,
+                  const OGRSpatialReference& target, const Options& opt, LoadReport& report,
+                  const SourceDataset::Fill& fill) {
     WarpPlan plan;
     plan.target = target;
     plan.targetText = opt.targetSrs;
@@ -231,16 +241,20 @@ WarpPlan planWarp(const GeoTransform& gtIn, size_t width, size_t height, const O
         // Columns with centres at 180 or beyond go east; those at west + 360 or beyond repeat column 0.
         const auto firstEast = static_cast<size_t>(std::clamp(std::ceil((180.0 - gt.g[0]) / dx - 0.5), 0.0, w));
         const auto end = static_cast<size_t>(std::clamp(std::ceil(360.0 / dx - 1e-6), 0.0, w));
-        pieces.assign(1, Piece{0, firstEast, gt});  // not = {{...}}: GCC 12 with ASan detect_stack_use_after_return crashed copying that initializer list
+        pieces.assign(1, Piece{0, firstEast, gt});  // not = {{...}}: GCC 12 with ASan detect_stack_use_after_return
+                                                    // crashed copying that initializer list
         if (firstEast < end) {
             GeoTransform east = gt;
             east.g[0] = gt.g[0] + static_cast<double>(firstEast) * dx - 360.0;
             pieces.push_back({firstEast, end, east});
             note = "; split at 180 degrees (east part shifted by -360)";
         }
-        // Seams: at 180 degrees between the pieces, and around a grid that closes the globe (its last column before its first).
-        if (firstEast < end && firstEast > 0) seams.push_back({firstEast - 1, firstEast, gt.g[0] + (double(firstEast) - 0.5) * dx});
-        if (end <= width && std::abs(double(end) * dx - 360.0) < 1e-6 * 360.0) seams.push_back({end - 1, 0, gt.g[0] + (double(end) - 0.5) * dx});
+        // Seams: at 180 degrees between the pieces, and around a grid that closes the globe (its last column before its
+        // first).
+        if (firstEast < end && firstEast > 0)
+            seams.push_back({firstEast - 1, firstEast, gt.g[0] + (double(firstEast) - 0.5) * dx});
+        if (end <= width && std::abs(double(end) * dx - 360.0) < 1e-6 * 360.0)
+            seams.push_back({end - 1, 0, gt.g[0] + (double(end) - 0.5) * dx});
         moved = gt;
         if (gt.g[0] != gtIn.g[0]) note += "; longitudes moved by " + fmt(gt.g[0] - gtIn.g[0]) + " degrees";
         if (end < width) note += "; " + std::to_string(width - end) + " closing column(s) repeating the first left out";
@@ -251,8 +265,11 @@ WarpPlan planWarp(const GeoTransform& gtIn, size_t width, size_t height, const O
     OGRSpatialReference from = srs, to = target;
     from.SetAxisMappingStrategy(OAMS_TRADITIONAL_GIS_ORDER);
     to.SetAxisMappingStrategy(OAMS_TRADITIONAL_GIS_ORDER);
-    plan.ct.reset(OGRCreateCoordinateTransformation(&from, &to), [](OGRCoordinateTransformation* t) { OGRCoordinateTransformation::DestroyCT(t); });
-    if (!plan.ct) throw Error("--t_srs " + targetText + ": cannot transform from " + report.sourceCrsName + ": " + detail::lastGdalError());
+    plan.ct.reset(OGRCreateCoordinateTransformation(&from, &to),
+                  [](OGRCoordinateTransformation* t) { OGRCoordinateTransformation::DestroyCT(t); });
+    if (!plan.ct)
+        throw Error("--t_srs " + targetText + ": cannot transform from " + report.sourceCrsName + ": " +
+                    detail::lastGdalError());
     // The output extent: GDAL's suggestion shrinks to what its edge samples reach, and loses every
     // row beyond a failing edge (a global grid's poles at +-90.5 cut it to +-81 degrees). So: the
     // bounding box of the pixel corners and centres that do transform: all along the outline, and on a
@@ -269,7 +286,8 @@ WarpPlan planWarp(const GeoTransform& gtIn, size_t width, size_t height, const O
                 const bool edgeRow = j == 0 || j + 2 >= m;
                 for (size_t i = 0; i < n; ++i) {
                     if (!(edgeRow || i == 0 || i + 2 >= n || (i % k == 0 && j % k == 0))) continue;
-                    const double c = std::min(double(i) + half, double(width)), r = std::min(double(j) + half, double(height));
+                    const double c = std::min(double(i) + half, double(width)),
+                                 r = std::min(double(j) + half, double(height));
                     double x, y;
                     gtIn.apply(c, r, x, y);
                     xs.push_back(x);
@@ -287,7 +305,8 @@ WarpPlan planWarp(const GeoTransform& gtIn, size_t width, size_t height, const O
                 ext[0] = std::min(ext[0], xs[i]), ext[1] = std::min(ext[1], ys[i]), ext[2] = std::max(ext[2], xs[i]),
                 ext[3] = std::max(ext[3], ys[i]);
         if (!(ext[0] < ext[2] && ext[1] < ext[3]))
-            throw Error(opt.input + ": no part of it has a position in " + targetText + " (PROJ: " + detail::lastGdalError() + ")");
+            throw Error(opt.input + ": no part of it has a position in " + targetText +
+                        " (PROJ: " + detail::lastGdalError() + ")");
     }
     double suggested = HUGE_VAL;
     for (const Piece& pc : pieces) {
@@ -296,16 +315,21 @@ WarpPlan planWarp(const GeoTransform& gtIn, size_t width, size_t height, const O
         char** dst = CSLSetNameValue(nullptr, "DST_SRS", targetText.c_str());
         void* tr = GDALCreateGenImgProjTransformer2(GDALDataset::ToHandle(plan.sources.back().get()), nullptr, dst);
         CSLDestroy(dst);
-        if (!tr) throw Error("--t_srs " + targetText + ": cannot transform from " + report.sourceCrsName + ": " + detail::lastGdalError());
+        if (!tr)
+            throw Error("--t_srs " + targetText + ": cannot transform from " + report.sourceCrsName + ": " +
+                        detail::lastGdalError());
         double sg[6];
         int pw = 0, ph = 0;
-        CPLErr e = GDALSuggestedWarpOutput(GDALDataset::ToHandle(plan.sources.back().get()), GDALGenImgProjTransform, tr, sg, &pw, &ph);
+        CPLErr e = GDALSuggestedWarpOutput(GDALDataset::ToHandle(plan.sources.back().get()), GDALGenImgProjTransform,
+                                           tr, sg, &pw, &ph);
         GDALDestroyGenImgProjTransformer(tr);
-        if (e != CE_None) throw Error("--t_srs " + targetText + ": cannot project " + opt.input + ": " + detail::lastGdalError());
+        if (e != CE_None)
+            throw Error("--t_srs " + targetText + ": cannot project " + opt.input + ": " + detail::lastGdalError());
         suggested = std::min({suggested, std::abs(sg[1]), std::abs(sg[5])});
     }
     plan.cell = opt.minCellM ? *opt.minCellM / target.GetLinearUnits() : suggested;
-    plan.scale = std::min(1.0, suggested / plan.cell);  // coarser than the source: the kernel widens (GDAL's downsampling)
+    plan.scale =
+        std::min(1.0, suggested / plan.cell);  // coarser than the source: the kernel widens (GDAL's downsampling)
     // Half a pixel more on every side: source pixel centres on the extent's edge (a pole, the
     // antimeridian) then fall inside the output rather than on its closing edge.
     const double cell = plan.cell;
@@ -313,12 +337,13 @@ WarpPlan planWarp(const GeoTransform& gtIn, size_t width, size_t height, const O
     // gdalwarp's size for -te and -tr.
     plan.width = size_t((ext[2] - ext[0] + cell / 2) / cell);
     plan.height = size_t((ext[3] - ext[1] + cell / 2) / cell);
-    if (plan.width == 0 || plan.height == 0) throw Error(opt.input + ": projected to " + targetText + ": an empty raster");
+    if (plan.width == 0 || plan.height == 0)
+        throw Error(opt.input + ": projected to " + targetText + ": an empty raster");
     checkWorkingSize(double(plan.width), double(plan.height), cell * target.GetLinearUnits(), opt);
     // Across the seams, pixels as fine as the source or finer (a coarser output widens GDAL's kernel: not done here).
     if (!seams.empty() && plan.scale == 1.0)
-        plan.seams = std::make_unique<detail::WarpSeams>(seams, moved.g, height, srs, target, plan.ct, plan.ext, plan.cell,
-                                                         plan.height, fill);
+        plan.seams = std::make_unique<detail::WarpSeams>(seams, moved.g, height, srs, target, plan.ct, plan.ext,
+                                                         plan.cell, plan.height, fill);
     return plan;
 }
 
@@ -336,10 +361,12 @@ WarpedFrame warpedFrame(const WarpPlan& plan, LoadReport& report) {
 }
 
 // Where each source pixel centre lands in the working raster's CRS [m]: PROJ, exact, from the source's own coordinates.
-std::function<void(size_t, std::vector<double>&, std::vector<double>&, std::vector<int>&)> warpRowToWorld(const WarpPlan& plan,
-                                                                                                        const GeoTransform& gtIn, double unit) {
-    return [ct = plan.ct, gt = gtIn, unit](size_t row, std::vector<double>& x, std::vector<double>& y, std::vector<int>& ok) {
-        for (size_t c = 0; c < x.size(); ++c) gt.apply(static_cast<double>(c) + 0.5, static_cast<double>(row) + 0.5, x[c], y[c]);
+std::function<void(size_t, std::vector<double>&, std::vector<double>&, std::vector<int>&)> warpRowToWorld(
+    const WarpPlan& plan, const GeoTransform& gtIn, double unit) {
+    return [ct = plan.ct, gt = gtIn, unit](size_t row, std::vector<double>& x, std::vector<double>& y,
+                                           std::vector<int>& ok) {
+        for (size_t c = 0; c < x.size(); ++c)
+            gt.apply(static_cast<double>(c) + 0.5, static_cast<double>(row) + 0.5, x[c], y[c]);
         CPLErrorReset();
         ct->Transform(static_cast<int>(x.size()), x.data(), y.data(), nullptr, ok.data());
         for (size_t c = 0; c < x.size(); ++c) {
@@ -350,8 +377,9 @@ std::function<void(size_t, std::vector<double>&, std::vector<double>&, std::vect
     };
 }
 
-Raster warpToTarget(SourceBand&& src, const GeoTransform& gtIn, const OGRSpatialReference& srs, const OGRSpatialReference& target,
-                    const Options& opt, LoadReport& report, detail::SourceTrace* trace) {
+Raster warpToTarget(SourceBand&& src, const GeoTransform& gtIn, const OGRSpatialReference& srs,
+                    const OGRSpatialReference& target, const Options& opt, LoadReport& report,
+                    detail::SourceTrace* trace) {
     auto fill = [&src](size_t c0, size_t r0, size_t w, size_t h, float* out) {
         for (size_t r = 0; r < h; ++r) std::copy_n(src.values.data() + (r0 + r) * src.width + c0, w, out + r * w);
     };
@@ -370,11 +398,13 @@ Raster warpToTarget(SourceBand&& src, const GeoTransform& gtIn, const OGRSpatial
         }
         progress.finish();
     }
-    plan.checkValid(uint64_t(std::count_if(ws.values.begin(), ws.values.end(), [](float v) { return !std::isnan(v); })));
+    plan.checkValid(
+        uint64_t(std::count_if(ws.values.begin(), ws.values.end(), [](float v) { return !std::isnan(v); })));
     const WarpedFrame frame = warpedFrame(plan, report);
     Options keep = opt;
     keep.minCellM.reset();  // -tr already applied it
-    Raster r = fromSourceAffine(std::move(ws), frame.gt, std::abs(frame.gt.g[1]), detail::toWkt(frame.crs), keep, report, nullptr);
+    Raster r = fromSourceAffine(std::move(ws), frame.gt, std::abs(frame.gt.g[1]), detail::toWkt(frame.crs), keep,
+                                report, nullptr);
     if (trace) {
         trace->band = std::move(src);
         trace->rowToWorldThreadSafe = false;  // PROJ's transformations

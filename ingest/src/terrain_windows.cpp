@@ -40,7 +40,8 @@ public:
         keptGeometry(o_.gt, o_.band->width(), o_.band->height(), shape_, flipX_, flipY_, report);
     }
     const Raster& shape() const override { return shape_; }
-    void read(size_t col0, size_t row0, size_t w, size_t h, std::vector<float>& values, std::vector<float>& rounding) override {
+    void read(size_t col0, size_t row0, size_t w, size_t h, std::vector<float>& values,
+              std::vector<float>& rounding) override {
         if (col0 + w > shape_.width || row0 + h > shape_.height) throw Error("window outside the working raster");
         const size_t c0 = flipX_ ? shape_.width - col0 - w : col0, r0 = flipY_ ? shape_.height - row0 - h : row0;
         values.assign(w * h, kNaN);
@@ -51,7 +52,8 @@ public:
                 if (v.empty()) return;
                 std::vector<float> m(v.size());
                 for (size_t r = 0; r < h; ++r)
-                    for (size_t c = 0; c < w; ++c) m[r * w + c] = v[(flipY_ ? h - 1 - r : r) * w + (flipX_ ? w - 1 - c : c)];
+                    for (size_t c = 0; c < w; ++c)
+                        m[r * w + c] = v[(flipY_ ? h - 1 - r : r) * w + (flipX_ ? w - 1 - c : c)];
                 v.swap(m);
             };
             mirror(values);
@@ -68,12 +70,12 @@ private:
     detail::SourceTally tally_;
 };
 
-// TerrainWindows over a source that is resampled (projected to UTM, rotated, non-square pixels or --min-cell): a working
-// window reads the source pixels its map reaches (resampleWindow asks for them) and resamples them on the whole target's lattice, so
-// its pixels are the same bits as the whole raster's (resample.h). The reading tally counts every source pixel once:
-// each rank reads its share of the source's row strips for it (one more pass over the source, spread over the ranks),
-// and in the same pass, once the grid file is written, checks those pixels against the cells under their centres
-// (LoadReport::sourceCheck), each strip against the file's region under it.
+// TerrainWindows over a source that is resampled (projected to UTM, rotated, non-square pixels or --min-cell): a
+// working window reads the source pixels its map reaches (resampleWindow asks for them) and resamples them on the whole
+// target's lattice, so its pixels are the same bits as the whole raster's (resample.h). The reading tally counts every
+// source pixel once: each rank reads its share of the source's row strips for it (one more pass over the source, spread
+// over the ranks), and in the same pass, once the grid file is written, checks those pixels against the cells under
+// their centres (LoadReport::sourceCheck), each strip against the file's region under it.
 class ResampledWindows final : public detail::TerrainWindows {
 public:
     ResampledWindows(Opened&& o, Resampling&& plan, const Options& opt, LoadReport& report)
@@ -82,10 +84,11 @@ public:
         if (plan_.sayLattice) report.method += ", map exact every " + std::to_string(step_) + " px" + plan_.methodTail;
     }
     // --t_srs: the windows warped by GDAL (WarpPlan::warp), the source's blocks read as the warper asks for them.
-    ResampledWindows(Opened&& o, const Options& opt, LoadReport& report) : o_(std::move(o)), threads_(opt.threads), progress_(opt.progress) {
+    ResampledWindows(Opened&& o, const Options& opt, LoadReport& report)
+        : o_(std::move(o)), threads_(opt.threads), progress_(opt.progress) {
         const size_t width = o_.band->width(), height = o_.band->height();
         auto fill = [this](size_t c0, size_t r0, size_t w, size_t h, float* out) {
-            std::vector<float> residual;  // the warper takes float32 values (as read whole)
+            std::vector<float> residual;    // the warper takes float32 values (as read whole)
             detail::SourceTally uncounted;  // counted once by tally()
             o_.band->read(c0, r0, w, h, out, residual, 0, w * h, uncounted);
         };
@@ -103,8 +106,10 @@ public:
     void checkValid(uint64_t validPixels) const override {
         if (warp_) warp_->checkValid(validPixels);
     }
-    void read(size_t col0, size_t row0, size_t w, size_t h, std::vector<float>& values, std::vector<float>& rounding) override {
-        if (col0 + w > plan_.shape.width || row0 + h > plan_.shape.height) throw Error("window outside the working raster");
+    void read(size_t col0, size_t row0, size_t w, size_t h, std::vector<float>& values,
+              std::vector<float>& rounding) override {
+        if (col0 + w > plan_.shape.width || row0 + h > plan_.shape.height)
+            throw Error("window outside the working raster");
         values.assign(w * h, kNaN);
         rounding.clear();  // a resampled raster keeps float32 values only (as read whole)
         if (warp_) {
@@ -122,7 +127,8 @@ public:
             o_.band->dropCache();
             return detail::SourceView{source_.data(), c0, r0, sw, width, height};
         };
-        detail::resampleWindow(plan_.map, plan_.shape, step_, col0, row0, w, h, width, height, readSource, values.data(), threads_);
+        detail::resampleWindow(plan_.map, plan_.shape, step_, col0, row0, w, h, width, height, readSource,
+                               values.data(), threads_);
     }
     const detail::SourceTally& tally() const override {
         if (!counted_) stripPass(nullptr, nullptr);
@@ -148,9 +154,10 @@ private:
         // regions under them about its share of the file (every rank's strips spread over the height would each touch
         // nearly every page of the file, the cells of a band being spread over it in Morton order).
         const uint64_t strips = (height + strip - 1) / strip;
-        const uint64_t s0 = ranks::shareBegin(strips, ranks::rank(), ranks::count()), s1 = ranks::shareBegin(strips, ranks::rank() + 1, ranks::count());
-        Progress progress(grid ? "checking the source's pixels against their cells" : "counting the source's pixels", s1 - s0,
-                          progress_ && ranks::rank() == 0);
+        const uint64_t s0 = ranks::shareBegin(strips, ranks::rank(), ranks::count()),
+                       s1 = ranks::shareBegin(strips, ranks::rank() + 1, ranks::count());
+        Progress progress(grid ? "checking the source's pixels against their cells" : "counting the source's pixels",
+                          s1 - s0, progress_ && ranks::rank() == 0);
         std::vector<float> values, residual, painted;
         std::vector<int64_t> at;  // per strip pixel: its working pixel (row * width + col), or -1 where none
         tally_ = {};
@@ -168,8 +175,9 @@ private:
     }
 
     // Rows [r0, r0 + rows) of the source (values, residual as read) against the file's cells, on every worker.
-    void checkStrip(const GridRegionReader& grid, size_t r0, size_t rows, const std::vector<float>& values, const std::vector<float>& residual,
-                    std::vector<int64_t>& at, std::vector<float>& painted, detail::SourceCheckSums& sums) const {
+    void checkStrip(const GridRegionReader& grid, size_t r0, size_t rows, const std::vector<float>& values,
+                    const std::vector<float>& residual, std::vector<int64_t>& at, std::vector<float>& painted,
+                    detail::SourceCheckSums& sums) const {
         const Raster& t = plan_.shape;
         const size_t width = o_.band->width(), workers = resolveThreads(threads_);
         at.assign(width * rows, -1);
@@ -189,21 +197,24 @@ private:
                     if (p < 0) continue;
                     const size_t ic = size_t(p) % t.width, ir = size_t(p) / t.width;
                     at[j * width + c] = p;
-                    box.c0 = std::min(box.c0, ic), box.c1 = std::max(box.c1, ic), box.w0 = std::min(box.w0, ir), box.w1 = std::max(box.w1, ir);
+                    box.c0 = std::min(box.c0, ic), box.c1 = std::max(box.c1, ic), box.w0 = std::min(box.w0, ir),
+                    box.w1 = std::max(box.w1, ir);
                 }
             }
         });
         Box all;
         for (const Box& box : boxes)
-            all.c0 = std::min(all.c0, box.c0), all.c1 = std::max(all.c1, box.c1), all.w0 = std::min(all.w0, box.w0), all.w1 = std::max(all.w1, box.w1);
+            all.c0 = std::min(all.c0, box.c0), all.c1 = std::max(all.c1, box.c1), all.w0 = std::min(all.w0, box.w0),
+            all.w1 = std::max(all.w1, box.w1);
         const size_t c0 = all.c0, c1 = all.c1, w0 = all.w0, w1 = all.w1;
         const size_t bw = c0 <= c1 ? c1 - c0 + 1 : 0, bh = w0 <= w1 ? w1 - w0 + 1 : 0;
         painted.assign(bw * bh, kNaN);
         if (bw > 0) {
-            // The cells under working pixels [c0, c1] x [w0, w1] (the grid's local frame: origin at the working raster's
-            // south-west corner, y north, one finest cell a pixel), painted onto them.
+            // The cells under working pixels [c0, c1] x [w0, w1] (the grid's local frame: origin at the working
+            // raster's south-west corner, y north, one finest cell a pixel), painted onto them.
             const double px = t.pixelSizeM;
-            const Grid cells = grid.region({double(c0) * px, double(t.height - 1 - w1) * px, double(c1 + 1) * px, double(t.height - w0) * px});
+            const Grid cells = grid.region(
+                {double(c0) * px, double(t.height - 1 - w1) * px, double(c1 + 1) * px, double(t.height - w0) * px});
             for (size_t i = 0; i < cells.cellCount(); ++i) {
                 const uint64_t key = codeKey(cells.codes[i]);
                 const size_t span = size_t{1} << codeLevel(cells.codes[i]), ix0 = mortonX(key), iy0 = mortonY(key);
@@ -211,7 +222,8 @@ private:
                     if (iy >= t.height) break;
                     const size_t row = t.height - 1 - iy;
                     if (row < w0 || row > w1) continue;
-                    for (size_t ix = std::max(ix0, c0); ix < std::min(ix0 + span, c1 + 1); ++ix) painted[(row - w0) * bw + (ix - c0)] = cells.values[0][i];
+                    for (size_t ix = std::max(ix0, c0); ix < std::min(ix0 + span, c1 + 1); ++ix)
+                        painted[(row - w0) * bw + (ix - c0)] = cells.values[0][i];
                 }
             }
         }
@@ -220,7 +232,8 @@ private:
             detail::SourceCheckSums& p = parts[worker];
             for (size_t i = b * width; i < e * width; ++i) {
                 if (std::isnan(values[i])) continue;
-                const float z = at[i] < 0 ? kNaN : painted[(size_t(at[i]) / t.width - w0) * bw + (size_t(at[i]) % t.width - c0)];
+                const float z =
+                    at[i] < 0 ? kNaN : painted[(size_t(at[i]) / t.width - w0) * bw + (size_t(at[i]) % t.width - c0)];
                 p.addPixel(double(values[i]) + (residual.empty() ? 0.0 : double(residual[i])), z);
             }
         });
@@ -244,14 +257,15 @@ std::unique_ptr<detail::TerrainWindows> detail::openTerrainWindows(const Options
     Opened o = openTerrain(opt, report);
     const size_t width = o.band->width(), height = o.band->height();
     switch (o.route) {
-    case Opened::Route::Warp: {
-        return std::make_unique<ResampledWindows>(std::move(o), opt, report);
-    }
-    case Opened::Route::Utm: {
-        Resampling plan = planUtm(o.gt, width, height, o.srs, opt, report, false);
-        return std::make_unique<ResampledWindows>(std::move(o), std::move(plan), opt, report);
-    }
-    case Opened::Route::Affine: break;
+        case Opened::Route::Warp: {
+            return std::make_unique<ResampledWindows>(std::move(o), opt, report);
+        }
+        case Opened::Route::Utm: {
+            Resampling plan = planUtm(o.gt, width, height, o.srs, opt, report, false);
+            return std::make_unique<ResampledWindows>(std::move(o), std::move(plan), opt, report);
+        }
+        case Opened::Route::Affine:
+            break;
     }
     if (!keptAsIs(o.gt, opt)) {
         Resampling plan = planAffine(o.gt, width, height, o.pixelM, o.wkt, opt, report, false);

@@ -13,11 +13,7 @@ namespace hc::ingest::detail {
 WarpSeams::WarpSeams(std::vector<Seam> seams, const double gt[6], size_t srcHeight, const OGRSpatialReference& source,
                      const OGRSpatialReference& target, std::shared_ptr<OGRCoordinateTransformation> ct,
                      const double ext[4], double cell, size_t height, Fill fill)
-    : seams_(std::move(seams)),
-      srcHeight_(srcHeight),
-      cell_(cell),
-      height_(height),
-      fill_(std::move(fill)) {
+    : seams_(std::move(seams)), srcHeight_(srcHeight), cell_(cell), height_(height), fill_(std::move(fill)) {
     std::copy(gt, gt + 6, gt_);
     std::copy(ext, ext + 4, ext_);
     OGRSpatialReference from = target, to = source;

@@ -1,7 +1,7 @@
 // The approximation pass, per cascade (approximate()): the texels visible in the last frame too copied from it, then
 // those the surface pyramid holds copied or interpolated (approximate_copy.cpp, approximate_interpolate.cpp), then the
-// Gaussian RBF sum (docs/design.md section 3) at the rest (approximate_sum.cpp): over the scene's cells in memory, or out of
-// core over blocks of texels whose cells are read from the grid file (here). What these files share is in
+// Gaussian RBF sum (docs/design.md section 3) at the rest (approximate_sum.cpp): over the scene's cells in memory, or
+// out of core over blocks of texels whose cells are read from the grid file (here). What these files share is in
 // approximate_internal.h. The cascades' max mipmaps (Heightfield::buildMip, CascadeTextures::buildBothMip) are built
 // here too, after the pass.
 #include <algorithm>
@@ -41,7 +41,8 @@ struct ApproximationPlan {
     }
 };
 
-// The texels [f, l] of row j of c that were visible in `reuse` too (empty: l < f), and the row's spans left to evaluate.
+// The texels [f, l] of row j of c that were visible in `reuse` too (empty: l < f), and the row's spans left to
+// evaluate.
 Todo keptSpan(const Cascade& c, const TexelReuse* reuse, int j, int& f, int& l) {
     const Cascade::RowSpan& r = c.rows[size_t(j)];
     Todo t{{r.first, r.last}, {0, -1}};
@@ -57,8 +58,8 @@ Todo keptSpan(const Cascade& c, const TexelReuse* reuse, int j, int& f, int& l) 
 
 // Writes every texel of tex: the visible texels of c that were visible in `reuse` (if any) copied, their count
 // added to `copied`; every other one "no surface" (-inf, depth 0) until evaluated. Returns the spans left to
-// evaluate. reuse->tex may be tex itself where the side is the same (renderFrame hands the last frame's storage on, so a
-// moving camera allocates nothing): this frame's row j reads the last frame's row j + dj, so rows are written in the
+// evaluate. reuse->tex may be tex itself where the side is the same (renderFrame hands the last frame's storage on, so
+// a moving camera allocates nothing): this frame's row j reads the last frame's row j + dj, so rows are written in the
 // order that reads each of the last frame's rows before overwriting it. A cascade of another side reads storage of
 // its own (rows of reuse->cascade->n texels).
 // With `rows` (RowFill; the plan's kRows and kRowsAndTiles): each row's spans into it, and only the spans left to
@@ -100,7 +101,8 @@ std::vector<Todo> copyReusedTexels(const Cascade& c, const ApproximationPlan& pl
         });
         return todo;
     }
-    if (reuse->tex == &tex && reuse->cascade->n != n) throw hc::Error("approximate: a cascade kept in place changed its side (a bug)");
+    if (reuse->tex == &tex && reuse->cascade->n != n)
+        throw hc::Error("approximate: a cascade kept in place changed its side (a bug)");
     const bool upwards = reuse->dj < 0;
     for (int step = 0; step < n; ++step) {
         const int j = upwards ? n - 1 - step : step;
@@ -145,7 +147,8 @@ constexpr int kOutOfCoreMinBlock = 16;
 // Clears `need` at the texels of r whose pyramid tile (level t, its lattice: copyPyramidTexels) is not stored because
 // its quadtree node holds no cell at all: the surface is undefined at every texel there (a hole, or outside the data),
 // so no cell need be read for them (EmptyTiles). Texels outside the domain are cleared too.
-void dropEmptyTiles(const GridRegionReader& file, const Cascade& c, int t, const TexelRange& r, std::vector<uint8_t>& need) {
+void dropEmptyTiles(const GridRegionReader& file, const Cascade& c, int t, const TexelRange& r,
+                    std::vector<uint8_t>& need) {
     EmptyTiles empty(file, t);
     if (!empty.asks()) return;
     const double i0 = std::round(c.x0 / c.texelM), j0 = std::round(c.y0 / c.texelM);
@@ -165,23 +168,26 @@ void dropEmptyTiles(const GridRegionReader& file, const Cascade& c, int t, const
 // would bring in and build lists for in vain (Marchfeld's far cascade: 1.0 M cells read for 64 k texels). A cell kept
 // is one that may weigh at a needed texel, so the texels' sums are what the whole grid gives. Adds the cells read
 // from the file to *cellsRead.
-influence::SurfaceRegion readNeededRegion(const GridRegionReader& file, const influence::KernelParams& params, const std::vector<double>& reach,
-                                          const Cascade& c, const std::vector<uint8_t>& need, const TexelRange& r, uint64_t& cellsRead) {
+influence::SurfaceRegion readNeededRegion(const GridRegionReader& file, const influence::KernelParams& params,
+                                          const std::vector<double>& reach, const Cascade& c,
+                                          const std::vector<uint8_t>& need, const TexelRange& r, uint64_t& cellsRead) {
     const double s = c.texelM;
     Grid all = file.region({c.x0 + r.i0 * s, c.y0 + r.j0 * s, c.x0 + r.i1 * s, c.y0 + r.j1 * s}, reach);
     cellsRead += all.cellCount();
     const int w = r.i1 - r.i0 + 1, h = r.j1 - r.j0 + 1;
-    std::vector<uint32_t> sat(size_t(w + 1) * size_t(h + 1), 0);  // sat[(j + 1) (w + 1) + i + 1]: needed texels in [0, i] x [0, j]
+    std::vector<uint32_t> sat(size_t(w + 1) * size_t(h + 1),
+                              0);  // sat[(j + 1) (w + 1) + i + 1]: needed texels in [0, i] x [0, j]
     for (int j = 0; j < h; ++j)
         for (int i = 0; i < w; ++i)
-            sat[size_t(j + 1) * size_t(w + 1) + size_t(i + 1)] = sat[size_t(j) * size_t(w + 1) + size_t(i + 1)] +
-                                                                 sat[size_t(j + 1) * size_t(w + 1) + size_t(i)] -
-                                                                 sat[size_t(j) * size_t(w + 1) + size_t(i)] +
-                                                                 need[size_t(r.j0 + j) * size_t(c.n) + size_t(r.i0 + i)];
-    auto first = [&](double v, double origin, int lo, int count) {  // first texel index at or after v, clamped to [lo, lo + count]
+            sat[size_t(j + 1) * size_t(w + 1) + size_t(i + 1)] =
+                sat[size_t(j) * size_t(w + 1) + size_t(i + 1)] + sat[size_t(j + 1) * size_t(w + 1) + size_t(i)] -
+                sat[size_t(j) * size_t(w + 1) + size_t(i)] + need[size_t(r.j0 + j) * size_t(c.n) + size_t(r.i0 + i)];
+    auto first = [&](double v, double origin, int lo,
+                     int count) {  // first texel index at or after v, clamped to [lo, lo + count]
         return std::clamp(int(std::ceil((v - origin) / s)), lo, lo + count);
     };
-    auto last = [&](double v, double origin, int lo, int count) {  // last texel index at or before v, clamped to [lo - 1, lo + count - 1]
+    auto last = [&](double v, double origin, int lo,
+                    int count) {  // last texel index at or before v, clamped to [lo - 1, lo + count - 1]
         return std::clamp(int(std::floor((v - origin) / s)), lo - 1, lo + count - 1);
     };
     Grid kept = all;
@@ -193,7 +199,8 @@ influence::SurfaceRegion readNeededRegion(const GridRegionReader& file, const in
         const int ia = first(q.x0 - m, c.x0, r.i0, w), ib = last(q.x1 + m, c.x0, r.i0, w);
         const int ja = first(q.y0 - m, c.y0, r.j0, h), jb = last(q.y1 + m, c.y0, r.j0, h);
         if (ia > ib || ja > jb) continue;
-        const size_t x0 = size_t(ia - r.i0), x1 = size_t(ib - r.i0 + 1), y0 = size_t(ja - r.j0), y1 = size_t(jb - r.j0 + 1);
+        const size_t x0 = size_t(ia - r.i0), x1 = size_t(ib - r.i0 + 1), y0 = size_t(ja - r.j0),
+                     y1 = size_t(jb - r.j0 + 1);
         const size_t W = size_t(w + 1);
         if (sat[y1 * W + x1] + sat[y0 * W + x0] - sat[y0 * W + x1] - sat[y1 * W + x0] == 0) continue;
         kept.codes.push_back(all.codes[k]);
@@ -261,7 +268,8 @@ TexelsToSum markTexelsToSum(const std::vector<Todo>& todo, const std::vector<uin
     int i0 = n, i1 = -1, j0 = n, j1 = -1;
     uint64_t todoTexels = 0;
     for (const Box& x : boxes)
-        i0 = std::min(i0, x.i0), i1 = std::max(i1, x.i1), j0 = std::min(j0, x.j0), j1 = std::max(j1, x.j1), todoTexels += x.texels;
+        i0 = std::min(i0, x.i0), i1 = std::max(i1, x.i1), j0 = std::min(j0, x.j0), j1 = std::max(j1, x.j1),
+        todoTexels += x.texels;
     return {{i0, i1, j0, j1}, todoTexels};
 }
 
@@ -271,8 +279,10 @@ void cellsToSum(const Grid& g, const Cascade& c, const std::vector<uint8_t>& nee
                 unsigned threads, std::vector<uint32_t>& cells) {
     const double s = c.texelM;
     const uint64_t boxTexels = uint64_t(r.i1 - r.i0 + 1) * uint64_t(r.j1 - r.j0 + 1);
-    if (texels * kSparseTodo < boxTexels) cellsUnderTexels(g, c, need, r, threads, cells);
-    else g.cellsInBox(c.x0 + r.i0 * s, c.y0 + r.j0 * s, c.x0 + r.i1 * s, c.y0 + r.j1 * s, cells);
+    if (texels * kSparseTodo < boxTexels)
+        cellsUnderTexels(g, c, need, r, threads, cells);
+    else
+        g.cellsInBox(c.x0 + r.i0 * s, c.y0 + r.j0 * s, c.x0 + r.i1 * s, c.y0 + r.j1 * s, cells);
 }
 
 // In memory: the kernels summed at the texels `need`ed, over the scene's own cells and lists.
@@ -307,7 +317,8 @@ std::vector<TexelRange> splitIntoBlocks(const std::vector<uint8_t>& need, int n,
         r = box;
         const int w = r.i1 - r.i0 + 1, h = r.j1 - r.j0 + 1;
         const uint64_t area = uint64_t(w) * uint64_t(h);
-        if (area > uint64_t(kOutOfCoreBlock) * kOutOfCoreBlock || (count * kOutOfCoreSplit < area && std::max(w, h) > kOutOfCoreMinBlock)) {
+        if (area > uint64_t(kOutOfCoreBlock) * kOutOfCoreBlock ||
+            (count * kOutOfCoreSplit < area && std::max(w, h) > kOutOfCoreMinBlock)) {
             const int mi = r.i0 + w / 2, mj = r.j0 + h / 2;
             for (const TexelRange& q : {TexelRange{r.i0, mi - 1, r.j0, mj - 1}, TexelRange{mi, r.i1, r.j0, mj - 1},
                                         TexelRange{r.i0, mi - 1, mj, r.j1}, TexelRange{mi, r.i1, mj, r.j1}})
@@ -343,7 +354,8 @@ void sumOutOfCore(const CascadeJob& job, const std::vector<Todo>& todo, std::vec
         std::vector<uint32_t> blockCells;
         for (size_t k = b; k < e; ++k) {
             const TexelRange& r = blocks[k];
-            const influence::SurfaceRegion region = readNeededRegion(*scene.file(), scene.params(), reach, c, need, r, t.cellsRead);
+            const influence::SurfaceRegion region =
+                readNeededRegion(*scene.file(), scene.params(), reach, c, need, r, t.cellsRead);
             ++t.regions;
             if (region.grid.cellCount() == 0) continue;
             const std::vector<Scene::CellKernel> kernels = Scene::kernelsOf(region.grid, scene.params());
@@ -355,7 +367,8 @@ void sumOutOfCore(const CascadeJob& job, const std::vector<Todo>& todo, std::vec
         }
     });
     for (const Tally& t : tally)
-        work.regionsRead += t.regions, work.cellsRead += t.cellsRead, work.cellsVisited += t.cellsVisited, work.gaussians += t.gaussians;
+        work.regionsRead += t.regions, work.cellsRead += t.cellsRead, work.cellsVisited += t.cellsVisited,
+            work.gaussians += t.gaussians;
 }
 
 }  // namespace
@@ -365,9 +378,10 @@ void CascadeTextures::buildBothMip(unsigned threads) {
     for (size_t l = 0; l < terrain.mip.size(); ++l) {
         const std::vector<float>&a = terrain.mip[l], &b = water.mip[l];
         bothMip[l].resize(a.size());
-        parallelFor(a.size(), a.size() < kMipParallelNodes ? a.size() : size_t{1} << 16, threads, [&](size_t begin, size_t end, unsigned) {
-            for (size_t i = begin; i < end; ++i) bothMip[l][i] = std::max(a[i], b[i]);
-        });
+        parallelFor(a.size(), a.size() < kMipParallelNodes ? a.size() : size_t{1} << 16, threads,
+                    [&](size_t begin, size_t end, unsigned) {
+                        for (size_t i = begin; i < end; ++i) bothMip[l][i] = std::max(a[i], b[i]);
+                    });
     }
 }
 
@@ -392,7 +406,8 @@ void Heightfield::buildMip(unsigned threads) {
                 if (l == 0) {
                     const float* r0 = &h[j * size_t(n)];
                     const float* r1 = r0 + n;
-                    for (int i = 0; i < side; ++i) out[i] = std::max(std::max(r0[i], r0[i + 1]), std::max(r1[i], r1[i + 1]));
+                    for (int i = 0; i < side; ++i)
+                        out[i] = std::max(std::max(r0[i], r0[i + 1]), std::max(r1[i], r1[i + 1]));
                     continue;
                 }
                 const int lower = mipSide[l - 1];
@@ -422,8 +437,9 @@ std::vector<RowFill> rowFills(const Cascade& c, const TexelReuse* reuse, uint64_
     return rows;
 }
 
-ApproximationWork approximate(const Scene& scene, const Cascade& c, CascadeTextures& tex, double waterMinDepthM, unsigned threads,
-                              const TexelReuse* reuse, int interpolateLevels, std::vector<RowFill>* rows, PyramidTiles* tiles) {
+ApproximationWork approximate(const Scene& scene, const Cascade& c, CascadeTextures& tex, double waterMinDepthM,
+                              unsigned threads, const TexelReuse* reuse, int interpolateLevels,
+                              std::vector<RowFill>* rows, PyramidTiles* tiles) {
     const ApproximationPlan plan = ApproximationPlan::of(reuse, interpolateLevels, rows, tiles);
     const CascadeJob job{scene, c, tex, waterMinDepthM, threads};
     const int n = c.n;
@@ -433,19 +449,23 @@ ApproximationWork approximate(const Scene& scene, const Cascade& c, CascadeTextu
     // The texels left to evaluate: `need` (n^2) marks them, the spans of `todo` hold them (and copies between them).
     std::vector<uint8_t> copied(size_t(n) * size_t(n), 0), need(size_t(n) * size_t(n), 0);
     PyramidTiles* const pyramidTiles = plan.output == ApproximationPlan::Output::kRowsAndTiles ? plan.tiles : nullptr;
-    const PyramidCopy pyramidCopy{scene, c, tex, waterMinDepthM, plan.interpolateLevels, threads, todo, copied, pyramidTiles};
+    const PyramidCopy pyramidCopy{scene,   c,    tex,    waterMinDepthM, plan.interpolateLevels,
+                                  threads, todo, copied, pyramidTiles};
     work.pyramidTexels = copyPyramidTexels(pyramidCopy, work);
     // Each span: the texels written here, the copies left out at its ends.
     if (plan.output == ApproximationPlan::Output::kRowsAndTiles)
         for (size_t j = 0; j < size_t(n); ++j) {
             RowFill& r = (*plan.rows)[j];
-            r.a.first = todo[j].a.first, r.a.last = todo[j].a.last, r.b.first = todo[j].b.first, r.b.last = todo[j].b.last;
+            r.a.first = todo[j].a.first, r.a.last = todo[j].a.last, r.b.first = todo[j].b.first,
+            r.b.last = todo[j].b.last;
         }
     const TexelsToSum sum = markTexelsToSum(todo, copied, need, n, threads);
     copied = {};
     if (sum.box.i1 < 0) return work;
-    if (!scene.outOfCore()) sumInMemory(job, todo, need, sum, work);
-    else sumOutOfCore(job, todo, need, sum, work);
+    if (!scene.outOfCore())
+        sumInMemory(job, todo, need, sum, work);
+    else
+        sumOutOfCore(job, todo, need, sum, work);
     return work;
 }
 

@@ -15,7 +15,8 @@
 
 namespace hc::render::detail {
 
-int copySamples(const float* s, const float* w, size_t plane, int count, float minDepth, float* h, float* depth, float* water) {
+int copySamples(const float* s, const float* w, size_t plane, int count, float minDepth, float* h, float* depth,
+                float* water) {
     // Branch-free over raw pointers, so that it vectorises: a store through the mask's uint8_t may alias anything, and
     // through the vectors would have every pointer reloaded per texel.
     int defined = 0;
@@ -45,13 +46,16 @@ int copySamples(const float* s, const float* w, size_t plane, int count, float m
 namespace {
 
 // Level 0's tiles as PyramidTiles::Block wants them: whether the 3 x 3 tiles around tile (tx, ty) are all stored, all
-// numbers and all dry or all wet (then PyramidInterpolator interpolates every texel of the block from level 0 and refuses
-// none: no sample is undefined or missing, no wet meets dry, the stencil stays in the domain), and those tiles. One
-// per worker: each tile's kind is kept in a small table by its address.
+// numbers and all dry or all wet (then PyramidInterpolator interpolates every texel of the block from level 0 and
+// refuses none: no sample is undefined or missing, no wet meets dry, the stencil stays in the domain), and those tiles.
+// One per worker: each tile's kind is kept in a small table by its address.
 class LevelZeroBlocks {
 public:
     LevelZeroBlocks(const influence::SurfacePyramid& p, const influence::SurfacePyramid* water)
-        : samples_(p, 0), channels3_(p.channels == 3), plane_(samples_.plane()), shift_(std::countr_zero(samples_.side())) {
+        : samples_(p, 0),
+          channels3_(p.channels == 3),
+          plane_(samples_.plane()),
+          shift_(std::countr_zero(samples_.side())) {
         if (water) water_.emplace(*water, 0);
     }
     // The block's tiles into b (tile, water), true where it is the caller's.
@@ -67,7 +71,9 @@ public:
                 const Kind k = kindOf(s, w);
                 if (k == kMixed || (first != kMixed && k != first)) return false;
                 first = k;
-                if (b) b->tile[size_t(3 * (dy + 1) + dx + 1)] = s, b->water[size_t(3 * (dy + 1) + dx + 1)] = k == kWet ? w : nullptr;
+                if (b)
+                    b->tile[size_t(3 * (dy + 1) + dx + 1)] = s, b->water[size_t(3 * (dy + 1) + dx + 1)] =
+                                                                    k == kWet ? w : nullptr;
             }
         return true;
     }
@@ -184,8 +190,7 @@ private:
         PyramidTiles* const tiles = in_.tiles;
         *tiles = PyramidTiles{};
         const std::vector<Todo>& todo = in_.todo;
-        for (size_t j = 0; j < todo.size(); ++j)
-            tiles->spans.push_back({{}, todo[j].a, todo[j].b});
+        for (size_t j = 0; j < todo.size(); ++j) tiles->spans.push_back({{}, todo[j].a, todo[j].b});
         if (t_ >= 0 && I0_ + c.n > 0 && J0_ + c.n > 0) {
             const influence::SurfacePyramid::Cursor probe(*p_, int(t_));
             const int shift = std::countr_zero(probe.side());
@@ -253,12 +258,14 @@ private:
                 continue;
             }
             // The run of texels in one tile of the cascade's level, or in one block (else to the span's end).
-            const int end = wk.samples  ? std::min(*hi, i + int(wk.sideMask - (uint64_t(gi) & wk.sideMask)))
+            const int end = wk.samples    ? std::min(*hi, i + int(wk.sideMask - (uint64_t(gi) & wk.sideMask)))
                             : blockShift_ ? std::min(*hi, i + int(blockMask_ - (uint64_t(gi) & blockMask_)))
                                           : *hi;
             const float* s = wk.samples ? wk.samples->find(uint64_t(gi), uint64_t(gj)) : nullptr;
-            if (s) copyRun(wk, s, gi, gj, rowAt + size_t(i), end - i + 1);
-            else fillRun(wk, gi, gj, rowAt, i, end, left);
+            if (s)
+                copyRun(wk, s, gi, gj, rowAt + size_t(i), end - i + 1);
+            else
+                fillRun(wk, gi, gj, rowAt, i, end, left);
             i = end + 1;
         }
         *lo = left.first, *hi = left.last;
@@ -268,7 +275,7 @@ private:
     void copyRun(Worker& wk, const float* s, double gi, double gj, size_t at, int len) {
         CascadeTextures& tex = in_.tex;
         PyramidTiles* const tiles = in_.tiles;
-        const float* w = wp_               ? wk.waterSamples->find(uint64_t(gi), uint64_t(gj))
+        const float* w = wp_              ? wk.waterSamples->find(uint64_t(gi), uint64_t(gj))
                          : channels_ == 3 ? s + wk.plane
                                           : nullptr;
         std::memset(&in_.copiedMask[at], 1, size_t(len));
@@ -358,18 +365,18 @@ private:
     ApproximationWork& work_;
     const influence::SurfacePyramid* p_ = nullptr;
     const influence::SurfacePyramid* wp_ = nullptr;  // the water pyramid of a later step, or nullptr
-    double t_ = 0;                                    // the cascade's pyramid level
+    double t_ = 0;                                   // the cascade's pyramid level
     size_t channels_ = 0;
-    double i0_ = 0, j0_ = 0;                          // the cascade's corner on level t's lattice
+    double i0_ = 0, j0_ = 0;  // the cascade's corner on level t's lattice
     int64_t I0_ = 0, J0_ = 0;
     float minDepth_ = 0;
-    std::vector<uint64_t> copied_, interpolated_;     // per worker
+    std::vector<uint64_t> copied_, interpolated_;  // per worker
     std::vector<int> mostUp_;
     std::vector<std::unique_ptr<PyramidInterpolator>> interpolators_;
     std::vector<std::unique_ptr<EmptyTiles>> emptyTiles_;
     std::vector<std::unique_ptr<LevelZeroBlocks>> zeroBlocks_;
-    int64_t tx0_ = 0, ty0_ = 0;                       // with `tiles`: the table's first tile
-    int blockShift_ = 0;                              // with blocks: log2 of a block's side in texels, else 0
+    int64_t tx0_ = 0, ty0_ = 0;  // with `tiles`: the table's first tile
+    int blockShift_ = 0;         // with blocks: log2 of a block's side in texels, else 0
     int64_t bx0_ = 0, by0_ = 0, blocksWide_ = 0;
     uint64_t blockMask_ = 0;
     std::vector<uint8_t> blockState_;
@@ -378,8 +385,6 @@ private:
 
 }  // namespace
 
-uint64_t copyPyramidTexels(const PyramidCopy& in, ApproximationWork& work) {
-    return PyramidCopier(in, work).run();
-}
+uint64_t copyPyramidTexels(const PyramidCopy& in, ApproximationWork& work) { return PyramidCopier(in, work).run(); }
 
 }  // namespace hc::render::detail

@@ -56,13 +56,14 @@ struct PyramidCopy {
 // whole span: 23 % of a far cascade's texels at 105 M cells, all of them copies). Out of core, texels in a tile whose
 // node holds no cell (EmptyTiles) are marked too, left "no surface": the interpolator would look for coarser samples
 // there in vain (1.4 us a texel: 8.5 ms of a fresh frame at 105 M cells, for 6 k texels over holes). Returns the
-// texels copied, adds the texels interpolated to work.pyramidInterpolated (the most levels up to work.pyramidInterpolatedUp) and sets
-// work.pyramidLevel to the pyramid level used (-1: none fits the cascade). With `tiles`, the copies are marked there
-// (PyramidTiles: each worker sets its texels' bits, no list to merge) instead of written or counted (the caller counts
-// what it copies), and each span shrinks to the texels written here (interpolated) or left to the kernels, from the
-// first to the last (the interpolated ones marked in copiedMask, so the kernels skip them). With `tiles` and a cascade
-// below level 0, the texels of blocks whose level-0 tiles are all stored and alike (PyramidTiles::Block) are left to
-// the caller to interpolate: marked in copiedMask, counted as interpolated, their blocks listed in `tiles`.
+// texels copied, adds the texels interpolated to work.pyramidInterpolated (the most levels up to
+// work.pyramidInterpolatedUp) and sets work.pyramidLevel to the pyramid level used (-1: none fits the cascade). With
+// `tiles`, the copies are marked there (PyramidTiles: each worker sets its texels' bits, no list to merge) instead of
+// written or counted (the caller counts what it copies), and each span shrinks to the texels written here
+// (interpolated) or left to the kernels, from the first to the last (the interpolated ones marked in copiedMask, so the
+// kernels skip them). With `tiles` and a cascade below level 0, the texels of blocks whose level-0 tiles are all stored
+// and alike (PyramidTiles::Block) are left to the caller to interpolate: marked in copiedMask, counted as interpolated,
+// their blocks listed in `tiles`.
 uint64_t copyPyramidTexels(const PyramidCopy& in, ApproximationWork& work);
 
 // Out of core: whether the pyramid tile (level t, its lattice: copyPyramidTexels) holding lattice point (gi, gj) lies
@@ -101,13 +102,13 @@ private:
 // ---- Texels interpolated from a coarser pyramid level (approximate_interpolate.cpp) ----
 
 // Fills texels finer than every pyramid level stored around them (pyramid.h keeps level t only where the kernel of a
-// cell as fine as its spacing reaches) by bicubic (Catmull-Rom) interpolation of the nearest coarser level whose samples around the
-// texel are all stored, at most `maxUp` levels above the cascade's, and where no cell finer than that level's spacing
-// lies within a kernel's reach of the samples: then the surface is smooth at that spacing (a sum of Gaussians at least
-// one spacing wide, kernel.h). Such cells lie only in the stored tiles of the level below; their positions come from
-// the grid's codes in those tiles' nodes (in memory or from the file), kept per worker in a table of recent tiles.
-// Undefined samples (holes), a water level defined at some samples only (a flood's edge) and finer cells near are left
-// to the kernels: such texels are not filled, as where no such level is stored.
+// cell as fine as its spacing reaches) by bicubic (Catmull-Rom) interpolation of the nearest coarser level whose
+// samples around the texel are all stored, at most `maxUp` levels above the cascade's, and where no cell finer than
+// that level's spacing lies within a kernel's reach of the samples: then the surface is smooth at that spacing (a sum
+// of Gaussians at least one spacing wide, kernel.h). Such cells lie only in the stored tiles of the level below; their
+// positions come from the grid's codes in those tiles' nodes (in memory or from the file), kept per worker in a table
+// of recent tiles. Undefined samples (holes), a water level defined at some samples only (a flood's edge) and finer
+// cells near are left to the kernels: such texels are not filled, as where no such level is stored.
 //
 // Separably, row by row: a texel row lies at one height between two rows of samples, so each column of 4 samples is
 // blended vertically once per texel row (and kept in a small cache), and a texel blends 4 columns. A texel of level
@@ -141,10 +142,11 @@ private:
     static constexpr size_t kColumns = 8;  // cached columns per level: a texel uses 4 neighbouring ones
     static constexpr size_t kFineTiles = 512, kRowMasks = 256;  // table sizes (powers of two; a row spans < 128 tiles)
     struct Level {
-        bool stored = false;                                            // false: below level 0
-        std::vector<influence::SurfacePyramid::Cursor> samples, water;  // by tile parity: a stencil spans up to 2 x 2 tiles
-        std::vector<influence::SurfacePyramid::Cursor> finer;           // the level below, by tile parity
-        int finerLevel = 0, finerShift = 0;                              // its level, log2 of its tile side
+        bool stored = false;  // false: below level 0
+        std::vector<influence::SurfacePyramid::Cursor> samples,
+            water;                                             // by tile parity: a stencil spans up to 2 x 2 tiles
+        std::vector<influence::SurfacePyramid::Cursor> finer;  // the level below, by tile parity
+        int finerLevel = 0, finerShift = 0;                    // its level, log2 of its tile side
         // The last stored tiles of the level below met (a table by tile column and row parity, as the pyramid's
         // Cursor keeps), each with its fine cells: bit i of row j set when a cell of that level or finer lies between
         // its samples (i, j) and (i + 1, j + 1). A tile dropped from the table is read again when asked again.
@@ -174,8 +176,8 @@ private:
     const std::array<uint16_t, 16>& tileCells(Level& L, int64_t tx, int64_t ty);
 
     const Scene& scene_;
-    std::vector<uint8_t> state_;    // run(): per point, pending, done or refused
-    std::vector<Column> columns_;   // run(): the columns of one level for the run
+    std::vector<uint8_t> state_;   // run(): per point, pending, done or refused
+    std::vector<Column> columns_;  // run(): the columns of one level for the run
     std::vector<uint64_t> codes_;  // out of core: a node's codes read from the file
     const influence::SurfacePyramid* water_;
     bool channels3_;

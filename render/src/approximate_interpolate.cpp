@@ -65,7 +65,7 @@ void PyramidInterpolator::run(uint64_t gi0, int count, uint64_t gj, Value* out, 
         Level& L = levels_[size_t(up - 1)];
         if (!L.stored) continue;
         const uint64_t mask = (uint64_t{1} << up) - 1, J = gj >> up;
-        if (J == 0) break;  // the stencil would leave the domain: every point left is refused
+        if (J == 0) break;                           // the stencil would leave the domain: every point left is refused
         if (J != L.rowJ || (gj & mask) != L.rowF) {  // a new texel row at this level: new vertical weights
             L.rowJ = J, L.rowF = gj & mask, ++L.stamp;
         }
@@ -155,13 +155,15 @@ bool PyramidInterpolator::fineCellNear(Level& L, int64_t x0, int64_t x1) {
         if (m.tx != tx || m.rowJ != L.rowJ) {
             m = {tx, L.rowJ, 0};
             for (int64_t ty = std::max<int64_t>(y0, 0) >> shift; ty <= y1 >> shift; ++ty) {
-                if (!L.finer[size_t(tx & 1) | size_t(ty & 1) << 1].find(uint64_t(tx) << shift, uint64_t(ty) << shift)) continue;
+                if (!L.finer[size_t(tx & 1) | size_t(ty & 1) << 1].find(uint64_t(tx) << shift, uint64_t(ty) << shift))
+                    continue;
                 const std::array<uint16_t, 16>& rows = tileCells(L, tx, ty);
                 for (int64_t y = std::max(y0, ty << shift); y <= std::min(y1, ((ty + 1) << shift) - 1); ++y)
                     m.bits |= rows[size_t(y - (ty << shift))];
             }
         }
-        const int64_t lo = std::max(x0, tx << shift) - (tx << shift), hi = std::min(x1, ((tx + 1) << shift) - 1) - (tx << shift);
+        const int64_t lo = std::max(x0, tx << shift) - (tx << shift),
+                      hi = std::min(x1, ((tx + 1) << shift) - 1) - (tx << shift);
         if ((m.bits >> lo) & ((uint32_t{1} << (hi - lo + 1)) - 1)) return true;
     }
     return false;
@@ -195,8 +197,9 @@ const std::array<uint16_t, 16>& PyramidInterpolator::tileCells(Level& L, int64_t
     return f.rows;
 }
 
-uint64_t interpolateBlock(const Scene& scene, const Cascade& c, const PyramidTiles& tiles, const PyramidTiles::Block& block, double waterMinDepthM,
-                          CascadeTextures& tex, std::vector<RowFill>& rows) {
+uint64_t interpolateBlock(const Scene& scene, const Cascade& c, const PyramidTiles& tiles,
+                          const PyramidTiles::Block& block, double waterMinDepthM, CascadeTextures& tex,
+                          std::vector<RowFill>& rows) {
     const influence::SurfacePyramid* p = scene.pyramid();
     if (!p || tiles.up < 1) throw Error("interpolateBlock: no block to interpolate (a bug)");
     PyramidInterpolator interpolator(scene, *p, scene.waterPyramid(), -tiles.up, tiles.up);

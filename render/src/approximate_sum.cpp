@@ -1,5 +1,5 @@
-// The Gaussian RBF sum (docs/design.md section 3) at the texels of a cascade left to evaluate, in float with a vectorised
-// exponential: sumTexels() and the cells it takes, cellsUnderTexels() (approximate_internal.h). Part of the
+// The Gaussian RBF sum (docs/design.md section 3) at the texels of a cascade left to evaluate, in float with a
+// vectorised exponential: sumTexels() and the cells it takes, cellsUnderTexels() (approximate_internal.h). Part of the
 // approximation pass (approximate.cpp).
 //
 // Texels are taken cell by cell: all texel centres inside cell k share k's influence list, and
@@ -28,7 +28,10 @@ inline float expNeg(float x) {
     const float y = x * 1.44269504088896341f;
     const float n = std::floor(y + 0.5f);
     const float f = y - n;
-    const float p = 1.0f + f * (0.693147181f + f * (0.240226507f + f * (0.0555041087f + f * (0.00961812911f + f * (0.00133335581f + f * 0.000154035304f)))));
+    const float p =
+        1.0f + f * (0.693147181f +
+                    f * (0.240226507f +
+                         f * (0.0555041087f + f * (0.00961812911f + f * (0.00133335581f + f * 0.000154035304f)))));
     const int32_t bits = (static_cast<int32_t>(n) + 127) << 23;
     return p * std::bit_cast<float>(bits);
 }
@@ -36,7 +39,7 @@ inline float expNeg(float x) {
 struct Candidates {
     std::vector<float> ex, ey, a, r2, dz;  // relative to the cell's centre / value; padded to kLanes
     std::vector<float> dl, wet;            // water: level z + d relative to the level base (0 if dry), 1 if wet
-    size_t count = 0;                          // real entries (before padding)
+    size_t count = 0;                      // real entries (before padding)
 };
 
 // Gathers the influence list of cell k into cand, relative to k's centre and value. Returns the water level
@@ -141,7 +144,8 @@ void sumTexels(const CellData& data, const Cascade& c, const std::vector<Todo>& 
             bool any = false;
             for (int j = ja; j < jb && !any; ++j) {
                 const Todo& t = todo[size_t(j)];
-                any = std::max(ia, t.a.first) <= std::min(ib - 1, t.a.last) || std::max(ia, t.b.first) <= std::min(ib - 1, t.b.last);
+                any = std::max(ia, t.a.first) <= std::min(ib - 1, t.a.last) ||
+                      std::max(ia, t.b.first) <= std::min(ib - 1, t.b.last);
             }
             if (!any) continue;
             const double lk = gatherCandidates(data, k, cand);

@@ -18,15 +18,25 @@ std::string num(double v) {
 }  // namespace
 
 void Camera::validate() const {
-    for (auto [v, name] : {std::pair{xWorld, "x"}, {yWorld, "y"}, {zWorld, "z"}, {yawDeg, "yaw"}, {pitchDeg, "pitch"}, {rollDeg, "roll"}, {nearM, "near"}, {farM, "far"}})
+    for (auto [v, name] : {std::pair{xWorld, "x"},
+                           {yWorld, "y"},
+                           {zWorld, "z"},
+                           {yawDeg, "yaw"},
+                           {pitchDeg, "pitch"},
+                           {rollDeg, "roll"},
+                           {nearM, "near"},
+                           {farM, "far"}})
         if (!std::isfinite(v)) throw Error(std::string("camera ") + name + " is not a finite number");
-    if (!(fovYDeg > 0 && fovYDeg < 179.0)) throw Error("camera field of view " + num(fovYDeg) + " degrees is outside (0, 179)");
+    if (!(fovYDeg > 0 && fovYDeg < 179.0))
+        throw Error("camera field of view " + num(fovYDeg) + " degrees is outside (0, 179)");
     if (pitchDeg < -90 || pitchDeg > 90) throw Error("camera pitch " + num(pitchDeg) + " degrees is outside [-90, 90]");
     if (nearM < 0) throw Error("camera near plane " + num(nearM) + " m is negative");
     if (farM < 0) throw Error("camera far plane " + num(farM) + " m is negative");
-    if (farM > 0 && nearM >= farM) throw Error("camera far plane " + num(farM) + " m is not beyond the near plane " + num(nearM) + " m");
+    if (farM > 0 && nearM >= farM)
+        throw Error("camera far plane " + num(farM) + " m is not beyond the near plane " + num(nearM) + " m");
     if (width < 1 || height < 1 || width > 16384 || height > 16384)
-        throw Error("image size " + std::to_string(width) + " x " + std::to_string(height) + " is outside 1..16384 per side");
+        throw Error("image size " + std::to_string(width) + " x " + std::to_string(height) +
+                    " is outside 1..16384 per side");
 }
 
 Camera Camera::lookAt(const glm::dvec3& eye, const glm::dvec3& target, double fovYDeg, int width, int height) {

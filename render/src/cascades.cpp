@@ -32,7 +32,8 @@ std::vector<glm::dvec3> polyhedronVertices(const std::vector<Plane>& planes, dou
                 const double det = glm::dot(na, bc);
                 if (std::abs(det) < 1e-12) continue;
                 // p = (-da (nb x nc) - db (nc x na) - dc (na x nb)) / det
-                const glm::dvec3 p = (bc * -planes[a].d + glm::cross(nc, na) * -planes[b].d + glm::cross(na, nb) * -planes[c].d) / det;
+                const glm::dvec3 p =
+                    (bc * -planes[a].d + glm::cross(nc, na) * -planes[b].d + glm::cross(na, nb) * -planes[c].d) / det;
                 bool inside = true;
                 for (const Plane& pl : planes) inside &= pl.eval(p) >= -eps;
                 if (inside) out.push_back(p);
@@ -43,8 +44,8 @@ std::vector<glm::dvec3> polyhedronVertices(const std::vector<Plane>& planes, dou
 // Keeps the part of a convex polygon where dot(p, dir) lies in [lo, hi], in `out`; `half` holds the polygon clipped
 // at lo. Both keep their storage from call to call (placeTexture clips a polygon for every texel row: allocating the
 // vectors anew cost more than clipping).
-void clipSlab(const std::vector<glm::dvec2>& poly, const glm::dvec2& dir, double lo, double hi, std::vector<glm::dvec2>& half,
-              std::vector<glm::dvec2>& out) {
+void clipSlab(const std::vector<glm::dvec2>& poly, const glm::dvec2& dir, double lo, double hi,
+              std::vector<glm::dvec2>& half, std::vector<glm::dvec2>& out) {
     auto clip = [&](const std::vector<glm::dvec2>& in, double sign, double bound, std::vector<glm::dvec2>& kept) {
         kept.clear();
         const size_t m = in.size();
@@ -164,7 +165,8 @@ void placeTexture(Cascade& c, int texelsPerSide, double finestCellM, int stepsPe
 
 std::vector<glm::dvec2> convexHull(std::vector<glm::dvec2> p) {
     // Sorted by x, then y (as std::array's lexicographic order was).
-    std::sort(p.begin(), p.end(), [](const glm::dvec2& a, const glm::dvec2& b) { return a.x < b.x || (a.x == b.x && a.y < b.y); });
+    std::sort(p.begin(), p.end(),
+              [](const glm::dvec2& a, const glm::dvec2& b) { return a.x < b.x || (a.x == b.x && a.y < b.y); });
     p.erase(std::unique(p.begin(), p.end()), p.end());
     if (p.size() < 3) return p;
     auto turn = [](const glm::dvec2& o, const glm::dvec2& a, const glm::dvec2& b) {
@@ -220,7 +222,8 @@ CascadeFit fitCascades(const ViewVolume& v, int count, int texelsPerSide) {
         c.farWithOverlap = k + 1 < count ? c.splitFar + std::max(0.1 * width, 4 * v.finestCellM) : c.splitFar;
         const double lo = k == 0 ? -HUGE_VAL : c.splitNear;  // the first cascade takes everything nearer
         c.polygon = clipSlab(fit.hull, fit.dir, eyeOffset + lo, eyeOffset + c.farWithOverlap);
-        if (c.polygon.size() >= 3) placeTexture(c, texelsPerSide, v.finestCellM, v.ladderStepsPerOctave, v.coarserTexels);
+        if (c.polygon.size() >= 3)
+            placeTexture(c, texelsPerSide, v.finestCellM, v.ladderStepsPerOctave, v.coarserTexels);
         fit.cascades.push_back(std::move(c));
     }
     return fit;

@@ -36,9 +36,10 @@ void writePng(const Frame& f, const std::string& path) {
 
 void writeFrameExr(const Frame& f, const std::string& path) {
     std::vector<exr::FloatChannel> channels = {
-        {"Z", f.distanceM}, {"P.X", f.posX}, {"P.Y", f.posY}, {"P.Z", f.posZ},
-        {"N.X", f.nX}, {"N.Y", f.nY}, {"N.Z", f.nZ}, {"cascade", f.cascade},
-        {"water_depth", f.waterDepthM}, {"wall", f.wall},
+        {"Z", f.distanceM}, {"P.X", f.posX},        {"P.Y", f.posY},
+        {"P.Z", f.posZ},    {"N.X", f.nX},          {"N.Y", f.nY},
+        {"N.Z", f.nZ},      {"cascade", f.cascade}, {"water_depth", f.waterDepthM},
+        {"wall", f.wall},
     };
     if (!f.colorLayerValue.empty()) channels.push_back({"layer." + f.colorLayer, f.colorLayerValue});
     const exr::Attribute attributes[] = {

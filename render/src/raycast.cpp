@@ -23,8 +23,8 @@ namespace {
 
 struct PatchHit {
     bool hit = false;
-    bool water = false;               // the hit is on the water surface
-    bool wall = false;                // the hit is on a cut face of the terrain block: normal in nx, ny, nz
+    bool water = false;  // the hit is on the water surface
+    bool wall = false;   // the hit is on a cut face of the terrain block: normal in nx, ny, nz
     double nx = 0, ny = 0, nz = 0;
     bool terrainUnderground = false;  // the ray met the terrain first from below: it starts inside it
     bool waterUnderground = false;    // the same for the water surface: the camera is under water
@@ -48,7 +48,8 @@ struct TexelRay {
 };
 
 // Ray `i` of `setups` in cascade c (setUpRays: u0 = (o.x - x0) / s, du = d.x / s, and likewise in v).
-TexelRay texelRay(const Cascade& c, const RaySetups::Cascade& setup, size_t i, const glm::dvec3& o, const glm::dvec3& d) {
+TexelRay texelRay(const Cascade& c, const RaySetups::Cascade& setup, size_t i, const glm::dvec3& o,
+                  const glm::dvec3& d) {
     return {setup.u0, setup.v0, setup.du[i], setup.dv[i], o.z, d.z, c.texelM};
 }
 
@@ -69,7 +70,8 @@ std::optional<PatchCorners> cornersOf(const Heightfield& hf, int iu, int iv) {
     const size_t n = size_t(hf.n);
     const float* r0 = &hf.h[size_t(iv) * n + size_t(iu)];
     const PatchCorners p{iu, iv, r0[0], r0[1], r0[n], r0[n + 1]};
-    if (!(std::isfinite(p.h00) && std::isfinite(p.h10) && std::isfinite(p.h01) && std::isfinite(p.h11))) return std::nullopt;
+    if (!(std::isfinite(p.h00) && std::isfinite(p.h10) && std::isfinite(p.h01) && std::isfinite(p.h11)))
+        return std::nullopt;
     return p;
 }
 bool patchDefined(const Heightfield& hf, int iu, int iv) { return cornersOf(hf, iu, iv).has_value(); }
@@ -136,12 +138,15 @@ PatchContact patchContact(const Heightfield& hf, int iu, int iv, const TexelRay&
 // highest point, where the walk would only skip nodes: start where a falling ray comes down to that height,
 // stop where a rising one climbs above it (a hair early and late, for rounding). tTop and tFloor: where the ray is at
 // heights zTop and zFloor, (z - z0) / dz (setUpRays), when dz != 0.
-bool clipToHeights(const TexelRay& ray, double zTop, double zFloor, double tTop, double tFloor, double& tIn, double& tOut) {
+bool clipToHeights(const TexelRay& ray, double zTop, double zFloor, double tTop, double tFloor, double& tIn,
+                   double& tOut) {
     if (std::min(ray.zAt(tIn), ray.zAt(tOut)) > zTop) return false;
     if (ray.dz != 0) {
         const double margin = 1e-9 * (1.0 + std::abs(tTop));
-        if (ray.dz < 0) tIn = std::max(tIn, tTop - margin);
-        else tOut = std::min(tOut, tTop + margin);
+        if (ray.dz < 0)
+            tIn = std::max(tIn, tTop - margin);
+        else
+            tOut = std::min(tOut, tTop + margin);
         if (!(tIn < tOut)) return false;
     }
     // Likewise under the block's bottom there is nothing to hit but the bottom, where a rising ray comes up
@@ -149,8 +154,10 @@ bool clipToHeights(const TexelRay& ray, double zTop, double zFloor, double tTop,
     // patch at the finest level: 6.3 s for a 480 x 300 frame from a camera under a domain edge.)
     if (ray.dz != 0) {
         const double margin = 1e-9 * (1.0 + std::abs(tFloor));
-        if (ray.dz > 0) tIn = std::max(tIn, tFloor - margin);
-        else tOut = std::min(tOut, tFloor + margin);
+        if (ray.dz > 0)
+            tIn = std::max(tIn, tFloor - margin);
+        else
+            tOut = std::min(tOut, tFloor + margin);
         return tIn < tOut;
     }
     return !(ray.z0 < zFloor);
@@ -187,7 +194,8 @@ struct PatchWalk {
         // terrain by more than the minimum depth (approximate.cpp), so the water's bilinear surface is at or above the
         // terrain's everywhere in the patch. A ray that enters the patch above the water then enters above the terrain
         // too, and meets the water first (the water wins a tie below), or neither: the terrain's intersection can be
-        // skipped: a share of the patch tests on every flood scene, the frames byte-identical. The GL walk (raycast.comp) intersects both, as before.
+        // skipped: a share of the patch tests on every flood scene, the frames byte-identical. The GL walk
+        // (raycast.comp) intersects both, as before.
         if (water) {
             if (const std::optional<PatchCorners> wc = cornersOf(tex.water, iu, iv)) {
                 const PatchContact cw = patchContact(*wc, ray, segment);
@@ -286,8 +294,9 @@ struct PatchWalk {
 // ray's state are the same.
 //
 // `setup`, `i`, `tFloor`: the ray's setup in this cascade (RaySetups).
-PatchHit traverse(const CascadeTextures& tex, const Cascade& c, const glm::dvec3& o, const glm::dvec3& d, double tIn, double tOut, double zFloor,
-                  RayState& st, double tFrom, const RaySetups::Cascade& setup, size_t i, double tFloor) {
+PatchHit traverse(const CascadeTextures& tex, const Cascade& c, const glm::dvec3& o, const glm::dvec3& d, double tIn,
+                  double tOut, double zFloor, RayState& st, double tFrom, const RaySetups::Cascade& setup, size_t i,
+                  double tFloor) {
     const Heightfield& hf = tex.terrain;
     if (hf.mip.empty() || !(tIn < tOut)) return PatchHit{};
     const TexelRay ray = texelRay(c, setup, i, o, d);
@@ -302,7 +311,8 @@ PatchHit traverse(const CascadeTextures& tex, const Cascade& c, const glm::dvec3
         if (both) return tex.bothMip[size_t(level)][idx];
         return std::max(hf.mip[size_t(level)][idx], tex.water.mip[size_t(level)][idx]);
     };
-    if (!clipToHeights(ray, maxAt(top, 0), zFloor, walk.water ? setup.tTopWet[i] : setup.tTopDry[i], tFloor, tIn, tOut)) return PatchHit{};
+    if (!clipToHeights(ray, maxAt(top, 0), zFloor, walk.water ? setup.tTopWet[i] : setup.tTopDry[i], tFloor, tIn, tOut))
+        return PatchHit{};
     // The walk carries its node as integers (level, iu, iv) and steps to the neighbour across the edge the ray
     // leaves by, as a grid walk does; each node's exit follows from its integers. It used to find each node
     // again from the ray's point a hair past t, a chain from float to int and back through every visit; now
@@ -339,7 +349,8 @@ PatchHit traverse(const CascadeTextures& tex, const Cascade& c, const glm::dvec3
         iu >>= level, iv >>= level;
     }
     const int stepU = du > 0 ? 1 : -1, stepV = dv > 0 ? 1 : -1;
-    const double edgeU = du > 0 ? 1.0 : 0.0, edgeV = dv > 0 ? 1.0 : 0.0;  // the side of a node the ray leaves by, in nodes
+    const double edgeU = du > 0 ? 1.0 : 0.0,
+                 edgeV = dv > 0 ? 1.0 : 0.0;  // the side of a node the ray leaves by, in nodes
     for (int guard = 0; guard < 1 << 20; ++guard) {
         const int side = hf.mipSide[size_t(level)];
         if (iu < 0 || iv < 0 || iu >= side || iv >= side) break;  // left the texture
@@ -378,8 +389,8 @@ PatchHit traverse(const CascadeTextures& tex, const Cascade& c, const glm::dvec3
     return walk.res;
 }
 
-Hit hitIn(const RayContext& ctx, size_t k, const glm::dvec3& o, const glm::dvec3& d, const RaySetups& setups, size_t ray, RayState& st,
-          bool& underground, double tFrom) {
+Hit hitIn(const RayContext& ctx, size_t k, const glm::dvec3& o, const glm::dvec3& d, const RaySetups& setups,
+          size_t ray, RayState& st, bool& underground, double tFrom) {
     Hit h;
     const Cascade& c = ctx.fit->cascades[k];
     const CascadeTextures& tex = (*ctx.tex)[k];
@@ -417,7 +428,8 @@ Hit hitIn(const RayContext& ctx, size_t k, const glm::dvec3& o, const glm::dvec3
 
 }  // namespace
 
-Hit castRay(const RayContext& ctx, const glm::dvec3& dir, const RaySetups& setups, size_t ray, Beam* beam, double dirLength) {
+Hit castRay(const RayContext& ctx, const glm::dvec3& dir, const RaySetups& setups, size_t ray, Beam* beam,
+            double dirLength) {
     const auto& cs = ctx.fit->cascades;
     RayState st;
     bool underground = false;
@@ -443,12 +455,15 @@ Hit castRay(const RayContext& ctx, const glm::dvec3& dir, const RaySetups& setup
                 st2.touchedTerrain = st2.touchedWater = true;
                 bool under2 = false;
                 Hit h2 = hitIn(ctx, k + 1, ctx.eyeLocal, dir, setups, ray, st2, under2, from(k + 1));
-                if (h2.hit && h2.water == h.water && !h2.wall && std::abs(h2.t - h.t) <= std::max(cs[k].texelM, cs[k + 1].texelM)) {
+                if (h2.hit && h2.water == h.water && !h2.wall &&
+                    std::abs(h2.t - h.t) <= std::max(cs[k].texelM, cs[k + 1].texelM)) {
                     for (Hit* x : {&h, &h2})
-                        if (x->slopeOnly) normalOfSlope(x->gx, x->gy, x->texelM, x->nx, x->ny, x->nz), x->slopeOnly = false;
+                        if (x->slopeOnly)
+                            normalOfSlope(x->gx, x->gy, x->texelM, x->nx, x->ny, x->nz), x->slopeOnly = false;
                     const double w = std::clamp((off - zoneStart) / (zoneEnd - zoneStart), 0.0, 1.0);
                     h.t = (1 - w) * h.t + w * h2.t;
-                    double nx = (1 - w) * h.nx + w * h2.nx, ny = (1 - w) * h.ny + w * h2.ny, nz = (1 - w) * h.nz + w * h2.nz;
+                    double nx = (1 - w) * h.nx + w * h2.nx, ny = (1 - w) * h.ny + w * h2.ny,
+                           nz = (1 - w) * h.nz + w * h2.nz;
                     const double nl = std::sqrt(nx * nx + ny * ny + nz * nz);
                     h.nx = nx / nl, h.ny = ny / nl, h.nz = nz / nl;
                     h.depth = (1 - w) * h.depth + w * h2.depth;
@@ -465,22 +480,23 @@ namespace {
 // The constants of setUpSpans: one cascade's, the same for every ray (they start at the eye).
 struct SpanConstants {
     double nearM, farM;
-    double dirX, dirY;           // the fit's view direction
-    double loNum, hiNum;         // lo - at0, hi - at0: the cascade's slab along the view, from the eye's offset
-    double flatCap;              // a ray along the slab: +inf when the eye lies in it, else -inf (nothing there)
-    double xLoNum, xHiNum, xCap; // x0 - o.x, (x0 + ext) - o.x; a ray without x motion: +inf inside, -inf outside
+    double dirX, dirY;            // the fit's view direction
+    double loNum, hiNum;          // lo - at0, hi - at0: the cascade's slab along the view, from the eye's offset
+    double flatCap;               // a ray along the slab: +inf when the eye lies in it, else -inf (nothing there)
+    double xLoNum, xHiNum, xCap;  // x0 - o.x, (x0 + ext) - o.x; a ray without x motion: +inf inside, -inf outside
     double yLoNum, yHiNum, yCap;
-    double s;                    // the texel size
-    double topDryNum, topWetNum; // the cascade's highest point without water and with it, less o.z
+    double s;                     // the texel size
+    double topDryNum, topWetNum;  // the cascade's highest point without water and with it, less o.z
 };
 
 // The spans, steps and crossings of n rays in one cascade (RaySetups), in the operations of a walk's set-up (hitIn()'s
 // clips, traverse()'s texel ray and clipToHeights()), in vector registers: a lane's value differs from those of that
 // code only where the ray has nothing in the cascade (t1 = -inf there, where those returned at once). Every condition
 // is a select of two values computed in full: this file is built without floating-point traps (render/CMakeLists.txt).
-void setUpSpans(size_t n, const double* __restrict dx, const double* __restrict dy, const double* __restrict dz, const SpanConstants& k,
-                double* __restrict t0s, double* __restrict t1s, double* __restrict dus, double* __restrict dvs, double* __restrict idus,
-                double* __restrict idvs, double* __restrict topDry, double* __restrict topWet) {
+void setUpSpans(size_t n, const double* __restrict dx, const double* __restrict dy, const double* __restrict dz,
+                const SpanConstants& k, double* __restrict t0s, double* __restrict t1s, double* __restrict dus,
+                double* __restrict dvs, double* __restrict idus, double* __restrict idvs, double* __restrict topDry,
+                double* __restrict topWet) {
     for (size_t i = 0; i < n; ++i) {
         const double x = dx[i], y = dy[i];
         double t0 = k.nearM, t1 = k.farM;
@@ -527,7 +543,8 @@ void setUpRays(const RayContext& ctx, size_t n, const double* dx, const double* 
         const Cascade& c = cs[k];
         if (c.empty()) continue;  // hitIn returns before its setup
         RaySetups::Cascade& r = out.cascades[k];
-        for (std::vector<double>* v : {&r.t0, &r.t1, &r.du, &r.dv, &r.invDu, &r.invDv, &r.tTopDry, &r.tTopWet}) v->resize(n);
+        for (std::vector<double>* v : {&r.t0, &r.t1, &r.du, &r.dv, &r.invDu, &r.invDv, &r.tTopDry, &r.tTopWet})
+            v->resize(n);
         const double s = c.texelM;
         r.u0 = (o.x - c.x0) / s, r.v0 = (o.y - c.y0) / s;
         const double lo = k == 0 ? -HUGE_VAL : c.splitNear, hi = c.farWithOverlap;
@@ -535,8 +552,10 @@ void setUpRays(const RayContext& ctx, size_t n, const double* dx, const double* 
         SpanConstants sc{};
         sc.nearM = ctx.nearM, sc.farM = ctx.farM, sc.dirX = dir.x, sc.dirY = dir.y;
         sc.loNum = lo - at0, sc.hiNum = hi - at0, sc.flatCap = at0 >= lo && at0 <= hi ? HUGE_VAL : -HUGE_VAL;
-        sc.xLoNum = c.x0 - o.x, sc.xHiNum = c.x0 + ext - o.x, sc.xCap = o.x < c.x0 || o.x > c.x0 + ext ? -HUGE_VAL : HUGE_VAL;
-        sc.yLoNum = c.y0 - o.y, sc.yHiNum = c.y0 + ext - o.y, sc.yCap = o.y < c.y0 || o.y > c.y0 + ext ? -HUGE_VAL : HUGE_VAL;
+        sc.xLoNum = c.x0 - o.x, sc.xHiNum = c.x0 + ext - o.x,
+        sc.xCap = o.x < c.x0 || o.x > c.x0 + ext ? -HUGE_VAL : HUGE_VAL;
+        sc.yLoNum = c.y0 - o.y, sc.yHiNum = c.y0 + ext - o.y,
+        sc.yCap = o.y < c.y0 || o.y > c.y0 + ext ? -HUGE_VAL : HUGE_VAL;
         sc.s = s;
         // traverse()'s maxAt(top, 0) without water and with it (clipToHeights' zTop).
         const CascadeTextures& tex = (*ctx.tex)[k];
@@ -546,18 +565,20 @@ void setUpRays(const RayContext& ctx, size_t n, const double* dx, const double* 
             const float dry = hf.mip[top][0];
             float wet = dry;
             if (tex.hasWater && !tex.water.mip.empty())
-                wet = tex.bothMip.size() == hf.mip.size() ? tex.bothMip[top][0] : std::max(hf.mip[top][0], tex.water.mip[top][0]);
+                wet = tex.bothMip.size() == hf.mip.size() ? tex.bothMip[top][0]
+                                                          : std::max(hf.mip[top][0], tex.water.mip[top][0]);
             sc.topDryNum = double(dry) - o.z, sc.topWetNum = double(wet) - o.z;
         }
-        setUpSpans(n, dx, dy, dz, sc, r.t0.data(), r.t1.data(), r.du.data(), r.dv.data(), r.invDu.data(), r.invDv.data(), r.tTopDry.data(),
-                   r.tTopWet.data());
+        setUpSpans(n, dx, dy, dz, sc, r.t0.data(), r.t1.data(), r.du.data(), r.dv.data(), r.invDu.data(),
+                   r.invDv.data(), r.tTopDry.data(), r.tTopWet.data());
     }
 }
 
 Beam::Beam(const RayContext& ctx, const CameraBasis& basis, double sx0, double sy0, double sx1, double sy1, Beam* outer)
     : ctx_(ctx), outer_(outer) {
-    const glm::dvec3 corners[4] = {basis.forward + sx0 * basis.right + sy0 * basis.up, basis.forward + sx1 * basis.right + sy0 * basis.up,
-                                   basis.forward + sx0 * basis.right + sy1 * basis.up, basis.forward + sx1 * basis.right + sy1 * basis.up};
+    const glm::dvec3 corners[4] = {
+        basis.forward + sx0 * basis.right + sy0 * basis.up, basis.forward + sx1 * basis.right + sy0 * basis.up,
+        basis.forward + sx0 * basis.right + sy1 * basis.up, basis.forward + sx1 * basis.right + sy1 * basis.up};
     lo_ = hi_ = corners[0];
     minDot_ = maxDot_ = glm::dot(glm::dvec2(corners[0]), ctx.fit->dir);
     for (const glm::dvec3& c : corners) {  // every quantity below is linear in (sx, sy): its extremes are at corners
@@ -621,7 +642,8 @@ double Beam::march(size_t k) {
         const size_t side = size_t(hf.mipSide[size_t(level)]);
         float m = -std::numeric_limits<float>::infinity();
         for (int j = j0 >> level; j <= j1 >> level; ++j)
-            for (int i = i0 >> level; i <= i1 >> level; ++i) m = std::max(m, maxAt(level, size_t(j) * side + size_t(i)));
+            for (int i = i0 >> level; i <= i1 >> level; ++i)
+                m = std::max(m, maxAt(level, size_t(j) * side + size_t(i)));
         return m;
     };
     const glm::dvec3& e = ctx_.eyeLocal;
@@ -631,10 +653,13 @@ double Beam::march(size_t k) {
     for (int guard = 0; guard < 100000 && tau < tauEnd; ++guard) {
         const double tb = std::min(tau + step, tauEnd);
         const double zLow = e.z + std::min(tau * lo_.z, tb * lo_.z);
-        const double ua = (e.x + std::min(tau * lo_.x, tb * lo_.x) - c.x0) / s, ub = (e.x + std::max(tau * hi_.x, tb * hi_.x) - c.x0) / s;
-        const double va = (e.y + std::min(tau * lo_.y, tb * lo_.y) - c.y0) / s, vb = (e.y + std::max(tau * hi_.y, tb * hi_.y) - c.y0) / s;
+        const double ua = (e.x + std::min(tau * lo_.x, tb * lo_.x) - c.x0) / s,
+                     ub = (e.x + std::max(tau * hi_.x, tb * hi_.x) - c.x0) / s;
+        const double va = (e.y + std::min(tau * lo_.y, tb * lo_.y) - c.y0) / s,
+                     vb = (e.y + std::max(tau * hi_.y, tb * hi_.y) - c.y0) / s;
         const float m = boxMax(ua, ub, va, vb);  // -inf: nothing under the box
-        if (m == -std::numeric_limits<float>::infinity() || zLow > m + 1e-9 * (1.0 + std::abs(e.z) + std::abs(zLow) + std::abs(m))) {
+        if (m == -std::numeric_limits<float>::infinity() ||
+            zLow > m + 1e-9 * (1.0 + std::abs(e.z) + std::abs(zLow) + std::abs(m))) {
             tau = tb;
             step *= 2;
             continue;

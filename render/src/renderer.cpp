@@ -22,7 +22,8 @@ namespace hc::render {
 
 std::string RenderOptions::validate() const {
     if (cascades < 1 || cascades > 4) return "--cascades " + std::to_string(cascades) + " is outside 1..4";
-    if (texelsPerSide < 16 || texelsPerSide > 8192) return "--texels " + std::to_string(texelsPerSide) + " is outside 16..8192";
+    if (texelsPerSide < 16 || texelsPerSide > 8192)
+        return "--texels " + std::to_string(texelsPerSide) + " is outside 16..8192";
     if (!(waterMinDepthM >= 0)) return "the minimum water depth must be >= 0";
     if (pyramidInterpolateLevels < 0 || pyramidInterpolateLevels > 8)
         return "--pyramid-interpolate " + std::to_string(pyramidInterpolateLevels) + " is outside 0..8";
@@ -32,8 +33,8 @@ std::string RenderOptions::validate() const {
 
 namespace {
 
-void checkOnePyramid(const influence::SurfacePyramid* pyramid, uint64_t structureHash, uint64_t contentHash, const influence::KernelParams& params,
-                     const char* kernelOf) {
+void checkOnePyramid(const influence::SurfacePyramid* pyramid, uint64_t structureHash, uint64_t contentHash,
+                     const influence::KernelParams& params, const char* kernelOf) {
     if (pyramid && (pyramid->structureHash != structureHash || pyramid->contentHash != contentHash))
         throw Error("the surface pyramid does not belong to this grid");
     if (pyramid && (pyramid->params.sigma != params.sigma || pyramid->params.truncation != params.truncation ||
@@ -43,8 +44,10 @@ void checkOnePyramid(const influence::SurfacePyramid* pyramid, uint64_t structur
 
 // A whole pyramid of the shown values; or a base (the first step's) and the shown step's water pyramid (pyramid.h).
 void checkPyramid(const influence::SurfacePyramid* pyramid, const influence::SurfacePyramid* water, const Grid& shape,
-                  uint64_t structureHash, uint64_t contentHash, const influence::KernelParams& params, const char* kernelOf) {
-    if (pyramid && pyramid->waterOnly()) throw Error("a water pyramid is not a base pyramid: the terrain comes from the first step's");
+                  uint64_t structureHash, uint64_t contentHash, const influence::KernelParams& params,
+                  const char* kernelOf) {
+    if (pyramid && pyramid->waterOnly())
+        throw Error("a water pyramid is not a base pyramid: the terrain comes from the first step's");
     if (!water) return checkOnePyramid(pyramid, structureHash, contentHash, params, kernelOf);
     if (!water->waterOnly()) throw Error("the water pyramid holds more than water");
     if (!pyramid || pyramid->channels != 3 || shape.steps.empty())
@@ -54,8 +57,8 @@ void checkPyramid(const influence::SurfacePyramid* pyramid, const influence::Sur
 }
 
 // The sum of docs/design.md section 3 over the list of cell k, in double, as the approximation evaluates it.
-double terrainIn(const Grid& g, const influence::InfluenceLists& lists, const std::vector<Scene::CellKernel>& kernels, uint32_t k,
-                 double xLocal, double yLocal) {
+double terrainIn(const Grid& g, const influence::InfluenceLists& lists, const std::vector<Scene::CellKernel>& kernels,
+                 uint32_t k, double xLocal, double yLocal) {
     const double tail = lists.params().tail(), zk = g.values[0][k];
     double num = 0, den = 0;
     for (const uint32_t i : lists.list(k)) {
@@ -98,13 +101,19 @@ double scenarioDepthMax(const Grid& grid, double shown) {
 
 Scene::Scene(const Grid& grid, const influence::InfluenceLists& lists, const influence::SurfacePyramid* pyramid,
              const influence::SurfacePyramid* waterPyramid, std::optional<GridHashes> known)
-    : grid_(grid), lists_(&lists), pyramid_(pyramid), waterPyramid_(waterPyramid), params_(lists.params()), cellCount_(grid.cellCount()) {
+    : grid_(grid),
+      lists_(&lists),
+      pyramid_(pyramid),
+      waterPyramid_(waterPyramid),
+      params_(lists.params()),
+      cellCount_(grid.cellCount()) {
     if (grid.cellCount() == 0) throw Error("the grid has no cells: nothing to render");
     const uint64_t structure = known ? known->structure : grid.structureHash();
     if (lists.cellCount() != grid.cellCount() || lists.gridStructureHash() != structure)
         throw Error("the influence lists do not belong to this grid");
     if (pyramid || waterPyramid)
-        checkPyramid(pyramid, waterPyramid, grid, structure, known ? known->content : grid.contentHash(), lists.params(), "the influence lists");
+        checkPyramid(pyramid, waterPyramid, grid, structure, known ? known->content : grid.contentHash(),
+                     lists.params(), "the influence lists");
     waterLayer_ = grid.findLayer("water_depth");
     grid.boundsLocal(xMin, yMin, xMax, yMax);
     elevationMin = HUGE_VAL, elevationMax = -HUGE_VAL, depthMax = 0;
@@ -128,9 +137,14 @@ Scene::Scene(const Grid& grid, const influence::InfluenceLists& lists, const inf
     depthColorMaxM = scenarioDepthMax(grid, depthMax);
 }
 
-Scene::Scene(const GridRegionReader& file, const influence::KernelParams& params, const influence::SurfacePyramid* pyramid,
-             const influence::SurfacePyramid* waterPyramid)
-    : grid_(file.shape()), file_(&file), pyramid_(pyramid), waterPyramid_(waterPyramid), params_(params), cellCount_(file.cellCount()) {
+Scene::Scene(const GridRegionReader& file, const influence::KernelParams& params,
+             const influence::SurfacePyramid* pyramid, const influence::SurfacePyramid* waterPyramid)
+    : grid_(file.shape()),
+      file_(&file),
+      pyramid_(pyramid),
+      waterPyramid_(waterPyramid),
+      params_(params),
+      cellCount_(file.cellCount()) {
     if (cellCount_ == 0) throw Error(file.path() + ": the grid has no cells: nothing to render");
     if (std::string why = params.validate(); !why.empty()) throw Error("kernel parameters: " + why);
     checkPyramid(pyramid, waterPyramid, file.shape(), file.info().structureHash, file.info().contentHash, params,
@@ -148,7 +162,10 @@ Scene::Scene(const GridRegionReader& file, const influence::KernelParams& params
 }
 
 const influence::SurfaceEvaluator& Scene::evaluator() const {
-    if (!lists_) throw Error("colouring by a layer needs the grid in memory with its influence lists (hc-influence writes them; --cache)");
+    if (!lists_)
+        throw Error(
+            "colouring by a layer needs the grid in memory with its influence lists (hc-influence writes them; "
+            "--cache)");
     std::call_once(evaluatorMade_, [&] { evaluator_ = std::make_unique<influence::SurfaceEvaluator>(grid_, *lists_); });
     return *evaluator_;
 }
@@ -164,7 +181,8 @@ std::optional<double> Scene::terrainAt(double xLocal, double yLocal) const {
         if (!k) return std::nullopt;
         return terrainIn(grid_, *lists_, kernels_, *k, xLocal, yLocal);
     }
-    const influence::SurfaceRegion r = influence::readSurfaceRegion(*file_, {xLocal, yLocal, xLocal, yLocal}, params_, 1);
+    const influence::SurfaceRegion r =
+        influence::readSurfaceRegion(*file_, {xLocal, yLocal, xLocal, yLocal}, params_, 1);
     const auto k = r.grid.locate(xLocal, yLocal);
     if (!k) return std::nullopt;
     return terrainIn(r.grid, r.lists, kernelsOf(r.grid, params_), *k, xLocal, yLocal);
@@ -206,7 +224,9 @@ Camera overviewCamera(const Scene& s, int width, int height) {
 }
 
 // A copied sample is the exact surface rounded to float once: half an ulp of the largest height.
-double detail::pyramidCopyBoundM(const Scene& scene) { return std::ldexp(std::max(std::abs(scene.zMin), std::abs(scene.zMax)), -24); }
+double detail::pyramidCopyBoundM(const Scene& scene) {
+    return std::ldexp(std::max(std::abs(scene.zMin), std::abs(scene.zMax)), -24);
+}
 
 namespace detail {
 
@@ -263,18 +283,20 @@ FrameSetup setUpFrame(const Scene& scene, const Camera& worldCamera) {
     return s;
 }
 
-CascadeFit fitFrame(const Scene& scene, const Camera& camera, const FrameSetup& setup, const RenderOptions& options, Timings& timings) {
+CascadeFit fitFrame(const Scene& scene, const Camera& camera, const FrameSetup& setup, const RenderOptions& options,
+                    Timings& timings) {
     const Stopwatch clock;
     // A camera inside the terrain sees nothing (raycast.cpp): no cascade to fit or fill.
     ViewVolume view = setup.view;
     view.coarserTexels = options.pyramidCoarseTexels;
-    const CascadeFit fit = cameraBelowTerrainM(scene, camera) > 0 ? CascadeFit{} : fitCascades(view, options.cascades, options.texelsPerSide);
+    const CascadeFit fit = cameraBelowTerrainM(scene, camera) > 0
+                               ? CascadeFit{}
+                               : fitCascades(view, options.cascades, options.texelsPerSide);
     timings.fittingMs = clock.milliseconds();
     timings.viewDirX = fit.dir.x;
     timings.viewDirY = fit.dir.y;
     return fit;
 }
-
 
 CascadeStats statsOf(const Cascade& c) {
     CascadeStats cs;
@@ -307,7 +329,8 @@ namespace {
 
 // The cache's entries, emptied when they were evaluated for another scene or water threshold.
 CascadeCache::Impl* keptFor(CascadeCache::Impl& kept, const Scene& scene, const RenderOptions& options) {
-    if (kept.scene != &scene || kept.cells != scene.cellCount() || kept.waterMinDepthM != options.waterMinDepthM) kept.entries.clear();
+    if (kept.scene != &scene || kept.cells != scene.cellCount() || kept.waterMinDepthM != options.waterMinDepthM)
+        kept.entries.clear();
     return &kept;
 }
 
@@ -315,12 +338,14 @@ CascadeCache::Impl* keptFor(CascadeCache::Impl& kept, const Scene& scene, const 
 // taken (its side may differ: a far cascade grows and shrinks by 64 texels as the camera moves, and keeps what it
 // still sees): its index in kept.entries and the texel offset. Two cascades of a frame may share a texel
 // size (a camera high above the terrain): the one placed nearest to c is taken, as the nearer holds more of c's
-// texels (the first one found copied 10 % of a far cascade in render_frames_test's MovingCameraVisitsCellsUnderTheNewTexelsOnly).
+// texels (the first one found copied 10 % of a far cascade in render_frames_test's
+// MovingCameraVisitsCellsUnderTheNewTexelsOnly).
 struct Reusable {
     size_t entry;
     int di, dj;
 };
-std::optional<Reusable> reusableCascade(const CascadeCache::Impl& kept, const std::vector<bool>& taken, const Cascade& c) {
+std::optional<Reusable> reusableCascade(const CascadeCache::Impl& kept, const std::vector<bool>& taken,
+                                        const Cascade& c) {
     std::optional<Reusable> best;
     for (size_t e = 0; e < kept.entries.size(); ++e) {
         const Cascade& old = kept.entries[e].cascade;
@@ -330,14 +355,16 @@ std::optional<Reusable> reusableCascade(const CascadeCache::Impl& kept, const st
         const double ri = std::round(fi), rj = std::round(fj);
         if (std::abs(fi - ri) >= 1e-6 || std::abs(fj - rj) >= 1e-6) continue;
         const Reusable r{e, int(ri), int(rj)};
-        if (!best || std::max(std::abs(r.di), std::abs(r.dj)) < std::max(std::abs(best->di), std::abs(best->dj))) best = r;
+        if (!best || std::max(std::abs(r.di), std::abs(r.dj)) < std::max(std::abs(best->di), std::abs(best->dj)))
+            best = r;
     }
     return best;
 }
 
 // reusableCascade's pick for c, marked taken, and recorded in `fill` (for a backend that keeps the texels itself) if
 // given: the last frame's cascade by its index in that frame's fit.
-std::optional<Reusable> takeReusable(const CascadeCache::Impl& kept, std::vector<bool>& taken, const Cascade& c, detail::CascadeFill* fill) {
+std::optional<Reusable> takeReusable(const CascadeCache::Impl& kept, std::vector<bool>& taken, const Cascade& c,
+                                     detail::CascadeFill* fill) {
     const std::optional<Reusable> r = reusableCascade(kept, taken, c);
     if (!r) return r;
     taken[r->entry] = true;
@@ -349,9 +376,11 @@ std::optional<Reusable> takeReusable(const CascadeCache::Impl& kept, std::vector
 // their statistics in timings.cascades. With `fills` (detail::approximateOnCpu), what `kept` holds is not copied: each
 // cascade's spans and the last frame's cascade they keep go there (and with pyramidTiles the texels left to copy from
 // the pyramid).
-std::vector<detail::CascadeTextures> approximateCascades(const Scene& scene, const CascadeFit& fit, const RenderOptions& options,
-                                                         CascadeCache::Impl* kept, Timings& timings, bool mipmaps = true,
-                                                         std::vector<detail::CascadeFill>* fills = nullptr, bool pyramidTiles = false) {
+std::vector<detail::CascadeTextures> approximateCascades(const Scene& scene, const CascadeFit& fit,
+                                                         const RenderOptions& options, CascadeCache::Impl* kept,
+                                                         Timings& timings, bool mipmaps = true,
+                                                         std::vector<detail::CascadeFill>* fills = nullptr,
+                                                         bool pyramidTiles = false) {
     std::vector<detail::CascadeTextures> tex(fit.cascades.size());
     if (fills) fills->assign(fit.cascades.size(), detail::CascadeFill{});
     std::vector<bool> taken(kept ? kept->entries.size() : 0, false);
@@ -362,7 +391,8 @@ std::vector<detail::CascadeTextures> approximateCascades(const Scene& scene, con
         // freed): most likely page faults as the heap grew and shrank every frame.
         std::optional<detail::TexelReuse> reuse;
         // A cascade of another side copies its kept texels from the last frame's storage into new storage.
-        if (const std::optional<Reusable> r = kept ? takeReusable(*kept, taken, c, fills ? &(*fills)[k] : nullptr) : std::nullopt) {
+        if (const std::optional<Reusable> r =
+                kept ? takeReusable(*kept, taken, c, fills ? &(*fills)[k] : nullptr) : std::nullopt) {
             CascadeCache::Impl::Entry& from = kept->entries[r->entry];
             if (from.cascade.n == c.n) tex[k] = std::move(from.tex);
             reuse = detail::TexelReuse{&from.cascade, from.cascade.n == c.n ? &tex[k] : &from.tex, r->di, r->dj};
@@ -370,9 +400,10 @@ std::vector<detail::CascadeTextures> approximateCascades(const Scene& scene, con
         CascadeStats cs = detail::statsOf(c);
         Stopwatch clock;
         if (!c.empty()) {
-            const detail::ApproximationWork work =
-                detail::approximate(scene, c, tex[k], options.waterMinDepthM, options.threads, reuse ? &*reuse : nullptr, options.pyramidInterpolateLevels,
-                                    fills ? &(*fills)[k].rows : nullptr, fills && pyramidTiles ? &(*fills)[k].tiles : nullptr);
+            const detail::ApproximationWork work = detail::approximate(
+                scene, c, tex[k], options.waterMinDepthM, options.threads, reuse ? &*reuse : nullptr,
+                options.pyramidInterpolateLevels, fills ? &(*fills)[k].rows : nullptr,
+                fills && pyramidTiles ? &(*fills)[k].tiles : nullptr);
             cs.gaussians = work.gaussians, cs.cellsVisited = work.cellsVisited, cs.reusedTexels = work.reusedTexels;
             cs.cellsRead = work.cellsRead, cs.regionsRead = work.regionsRead;
             cs.pyramidTexels = work.pyramidTexels, cs.pyramidLevel = work.pyramidLevel;
@@ -392,14 +423,13 @@ std::vector<detail::CascadeTextures> approximateCascades(const Scene& scene, con
     return tex;
 }
 
-
 // Hits whose unit normal is still to be computed from their slope (detail::Hit::slopeOnly): a worker's, 256 at a time,
 // in vector registers. One at a time, the square root and divisions at the end of every ray that hit were 4-6 % of
 // ray casting (docs/benchmarks.md). The same operations either way (detail::normalOfSlope).
 struct PendingNormals {
     static constexpr size_t kMax = 256;
     std::array<double, kMax> gx, gy, texelM, nx, ny, nz;  // Hit's gx, gy, texelM; the normal
-    std::array<size_t, kMax> at;  // the pixel
+    std::array<size_t, kMax> at;                          // the pixel
     size_t n = 0;
     void add(size_t pixel, const detail::Hit& h, Frame& f) {
         if (n == kMax) flush(f);
@@ -408,7 +438,8 @@ struct PendingNormals {
     void flush(Frame& f) {
         const size_t count = n;  // a local: the stores below could change a member, for all the compiler knows
         for (size_t k = 0; k < count; ++k) detail::normalOfSlope(gx[k], gy[k], texelM[k], nx[k], ny[k], nz[k]);
-        for (size_t k = 0; k < count; ++k) f.nX[at[k]] = float(nx[k]), f.nY[at[k]] = float(ny[k]), f.nZ[at[k]] = float(nz[k]);
+        for (size_t k = 0; k < count; ++k)
+            f.nX[at[k]] = float(nx[k]), f.nY[at[k]] = float(ny[k]), f.nZ[at[k]] = float(nz[k]);
         n = 0;
     }
 };
@@ -416,14 +447,15 @@ struct PendingNormals {
 // The rays of a rectangle of pixels: unit directions and their lengths before normalising, computed at once in vector
 // registers (a square root and three divisions a ray) in the operations each ray used one at a time (glm's d = forward
 // + sx right + sy up, length(d), d / length component by component). The compiler fuses the multiply-adds of this loop
-// differently from glm's: a direction's y moved by its last bit in 280 of 921,600 rays of one render (docs/benchmarks.md).
+// differently from glm's: a direction's y moved by its last bit in 280 of 921,600 rays of one render
+// (docs/benchmarks.md).
 struct RayDirections {
     int x0 = 0, y0 = 0, width = 0;
     std::vector<double> sx, sy, x, y, z, length;
     detail::RaySetups setups;  // and each ray's set-up in each cascade (detail::setUpRays)
     size_t at(int px, int py) const { return size_t(py - y0) * size_t(width) + size_t(px - x0); }
-    void compute(const detail::RayContext& ctx, const CameraBasis& basis, const double* sxAt, const double* syAt, int px0, int px1, int py0,
-                 int py1) {
+    void compute(const detail::RayContext& ctx, const CameraBasis& basis, const double* sxAt, const double* syAt,
+                 int px0, int px1, int py0, int py1) {
         x0 = px0, y0 = py0, width = px1 - px0;
         const size_t n = size_t(width) * size_t(py1 - py0);
         for (std::vector<double>* v : {&sx, &sy, &x, &y, &z, &length}) v->resize(n);
@@ -433,11 +465,13 @@ struct RayDirections {
         detail::setUpRays(ctx, n, x.data(), y.data(), z.data(), setups);
     }
     // Six arrays of their own (restrict: the compiler would otherwise check every pair for overlap before vectorising).
-    static void unitDirections(const CameraBasis& basis, size_t n, const double* __restrict sx, const double* __restrict sy, double* __restrict dx,
-                               double* __restrict dy, double* __restrict dz, double* __restrict len) {
+    static void unitDirections(const CameraBasis& basis, size_t n, const double* __restrict sx,
+                               const double* __restrict sy, double* __restrict dx, double* __restrict dy,
+                               double* __restrict dz, double* __restrict len) {
         const glm::dvec3 f = basis.forward, r = basis.right, u = basis.up;
         for (size_t k = 0; k < n; ++k) {
-            const double vx = f.x + sx[k] * r.x + sy[k] * u.x, vy = f.y + sx[k] * r.y + sy[k] * u.y, vz = f.z + sx[k] * r.z + sy[k] * u.z;
+            const double vx = f.x + sx[k] * r.x + sy[k] * u.x, vy = f.y + sx[k] * r.y + sy[k] * u.y,
+                         vz = f.z + sx[k] * r.z + sy[k] * u.z;
             const double l = std::sqrt(vx * vx + vy * vy + vz * vz);
             dx[k] = vx / l, dy[k] = vy / l, dz[k] = vz / l, len[k] = l;
         }
@@ -454,15 +488,24 @@ detail::PixelRays castRays(const Scene& scene, const detail::FrameSetup& setup, 
     // pages in on a first frame, is too much for one core).
     detail::PixelRays rays;
     const std::pair<std::vector<float>*, float> layers[] = {{&f.distanceM, std::numeric_limits<float>::infinity()},
-                                                             {&f.posX, 0.0f}, {&f.posY, 0.0f}, {&f.posZ, 0.0f}, {&f.nX, 0.0f},
-                                                             {&f.nY, 0.0f}, {&f.nZ, 0.0f}, {&f.waterDepthM, 0.0f},
-                                                             {&f.cascade, -1.0f}, {&f.wall, 0.0f}};
+                                                            {&f.posX, 0.0f},
+                                                            {&f.posY, 0.0f},
+                                                            {&f.posZ, 0.0f},
+                                                            {&f.nX, 0.0f},
+                                                            {&f.nY, 0.0f},
+                                                            {&f.nZ, 0.0f},
+                                                            {&f.waterDepthM, 0.0f},
+                                                            {&f.cascade, -1.0f},
+                                                            {&f.wall, 0.0f}};
     constexpr size_t kLayers = std::size(layers);
     parallelFor(kLayers + 2, 1, options.threads, [&](size_t b, size_t e, unsigned) {
         for (size_t i = b; i < e; ++i) {
-            if (i < kLayers) layers[i].first->assign(pixels, layers[i].second);
-            else if (i == kLayers) rays.dirZ.assign(pixels, 0.0f);
-            else rays.isWater.assign(pixels, 0);
+            if (i < kLayers)
+                layers[i].first->assign(pixels, layers[i].second);
+            else if (i == kLayers)
+                rays.dirZ.assign(pixels, 0.0f);
+            else
+                rays.isWater.assign(pixels, 0);
         }
     });
     const CameraBasis& basis = setup.basis;
@@ -487,8 +530,10 @@ detail::PixelRays castRays(const Scene& scene, const detail::FrameSetup& setup, 
         f.posX[i] = float(eye.x + d.x * h.t);
         f.posY[i] = float(eye.y + d.y * h.t);
         f.posZ[i] = float(eye.z + d.z * h.t);
-        if (h.slopeOnly) normals.add(i, h, f);
-        else f.nX[i] = float(h.nx), f.nY[i] = float(h.ny), f.nZ[i] = float(h.nz);
+        if (h.slopeOnly)
+            normals.add(i, h, f);
+        else
+            f.nX[i] = float(h.nx), f.nY[i] = float(h.ny), f.nZ[i] = float(h.nz);
         f.cascade[i] = float(h.cascade);
         f.waterDepthM[i] = float(h.depth);
         f.wall[i] = h.wall ? 1.0f : 0.0f;
@@ -506,7 +551,8 @@ detail::PixelRays castRays(const Scene& scene, const detail::FrameSetup& setup, 
             }
             normals.flush(f);
         });
-    } else {  // a row of blocks of 4 x 4 tiles a task; each tile's rays with their beam (detail::Beam), inside its block's
+    } else {  // a row of blocks of 4 x 4 tiles a task; each tile's rays with their beam (detail::Beam), inside its
+              // block's
         const int block = 4 * tile;
         parallelFor(size_t((H + block - 1) / block), 1, options.threads, [&](size_t b, size_t e, unsigned) {
             PendingNormals normals;
@@ -534,7 +580,6 @@ detail::PixelRays castRays(const Scene& scene, const detail::FrameSetup& setup, 
     return rays;
 }
 
-
 // This frame's textures into the cache, for the next.
 void keepCascades(CascadeCache::Impl& kept, const Scene& scene, const RenderOptions& options, const CascadeFit& fit,
                   std::vector<detail::CascadeTextures>& tex) {
@@ -550,18 +595,22 @@ struct detail::CacheAccess {
     static CascadeCache::Impl& of(CascadeCache& cache) { return *cache.impl_; }
 };
 
-void detail::approximateOnCpu(const Scene& scene, const CascadeFit& fit, const RenderOptions& options, CascadeCache& cache, Timings& timings,
-                              const std::function<void(size_t, CascadeTextures&, CascadeFill&)>& use, bool pyramidTiles) {
+void detail::approximateOnCpu(const Scene& scene, const CascadeFit& fit, const RenderOptions& options,
+                              CascadeCache& cache, Timings& timings,
+                              const std::function<void(size_t, CascadeTextures&, CascadeFill&)>& use,
+                              bool pyramidTiles) {
     CascadeCache::Impl* kept = keptFor(CacheAccess::of(cache), scene, options);
     std::vector<CascadeFill> fills;
-    std::vector<CascadeTextures> tex = approximateCascades(scene, fit, options, kept, timings, false, &fills, pyramidTiles);
+    std::vector<CascadeTextures> tex =
+        approximateCascades(scene, fit, options, kept, timings, false, &fills, pyramidTiles);
     for (size_t k = 0; k < fit.cascades.size(); ++k)
         if (!fit.cascades[k].empty()) use(k, tex[k], fills[k]);
     keepCascades(*kept, scene, options, fit, tex);  // their storage, for the next frame's spans
 }
 
-std::vector<detail::CascadeFill> detail::planCascades(const Scene& scene, const CascadeFit& fit, const RenderOptions& options, CascadeCache& cache,
-                                                     Timings& timings) {
+std::vector<detail::CascadeFill> detail::planCascades(const Scene& scene, const CascadeFit& fit,
+                                                      const RenderOptions& options, CascadeCache& cache,
+                                                      Timings& timings) {
     CascadeCache::Impl& kept = *keptFor(CacheAccess::of(cache), scene, options);
     std::vector<CascadeFill> fills(fit.cascades.size());
     std::vector<bool> taken(kept.entries.size(), false);
@@ -580,7 +629,8 @@ std::vector<detail::CascadeFill> detail::planCascades(const Scene& scene, const 
     return fills;
 }
 
-Frame renderFrame(const Scene& scene, const Camera& camera, const RenderOptions& options, Timings& timings, CascadeCache* cache) {
+Frame renderFrame(const Scene& scene, const Camera& camera, const RenderOptions& options, Timings& timings,
+                  CascadeCache* cache) {
     camera.validate();
     if (std::string why = options.validate(); !why.empty()) throw Error(why);
     if (!options.colorLayer.empty()) {  // before any work: the layer exists, and the evaluator can be had
@@ -605,6 +655,5 @@ Frame renderFrame(const Scene& scene, const Camera& camera, const RenderOptions&
     timings.totalMs = total.milliseconds();
     return f;
 }
-
 
 }  // namespace hc::render

@@ -108,14 +108,21 @@ void drawText(Frame& f, int x, int y, const std::string& text, int scale) {
 
 std::string label(double v, const std::string& units = "m") {
     char b[48];
-    std::snprintf(b, sizeof b, std::abs(v) >= 100 ? "%.0f%s" : std::abs(v) >= 1 || v == 0 ? "%.1f%s" : "%.3g%s", v, units.c_str());
+    std::snprintf(b, sizeof b,
+                  std::abs(v) >= 100           ? "%.0f%s"
+                  : std::abs(v) >= 1 || v == 0 ? "%.1f%s"
+                                               : "%.3g%s",
+                  v, units.c_str());
     return b;
 }
 
 // RenderOptions::colorLayer's ramp (perceptually ordered, dark violet to yellow, as viridis), distinct from the
 // elevation and depth ramps so that a picture never reads as one of those.
-constexpr double kLayerStops[5][4] = {{0.0, 0.267, 0.005, 0.329}, {0.25, 0.229, 0.322, 0.546}, {0.5, 0.128, 0.567, 0.551},
-                                       {0.75, 0.369, 0.789, 0.383}, {1.0, 0.993, 0.906, 0.144}};
+constexpr double kLayerStops[5][4] = {{0.0, 0.267, 0.005, 0.329},
+                                      {0.25, 0.229, 0.322, 0.546},
+                                      {0.5, 0.128, 0.567, 0.551},
+                                      {0.75, 0.369, 0.789, 0.383},
+                                      {1.0, 0.993, 0.906, 0.144}};
 constexpr Ramp kLayerRamp = rampOf(kLayerStops);
 static_assert(rampIsValid(kLayerRamp));
 
@@ -126,7 +133,8 @@ std::pair<double, double> layerRange(const Grid& g, const influence::Layer& laye
     if (layer.kind == influence::Layer::WaterCells) {
         const size_t s = layer.index - g.firstStepLayer();
         for (const StepInfo& step : g.steps)
-            if (s < step.layerMin.size()) lo = std::min(lo, double(step.layerMin[s])), hi = std::max(hi, double(step.layerMax[s]));
+            if (s < step.layerMin.size())
+                lo = std::min(lo, double(step.layerMin[s])), hi = std::max(hi, double(step.layerMax[s]));
     } else {
         for (float v : g.values[layer.index]) lo = std::min(lo, double(v)), hi = std::max(hi, double(v));
     }
@@ -136,14 +144,15 @@ std::pair<double, double> layerRange(const Grid& g, const influence::Layer& laye
 
 // The colour layer (RenderOptions::colorLayer) at every hit it colours: the water's hits for a step layer, the
 // terrain's (not walls) for a static one; NaN elsewhere and where the field is undefined.
-std::vector<float> colorLayerValues(const Scene& scene, const influence::Layer& layer, const RenderOptions& options, const Frame& f,
-                                    const std::vector<uint8_t>& isWater) {
+std::vector<float> colorLayerValues(const Scene& scene, const influence::Layer& layer, const RenderOptions& options,
+                                    const Frame& f, const std::vector<uint8_t>& isWater) {
     std::vector<float> out(f.distanceM.size(), std::numeric_limits<float>::quiet_NaN());
     std::vector<std::array<double, 2>> pts;
     std::vector<size_t> at;
     const bool onWater = layer.kind == influence::Layer::WaterCells;
     for (size_t i = 0; i < out.size(); ++i)
-        if (std::isfinite(f.distanceM[i]) && f.wall[i] == 0 && (isWater[i] != 0) == onWater) pts.push_back({f.posX[i], f.posY[i]}), at.push_back(i);
+        if (std::isfinite(f.distanceM[i]) && f.wall[i] == 0 && (isWater[i] != 0) == onWater)
+            pts.push_back({f.posX[i], f.posY[i]}), at.push_back(i);
     const auto v = scene.evaluator().values(pts, layer, options.threads);
     for (size_t j = 0; j < at.size(); ++j)
         if (v[j]) out[at[j]] = float(*v[j]);
@@ -158,7 +167,8 @@ void drawLegend(Frame& f, const LegendLayout& l) {
         const Rgb c = ramp.at(1.0 - double(y) / (l.barH - 1));
         for (int x = 0; x < l.barW; ++x) {
             uint8_t* p = &f.rgb[(size_t(l.y0 + y) * size_t(f.width) + size_t(l.x0 + x)) * 3];
-            p[0] = static_cast<uint8_t>(c.r * 255), p[1] = static_cast<uint8_t>(c.g * 255), p[2] = static_cast<uint8_t>(c.b * 255);
+            p[0] = static_cast<uint8_t>(c.r * 255), p[1] = static_cast<uint8_t>(c.g * 255),
+            p[2] = static_cast<uint8_t>(c.b * 255);
         }
     }
     drawText(f, l.x0 + l.barW + 2 * l.scale, l.y0, l.hi, l.scale);
@@ -182,10 +192,11 @@ struct ShadeInputs {
 // A worker's buffers for a run of up to kShadeBlock pixels of a row.
 constexpr size_t kShadeBlock = 256;
 struct ShadeBlock {
-    std::array<double, kShadeBlock> fog;      // the fog's share
-    std::array<double, kShadeBlock> dim;      // the cell outline's factor: 1, or 0.35 on an edge (RenderOptions::cellOutlines)
-    std::array<int, kShadeBlock> water;       // PixelRays::isWater
-    std::array<int, kShadeBlock> r, g, b;     // indices into the sRGB tables
+    std::array<double, kShadeBlock> fog;  // the fog's share
+    std::array<double, kShadeBlock>
+        dim;  // the cell outline's factor: 1, or 0.35 on an edge (RenderOptions::cellOutlines)
+    std::array<int, kShadeBlock> water;    // PixelRays::isWater
+    std::array<int, kShadeBlock> r, g, b;  // indices into the sRGB tables
     ShadeBlock() { dim.fill(1.0); }
 };
 
@@ -222,11 +233,12 @@ uint64_t shadeBlock(const ShadeInputs& in, size_t i0, size_t n, ShadeBlock& blk,
     };
     // The nearest entry of kSrgb's tables (adding 0.5 and truncating rounds as lround does).
     auto index = [&](double c) { return int(unit(c) * 4096.0 + 0.5); };
-    const Rgb hz = in.skyHorizon, zn = in.skyZenith, wallColor{gpu::kWallColor[0], gpu::kWallColor[1], gpu::kWallColor[2]},
+    const Rgb hz = in.skyHorizon, zn = in.skyZenith,
+              wallColor{gpu::kWallColor[0], gpu::kWallColor[1], gpu::kWallColor[2]},
               dry{gpu::kDryColor[0], gpu::kDryColor[1], gpu::kDryColor[2]};
     const double sun0 = in.sun[0], sun1 = in.sun[1], sun2 = in.sun[2];
-    // Dry land in ColorMode::WaterDepth: a ramp of the dry colour at every stop, which gives that colour exactly (a select
-    // on a flag the loop does not change is not vectorised).
+    // Dry land in ColorMode::WaterDepth: a ramp of the dry colour at every stop, which gives that colour exactly (a
+    // select on a flag the loop does not change is not vectorised).
     const Ramp& landRamp = in.depthMode ? kDryRamp : kElevation;
     for (size_t k = 0; k < n; ++k) {
         const double up = unit(dirZ[k]);
@@ -258,7 +270,8 @@ uint64_t shadeBlock(const ShadeInputs& in, size_t i0, size_t n, ShadeBlock& blk,
     }
     for (size_t k = 0; k < n; ++k) {
         uint8_t* p = rgb + 3 * k;
-        p[0] = kSrgb.toSrgb[size_t(blk.r[k])], p[1] = kSrgb.toSrgb[size_t(blk.g[k])], p[2] = kSrgb.toSrgb[size_t(blk.b[k])];
+        p[0] = kSrgb.toSrgb[size_t(blk.r[k])], p[1] = kSrgb.toSrgb[size_t(blk.g[k])],
+        p[2] = kSrgb.toSrgb[size_t(blk.b[k])];
     }
     return hits;
 }

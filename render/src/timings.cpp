@@ -36,23 +36,25 @@ std::string Timings::toJson() const {
     j["cascades"] = Json::array();
     for (size_t k = 0; k < cascades.size(); ++k) {
         const CascadeStats& c = cascades[k];
-        j["cascades"].push_back({{"index", k},
-                                 {"near_m", threeDecimals(c.nearM)},
-                                 {"far_m", threeDecimals(c.farM)},
-                                 {"texel_m", rounded(c.texelM, std::chars_format::general, 6)},
-                                 {"visible_texels", c.visibleTexels},
-                                 {"reused_texels", c.reusedTexels},
-                                 {"pyramid_level", c.pyramidLevel},
-                                 {"pyramid_texels", c.pyramidTexels},
-                                 {"pyramid_interpolated", c.pyramidInterpolated},
-                                 {"pyramid_interpolated_levels_up", c.pyramidInterpolatedUp},
-                                 // null where no texel was copied: the bound is the copies' (CascadeStats::errorBoundM)
-                                 {"error_bound_m", c.pyramidTexels ? Json(rounded(c.errorBoundM, std::chars_format::general, 3)) : Json(nullptr)},
-                                 {"gaussians", c.gaussians},
-                                 {"cells_visited", c.cellsVisited},
-                                 {"cells_read", c.cellsRead},
-                                 {"regions_read", c.regionsRead},
-                                 {"approximation_ms", threeDecimals(c.approximationMs)}});
+        j["cascades"].push_back(
+            {{"index", k},
+             {"near_m", threeDecimals(c.nearM)},
+             {"far_m", threeDecimals(c.farM)},
+             {"texel_m", rounded(c.texelM, std::chars_format::general, 6)},
+             {"visible_texels", c.visibleTexels},
+             {"reused_texels", c.reusedTexels},
+             {"pyramid_level", c.pyramidLevel},
+             {"pyramid_texels", c.pyramidTexels},
+             {"pyramid_interpolated", c.pyramidInterpolated},
+             {"pyramid_interpolated_levels_up", c.pyramidInterpolatedUp},
+             // null where no texel was copied: the bound is the copies' (CascadeStats::errorBoundM)
+             {"error_bound_m",
+              c.pyramidTexels ? Json(rounded(c.errorBoundM, std::chars_format::general, 3)) : Json(nullptr)},
+             {"gaussians", c.gaussians},
+             {"cells_visited", c.cellsVisited},
+             {"cells_read", c.cellsRead},
+             {"regions_read", c.regionsRead},
+             {"approximation_ms", threeDecimals(c.approximationMs)}});
     }
     return j.dump(2) + "\n";
 }
@@ -64,16 +66,19 @@ std::string Timings::toTable() const {
     s += b;
     for (size_t k = 0; k < cascades.size(); ++k) {
         const CascadeStats& c = cascades[k];
-        std::snprintf(b, sizeof b, "    cascade %zu     %9.2f   offsets %.0f..%.0f m, texel %.3g m, %llu visible texels, %llu Gaussians", k,
-                      c.approximationMs, c.nearM, c.farM, c.texelM, (unsigned long long)c.visibleTexels, (unsigned long long)c.gaussians);
+        std::snprintf(
+            b, sizeof b,
+            "    cascade %zu     %9.2f   offsets %.0f..%.0f m, texel %.3g m, %llu visible texels, %llu Gaussians", k,
+            c.approximationMs, c.nearM, c.farM, c.texelM, (unsigned long long)c.visibleTexels,
+            (unsigned long long)c.gaussians);
         s += b;
         if (c.cellsVisited) {
             std::snprintf(b, sizeof b, ", %llu cells visited", (unsigned long long)c.cellsVisited);
             s += b;
         }
         if (c.regionsRead) {
-            std::snprintf(b, sizeof b, ", %llu cells read from the grid file in %llu blocks", (unsigned long long)c.cellsRead,
-                          (unsigned long long)c.regionsRead);
+            std::snprintf(b, sizeof b, ", %llu cells read from the grid file in %llu blocks",
+                          (unsigned long long)c.cellsRead, (unsigned long long)c.regionsRead);
             s += b;
         }
         if (c.reusedTexels) {
@@ -81,36 +86,45 @@ std::string Timings::toTable() const {
             s += b;
         }
         if (c.pyramidLevel >= 0) {
-            std::snprintf(b, sizeof b, ", %llu copied from pyramid level %d (within %.2g m)", (unsigned long long)c.pyramidTexels, c.pyramidLevel,
-                          c.errorBoundM);
+            std::snprintf(b, sizeof b, ", %llu copied from pyramid level %d (within %.2g m)",
+                          (unsigned long long)c.pyramidTexels, c.pyramidLevel, c.errorBoundM);
             s += b;
         }
         if (c.pyramidInterpolated) {
-            std::snprintf(b, sizeof b, ", %llu interpolated from up to %d level%s above", (unsigned long long)c.pyramidInterpolated,
-                          c.pyramidInterpolatedUp, c.pyramidInterpolatedUp == 1 ? "" : "s");
+            std::snprintf(b, sizeof b, ", %llu interpolated from up to %d level%s above",
+                          (unsigned long long)c.pyramidInterpolated, c.pyramidInterpolatedUp,
+                          c.pyramidInterpolatedUp == 1 ? "" : "s");
             s += b;
         }
         s += "\n";
     }
-    std::snprintf(b, sizeof b, "  mipmaps         %9.2f\n  ray casting     %9.2f   %llu rays, %llu hits\n  shading         %9.2f\n  total           %9.2f\n",
+    std::snprintf(b, sizeof b,
+                  "  mipmaps         %9.2f\n  ray casting     %9.2f   %llu rays, %llu hits\n  shading         %9.2f\n  "
+                  "total           %9.2f\n",
                   mipmapMs, raycastMs, (unsigned long long)rays, (unsigned long long)hits, shadingMs, totalMs);
     s += b;
     if (gpuMs > 0 || readbackMs > 0) {
-        std::snprintf(b, sizeof b, "    GPU span      %9.2f   first stage's start to shading's end\n    read back     %9.2f   the frame to host memory\n",
+        std::snprintf(b, sizeof b,
+                      "    GPU span      %9.2f   first stage's start to shading's end\n    read back     %9.2f   the "
+                      "frame to host memory\n",
                       gpuMs, readbackMs);
         s += b;
     }
     if (uploadMs > 0) {
-        std::snprintf(b, sizeof b, "    upload        %9.2f   the rows and new texels, to the GPU: %.2f MB\n", uploadMs, double(uploadBytes) / 1e6);
+        std::snprintf(b, sizeof b, "    upload        %9.2f   the rows and new texels, to the GPU: %.2f MB\n", uploadMs,
+                      double(uploadBytes) / 1e6);
         s += b;
     }
     if (atlasTexels > 0) {
-        std::snprintf(b, sizeof b, "    pyramid tiles           %llu texels copied on the GPU from its tiles there (%llu tiles uploaded)\n",
-                      (unsigned long long)atlasTexels, (unsigned long long)atlasTilesUploaded);
+        std::snprintf(
+            b, sizeof b,
+            "    pyramid tiles           %llu texels copied on the GPU from its tiles there (%llu tiles uploaded)\n",
+            (unsigned long long)atlasTexels, (unsigned long long)atlasTilesUploaded);
         s += b;
     }
     if (atlasInterpolated > 0) {
-        std::snprintf(b, sizeof b, "    pyramid tiles           %llu texels interpolated on the GPU from level 0's tiles there\n",
+        std::snprintf(b, sizeof b,
+                      "    pyramid tiles           %llu texels interpolated on the GPU from level 0's tiles there\n",
                       (unsigned long long)atlasInterpolated);
         s += b;
     }

@@ -14,9 +14,12 @@ Backend parseBackend(const std::string& name) {
 
 const char* backendName(Backend b) {
     switch (b) {
-        case Backend::Cpu: return "cpu";
-        case Backend::Gl: return "gl";
-        case Backend::Auto: return "auto";
+        case Backend::Cpu:
+            return "cpu";
+        case Backend::Gl:
+            return "gl";
+        case Backend::Auto:
+            return "auto";
     }
     return "?";
 }
@@ -29,7 +32,8 @@ GlOnHand probeHeadlessGl() {
 
 void requireCpu(const std::string& what, Backend requested, BackendDecision& d) {
     if (!d.useGl) return;
-    if (requested == Backend::Gl) throw Error("--backend gl: " + what + " is drawn by the CPU backend only (use --backend cpu)");
+    if (requested == Backend::Gl)
+        throw Error("--backend gl: " + what + " is drawn by the CPU backend only (use --backend cpu)");
     d.useGl = false;
     d.note = what + " is drawn by the CPU backend only: rendering on the CPU";
 }
@@ -43,11 +47,13 @@ BackendDecision decideBackend(Backend requested, const GlOnHand& gl) {
     if (requested == Backend::Gl) {
         d.useGl = true;
         // docs/testing.md: without a GPU the CPU backend is the fast one.
-        if (software) d.note = "OpenGL here is software rendering (" + renderer + "); --backend cpu is about twice as fast";
+        if (software)
+            d.note = "OpenGL here is software rendering (" + renderer + "); --backend cpu is about twice as fast";
     } else if (!gl.unavailable.empty()) {
         d.note = "the GL backend is not available (" + gl.unavailable + "): rendering on the CPU";
     } else if (software) {
-        d.note = "OpenGL here is software rendering (" + renderer + "): rendering on the CPU, which is faster (--backend gl forces it)";
+        d.note = "OpenGL here is software rendering (" + renderer +
+                 "): rendering on the CPU, which is faster (--backend gl forces it)";
     } else {
         d.useGl = true;
     }

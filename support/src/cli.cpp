@@ -29,7 +29,8 @@ void Parser::option(const std::string& name, const std::string& value, const std
 void Parser::option(const std::string& name, const std::string& value, const std::string& help, double& target) {
     opts_.push_back({name, value, help, [&target, name](const std::string& v) { target = parseNumber(v, name); }});
 }
-void Parser::option(const std::string& name, const std::string& value, const std::string& help, std::optional<double>& target) {
+void Parser::option(const std::string& name, const std::string& value, const std::string& help,
+                    std::optional<double>& target) {
     opts_.push_back({name, value, help, [&target, name](const std::string& v) { target = parseNumber(v, name); }});
 }
 void Parser::option(const std::string& name, const std::string& value, const std::string& help, int& target) {
@@ -42,7 +43,8 @@ void Parser::option(const std::string& name, const std::string& value, const std
 void Parser::option(const std::string& name, const std::string& value, const std::string& help, unsigned& target) {
     opts_.push_back({name, value, help, [&target, name](const std::string& v) {
                          double d = parseNumber(v, name);
-                         if (d != std::floor(d) || d < 0 || d > 4096) throw Error(name + " " + v + ": not a count in 0..4096");
+                         if (d != std::floor(d) || d < 0 || d > 4096)
+                             throw Error(name + " " + v + ": not a count in 0..4096");
                          target = static_cast<unsigned>(d);
                      }});
 }
@@ -71,7 +73,8 @@ bool Parser::parse(int argc, char** argv) {
             std::fputs(help().c_str(), stdout);
             return false;
         }
-        if (a.size() > 1 && a[0] == '-' && !(a.size() > 1 && (std::isdigit(static_cast<unsigned char>(a[1])) || a[1] == '.'))) {
+        if (a.size() > 1 && a[0] == '-' &&
+            !(a.size() > 1 && (std::isdigit(static_cast<unsigned char>(a[1])) || a[1] == '.'))) {
             std::string value;
             bool inlineValue = false;
             if (auto eq = a.find('='); eq != std::string::npos && a.rfind("--", 0) == 0) {
@@ -135,18 +138,22 @@ double parseNumber(const std::string& text, const std::string& what) {
     return v;
 }
 
-std::vector<double> parseNumberList(const std::string& text, const std::string& what, size_t minCount, size_t maxCount) {
+std::vector<double> parseNumberList(const std::string& text, const std::string& what, size_t minCount,
+                                    size_t maxCount) {
     std::vector<double> v;
     size_t start = 0;
     for (;;) {
         const size_t comma = text.find(',', start);
-        v.push_back(parseNumber(text.substr(start, comma == std::string::npos ? std::string::npos : comma - start), what));
+        v.push_back(
+            parseNumber(text.substr(start, comma == std::string::npos ? std::string::npos : comma - start), what));
         if (comma == std::string::npos) break;
         start = comma + 1;
     }
     if (v.size() < minCount || v.size() > maxCount)
-        throw Error(what + " " + text + ": expected " + (maxCount == SIZE_MAX ? "at least " : "") + std::to_string(minCount) +
-                    (maxCount > minCount && maxCount != SIZE_MAX ? " or " + std::to_string(maxCount) : "") + " comma-separated numbers");
+        throw Error(what + " " + text + ": expected " + (maxCount == SIZE_MAX ? "at least " : "") +
+                    std::to_string(minCount) +
+                    (maxCount > minCount && maxCount != SIZE_MAX ? " or " + std::to_string(maxCount) : "") +
+                    " comma-separated numbers");
     return v;
 }
 
@@ -217,7 +224,8 @@ std::vector<std::array<double, 2>> parsePointsCsv(std::string_view text, const s
         ++lineNo;
         if (!line.empty() && line.back() == '\r') line.remove_suffix(1);
         if (lineNo == 1) {
-            if (line.substr(0, 3) != "x,y") throw Error(name + ": line 1: header must start with x,y (got " + quoted(line) + ")");
+            if (line.substr(0, 3) != "x,y")
+                throw Error(name + ": line 1: header must start with x,y (got " + quoted(line) + ")");
             continue;
         }
         if (line.empty()) continue;
@@ -260,7 +268,8 @@ int run(const char* program, const std::function<int()>& body) {
 
 void checkNotSame(const std::string& output, const std::string& input, const std::string& what) {
     std::error_code ec;
-    if (std::filesystem::equivalent(output, input, ec)) throw Error(output + ": " + what + " would overwrite the input " + input);
+    if (std::filesystem::equivalent(output, input, ec))
+        throw Error(output + ": " + what + " would overwrite the input " + input);
 }
 
 void checkWritable(const std::string& path, const std::string& what) {
@@ -272,7 +281,8 @@ void checkWritable(const std::string& path, const std::string& what) {
     if (fs::exists(p, ec) && !fs::is_regular_file(p, ec))
         throw Error(path + ": exists and is not a regular file (" + what + "); it would be replaced");
     fs::path dir = p.parent_path();
-    if (!dir.empty() && !fs::is_directory(dir, ec)) throw Error(path + ": directory " + dir.string() + " does not exist (" + what + ")");
+    if (!dir.empty() && !fs::is_directory(dir, ec))
+        throw Error(path + ": directory " + dir.string() + " does not exist (" + what + ")");
 }
 
 }  // namespace hc::cli

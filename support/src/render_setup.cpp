@@ -14,13 +14,17 @@
 namespace hc::cli {
 
 void RenderSetup::addCameraOptions(Parser& p, const std::string& alsoExclusive) {
-    p.option("--camera", "X,Y,Z,YAW,PITCH,FOV[,ROLL]", "camera position [m], yaw, pitch, vertical field of view and roll (default 0) [degrees]",
-             cameraText);
-    p.option("--look-at", "EX,EY,EZ,TX,TY,TZ[,FOV]", "camera at the eye E looking at the target T [m] (FOV default 50 degrees)", lookAt);
-    p.option("--near", "M", "near clipping distance along each ray [m] (default: the far distance / 1e7, at least 1 mm)", nearM);
+    p.option("--camera", "X,Y,Z,YAW,PITCH,FOV[,ROLL]",
+             "camera position [m], yaw, pitch, vertical field of view and roll (default 0) [degrees]", cameraText);
+    p.option("--look-at", "EX,EY,EZ,TX,TY,TZ[,FOV]",
+             "camera at the eye E looking at the target T [m] (FOV default 50 degrees)", lookAt);
+    p.option("--near", "M",
+             "near clipping distance along each ray [m] (default: the far distance / 1e7, at least 1 mm)", nearM);
     p.option("--far", "M", "far clipping distance along each ray [m] (default: the scene's farthest corner)", farM);
-    if (alsoExclusive.empty()) p.exclusive({"--camera", "--look-at"});
-    else p.exclusive({"--camera", "--look-at", alsoExclusive});
+    if (alsoExclusive.empty())
+        p.exclusive({"--camera", "--look-at"});
+    else
+        p.exclusive({"--camera", "--look-at", alsoExclusive});
 }
 
 void RenderSetup::addRenderOptions(Parser& p) {
@@ -28,31 +32,49 @@ void RenderSetup::addRenderOptions(Parser& p) {
     p.option("--cascades", "K", "number of cascades, 1..4 (default 3)", options.cascades);
     p.option("--texels", "N", "texels per cascade side, 16..8192 (default 1024)", options.texelsPerSide);
     p.option("--threads", "N", "worker threads (default 0 = all cores)", options.threads);
-    p.option("--color", "MODE", "elevation (hypsometric terrain, water by depth) or water_depth (grey terrain) (default elevation)", color);
-    p.option("--color-by", "LAYER", "colour by this grid layer, with its legend (hc-info lists them): a step layer such as velocity\n"
-             "colours the water (its wet cells' field) and leaves dry land grey, a static layer colours the terrain; the\n"
-             "exact surface at every hit, so the grid is read whole with its influence cache; CPU backend (default none)", colorBy);
+    p.option("--color", "MODE",
+             "elevation (hypsometric terrain, water by depth) or water_depth (grey terrain) (default elevation)",
+             color);
+    p.option(
+        "--color-by", "LAYER",
+        "colour by this grid layer, with its legend (hc-info lists them): a step layer such as velocity\n"
+        "colours the water (its wet cells' field) and leaves dry land grey, a static layer colours the terrain; the\n"
+        "exact surface at every hit, so the grid is read whole with its influence cache; CPU backend (default none)",
+        colorBy);
     p.flag("--cells", "overlay the outlines of the adaptive cells", cells);
     p.flag("--no-legend", "leave the colour bar out", noLegend);
-    p.option("--cache", "C.hci", "influence cache: the grid is read whole with its lists (default: the grid's path with .hci when\n"
-             "that exists; rebuilt if stale)", cachePath);
-    p.flag("--out-of-core", "read the grid a region at a time, without lists (hc-render's default when no cache is beside\n"
+    p.option("--cache", "C.hci",
+             "influence cache: the grid is read whole with its lists (default: the grid's path with .hci when\n"
+             "that exists; rebuilt if stale)",
+             cachePath);
+    p.flag("--out-of-core",
+           "read the grid a region at a time, without lists (hc-render's default when no cache is beside\n"
            "the grid): memory follows the cascades, not the grid (105 M cells: 0.8 GB); the GL backend then evaluates\n"
-           "the texels a frame newly sees on the CPU, keeps its cascades on the GPU, and draws no --cells", outOfCore);
+           "the texels a frame newly sees on the CPU, keeps its cascades on the GPU, and draws no --cells",
+           outOfCore);
     p.exclusive({"--cache", "--out-of-core"});
-    p.option("--pyramid", "P.hcp", "surface pyramid (hc-influence) to copy texels from (default: the grid's path with .hcp, used if\n"
-             "valid; cascade texel sizes are then its spacings, powers of two of the finest cell)", pyramidPath);
+    p.option("--pyramid", "P.hcp",
+             "surface pyramid (hc-influence) to copy texels from (default: the grid's path with .hcp, used if\n"
+             "valid; cascade texel sizes are then its spacings, powers of two of the finest cell)",
+             pyramidPath);
     p.flag("--no-pyramid", "sum every texel from the kernels, even with a pyramid beside the grid", noPyramid);
-    p.flag("--pyramid-coarse", "with a pyramid: texels up to 2x coarser than without one (N a side: faster, less accurate)\n"
-           "instead of up to 2x finer (up to 2N a side: as accurate as without a pyramid, or more)", options.pyramidCoarseTexels);
-    p.option("--pyramid-interpolate", "L", "with a pyramid: texels finer than every level stored around them (over cells at least\n"
-             "twice their size, no finer cell within a kernel's reach) are interpolated, bicubic, from a stored level at most\n"
+    p.flag("--pyramid-coarse",
+           "with a pyramid: texels up to 2x coarser than without one (N a side: faster, less accurate)\n"
+           "instead of up to 2x finer (up to 2N a side: as accurate as without a pyramid, or more)",
+           options.pyramidCoarseTexels);
+    p.option("--pyramid-interpolate", "L",
+             "with a pyramid: texels finer than every level stored around them (over cells at least\n"
+             "twice their size, no finer cell within a kernel's reach) are interpolated, bicubic, from a stored level "
+             "at most\n"
              "L above; 0..8, 0 sums them from the kernels (default 3)",
              options.pyramidInterpolateLevels);
-    p.option("--beam-tile", "P", "each tile of P x P pixels marches its rays' beam over the max mipmaps first (both backends), and\n"
+    p.option("--beam-tile", "P",
+             "each tile of P x P pixels marches its rays' beam over the max mipmaps first (both backends), and\n"
              "its rays start their walks where none of them can hit before (the same hits, fewer node visits); 0..64,\n"
-             "0 walks every ray from its cascade's start (default 4)", options.beamTilePx);
-    p.option("--step", "K", "water step to show, 0-based (default 0; hc-info lists a grid's steps and their times)", step);
+             "0 walks every ray from its cascade's start (default 4)",
+             options.beamTilePx);
+    p.option("--step", "K", "water step to show, 0-based (default 0; hc-info lists a grid's steps and their times)",
+             step);
     p.option("--sigma", "S", "kernel width in cell sizes (default 1.0)", params.sigma);
     p.option("--truncation", "R", "kernel cut-off in sigmas (default 3.5)", params.truncation);
 }
@@ -67,13 +89,18 @@ void parseSize(const std::string& text, int& width, int& height) {
 }
 
 void RenderSetup::finish() {
-    if (color == "elevation") options.color = render::ColorMode::Elevation;
-    else if (color == "water_depth") options.color = render::ColorMode::WaterDepth;
-    else throw Error("--color " + color + ": use elevation or water_depth");
+    if (color == "elevation")
+        options.color = render::ColorMode::Elevation;
+    else if (color == "water_depth")
+        options.color = render::ColorMode::WaterDepth;
+    else
+        throw Error("--color " + color + ": use elevation or water_depth");
     if (colorBy == "elevation" || colorBy == "water_depth" || colorBy == "water_surface")
-        throw Error("--color-by " + colorBy + ": use --color elevation or water_depth for those; --color-by takes a further layer");
+        throw Error("--color-by " + colorBy +
+                    ": use --color elevation or water_depth for those; --color-by takes a further layer");
     options.colorLayer = colorBy;
-    if (!colorBy.empty() && outOfCore) throw Error("--color-by needs the grid in memory with its influence lists: leave out --out-of-core");
+    if (!colorBy.empty() && outOfCore)
+        throw Error("--color-by needs the grid in memory with its influence lists: leave out --out-of-core");
     options.cellOutlines = cells;
     options.legend = !noLegend;
     if (std::string why = options.validate(); !why.empty()) throw Error(why);
@@ -95,8 +122,8 @@ void RenderSetup::finish() {
         c.width = width, c.height = height;
         camera = c;
     } else if (!look.empty()) {
-        camera = render::Camera::lookAt({look[0], look[1], look[2]}, {look[3], look[4], look[5]}, look.size() > 6 ? look[6] : 50.0,
-                                        width, height);
+        camera = render::Camera::lookAt({look[0], look[1], look[2]}, {look[3], look[4], look[5]},
+                                        look.size() > 6 ? look[6] : 50.0, width, height);
     }
     if (camera) camera->validate();
 }
@@ -105,7 +132,8 @@ namespace {
 
 // The pyramid of the scene's current step (read when valid, saying which or why none is used) and a new scene over
 // the grid or the file. `quiet`: say only what went wrong (the later steps of a sequence).
-void attachScene(const char* program, LoadedScene& s, const std::string& gridPath, const RenderSetup& setup, size_t step, bool quiet) {
+void attachScene(const char* program, LoadedScene& s, const std::string& gridPath, const RenderSetup& setup,
+                 size_t step, bool quiet) {
     s.scene.reset();
     s.pyramid.reset();  // the base pyramid (the first step's) serves every later step: kept
     const size_t stepCount = s.file ? s.file->shape().stepCount() : s.grid.stepCount();
@@ -117,27 +145,35 @@ void attachScene(const char* program, LoadedScene& s, const std::string& gridPat
         if (!quiet) std::fprintf(stderr, "%s: --no-pyramid: every texel summed from the kernels\n", program);
     } else if (!pyramidExists) {
         if (!quiet)
-            std::fprintf(stderr, "%s: no surface pyramid at %s: every texel summed from the kernels (hc-influence writes one)\n", program,
-                         pyramidPath.c_str());
+            std::fprintf(
+                stderr, "%s: no surface pyramid at %s: every texel summed from the kernels (hc-influence writes one)\n",
+                program, pyramidPath.c_str());
     } else {
         try {
             s.pyramid = s.file     ? influence::readSurfacePyramid(pyramidPath, s.file->info(), setup.params)
-                        : s.hashes ? influence::readSurfacePyramid(pyramidPath, s.grid, s.hashes->structure, s.hashes->content, setup.params)
+                        : s.hashes ? influence::readSurfacePyramid(pyramidPath, s.grid, s.hashes->structure,
+                                                                   s.hashes->content, setup.params)
                                    : influence::readSurfacePyramid(pyramidPath, s.grid, setup.params);
             // A later step's water pyramid: the terrain comes from the first step's (influence/pyramid.h).
             std::string basePath;
             if (s.pyramid->waterOnly()) {
                 const Grid& shape = s.file ? s.file->shape() : s.grid;
-                const uint64_t structure = s.file ? s.file->info().structureHash : s.hashes ? s.hashes->structure : s.grid.structureHash();
+                const uint64_t structure = s.file     ? s.file->info().structureHash
+                                           : s.hashes ? s.hashes->structure
+                                                      : s.grid.structureHash();
                 basePath = influence::defaultPyramidPath(gridPath, 0, stepCount);
-                if (shape.steps.empty()) throw Error(pyramidPath + ": a water pyramid, but the grid has no water steps");
+                if (shape.steps.empty())
+                    throw Error(pyramidPath + ": a water pyramid, but the grid has no water steps");
                 try {
                     if (!s.basePyramid)
-                        s.basePyramid = influence::readSurfacePyramid(basePath, shape, structure, shape.steps[0].contentHash, setup.params);
+                        s.basePyramid = influence::readSurfacePyramid(basePath, shape, structure,
+                                                                      shape.steps[0].contentHash, setup.params);
                 } catch (const Error& e) {
                     s.pyramid.reset();
-                    throw Error(pyramidPath + " holds this step's water only and its base, the first step's pyramid, is not usable (" +
-                                e.what() + ")");
+                    throw Error(
+                        pyramidPath +
+                        " holds this step's water only and its base, the first step's pyramid, is not usable (" +
+                        e.what() + ")");
                 }
             }
             if (!quiet)
@@ -146,7 +182,8 @@ void attachScene(const char* program, LoadedScene& s, const std::string& gridPat
         } catch (const Error& e) {
             if (!setup.pyramidPath.empty()) throw;
             s.pyramid.reset();
-            std::fprintf(stderr, "%s: %s: not used, every texel summed from the kernels (hc-influence rebuilds it)\n", program, e.what());
+            std::fprintf(stderr, "%s: %s: not used, every texel summed from the kernels (hc-influence rebuilds it)\n",
+                         program, e.what());
         }
     }
     const bool waterOnly = s.pyramid && s.pyramid->waterOnly();
@@ -167,16 +204,18 @@ std::unique_ptr<LoadedScene> loadScene(const char* program, const std::string& g
     // So must a --color-by layer (from the header and META alone: no cells read, no lists built).
     if (!setup.colorBy.empty()) (void)influence::Layer::byName(readGridInfo(gridPath).shape, setup.colorBy);
     const std::string cachePath = setup.cachePath.empty() ? influence::defaultCachePath(gridPath) : setup.cachePath;
-    const bool outOfCore =
-        setup.outOfCore || (outOfCoreWithoutCache && setup.cachePath.empty() && !std::filesystem::exists(cachePath, ec));
+    const bool outOfCore = setup.outOfCore || (outOfCoreWithoutCache && setup.cachePath.empty() &&
+                                               !std::filesystem::exists(cachePath, ec));
     auto s = std::make_unique<LoadedScene>();
     if (outOfCore) {
         s->file = std::make_unique<GridRegionReader>(gridPath, setup.step);
         if (setup.outOfCore)
-            std::fprintf(stderr, "%s: --out-of-core: the grid is read a region at a time, without an influence cache\n", program);
+            std::fprintf(stderr, "%s: --out-of-core: the grid is read a region at a time, without an influence cache\n",
+                         program);
         else
             std::fprintf(stderr,
-                         "%s: no influence cache at %s: the grid is read a region at a time (out of core; hc-influence writes a cache,\n"
+                         "%s: no influence cache at %s: the grid is read a region at a time (out of core; hc-influence "
+                         "writes a cache,\n"
                          "  --cache %s builds one here)\n",
                          program, cachePath.c_str(), cachePath.c_str());
     } else {
@@ -193,10 +232,13 @@ std::unique_ptr<LoadedScene> loadScene(const char* program, const std::string& g
     return s;
 }
 
-void switchStep(const char* program, LoadedScene& s, const std::string& gridPath, const RenderSetup& setup, size_t step) {
+void switchStep(const char* program, LoadedScene& s, const std::string& gridPath, const RenderSetup& setup,
+                size_t step) {
     s.scene.reset();  // it refers to the grid or file replaced here
-    if (s.file) s.file = std::make_unique<GridRegionReader>(gridPath, step);
-    else readGridStep(gridPath, s.grid, step, s.digests ? &*s.digests : nullptr);
+    if (s.file)
+        s.file = std::make_unique<GridRegionReader>(gridPath, step);
+    else
+        readGridStep(gridPath, s.grid, step, s.digests ? &*s.digests : nullptr);
     if (s.digests) s.hashes = GridHashes{s.digests->structureHash, s.grid.steps.at(step).contentHash};
     attachScene(program, s, gridPath, setup, step, true);
 }

@@ -80,8 +80,13 @@ std::string bookmarksToJson(const Bookmarks& b) {
         if (!b[slot]) continue;
         const Bookmark& m = *b[slot];
         // nlohmann writes doubles with the shortest digits that read back to the same value: an exact round trip.
-        doc["bookmarks"].push_back(
-            {{"slot", slot}, {"x", m.x}, {"y", m.y}, {"z", m.z}, {"yaw", m.yawDeg}, {"pitch", m.pitchDeg}, {"fov", m.fovYDeg}});
+        doc["bookmarks"].push_back({{"slot", slot},
+                                    {"x", m.x},
+                                    {"y", m.y},
+                                    {"z", m.z},
+                                    {"yaw", m.yawDeg},
+                                    {"pitch", m.pitchDeg},
+                                    {"fov", m.fovYDeg}});
     }
     return doc.dump(2) + "\n";
 }
@@ -108,7 +113,8 @@ Bookmarks bookmarksFromJson(std::string_view text) {
             return v->get<double>();
         };
         const double slot = num("slot");
-        if (slot != std::floor(slot) || slot < 1 || slot > 9) throw Error(where + ": slot " + std::to_string(slot) + " is outside 1..9");
+        if (slot != std::floor(slot) || slot < 1 || slot > 9)
+            throw Error(where + ": slot " + std::to_string(slot) + " is outside 1..9");
         const int s = int(slot);
         if (out[s]) throw Error(where + ": slot " + std::to_string(s) + " given twice");
         Bookmark b{num("x"), num("y"), num("z"), num("yaw"), num("pitch"), num("fov")};

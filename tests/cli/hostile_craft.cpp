@@ -17,10 +17,14 @@ int main(int argc, char** argv) {
     try {
         const std::string what = argv[1], in = argv[2], out = argv[3];
         const uint64_t count = std::stoull(argv[4]);
-        if (what == "grid-cells") hc::hostile::gridWithEmptySections(in, out, count);
-        else if (what == "cache-entries") hc::hostile::cacheWithEntryCount(in, out, count);
-        else if (what == "cache-past-end") hc::hostile::cacheWithListPastTheEnd(in, out, count);
-        else throw std::runtime_error("unknown craft " + what);
+        if (what == "grid-cells")
+            hc::hostile::gridWithEmptySections(in, out, count);
+        else if (what == "cache-entries")
+            hc::hostile::cacheWithEntryCount(in, out, count);
+        else if (what == "cache-past-end")
+            hc::hostile::cacheWithListPastTheEnd(in, out, count);
+        else
+            throw std::runtime_error("unknown craft " + what);
     } catch (const std::exception& e) {
         std::fprintf(stderr, "hc_hostile_craft: %s\n", e.what());
         return 1;

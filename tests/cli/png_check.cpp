@@ -47,10 +47,13 @@ int main(int argc, char** argv) {
             const unsigned char* p = at(x, y);
             if (std::abs(p[0] - sky[0]) + std::abs(p[1] - sky[1]) + std::abs(p[2] - sky[2]) > 24) ++differs;
         }
-    std::printf("png_check: %s: %d x %d, %zu distinct colours, %.1f %% of the centre differs from the corner colour %d,%d,%d\n", argv[1], w,
-                h, colours.size(), centre ? 100.0 * double(differs) / double(centre) : 0.0, sky[0], sky[1], sky[2]);
+    std::printf(
+        "png_check: %s: %d x %d, %zu distinct colours, %.1f %% of the centre differs from the corner colour %d,%d,%d\n",
+        argv[1], w, h, colours.size(), centre ? 100.0 * double(differs) / double(centre) : 0.0, sky[0], sky[1], sky[2]);
     bool ok = true;
-    if (long(colours.size()) <= minColours) std::printf("png_check: FAIL: no more than %ld distinct colours: blank?\n", minColours), ok = false;
-    if (centre == 0 || differs * 2 < centre) std::printf("png_check: FAIL: the centre is mostly the corner (sky) colour\n"), ok = false;
+    if (long(colours.size()) <= minColours)
+        std::printf("png_check: FAIL: no more than %ld distinct colours: blank?\n", minColours), ok = false;
+    if (centre == 0 || differs * 2 < centre)
+        std::printf("png_check: FAIL: the centre is mostly the corner (sky) colour\n"), ok = false;
     return ok ? 0 : 1;
 }

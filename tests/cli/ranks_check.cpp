@@ -1,6 +1,6 @@
-// ranks_check RANK [outside]: a program that runs under mpirun as hc-ingest and hc-influence do (support/on_ranks.h) and
-// fails on one rank only (1-based RANK; 0: none), inside ranks::together (the others reach the same agreement point and
-// stop there with the same error, reported once by rank 1) or, with `outside`, where no other rank waits for it (it
+// ranks_check RANK [outside]: a program that runs under mpirun as hc-ingest and hc-influence do (support/on_ranks.h)
+// and fails on one rank only (1-based RANK; 0: none), inside ranks::together (the others reach the same agreement point
+// and stop there with the same error, reported once by rank 1) or, with `outside`, where no other rank waits for it (it
 // reports with its own name and stops every rank). After the agreement, a collective the ranks only reach together: a
 // disagreement would hang there, and the test's timeout would fail it. The MPI tests (mpi.cmake) run it.
 // ranks_check in-memory: every rank builds a grid in memory (ingest::buildGrid), which ranks do not do (each writes its

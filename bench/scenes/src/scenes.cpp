@@ -24,13 +24,45 @@ constexpr int kTileLevelsAboveCoarsest = 3;  // generation tiles: 8 x 8 coarsest
 constexpr double kFinestHeadroom = 1.5;
 
 const Scenario kScenarios[] = {
-    {"Marchfeld", 82.9, 57.1, 3.0, 7.46, 15.1, 5.1, 580000, 5330000,
+    {"Marchfeld",
+     82.9,
+     57.1,
+     3.0,
+     7.46,
+     15.1,
+     5.1,
+     580000,
+     5330000,
      {160, 0.0004, 0.42, {2600, 700}, {32000, 7000}, 2600, 1800, 150, 6, 2.4, 1.2, 45, 8, 11}},
-    {"Petzenkirchen", 15.4, 16.0, 0.75, 1.81, 20.8, 4.3, 510000, 5330000,
+    {"Petzenkirchen",
+     15.4,
+     16.0,
+     0.75,
+     1.81,
+     20.8,
+     4.3,
+     510000,
+     5330000,
      {300, 0.002, 0.5, {700, 160}, {9000, 1800}, 110, 700, 4, 1.5, 0.8, 0.4, 90, 12, 22}},
-    {"Wachau", 24.1, 16.5, 3.0, 1.95, 5.3, 4.3, 530000, 5360000,
+    {"Wachau",
+     24.1,
+     16.5,
+     3.0,
+     1.95,
+     5.3,
+     4.3,
+     530000,
+     5360000,
      {205, 0.0003, 0.5, {1600, 400}, {19000, 5200}, 450, 2600, 140, 5, 3.0, 1.0, 430, 35, 33}},
-    {"Florence", 44.6, 28.2, 3.0, 4.53, 1.5, 2.8, 660000, 4840000,
+    {"Florence",
+     44.6,
+     28.2,
+     3.0,
+     4.53,
+     1.5,
+     2.8,
+     660000,
+     4840000,
      {55, 0.0005, 0.45, {1300, 320}, {21000, 4300}, 1900, 3200, 60, 4, 2.5, 0.9, 330, 28, 44}},
 };
 
@@ -157,7 +189,8 @@ private:
                 zLo = std::min(zLo, p.z), zHi = std::max(zHi, p.z);
                 dLo = std::min(dLo, p.depth), dHi = std::max(dHi, p.depth);
             }
-            split = (wet > 0 && wet < 9) || zHi - zLo > T || dHi - dLo > T || std::abs(s[4].bank) < 0.7072f * float(size);
+            split =
+                (wet > 0 && wet < 9) || zHi - zLo > T || dHi - dLo > T || std::abs(s[4].bank) < 0.7072f * float(size);
         }
         if (!split) {
             ++count;
@@ -175,7 +208,7 @@ private:
         for (int b = 0; b < 5; ++b)
             for (int a = 0; a < 5; ++a)
                 q[size_t(b * 5 + a)] = (a % 2 == 0 && b % 2 == 0) ? s[size_t(b / 2 * 3 + a / 2)]
-                                                                   : t_.at(ix * f_ + a * step, iy * f_ + b * step);
+                                                                  : t_.at(ix * f_ + a * step, iy * f_ + b * step);
         const uint32_t half = span / 2;
         for (int c = 0; c < 4; ++c) {  // Morton order: south-west, south-east, north-west, north-east
             const int cx = c & 1, cy = c >> 1;
@@ -203,7 +236,9 @@ uint64_t hash64(uint64_t x) {  // splitmix64's finaliser: a fixed, well-spread t
 
 double targetCells(const Scenario& sc, double scale) { return sc.reportCellsM * 1e6 / scale; }
 
-Generated generate(const Scenario& sc, double scale, unsigned threads) { return generateCells(sc, targetCells(sc, scale), threads); }
+Generated generate(const Scenario& sc, double scale, unsigned threads) {
+    return generateCells(sc, targetCells(sc, scale), threads);
+}
 
 Generated generateCells(const Scenario& sc, double target, unsigned threads) {
     Generated gen;
@@ -226,7 +261,9 @@ Generated generateCells(const Scenario& sc, double target, unsigned threads) {
         std::vector<std::array<uint32_t, 2>> tiles;
         for (uint32_t ty = 0; ty < nty; ++ty)
             for (uint32_t tx = 0; tx < ntx; ++tx) tiles.push_back({tx, ty});
-        std::sort(tiles.begin(), tiles.end(), [](const auto& a, const auto& b) { return hc::mortonEncode(a[0], a[1]) < hc::mortonEncode(b[0], b[1]); });
+        std::sort(tiles.begin(), tiles.end(), [](const auto& a, const auto& b) {
+            return hc::mortonEncode(a[0], a[1]) < hc::mortonEncode(b[0], b[1]);
+        });
         std::vector<size_t> sample;
         for (size_t k = 0; k < tiles.size(); ++k)
             if (tiles.size() < 256 || hash64(uint64_t(tiles[k][0]) << 32 | tiles[k][1]) % 8 == 0) sample.push_back(k);
@@ -307,7 +344,8 @@ Generated generateCells(const Scenario& sc, double target, unsigned threads) {
         hc::parallelFor(tiles.size(), 1, threads, [&](size_t b, size_t e, unsigned) {
             for (size_t k = b; k < e; ++k) {
                 CellSink sink{g.codes.data(), g.values[0].data(), g.values[1].data(), firstCell[k]};
-                refiner.run(tiles[k][0] << tileLevel, tiles[k][1] << tileLevel, tileLevel, gen.thresholdM, &sink, UINT64_MAX);
+                refiner.run(tiles[k][0] << tileLevel, tiles[k][1] << tileLevel, tileLevel, gen.thresholdM, &sink,
+                            UINT64_MAX);
                 assert(sink.at == firstCell[k + 1]);  // the same T visits the same tree
             }
         });

@@ -40,7 +40,8 @@ void writeFloatImage(const std::string& path, size_t width, size_t height, std::
             assert(!header.channels().findChannel(c.name) && "channel names must be distinct");
             header.channels().insert(c.name, Imf::Channel(Imf::FLOAT));
             // OpenEXR's Slice takes a mutable pointer for reading and writing alike; an OutputFile only reads it.
-            fb.insert(c.name, Imf::Slice(Imf::FLOAT, reinterpret_cast<char*>(const_cast<float*>(c.values.data())), xStride, yStride));
+            fb.insert(c.name, Imf::Slice(Imf::FLOAT, reinterpret_cast<char*>(const_cast<float*>(c.values.data())),
+                                         xStride, yStride));
         }
         Imf::OutputFile file(out.temp().c_str(), header);
         file.setFrameBuffer(fb);

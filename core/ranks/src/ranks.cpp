@@ -47,9 +47,10 @@ Session::Session(int& argc, char**& argv) {
 #else
     (void)argc, (void)argv;
     if (launched > 1)
-        throw Error("started by mpirun with " + std::to_string(launched) +
-                    " processes, but this build has no MPI (HC_WITH_MPI=OFF or no MPI found): each process would do all "
-                    "the work; run one process, or rebuild with libopenmpi-dev installed");
+        throw Error(
+            "started by mpirun with " + std::to_string(launched) +
+            " processes, but this build has no MPI (HC_WITH_MPI=OFF or no MPI found): each process would do all "
+            "the work; run one process, or rebuild with libopenmpi-dev installed");
 #endif
 }
 
@@ -143,7 +144,8 @@ std::vector<std::byte> receiveFrom(int from) {
     std::vector<std::byte> out(size);
     for (size_t at = 0; at < out.size(); at += kChunk) {
         const size_t n = std::min(kChunk, out.size() - at);
-        check(MPI_Recv(out.data() + at, int(n), MPI_BYTE, from, kTagData, MPI_COMM_WORLD, MPI_STATUS_IGNORE), "MPI_Recv");
+        check(MPI_Recv(out.data() + at, int(n), MPI_BYTE, from, kTagData, MPI_COMM_WORLD, MPI_STATUS_IGNORE),
+              "MPI_Recv");
     }
     return out;
 #else
@@ -158,11 +160,12 @@ void receiveInto(int from, std::span<std::byte> out) {
     uint64_t size = 0;
     check(MPI_Recv(&size, 1, MPI_UINT64_T, from, kTagSize, MPI_COMM_WORLD, MPI_STATUS_IGNORE), "MPI_Recv");
     if (size != out.size())
-        throw Error("rank " + std::to_string(from + 1) + " sent " + std::to_string(size) + " bytes where " + std::to_string(out.size()) +
-                    " were agreed");
+        throw Error("rank " + std::to_string(from + 1) + " sent " + std::to_string(size) + " bytes where " +
+                    std::to_string(out.size()) + " were agreed");
     for (size_t at = 0; at < out.size(); at += kChunk) {
         const size_t n = std::min(kChunk, out.size() - at);
-        check(MPI_Recv(out.data() + at, int(n), MPI_BYTE, from, kTagData, MPI_COMM_WORLD, MPI_STATUS_IGNORE), "MPI_Recv");
+        check(MPI_Recv(out.data() + at, int(n), MPI_BYTE, from, kTagData, MPI_COMM_WORLD, MPI_STATUS_IGNORE),
+              "MPI_Recv");
     }
 #else
     (void)from, (void)out;
@@ -173,7 +176,8 @@ void receiveInto(int from, std::span<std::byte> out) {
 std::vector<std::vector<std::byte>> allGather(std::span<const std::byte> bytes) {
     if (gCount == 1) return {std::vector<std::byte>(bytes.begin(), bytes.end())};
 #if HC_WITH_MPI
-    if (bytes.size() > size_t(std::numeric_limits<int>::max())) throw Error("allGather: a table over 2 GB; send it to rank 0 instead");
+    if (bytes.size() > size_t(std::numeric_limits<int>::max()))
+        throw Error("allGather: a table over 2 GB; send it to rank 0 instead");
     const int mine = int(bytes.size());
     std::vector<int> sizes(static_cast<size_t>(gCount)), at(static_cast<size_t>(gCount));
     check(MPI_Allgather(&mine, 1, MPI_INT, sizes.data(), 1, MPI_INT, MPI_COMM_WORLD), "MPI_Allgather");

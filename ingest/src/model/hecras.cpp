@@ -395,8 +395,10 @@ ModelMesh readHecRas(const std::string& path, std::shared_ptr<GDALDataset> keep,
     } else if (!results) {
         const bool plan = rootText(f, "File Type").find("Results") != std::string::npos;
         const std::string none = "no 2-D results ('" + kSeries + "/2D Flow Areas'): read as terrain only";
-        if (plan) m.warnings.push_back(f.path + ": " + none);
-        else m.notes.push_back(none);
+        if (plan)
+            m.warnings.push_back(f.path + ": " + none);
+        else
+            m.notes.push_back(none);
     }
     // Stage 4: names, kind, what is left out.
     m.faceName = [areas, faces = m.faceCount()](size_t face) {

@@ -173,11 +173,14 @@ Header readHeader(RecordFile& f) {
     const int32_t elems = f.endian.i32(&sizes[0]), nodes = f.endian.i32(&sizes[4]), ndp = f.endian.i32(&sizes[8]);
     if (h.iparam[6] > 1 || ndp == 6)
         f.fail("the IPARAM record", iparamAt,
-               "a 3-D result (" + num(h.iparam[6]) + " planes, NDP " + num(ndp) + "): 3-D results are not read; use "
-               "the 2-D result file TELEMAC-3D writes (2D RESULT FILE) or extract the free surface with TELEMAC tools");
+               "a 3-D result (" + num(h.iparam[6]) + " planes, NDP " + num(ndp) +
+                   "): 3-D results are not read; use "
+                   "the 2-D result file TELEMAC-3D writes (2D RESULT FILE) or extract the free surface with TELEMAC "
+                   "tools");
     if (elems < 1 || nodes < 3 || (ndp != 3 && ndp != 4))
-        f.fail("the sizes record", sizesAt, "NELEM " + num(elems) + ", NPOIN " + num(nodes) + ", NDP " + num(ndp) +
-                                                ": not a 2-D mesh of triangles (NDP 3) or quadrilaterals (NDP 4)");
+        f.fail("the sizes record", sizesAt,
+               "NELEM " + num(elems) + ", NPOIN " + num(nodes) + ", NDP " + num(ndp) +
+                   ": not a 2-D mesh of triangles (NDP 3) or quadrilaterals (NDP 4)");
     h.elems = uint64_t(elems), h.nodes = uint64_t(nodes), h.perElem = uint64_t(ndp), h.at = at;
     return h;
 }
@@ -236,8 +239,9 @@ std::vector<double> scanSteps(RecordFile& f, uint64_t at, Layout& layout) {
         const double time = f.endian.real(t.data(), layout.realBytes);
         if (!std::isfinite(time)) f.fail(step + "'s time record", timeAt, "the time is not finite");
         if (k > 0 && !(time > times.back()))
-            f.fail(step + "'s time record", timeAt, "time " + num(time) + " s does not follow step " + str(k - 1) +
-                                                        "'s " + num(times.back()) + " s: times must increase");
+            f.fail(step + "'s time record", timeAt,
+                   "time " + num(time) + " s does not follow step " + str(k - 1) + "'s " + num(times.back()) +
+                       " s: times must increase");
         for (const Var& v : layout.vars)
             at += f.check(at, step + ", the values of " + v.name, layout.nodes * layout.realBytes) + 8;
         times.push_back(time);
@@ -251,8 +255,8 @@ std::vector<double> readValues(const Layout& L, size_t step, size_t var) {
         throw Error(L.path + ": no step " + str(step) + " (the file holds " + str(L.stepAt.size()) + ")");
     RecordFile f(L.path, L.endian);
     uint64_t at = L.recordAt(step, var);
-    std::vector<double> v = reals(f, at, "step " + str(step) + ", the values of " + L.vars[var].name, L.nodes,
-                                  L.realBytes);
+    std::vector<double> v =
+        reals(f, at, "step " + str(step) + ", the values of " + L.vars[var].name, L.nodes, L.realBytes);
     for (double& x : v) x = std::isfinite(x) ? x * L.vars[var].scale : std::numeric_limits<double>::quiet_NaN();
     return v;
 }
@@ -301,13 +305,15 @@ Roles chooseVariables(const std::string& path, const std::vector<Var>& vars, con
 // The bed from the first step (with a warning when a later one differs: a morphodynamic run).
 void readBed(ModelMesh& mesh, const std::shared_ptr<const Layout>& L, const Roles& r) {
     if (!r.bed) {
-        mesh.warnings.push_back("no bed variable (BOTTOM / FOND; --terrain-var names another): the mesh has no "
-                                "terrain, a DEM must be given");
+        mesh.warnings.push_back(
+            "no bed variable (BOTTOM / FOND; --terrain-var names another): the mesh has no "
+            "terrain, a DEM must be given");
         return;
     }
     const std::string name = L->vars[*r.bed].name;
     if (L->stepAt.empty()) {
-        mesh.warnings.push_back("the bed variable " + name + " has no values (the file holds no step): a DEM must be "
+        mesh.warnings.push_back("the bed variable " + name +
+                                " has no values (the file holds no step): a DEM must be "
                                 "given");
         return;
     }
@@ -316,7 +322,8 @@ void readBed(ModelMesh& mesh, const std::shared_ptr<const Layout>& L, const Role
         const std::vector<double> last = readValues(*L, L->stepAt.size() - 1, *r.bed);
         for (size_t i = 0; i < last.size(); ++i)
             if (std::abs(last[i] - mesh.bed.values[i]) > 1e-6) {  // an unchanged bed is stored bit for bit
-                mesh.warnings.push_back(name + " changes over the steps (a morphodynamic run?): the first step's bed "
+                mesh.warnings.push_back(name +
+                                        " changes over the steps (a morphodynamic run?): the first step's bed "
                                         "is used");
                 break;
             }
@@ -328,11 +335,15 @@ void bindSteps(ModelMesh& mesh, const std::shared_ptr<const Layout>& L, const Ro
     const std::vector<Var>& vars = L->vars;
     const bool derived = !r.surface && r.depth && r.bed;
     if (!r.surface && !derived) {
-        if (!r.bed) throw Error(mesh.source + ": neither a bed nor a water level to read (BOTTOM / FOND, FREE SURFACE "
-                                "/ SURFACE LIBRE, WATER DEPTH / HAUTEUR D'EAU); its variables: " + listVars(vars));
-        mesh.notes.push_back("no water level (FREE SURFACE / SURFACE LIBRE, or BOTTOM + WATER DEPTH / HAUTEUR D'EAU; "
-                             "--water-surface-var names another): read as terrain only (the file holds " +
-                             str(times.size()) + " step(s))");
+        if (!r.bed)
+            throw Error(mesh.source +
+                        ": neither a bed nor a water level to read (BOTTOM / FOND, FREE SURFACE "
+                        "/ SURFACE LIBRE, WATER DEPTH / HAUTEUR D'EAU); its variables: " +
+                        listVars(vars));
+        mesh.notes.push_back(
+            "no water level (FREE SURFACE / SURFACE LIBRE, or BOTTOM + WATER DEPTH / HAUTEUR D'EAU; "
+            "--water-surface-var names another): read as terrain only (the file holds " +
+            str(times.size()) + " step(s))");
         if (!r.layers.empty()) throw Error(mesh.source + ": layers need a water level: they are stored on wet cells");
         return;
     }
@@ -342,8 +353,10 @@ void bindSteps(ModelMesh& mesh, const std::shared_ptr<const Layout>& L, const Ro
         return;
     }
     if (derived)
-        mesh.warnings.push_back("no FREE SURFACE / SURFACE LIBRE (--water-surface-var names another): the water level "
-                                "is derived as " + vars[*r.bed].name + " + " + vars[*r.depth].name + " per step");
+        mesh.warnings.push_back(
+            "no FREE SURFACE / SURFACE LIBRE (--water-surface-var names another): the water level "
+            "is derived as " +
+            vars[*r.bed].name + " + " + vars[*r.depth].name + " per step");
     mesh.timesS = std::move(times);
     const size_t level = derived ? *r.depth : *r.surface, bed = r.bed.value_or(0);
     mesh.level = [L, level, bed, derived](size_t step) {
@@ -356,8 +369,9 @@ void bindSteps(ModelMesh& mesh, const std::shared_ptr<const Layout>& L, const Ro
     };
     for (size_t v : r.layers) {
         const Var& var = vars[v];
-        mesh.layers.push_back({var.name, var.scale != 1 ? "M" : var.unit,
-                               [L, v](size_t step) { return MeshField{MeshAt::Node, readValues(*L, step, v)}; }});
+        mesh.layers.push_back({var.name, var.scale != 1 ? "M" : var.unit, [L, v](size_t step) {
+                                   return MeshField{MeshAt::Node, readValues(*L, step, v)};
+                               }});
     }
 }
 
@@ -399,8 +413,8 @@ void describe(ModelMesh& mesh, const Header& h, const Layout& L, const Roles& r)
         const auto& d = *h.date;
         char b[80];
         std::snprintf(b, sizeof b, "%04d-%02d-%02d %02d:%02d:%02d", d[0], d[1], d[2], d[3], d[4], d[5]);
-        const bool valid = d[1] >= 1 && d[1] <= 12 && d[2] >= 1 && d[2] <= 31 && d[3] >= 0 && d[3] < 24 &&
-                           d[4] >= 0 && d[4] < 60 && d[5] >= 0 && d[5] < 60;
+        const bool valid = d[1] >= 1 && d[1] <= 12 && d[2] >= 1 && d[2] <= 31 && d[3] >= 0 && d[3] < 24 && d[4] >= 0 &&
+                           d[4] < 60 && d[5] >= 0 && d[5] < 60;
         mesh.notes.push_back(std::string("start date ") + b + (valid ? "" : " (as stored: not a valid date)") +
                              " in the date record (times are seconds from it)");
     }

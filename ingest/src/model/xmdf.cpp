@@ -111,10 +111,14 @@ TwoDmLines readLines(const std::string& path, ModelMesh& m) {
         if (line == 1 && (f.empty() || f[0].find("MESH2D") == std::string_view::npos))
             throw Error(path + ": line 1: no MESH2D header line: not an SMS .2dm mesh");
         if (f.empty()) continue;
-        if (f[0] == "ND") readNode(path, line, f, m, t);
-        else if (!cornersOf(f[0]).empty()) readElement(path, line, f, t);
-        else if (f[0] == "E2L" || f[0] == "E3L") ++t.lines1d;
-        else if (f[0] == "NS") ++t.nodestrings;
+        if (f[0] == "ND")
+            readNode(path, line, f, m, t);
+        else if (!cornersOf(f[0]).empty())
+            readElement(path, line, f, t);
+        else if (f[0] == "E2L" || f[0] == "E3L")
+            ++t.lines1d;
+        else if (f[0] == "NS")
+            ++t.nodestrings;
     }
     if (line == 0) throw Error(path + ": empty file: not an SMS .2dm mesh");
     return t;
@@ -198,8 +202,13 @@ void collectDatasets(const std::shared_ptr<GDALGroup>& g, const std::string& at,
     const std::vector<std::string> arrays = g->GetMDArrayNames();
     const auto has = [&](const char* n) { return std::find(arrays.begin(), arrays.end(), n) != arrays.end(); };
     if (depth > 0 && has("Values") && has("Times")) {
-        Dataset d{at.substr(at.rfind('/') + 1), at, g, g->OpenMDArray("Values"), g->OpenMDArray("Times"),
-                  has("Active") ? g->OpenMDArray("Active") : nullptr, 0};
+        Dataset d{at.substr(at.rfind('/') + 1),
+                  at,
+                  g,
+                  g->OpenMDArray("Values"),
+                  g->OpenMDArray("Times"),
+                  has("Active") ? g->OpenMDArray("Active") : nullptr,
+                  0};
         if (d.values && d.times && !d.values->GetDimensions().empty()) {
             d.steps = size_t(d.values->GetDimensions()[0]->GetSize());
             out.push_back(std::move(d));
@@ -410,8 +419,9 @@ std::string xmdfFormat(const std::string& path) {
 ModelMesh readXmdf(const std::string& path, const MeshReadOptions& opt) {
     const std::string meshPath = meshOf(path);
     if (meshPath.empty())
-        throw Error(path + ": no .2dm mesh found for the XMDF results (NAME.2dm beside NAME.xmdf, or the folder's only "
-                           ".2dm)");
+        throw Error(path +
+                    ": no .2dm mesh found for the XMDF results (NAME.2dm beside NAME.xmdf, or the folder's only "
+                    ".2dm)");
     std::shared_ptr<GDALDataset> keep;
     std::shared_ptr<GDALGroup> root = openMultidimRoot(path, keep);
     if (!root) throw Error(path + ": GDAL cannot open it as an HDF5 (XMDF) file: " + lastGdalError());

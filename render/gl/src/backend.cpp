@@ -9,8 +9,8 @@
 //
 // The cascades stay on the GPU from one frame to the next (two heights buffers, swapped each frame): assemble.comp
 // starts each frame's textures from the last frame's texels that the frame still sees (the incremental cascades of
-// docs/design.md section 5, planned on the CPU as renderFrame() plans them), and only the others are evaluated. In memory
-// approximate.comp sums those (detail::planCascades gives the spans).
+// docs/design.md section 5, planned on the CPU as renderFrame() plans them), and only the others are evaluated. In
+// memory approximate.comp sums those (detail::planCascades gives the spans).
 //
 // Out of core (a Scene over a GridRegionReader: no cells or lists in memory, the grid may hold 100 M cells) the
 // cascades stay on the GPU from one frame to the next, and the CPU evaluates only the texels a frame newly sees, as
@@ -101,8 +101,8 @@ void GlRenderer::Impl::release() {
     for (GLuint p : {approximate, assemble, atlas, interpolate, beams, mipmap, raycast, shade})
         if (p) glDeleteProgram(p);
     approximate = assemble = atlas = interpolate = beams = mipmap = raycast = shade = 0;
-    for (Buffer* b : {&frameBuf, &cellsBuf, &keysBuf, &visibleBuf, &heightsBuf, &pixelsBuf, &countersBuf, &readbackBuf, &lastHeightsBuf,
-                      &fillRowsBuf, &fillTexelsBuf, &beamsBuf, &atlasTilesBuf, &atlasBlocksBuf})
+    for (Buffer* b : {&frameBuf, &cellsBuf, &keysBuf, &visibleBuf, &heightsBuf, &pixelsBuf, &countersBuf, &readbackBuf,
+                      &lastHeightsBuf, &fillRowsBuf, &fillTexelsBuf, &beamsBuf, &atlasTilesBuf, &atlasBlocksBuf})
         b->release();
     terrainAtlas.release(), waterAtlas.release();
     for (Buffer& b : indexBufs) b.release();
@@ -125,9 +125,10 @@ void GlRenderer::Impl::uploadScene() {
     GLint bindings = 0;
     glGetIntegerv(GL_MAX_SHADER_STORAGE_BUFFER_BINDINGS, &bindings);
     if (bindings <= HC_BIND_LAST)
-        throw Error("the GL backend needs " + std::to_string(HC_BIND_LAST + 1) + " shader storage buffer bindings; " + device + " has " +
-                    std::to_string(bindings) + ": use --backend cpu");
-    for (Buffer* b : {&lastHeightsBuf, &fillRowsBuf, &fillTexelsBuf, &beamsBuf, &atlasTilesBuf, &atlasBlocksBuf, &terrainAtlas.buffer, &waterAtlas.buffer})
+        throw Error("the GL backend needs " + std::to_string(HC_BIND_LAST + 1) + " shader storage buffer bindings; " +
+                    device + " has " + std::to_string(bindings) + ": use --backend cpu");
+    for (Buffer* b : {&lastHeightsBuf, &fillRowsBuf, &fillTexelsBuf, &beamsBuf, &atlasTilesBuf, &atlasBlocksBuf,
+                      &terrainAtlas.buffer, &waterAtlas.buffer})
         b->reserve(16);
     frameBuf.reserve(sizeof(gpu::FrameBlock));
     countersBuf.reserve(sizeof(uint32_t) * gpu::kCounterSlots * (gpu::kMaxCascades + 1));
@@ -143,8 +144,8 @@ void GlRenderer::Impl::uploadScene() {
     const auto& lists = scene.lists();
     const size_t count = g.cellCount();
     if (lists.entryCount() >= (uint64_t{1} << 32) || count >= (uint64_t{1} << 31))
-        throw Error("the GL backend addresses influence lists with 32-bit indices: this grid has " + std::to_string(lists.entryCount()) +
-                    " entries");
+        throw Error("the GL backend addresses influence lists with 32-bit indices: this grid has " +
+                    std::to_string(lists.entryCount()) + " entries");
     std::vector<gpu::GpuCell> cells(count + 1);
     std::vector<uint32_t> keys(2 * count);
     const int water = scene.waterLayer();
@@ -175,12 +176,14 @@ void GlRenderer::Impl::uploadScene() {
     // The entries in chunks of a power of two that one storage buffer can hold.
     const auto entries = lists.indices();
     uint64_t chunkEntries = uint64_t{1} << 31;
-    while (chunkEntries > 1 && (chunkEntries * 4 > uint64_t(maxStorageBlock) || chunkEntries > gIndexChunkLimitForTest)) chunkEntries >>= 1;
+    while (chunkEntries > 1 && (chunkEntries * 4 > uint64_t(maxStorageBlock) || chunkEntries > gIndexChunkLimitForTest))
+        chunkEntries >>= 1;
     indexChunkShift = uint32_t(std::countr_zero(chunkEntries));
     const uint64_t chunks = (entries.size() + chunkEntries - 1) / chunkEntries;
     if (chunks > uint64_t(gpu::kIndexChunks))
-        throw Error("the GL backend needs " + std::to_string(entries.size_bytes() >> 20) + " MiB for the influence lists; this driver allows " +
-                    std::to_string(gpu::kIndexChunks) + " storage buffers of " + std::to_string((chunkEntries * 4) >> 20) + " MiB");
+        throw Error("the GL backend needs " + std::to_string(entries.size_bytes() >> 20) +
+                    " MiB for the influence lists; this driver allows " + std::to_string(gpu::kIndexChunks) +
+                    " storage buffers of " + std::to_string((chunkEntries * 4) >> 20) + " MiB");
     for (size_t c = 0; c < size_t(gpu::kIndexChunks); ++c) {
         const size_t begin = std::min<size_t>(c * chunkEntries, entries.size());
         const size_t n = std::min<size_t>(entries.size() - begin, chunkEntries);
@@ -242,7 +245,6 @@ void GlRenderer::Impl::fillFrame(gpu::GpuFrame& f, const CascadeFit& fit, const 
     }
     f.zFloor = float(scene.elevationMin);
     f.beamTile = options.beamTilePx > 1 ? options.beamTilePx : 0;  // beams.comp, raycast.comp
-
 }
 
 // Each cascade's places in the heights and visibility buffers (GpuCascade), and its statistics.
@@ -328,8 +330,10 @@ CascadeFit GlRenderer::Impl::runFrame(const Camera& camera, const RenderOptions&
     if (!options.colorLayer.empty())  // the tools choose the CPU backend for it (backend_choice.h)
         throw Error("colouring by a layer (" + options.colorLayer + ") is the CPU backend's: use --backend cpu");
     if (cpuCascades && options.cellOutlines)
-        throw Error("cell outlines with the GL backend need the grid's cells on the GPU; this scene is read out of core (" +
-                    scene.file()->path() + "): use --backend cpu, or give the grid an influence cache (hc-influence) to keep it in memory");
+        throw Error(
+            "cell outlines with the GL backend need the grid's cells on the GPU; this scene is read out of core (" +
+            scene.file()->path() +
+            "): use --backend cpu, or give the grid an influence cache (hc-influence) to keep it in memory");
     if (headless) headless->makeCurrent();
     const Stopwatch frameClock;
     timings = Timings{};
@@ -344,15 +348,18 @@ CascadeFit GlRenderer::Impl::runFrame(const Camera& camera, const RenderOptions&
     const bool keep = lastAssembled;
     std::swap(heightsBuf, lastHeightsBuf), lastAssembled = false;
     uploadFrame(block, fit, camera, options, timings);
-    if (cpuCascades) approximateOnCpu(fit, block, options, timings, keep);
-    else planOnGpu(fit, block, options, timings, keep);
+    if (cpuCascades)
+        approximateOnCpu(fit, block, options, timings, keep);
+    else
+        planOnGpu(fit, block, options, timings, keep);
     bindFrame();
     int stamp = 0;
     timeStamp(stamp++, frameClock);
     dispatchAssembly(fit);
     dispatchAtlas();
     dispatchApproximation(fit, frameClock, stamp);
-    std::copy(std::begin(block.cascades), std::end(block.cascades), lastCascades.begin());  // where this frame's textures lie
+    std::copy(std::begin(block.cascades), std::end(block.cascades),
+              lastCascades.begin());  // where this frame's textures lie
     lastCascadeCount = fit.cascades.size();
     dispatchMipmaps(fit, block);
     timeStamp(stamp++, frameClock);
@@ -362,7 +369,8 @@ CascadeFit GlRenderer::Impl::runFrame(const Camera& camera, const RenderOptions&
         for (const int pass : {1, 0}) {  // an image of one tile has as many blocks as tiles: told apart by the pass
             glUniform1i(outer, pass);
             const size_t slots = pass ? outerBeamSlots : beamSlots;
-            const size_t groups = (slots + 63) / 64, across = std::min<size_t>(groups, 65535);  // GL's least limit a dimension
+            const size_t groups = (slots + 63) / 64,
+                         across = std::min<size_t>(groups, 65535);  // GL's least limit a dimension
             glDispatchCompute(GLuint(across), GLuint((groups + across - 1) / across), 1);
             glMemoryBarrier(GL_SHADER_STORAGE_BARRIER_BIT);
         }
@@ -406,7 +414,8 @@ Frame GlRenderer::Impl::readBack(const Camera& camera, Timings& timings) {
     glGetTexImage(GL_TEXTURE_2D, 0, GL_RGBA, GL_UNSIGNED_BYTE, rgba.data());
     // The rays are copied on the GPU into a buffer of their own (readbackBuf), read through a mapping of it (no
     // staging copy in host memory) and spread over the frame's layers on all cores.
-    for (auto* v : {&f.distanceM, &f.posX, &f.posY, &f.posZ, &f.nX, &f.nY, &f.nZ, &f.waterDepthM, &f.cascade, &f.wall}) v->resize(pixels);
+    for (auto* v : {&f.distanceM, &f.posX, &f.posY, &f.posZ, &f.nX, &f.nY, &f.nZ, &f.waterDepthM, &f.cascade, &f.wall})
+        v->resize(pixels);
     f.rgb.resize(pixels * 3);
     const size_t rayBytes = pixels * sizeof(gpu::GpuPixel);
     readbackBuf.reserve(rayBytes);
@@ -414,7 +423,8 @@ Frame GlRenderer::Impl::readBack(const Camera& camera, Timings& timings) {
     glBindBuffer(GL_COPY_WRITE_BUFFER, readbackBuf.name);
     glCopyBufferSubData(GL_COPY_READ_BUFFER, GL_COPY_WRITE_BUFFER, 0, 0, GLsizeiptr(rayBytes));
     glBindBuffer(GL_SHADER_STORAGE_BUFFER, readbackBuf.name);
-    const auto* px = static_cast<const gpu::GpuPixel*>(glMapBufferRange(GL_SHADER_STORAGE_BUFFER, 0, GLsizeiptr(rayBytes), GL_MAP_READ_BIT));
+    const auto* px = static_cast<const gpu::GpuPixel*>(
+        glMapBufferRange(GL_SHADER_STORAGE_BUFFER, 0, GLsizeiptr(rayBytes), GL_MAP_READ_BIT));
     if (!px) throw Error("the GL backend cannot map its rays for reading on " + device);
     const float inf = std::numeric_limits<float>::infinity();
     parallelFor(size_t(H), 16, 0, [&](size_t rowBegin, size_t rowEnd, unsigned) {
@@ -422,11 +432,13 @@ Frame GlRenderer::Impl::readBack(const Camera& camera, Timings& timings) {
             for (size_t col = 0; col < size_t(W); ++col) {
                 const size_t i = row * size_t(W) + col;
                 const gpu::GpuPixel p = px[i];
-                const uint8_t* src = &rgba[((size_t(H) - 1 - row) * size_t(W) + col) * 4];  // the texture's row 0 is the bottom
+                const uint8_t* src =
+                    &rgba[((size_t(H) - 1 - row) * size_t(W) + col) * 4];  // the texture's row 0 is the bottom
                 std::memcpy(&f.rgb[i * 3], src, 3);
                 if (!(p.t < inf)) {
                     f.distanceM[i] = inf;
-                    f.posX[i] = f.posY[i] = f.posZ[i] = f.nX[i] = f.nY[i] = f.nZ[i] = f.waterDepthM[i] = f.wall[i] = 0.0f;
+                    f.posX[i] = f.posY[i] = f.posZ[i] = f.nX[i] = f.nY[i] = f.nZ[i] = f.waterDepthM[i] = f.wall[i] =
+                        0.0f;
                     f.cascade[i] = -1.0f;
                     continue;
                 }
@@ -447,7 +459,6 @@ Frame GlRenderer::Impl::readBack(const Camera& camera, Timings& timings) {
     timings.totalMs += timings.readbackMs;
     return f;
 }
-
 
 GlRenderer::GlRenderer(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {}
 GlRenderer::~GlRenderer() = default;
@@ -483,7 +494,8 @@ std::vector<GlRenderer::CascadeTexels> GlRenderer::cascadeTexturesForTest() cons
         const size_t texels = size_t(c.n) * size_t(c.n);
         auto read = [&](std::vector<float>& to, uint32_t offset) {
             to.resize(texels);
-            if (texels) glGetBufferSubData(GL_SHADER_STORAGE_BUFFER, GLintptr(offset) * 4, GLsizeiptr(texels * 4), to.data());
+            if (texels)
+                glGetBufferSubData(GL_SHADER_STORAGE_BUFFER, GLintptr(offset) * 4, GLsizeiptr(texels * 4), to.data());
         };
         read(out[k].terrain, c.terrainOffset);
         if (impl_->scene.hasWater()) read(out[k].water, c.waterOffset), read(out[k].depth, c.depthOffset);
@@ -493,7 +505,9 @@ std::vector<GlRenderer::CascadeTexels> GlRenderer::cascadeTexturesForTest() cons
 
 void GlRenderer::forgetCascades() { impl_->cascadeCache.clear(); }
 
-void GlRenderer::limitIndexChunksForTest(uint64_t entries) { gIndexChunkLimitForTest = entries ? entries : uint64_t{1} << 31; }
+void GlRenderer::limitIndexChunksForTest(uint64_t entries) {
+    gIndexChunkLimitForTest = entries ? entries : uint64_t{1} << 31;
+}
 void GlRenderer::limitAtlasForTest(uint32_t tiles) { gAtlasTileLimitForTest = tiles; }
 
 void GlRenderer::compileForTest(const std::string& name, const std::string& source) const {
@@ -501,7 +515,8 @@ void GlRenderer::compileForTest(const std::string& name, const std::string& sour
     glDeleteProgram(gl::compileCompute(name, source));
 }
 
-GlRenderer::VariableLayout GlRenderer::bufferVariableLayout(const std::string& program, const std::string& variable) const {
+GlRenderer::VariableLayout GlRenderer::bufferVariableLayout(const std::string& program,
+                                                            const std::string& variable) const {
     if (impl_->headless) impl_->headless->makeCurrent();
     const GLuint p = impl_->program(program);
     VariableLayout out;

@@ -1,6 +1,6 @@
 // render/gl/src/backend_atlas.cpp: the GL backend's atlases (TileAtlas: pyramid tiles resident on the GPU from frame
-// to frame, docs/design.md section 4), and out of core the tiles a frame copies texels from (atlas.comp) and the blocks it
-// interpolates from level 0's tiles (interpolate.comp) placed in them, or filled on the CPU where no slot is left.
+// to frame, docs/design.md section 4), and out of core the tiles a frame copies texels from (atlas.comp) and the blocks
+// it interpolates from level 0's tiles (interpolate.comp) placed in them, or filled on the CPU where no slot is left.
 #include <algorithm>
 #include <array>
 #include <bit>
@@ -37,7 +37,8 @@ uint32_t TileAtlas::slot(const float* tile, size_t plane) {
     slotOf.emplace(tile, s);
     const size_t at = staging.size();
     staging.resize(at + planes * size_t(gpu::kAtlasPlane), 0.0f);
-    for (size_t c = 0; c < planes; ++c) std::copy_n(tile + c * plane, plane, &staging[at + c * size_t(gpu::kAtlasPlane)]);
+    for (size_t c = 0; c < planes; ++c)
+        std::copy_n(tile + c * plane, plane, &staging[at + c * size_t(gpu::kAtlasPlane)]);
     stagedSlots.push_back(s);
     const size_t side = sideOf(plane);
     validRows[s] = {};
@@ -51,7 +52,8 @@ void TileAtlas::upload() {
     for (size_t a = 0; a < stagedSlots.size();) {
         size_t b = a + 1;
         while (b < stagedSlots.size() && stagedSlots[b] == stagedSlots[b - 1] + 1) ++b;
-        buffer.upload(&staging[a * slotFloats], (b - a) * slotFloats * sizeof(float), size_t(stagedSlots[a]) * slotFloats * sizeof(float));
+        buffer.upload(&staging[a * slotFloats], (b - a) * slotFloats * sizeof(float),
+                      size_t(stagedSlots[a]) * slotFloats * sizeof(float));
         a = b;
     }
     uploadedTiles += stagedSlots.size(), uploadedBytes += staging.size() * sizeof(float);
@@ -81,21 +83,27 @@ uint64_t GlRenderer::Impl::placeTiles(size_t k, detail::CascadeTextures& tex, de
     const size_t n = size_t(tex.terrain.n), side = size_t(p.side);
     const int shift = std::countr_zero(side);
     if (n + side >= 32768)  // atlas.comp's tiles hold their first texel's i and j in 16 bits each
-        throw Error("the GL backend copies the pyramid's texels into cascades of under 32752 texels a side, not " + std::to_string(n));
+        throw Error("the GL backend copies the pyramid's texels into cascades of under 32752 texels a side, not " +
+                    std::to_string(n));
     for (size_t e = 0; e < p.tile.size(); ++e) {
         const float* tile = p.tile[e];
         if (!tile) continue;
         const float* water = p.water[e];
         const uint16_t* rows = &p.copied[e * side];
-        // The texel of the tile's first sample (it may lie outside the cascade: the tile's samples there are not marked).
-        const int64_t i0 = int64_t(e % size_t(p.width)) * int64_t(side) - p.originI, j0 = int64_t(e / size_t(p.width)) * int64_t(side) - p.originJ;
+        // The texel of the tile's first sample (it may lie outside the cascade: the tile's samples there are not
+        // marked).
+        const int64_t i0 = int64_t(e % size_t(p.width)) * int64_t(side) - p.originI,
+                      j0 = int64_t(e / size_t(p.width)) * int64_t(side) - p.originJ;
         const uint32_t slot = terrainAtlas.slot(tile, p.plane);
-        const uint32_t waterSlot = water && slot != TileAtlas::kNone ? waterAtlas.slot(water, p.plane) : TileAtlas::kNone;
+        const uint32_t waterSlot =
+            water && slot != TileAtlas::kNone ? waterAtlas.slot(water, p.plane) : TileAtlas::kNone;
         if (slot != TileAtlas::kNone && (!water || waterSlot != TileAtlas::kNone)) {
             // The first texel's i and j in 16 bits each (offset by 2^15: a tile may begin left of or below texel 0).
-            atlasTiles.insert(atlasTiles.end(), {uint32_t(k) | uint32_t(shift) << 4, uint32_t(i0 + 32768) | uint32_t(j0 + 32768) << 16, slot,
-                                                 water ? waterSlot : TileAtlas::kNone});
-            rowLo = std::min(rowLo, int(std::max<int64_t>(j0, 0))), rowHi = std::max(rowHi, int(std::min(j0 + int64_t(side) - 1, int64_t(n) - 1)));
+            atlasTiles.insert(atlasTiles.end(),
+                              {uint32_t(k) | uint32_t(shift) << 4, uint32_t(i0 + 32768) | uint32_t(j0 + 32768) << 16,
+                               slot, water ? waterSlot : TileAtlas::kNone});
+            rowLo = std::min(rowLo, int(std::max<int64_t>(j0, 0))),
+            rowHi = std::max(rowHi, int(std::min(j0 + int64_t(side) - 1, int64_t(n) - 1)));
             for (size_t r = 0; r < side; ++r) atlasTexels += uint64_t(std::popcount(unsigned(rows[r])));
             copied += uint64_t(terrainAtlas.validIn(slot, rows, side));
             continue;
@@ -112,8 +120,9 @@ uint64_t GlRenderer::Impl::placeTiles(size_t k, detail::CascadeTextures& tex, de
                 bits &= ~((2u << c1) - (1u << c0));
                 const size_t at = j * n + size_t(i), sample = (r << shift) + size_t(c0);
                 const int count = c1 - c0 + 1;
-                copied += uint64_t(detail::copySamples(tile + sample, water ? water + sample : nullptr, p.plane, count, minDepth,
-                                                       &tex.terrain.h[at], water ? &tex.depth[at] : nullptr, water ? &tex.water.h[at] : nullptr));
+                copied += uint64_t(detail::copySamples(tile + sample, water ? water + sample : nullptr, p.plane, count,
+                                                       minDepth, &tex.terrain.h[at], water ? &tex.depth[at] : nullptr,
+                                                       water ? &tex.water.h[at] : nullptr));
                 detail::widenSpan(fill.rows[j], span, i, i + count - 1);
             }
         }
@@ -140,8 +149,8 @@ void GlRenderer::Impl::placeBlocks(size_t k, const Cascade& c, detail::CascadeTe
     openAtlases();
     const int n = tex.terrain.n, side = p.levelSide << p.up;
     if (n + side >= 32768)  // interpolate.comp's blocks hold their first texel's i and j in 16 bits each
-        throw Error("the GL backend interpolates the pyramid's texels into cascades of under " + std::to_string(32768 - side) +
-                    " texels a side, not " + std::to_string(n));
+        throw Error("the GL backend interpolates the pyramid's texels into cascades of under " +
+                    std::to_string(32768 - side) + " texels a side, not " + std::to_string(n));
     for (const detail::PyramidTiles::Block& b : p.blocks) {
         std::array<uint32_t, gpu::kAtlasBlockUints> e;
         e[0] = uint32_t(k) | uint32_t(p.up) << 4 | uint32_t(std::countr_zero(unsigned(p.levelSide))) << 8;
@@ -149,7 +158,8 @@ void GlRenderer::Impl::placeBlocks(size_t k, const Cascade& c, detail::CascadeTe
         bool placed = true;
         for (size_t q = 0; q < 9 && placed; ++q) {
             e[2 + q] = terrainAtlas.slot(b.tile[q], p.levelPlane);
-            e[11 + q] = b.water[q] && e[2 + q] != TileAtlas::kNone ? waterAtlas.slot(b.water[q], p.levelPlane) : TileAtlas::kNone;
+            e[11 + q] = b.water[q] && e[2 + q] != TileAtlas::kNone ? waterAtlas.slot(b.water[q], p.levelPlane)
+                                                                   : TileAtlas::kNone;
             placed = e[2 + q] != TileAtlas::kNone && (!b.water[q] || e[11 + q] != TileAtlas::kNone);
         }
         if (!placed) {

@@ -27,8 +27,10 @@ size_t GlRenderer::Impl::addRows(size_t k, const detail::CascadeFill& fill, size
         packed += size_t(r.a.count());
         const int32_t atB = int32_t(packed);
         packed += size_t(r.b.count());
-        fillRows.insert(fillRows.end(), {r.kept.first, r.kept.last, r.a.first, r.a.last, r.b.first, r.b.last, atA, atB});
-        a.widest[0] = std::max(a.widest[0], r.a.last - r.a.first + 1), a.widest[1] = std::max(a.widest[1], r.b.last - r.b.first + 1);
+        fillRows.insert(fillRows.end(),
+                        {r.kept.first, r.kept.last, r.a.first, r.a.last, r.b.first, r.b.last, atA, atB});
+        a.widest[0] = std::max(a.widest[0], r.a.last - r.a.first + 1),
+        a.widest[1] = std::max(a.widest[1], r.b.last - r.b.first + 1);
     }
     return packed;
 }
@@ -44,8 +46,8 @@ size_t GlRenderer::Impl::uploadRows() {
 
 // `keep`: the last frame's textures are in lastHeightsBuf (else the cache starts afresh: the GPU does not hold the
 // frame it describes).
-void GlRenderer::Impl::approximateOnCpu(const CascadeFit& fit, const gpu::FrameBlock& block, const RenderOptions& options,
-                                        Timings& timings, bool keep) {
+void GlRenderer::Impl::approximateOnCpu(const CascadeFit& fit, const gpu::FrameBlock& block,
+                                        const RenderOptions& options, Timings& timings, bool keep) {
     if (!keep) cascadeCache.clear();
     const bool water = scene.hasWater();
     std::array<std::vector<float>, 3>& packed = fillTexels;
@@ -62,54 +64,60 @@ void GlRenderer::Impl::approximateOnCpu(const CascadeFit& fit, const gpu::FrameB
     size_t spanBytes = 0;
     if (useAtlas) terrainAtlas.beginFrame(), waterAtlas.beginFrame();
     const float minDepth = float(options.waterMinDepthM);
-    detail::approximateOnCpu(scene, fit, options, cascadeCache, cpu, [&](size_t k, detail::CascadeTextures& tex, detail::CascadeFill& fill) {
-        const Stopwatch clock;
-        if (useAtlas) {  // cpu.cascades: one per cascade of the fit (approximateCascades)
-            CascadeStats& stats = cpu.cascades[k];
-            // The spans before the copies were taken out, of the rows of the tiles atlas.comp copies from and the
-            // blocks interpolate.comp fills (the visible buffer is in-memory's otherwise): a moving frame's few tiles
-            // need few rows.
-            int lo = fit.cascades[k].n, hi = -1;
-            stats.pyramidTexels += placeTiles(k, tex, fill, minDepth, lo, hi);
-            if (stats.pyramidTexels) stats.errorBoundM = detail::pyramidCopyBoundM(scene);
-            placeBlocks(k, fit.cascades[k], tex, fill, options.waterMinDepthM, lo, hi);
-            spans.clear();
-            for (int j = lo; j <= hi; ++j) {
-                const detail::RowFill& r = fill.tiles.spans[size_t(j)];
-                spans.insert(spans.end(), {r.a.first, r.a.last, r.b.first, r.b.last});
+    detail::approximateOnCpu(
+        scene, fit, options, cascadeCache, cpu,
+        [&](size_t k, detail::CascadeTextures& tex, detail::CascadeFill& fill) {
+            const Stopwatch clock;
+            if (useAtlas) {  // cpu.cascades: one per cascade of the fit (approximateCascades)
+                CascadeStats& stats = cpu.cascades[k];
+                // The spans before the copies were taken out, of the rows of the tiles atlas.comp copies from and the
+                // blocks interpolate.comp fills (the visible buffer is in-memory's otherwise): a moving frame's few
+                // tiles need few rows.
+                int lo = fit.cascades[k].n, hi = -1;
+                stats.pyramidTexels += placeTiles(k, tex, fill, minDepth, lo, hi);
+                if (stats.pyramidTexels) stats.errorBoundM = detail::pyramidCopyBoundM(scene);
+                placeBlocks(k, fit.cascades[k], tex, fill, options.waterMinDepthM, lo, hi);
+                spans.clear();
+                for (int j = lo; j <= hi; ++j) {
+                    const detail::RowFill& r = fill.tiles.spans[size_t(j)];
+                    spans.insert(spans.end(), {r.a.first, r.a.last, r.b.first, r.b.last});
+                }
+                if (!spans.empty())
+                    visibleBuf.upload(spans.data(), spans.size() * sizeof(int32_t),
+                                      (size_t(block.cascades[k].visibleOffset) + 4 * size_t(lo)) * 4);
+                spanBytes += spans.size() * sizeof(int32_t);
             }
-            if (!spans.empty())
-                visibleBuf.upload(spans.data(), spans.size() * sizeof(int32_t), (size_t(block.cascades[k].visibleOffset) + 4 * size_t(lo)) * 4);
-            spanBytes += spans.size() * sizeof(int32_t);
-        }
-        // Each row's place in the packed planes, then the rows copied there on all cores.
-        const size_t n = size_t(fit.cascades[k].n), first = packed[0].size(), end = addRows(k, fill, first);
-        const size_t channels = water ? 3 : 1;
-        for (size_t c = 0; c < channels; ++c) packed[c].resize(end);
-        const int32_t* rowInts = &fillRows[size_t(assembly[k].rowBase) * size_t(gpu::kFillRowInts)];
-        // On all cores where there is much to copy (a fresh cascade: up to 3 x 16 MB); a moving frame's few texels on this one.
-        const unsigned threads = end - first >= (size_t{1} << 16) ? options.threads : 1;
-        parallelFor(fill.rows.size(), 64, threads, [&](size_t b, size_t e, unsigned) {
-            for (size_t j = b; j < e; ++j) {
-                const detail::RowFill& r = fill.rows[j];
-                for (int span = 0; span < 2; ++span) {
-                    const int lo = r.span(span).first, hi = r.span(span).last;
-                    if (hi < lo) continue;
-                    const size_t from = j * n + size_t(lo), count = size_t(hi - lo + 1);
-                    const size_t to = size_t(rowInts[j * size_t(gpu::kFillRowInts) + 6 + size_t(span)]);
-                    std::memcpy(&packed[0][to], &tex.terrain.h[from], count * sizeof(float));
-                    if (water) {
-                        std::memcpy(&packed[1][to], &tex.water.h[from], count * sizeof(float));
-                        std::memcpy(&packed[2][to], &tex.depth[from], count * sizeof(float));
+            // Each row's place in the packed planes, then the rows copied there on all cores.
+            const size_t n = size_t(fit.cascades[k].n), first = packed[0].size(), end = addRows(k, fill, first);
+            const size_t channels = water ? 3 : 1;
+            for (size_t c = 0; c < channels; ++c) packed[c].resize(end);
+            const int32_t* rowInts = &fillRows[size_t(assembly[k].rowBase) * size_t(gpu::kFillRowInts)];
+            // On all cores where there is much to copy (a fresh cascade: up to 3 x 16 MB); a moving frame's few texels
+            // on this one.
+            const unsigned threads = end - first >= (size_t{1} << 16) ? options.threads : 1;
+            parallelFor(fill.rows.size(), 64, threads, [&](size_t b, size_t e, unsigned) {
+                for (size_t j = b; j < e; ++j) {
+                    const detail::RowFill& r = fill.rows[j];
+                    for (int span = 0; span < 2; ++span) {
+                        const int lo = r.span(span).first, hi = r.span(span).last;
+                        if (hi < lo) continue;
+                        const size_t from = j * n + size_t(lo), count = size_t(hi - lo + 1);
+                        const size_t to = size_t(rowInts[j * size_t(gpu::kFillRowInts) + 6 + size_t(span)]);
+                        std::memcpy(&packed[0][to], &tex.terrain.h[from], count * sizeof(float));
+                        if (water) {
+                            std::memcpy(&packed[1][to], &tex.water.h[from], count * sizeof(float));
+                            std::memcpy(&packed[2][to], &tex.depth[from], count * sizeof(float));
+                        }
                     }
                 }
-            }
-        });
-        packMs += clock.milliseconds();
-    }, useAtlas);
+            });
+            packMs += clock.milliseconds();
+        },
+        useAtlas);
     const Stopwatch clock;
     const size_t plane = packed[0].size(), planeBytes = plane * sizeof(float), channels = water ? 3 : 1;
-    if (plane >= (size_t{1} << 31)) throw Error("the GL backend out of core evaluated more than 2^31 texels in one frame");
+    if (plane >= (size_t{1} << 31))
+        throw Error("the GL backend out of core evaluated more than 2^31 texels in one frame");
     fillPlane = uint32_t(plane);
     checkBlock(planeBytes * channels, "the texels the CPU evaluated");
     const size_t rowBytes = uploadRows();
@@ -118,7 +126,8 @@ void GlRenderer::Impl::approximateOnCpu(const CascadeFit& fit, const gpu::FrameB
     size_t atlasBytes = 0;
     if (useAtlas) {
         checkBlock(atlasTiles.size() * sizeof(uint32_t), "the pyramid tiles to copy texels from");
-        atlasBytes = terrainAtlas.uploadedBytes + waterAtlas.uploadedBytes + atlasTiles.size() * sizeof(uint32_t) + spanBytes;
+        atlasBytes =
+            terrainAtlas.uploadedBytes + waterAtlas.uploadedBytes + atlasTiles.size() * sizeof(uint32_t) + spanBytes;
         atlasTilesBuf.reserve(atlasTiles.size() * sizeof(uint32_t));
         if (!atlasTiles.empty()) atlasTilesBuf.upload(atlasTiles.data(), atlasTiles.size() * sizeof(uint32_t));
         checkBlock(atlasBlocks.size() * sizeof(uint32_t), "the blocks to interpolate from the pyramid");
@@ -150,7 +159,8 @@ void GlRenderer::Impl::planOnGpu(const CascadeFit& fit, const gpu::FrameBlock& b
         if (fit.cascades[k].empty()) continue;
         addRows(k, fills[k], 0);  // nothing packed: approximate.comp sums the spans (assemble.comp's uPacked 0)
         spans.clear();
-        for (const detail::RowFill& r : fills[k].rows) spans.insert(spans.end(), {r.a.first, r.a.last, r.b.first, r.b.last});
+        for (const detail::RowFill& r : fills[k].rows)
+            spans.insert(spans.end(), {r.a.first, r.a.last, r.b.first, r.b.last});
         visibleBuf.upload(spans.data(), spans.size() * sizeof(int32_t), size_t(block.cascades[k].visibleOffset) * 4);
         spanBytes += spans.size() * sizeof(int32_t);
     }

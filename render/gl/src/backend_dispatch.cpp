@@ -31,7 +31,8 @@ void GlRenderer::Impl::bindFrame() const {
     frameBuf.bind(HC_BIND_FRAME);
     cellsBuf.bind(HC_BIND_CELLS);
     keysBuf.bind(HC_BIND_KEYS);
-    const GLuint indexBindings[gpu::kIndexChunks] = {HC_BIND_INDICES, HC_BIND_INDICES_1, HC_BIND_INDICES_2, HC_BIND_INDICES_3};
+    const GLuint indexBindings[gpu::kIndexChunks] = {HC_BIND_INDICES, HC_BIND_INDICES_1, HC_BIND_INDICES_2,
+                                                     HC_BIND_INDICES_3};
     for (size_t c = 0; c < size_t(gpu::kIndexChunks); ++c) indexBufs[c].bind(indexBindings[c]);
     visibleBuf.bind(HC_BIND_VISIBLE);
     heightsBuf.bind(HC_BIND_HEIGHTS);
@@ -61,8 +62,8 @@ void GlRenderer::Impl::dispatchAtlas() {
 }
 
 // Stage 2 on the GPU: each cascade's textures written whole by assemble.comp, the texels kept from the last frame's
-// and (out of core) the packed ones placed, "no surface" elsewhere; in memory approximate.comp then sums the spans. Then they are this frame's:
-// the next may keep them.
+// and (out of core) the packed ones placed, "no surface" elsewhere; in memory approximate.comp then sums the spans.
+// Then they are this frame's: the next may keep them.
 void GlRenderer::Impl::dispatchAssembly(const CascadeFit& fit) {
     lastHeightsBuf.bind(HC_BIND_LAST_HEIGHTS);
     fillRowsBuf.bind(HC_BIND_FILL_ROWS);
@@ -74,7 +75,8 @@ void GlRenderer::Impl::dispatchAssembly(const CascadeFit& fit) {
         const Assembly& a = assembly[k];
         const bool kept = a.from >= 0;
         if (kept && size_t(a.from) >= lastCascades.size())
-            throw Error("the GL backend's cascades kept on the GPU do not match the CPU's (cascade " + std::to_string(k) + "): a bug");
+            throw Error("the GL backend's cascades kept on the GPU do not match the CPU's (cascade " +
+                        std::to_string(k) + "): a bug");
         const gpu::GpuCascade& last = lastCascades[kept ? size_t(a.from) : 0];
         glUniform1i(uniform("uCascade"), int(k));
         glUniform1i(uniform("uRowBase"), a.rowBase);
@@ -87,8 +89,10 @@ void GlRenderer::Impl::dispatchAssembly(const CascadeFit& fit) {
         glUniform1i(uniform("uDi"), a.di);
         glUniform1i(uniform("uDj"), a.dj);
         glUniform1i(uniform("uLastN"), last.n);
-        const GLuint texelsPerGroup = kAssembleRun * kAssembleGroup;  // assemble.comp: kRun texels an invocation, 64 apart
-        glDispatchCompute((GLuint(fit.cascades[k].n) + texelsPerGroup - 1) / texelsPerGroup, GLuint(fit.cascades[k].n), 1);
+        const GLuint texelsPerGroup =
+            kAssembleRun * kAssembleGroup;  // assemble.comp: kRun texels an invocation, 64 apart
+        glDispatchCompute((GLuint(fit.cascades[k].n) + texelsPerGroup - 1) / texelsPerGroup, GLuint(fit.cascades[k].n),
+                          1);
     }
     glMemoryBarrier(GL_SHADER_STORAGE_BARRIER_BIT);
     lastAssembled = true;
@@ -100,13 +104,15 @@ void GlRenderer::Impl::dispatchAssembly(const CascadeFit& fit) {
 void GlRenderer::Impl::dispatchApproximation(const CascadeFit& fit, const Stopwatch& frameClock, int& stamp) {
     glUseProgram(approximate);
     for (size_t k = 0; k < fit.cascades.size(); ++k) {
-        for (int span = 0; span < 2 && !fit.cascades[k].empty() && !cpuCascades; ++span) {  // x: along the span, y: rows
+        for (int span = 0; span < 2 && !fit.cascades[k].empty() && !cpuCascades;
+             ++span) {                                    // x: along the span, y: rows
             if (assembly[k].widest[span] <= 0) continue;  // no row has such a span (a fresh frame's second ones)
             glUniform1i(glGetUniformLocation(approximate, "uCascade"), int(k));
             glUniform1i(glGetUniformLocation(approximate, "uSpan"), span);
             const bool relative = assembly[k].widest[span] * 4 <= fit.cascades[k].n;  // narrow spans (approximate.comp)
             glUniform1i(glGetUniformLocation(approximate, "uRelative"), relative ? 1 : 0);
-            glDispatchCompute(groups(relative ? assembly[k].widest[span] : fit.cascades[k].n), groups(fit.cascades[k].n), 1);
+            glDispatchCompute(groups(relative ? assembly[k].widest[span] : fit.cascades[k].n),
+                              groups(fit.cascades[k].n), 1);
         }
         timeStamp(stamp++, frameClock);
     }
@@ -171,8 +177,10 @@ void GlRenderer::Impl::readCounters(size_t cascadeCount, Timings& timings) const
     glBindBuffer(GL_SHADER_STORAGE_BUFFER, countersBuf.name);
     glGetBufferSubData(GL_SHADER_STORAGE_BUFFER, 0, GLsizeiptr(countersBuf.bytes), counters.data());
     for (size_t k = 0; k < cascadeCount; ++k)
-        for (int s = 0; s < gpu::kCounterSlots; ++s) timings.cascades[k].gaussians += counters[k * gpu::kCounterSlots + size_t(s)];
-    for (int s = 0; s < gpu::kCounterSlots; ++s) timings.hits += counters[size_t(gpu::kMaxCascades * gpu::kCounterSlots + s)];
+        for (int s = 0; s < gpu::kCounterSlots; ++s)
+            timings.cascades[k].gaussians += counters[k * gpu::kCounterSlots + size_t(s)];
+    for (int s = 0; s < gpu::kCounterSlots; ++s)
+        timings.hits += counters[size_t(gpu::kMaxCascades * gpu::kCounterSlots + s)];
 }
 
 void GlRenderer::Impl::throwOnGlError() const {

@@ -48,11 +48,12 @@ struct Buffer {
     }
 };
 
-// Pyramid tiles resident on the GPU from frame to frame (docs/design.md section 4: the atlas), in slots of `planes` channels
-// of gpu::kAtlasPlane floats: out of core the texels a frame copies from the pyramid are copied there (atlas.comp)
-// instead of on the CPU, and only tiles not yet resident go up. A tile is known by its first sample's address in the
-// pyramid (a mapped file, or the water pyramid's). Slots are taken in turn, skipping those this frame uses, so the tile
-// placed longest ago is the first dropped (a clock without reference bits: a flight's tiles come and go together).
+// Pyramid tiles resident on the GPU from frame to frame (docs/design.md section 4: the atlas), in slots of `planes`
+// channels of gpu::kAtlasPlane floats: out of core the texels a frame copies from the pyramid are copied there
+// (atlas.comp) instead of on the CPU, and only tiles not yet resident go up. A tile is known by its first sample's
+// address in the pyramid (a mapped file, or the water pyramid's). Slots are taken in turn, skipping those this frame
+// uses, so the tile placed longest ago is the first dropped (a clock without reference bits: a flight's tiles come and
+// go together).
 struct TileAtlas {
     static constexpr uint32_t kNone = ~uint32_t{0};
     Buffer buffer;
@@ -62,22 +63,24 @@ struct TileAtlas {
     std::unordered_map<const float*, uint32_t> slotOf;
     std::vector<const float*> tileIn;  // per slot (nullptr: free)
     std::vector<uint64_t> usedIn;      // per slot: the frame that used it last
-    // Per slot: bit c of row r set where the tile's sample (c, r) of its first channel is a number (not NaN: outside every
-    // cell), so that the copied texels of a tile are counted without reading the tile again (validIn).
+    // Per slot: bit c of row r set where the tile's sample (c, r) of its first channel is a number (not NaN: outside
+    // every cell), so that the copied texels of a tile are counted without reading the tile again (validIn).
     std::vector<std::array<uint16_t, 16>> validRows;
     static_assert(gpu::kAtlasPlane <= 16 * 16, "validRows holds a tile of at most 16 x 16 samples");
     uint32_t hand = 0, usedNow = 0;
     uint64_t frame = 0;
     uint64_t uploadedTiles = 0, uploadedBytes = 0;  // this frame's
-    std::vector<float> staging;        // this frame's new tiles, in the order of stagedSlots
+    std::vector<float> staging;                     // this frame's new tiles, in the order of stagedSlots
     std::vector<uint32_t> stagedSlots;
 
     // Sized once, at the first frame that copies from it: `bytes` of storage (the buffer is never grown: that would
     // lose the tiles in it).
     void open(size_t bytes, size_t channelPlanes);
-    void beginFrame() { ++frame, usedNow = 0, uploadedTiles = 0, uploadedBytes = 0, staging.clear(), stagedSlots.clear(); }
-    // The slot holding `tile` (its planes of `plane` floats each, `plane` apart) this frame, staged for upload if it was
-    // not resident; kNone when this frame already uses every slot.
+    void beginFrame() {
+        ++frame, usedNow = 0, uploadedTiles = 0, uploadedBytes = 0, staging.clear(), stagedSlots.clear();
+    }
+    // The slot holding `tile` (its planes of `plane` floats each, `plane` apart) this frame, staged for upload if it
+    // was not resident; kNone when this frame already uses every slot.
     uint32_t slot(const float* tile, size_t plane);
     // A tile's side for a plane of `plane` samples (a power of four up to gpu::kAtlasPlane).
     static size_t sideOf(size_t plane) { return size_t{1} << (std::countr_zero(plane) / 2); }
@@ -103,7 +106,7 @@ struct GlRenderer::Impl {
     std::unique_ptr<gl::HeadlessContext> headless;  // null when rendering into the caller's context
     GLuint approximate = 0, assemble = 0, atlas = 0, interpolate = 0, beams = 0, mipmap = 0, raycast = 0, shade = 0;
     Buffer frameBuf, cellsBuf, keysBuf, visibleBuf, heightsBuf, pixelsBuf, countersBuf;
-    Buffer beamsBuf;        // beams.comp's start depths, beamSlots of them this frame (0: no beams)
+    Buffer beamsBuf;  // beams.comp's start depths, beamSlots of them this frame (0: no beams)
     size_t beamSlots = 0, outerBeamSlots = 0;
     // Out of core (backend.cpp's first comment): the last frame's heights buffer, and what the CPU evaluated this
     // frame.
@@ -134,10 +137,10 @@ struct GlRenderer::Impl {
     std::array<gpu::GpuCascade, gpu::kMaxCascades> lastCascades{};
     size_t lastCascadeCount = 0;
     bool lastAssembled = false;
-    struct Assembly {  // a cascade of this frame for assemble.comp
-        int rowBase = 0;          // its first row in fillRowsBuf
+    struct Assembly {                   // a cascade of this frame for assemble.comp
+        int rowBase = 0;                // its first row in fillRowsBuf
         int from = -1, di = 0, dj = 0;  // detail::CascadeFill
-        int widest[2] = {0, 0};   // in memory: the most texels of a row's first and second span to evaluate
+        int widest[2] = {0, 0};         // in memory: the most texels of a row's first and second span to evaluate
     };
     std::array<Assembly, gpu::kMaxCascades> assembly{};
     uint32_t fillPlane = 0;  // packed texels a channel

@@ -26,11 +26,14 @@ std::string eglErrorText() {
 // and Mesa both installed gives Mesa's software renderer; Mesa's software device (EGL_MESA_device_software)
 // comes last.
 std::vector<EGLDisplay> candidateDisplays(std::string& tried) {
-    auto getPlatformDisplay = reinterpret_cast<PFNEGLGETPLATFORMDISPLAYEXTPROC>(eglGetProcAddress("eglGetPlatformDisplayEXT"));
-    if (!getPlatformDisplay) throw Error("no headless OpenGL 4.3 context: EGL lacks eglGetPlatformDisplayEXT (EGL_EXT_platform_base)");
+    auto getPlatformDisplay =
+        reinterpret_cast<PFNEGLGETPLATFORMDISPLAYEXTPROC>(eglGetProcAddress("eglGetPlatformDisplayEXT"));
+    if (!getPlatformDisplay)
+        throw Error("no headless OpenGL 4.3 context: EGL lacks eglGetPlatformDisplayEXT (EGL_EXT_platform_base)");
     std::vector<EGLDisplay> hardware, software;
     auto queryDevices = reinterpret_cast<PFNEGLQUERYDEVICESEXTPROC>(eglGetProcAddress("eglQueryDevicesEXT"));
-    auto queryDeviceString = reinterpret_cast<PFNEGLQUERYDEVICESTRINGEXTPROC>(eglGetProcAddress("eglQueryDeviceStringEXT"));
+    auto queryDeviceString =
+        reinterpret_cast<PFNEGLQUERYDEVICESTRINGEXTPROC>(eglGetProcAddress("eglQueryDeviceStringEXT"));
     EGLint count = 0;
     if (queryDevices && queryDeviceString && queryDevices(0, nullptr, &count) && count > 0) {
         std::vector<EGLDeviceEXT> devices(static_cast<size_t>(count));
@@ -47,8 +50,10 @@ std::vector<EGLDisplay> candidateDisplays(std::string& tried) {
     }
     std::vector<EGLDisplay> all = hardware;
     EGLDisplay surfaceless = getPlatformDisplay(EGL_PLATFORM_SURFACELESS_MESA, EGL_DEFAULT_DISPLAY, nullptr);
-    if (surfaceless != EGL_NO_DISPLAY) all.push_back(surfaceless);
-    else tried += "no surfaceless platform, ";
+    if (surfaceless != EGL_NO_DISPLAY)
+        all.push_back(surfaceless);
+    else
+        tried += "no surfaceless platform, ";
     all.insert(all.end(), software.begin(), software.end());
     return all;
 }
@@ -69,8 +74,9 @@ std::unique_ptr<HeadlessContext> HeadlessContext::create() {
             failures += "no desktop OpenGL API (" + eglErrorText() + "); ";
             continue;
         }
-        const EGLint attributes[] = {EGL_CONTEXT_MAJOR_VERSION, 4, EGL_CONTEXT_MINOR_VERSION, 3,
-                                     EGL_CONTEXT_OPENGL_PROFILE_MASK, EGL_CONTEXT_OPENGL_CORE_PROFILE_BIT, EGL_NONE};
+        const EGLint attributes[] = {
+            EGL_CONTEXT_MAJOR_VERSION,           4,       EGL_CONTEXT_MINOR_VERSION, 3, EGL_CONTEXT_OPENGL_PROFILE_MASK,
+            EGL_CONTEXT_OPENGL_CORE_PROFILE_BIT, EGL_NONE};
         EGLContext context = eglCreateContext(display, EGL_NO_CONFIG_KHR, EGL_NO_CONTEXT, attributes);
         if (context == EGL_NO_CONTEXT) {
             failures += "eglCreateContext for OpenGL 4.3 core failed (" + eglErrorText() + "); ";

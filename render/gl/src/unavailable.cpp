@@ -5,8 +5,9 @@
 
 namespace hc::render {
 namespace {
-const char* const kBuiltOut = "this heightcast was built without the OpenGL backend (-DHC_WITH_GL=OFF; rebuild with "
-                              "-DHC_WITH_GL=ON, Debian packages libegl-dev libgl-dev glslang-tools libglfw3-dev)";
+const char* const kBuiltOut =
+    "this heightcast was built without the OpenGL backend (-DHC_WITH_GL=OFF; rebuild with "
+    "-DHC_WITH_GL=ON, Debian packages libegl-dev libgl-dev glslang-tools libglfw3-dev)";
 }
 
 std::string headlessGlUnavailable(std::string*) { return kBuiltOut; }

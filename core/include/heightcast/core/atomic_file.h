@@ -20,7 +20,7 @@ public:
     AtomicFileWriter(const AtomicFileWriter&) = delete;
     AtomicFileWriter& operator=(const AtomicFileWriter&) = delete;
 
-    void write(std::span<const std::byte> bytes);          // at position(), which then advances
+    void write(std::span<const std::byte> bytes);                     // at position(), which then advances
     void writeAt(uint64_t offset, std::span<const std::byte> bytes);  // anywhere; position() unchanged
     void writeZeros(size_t count);
     uint64_t position() const { return position_; }

@@ -24,7 +24,9 @@ public:
     explicit Hash64(uint64_t seed = 0x6863677269640001ull) : state_(seed) {}
     void update(std::span<const std::byte> bytes);
     template <typename T>
-    void updateValue(const T& v) { update(std::as_bytes(std::span<const T>(&v, 1))); }
+    void updateValue(const T& v) {
+        update(std::as_bytes(std::span<const T>(&v, 1)));
+    }
     uint64_t digest() const;
 
     // The running state, so that another process can go on with the same stream (under mpirun each rank hashes its own

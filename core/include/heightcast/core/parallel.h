@@ -59,7 +59,8 @@ void parallelFor(size_t count, size_t chunk, unsigned threads, Fn&& fn) {
     if (threads <= 1) {
         work(0);
     } else {
-        detail::runOnThreads(threads, [](void* w, unsigned worker) { (*static_cast<decltype(work)*>(w))(worker); }, &work);
+        detail::runOnThreads(
+            threads, [](void* w, unsigned worker) { (*static_cast<decltype(work)*>(w))(worker); }, &work);
     }
     if (error) std::rethrow_exception(error);
 }

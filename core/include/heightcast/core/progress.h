@@ -1,4 +1,5 @@
-// heightcast/core/progress.h: GDAL-style terminal progress ("0...10...20...30...40...50...60...70...80...90...100 - done.").
+// heightcast/core/progress.h: GDAL-style terminal progress ("0...10...20...30...40...50...60...70...80...90...100 -
+// done.").
 //
 // Thread-safe: workers may call advance() concurrently. Prints to stderr; silent when disabled.
 #pragma once

@@ -36,35 +36,38 @@ struct SampledRaster {
     double westWorld = 0, northWorld = 0;  // the raster's north-west corner, grid CRS [m]
     double pixelSizeM = 1;
     double originWorldX = 0, originWorldY = 0;  // the grid's origin (local frame = world - origin)
-    std::string crsWkt;                          // "" = local metres
-    std::string layer, units;                    // "elevation", "m"
-    std::vector<float> values;                   // NaN = undefined
-    std::vector<float> gradX, gradY;             // d value / d x, d y [units per m]; only if asked
+    std::string crsWkt;                         // "" = local metres
+    std::string layer, units;                   // "elevation", "m"
+    std::vector<float> values;                  // NaN = undefined
+    std::vector<float> gradX, gradY;            // d value / d x, d y [units per m]; only if asked
 
     size_t definedCount() const;
 };
 
 // The raster that sampleSurface() would fill (geometry only, no values): checks the request first, so
 // tools refuse it before any expensive work. Throws hc::Error as sampleSurface() does.
-SampledRaster planRaster(const Grid& grid, double resolutionM, std::optional<BoxWorld> box, size_t maxPixels = size_t{1} << 30);
+SampledRaster planRaster(const Grid& grid, double resolutionM, std::optional<BoxWorld> box,
+                         size_t maxPixels = size_t{1} << 30);
 // The same for a grid file not read whole: its shape and the bounds its summary stores.
-SampledRaster planRaster(const GridFileInfo& file, double resolutionM, std::optional<BoxWorld> box, size_t maxPixels = size_t{1} << 30);
+SampledRaster planRaster(const GridFileInfo& file, double resolutionM, std::optional<BoxWorld> box,
+                         size_t maxPixels = size_t{1} << 30);
 
 // Samples `layer` over `box` (default: the grid's cells' extent) every resolutionM metres.
 // Throws hc::Error for a non-positive resolution, an empty or inverted box, or a raster beyond
 // maxPixels (it would not fit: the error says how many pixels it would be).
-SampledRaster sampleSurface(const influence::SurfaceEvaluator& eval, const influence::Layer& layer, const std::string& layerName,
-                            double resolutionM, std::optional<BoxWorld> box, bool gradients, unsigned threads, bool progress,
-                            size_t maxPixels = size_t{1} << 30);
+SampledRaster sampleSurface(const influence::SurfaceEvaluator& eval, const influence::Layer& layer,
+                            const std::string& layerName, double resolutionM, std::optional<BoxWorld> box,
+                            bool gradients, unsigned threads, bool progress, size_t maxPixels = size_t{1} << 30);
 
 // The same out of core (docs/design.md section 4): the raster is sampled a tile of kExportTileCells^2 finest cells (at
 // least a pixel) at a time, each from the cells whose kernels reach it, read from the file with their lists built on
 // the spot (influence/region.h) and dropped: memory follows the tile and the raster, not the grid. The same bits as
 // sampleSurface over the whole grid and its lists.
 constexpr size_t kExportTileCells = 256;
-SampledRaster sampleSurface(const GridRegionReader& file, const influence::KernelParams& params, const influence::Layer& layer,
-                            const std::string& layerName, double resolutionM, std::optional<BoxWorld> box, bool gradients, unsigned threads,
-                            bool progress, size_t maxPixels = size_t{1} << 30);
+SampledRaster sampleSurface(const GridRegionReader& file, const influence::KernelParams& params,
+                            const influence::Layer& layer, const std::string& layerName, double resolutionM,
+                            std::optional<BoxWorld> box, bool gradients, unsigned threads, bool progress,
+                            size_t maxPixels = size_t{1} << 30);
 
 // The grid file's cells as a UGRID-1.0 mesh (CF conventions) in NetCDF, as quadtree flood models such as SFINCS
 // write their map files, through GDAL's multidimensional API (no other dependency): one square face per cell
@@ -104,7 +107,8 @@ void writeExr(const SampledRaster& raster, const std::string& path);
 void writeVdb(const SampledRaster& terrain, const SampledRaster* water, const std::string& path);
 // Whether this build writes .vdb (CMake option HC_WITH_VDB).
 bool vdbAvailable();
-// Throws hc::Error naming `path` and how to get .vdb when this build has no OpenVDB; lets a tool refuse before any work.
+// Throws hc::Error naming `path` and how to get .vdb when this build has no OpenVDB; lets a tool refuse before any
+// work.
 void checkVdbAvailable(const std::string& path);
 
 }  // namespace hc::exporting

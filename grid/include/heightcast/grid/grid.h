@@ -39,45 +39,46 @@ struct LayerInfo {
 
 // One water step of a scenario, as a file describes it (grid_file.h: STEPS).
 struct StepInfo {
-    double timeS = 0;                 // seconds from the scenario's start; strictly increasing over the steps
-    uint64_t wetCells = 0;            // cells with water_depth > 0: only those store step values
-    uint64_t contentHash = 0;         // Grid::contentHash of the grid with this step selected
+    double timeS = 0;                       // seconds from the scenario's start; strictly increasing over the steps
+    uint64_t wetCells = 0;                  // cells with water_depth > 0: only those store step values
+    uint64_t contentHash = 0;               // Grid::contentHash of the grid with this step selected
     std::vector<float> layerMin, layerMax;  // per step layer, over the wet cells (empty when no cell is wet)
 };
 
 // What ingest measured when it built the grid (absent fields are NaN / 0 / empty).
 struct IngestStats {
-    std::string sourcePath;      // the input raster as given
-    std::string sourceCrsName;   // the input's CRS name ("" when it had none)
-    std::string sourceKind;      // "" for a raster (the working raster and deviation below apply); "UGRID mesh" for a
-                                 // mesh taken as it is (one cell per face: no working raster, nothing to deviate)
-    std::string sourceFormat;    // a flood model's results: the model, format, mesh kind, faces, nodes and steps ("SFINCS
-                                 // quadtree map (UGRID-1.0): 4226 faces (quadtree), ..."); "" for a raster
+    std::string sourcePath;     // the input raster as given
+    std::string sourceCrsName;  // the input's CRS name ("" when it had none)
+    std::string sourceKind;     // "" for a raster (the working raster and deviation below apply); "UGRID mesh" for a
+                                // mesh taken as it is (one cell per face: no working raster, nothing to deviate)
+    std::string sourceFormat;  // a flood model's results: the model, format, mesh kind, faces, nodes and steps ("SFINCS
+                               // quadtree map (UGRID-1.0): 4226 faces (quadtree), ..."); "" for a raster
     double latticeResidualM = -1;  // a quadtree mesh taken as it is: the largest distance of a node from the fitted
                                    // lattice [m]; < 0 for none
-    uint64_t sourceWidth = 0;    // pixels of the working raster (after projection / resampling)
+    uint64_t sourceWidth = 0;      // pixels of the working raster (after projection / resampling)
     uint64_t sourceHeight = 0;
-    uint64_t validPixels = 0;    // working-raster pixels that carry data
-    double toleranceM = 0;       // requested: max |pixel - cell| in every layer
-    double maxDevM = 0;          // achieved max |pixel - covering cell value| over every layer
-    double rmsDevM = 0;          // achieved RMS of the same, over elevation
-    double seconds = 0;          // ingest wall time (printed by hc-ingest; no longer written to the file: its bytes depend on its inputs only)
+    uint64_t validPixels = 0;  // working-raster pixels that carry data
+    double toleranceM = 0;     // requested: max |pixel - cell| in every layer
+    double maxDevM = 0;        // achieved max |pixel - covering cell value| over every layer
+    double rmsDevM = 0;        // achieved RMS of the same, over elevation
+    double seconds = 0;  // ingest wall time (printed by hc-ingest; no longer written to the file: its bytes depend on
+                         // its inputs only)
 };
 
 class Grid {
 public:
     // ---- geometry (set before adding cells) ----
-    double originWorldX = 0;   // domain's south-west corner in the grid CRS [m]
+    double originWorldX = 0;  // domain's south-west corner in the grid CRS [m]
     double originWorldY = 0;
-    double finestCellM = 1;    // size of a level-0 cell [m], > 0
-    double rotationDeg = 0;    // counterclockwise angle of the local x axis from the CRS's x (east) axis, about the
-                               // origin [degrees], in (-180, 180]; 0 for rasters
-    int rootLevel = 0;         // domain side = finestCellM * 2^rootLevel, 0..kMaxRootLevel
-    int minLevel = 0;          // every cell's level lies in [minLevel, maxLevel]
+    double finestCellM = 1;  // size of a level-0 cell [m], > 0
+    double rotationDeg = 0;  // counterclockwise angle of the local x axis from the CRS's x (east) axis, about the
+                             // origin [degrees], in (-180, 180]; 0 for rasters
+    int rootLevel = 0;       // domain side = finestCellM * 2^rootLevel, 0..kMaxRootLevel
+    int minLevel = 0;        // every cell's level lies in [minLevel, maxLevel]
     int maxLevel = 0;
-    std::string crsWkt;        // "" = local metres with no CRS
-    std::string crsName;       // crsWkt's name as ingest's GDAL gave it, "WGS 84 / UTM zone 32N (EPSG:32632)";
-                               // "" with no CRS, and in files of format 1.0 (grid_file.h)
+    std::string crsWkt;   // "" = local metres with no CRS
+    std::string crsName;  // crsWkt's name as ingest's GDAL gave it, "WGS 84 / UTM zone 32N (EPSG:32632)";
+                          // "" with no CRS, and in files of format 1.0 (grid_file.h)
     std::vector<LayerInfo> layers{{"elevation", "m"}};
     IngestStats stats;
     std::vector<StepInfo> steps;  // every water step of the scenario; empty: none, or one step at time 0 (above)

@@ -19,9 +19,9 @@
 //   88      32    reserved, zero
 //
 // Sections, in file order: CELLS (kind 2: u64 cell codes, sorted), LAYER (kind 3, index = layer:
-// float32 values, one section per layer), (1.3) STEP and STEPS (water steps), META (kind 1: u32-length-prefixed key/value strings:
-// crs_wkt, crs_name, layer.N.name, layer.N.units, layer.N.min, layer.N.max, summary.*, ingest.*), then
-// (1.2) the container's block checksums. Readers locate sections by the table, not by order. ingest.source_kind
+// float32 values, one section per layer), (1.3) STEP and STEPS (water steps), META (kind 1: u32-length-prefixed
+// key/value strings: crs_wkt, crs_name, layer.N.name, layer.N.units, layer.N.min, layer.N.max, summary.*, ingest.*),
+// then (1.2) the container's block checksums. Readers locate sections by the table, not by order. ingest.source_kind
 // ("UGRID mesh") is written only for a grid not made from a raster; its absence means a raster.
 //
 // The summary (1.2), written as the cells stream past, so a reader need not read them (readGridInfo):
@@ -31,8 +31,9 @@
 //   layer.N.min, layer.N.max the least and greatest value of layer N (shortest exact decimal of the float32;
 //                            absent in an empty grid)
 //
-// Water steps (1.3, docs/design.md section 6). The layers from water_depth on are the step layers (Grid::firstStepLayer);
-// they are not LAYER sections. META holds step_layers (their count L) and step_layer.N.name / .units. Then:
+// Water steps (1.3, docs/design.md section 6). The layers from water_depth on are the step layers
+// (Grid::firstStepLayer); they are not LAYER sections. META holds step_layers (their count L) and step_layer.N.name /
+// .units. Then:
 //   STEP  (kind 5, index = step k): the wet cells of step k (water_depth > 0), u32 ascending cell indices, then per
 //         step layer one f32 per wet cell (water_depth first): 4 * wet * (1 + L) bytes. Dry cells store nothing and
 //         read as 0. Grids with steps hold at most 2^32 - 1 cells.
@@ -48,7 +49,8 @@
 //   1.1  META key crs_name (Grid::crsName); read from a 1.0 file as ""
 //   1.2  block checksums (sectioned_file.h: a CRC-32 per 1 MiB, checked when first read) and the summary
 //        in META; a 1.0/1.1 file has neither: readGridInfo reads it whole
-//   1.3  water steps (STEP, STEPS, META step_layer*); water is no longer a LAYER; the rotation at byte 80. A 1.2 file's water_depth LAYER reads
+//   1.3  water steps (STEP, STEPS, META step_layer*); water is no longer a LAYER; the rotation at byte 80. A 1.2 file's
+//   water_depth LAYER reads
 //        as a grid with water and no steps (one step at time 0)
 //
 // Hashes: structure = Hash64 over (finest size f64, root level i32, cell count u64, codes);
@@ -128,8 +130,8 @@ private:
 // append() checks, summarises and writes the run's cells at their place in the file (every rank at once); then, rank
 // by rank, resume() takes the state the runs before left (the hashes, the last cell's end), follow() hashes the run's
 // cells from it, read back from the file, and state() passes it on (the only part that runs in turn: the hashes are one
-// stream over the whole file); finish() flushes the run and returns what the writer's addPart() takes. Nothing of it is a file until the
-// writer commits; the writer removes the temporary if it does not.
+// stream over the whole file); finish() flushes the run and returns what the writer's addPart() takes. Nothing of it is
+// a file until the writer commits; the writer removes the temporary if it does not.
 class GridFilePart {
 public:
     // `shape`: the one the writer was given (geometry, layers; no cells); this run's first cell is `firstCell`.
@@ -138,14 +140,14 @@ public:
     GridFilePart(const GridFilePart&) = delete;
     GridFilePart& operator=(const GridFilePart&) = delete;
 
-    // The run's next cells: checked as GridFileWriter::append checks them (throws hc::Error naming the cell), summarised,
-    // written.
+    // The run's next cells: checked as GridFileWriter::append checks them (throws hc::Error naming the cell),
+    // summarised, written.
     void append(std::span<const uint64_t> codes, const std::vector<std::span<const float>>& layerValues);
     // The state after the cells before this run (the writer's streamState() or the previous part's state()): it must
     // count exactly firstCell cells, and this run's first cell must not overlap the last of them.
     void resume(std::span<const std::byte> state);
-    // Every cell append()ed, read back from the temporary (a run's own writes: in its page cache) and hashed in order, so
-    // that nothing of the run is held between append() and its turn.
+    // Every cell append()ed, read back from the temporary (a run's own writes: in its page cache) and hashed in order,
+    // so that nothing of the run is held between append() and its turn.
     void follow();
     // The state after this run's cells, for the next; throws unless every cell appended was followed.
     std::vector<std::byte> state() const;
@@ -180,23 +182,23 @@ void readGridStep(const std::string& path, Grid& grid, size_t step, const Static
 
 // What a full pass over the cells would tell (stored in META from format 1.2 on).
 struct GridSummary {
-    std::vector<uint64_t> cellsPerLevel;        // index: level 0..maxLevel
-    std::array<uint64_t, 4> boundsFinest{};     // x0, y0, x1, y1 [finest cells, local frame]; zero when empty
-    std::vector<float> layerMin, layerMax;      // per layer; empty for a grid without cells
+    std::vector<uint64_t> cellsPerLevel;     // index: level 0..maxLevel
+    std::array<uint64_t, 4> boundsFinest{};  // x0, y0, x1, y1 [finest cells, local frame]; zero when empty
+    std::vector<float> layerMin, layerMax;   // per layer; empty for a grid without cells
 };
 
 // A grid file's header, META and summary.
 struct GridFileInfo {
-    Grid shape;                    // geometry, CRS, layers, ingest statistics, steps (shape.step selected); no cells
+    Grid shape;  // geometry, CRS, layers, ingest statistics, steps (shape.step selected); no cells
     uint64_t cellCount = 0;
     uint16_t fileMinor = 0;
     uint64_t fileBytes = 0;
-    uint64_t blockBytes = 0;       // of the block checksums; 0 for a 1.0/1.1 file (one CRC per section)
-    uint64_t structureHash = 0, contentHash = 0;  // as the header stores them (recomputed only when verified); with steps,
-                                                  // contentHash is the selected step's (STEPS)
-    GridSummary summary;           // layer ranges: the static layers' and the selected step's
-    bool verified = false;         // every checksum, cell invariant, hash and the summary checked against the cells
-    uint64_t bytesChecked = 0;     // section bytes whose checksums were checked
+    uint64_t blockBytes = 0;                      // of the block checksums; 0 for a 1.0/1.1 file (one CRC per section)
+    uint64_t structureHash = 0, contentHash = 0;  // as the header stores them (recomputed only when verified); with
+                                                  // steps, contentHash is the selected step's (STEPS)
+    GridSummary summary;                          // layer ranges: the static layers' and the selected step's
+    bool verified = false;             // every checksum, cell invariant, hash and the summary checked against the cells
+    uint64_t bytesChecked = 0;         // section bytes whose checksums were checked
     std::shared_ptr<const Grid> grid;  // the whole grid, from verifyGridFile only
 };
 
@@ -225,7 +227,7 @@ public:
     GridRegionReader& operator=(const GridRegionReader&) = delete;
 
     const std::string& path() const;
-    const GridFileInfo& info() const;       // shape (no cells), cell count, stored hashes and summary
+    const GridFileInfo& info() const;  // shape (no cells), cell count, stored hashes and summary
     const Grid& shape() const { return info().shape; }
     uint64_t cellCount() const { return info().cellCount; }
 

@@ -45,9 +45,7 @@ constexpr uint32_t mortonY(uint64_t key) { return compactBits(key >> 1); }
 // Number of finest cells a cell of `level` covers: 4^level (the span of its keys).
 constexpr uint64_t mortonSpan(int level) { return uint64_t{1} << (2 * level); }
 
-constexpr uint64_t makeCellCode(uint64_t key, int level) {
-    return (key << kLevelBits) | static_cast<uint64_t>(level);
-}
+constexpr uint64_t makeCellCode(uint64_t key, int level) { return (key << kLevelBits) | static_cast<uint64_t>(level); }
 constexpr uint64_t codeKey(uint64_t code) { return code >> kLevelBits; }
 constexpr int codeLevel(uint64_t code) { return static_cast<int>(code & ((1u << kLevelBits) - 1)); }
 

@@ -68,7 +68,8 @@ bool influences(const Grid& grid, const KernelParams& params, size_t i, size_t k
 
 // Builds every list, on `threads` workers (0 = all cores), with terminal progress if asked.
 // Throws hc::Error for invalid parameters or a grid of 2^32 cells or more.
-InfluenceLists buildInfluenceLists(const Grid& grid, const KernelParams& params, unsigned threads = 0, bool progress = false);
+InfluenceLists buildInfluenceLists(const Grid& grid, const KernelParams& params, unsigned threads = 0,
+                                   bool progress = false);
 
 // ---- the .hci cache file ----
 
@@ -85,7 +86,7 @@ std::string defaultCachePath(const std::string& gridPath);
 
 // What tools do: read `cachePath` if it is valid for (grid, params); otherwise build the lists and
 // write them there, and say why in `note` ("no cache at X: built", "X is stale (...): rebuilt").
-InfluenceLists loadOrBuildCache(const Grid& grid, const KernelParams& params, const std::string& cachePath, unsigned threads,
-                                bool progress, std::string& note);
+InfluenceLists loadOrBuildCache(const Grid& grid, const KernelParams& params, const std::string& cachePath,
+                                unsigned threads, bool progress, std::string& note);
 
 }  // namespace hc::influence

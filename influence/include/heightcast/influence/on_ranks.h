@@ -40,11 +40,11 @@ RankPartition partitionOf(const GridRegionReader& file, int ranks);
 
 // What one rank did (its share), for its log line.
 struct RankShare {
-    uint64_t nodes = 0;        // partition nodes built
-    uint64_t cells = 0;        // cells of those nodes (lists built)
-    uint64_t cellsRead = 0;    // cells read, halos and coarse tiles' regions included
-    uint64_t tiles = 0;        // pyramid tiles sampled
-    double seconds = 0;        // building (not waiting or sending)
+    uint64_t nodes = 0;      // partition nodes built
+    uint64_t cells = 0;      // cells of those nodes (lists built)
+    uint64_t cellsRead = 0;  // cells read, halos and coarse tiles' regions included
+    uint64_t tiles = 0;      // pyramid tiles sampled
+    double seconds = 0;      // building (not waiting or sending)
 };
 
 // One rank's share of the influence lists: the lists of the cells [firstCell, firstCell + cellCount()) of the file, in
@@ -70,20 +70,20 @@ struct InfluenceListsPart {
 // Collective: every rank calls them with the same file (opened at the grid's water step) and arguments, and gets its
 // part, bit for bit that of one process over the grid read whole; one process gets the whole.
 // The lists: each rank's nodes' cells (a run of the file's cells; the ranks' runs in rank order).
-InfluenceListsPart buildInfluenceListsOnRanks(const GridRegionReader& file, const KernelParams& params, unsigned threads, bool progress,
-                                              RankShare* share = nullptr);
+InfluenceListsPart buildInfluenceListsOnRanks(const GridRegionReader& file, const KernelParams& params,
+                                              unsigned threads, bool progress, RankShare* share = nullptr);
 // Collective: writes the lists whose parts the ranks hold to `path`, the bytes writeInfluenceCache writes of the whole
 // (rank 0 places the sections and appends its part, the others write theirs into rank 0's temporary in place, which
 // must lie on a file system every rank sees; nothing appears at `path` if any rank fails), and returns the whole lists'
 // Stats on every rank.
 InfluenceLists::Stats writeInfluenceCacheOnRanks(const InfluenceListsPart& part, const std::string& path);
 // The pyramid (waterOnly: what buildWaterPyramid builds, a scenario's later step; else buildSurfacePyramid): the tiles
-// a rank writes, with their parent errors: on the levels whose tiles lie inside a partition node the tiles of its nodes,
-// on the coarser levels every tile on rank 0 and none on the others.
-SurfacePyramid buildPyramidOnRanks(const GridRegionReader& file, const KernelParams& params, unsigned threads, bool progress,
-                                   bool waterOnly, RankShare* share = nullptr);
-// Collective: writes the pyramid whose parts the ranks hold to `path`, the bytes writeSurfacePyramid writes of the whole
-// (as writeInfluenceCacheOnRanks does).
+// a rank writes, with their parent errors: on the levels whose tiles lie inside a partition node the tiles of its
+// nodes, on the coarser levels every tile on rank 0 and none on the others.
+SurfacePyramid buildPyramidOnRanks(const GridRegionReader& file, const KernelParams& params, unsigned threads,
+                                   bool progress, bool waterOnly, RankShare* share = nullptr);
+// Collective: writes the pyramid whose parts the ranks hold to `path`, the bytes writeSurfacePyramid writes of the
+// whole (as writeInfluenceCacheOnRanks does).
 void writePyramidOnRanks(const SurfacePyramid& part, const std::string& path);
 
 }  // namespace hc::influence

@@ -23,11 +23,11 @@
 //               kWetShareMin and WaterLevel > Elevation (surface.h)
 // The water channels exist only for a grid with a water_depth layer.
 //
-// Water pyramids (a scenario of several water steps, docs/design.md section 6): the terrain and the tree are the same in
-// every step, so only the first step's pyramid is whole (the base, 3 channels); each later step's holds its two water
-// channels (WaterLevel, WetShare, in that order) in the tiles where its water is drawn at some sample (waterPyramidOf).
-// A reader takes the elevation from the base and the water from the step's pyramid; a tile of the base that the
-// step's pyramid lacks draws no water in that step. Every tile of a water pyramid is a tile of its base.
+// Water pyramids (a scenario of several water steps, docs/design.md section 6): the terrain and the tree are the same
+// in every step, so only the first step's pyramid is whole (the base, 3 channels); each later step's holds its two
+// water channels (WaterLevel, WetShare, in that order) in the tiles where its water is drawn at some sample
+// (waterPyramidOf). A reader takes the elevation from the base and the water from the step's pyramid; a tile of the
+// base that the step's pyramid lacks draws no water in that step. Every tile of a water pyramid is a tile of its base.
 //
 // Bound: each tile records, per channel, parentErrorM: the largest |sample - bilinear interpolation of the
 // parent level's samples| over the tile's samples where all are defined. It is what a reader gives up at
@@ -60,11 +60,11 @@ enum class PyramidChannel : int { Elevation = 0, WaterLevel = 1, WetShare = 2 };
 class SurfacePyramid {
 public:
     struct Level {
-        int level = 0;                 // t: spacing finestCellM * 2^t
-        int tileSide = 0;              // samples per tile side (kPyramidTileSide, less when the domain is smaller)
-        std::span<const uint64_t> keys;        // tile keys, ascending
-        std::span<const float> parentErrorM;   // [tile * channels + channel]
-        std::span<const float> samples;        // [(tile * channels + channel) * tileSide^2 + j * tileSide + i]
+        int level = 0;                   // t: spacing finestCellM * 2^t
+        int tileSide = 0;                // samples per tile side (kPyramidTileSide, less when the domain is smaller)
+        std::span<const uint64_t> keys;  // tile keys, ascending
+        std::span<const float> parentErrorM;  // [tile * channels + channel]
+        std::span<const float> samples;       // [(tile * channels + channel) * tileSide^2 + j * tileSide + i]
         size_t tileCount() const { return keys.size(); }
         // Index of the tile with this key, or -1.
         long findTile(uint64_t key) const;
@@ -110,7 +110,7 @@ public:
         const float* tile() const { return tile_; }
 
     private:
-        void seek(uint64_t i, uint64_t j);  // remembers the tile holding (i, j)
+        void seek(uint64_t i, uint64_t j);          // remembers the tile holding (i, j)
         static constexpr size_t kRemembered = 256;  // 128 tile columns (a 1024-texel row spans 64) x 2 row parities
         struct Remembered {
             uint64_t tileI = ~uint64_t{0}, tileJ = ~uint64_t{0};
@@ -121,7 +121,7 @@ public:
         size_t side_;  // a power of two (the domain's side is one)
         int shift_;
         uint64_t tileI_ = ~uint64_t{0}, tileJ_ = ~uint64_t{0};
-        const float* tile_ = nullptr;  // the remembered tile's first sample, nullptr if not stored
+        const float* tile_ = nullptr;    // the remembered tile's first sample, nullptr if not stored
         std::vector<Remembered> table_;  // kRemembered entries once a second tile is sought
     };
 
@@ -134,7 +134,8 @@ public:
 // cores), with terminal progress if asked. Each tile evaluates its samples against the cells whose kernels
 // reach it (gathered once per tile, narrowed per block of 4 x 4 samples), in double, without influence lists.
 // Throws hc::Error for invalid parameters.
-SurfacePyramid buildSurfacePyramid(const Grid& grid, const KernelParams& params, unsigned threads = 0, bool progress = false);
+SurfacePyramid buildSurfacePyramid(const Grid& grid, const KernelParams& params, unsigned threads = 0,
+                                   bool progress = false);
 // The water pyramid of a whole one (3 channels; above): its water channels and their parent errors, in the tiles with
 // a sample where water is drawn (the water rule of surface.h: wet share >= kWetShareMin, level above the elevation).
 // Throws hc::Error for a pyramid without water channels.
@@ -143,7 +144,8 @@ SurfacePyramid waterPyramidOf(const SurfacePyramid& whole);
 // tiles a wet cell's kernel reaches (and one tile around them): the others hold no wet weight, so no water. What
 // hc-influence builds for a scenario's later steps: the cost follows the water, not the grid. Throws hc::Error for a
 // grid without water.
-SurfacePyramid buildWaterPyramid(const Grid& grid, const KernelParams& params, unsigned threads = 0, bool progress = false);
+SurfacePyramid buildWaterPyramid(const Grid& grid, const KernelParams& params, unsigned threads = 0,
+                                 bool progress = false);
 
 // The .hcp file: written atomically; read memory-mapped, validated (checksums, sizes, keys ascending and
 // inside the domain) and checked to belong to `grid` with `params` (like the .hci cache); a water pyramid (2 channels)
@@ -153,8 +155,8 @@ SurfacePyramid readSurfacePyramid(const std::string& path, const Grid& grid, con
 // The same for a grid file not read whole (GridRegionReader): its geometry and the hashes its header stores.
 SurfacePyramid readSurfacePyramid(const std::string& path, const GridFileInfo& grid, const KernelParams& params);
 // Both: `grid` gives the geometry and layers (its cells are not read), the hashes are the grid's.
-SurfacePyramid readSurfacePyramid(const std::string& path, const Grid& grid, uint64_t structureHash, uint64_t contentHash,
-                                  const KernelParams& params);
+SurfacePyramid readSurfacePyramid(const std::string& path, const Grid& grid, uint64_t structureHash,
+                                  uint64_t contentHash, const KernelParams& params);
 
 // The pyramid path a tool uses by default: the grid's path with its extension replaced by ".hcp".
 // A grid of several water steps has one pyramid per step (the water channels differ): grid.step0007.hcp for step 7.

@@ -33,13 +33,14 @@ struct SurfaceRegion {
 };
 
 // The cells of `file` the surface needs over the closed box (local frame [m]) and their lists. Throws hc::Error.
-SurfaceRegion readSurfaceRegion(const GridRegionReader& file, const Grid::Square& box, const KernelParams& params, unsigned threads = 0);
+SurfaceRegion readSurfaceRegion(const GridRegionReader& file, const Grid::Square& box, const KernelParams& params,
+                                unsigned threads = 0);
 
 // What valuesFromFile read.
 struct RegionReadStats {
-    uint64_t regions = 0;         // groups of points, one region read each
-    uint64_t cellsRead = 0;       // cells over all regions (a cell near two groups counts twice)
-    uint64_t largestRegion = 0;   // cells of the largest region: what bounds the memory
+    uint64_t regions = 0;        // groups of points, one region read each
+    uint64_t cellsRead = 0;      // cells over all regions (a cell near two groups counts twice)
+    uint64_t largestRegion = 0;  // cells of the largest region: what bounds the memory
 };
 
 // The layer at many points (local frame [m]) of a grid file, as SurfaceEvaluator::values gives it over the whole
@@ -48,7 +49,8 @@ struct RegionReadStats {
 // read, evaluated and dropped in turn: memory follows the group, not the grid.
 constexpr uint64_t kRegionPoints = 1u << 16;
 constexpr uint64_t kRegionCells = 1u << 18;
-std::vector<std::optional<double>> valuesFromFile(const GridRegionReader& file, std::span<const std::array<double, 2>> pointsLocal,
+std::vector<std::optional<double>> valuesFromFile(const GridRegionReader& file,
+                                                  std::span<const std::array<double, 2>> pointsLocal,
                                                   const Layer& layer, const KernelParams& params, unsigned threads = 0,
                                                   RegionReadStats* stats = nullptr);
 

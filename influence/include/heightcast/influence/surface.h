@@ -3,9 +3,9 @@
 //
 //   v(p) = sum_i w_i(p) v_i / sum_i w_i(p)     over the influence list of the cell containing p
 //
-// in double precision (evaluated relative to the containing cell's value: surface.cpp). Outside every cell (holes, outside the domain) the surface is undefined:
-// std::nullopt, never 0, never NaN. Inside a cell the cell's own weight is at least
-// exp(-1 / (4 sigma^2)) - exp(-R^2 / 2) > 0, so the denominator cannot vanish.
+// in double precision (evaluated relative to the containing cell's value: surface.cpp). Outside every cell (holes,
+// outside the domain) the surface is undefined: std::nullopt, never 0, never NaN. Inside a cell the cell's own weight
+// is at least exp(-1 / (4 sigma^2)) - exp(-R^2 / 2) > 0, so the denominator cannot vanish.
 #pragma once
 
 #include <array>
@@ -52,8 +52,8 @@ struct Layer {
 constexpr double kWetShareMin = 0.5;
 
 struct ValueGradient {
-    double value;  // [layer units]
-    double dx, dy; // d value / d x, d value / d y [layer units per metre]
+    double value;   // [layer units]
+    double dx, dy;  // d value / d x, d value / d y [layer units per metre]
 };
 
 class SurfaceEvaluator {
@@ -77,8 +77,8 @@ private:
     // Weighted sums at p over cell k's list of v_i - base: v the grid layer `l`; or, with `depth`, over the wet
     // cells only (d_i > 0), of the water level z_i + d_i (l = 0, addDepth) or of layer l's values. Also the gradient
     // sums if asked.
-    void sums(size_t k, double x, double y, size_t l, const float* depth, bool addDepth, double base, double& num, double& den,
-              double* dnum, double* dden) const;
+    void sums(size_t k, double x, double y, size_t l, const float* depth, bool addDepth, double base, double& num,
+              double& den, double* dnum, double* dden) const;
     // The level (or, with l > 0, layer l's value) of cell k if it is wet, else of the first wet cell of its list;
     // NaN if none is wet.
     double levelBase(size_t k, size_t l = 0) const;

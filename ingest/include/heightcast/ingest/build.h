@@ -38,9 +38,9 @@ void checkToleranceM(double toleranceM);
 
 struct BuildOptions {
     double toleranceM = kDefaultToleranceM;  // >= 0
-    int maxLevel = 0;          // coarsest cell = pixelSizeM * 2^maxLevel
-    unsigned threads = 0;      // 0 = all cores
-    bool progress = false;     // terminal progress on stderr
+    int maxLevel = 0;                        // coarsest cell = pixelSizeM * 2^maxLevel
+    unsigned threads = 0;                    // 0 = all cores
+    bool progress = false;                   // terminal progress on stderr
     // Optional, not owned: resized to the terrain's width * height and filled with the elevation of the
     // cell covering each pixel (NaN where none), for checks against the source after the build.
     std::vector<float>* cellElevations = nullptr;
@@ -52,8 +52,8 @@ public:
     virtual ~CellSink() = default;
     virtual void begin(uint64_t cellCount) = 0;
     virtual void append(std::span<const uint64_t> codes, const std::vector<std::span<const float>>& values) = 0;
-    // Under mpirun (docs/design.md section 7) every rank writes its own cells into the sink's file: the sink gives rank 0's
-    // writer after begin(), and every rank the file's shape for its GridFilePart. A sink without a file (a grid in
+    // Under mpirun (docs/design.md section 7) every rank writes its own cells into the sink's file: the sink gives rank
+    // 0's writer after begin(), and every rank the file's shape for its GridFilePart. A sink without a file (a grid in
     // memory) is built by one process only.
     virtual GridFileWriter* sharedWriter() { return nullptr; }
     virtual const Grid* fileShape() const { return nullptr; }
@@ -93,13 +93,16 @@ struct RasterWindows {
     std::string source;  // the file, for messages
     // Fills values (and rounding: Raster::roundingM, left empty when float32 holds the source) with the working pixels
     // [col0, col0 + w) x [row0, row0 + h), row 0 the northern-most, row-major. Throws hc::Error.
-    std::function<void(size_t col0, size_t row0, size_t w, size_t h, std::vector<float>& values, std::vector<float>& rounding)> read;
-    // Water steps read window by window too (none without): their times [s], and readStep, which fills `depth` with step
-    // k's depths [m] at the same working pixels as read(), given the terrain's elevations there (`terrain`, as read()
-    // gave them). Each window of each step is read twice: for the merge masks (`first`: count what it reports once),
-    // then for the cells' depths.
+    std::function<void(size_t col0, size_t row0, size_t w, size_t h, std::vector<float>& values,
+                       std::vector<float>& rounding)>
+        read;
+    // Water steps read window by window too (none without): their times [s], and readStep, which fills `depth` with
+    // step k's depths [m] at the same working pixels as read(), given the terrain's elevations there (`terrain`, as
+    // read() gave them). Each window of each step is read twice: for the merge masks (`first`: count what it reports
+    // once), then for the cells' depths.
     std::vector<double> stepTimesS;
-    std::function<void(size_t k, size_t col0, size_t row0, size_t w, size_t h, const float* terrain, std::vector<float>& depth, bool first)>
+    std::function<void(size_t k, size_t col0, size_t row0, size_t w, size_t h, const float* terrain,
+                       std::vector<float>& depth, bool first)>
         readStep;
     // Or bathtub levels [m], one a step (--water-level), instead of readStep: the builder floods its windows itself,
     // joining the ranks' pieces of each flood across their windows' edges.

@@ -15,11 +15,11 @@ namespace hc::ingest {
 struct Raster {
     size_t width = 0;
     size_t height = 0;
-    double westWorld = 0;    // x of the west edge, grid CRS [m]
-    double northWorld = 0;   // y of the north edge, grid CRS [m]
-    double pixelSizeM = 1;   // pixel side [m]
-    std::string crsWkt;      // "" = local metres, no CRS
-    std::string crsName;     // crsWkt's name as GDAL gives it (LoadReport::gridCrsName); "" with no CRS
+    double westWorld = 0;       // x of the west edge, grid CRS [m]
+    double northWorld = 0;      // y of the north edge, grid CRS [m]
+    double pixelSizeM = 1;      // pixel side [m]
+    std::string crsWkt;         // "" = local metres, no CRS
+    std::string crsName;        // crsWkt's name as GDAL gives it (LoadReport::gridCrsName); "" with no CRS
     std::vector<float> values;  // width * height, row-major, NaN = nodata
     // Empty, or (width * height) the source value minus values[i] [m]: what float32 lost of a source that
     // holds more precision (Float64, Int32). The build checks its tolerance against values + roundingM.

@@ -20,7 +20,7 @@ struct Camera {
     double xWorld = 0, yWorld = 0, zWorld = 0;  // [m]
     double yawDeg = 0, pitchDeg = -30, rollDeg = 0;
     double fovYDeg = 50;
-    double nearM = 0, farM = 0;  // [m] along the ray; 0: derived from the scene
+    double nearM = 0, farM = 0;      // [m] along the ray; 0: derived from the scene
     int width = 1280, height = 720;  // pixels
 
     // Throws hc::Error naming the first bad value (non-finite numbers, fov outside (0, 179), sizes,

@@ -26,15 +26,16 @@ struct ViewVolume {
     glm::dvec3 eyeLocal;            // camera position relative to the grid origin [m]
     glm::dvec3 forward, right, up;  // camera basis (CameraBasis)
     double tanHalfX, tanHalfY;
-    double nearM, farM;             // clip distances along forward
-    double yawRad;                  // d = (sin yaw, cos yaw)
-    glm::dvec3 boxMin, boxMax;      // scene bounds, local [m]
+    double nearM, farM;         // clip distances along forward
+    double yawRad;              // d = (sin yaw, cos yaw)
+    glm::dvec3 boxMin, boxMax;  // scene bounds, local [m]
     double finestCellM;
     // Texel sizes per octave of the ladder: 8 (s = finest * 2^(q/8), at most 9 % of a texture lost to the steps)
     // or 1 (s = finest * 2^t, the surface pyramid's spacings, so texel centres are its samples: the largest such
     // s not above the 8-step one, with more texels per side than asked, up to 2N, to cover the same extent).
     int ladderStepsPerOctave = 8;
-    bool coarserTexels = false;     // with 1 step per octave: the smallest power of two not below the 8-step size, N texels
+    bool coarserTexels =
+        false;  // with 1 step per octave: the smallest power of two not below the 8-step size, N texels
 };
 
 // An inclusive span [first, last] of texel columns in a row; empty when last < first. The one span type of render/:
@@ -51,7 +52,7 @@ struct Cascade {
     double texelM = 0;                   // s
     double x0 = 0, y0 = 0;               // local position of texel (0, 0)'s centre (a multiple of s)
     int n = 0;                           // texels per side
-    std::vector<glm::dvec2> polygon;           // the hull's slab [splitNear, farWithOverlap], local xy
+    std::vector<glm::dvec2> polygon;     // the hull's slab [splitNear, farWithOverlap], local xy
     // The visible texels: inside the polygon dilated by 1.5 texels. The polygon is convex, so they are one
     // span of each row: row j's are i in [rows[j].first, rows[j].last] (none when last < first).
     using RowSpan = TexelSpan;
@@ -66,10 +67,10 @@ struct Cascade {
 };
 
 struct CascadeFit {
-    glm::dvec2 dir{0, 1};           // horizontal view direction
-    std::vector<glm::dvec2> hull;   // potentially visible area (local xy), counter-clockwise
+    glm::dvec2 dir{0, 1};                  // horizontal view direction
+    std::vector<glm::dvec2> hull;          // potentially visible area (local xy), counter-clockwise
     double nearOffset = 0, farOffset = 0;  // [n, f] along dir, from the eye
-    std::vector<Cascade> cascades;  // near to far
+    std::vector<Cascade> cascades;         // near to far
 };
 
 // count 1..4 cascades of texelsPerSide texels (more with ladderStepsPerOctave 1). An empty fit (no hull) means

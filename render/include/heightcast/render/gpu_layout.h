@@ -27,25 +27,28 @@ using uint = std::uint32_t;
 #define HC_BIND_INDICES_1 8  // further chunks of the entries (a driver caps one storage buffer: llvmpipe at
 #define HC_BIND_INDICES_2 9  //   128 MiB, which the lists of a million cells exceed)
 #define HC_BIND_INDICES_3 10
-#define HC_BIND_VISIBLE 4    // int[]: per cascade 4 ints a row: the spans to evaluate (RowFill a0, a1, b0, b1); out of core the
-                             //   spans atlas.comp copies the pyramid's texels in
-#define HC_BIND_HEIGHTS 5    // float[]: per cascade terrain, water, depth textures and both max mipmaps
-#define HC_BIND_PIXELS 6     // GpuPixel[width * height], row 0 at the top
-#define HC_BIND_COUNTERS 7   // uint[kCounterSlots * (kMaxCascades + 1)]: Gaussians per cascade, then hits
+#define HC_BIND_VISIBLE \
+    4  // int[]: per cascade 4 ints a row: the spans to evaluate (RowFill a0, a1, b0, b1); out of core the
+       //   spans atlas.comp copies the pyramid's texels in
+#define HC_BIND_HEIGHTS 5   // float[]: per cascade terrain, water, depth textures and both max mipmaps
+#define HC_BIND_PIXELS 6    // GpuPixel[width * height], row 0 at the top
+#define HC_BIND_COUNTERS 7  // uint[kCounterSlots * (kMaxCascades + 1)]: Gaussians per cascade, then hits
 // Out of core (assemble.comp): the last frame's heights buffer, and what the CPU evaluated this frame.
 #define HC_BIND_LAST_HEIGHTS 11  // float[]: the last frame's HC_BIND_HEIGHTS
-#define HC_BIND_FILL_ROWS 12     // int[kFillRowInts per texel row of every cascade]: RowFill, then its spans' first packed texels
-#define HC_BIND_FILL_TEXELS 13   // float[3 * plane]: the evaluated texels packed, terrain, then water, then depth
+#define HC_BIND_FILL_ROWS \
+    12  // int[kFillRowInts per texel row of every cascade]: RowFill, then its spans' first packed texels
+#define HC_BIND_FILL_TEXELS 13  // float[3 * plane]: the evaluated texels packed, terrain, then water, then depth
 // raycast.comp's beams (beams.comp): per tile of GpuFrame::beamTile^2 pixels and cascade, (start depth, passed).
-#define HC_BIND_BEAMS 14         // vec2[tiles * kMaxCascades], tiles row-major over the image
+#define HC_BIND_BEAMS 14  // vec2[tiles * kMaxCascades], tiles row-major over the image
 // Out of core with a pyramid (atlas.comp): its tiles resident on the GPU, and the frame's tiles to copy texels from
 // (each cascade's row spans to copy in, before the copies were taken out, are in HC_BIND_VISIBLE).
-#define HC_BIND_ATLAS_TERRAIN 15 // float[kAtlasPlane per slot]: a tile's elevations
-#define HC_BIND_ATLAS_WATER 16   // float[2 kAtlasPlane per slot]: a tile's water levels, then its wet shares
-#define HC_BIND_ATLAS_TILES 17   // uvec4 per tile to copy from (atlas.comp)
-#define HC_BIND_ATLAS_BLOCKS 18  // uint[kAtlasBlockUints per block]: texels to interpolate from level 0's tiles (interpolate.comp)
-#define HC_BIND_LAST 18          // the highest binding
-#define HC_IMAGE_COLOR 0     // rgba8 image unit of the shaded picture (row 0 at the bottom)
+#define HC_BIND_ATLAS_TERRAIN 15  // float[kAtlasPlane per slot]: a tile's elevations
+#define HC_BIND_ATLAS_WATER 16    // float[2 kAtlasPlane per slot]: a tile's water levels, then its wet shares
+#define HC_BIND_ATLAS_TILES 17    // uvec4 per tile to copy from (atlas.comp)
+#define HC_BIND_ATLAS_BLOCKS \
+    18  // uint[kAtlasBlockUints per block]: texels to interpolate from level 0's tiles (interpolate.comp)
+#define HC_BIND_LAST 18   // the highest binding
+#define HC_IMAGE_COLOR 0  // rgba8 image unit of the shaded picture (row 0 at the bottom)
 
 // Work-group sizes (macros: they go into layout(local_size_x = ...)).
 #define HC_GROUP_2D 8
@@ -56,38 +59,40 @@ const int kCounterSlots = 64;   // a counter is spread over slots so that no uin
 const int kMaxLabelChars = 12;  // legend labels ("-10994m")
 const int kIndexChunks = 4;     // storage buffers the influence lists' entries may span
 const int kFillRowInts = 8;     // a row of HC_BIND_FILL_ROWS: keptFirst, keptLast, a0, a1, b0, b1, packed a0, packed b0
-const int kAtlasPlane = 256;    // floats a channel of an atlas slot: a pyramid tile's samples (16^2; fewer where its side is less)
-const int kAtlasBlockUints = 20;  // a block of interpolate.comp: its head, its first texel, 9 terrain slots, 9 water slots
+const int kAtlasPlane =
+    256;  // floats a channel of an atlas slot: a pyramid tile's samples (16^2; fewer where its side is less)
+const int kAtlasBlockUints =
+    20;  // a block of interpolate.comp: its head, its first texel, 9 terrain slots, 9 water slots
 
 // One grid cell, plus a sentinel after the last so that cells[k + 1].listBegin ends k's list.
 struct GpuCell {
-    uint ix;          // south-west corner [finest units]
+    uint ix;  // south-west corner [finest units]
     uint iy;
-    uint level;       // size = finest * 2^level
-    uint listBegin;   // first entry of the influence list in the indices buffer
-    float a;          // 1 / (2 sigma^2 c^2) (Scene::CellKernel::a)
-    float r2;         // squared kernel radius [m^2]
-    float z;          // elevation [m]
-    float depth;      // water depth [m], 0 without a water layer
+    uint level;      // size = finest * 2^level
+    uint listBegin;  // first entry of the influence list in the indices buffer
+    float a;         // 1 / (2 sigma^2 c^2) (Scene::CellKernel::a)
+    float r2;        // squared kernel radius [m^2]
+    float z;         // elevation [m]
+    float depth;     // water depth [m], 0 without a water layer
 };
 
 // One cascade (Cascade in cascades.h) as the shaders read it.
 struct GpuCascade {
-    double x0;        // local position of texel (0, 0)'s centre [m]; double: texel centres are
-    double y0;        //   located in the grid exactly as the CPU does (approximate_sum.cpp)
-    double texelM;    // texel size s [m]
-    float x0Eye;      // x0 - eye, y0 - eye [m]: the ray caster's frame
+    double x0;      // local position of texel (0, 0)'s centre [m]; double: texel centres are
+    double y0;      //   located in the grid exactly as the CPU does (approximate_sum.cpp)
+    double texelM;  // texel size s [m]
+    float x0Eye;    // x0 - eye, y0 - eye [m]: the ray caster's frame
     float y0Eye;
     float texelF;     // s as float
     int n;            // texels per side; 0 for an empty cascade
     float splitNear;  // offsets from the eye along the horizontal view direction [m]
     float splitFar;
     float farWithOverlap;
-    int levels;       // max mipmap levels (Heightfield::mip.size())
-    uint terrainOffset;  // into the heights buffer [floats]: terrain heights, n * n
-    uint waterOffset;    // water surface heights, n * n
-    uint depthOffset;    // water depths, n * n
-    uint visibleOffset;  // into the visible buffer [uints]
+    int levels;                      // max mipmap levels (Heightfield::mip.size())
+    uint terrainOffset;              // into the heights buffer [floats]: terrain heights, n * n
+    uint waterOffset;                // water surface heights, n * n
+    uint depthOffset;                // water depths, n * n
+    uint visibleOffset;              // into the visible buffer [uints]
     uint terrainMip[kMaxMipLevels];  // per level: offset of the terrain's max mipmap [floats]
     uint waterMip[kMaxMipLevels];
     int mipSide[kMaxMipLevels];
@@ -95,44 +100,44 @@ struct GpuCascade {
 
 // What every stage of one frame reads.
 struct GpuFrame {
-    double eyeX;      // camera position, local [m] (double: cell outlines locate hit points)
+    double eyeX;  // camera position, local [m] (double: cell outlines locate hit points)
     double eyeY;
-    double finestM;   // grid's finest cell size [m]
-    double domainM;   // grid's domain side [m]
-    float eyeZ;       // camera height, local z (= world z) [m]
-    float tanHalfX;   // image plane half extents at unit distance
+    double finestM;  // grid's finest cell size [m]
+    double domainM;  // grid's domain side [m]
+    float eyeZ;      // camera height, local z (= world z) [m]
+    float tanHalfX;  // image plane half extents at unit distance
     float tanHalfY;
     float nearM;
     float farM;
-    float dirX;       // horizontal view direction the cascade offsets are measured along
+    float dirX;  // horizontal view direction the cascade offsets are measured along
     float dirY;
-    float tail;       // exp(-R^2 / 2): the kernel's cut
+    float tail;  // exp(-R^2 / 2): the kernel's cut
     float forward[3];
     float right[3];
     float up[3];
-    float sun[3];     // unit vector towards the sun
-    int width;        // image [pixels]
+    float sun[3];  // unit vector towards the sun
+    int width;     // image [pixels]
     int height;
-    int cascades;     // fitted cascades (<= kMaxCascades)
+    int cascades;  // fitted cascades (<= kMaxCascades)
     int hasWater;
     uint cellCount;
     uint rootLevel;
     uint indexChunkShift;  // entry e lies in chunk e >> shift, at e & ((1 << shift) - 1)
-    float minDepthM;  // RenderOptions::waterMinDepthM
-    float fogDistM;   // fog reaches 1 - 1/e of its half strength at this distance
+    float minDepthM;       // RenderOptions::waterMinDepthM
+    float fogDistM;        // fog reaches 1 - 1/e of its half strength at this distance
     float elevationMin;
-    float zRange;     // elevation range (>= 1e-6)
-    float dRange;     // water depth range (>= 1e-6)
-    float pixelAngle; // vertical angle of one pixel at the image centre [rad]
-    int colorMode;    // 0 elevation, 1 water depth (ColorMode)
+    float zRange;      // elevation range (>= 1e-6)
+    float dRange;      // water depth range (>= 1e-6)
+    float pixelAngle;  // vertical angle of one pixel at the image centre [rad]
+    int colorMode;     // 0 elevation, 1 water depth (ColorMode)
     int cellOutlines;
-    int legendRamp;   // 0 none, 1 water depth, 2 elevation
-    int legendX0;     // colour bar's top-left pixel (row 0 at the top), size and label scale
+    int legendRamp;  // 0 none, 1 water depth, 2 elevation
+    int legendX0;    // colour bar's top-left pixel (row 0 at the top), size and label scale
     int legendY0;
     int legendBarW;
     int legendBarH;
     int legendScale;
-    int labelHiLen;   // characters of the two labels; their glyphs are 15-bit masks (glyphBits)
+    int labelHiLen;  // characters of the two labels; their glyphs are 15-bit masks (glyphBits)
     int labelLoLen;
     uint labelHi[kMaxLabelChars];
     uint labelLo[kMaxLabelChars];
@@ -141,32 +146,35 @@ struct GpuFrame {
     float skyHorizon[3];
     float skyZenith[3];
     float dryColor[3];
-    float zFloor;     // the terrain block's bottom: the grid's lowest elevation, local z [m] (RayContext::zFloor)
+    float zFloor;        // the terrain block's bottom: the grid's lowest elevation, local z [m] (RayContext::zFloor)
     float wallColor[3];  // kWallColor, sRGB
-    int beamTile;     // raycast.comp's beams: tiles of beamTile^2 pixels, 0 or 1 none (RenderOptions::beamTilePx)
-    int pad[3];       // FrameBlock to a multiple of 16 bytes, to which Mesa rounds a buffer block's size
+    int beamTile;        // raycast.comp's beams: tiles of beamTile^2 pixels, 0 or 1 none (RenderOptions::beamTilePx)
+    int pad[3];          // FrameBlock to a multiple of 16 bytes, to which Mesa rounds a buffer block's size
 };
 
 // One pixel's ray-cast result, row 0 at the top (Frame's layout).
 struct GpuPixel {
-    float t;          // distance along the ray [m]; +inf where the ray misses
-    float relX;       // hit position minus the eye [m]
+    float t;     // distance along the ray [m]; +inf where the ray misses
+    float relX;  // hit position minus the eye [m]
     float relY;
     float relZ;
-    float nx;         // unit normal
+    float nx;  // unit normal
     float ny;
     float nz;
-    float depth;      // water depth at a water hit, else 0
-    int cascade;      // -1 where the ray misses
-    int water;        // 1 for a water hit
-    int wall;         // 1 for a hit on a cut face of the terrain block (Frame::wall)
+    float depth;  // water depth at a water hit, else 0
+    int cascade;  // -1 where the ray misses
+    int water;    // 1 for a water hit
+    int wall;     // 1 for a hit on a cut face of the terrain block (Frame::wall)
 };
 
 #ifdef __cplusplus
 // Shading constants both backends use (shading.cpp and shade.comp through GpuFrame).
 // Colour ramps: stops (t, r, g, b), sRGB.
-inline constexpr double kElevationRamp[5][4] = {
-    {0.0, 0.24, 0.47, 0.24}, {0.3, 0.59, 0.67, 0.35}, {0.55, 0.63, 0.51, 0.35}, {0.8, 0.6, 0.6, 0.6}, {1.0, 0.98, 0.98, 0.98}};
+inline constexpr double kElevationRamp[5][4] = {{0.0, 0.24, 0.47, 0.24},
+                                                {0.3, 0.59, 0.67, 0.35},
+                                                {0.55, 0.63, 0.51, 0.35},
+                                                {0.8, 0.6, 0.6, 0.6},
+                                                {1.0, 0.98, 0.98, 0.98}};
 inline constexpr double kDepthRamp[3][4] = {{0.0, 0.6, 0.87, 0.95}, {0.5, 0.16, 0.47, 0.8}, {1.0, 0.04, 0.12, 0.45}};
 inline constexpr double kDryColor[3] = {0.7, 0.7, 0.68};  // terrain under ColorMode::WaterDepth
 // The cut faces of the terrain block (walls at hole and domain edges, the bottom: Frame::wall), in either colour
@@ -182,31 +190,79 @@ inline constexpr double kFogExtents = 3.0;  // fog distance in horizontal scene 
 constexpr uint glyphBits(char ch) {
     const char* rows = "000000000000000";
     switch (ch) {
-        case '0': rows = "111101101101111"; break;
-        case '1': rows = "010110010010111"; break;
-        case '2': rows = "111001111100111"; break;
-        case '3': rows = "111001111001111"; break;
-        case '4': rows = "101101111001001"; break;
-        case '5': rows = "111100111001111"; break;
-        case '6': rows = "111100111101111"; break;
-        case '7': rows = "111001001001001"; break;
-        case '8': rows = "111101111101111"; break;
-        case '9': rows = "111101111001111"; break;
-        case '.': rows = "000000000000010"; break;
-        case '-': rows = "000000111000000"; break;
-        case 'm': rows = "000000111111101"; break;
+        case '0':
+            rows = "111101101101111";
+            break;
+        case '1':
+            rows = "010110010010111";
+            break;
+        case '2':
+            rows = "111001111100111";
+            break;
+        case '3':
+            rows = "111001111001111";
+            break;
+        case '4':
+            rows = "101101111001001";
+            break;
+        case '5':
+            rows = "111100111001111";
+            break;
+        case '6':
+            rows = "111100111101111";
+            break;
+        case '7':
+            rows = "111001001001001";
+            break;
+        case '8':
+            rows = "111101111101111";
+            break;
+        case '9':
+            rows = "111101111001111";
+            break;
+        case '.':
+            rows = "000000000000010";
+            break;
+        case '-':
+            rows = "000000111000000";
+            break;
+        case 'm':
+            rows = "000000111111101";
+            break;
         // Enough letters for the units of a --color-by layer ("m s-1", "m/s", "%", "kg m-3", "degC", ...).
-        case 's': rows = "011100010001110"; break;
-        case '/': rows = "001001010100100"; break;
-        case '%': rows = "101001010100101"; break;
-        case 'k': case 'K': rows = "100101110101101"; break;
-        case 'g': rows = "011101011001110"; break;
-        case 'h': rows = "100100111101101"; break;
-        case 'e': rows = "000111101110011"; break;
-        case 'C': rows = "111100100100111"; break;
-        case 'd': rows = "001001111101111"; break;
-        case 'a': rows = "000110011101111"; break;
-        default: break;
+        case 's':
+            rows = "011100010001110";
+            break;
+        case '/':
+            rows = "001001010100100";
+            break;
+        case '%':
+            rows = "101001010100101";
+            break;
+        case 'k':
+        case 'K':
+            rows = "100101110101101";
+            break;
+        case 'g':
+            rows = "011101011001110";
+            break;
+        case 'h':
+            rows = "100100111101101";
+            break;
+        case 'e':
+            rows = "000111101110011";
+            break;
+        case 'C':
+            rows = "111100100100111";
+            break;
+        case 'd':
+            rows = "001001111101111";
+            break;
+        case 'a':
+            rows = "000110011101111";
+            break;
+        default:
+            break;
     }
     uint bits = 0;
     for (int i = 0; i < 15; ++i) bits = (bits << 1) | (rows[i] == '1' ? 1u : 0u);

@@ -26,13 +26,13 @@ namespace hc::render {
 enum class ColorMode { Elevation, WaterDepth };
 
 struct RenderOptions {
-    int cascades = 3;             // 1..4
-    int texelsPerSide = 1024;     // 16..8192, cascade texture side N
-    unsigned threads = 0;         // 0 = all cores
+    int cascades = 3;          // 1..4
+    int texelsPerSide = 1024;  // 16..8192, cascade texture side N
+    unsigned threads = 0;      // 0 = all cores
     ColorMode color = ColorMode::Elevation;
-    bool cellOutlines = false;    // draw the adaptive cells' edges
-    bool legend = true;           // colour bar of the water depth (or elevation) in the image
-    double waterMinDepthM = 0.01; // water thinner than this is not drawn (smoothing spreads depth thinly)
+    bool cellOutlines = false;     // draw the adaptive cells' edges
+    bool legend = true;            // colour bar of the water depth (or elevation) in the image
+    double waterMinDepthM = 0.01;  // water thinner than this is not drawn (smoothing spreads depth thinly)
     // With a surface pyramid, texel sizes are its spacings (powers of two of the finest cell). false: the largest
     // not above the size without a pyramid, with up to 2N texels a side (never coarser, so the rendered error is
     // no worse); true: the smallest not below it, N texels (up to 2x coarser: faster, more texels copied, larger
@@ -52,19 +52,19 @@ struct RenderOptions {
     // their block's of 4 x 4 tiles; on the GL backend a pass of its own, beams.comp); 0 or 1: every ray walks from its
     // cascade's start. 0..64. docs/benchmarks.md measures it.
     int beamTilePx = 4;
-    std::string validate() const; // "" or what is wrong
+    std::string validate() const;  // "" or what is wrong
 };
 
 // Per-pixel results, row 0 at the top. Misses: distance +inf, position/normal 0, cascade -1.
 struct Frame {
     int width = 0, height = 0;
-    std::vector<uint8_t> rgb;           // 8-bit sRGB, 3 per pixel
-    std::vector<float> distanceM;       // along the ray [m]; +inf where the ray misses
-    std::vector<float> posX, posY, posZ;// hit position relative to the grid origin [m], along the CRS's axes (for a
-                                        // rotated grid too: world = origin + pos)
-    std::vector<float> nX, nY, nZ;      // unit surface normal (z up), along the CRS's axes
-    std::vector<float> cascade;         // index of the cascade that gave the hit (blend: the nearer), -1 miss
-    std::vector<float> waterDepthM;     // water depth at the hit [m], 0 where dry or missed
+    std::vector<uint8_t> rgb;             // 8-bit sRGB, 3 per pixel
+    std::vector<float> distanceM;         // along the ray [m]; +inf where the ray misses
+    std::vector<float> posX, posY, posZ;  // hit position relative to the grid origin [m], along the CRS's axes (for a
+                                          // rotated grid too: world = origin + pos)
+    std::vector<float> nX, nY, nZ;        // unit surface normal (z up), along the CRS's axes
+    std::vector<float> cascade;           // index of the cascade that gave the hit (blend: the nearer), -1 miss
+    std::vector<float> waterDepthM;       // water depth at the hit [m], 0 where dry or missed
     // 1 where the hit is on a cut face of the terrain block, else 0. The terrain is drawn as a solid block: the
     // smooth surface on top, vertical walls where the surface ends (the edges of holes and of the domain) down
     // to the grid's lowest elevation, and a flat bottom there. Wall normals are horizontal, the bottom's points
@@ -78,19 +78,21 @@ struct Frame {
 };
 
 struct CascadeStats {
-    double nearM = 0, farM = 0;         // offsets along the projected view direction (far includes the overlap)
-    double splitFarM = 0;               // where the blend with the next cascade starts
-    double texelM = 0;                  // texel size
+    double nearM = 0, farM = 0;  // offsets along the projected view direction (far includes the overlap)
+    double splitFarM = 0;        // where the blend with the next cascade starts
+    double texelM = 0;           // texel size
     uint64_t visibleTexels = 0;
-    uint64_t gaussians = 0;             // kernel evaluations in the approximation
-    uint64_t reusedTexels = 0;          // visible texels copied from the last frame (renderFrame with a CascadeCache)
-    uint64_t cellsVisited = 0;          // CPU: grid cells whose squares the approximation examined for texels to evaluate (0 on GL)
-    uint64_t cellsRead = 0;             // CPU out of core (Scene): cells read from the grid file for the texels summed, kernel margins
-    uint64_t regionsRead = 0;           // included, in that many blocks of texels (0 in memory and on GL)
-    int pyramidLevel = -1;              // the surface pyramid level whose spacing is texelM, -1 without a pyramid
-    uint64_t pyramidTexels = 0;         // visible texels copied from the pyramid's samples (the others: Gaussians)
-    uint64_t pyramidInterpolated = 0;   // visible texels interpolated from a coarser level (pyramidInterpolateLevels)
-    int pyramidInterpolatedUp = 0;      // the most levels above the texels' own one of them was interpolated from
+    uint64_t gaussians = 0;     // kernel evaluations in the approximation
+    uint64_t reusedTexels = 0;  // visible texels copied from the last frame (renderFrame with a CascadeCache)
+    uint64_t cellsVisited =
+        0;  // CPU: grid cells whose squares the approximation examined for texels to evaluate (0 on GL)
+    uint64_t cellsRead =
+        0;  // CPU out of core (Scene): cells read from the grid file for the texels summed, kernel margins
+    uint64_t regionsRead = 0;          // included, in that many blocks of texels (0 in memory and on GL)
+    int pyramidLevel = -1;             // the surface pyramid level whose spacing is texelM, -1 without a pyramid
+    uint64_t pyramidTexels = 0;        // visible texels copied from the pyramid's samples (the others: Gaussians)
+    uint64_t pyramidInterpolated = 0;  // visible texels interpolated from a coarser level (pyramidInterpolateLevels)
+    int pyramidInterpolatedUp = 0;     // the most levels above the texels' own one of them was interpolated from
     // Largest |texel - exact surface| of the texels copied from the pyramid [m]: a sample is the exact surface
     // rounded to float once, so half a float ulp of the largest |height|; 0 when none was copied. The texels
     // summed from the kernels in float are not bounded here (tests: within 1 mm of the exact surface), nor are the
@@ -107,9 +109,9 @@ struct Timings {
     // copy of the finished frame to host memory (render(); a viewer drawing the texture has none). totalMs is
     // the wall time of the whole call, both included.
     double gpuMs = 0, readbackMs = 0;
-    // GL backend: handing the driver each cascade's rows (the texels kept from the last frame, which stay on the GPU, and
-    // the spans to evaluate) and, out of core, the texels the CPU evaluated, packed (in totalMs, not in gpuMs); and the
-    // bytes handed over.
+    // GL backend: handing the driver each cascade's rows (the texels kept from the last frame, which stay on the GPU,
+    // and the spans to evaluate) and, out of core, the texels the CPU evaluated, packed (in totalMs, not in gpuMs); and
+    // the bytes handed over.
     double uploadMs = 0;
     uint64_t uploadBytes = 0;
     // GL backend out of core with a pyramid: the texels copied on the GPU from the pyramid tiles resident there (the
@@ -145,8 +147,8 @@ public:
     // Out of core: `file` and `pyramid` must outlive the scene. The bounds come from the file's stored summary
     // (format 1.2; older files are read whole once by GridRegionReader). Throws hc::Error if the pyramid is not the
     // file's grid's or was built for another kernel.
-    Scene(const GridRegionReader& file, const influence::KernelParams& params, const influence::SurfacePyramid* pyramid = nullptr,
-          const influence::SurfacePyramid* waterPyramid = nullptr);
+    Scene(const GridRegionReader& file, const influence::KernelParams& params,
+          const influence::SurfacePyramid* pyramid = nullptr, const influence::SurfacePyramid* waterPyramid = nullptr);
 
     bool outOfCore() const { return file_ != nullptr; }
     // The grid: in memory its cells; out of core its shape only (geometry, CRS, layers; no cells).
@@ -218,7 +220,8 @@ public:
 
 private:
     friend Frame renderFrame(const Scene&, const Camera&, const RenderOptions&, Timings&, CascadeCache*);
-    friend struct detail::CacheAccess;  // the GL backend out of core keeps its cascades' shapes here (detail::approximateOnCpu)
+    friend struct detail::CacheAccess;  // the GL backend out of core keeps its cascades' shapes here
+                                        // (detail::approximateOnCpu)
     std::unique_ptr<Impl> impl_;
 };
 
@@ -232,7 +235,8 @@ double cameraBelowTerrainM(const Scene& scene, const Camera& camera);
 // (every ray misses), and no cascade is fitted or evaluated (Timings::cascades is empty).
 // Throws hc::Error for invalid camera or options. With a cache, reuses the texels the last
 // frame of that cache evaluated (the same picture, to float rounding) and leaves this frame's there.
-Frame renderFrame(const Scene& scene, const Camera& camera, const RenderOptions& options, Timings& timings, CascadeCache* cache = nullptr);
+Frame renderFrame(const Scene& scene, const Camera& camera, const RenderOptions& options, Timings& timings,
+                  CascadeCache* cache = nullptr);
 
 // A camera that frames the whole grid obliquely, as a person would pick: from the south-south-west,
 // 35 degrees down, far enough back that the grid's extent fills the view.

@@ -20,7 +20,8 @@ public:
     // An option with a value; `help` states the units and the default.
     void option(const std::string& name, const std::string& value, const std::string& help, std::string& target);
     void option(const std::string& name, const std::string& value, const std::string& help, double& target);
-    void option(const std::string& name, const std::string& value, const std::string& help, std::optional<double>& target);
+    void option(const std::string& name, const std::string& value, const std::string& help,
+                std::optional<double>& target);
     void option(const std::string& name, const std::string& value, const std::string& help, int& target);
     void option(const std::string& name, const std::string& value, const std::string& help, unsigned& target);
     // A positional argument.

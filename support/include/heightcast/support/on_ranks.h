@@ -19,7 +19,8 @@ inline int runOnRanks(const char* program, int& argc, char**& argv, const std::f
     std::optional<ranks::Session> session;
     return run(program, [&]() -> int {
         session.emplace(argc, argv);
-        if (ranks::rank() != 0 && !std::freopen("/dev/null", "w", stdout)) throw Error("cannot silence standard output");
+        if (ranks::rank() != 0 && !std::freopen("/dev/null", "w", stdout))
+            throw Error("cannot silence standard output");
         try {
             return body();
         } catch (const ranks::RanksError&) {

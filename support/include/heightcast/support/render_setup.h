@@ -20,12 +20,12 @@ struct RenderSetup {
     render::RenderOptions options;
     influence::KernelParams params;
     bool cells = false, noLegend = false, noPyramid = false, outOfCore = false;
-    double nearM = 0, farM = 0;                // --near, --far [m]; 0: from the scene
-    unsigned step = 0;                         // --step: the water step shown
+    double nearM = 0, farM = 0;  // --near, --far [m]; 0: from the scene
+    unsigned step = 0;           // --step: the water step shown
 
     // Set by finish():
-    int width = 0, height = 0;                 // from --size [pixels]
-    std::optional<render::Camera> camera;      // from --camera or --look-at, validated; empty: the overview
+    int width = 0, height = 0;             // from --size [pixels]
+    std::optional<render::Camera> camera;  // from --camera or --look-at, validated; empty: the overview
 
     explicit RenderSetup(std::string defaultSize) : size(std::move(defaultSize)) {}
     // --camera, --look-at (exclusive with each other and with `alsoExclusive`, e.g. "--view"), --near, --far.
@@ -48,7 +48,8 @@ struct LoadedScene {
     influence::InfluenceLists lists;
     std::unique_ptr<GridRegionReader> file;  // out of core; then grid and lists stay empty
     std::optional<influence::SurfacePyramid> pyramid;
-    std::optional<influence::SurfacePyramid> basePyramid;  // where `pyramid` is a later step's water pyramid: the first step's
+    std::optional<influence::SurfacePyramid>
+        basePyramid;  // where `pyramid` is a later step's water pyramid: the first step's
     // In memory, a grid of several water steps: its digests (hashed once at load) and the shown step's hashes (from the
     // file's step table, checked as the step was read): a step switch hashes the step's values only.
     std::optional<StaticDigests> digests;
@@ -58,9 +59,9 @@ struct LoadedScene {
 // In memory (a cache named with --cache, one beside the grid, or none and not `outOfCoreWithoutCache`): reads the
 // grid, loads or (re)builds the cache saying why on stderr as "PROGRAM: NOTE". Out of core (--out-of-core, or no
 // cache beside the grid, none named and `outOfCoreWithoutCache`): opens the grid file for region reads
-// (render::Scene), saying so. Then reads the surface pyramid (default: the grid's path with .hcp) when there is a valid one
-// (saying which, or why none is used: missing, stale or damaged ones are not rebuilt here: hc-influence does),
-// and prepares the scene, all for water step setup.step (the step's own pyramid: influence::defaultPyramidPath; a later
+// (render::Scene), saying so. Then reads the surface pyramid (default: the grid's path with .hcp) when there is a valid
+// one (saying which, or why none is used: missing, stale or damaged ones are not rebuilt here: hc-influence does), and
+// prepares the scene, all for water step setup.step (the step's own pyramid: influence::defaultPyramidPath; a later
 // step's water pyramid with the first step's as its base).
 // Throws hc::Error.
 std::unique_ptr<LoadedScene> loadScene(const char* program, const std::string& gridPath, const RenderSetup& setup,
@@ -69,7 +70,8 @@ std::unique_ptr<LoadedScene> loadScene(const char* program, const std::string& g
 // Moves a loaded scene to water step `step`: in memory the grid reads that step's section only (the lists stay: they
 // depend on the structure alone); out of core a reader of that step. Then that step's pyramid and a new scene (notes
 // only for problems). Throws hc::Error.
-void switchStep(const char* program, LoadedScene& s, const std::string& gridPath, const RenderSetup& setup, size_t step);
+void switchStep(const char* program, LoadedScene& s, const std::string& gridPath, const RenderSetup& setup,
+                size_t step);
 
 // The camera the options gave, or the overview framing the whole grid; of the given size, with --near/--far.
 render::Camera initialCamera(const RenderSetup& setup, const render::Scene& scene);

@@ -49,26 +49,26 @@ constexpr double kCoarsestM = 96.0;  // every scenario's coarsest cell [m]
 
 // Everything that shapes one synthetic landscape. Lengths in metres, heights in metres above sea level.
 struct Landscape {
-    double z0;                  // floodplain floor at the upstream (west) edge
-    double riverSlope;          // floor drop per metre downstream (+x)
-    double riverYFraction;      // mean centreline, as a fraction of the extent in y
+    double z0;              // floodplain floor at the upstream (west) edge
+    double riverSlope;      // floor drop per metre downstream (+x)
+    double riverYFraction;  // mean centreline, as a fraction of the extent in y
     double meanderAmp[2], meanderLen[2];
-    double floorHalfWidth;      // flat floodplain each side of the centreline
-    double sideWidth;           // valley sides, from the floodplain up to the uplands
+    double floorHalfWidth;  // flat floodplain each side of the centreline
+    double sideWidth;       // valley sides, from the floodplain up to the uplands
     double channelHalfWidth, channelDepth;
-    double floodHeight;         // water level above the floodplain floor
-    double microAmp;            // floodplain undulations (max amplitude)
-    double reliefAmp;           // uplands above the floor (mean); large-scale waves add +-50 %
-    double hillAmp;             // small-scale hills on the uplands (max amplitude)
+    double floodHeight;  // water level above the floodplain floor
+    double microAmp;     // floodplain undulations (max amplitude)
+    double reliefAmp;    // uplands above the floor (mean); large-scale waves add +-50 %
+    double hillAmp;      // small-scale hills on the uplands (max amplitude)
     uint64_t seed;
 };
 
 struct Scenario {
     const char* name;
     double extentXKm, extentYKm, finestM;
-    double reportCellsM;        // the report's cell count, millions
+    double reportCellsM;               // the report's cell count, millions
     double gpuApproxMs, gpuRaycastMs;  // the report's GTX 1080 times
-    double originX, originY;    // world position of the south-west corner (UTM-like, to exercise the camera maths)
+    double originX, originY;  // world position of the south-west corner (UTM-like, to exercise the camera maths)
     Landscape land;
 };
 
@@ -86,8 +86,8 @@ public:
     explicit Terrain(const Scenario& sc);
 
     struct Sample {
-        float z, depth;   // terrain [m]; water depth [m], 0 where dry
-        float bank;       // distance to the nearest channel bank [m] (centreline distance - half width)
+        float z, depth;  // terrain [m]; water depth [m], 0 where dry
+        float bank;      // distance to the nearest channel bank [m] (centreline distance - half width)
     };
     Sample at(double xLocal, double yLocal) const;
     // Centreline y of the river at x [m], and its slope dy/dx.
@@ -107,12 +107,12 @@ private:
 };
 
 struct Generated {
-    Grid grid;                 // layers elevation and water_depth; origin at the scenario's south-west corner
-    double thresholdM = 0;     // the calibrated T
+    Grid grid;              // layers elevation and water_depth; origin at the scenario's south-west corner
+    double thresholdM = 0;  // the calibrated T
     double calibrationS = 0, buildS = 0;  // wall time finding T, and building the grid
     uint64_t sampleTiles = 0, tiles = 0;
-    bool finestRaised = false; // the finest size was doubled (see the top of this file)
-    bool finestLowered = false;// the finest size was halved (the same)
+    bool finestRaised = false;   // the finest size was doubled (see the top of this file)
+    bool finestLowered = false;  // the finest size was halved (the same)
 };
 
 // The cell count a scale asks for: the report's count / scale (scale > 0; below 1 is more than the report's).

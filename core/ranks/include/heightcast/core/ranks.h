@@ -40,8 +40,8 @@ public:
     Session& operator=(const Session&) = delete;
 };
 
-int rank();         // K: 0 .. count() - 1
-int count();        // N: 1 without mpirun
+int rank();   // K: 0 .. count() - 1
+int count();  // N: 1 without mpirun
 bool builtWithMpi();
 inline bool distributed() { return count() > 1; }
 // "rank K/N" (1-based K, as the logs print it).
@@ -79,7 +79,8 @@ template <typename T>
 std::vector<T> receiveVectorFrom(int from) {
     static_assert(std::is_trivially_copyable_v<T>);
     const std::vector<std::byte> b = receiveFrom(from);
-    if (b.size() % sizeof(T) != 0) throw Error("rank message of " + std::to_string(b.size()) + " bytes is no whole number of items");
+    if (b.size() % sizeof(T) != 0)
+        throw Error("rank message of " + std::to_string(b.size()) + " bytes is no whole number of items");
     std::vector<T> out(b.size() / sizeof(T));
     if (!b.empty()) std::memcpy(out.data(), b.data(), b.size());
     return out;

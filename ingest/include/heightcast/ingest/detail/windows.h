@@ -56,7 +56,8 @@ public:
     virtual const Raster& shape() const = 0;
     // Working pixels [col0, col0 + w) x [row0, row0 + h) (row 0 north) into values (w h, NaN = nodata, metres) and
     // rounding (empty, or w h: Raster::roundingM).
-    virtual void read(size_t col0, size_t row0, size_t w, size_t h, std::vector<float>& values, std::vector<float>& rounding) = 0;
+    virtual void read(size_t col0, size_t row0, size_t w, size_t h, std::vector<float>& values,
+                      std::vector<float>& rounding) = 0;
     // What the reads so far found.
     virtual const SourceTally& tally() const = 0;
     // Once every rank has read its windows, before anything is written: the whole working raster's valid pixels (every

@@ -49,19 +49,19 @@ using Texels = std::vector<float, UninitialisedAllocator<float>>;
 // One heightfield in a cascade: heights at texel centres and its max mipmap over patches.
 // -inf marks "no surface" (a hole, dry land for water, or a texel outside the visible polygon).
 struct Heightfield {
-    int n = 0;                             // texels per side; patches per side = n - 1
-    Texels h;                              // n * n [m, local z]
-    std::vector<std::vector<float>> mip;   // mip[0]: (n-1)^2 patch maxima, then halving to 1 x 1
-    std::vector<int> mipSide;              // side of each mip level
-    void buildMip(unsigned threads);  // the rows of its large levels on `threads` workers (0 = all cores)
+    int n = 0;                            // texels per side; patches per side = n - 1
+    Texels h;                             // n * n [m, local z]
+    std::vector<std::vector<float>> mip;  // mip[0]: (n-1)^2 patch maxima, then halving to 1 x 1
+    std::vector<int> mipSide;             // side of each mip level
+    void buildMip(unsigned threads);      // the rows of its large levels on `threads` workers (0 = all cores)
 };
 
 // Levels of at least this many nodes are built on several workers (waking parallelFor's threads costs microseconds).
 constexpr size_t kMipParallelNodes = size_t{1} << 16;
 
 struct CascadeTextures {
-    Heightfield terrain, water;            // water: surface height where wet (depth > min), else -inf
-    Texels depth;                          // water depth at texels (0 where dry)
+    Heightfield terrain, water;  // water: surface height where wet (depth > min), else -inf
+    Texels depth;                // water depth at texels (0 where dry)
     bool hasWater = false;
     // With water: the larger of the two max mipmaps, level by level (buildBothMip, after both buildMip): the ray walk
     // over both surfaces reads one maximum a node instead of two. Empty: the walk reads both.
@@ -79,15 +79,15 @@ struct TexelReuse {
 
 // What one cascade's approximation did, in counts that do not depend on the machine.
 struct ApproximationWork {
-    uint64_t gaussians = 0;     // kernel evaluations
-    uint64_t cellsVisited = 0;  // cells whose squares were examined for texel centres to evaluate
-    uint64_t reusedTexels = 0;  // visible texels copied from `reuse`
-    uint64_t pyramidTexels = 0; // visible texels copied from the scene's surface pyramid (and not evaluated again)
-    int pyramidLevel = -1;      // the pyramid level whose spacing is the cascade's texel size, -1 when none fits
+    uint64_t gaussians = 0;      // kernel evaluations
+    uint64_t cellsVisited = 0;   // cells whose squares were examined for texel centres to evaluate
+    uint64_t reusedTexels = 0;   // visible texels copied from `reuse`
+    uint64_t pyramidTexels = 0;  // visible texels copied from the scene's surface pyramid (and not evaluated again)
+    int pyramidLevel = -1;       // the pyramid level whose spacing is the cascade's texel size, -1 when none fits
     uint64_t pyramidInterpolated = 0;  // visible texels interpolated from a coarser pyramid level (interpolateLevels)
     int pyramidInterpolatedUp = 0;     // the most levels above the cascade's one of them was interpolated from
-    uint64_t regionsRead = 0;   // out of core: blocks of texels whose cells were read from the grid file
-    uint64_t cellsRead = 0;     // out of core: the cells those regions held (kernel margins included)
+    uint64_t regionsRead = 0;          // out of core: blocks of texels whose cells were read from the grid file
+    uint64_t cellsRead = 0;            // out of core: the cells those regions held (kernel margins included)
 };
 
 // A cascade's row j as approximate() filled it for a caller that keeps the last frame's texels itself (the GL backend
@@ -104,8 +104,10 @@ struct RowFill {
 // that writes texels approximate() left to it into the textures after all (its atlas has no slot for their tile).
 inline void widenSpan(RowFill& row, int span, int lo, int hi) {
     TexelSpan& s = row.span(span);
-    if (s.empty()) s.first = lo, s.last = hi;
-    else s.first = std::min(s.first, lo), s.last = std::max(s.last, hi);
+    if (s.empty())
+        s.first = lo, s.last = hi;
+    else
+        s.first = std::min(s.first, lo), s.last = std::max(s.last, hi);
 }
 
 // The texels that approximate() with `tiles` leaves to the caller to copy from the surface pyramid (the GL backend out
@@ -115,26 +117,30 @@ inline void widenSpan(RowFill& row, int span, int lo, int hi) {
 // those of a tile in the table are copied exactly where that tile's `copied` bit is set (every texel of a span to
 // evaluate that lies in a stored tile: no other is), under the water rule of surface.h as copySamples() copies them.
 struct PyramidTiles {
-    int side = 0;                  // samples a tile side (a power of two, <= 16); 0: nothing is copied
-    size_t plane = 0;              // samples a tile channel (side^2); channel c of a tile at [c * plane]
+    int side = 0;      // samples a tile side (a power of two, <= 16); 0: nothing is copied
+    size_t plane = 0;  // samples a tile channel (side^2); channel c of a tile at [c * plane]
     int64_t originI = 0, originJ = 0;
-    int width = 0, height = 0;     // tiles
-    std::vector<const float*> tile;    // per table entry: the tile's first sample, nullptr where nothing is copied from it
-    std::vector<const float*> water;   // its water levels (wet shares a plane after): its own channels 1 and 2, or the
-                                       // water pyramid's tile at the same place in a later step of a scenario; nullptr: dry
-    std::vector<uint16_t> copied;      // per entry, `side` rows: bit c of row r set where sample (c, r) is copied to a texel
-    std::vector<RowFill> spans;        // per texel row: its spans to evaluate before the copies were taken out (a and b)
+    int width = 0, height = 0;  // tiles
+    std::vector<const float*>
+        tile;  // per table entry: the tile's first sample, nullptr where nothing is copied from it
+    std::vector<const float*>
+        water;  // its water levels (wet shares a plane after): its own channels 1 and 2, or the
+                // water pyramid's tile at the same place in a later step of a scenario; nullptr: dry
+    std::vector<uint16_t>
+        copied;                  // per entry, `side` rows: bit c of row r set where sample (c, r) is copied to a texel
+    std::vector<RowFill> spans;  // per texel row: its spans to evaluate before the copies were taken out (a and b)
 
-    // Texels finer than every level (the cascade's level t < 0) left to the caller to interpolate from level 0, `up` = -t
-    // levels above, as PyramidInterpolator does (the GL backend does it on the GPU from its atlas: interpolate.comp), in
-    // blocks: a block is the footprint of one level-0 tile in texels, (levelSide << up)^2 of them, and is left to the
-    // caller where the Catmull-Rom stencils of all its texels lie in the 3 x 3 level-0 tiles around it and those are all
-    // stored, all numbers, and all dry or all wet: there the interpolator takes level 0 and refuses no texel. Every texel
-    // of a span to evaluate (`spans`) in a block is the caller's; no other is. They count as interpolated.
+    // Texels finer than every level (the cascade's level t < 0) left to the caller to interpolate from level 0, `up` =
+    // -t levels above, as PyramidInterpolator does (the GL backend does it on the GPU from its atlas:
+    // interpolate.comp), in blocks: a block is the footprint of one level-0 tile in texels, (levelSide << up)^2 of
+    // them, and is left to the caller where the Catmull-Rom stencils of all its texels lie in the 3 x 3 level-0 tiles
+    // around it and those are all stored, all numbers, and all dry or all wet: there the interpolator takes level 0 and
+    // refuses no texel. Every texel of a span to evaluate (`spans`) in a block is the caller's; no other is. They count
+    // as interpolated.
     struct Block {
         int64_t i0 = 0, j0 = 0;                       // its first texel (it may lie left of or below texel 0)
-        std::array<const float*, 9> tile{}, water{};  // level 0's tiles around it, (dx, dy) in -1..1 at 3 (dy + 1) + dx + 1;
-                                                      // water (levels, wet shares a plane after) nullptr: dry
+        std::array<const float*, 9> tile{}, water{};  // level 0's tiles around it, (dx, dy) in -1..1 at 3 (dy + 1) + dx
+                                                      // + 1; water (levels, wet shares a plane after) nullptr: dry
     };
     static constexpr int kMaxBlockUp = 3;  // blocks only up to this many levels below level 0 (a block of 128^2 texels)
     int up = 0;                            // levels from the cascade's up to level 0 (0: no blocks)
@@ -143,9 +149,9 @@ struct PyramidTiles {
     std::vector<Block> blocks;
 };
 
-// Calls fn(j, lo, hi, span) for each run of texels lo .. hi of row j that lie in `block` and in span `span` (0: a, 1: b)
-// of that row's spans to evaluate (tiles.spans), in a cascade of n texels a side: the texels of the block that are the
-// caller's.
+// Calls fn(j, lo, hi, span) for each run of texels lo .. hi of row j that lie in `block` and in span `span` (0: a, 1:
+// b) of that row's spans to evaluate (tiles.spans), in a cascade of n texels a side: the texels of the block that are
+// the caller's.
 template <class Fn>
 void forEachBlockRun(const PyramidTiles& tiles, const PyramidTiles::Block& block, int n, Fn&& fn) {
     const int64_t side = int64_t(tiles.levelSide) << tiles.up;
@@ -162,8 +168,9 @@ void forEachBlockRun(const PyramidTiles& tiles, const PyramidTiles::Block& block
 // The texels of `block` (approximate() with `tiles` left them to the caller) interpolated on the CPU into tex, as
 // approximate() interpolates, for a caller that cannot take them (the GL backend whose atlas has no slot left), and
 // each RowFill span of `rows` widened to hold them. Returns the texels written.
-uint64_t interpolateBlock(const Scene& scene, const Cascade& c, const PyramidTiles& tiles, const PyramidTiles::Block& block, double waterMinDepthM,
-                          CascadeTextures& tex, std::vector<RowFill>& rows);
+uint64_t interpolateBlock(const Scene& scene, const Cascade& c, const PyramidTiles& tiles,
+                          const PyramidTiles::Block& block, double waterMinDepthM, CascadeTextures& tex,
+                          std::vector<RowFill>& rows);
 
 // The error bound of a texel copied from the surface pyramid (CascadeStats::errorBoundM) [m].
 double pyramidCopyBoundM(const Scene& scene);
@@ -171,7 +178,8 @@ double pyramidCopyBoundM(const Scene& scene);
 // Copies `count` pyramid samples into a row of a cascade's textures with the water rule of surface.h: s the elevations,
 // w (nullptr: dry) the water levels with the wet shares at w + plane; NaN elevations (outside every cell) and dry
 // texels leave h, depth and water as they are. Returns the texels with a surface.
-int copySamples(const float* s, const float* w, size_t plane, int count, float minDepth, float* h, float* depth, float* water);
+int copySamples(const float* s, const float* w, size_t plane, int count, float minDepth, float* h, float* depth,
+                float* water);
 
 // The RowFill of every row of c with the texels kept from `reuse` (none without), adding their count to `kept`: what
 // approximate() with `rows` gives, without evaluating anything (the GL backend in memory sums the texels on the GPU).
@@ -181,26 +189,27 @@ std::vector<RowFill> rowFills(const Cascade& c, const TexelReuse* reuse, uint64_
 // visible there too are copied; with a scene pyramid at the cascade's texel size, texels whose samples it holds
 // are copied from it; the others are evaluated. The cells visited follow the texels evaluated (a few per texel),
 // not the cascade's area. With `rows`, the kept texels are not copied and the texels outside every span are not
-// written: only the evaluated spans, which go into `rows` with the kept ones (RowFill). With `rows` and `tiles` too, the
-// texels copied from the pyramid are not written either but marked in `tiles` (PyramidTiles), and each RowFill span
+// written: only the evaluated spans, which go into `rows` with the kept ones (RowFill). With `rows` and `tiles` too,
+// the texels copied from the pyramid are not written either but marked in `tiles` (PyramidTiles), and each RowFill span
 // shrinks to the texels written (interpolated or summed), from the first to the last of them: the caller copies the
 // marked texels itself, after the spans, and interpolates the texels of the blocks listed there (PyramidTiles::Block).
-ApproximationWork approximate(const Scene& scene, const Cascade& c, CascadeTextures& tex, double waterMinDepthM, unsigned threads,
-                              const TexelReuse* reuse = nullptr, int interpolateLevels = 0, std::vector<RowFill>* rows = nullptr,
-                              PyramidTiles* tiles = nullptr);
+ApproximationWork approximate(const Scene& scene, const Cascade& c, CascadeTextures& tex, double waterMinDepthM,
+                              unsigned threads, const TexelReuse* reuse = nullptr, int interpolateLevels = 0,
+                              std::vector<RowFill>* rows = nullptr, PyramidTiles* tiles = nullptr);
 
 // One ray through the cascades (raycast.cpp).
 struct Hit {
     bool hit = false;
-    double t = 0;                          // distance along the ray [m]
-    double nx = 0, ny = 0, nz = 1;         // unit normal (unless slopeOnly)
-    // The hit is on a smooth surface that rises gx and gy [m] a texel of texelM [m] along x and y, and nx, ny, nz are not
-    // set: the caller takes the normal from normalOfSlope(), as castRays does for many hits at once, in vector registers.
+    double t = 0;                   // distance along the ray [m]
+    double nx = 0, ny = 0, nz = 1;  // unit normal (unless slopeOnly)
+    // The hit is on a smooth surface that rises gx and gy [m] a texel of texelM [m] along x and y, and nx, ny, nz are
+    // not set: the caller takes the normal from normalOfSlope(), as castRays does for many hits at once, in vector
+    // registers.
     bool slopeOnly = false;
     double gx = 0, gy = 0, texelM = 1;
-    double depth = 0;                      // water depth at the hit (water hits), else 0
+    double depth = 0;  // water depth at the hit (water hits), else 0
     bool water = false;
-    bool wall = false;                     // on a cut face of the terrain block (raycast.cpp): a hole's or the domain's edge, the bottom
+    bool wall = false;  // on a cut face of the terrain block (raycast.cpp): a hole's or the domain's edge, the bottom
     int cascade = -1;
 };
 
@@ -219,9 +228,9 @@ inline void normalOfSlope(double riseX, double riseY, double texelM, double& nx,
 struct RayContext {
     const CascadeFit* fit;
     const std::vector<CascadeTextures>* tex;
-    glm::dvec3 eyeLocal;                   // where every ray starts [m, local]
+    glm::dvec3 eyeLocal;  // where every ray starts [m, local]
     double nearM, farM;
-    double zFloor;                         // the terrain block's bottom: the grid's lowest elevation, local z [m]
+    double zFloor;  // the terrain block's bottom: the grid's lowest elevation, local z [m]
 };
 
 // The rays of a tile of pixels as one beam (raycast.cpp): every ray eye + tau (forward + sx right + sy up) for (sx, sy)
@@ -235,7 +244,8 @@ public:
     // (sx0, sy0) and (sx1, sy1): opposite corners of the rectangle, in CameraBasis image-plane units (the pixels'
     // centres at the tile's corners).
     // `outer`: a beam holding this one (its rays a subset), whose start depths this one's marches start from.
-    Beam(const RayContext& ctx, const CameraBasis& basis, double sx0, double sy0, double sx1, double sy1, Beam* outer = nullptr);
+    Beam(const RayContext& ctx, const CameraBasis& basis, double sx0, double sy0, double sx1, double sy1,
+         Beam* outer = nullptr);
     // The depth tau before which no ray of the beam meets cascade k's surfaces or walls; marched once a tile, when
     // a ray first walks cascade k.
     double startDepth(size_t k);
@@ -250,13 +260,13 @@ private:
     double march(size_t k);
     const RayContext& ctx_;
     Beam* outer_;
-    glm::dvec3 lo_, hi_;           // the componentwise least and largest of the four corner directions
-    double width_ = 0;             // the rectangle's longer side [image-plane units ~ radians]
-    double maxLen_ = 1;            // the longest corner direction (t = tau |direction|, |direction| >= 1)
+    glm::dvec3 lo_, hi_;              // the componentwise least and largest of the four corner directions
+    double width_ = 0;                // the rectangle's longer side [image-plane units ~ radians]
+    double maxLen_ = 1;               // the longest corner direction (t = tau |direction|, |direction| >= 1)
     double minDot_ = 0, maxDot_ = 0;  // the least and largest horizontal rate along the fit's view direction
-    double centreLen_ = 1;         // |the centre's direction|
-    std::array<double, 8> depth_;  // per cascade (RenderOptions: at most 4); NaN until marched
-    std::array<bool, 8> passed_{};  // per cascade: the march passed the whole slab (passesOver)
+    double centreLen_ = 1;            // |the centre's direction|
+    std::array<double, 8> depth_;     // per cascade (RenderOptions: at most 4); NaN until marched
+    std::array<bool, 8> passed_{};    // per cascade: the march passed the whole slab (passesOver)
 };
 
 // What each ray's walk through each cascade needs from its direction alone (raycast.cpp): its span there (the
@@ -276,16 +286,17 @@ struct RaySetups {
 // The setups of n rays with unit directions (dx[i], dy[i], dz[i]), into `out` (its vectors reused from call to call).
 void setUpRays(const RayContext& ctx, size_t n, const double* dx, const double* dy, const double* dz, RaySetups& out);
 
-// dir: unit direction of the ray, setups.*[ray] its setup (setUpRays). With a beam holding the ray (its direction before
-// normalising was dirLength times dir), each cascade's walk starts where the beam's march allows.
-Hit castRay(const RayContext& ctx, const glm::dvec3& dir, const RaySetups& setups, size_t ray, Beam* beam = nullptr, double dirLength = 1);
+// dir: unit direction of the ray, setups.*[ray] its setup (setUpRays). With a beam holding the ray (its direction
+// before normalising was dirLength times dir), each cascade's walk starts where the beam's march allows.
+Hit castRay(const RayContext& ctx, const glm::dvec3& dir, const RaySetups& setups, size_t ray, Beam* beam = nullptr,
+            double dirLength = 1);
 
 // What approximateOnCpu() filled of a cascade, for a backend that keeps the last frame's texels itself.
 struct CascadeFill {
     std::vector<RowFill> rows;  // per texel row: the texels kept and the spans evaluated
     PyramidTiles tiles;         // with approximateOnCpu's pyramidTiles: the texels left to copy from the pyramid
-    int from = -1;              // the last frame's cascade (its index in that frame's fit) whose texels are kept, -1: none
-    int di = 0, dj = 0;         // this frame's texel (i, j) is that one's (i + di, j + dj)
+    int from = -1;       // the last frame's cascade (its index in that frame's fit) whose texels are kept, -1: none
+    int di = 0, dj = 0;  // this frame's texel (i, j) is that one's (i + di, j + dj)
 };
 
 // Stage 2 on the CPU for a backend that runs the later stages elsewhere and keeps the cascades' texels from one frame
@@ -298,19 +309,20 @@ struct CascadeFill {
 // pyramid are left to the backend too (CascadeFill::tiles; approximate() with `tiles`), and `use` may write into the
 // textures (the texels it copies there itself). The cache holds the cascades' shapes for the next frame, not their
 // texels: it must not be handed to renderFrame().
-void approximateOnCpu(const Scene& scene, const CascadeFit& fit, const RenderOptions& options, CascadeCache& cache, Timings& timings,
-                      const std::function<void(size_t, CascadeTextures&, CascadeFill&)>& use, bool pyramidTiles = false);
+void approximateOnCpu(const Scene& scene, const CascadeFit& fit, const RenderOptions& options, CascadeCache& cache,
+                      Timings& timings, const std::function<void(size_t, CascadeTextures&, CascadeFill&)>& use,
+                      bool pyramidTiles = false);
 // The same plan without evaluating a texel, for a backend that evaluates them itself (the GL backend in memory): each
 // cascade's rows and the last frame's cascade it keeps texels of (CascadeFill), their count in timings.cascades[k]
 // (which must hold the frame's cascades) as reusedTexels. The cache holds the cascades' shapes for the next frame.
-std::vector<CascadeFill> planCascades(const Scene& scene, const CascadeFit& fit, const RenderOptions& options, CascadeCache& cache,
-                                      Timings& timings);
+std::vector<CascadeFill> planCascades(const Scene& scene, const CascadeFit& fit, const RenderOptions& options,
+                                      CascadeCache& cache, Timings& timings);
 
 // Per-frame set-up both backends share (renderer.cpp): the eye in the local frame, near and far along the
 // ray (the camera's, else from the scene's bounds), and the view volume cascade fitting takes.
 struct FrameSetup {
     CameraBasis basis;
-    glm::dvec3 eyeLocal;                   // the camera, local [m]
+    glm::dvec3 eyeLocal;  // the camera, local [m]
     double nearM, farM;
     ViewVolume view;
 };
@@ -323,17 +335,18 @@ Camera localCamera(const Grid& grid, const Camera& camera);
 void frameToWorldAxes(const Grid& grid, Frame& f);
 // The frame's cascades (stage 1 of both backends), with Timings' fittingMs and view direction. A camera below
 // the terrain (cameraBelowTerrainM > 0) sees nothing: no cascade is fitted (an empty fit).
-CascadeFit fitFrame(const Scene& scene, const Camera& camera, const FrameSetup& setup, const RenderOptions& options, Timings& timings);
+CascadeFit fitFrame(const Scene& scene, const Camera& camera, const FrameSetup& setup, const RenderOptions& options,
+                    Timings& timings);
 // A cascade's extent and texels as Timings reports them (both backends; the work counts are filled by the caller).
 CascadeStats statsOf(const Cascade& c);
 
 // Where the legend goes and what it says (drawn by renderFrame() and by shade.comp).
 struct LegendLayout {
     bool shown = false;
-    bool depth = false;  // the water-depth ramp, else the elevation ramp
-    bool layer = false;  // RenderOptions::colorLayer's ramp (before `depth`)
+    bool depth = false;                                 // the water-depth ramp, else the elevation ramp
+    bool layer = false;                                 // RenderOptions::colorLayer's ramp (before `depth`)
     int x0 = 0, y0 = 0, barW = 0, barH = 0, scale = 1;  // bar's top-left pixel (row 0 at the top) and size
-    std::string hi, lo;  // labels at the bar's top and bottom
+    std::string hi, lo;                                 // labels at the bar's top and bottom
 };
 LegendLayout legendLayout(const Scene& scene, const RenderOptions& options, int width, int height);
 

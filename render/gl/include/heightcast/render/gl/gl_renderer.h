@@ -61,8 +61,8 @@ public:
     // Splits the influence lists of renderers made after this call into chunks of at most `entries`
     // entries (0: as large as the driver allows), so that tests exercise the chunked lists on small grids.
     static void limitIndexChunksForTest(uint64_t entries);
-    // Holds the pyramid tiles of renderers made after this call (out of core) in atlases of at most `tiles` slots (0: as
-    // many as their storage allows), so that tests exercise eviction and a frame that needs more tiles than fit.
+    // Holds the pyramid tiles of renderers made after this call (out of core) in atlases of at most `tiles` slots (0:
+    // as many as their storage allows), so that tests exercise eviction and a frame that needs more tiles than fit.
     static void limitAtlasForTest(uint32_t tiles);
     // Compiles and links `source` as a compute shader named `name` and deletes it again. Throws
     // hc::Error with the name and the driver's info log when it fails.
