@@ -26,6 +26,10 @@
 
 namespace hc::fuzz {
 
+// Every target that includes this reads files into exact-size heap blocks (readFilesIntoHeap), set before the first
+// input: AddressSanitizer then sees a read past a file's end.
+inline const bool kHeapFiles = (hc::readFilesIntoHeap(true), true);
+
 // A last section of the container's block-checksum kind whose size fits the sections before it gets their
 // block CRCs rewritten (its block size and zero field as they are), so mutations reach past the block checks.
 inline void fixBlockChecksums(std::vector<std::byte>& b, uint32_t count) {

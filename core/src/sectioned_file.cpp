@@ -48,6 +48,12 @@ struct SectionedFileReader::Checks {
     std::atomic<uint64_t> bytesChecked{0};
 };
 
+namespace {
+std::atomic<bool> heapFiles{false};  // readFilesIntoHeap
+}  // namespace
+
+void readFilesIntoHeap(bool on) { heapFiles.store(on, std::memory_order_relaxed); }
+
 MappedFile::MappedFile(const std::string& path) {
     std::error_code ec;
     if (!std::filesystem::exists(path, ec)) throw Error(path + ": no such file");
@@ -60,10 +66,7 @@ MappedFile::MappedFile(const std::string& path) {
         throw Error(path + ": not a regular file");
     }
     size_ = static_cast<size_t>(st.st_size);
-#ifdef HC_FUZZ_HEAP_FILES
-    // Fuzz builds (HC_FUZZ, fuzz/): the file goes into a heap block of exactly its size, so AddressSanitizer
-    // reports a read past its end; a mapping would quietly return the zeros at the end of its last page.
-    if (size_ > 0) {
+    if (size_ > 0 && heapFiles.load(std::memory_order_relaxed)) {  // readFilesIntoHeap (the fuzz targets)
         auto* p = static_cast<std::byte*>(::operator new (size_, std::align_val_t{kFileSectionAlign}));
         for (size_t done = 0; done < size_;) {
             const ssize_t n = ::pread(fd, p + done, size_ - done, static_cast<off_t>(done));
@@ -75,9 +78,8 @@ MappedFile::MappedFile(const std::string& path) {
             done += static_cast<size_t>(n);
         }
         data_ = p;
-    }
-#else
-    if (size_ > 0) {
+        heap_ = true;
+    } else if (size_ > 0) {
         void* p = ::mmap(nullptr, size_, PROT_READ, MAP_PRIVATE, fd, 0);
         if (p == MAP_FAILED) {
             int err = errno;
@@ -86,22 +88,18 @@ MappedFile::MappedFile(const std::string& path) {
         }
         data_ = static_cast<const std::byte*>(p);
     }
-#endif
     ::close(fd);
 }
 
 void MappedFile::releasePages() const {
-#ifndef HC_FUZZ_HEAP_FILES
-    if (data_) ::madvise(const_cast<std::byte*>(data_), size_, MADV_DONTNEED);  // advice: nothing to do if refused
-#endif
+    if (data_ && !heap_) ::madvise(const_cast<std::byte*>(data_), size_, MADV_DONTNEED);  // advice: nothing if refused
 }
 
 MappedFile::~MappedFile() {
-#ifdef HC_FUZZ_HEAP_FILES
-    if (data_) ::operator delete (const_cast<std::byte*>(data_), std::align_val_t{kFileSectionAlign});
-#else
-    if (data_) ::munmap(const_cast<std::byte*>(data_), size_);
-#endif
+    if (data_ && heap_)
+        ::operator delete (const_cast<std::byte*>(data_), std::align_val_t{kFileSectionAlign});
+    else if (data_)
+        ::munmap(const_cast<std::byte*>(data_), size_);
 }
 
 void SectionedFileReader::fail(uint64_t offset, const std::string& what) const {

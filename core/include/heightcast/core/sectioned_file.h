@@ -66,7 +66,12 @@ struct FileSection {
     uint32_t crc = 0;
 };
 
-// A read-only memory mapping of a whole file (fuzz builds: an exact-size heap copy, see HC_FUZZ_HEAP_FILES).
+// From now on, files are read into exact-size heap blocks instead of mapped (MappedFile): the fuzz targets call it
+// first, so that AddressSanitizer reports a read past a file's end, where a mapping would quietly return the zeros at
+// the end of its last page. Tools and tests map (releasePages() then drops pages from resident memory).
+void readFilesIntoHeap(bool on);
+
+// A read-only memory mapping of a whole file (or an exact-size heap copy: readFilesIntoHeap).
 class MappedFile {
 public:
     explicit MappedFile(const std::string& path);  // throws hc::Error
@@ -81,6 +86,7 @@ public:
 private:
     const std::byte* data_ = nullptr;
     size_t size_ = 0;
+    bool heap_ = false;  // data_ is a heap block (readFilesIntoHeap), not a mapping
 };
 
 // Maps a file and validates the container at open without a pass over the data: size, magic, version,
