@@ -25,6 +25,11 @@
 
 namespace hc::ingest {
 
+void checkToleranceM(double toleranceM) {
+    if (!std::isfinite(toleranceM) || toleranceM < 0)
+        throw Error(fmt::format("--tolerance {:.6g}: must be a finite number of metres >= 0", toleranceM));
+}
+
 namespace {
 
 using detail::Block;

@@ -32,11 +32,6 @@ int chooseMaxLevel(const Options& opt, double pixelSizeM, LoadReport&) {
     return level;
 }
 
-void checkToleranceM(double toleranceM) {
-    if (!std::isfinite(toleranceM) || toleranceM < 0)
-        throw Error("--tolerance " + fmtM(toleranceM) + ": must be a finite number of metres >= 0");
-}
-
 BuildOptions buildOptions(const Options& opt, double pixelSizeM, LoadReport& report) {
     BuildOptions b;
     b.toleranceM = opt.toleranceM;
