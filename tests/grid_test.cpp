@@ -5,7 +5,9 @@
 
 #include <algorithm>
 #include <random>
+#include <cmath>
 #include <set>
+#include <span>
 
 #include "heightcast/grid/grid.h"
 #include "heightcast/ingest/build.h"
@@ -197,6 +199,38 @@ TEST(GridValidate, CatchesBrokenInvariants) {
     shortLayer.values[0].pop_back();
     EXPECT_THAT(shortLayer.validate(), HasSubstr("layer elevation has " + std::to_string(g.codes.size() - 1) +
                                                  " values for " + std::to_string(g.codes.size()) + " cells"));
+}
+
+TEST(CellStreamCheck, BatchesSayWhatCellByCellSays) {
+    // A writer checks its cells a batch at a time (nextBatch's tight loop); the first bad cell must be found in any
+    // batch, worded as next() words it, with the state left before it, and a good stream passes in any split.
+    Grid g = ratio128Grid();
+    Grid unsorted = g, nonFinite = g, misaligned = g;
+    std::swap(unsorted.codes[700], unsorted.codes[701]);
+    nonFinite.values[0][333] = INFINITY;
+    size_t big = 0;
+    while (hc::codeLevel(misaligned.codes[big]) == 0) ++big;
+    misaligned.codes[big] = hc::makeCellCode(hc::codeKey(misaligned.codes[big]) + 1, hc::codeLevel(g.codes[big]));
+    for (const Grid* grid : {&g, &unsorted, &nonFinite, &misaligned}) {
+        const Grid shape = *grid;
+        std::string oneByOne;
+        hc::CellStreamCheck single(shape);
+        for (size_t i = 0; i < grid->codes.size() && oneByOne.empty(); ++i)
+            oneByOne = single.next(grid->codes[i], &grid->values[0][i]);
+        for (size_t batch : {size_t{1}, size_t{7}, size_t{256}, grid->codes.size()}) {
+            hc::CellStreamCheck check(shape);
+            std::string problem;
+            for (size_t at = 0; at < grid->codes.size() && problem.empty(); at += batch) {
+                const size_t n = std::min(batch, grid->codes.size() - at);
+                problem = check.nextBatch(std::span(grid->codes).subspan(at, n),
+                                          {std::span<const float>(grid->values[0]).subspan(at, n)});
+            }
+            EXPECT_EQ(problem, oneByOne) << "batches of " << batch;
+            if (!oneByOne.empty()) {
+                EXPECT_EQ(check.count(), single.count()) << "batches of " << batch;
+            }
+        }
+    }
 }
 
 TEST(GridHashes, StructureIgnoresValuesContentDoesNot) {

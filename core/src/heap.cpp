@@ -1,6 +1,9 @@
 #include "heightcast/core/heap.h"
 
 #include <climits>
+#include <cstdint>
+
+#include <sys/mman.h>
 
 #if defined(__GLIBC__)
 #include <malloc.h>
@@ -20,6 +23,16 @@ bool keepFreedMemory(size_t mmapAboveBytes, size_t keepBytes) {
 #else
     (void)mmapAboveBytes, (void)keepBytes;
     return false;
+#endif
+}
+
+void adviseHugePages(const void* data, size_t bytes) {
+#if defined(MADV_HUGEPAGE)
+    const size_t huge = size_t(2) << 20;
+    const uintptr_t begin = (uintptr_t(data) + huge - 1) & ~(huge - 1), end = (uintptr_t(data) + bytes) & ~(huge - 1);
+    if (end > begin) ::madvise(reinterpret_cast<void*>(begin), end - begin, MADV_HUGEPAGE);
+#else
+    (void)data, (void)bytes;
 #endif
 }
 

@@ -310,6 +310,31 @@ std::string CellStreamCheck::next(uint64_t code, const float* layerValues) {
     return {};
 }
 
+std::string CellStreamCheck::nextBatch(std::span<const uint64_t> codes,
+                                       const std::vector<std::span<const float>>& layerValues) {
+    const uint64_t domainSpan = mortonSpan(shape_.rootLevel);
+    size_t i = 0;
+    for (; i < codes.size(); ++i) {  // next()'s rules, without the words
+        const uint64_t key = codeKey(codes[i]);
+        const int lv = codeLevel(codes[i]);
+        if (lv < shape_.minLevel || lv > shape_.maxLevel) break;
+        const uint64_t span = mortonSpan(lv);
+        if ((key & (span - 1)) != 0 || key >= domainSpan || span > domainSpan - key) break;
+        if (count_ + i > 0 && key < nextFree_) break;
+        bool finite = true;
+        for (const std::span<const float>& v : layerValues) finite &= std::isfinite(v[i]);
+        if (!finite) break;
+        nextFree_ = key + span;
+    }
+    count_ += i;
+    if (i == codes.size()) return {};
+    float v[256];
+    for (size_t l = 0; l < layerValues.size() && l < 256; ++l) v[l] = layerValues[l][i];
+    std::string problem = next(codes[i], v);
+    if (problem.empty()) throw Error("internal: CellStreamCheck::nextBatch stopped at a cell next() passes");
+    return problem;
+}
+
 std::string Grid::validateShape() const {
     std::ostringstream err;
     if (!(finestCellM > 0) || !std::isfinite(finestCellM))

@@ -57,25 +57,29 @@ public:
     }
     // Cells already checked (CellStreamCheck or Grid::validate): levels in range, values finite.
     void add(std::span<const uint64_t> codes, const std::vector<std::span<const float>>& values) {
-        for (uint64_t c : codes) {
-            const int level = codeLevel(c);
-            ++s_.cellsPerLevel[static_cast<size_t>(level)];
-            const uint64_t key = codeKey(c), x = mortonX(key), y = mortonY(key), span = uint64_t{1} << level;
-            if (first_) s_.boundsFinest = {x, y, x + span, y + span};
-            s_.boundsFinest = {std::min(s_.boundsFinest[0], x), std::min(s_.boundsFinest[1], y),
-                               std::max(s_.boundsFinest[2], x + span), std::max(s_.boundsFinest[3], y + span)};
-            first_ = false;
-        }
         if (codes.empty()) return;
-        if (s_.layerMin.empty()) {
+        if (first_) {
+            const uint64_t key = codeKey(codes[0]), x = mortonX(key), y = mortonY(key);
+            s_.boundsFinest = {x, y, x, y};
             s_.layerMin.assign(layers_, HUGE_VALF);
             s_.layerMax.assign(layers_, -HUGE_VALF);
+            first_ = false;
         }
-        for (size_t l = 0; l < layers_; ++l)
-            for (float v : values[l]) {
-                s_.layerMin[l] = std::min(s_.layerMin[l], v);
-                s_.layerMax[l] = std::max(s_.layerMax[l], v);
-            }
+        // In locals, so the loops keep them in registers.
+        uint64_t x0 = s_.boundsFinest[0], y0 = s_.boundsFinest[1], x1 = s_.boundsFinest[2], y1 = s_.boundsFinest[3];
+        uint64_t* perLevel = s_.cellsPerLevel.data();
+        for (uint64_t c : codes) {
+            const int level = codeLevel(c);
+            ++perLevel[static_cast<size_t>(level)];
+            const uint64_t key = codeKey(c), x = mortonX(key), y = mortonY(key), span = uint64_t{1} << level;
+            x0 = std::min(x0, x), y0 = std::min(y0, y), x1 = std::max(x1, x + span), y1 = std::max(y1, y + span);
+        }
+        s_.boundsFinest = {x0, y0, x1, y1};
+        for (size_t l = 0; l < layers_; ++l) {
+            float lo = s_.layerMin[l], hi = s_.layerMax[l];
+            for (float v : values[l]) lo = std::min(lo, v), hi = std::max(hi, v);
+            s_.layerMin[l] = lo, s_.layerMax[l] = hi;
+        }
     }
     const GridSummary& summary() const { return s_; }
 

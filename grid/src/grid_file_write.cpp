@@ -209,13 +209,8 @@ void checkBatchShape(const std::string& path, std::span<const uint64_t> codes,
 void checkCells(const std::string& path, std::span<const uint64_t> codes,
                 const std::vector<std::span<const float>>& layerValues, CellStreamCheck& check,
                 SummaryBuilder& summary) {
-    const size_t layers = layerValues.size();
-    float v[256];
-    for (size_t i = 0; i < codes.size(); ++i) {
-        for (size_t l = 0; l < layers; ++l) v[l] = layerValues[l][i];
-        std::string problem = check.next(codes[i], v);
-        if (!problem.empty()) throw Error(path + ": refusing to write an invalid grid: " + problem);
-    }
+    std::string problem = check.nextBatch(codes, layerValues);
+    if (!problem.empty()) throw Error(path + ": refusing to write an invalid grid: " + problem);
     summary.add(codes, layerValues);
 }
 

@@ -33,6 +33,8 @@
 #include <array>
 #include <cassert>
 #include <cmath>
+#include <functional>
+#include <future>
 #include <memory>
 #include <span>
 
@@ -85,8 +87,18 @@ const Node& Builder::buildTile(size_t tx, size_t ty, std::vector<std::vector<Nod
     size_t side = tile_;
     scratch[0].assign(side * side, Node{});
     const Block& b = blockAt(tx * tile_, ty * tile_);  // a tile lies in one share node, so in one block
-    for (size_t y = 0; y < side; ++y)
-        for (size_t x = 0; x < side; ++x) pixel(b, tx * tile_ + x, ty * tile_ + y, scratch[0][y * side + x]);
+    const size_t x0 = tx * tile_, y0 = ty * tile_;
+    const size_t nx = std::min(side, t_.width - x0), ny = std::min(side, t_.height - y0);  // inside the raster
+    for (size_t y = 0; y < ny; ++y) {
+        Node* row = &scratch[0][y * side];
+        if (b.rounding) {  // the rare case (a Float64 source): pixel() widens lo and hi
+            for (size_t x = 0; x < nx; ++x) pixel(b, x0 + x, y0 + y, row[x]);
+            continue;
+        }
+        const float* z = &b.values[b.index(x0, y0 + y)];
+        for (size_t x = 0; x < nx; ++x)
+            if (!std::isnan(z[x])) row[x].mean[0] = row[x].lo[0] = row[x].hi[0] = z[x], row[x].leaf = true;
+    }
     for (int l = 1; l <= tileLevel_; ++l) {
         size_t childSide = side;
         side /= 2;
@@ -107,14 +119,29 @@ const Node& Builder::buildTile(size_t tx, size_t ty, std::vector<std::vector<Nod
     return scratch[static_cast<size_t>(tileLevel_)][0];
 }
 
-size_t Builder::emitTile(size_t tx, size_t ty, const std::vector<std::vector<Node>>& scratch, Batch* grid,
-                         size_t at) const {
+size_t Builder::countLeaves(const std::vector<std::vector<Node>>& scratch) const {
+    // A leaf is a cell unless its parent is one too: a scan of the levels, no walk.
+    size_t count = scratch[static_cast<size_t>(tileLevel_)][0].leaf ? 1 : 0;
+    for (int l = tileLevel_ - 1; l >= 0; --l) {
+        const size_t side = tile_ >> l;
+        const std::vector<Node>& cur = scratch[static_cast<size_t>(l)];
+        const std::vector<Node>& up = scratch[static_cast<size_t>(l) + 1];
+        for (size_t y = 0; y < side; ++y)
+            for (size_t x = 0; x < side; ++x) count += cur[y * side + x].leaf && !up[(y / 2) * (side / 2) + x / 2].leaf;
+    }
+    return count;
+}
+
+size_t Builder::emitTile(size_t tx, size_t ty, const std::vector<std::vector<Node>>& scratch, Emit& out) const {
     size_t count = 0;
+    const Block& px = blockAt(tx * tile_, ty * tile_);
     auto visit = [&](auto&& self, int l, size_t x, size_t y) -> void {
         size_t side = tile_ >> l;
         const Node& n = scratch[static_cast<size_t>(l)][y * side + x];
         if (n.leaf) {
-            if (grid) writeCell(*grid, at + count, tx * tile_ + (x << l), ty * tile_ + (y << l), l, n);
+            const size_t ix = tx * tile_ + (x << l), iy = ty * tile_ + (y << l);
+            writeCell(out.batch, out.at + count, ix, iy, l, n);
+            measureCell(px, ix, iy, l, n.mean[0], out.tally, out.paint);
             ++count;
             return;
         }
@@ -196,7 +223,7 @@ void Builder::buildTileRoots(RunState& rs, Progress& progress) const {
             for (size_t k = b; k < e; ++k) {
                 const size_t i = myTiles[k], tx = i % ntx_, ty = i / ntx_;
                 roots[i] = buildTile(tx, ty, scratch[worker]);
-                leafCount[i] = static_cast<uint32_t>(emitTile(tx, ty, scratch[worker], nullptr, 0));
+                leafCount[i] = static_cast<uint32_t>(countLeaves(scratch[worker]));
             }
             progress.advance((e - b) * size_t(rankCount));
         });
@@ -263,28 +290,37 @@ Stats Builder::writeUnits(RunState& rs, CellSink& sink, GridFilePart* part, std:
                           Progress& progress) const {
     std::vector<Stats> acc(rs.threads);
     for (auto& a : acc) a.perLevel.assign(static_cast<size_t>(maxLevel_) + 1, 0);
-    Batch batch;
-    batch.values.resize(static_cast<size_t>(layers_));
+    // Two batches: the workers fill one while a thread of its own hands the other to the sink (checks, hashes,
+    // checksums, writes: one thread's work), so that work no longer leaves the other cores idle.
+    std::array<Batch, 2> batches;
+    for (Batch& b : batches) b.values.resize(static_cast<size_t>(layers_));
+    auto hand = [&](const Batch& batch) {
+        const std::vector<std::span<const float>> values(batch.values.begin(), batch.values.end());
+        if (rs.root) {
+            sink.append(batch.codes, values);
+        } else {  // into the file at its place; read back for the hashes (nothing held)
+            part->append(batch.codes, values);
+            sink.keepOwn(batch.codes);
+        }
+    };
     ranks::together([&] {
-        size_t u0 = rs.myU0;
+        std::future<void> handing;  // declared after the batches: waited for before they go
+        size_t u0 = rs.myU0, next = 0;
         while (u0 < rs.myU1) {
             size_t u1 = u0;
             const size_t first = rs.units[u0].offset;
             while (u1 < rs.myU1 && (u1 == u0 || rs.units[u1].offset - first < (size_t{1} << 16))) ++u1;
             const size_t last = rs.offsetOf(u1);
+            Batch& batch = batches[next];
             batch.codes.resize(last - first);
             for (auto& v : batch.values) v.resize(last - first);
             fillBatch(rs, u0, u1, batch, acc, unitSumSq, progress);
-            if (rs.root) {
-                std::vector<std::span<const float>> values(batch.values.begin(), batch.values.end());
-                sink.append(batch.codes, values);
-            } else {  // into the file at its place; read back for the hashes (nothing held)
-                part->append(batch.codes,
-                             std::vector<std::span<const float>>(batch.values.begin(), batch.values.end()));
-                sink.keepOwn(batch.codes);
-            }
+            if (handing.valid()) handing.get();  // the batch before, handed in order
+            handing = std::async(std::launch::async, hand, std::cref(batch));
+            next ^= 1;
             u0 = u1;
         }
+        if (handing.valid()) handing.get();
     });
     Stats sum;
     sum.perLevel.assign(static_cast<size_t>(maxLevel_) + 1, 0);
@@ -308,49 +344,48 @@ void Builder::fillBatch(RunState& rs, size_t u0, size_t u1, Batch& batch, std::v
         size_t tilesDone = 0;
         for (size_t k = u0 + b; k < u0 + e; ++k) {
             const Unit& unit = units[k];
-            const size_t at = unit.offset - first;
-            size_t written = 1;
+            Emit out{batch, unit.offset - first, rs.root};
             if (unit.level > tileLevel_) {
                 auto lk = static_cast<size_t>(unit.level - tileLevel_);
                 const Node& n = rs.coarse[lk][unit.y * rs.dims[lk].first + unit.x];
                 size_t span = size_t{1} << unit.level;
-                writeCell(batch, at, unit.x * span, unit.y * span, unit.level, n);
+                writeCell(batch, out.at, unit.x * span, unit.y * span, unit.level, n);
+                measureCell(blockAt(unit.x * span, unit.y * span), unit.x * span, unit.y * span, unit.level, n.mean[0],
+                            out.tally, out.paint);
             } else {
                 buildTile(unit.x, unit.y, rs.scratch[worker]);
-                written = emitTile(unit.x, unit.y, rs.scratch[worker], &batch, at);
+                [[maybe_unused]] const size_t written = emitTile(unit.x, unit.y, rs.scratch[worker], out);
                 assert(written == rs.leafCount[unit.y * ntx_ + unit.x]);
                 ++tilesDone;
             }
-            unitSumSq[k - rs.myU0] = measure(batch, at, at + written, acc[worker], rs.root);
+            unitSumSq[k - rs.myU0] = out.tally.sumSq;
+            Stats& a = acc[worker];
+            a.maxDev = std::max(a.maxDev, out.tally.maxDev);
+            a.pixels += out.tally.pixels;
+            for (size_t l = 0; l < a.perLevel.size(); ++l) a.perLevel[l] += out.tally.perLevel[l];
         }
         progress.advance(tilesDone * size_t(rs.rankCount));
     });
 }
 
-double Builder::measure(const Batch& b, size_t begin, size_t end, Stats& a, bool paintElevations) const {
-    double sumSq = 0;
-    for (size_t i = begin; i < end; ++i) {
-        const uint64_t key = codeKey(b.codes[i]);
-        const int level = codeLevel(b.codes[i]);
-        ++a.perLevel[static_cast<size_t>(level)];
-        const size_t span = size_t{1} << level;
-        const size_t ix0 = mortonX(key), iy0 = mortonY(key);
-        const double z = b.values[0][i];
-        const Block& px = blockAt(ix0, iy0);  // a cell lies in one share node
-        for (size_t iy = iy0; iy < iy0 + span; ++iy) {
-            for (size_t ix = ix0; ix < ix0 + span; ++ix) {
-                const size_t idx = px.index(ix, iy);
-                const double exact = static_cast<double>(px.values[idx]) + (px.rounding ? px.rounding[idx] : 0.0);
-                const double dz = exact - z;
-                if (paintElevations && opt_.cellElevations)
-                    (*opt_.cellElevations)[(t_.height - 1 - iy) * t_.width + ix] = b.values[0][i];
-                sumSq += dz * dz;
-                a.maxDev = std::max(a.maxDev, std::abs(dz));
-                ++a.pixels;
-            }
+void Builder::measureCell(const Block& px, size_t ix0, size_t iy0, int level, float stored, Tally& a,
+                          bool paintElevations) const {
+    ++a.perLevel[static_cast<size_t>(level)];
+    double& sumSq = a.sumSq;
+    const size_t span = size_t{1} << level;
+    const double z = stored;
+    for (size_t iy = iy0; iy < iy0 + span; ++iy) {
+        for (size_t ix = ix0; ix < ix0 + span; ++ix) {
+            const size_t idx = px.index(ix, iy);
+            const double exact = static_cast<double>(px.values[idx]) + (px.rounding ? px.rounding[idx] : 0.0);
+            const double dz = exact - z;
+            if (paintElevations && opt_.cellElevations)
+                (*opt_.cellElevations)[(t_.height - 1 - iy) * t_.width + ix] = stored;
+            sumSq += dz * dz;
+            a.maxDev = std::max(a.maxDev, std::abs(dz));
+            ++a.pixels;
         }
     }
-    return sumSq;
 }
 
 }  // namespace hc::ingest::detail

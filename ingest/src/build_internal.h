@@ -125,6 +125,13 @@ struct Stats {
     uint64_t firstCell = 0, ownCells = 0;  // this rank's cells: indices [firstCell, firstCell + ownCells) of the file's
 };
 
+// A unit's measurements (Builder::measureCell), added into its worker's Stats when the unit is done.
+struct Tally {
+    double maxDev = 0, sumSq = 0;
+    uint64_t pixels = 0;
+    std::array<uint64_t, 64> perLevel{};
+};
+
 class Builder {
 public:
     // `terrain` gives the geometry, and the pixels unless `windows` reads them (RasterWindows: each rank then reads
@@ -232,14 +239,26 @@ private:
     // Builds tile (tx, ty)'s pyramid into scratch[level]; returns the root.
     const Node& buildTile(size_t tx, size_t ty, std::vector<std::vector<Node>>& scratch) const;
 
-    // Emits the leaves of a built tile pyramid in Morton order; returns how many.
-    size_t emitTile(size_t tx, size_t ty, const std::vector<std::vector<Node>>& scratch, Batch* grid, size_t at) const;
+    // The cells of a built tile pyramid (its leaves whose parent is no leaf).
+    size_t countLeaves(const std::vector<std::vector<Node>>& scratch) const;
+    // Where emitTile writes and measures: the batch from `at` on, the worker's statistics, whether to paint the trace,
+    // and the unit's sum of squared deviations (its cells in Morton order, each cell's pixels in rows).
+    struct Emit {
+        Batch& batch;
+        size_t at;
+        bool paint;
+        Tally tally{};  // on the worker's stack: no cache line shared with another worker's
+    };
+    // Writes the leaves of a built tile pyramid in Morton order, each measured (measureCell); returns how many.
+    size_t emitTile(size_t tx, size_t ty, const std::vector<std::vector<Node>>& scratch, Emit& out) const;
 
     void writeCell(Batch& b, size_t at, size_t ix, size_t iy, int level, const Node& n) const;
 
-    // The guarantee, measured: every valid pixel under cells [begin, end) of the batch against the stored value of its
-    // cell (largest deviation, pixels and cells per level into acc); returns the sum of the squared deviations.
-    double measure(const Batch& b, size_t begin, size_t end, Stats& acc, bool paintElevations) const;
+    // The guarantee, measured: every valid pixel under the cell of `level` at (ix0, iy0) (in block px) against its
+    // stored value, into t (the squared deviations added one by one, so that their sum has the same bits however the
+    // cells are split).
+    void measureCell(const Block& px, size_t ix0, size_t iy0, int level, float stored, Tally& t,
+                     bool paintElevations) const;
     // Under mpirun every rank writes its own cells into rank 0's file (GridFilePart); then a rank other than 0 sends
     // its part's result (GridFilePart::finish) and its statistics (per-unit sums of squares) to rank 0, which receives
     // every other rank's in order, hands each part to its writer (GridFileWriter::addPart) and adds the statistics into

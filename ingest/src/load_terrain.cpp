@@ -13,6 +13,7 @@
 
 #include "gdal_util.h"
 #include "heightcast/core/error.h"
+#include "heightcast/core/heap.h"
 #include "heightcast/core/progress.h"
 #include "heightcast/ingest/ingest.h"
 #include "load_terrain_internal.h"
@@ -385,8 +386,10 @@ Raster detail::loadTerrainTraced(const Options& opt, LoadReport& report, SourceT
     {
         src.width = o.band->width();
         src.height = o.band->height();
+        src.values.reserve(src.width * src.height);
+        adviseHugePages(src.values.data(), src.width * src.height * sizeof(float));
         src.values.assign(src.width * src.height, kNaN);
-        const size_t strip = std::max<size_t>(1, (size_t{1} << 20) / (src.width * 8 + 1));  // ~1 MB buffers
+        const size_t strip = o.band->stripRows(size_t{1} << 20);  // ~1 MB buffers, whole rows of blocks
         SourceTally tally;
         Progress progress("reading " + opt.input, src.height, opt.progress);
         for (size_t r0 = 0; r0 < src.height; r0 += strip) {

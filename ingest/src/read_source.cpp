@@ -77,6 +77,9 @@ BandReader::BandReader(GDALDataset& ds, const Options& opt, LoadReport& report, 
                 throw Error(opt.input + ": --terrain-rgb needs 8-bit bands; band " + std::to_string(b) + " is " +
                             GDALGetDataTypeName(ds.GetRasterBand(b)->GetRasterDataType()));
 
+    int blockX = 0, blockY = 0;
+    band_->GetBlockSize(&blockX, &blockY);
+    blockRows_ = size_t(std::clamp(blockY, 1, 4096));  // a strip of 4096 rows at most, whatever a driver says
     report.sourceDescription = std::to_string(width_) + " x " + std::to_string(height_) + " px, " +
                                GDALGetDataTypeName(band_->GetRasterDataType()) + ", " + std::to_string(bandCount) +
                                " band" + (bandCount == 1 ? "" : "s") + ", " + ds.GetDriver()->GetDescription();
@@ -179,6 +182,11 @@ void BandReader::read(size_t c0, size_t r0, size_t w, size_t h, float* dst, std:
             if (mask_[i] == 0) dst[i] = kNaN;
     }
     for (size_t i = 0; i < n; ++i) tally.validPixels += !std::isnan(dst[i]);
+}
+
+size_t BandReader::stripRows(size_t bytes) const {
+    const size_t rows = std::max<size_t>(1, bytes / (width_ * 8 + 1));
+    return std::min(height_, (rows + blockRows_ - 1) / blockRows_ * blockRows_);
 }
 
 void BandReader::dropCache() {

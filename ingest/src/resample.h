@@ -57,6 +57,10 @@ public:
     // goes to residual[residualAt + i], the vector sized residualSize (zeros) when the first such pixel comes.
     void read(size_t c0, size_t r0, size_t w, size_t h, float* values, std::vector<float>& residual, size_t residualAt,
               size_t residualSize, SourceTally& tally);
+    // Rows a strip of whole rows should hold to read the band once: about `bytes` of buffers (8 bytes a pixel), rounded
+    // up to whole rows of the file's blocks. A strip thinner than a block would decode every tile of a tiled file once
+    // per strip (dropCache throws it away between strips): 21 times for 256-row tiles and 12-row strips.
+    size_t stripRows(size_t bytes) const;
     // Drops GDAL's cached blocks of what was read (a second copy of the file otherwise).
     void dropCache();
     // The counts and warnings of a tally (the whole band's, every window and rank added) into report.
@@ -66,7 +70,7 @@ private:
     GDALDataset& ds_;
     const Options& opt_;
     GDALRasterBand* band_ = nullptr;
-    size_t width_ = 0, height_ = 0;
+    size_t width_ = 0, height_ = 0, blockRows_ = 1;
     bool hasNodata_ = false, useMask_ = false, exactInFloat_ = false;
     double nodata_ = 0, zScale_ = 1;
     std::vector<double> buf_;

@@ -149,7 +149,7 @@ private:
     // read from the file (the region under the strip, painted onto that strip's pixels).
     void stripPass(const GridRegionReader* grid, detail::SourceCheckSums* sums) const {
         const size_t width = o_.band->width(), height = o_.band->height();
-        const size_t strip = std::max<size_t>(1, (size_t{1} << 20) / (width * 8 + 1));  // ~1 MB buffers, as read whole
+        const size_t strip = o_.band->stripRows(size_t{1} << 20);  // as read whole
         // A rank takes a run of strips: its rows' footprint is then one band of the working raster, and the file's
         // regions under them about its share of the file (every rank's strips spread over the height would each touch
         // nearly every page of the file, the cells of a band being spread over it in Morton order).

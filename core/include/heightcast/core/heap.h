@@ -20,4 +20,10 @@ namespace hc {
 
 bool keepFreedMemory(size_t mmapAboveBytes = size_t(256) << 20, size_t keepBytes = size_t(1) << 30);
 
+// Asks the kernel to back the whole 2 MiB pages inside [data, data + bytes) with transparent huge pages (madvise
+// MADV_HUGEPAGE), before the memory is first touched: a buffer of hundreds of MB then faults in 512 times fewer
+// pages (a 420 MB raster: 0.58 s of faults and zeroing with 4 kB pages). Advice only: nothing happens where the
+// kernel has THP off or the range holds no whole huge page.
+void adviseHugePages(const void* data, size_t bytes);
+
 }  // namespace hc

@@ -171,6 +171,10 @@ public:
     explicit CellStreamCheck(const Grid& shape) : shape_(shape) {}
     // "" if the cell may follow the ones before it, else what is wrong with it.
     std::string next(uint64_t code, const float* layerValues);
+    // A batch of cells (layerValues: an array per layer, as long as codes): "" if they may all follow the ones before,
+    // else what is wrong with the first that may not (the state then as next() leaves it there). One tight loop for the
+    // cells that pass; next() words the problem.
+    std::string nextBatch(std::span<const uint64_t> codes, const std::vector<std::span<const float>>& layerValues);
     uint64_t count() const { return count_; }
     // Where the cells so far leave the check, so that another process can check the cells after them (GridFilePart).
     struct State {
