@@ -51,8 +51,8 @@ bool parseOptions(int argc, char** argv, ExportArgs& a) {
              a.layerName);
     p.option("--cache", "C.hci",
              "read the whole grid and this influence cache (built if missing or stale; default: the grid's\n"
-             "path with .hci when that exists); without one the grid is read a tile at a time (out of core,\n"
-             "the same values)",
+             "path with .hci when that exists and the grid has at most 4.5 M cells); without one the grid is\n"
+             "read a tile at a time (out of core, the same values)",
              a.cachePath);
     p.option("--step", "K",
              "water step to export, 0-based (default 0; hc-info lists a grid's steps and their times; a .nc\n"
@@ -169,14 +169,23 @@ int main(int argc, char** argv) {
         const std::string cachePath = a.cachePath.empty() ? hc::influence::defaultCachePath(a.gridPath) : a.cachePath;
         std::error_code ec;
         Exported exported;
-        if (a.cachePath.empty() && !std::filesystem::exists(cachePath, ec)) {
-            // No cache: out of core, a tile at a time (the same bits).
+        const bool cacheBeside = std::filesystem::exists(cachePath, ec);
+        if (a.cachePath.empty() &&
+            (!cacheBeside || hc::readGridInfo(a.gridPath).cellCount > hc::influence::kListsDefaultMaxCells)) {
+            // No cache, or a grid whose cache costs more to read than its regions: out of core, a tile at a time (the
+            // same bits).
             const hc::GridRegionReader file(a.gridPath, a.step);
             hc::exporting::planRaster(file.info(), a.resolution, a.box);  // refuse a bad request before any real work
             const auto layer = hc::influence::Layer::byName(file.shape(), a.vdb() ? "elevation" : a.layerName);
-            std::fprintf(stderr,
-                         "hc-export: no influence cache at %s: the grid is read a tile at a time (out of core)\n",
-                         cachePath.c_str());
+            if (cacheBeside)
+                std::fprintf(stderr,
+                             "hc-export: %llu cells: the grid is read a tile at a time (out of core), its influence "
+                             "cache %s not read (--cache %s reads it)\n",
+                             (unsigned long long)file.cellCount(), cachePath.c_str(), cachePath.c_str());
+            else
+                std::fprintf(stderr,
+                             "hc-export: no influence cache at %s: the grid is read a tile at a time (out of core)\n",
+                             cachePath.c_str());
             exported = sampleAndWrite(a, Source{file.shape(), nullptr, &file, a.params}, layer);
         } else {
             const hc::Grid grid = hc::readGrid(a.gridPath, nullptr, a.step);

@@ -21,6 +21,7 @@ namespace {
 
 struct InfluenceArgs {
     std::string gridPath, out, pyramidOut;
+    std::string listsWhy;  // why the default built the lists or not ("" when --lists or --no-lists said)
     hc::influence::KernelParams params;
     unsigned threads = 0;
     bool quiet = false;
@@ -32,7 +33,7 @@ struct InfluenceArgs {
 
 // The options, validated before any work; false after --help.
 bool parseOptions(int argc, char** argv, InfluenceArgs& a) {
-    bool noLists = false, noPyramid = false;
+    bool noLists = false, noPyramid = false, lists = false;
     hc::cli::Parser p(
         "hc-influence", "GRID.hcg [-o OUT.hci] [-p OUT.hcp] [--sigma S] [--truncation R] [--no-lists | --no-pyramid]",
         "Builds the influence list of every cell (the cells whose truncated Gaussian reaches into it)\n"
@@ -41,9 +42,10 @@ bool parseOptions(int argc, char** argv, InfluenceArgs& a) {
         "Then samples the exact smooth surface into the surface pyramid (docs/design.md section 4): dyadic\n"
         "lattices (spacing finest cell * 2^t) in 16 x 16 tiles kept where cells are as fine as the\n"
         "spacing, each tile with its measured error against the next coarser level. The lists take\n"
-        "about 220 bytes per cell; the pyramid about 4-20 per channel and needs no lists: for grids whose\n"
-        "lists do not fit in memory (100 M cells), use --no-lists: the grid is then read a node (at most\n"
-        "4 M cells and their halo) at a time, never whole. Under `mpirun -np N` the ranks share the nodes\n"
+        "about 220 bytes per cell; the pyramid about 4-20 per channel and needs no lists. By default the\n"
+        "lists are built for grids of up to 4.5 M cells (1 GB of lists) and left out above, where the\n"
+        "pyramid serves every tool and the grid is read a node (at most 4 M cells and their halo) at a\n"
+        "time, never whole: any grid that fits the disk. Under `mpirun -np N` the ranks share the nodes\n"
         "of the grid, each reading its nodes and their halo, and write the same bytes as one process,\n"
         "each its lists and tiles into the files rank 1 opens: they must lie on a file system every rank\n"
         "sees (docs/mpi.md).");
@@ -63,16 +65,27 @@ bool parseOptions(int argc, char** argv, InfluenceArgs& a) {
              "      take the terrain from the first step's",
              a.step);
     p.option("--threads", "N", "worker threads (default 0 = all cores; under mpirun: per rank)", a.threads);
+    p.flag("--lists", "build the lists whatever the grid's size (default: up to 4.5 M cells)", lists);
     p.flag("--no-lists", "build the surface pyramid only (no .hci)", noLists);
     p.flag("--no-pyramid", "build the influence lists only (no .hcp)", noPyramid);
     p.flag("--quiet", "no progress output", a.quiet);
     if (!p.parse(argc, argv)) return false;
     if (std::string why = a.params.validate(); !why.empty()) throw hc::Error("--sigma/--truncation: " + why);
     if (noLists && noPyramid) throw hc::Error("--no-lists and --no-pyramid together leave nothing to build");
-    a.lists = !noLists;
+    if (noLists && lists) throw hc::Error("--lists and --no-lists contradict each other");
     a.pyramid = !noPyramid;
     if (a.out.empty()) a.out = hc::influence::defaultCachePath(a.gridPath);
-    a.stepCount = hc::readGridInfo(a.gridPath).shape.stepCount();
+    const hc::GridFileInfo info = hc::readGridInfo(a.gridPath);
+    a.stepCount = info.shape.stepCount();
+    a.lists = !noLists;
+    if (!lists && !noLists && !noPyramid) {  // the default: lists where they fit and help
+        a.lists = info.cellCount <= hc::influence::kListsDefaultMaxCells;
+        a.listsWhy = fmt::format("{} (about {:.1f} MB for {} cells; default up to {:.1f} M cells{})",
+                                 a.lists ? "built" : "not built",
+                                 hc::influence::kListBytesPerCell * double(info.cellCount) / 1e6, info.cellCount,
+                                 double(hc::influence::kListsDefaultMaxCells) / 1e6,
+                                 a.lists ? "; --no-lists skips them" : "; --lists builds them");
+    }
     if (a.step < -1 || (a.step >= 0 && size_t(a.step) >= std::max<size_t>(1, a.stepCount)))
         throw hc::Error("--step " + std::to_string(a.step) + ": " + a.gridPath + " has " + std::to_string(a.stepCount) +
                         " water steps");
@@ -177,6 +190,7 @@ void printHeader(const InfluenceArgs& a, uint64_t cells) {
     std::printf("  kernel       truncated Gaussian, sigma %g, R %g (reach %g cell sizes)\n", a.params.sigma,
                 a.params.truncation, a.params.truncation * a.params.sigma);
     std::printf("  cells        %llu\n", (unsigned long long)cells);
+    if (!a.listsWhy.empty()) std::printf("  lists        %s\n", a.listsWhy.c_str());
 }
 
 // One process building lists: the grid read whole, every list and tile built here.

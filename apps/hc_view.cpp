@@ -157,7 +157,7 @@ int main(int argc, char** argv) {
         // --backend gl without a 4.3 context fails here, before any work.
         hc::cli::BackendDecision decision = hc::cli::decideBackend(a.backend, window.gl());
         if (!a.setup.colorBy.empty()) hc::cli::requireCpu("--color-by " + a.setup.colorBy, a.backend, decision);
-        auto loaded = hc::cli::loadScene("hc-view", a.gridPath, a.setup);
+        auto loaded = hc::cli::loadScene("hc-view", a.gridPath, a.setup, a.setup.colorBy.empty());
         auto maker = std::make_shared<BackendMaker>(a.backend, decision, window.gl(), a.setup.options.threads);
         auto backend = (*maker)(*loaded->scene);  // the first one; a new water step's scene gets a new one from `maker`
         window.show();

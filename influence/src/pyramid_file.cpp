@@ -95,6 +95,20 @@ void writeSurfacePyramid(const SurfacePyramid& p, const std::string& path) {
     out.commit(detail::pyramidFileHeader(p));
 }
 
+bool pyramidBelongsTo(const std::string& path, const GridFileInfo& grid, const KernelParams& params) {
+    try {
+        const SectionedFileReader file(path, kFormat);
+        const std::byte* h = file.header();
+        return bytes::load<uint64_t>(h + off::structureHash) == grid.structureHash &&
+               bytes::load<uint64_t>(h + off::contentHash) == grid.contentHash &&
+               bytes::load<uint32_t>(h + off::kernelId) == params.kernelId &&
+               bytes::load<double>(h + off::sigma) == params.sigma &&
+               bytes::load<double>(h + off::truncation) == params.truncation;
+    } catch (const Error&) {
+        return false;
+    }
+}
+
 SurfacePyramid readSurfacePyramid(const std::string& path, const Grid& grid, const KernelParams& params) {
     return readSurfacePyramid(path, grid, grid.structureHash(), grid.contentHash(), params);
 }

@@ -45,11 +45,12 @@ void RenderSetup::addRenderOptions(Parser& p) {
     p.flag("--no-legend", "leave the colour bar out", noLegend);
     p.option("--cache", "C.hci",
              "influence cache: the grid is read whole with its lists (default: the grid's path with .hci when\n"
-             "that exists; rebuilt if stale)",
+             "that exists and no surface pyramid is beside the grid; rebuilt if stale)",
              cachePath);
     p.flag("--out-of-core",
-           "read the grid a region at a time, without lists (hc-render's default when no cache is beside\n"
-           "the grid): memory follows the cascades, not the grid (105 M cells: 0.8 GB); the GL backend then evaluates\n"
+           "read the grid a region at a time, without lists (the default when a surface pyramid or no cache\n"
+           "is beside the grid): memory follows the cascades, not the grid (105 M cells: 0.8 GB); the GL backend then "
+           "evaluates\n"
            "the texels a frame newly sees on the CPU, keeps its cascades on the GPU, and draws no --cells",
            outOfCore);
     p.exclusive({"--cache", "--out-of-core"});
@@ -196,7 +197,7 @@ void attachScene(const char* program, LoadedScene& s, const std::string& gridPat
 }  // namespace
 
 std::unique_ptr<LoadedScene> loadScene(const char* program, const std::string& gridPath, const RenderSetup& setup,
-                                       bool outOfCoreWithoutCache) {
+                                       bool allowOutOfCore) {
     // A pyramid asked for by name must exist (checked before any work); the default one is optional.
     std::error_code ec;
     if (!setup.noPyramid && !setup.pyramidPath.empty() && !std::filesystem::exists(setup.pyramidPath, ec))
@@ -204,14 +205,30 @@ std::unique_ptr<LoadedScene> loadScene(const char* program, const std::string& g
     // So must a --color-by layer (from the header and META alone: no cells read, no lists built).
     if (!setup.colorBy.empty()) (void)influence::Layer::byName(readGridInfo(gridPath).shape, setup.colorBy);
     const std::string cachePath = setup.cachePath.empty() ? influence::defaultCachePath(gridPath) : setup.cachePath;
-    const bool outOfCore = setup.outOfCore || (outOfCoreWithoutCache && setup.cachePath.empty() &&
-                                               !std::filesystem::exists(cachePath, ec));
+    // The default is the cheaper path that draws the same image: out of core where a pyramid serves the texels (only
+    // the regions a frame needs are read, not the grid and its cache whole) or where there is no cache to read.
+    const bool cacheBeside = std::filesystem::exists(cachePath, ec);
+    bool pyramidBeside = false;  // and belonging to the grid: a stale one serves nothing
+    if (!setup.noPyramid && allowOutOfCore && !setup.outOfCore && setup.cachePath.empty() && cacheBeside) {
+        const GridFileInfo info = readGridInfo(gridPath, setup.step);
+        pyramidBeside = influence::pyramidBelongsTo(
+            setup.pyramidPath.empty() ? influence::defaultPyramidPath(gridPath, setup.step, info.shape.stepCount())
+                                      : setup.pyramidPath,
+            info, setup.params);
+    }
+    const bool outOfCore =
+        setup.outOfCore || (allowOutOfCore && setup.cachePath.empty() && (!cacheBeside || pyramidBeside));
     auto s = std::make_unique<LoadedScene>();
     if (outOfCore) {
         s->file = std::make_unique<GridRegionReader>(gridPath, setup.step);
         if (setup.outOfCore)
             std::fprintf(stderr, "%s: --out-of-core: the grid is read a region at a time, without an influence cache\n",
                          program);
+        else if (pyramidBeside)
+            std::fprintf(stderr,
+                         "%s: the surface pyramid serves the texels: the grid is read a region at a time (out of "
+                         "core);\n  the influence cache %s is not read (--cache %s reads the grid whole with it)\n",
+                         program, cachePath.c_str(), cachePath.c_str());
         else
             std::fprintf(stderr,
                          "%s: no influence cache at %s: the grid is read a region at a time (out of core; hc-influence "

@@ -84,6 +84,13 @@ InfluenceLists readInfluenceCache(const std::string& path, const Grid& grid, con
 // The cache path a tool uses by default: the grid's path with its extension replaced by ".hci".
 std::string defaultCachePath(const std::string& gridPath);
 
+// Where influence lists pay off by default: hc-influence builds them, and hc-export reads a cache beside the grid, for
+// grids of up to this many cells (at about kListBytesPerCell, 1 GB of lists). Above it the lists cost more memory than
+// a machine may have and more time to read than the regions of the grid that a tool needs: the tools read the grid out
+// of core and the renderers take their texels from the surface pyramid.
+constexpr uint64_t kListsDefaultMaxCells = 4'500'000;
+constexpr double kListBytesPerCell = 220;  // the mean of the lists at R 3.5, sigma 1 (docs/benchmarks.md)
+
 // What tools do: read `cachePath` if it is valid for (grid, params); otherwise build the lists and
 // write them there, and say why in `note` ("no cache at X: built", "X is stale (...): rebuilt").
 InfluenceLists loadOrBuildCache(const Grid& grid, const KernelParams& params, const std::string& cachePath,

@@ -158,6 +158,11 @@ SurfacePyramid readSurfacePyramid(const std::string& path, const GridFileInfo& g
 SurfacePyramid readSurfacePyramid(const std::string& path, const Grid& grid, uint64_t structureHash,
                                   uint64_t contentHash, const KernelParams& params);
 
+// Whether the file at `path` is a pyramid built for `grid` (the hashes of the step GridFileInfo selects) with `params`,
+// from its header alone (nothing else read or validated; false for a missing or unreadable file): for choosing a path
+// before reading it, which readSurfacePyramid then checks whole.
+bool pyramidBelongsTo(const std::string& path, const GridFileInfo& grid, const KernelParams& params);
+
 // The pyramid path a tool uses by default: the grid's path with its extension replaced by ".hcp".
 // A grid of several water steps has one pyramid per step (the water channels differ): grid.step0007.hcp for step 7.
 std::string defaultPyramidPath(const std::string& gridPath, size_t step = 0, size_t stepCount = 1);

@@ -56,16 +56,16 @@ struct LoadedScene {
     std::optional<GridHashes> hashes;
     std::unique_ptr<render::Scene> scene;
 };
-// In memory (a cache named with --cache, one beside the grid, or none and not `outOfCoreWithoutCache`): reads the
-// grid, loads or (re)builds the cache saying why on stderr as "PROGRAM: NOTE". Out of core (--out-of-core, or no
-// cache beside the grid, none named and `outOfCoreWithoutCache`): opens the grid file for region reads
-// (render::Scene), saying so. Then reads the surface pyramid (default: the grid's path with .hcp) when there is a valid
-// one (saying which, or why none is used: missing, stale or damaged ones are not rebuilt here: hc-influence does), and
+// Out of core (--out-of-core; or, where `allowOutOfCore` and no --cache is named, no cache beside the grid or a surface
+// pyramid beside it, built for it (influence::pyramidBelongsTo), to serve the texels): opens the grid file for region
+// reads (render::Scene), saying so and why. In memory (--cache, a cache beside the grid and no pyramid, or not
+// `allowOutOfCore`: --color-by needs the lists): reads the grid, loads or (re)builds the cache saying why on stderr as
+// "PROGRAM: NOTE". Then reads the surface pyramid (default: the grid's path with .hcp) when there is a valid one
+// (saying which, or why none is used: missing, stale or damaged ones are not rebuilt here: hc-influence does), and
 // prepares the scene, all for water step setup.step (the step's own pyramid: influence::defaultPyramidPath; a later
-// step's water pyramid with the first step's as its base).
-// Throws hc::Error.
+// step's water pyramid with the first step's as its base). Throws hc::Error.
 std::unique_ptr<LoadedScene> loadScene(const char* program, const std::string& gridPath, const RenderSetup& setup,
-                                       bool outOfCoreWithoutCache = false);
+                                       bool allowOutOfCore);
 
 // Moves a loaded scene to water step `step`: in memory the grid reads that step's section only (the lists stay: they
 // depend on the structure alone); out of core a reader of that step. Then that step's pyramid and a new scene (notes
