@@ -172,6 +172,22 @@ int pyramidBlockSide(const Grid& shape, const KernelParams& params, int t) {
                : kPyramidBlock;
 }
 
+namespace {
+
+// The candidates of `from` (a gather over a box holding `box`) whose kernels reach `box`, in their order, into `to`.
+void narrowCandidates(const ListIndex::Scratch& from, const Grid::Square& box, ListIndex::Scratch& to) {
+    to.cx.clear(), to.cy.clear(), to.r2.clear(), to.index.clear();
+    for (size_t c = 0; c < from.index.size(); ++c)
+        if (kernelReaches(from.cx[c], from.cy[c], from.r2[c], box.x0, box.y0, box.x1, box.y1)) {
+            to.cx.push_back(from.cx[c]);
+            to.cy.push_back(from.cy[c]);
+            to.r2.push_back(from.r2[c]);
+            to.index.push_back(from.index[c]);
+        }
+}
+
+}  // namespace
+
 void buildTile(const Grid& g, const ListIndex& index, const KernelParams& params, int t, int side, uint64_t key,
                int channels, int depthLayer, float* out, PyramidWorkspace& w, int onlyBlock) {
     const int block = pyramidBlockSide(g, params, t);
@@ -182,12 +198,20 @@ void buildTile(const Grid& g, const ListIndex& index, const KernelParams& params
     const float* depth = depthLayer >= 0 ? g.values[size_t(depthLayer)].data() : nullptr;
     const size_t plane = size_t(side) * size_t(side);
     const int blocksPerSide = (side + block - 1) / block;
+    // A tile of several blocks gathers its candidates once, over the whole tile, and narrows them to each block by the
+    // test the gather ends with (kernelReaches): the same candidates in the same order as a gather per block, for one
+    // walk of the levels' quadtrees a tile instead of one a block.
+    const bool perTile = onlyBlock < 0 && blocksPerSide > 1 && t == 0;
+    if (perTile) index.candidatesFor(Grid::Square{x0, y0, x0 + (side - 1) * h, y0 + (side - 1) * h}, w.tile);
     for (int bj = 0; bj < side; bj += block)
         for (int bi = 0; bi < side; bi += block) {
             if (onlyBlock >= 0 && onlyBlock != (bj / block) * blocksPerSide + bi / block) continue;
             const int bi1 = std::min(side, bi + block), bj1 = std::min(side, bj + block);
             const Grid::Square box{x0 + bi * h, y0 + bj * h, x0 + (bi1 - 1) * h, y0 + (bj1 - 1) * h};
-            index.candidatesFor(box, w.wide);
+            if (perTile)
+                narrowCandidates(w.tile, box, w.wide);
+            else
+                index.candidatesFor(box, w.wide);
             const size_t m = w.wide.index.size();
             // Relative to one cell's value per block, and to one wet cell's level (as surface.cpp does per point:
             // any value of the neighbourhood keeps the digits; a constant field stays exactly constant).

@@ -39,6 +39,7 @@ void wetMarkedTiles(const Grid& g, const KernelParams& params, int depthLayer, s
 
 // One worker's memory for buildTile.
 struct PyramidWorkspace {
+    ListIndex::Scratch tile;  // a whole tile's candidates (buildTile narrows them to each block)
     ListIndex::Scratch wide;
     Gathered block;  // one block's candidates, in the local frame
 };
