@@ -348,6 +348,38 @@ TEST(GridRegionReader, ReleasedPagesLeaveResidentMemoryAndReadBackTheSame) {
     EXPECT_EQ(again.values, first.values);
 }
 
+// Reading a pyramid checks every sample's block but leaves the samples out of resident memory (a renderer then holds
+// the tiles it reads, not the file: 2.3 GB at 420 M cells); the samples read afterwards are the ones written.
+TEST(SurfacePyramidFile, ReadingChecksTheSamplesWithoutKeepingThemResident) {
+    if (hc::test::dataFile("lidar1m_minnesota_utm15.tif").empty()) GTEST_SKIP() << "no LiDAR raster";
+    const GridOnDisk& d = lidar();
+    const inf::SurfacePyramid built = inf::buildSurfacePyramid(d.grid, {});
+    const fs::path path = hc::test::tempPath("hc_region_", "resident.hcp");
+    inf::writeSurfacePyramid(built, path.string());
+    auto residentFileKb = [] {  // this process's resident pages of mapped files, /proc/self/status
+        std::ifstream status("/proc/self/status");
+        for (std::string line; std::getline(status, line);)
+            if (line.rfind("RssFile:", 0) == 0) return std::stol(line.substr(8));
+        return -1L;
+    };
+    uint64_t sampleBytes = 0;
+    for (const auto& L : built.levels) sampleBytes += L.samples.size() * sizeof(float);
+    ASSERT_GT(sampleBytes, uint64_t(1) << 20) << "too small a pyramid to tell";
+    const long before = residentFileKb();
+    ASSERT_GE(before, 0) << "no RssFile in /proc/self/status";
+    const inf::SurfacePyramid read = inf::readSurfacePyramid(path.string(), d.grid, {});
+    const long after = residentFileKb();
+    // The keys and parent errors stay (a few per cent of the file) and a page at each section's ends; not the samples.
+    EXPECT_LT(after - before, long(sampleBytes / 1024 / 4)) << "samples " << sampleBytes / 1024 << " kB";
+    ASSERT_EQ(read.levels.size(), built.levels.size());
+    for (size_t t = 0; t < built.levels.size(); ++t)
+        ASSERT_TRUE(read.levels[t].samples.size() == built.levels[t].samples.size() &&
+                    std::memcmp(read.levels[t].samples.data(), built.levels[t].samples.data(),
+                                built.levels[t].samples.size_bytes()) == 0)  // bytes: holes are NaN
+            << "level " << t;
+    fs::remove(path);
+}
+
 // The nodes the ranks of an MPI run share out (on_ranks.h): every cell in exactly one node, no node finer than the
 // coarsest cell, the ranks in Morton runs of about equal cell count (off by at most one node's cells).
 TEST(Ranks, PartitionPutsEveryCellInOneNodeAndBalancesTheRanks) {

@@ -1,5 +1,6 @@
 #include "heightcast/core/sectioned_file.h"
 
+#include <algorithm>
 #include <atomic>
 #include <bit>
 #include <cerrno>
@@ -93,6 +94,14 @@ MappedFile::MappedFile(const std::string& path) {
 
 void MappedFile::releasePages() const {
     if (data_ && !heap_) ::madvise(const_cast<std::byte*>(data_), size_, MADV_DONTNEED);  // advice: nothing if refused
+}
+
+void MappedFile::releasePages(uint64_t offset, uint64_t bytes) const {
+    const uint64_t page = uint64_t(::sysconf(_SC_PAGESIZE));
+    const uint64_t begin = (offset + page - 1) / page * page,
+                   end = std::min<uint64_t>(offset + bytes, size_) / page * page;
+    if (data_ && !heap_ && end > begin)
+        ::madvise(const_cast<std::byte*>(data_) + begin, end - begin, MADV_DONTNEED);  // advice: nothing if refused
 }
 
 MappedFile::~MappedFile() {
@@ -254,6 +263,15 @@ std::span<const std::byte> SectionedFileReader::read(const FileSection& s, uint6
             checkBlock(index, b);
     }
     return map_->bytes().subspan(s.offset + offset, bytes);
+}
+
+void SectionedFileReader::checkReleasing(const FileSection& s) const {
+    const uint64_t chunk = uint64_t(64) << 20;
+    for (uint64_t at = 0; at < s.bytes; at += chunk) {
+        const uint64_t n = std::min(chunk, s.bytes - at);
+        read(s, at, n);
+        map_->releasePages(s.offset + at, n);
+    }
 }
 
 void SectionedFileReader::verifyAll() const {

@@ -199,7 +199,10 @@ SurfacePyramid readSurfacePyramid(const std::string& path, const Grid& grid, uin
             file.fail(samples->offset, "SAMPLES of level " + std::to_string(t) + " holds " +
                                            std::to_string(samples->bytes) + " bytes, expected " +
                                            std::to_string(n * ch * plane * 4));
-        // 64-byte aligned in a page-aligned mapping: the spans are properly aligned.
+        // 64-byte aligned in a page-aligned mapping: the spans are properly aligned. The samples, the bulk of the file,
+        // are checked without staying resident: a renderer then holds the tiles it reads, not the pyramid (2.3 GB at
+        // 420 M cells).
+        file.checkReleasing(*samples);
         L.keys = {reinterpret_cast<const uint64_t*>(file.data(*keys).data()), n};
         L.parentErrorM = {reinterpret_cast<const float*>(file.data(*errors).data()), n * ch};
         L.samples = {reinterpret_cast<const float*>(file.data(*samples).data()), n * ch * plane};

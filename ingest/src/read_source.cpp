@@ -143,6 +143,7 @@ void BandReader::read(size_t c0, size_t r0, size_t w, size_t h, float* dst, std:
             buf_.resize(n);
             rasterIO(band_, buf_.data(), GDT_Float64);
         }
+        double maxOther = tally.maxOther;  // in a register, not stored through `tally` a pixel
         for (size_t i = 0; i < n; ++i) {
             double v = exactInFloat_ ? static_cast<double>(dst[i]) : buf_[i];
             bool isNodata =
@@ -167,13 +168,14 @@ void BandReader::read(size_t c0, size_t r0, size_t w, size_t h, float* dst, std:
             if (size_t k = sentinelIndex(v); k < kSentinelCount)
                 ++tally.sentinels[k];
             else
-                tally.maxOther = std::max(tally.maxOther, exact);
+                maxOther = std::max(maxOther, exact);
             const float lost = static_cast<float>(exact - static_cast<double>(dst[i]));
             if (lost != 0.0f) {
                 if (residual.empty()) residual.assign(residualSize, 0.0f);
                 residual[residualAt + i] = lost;
             }
         }
+        tally.maxOther = maxOther;
     }
     if (useMask_) {
         mask_.resize(n);
@@ -181,7 +183,9 @@ void BandReader::read(size_t c0, size_t r0, size_t w, size_t h, float* dst, std:
         for (size_t i = 0; i < n; ++i)
             if (mask_[i] == 0) dst[i] = kNaN;
     }
-    for (size_t i = 0; i < n; ++i) tally.validPixels += !std::isnan(dst[i]);
+    uint64_t valid = 0;
+    for (size_t i = 0; i < n; ++i) valid += !std::isnan(dst[i]);
+    tally.validPixels += valid;
 }
 
 size_t BandReader::stripRows(size_t bytes) const {

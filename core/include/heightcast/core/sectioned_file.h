@@ -82,6 +82,8 @@ public:
     // Drops the mapping's pages from this process's resident memory (madvise MADV_DONTNEED): they stay in the page
     // cache and are read back from it when touched again, the same bytes (the mapping is read-only).
     void releasePages() const;
+    // The same for the whole pages inside bytes [offset, offset + bytes) of the file.
+    void releasePages(uint64_t offset, uint64_t bytes) const;
 
 private:
     const std::byte* data_ = nullptr;
@@ -120,6 +122,9 @@ public:
     static uint64_t entryOffset(size_t s) { return kFileHeaderBytes + s * kFileSectionEntryBytes; }
     std::shared_ptr<const MappedFile> mapping() const { return map_; }
     void releasePages() const { map_->releasePages(); }  // MappedFile::releasePages
+    // Checks every block of section `s` a chunk at a time and releases each chunk's pages after it: the whole section
+    // checked while at most a chunk of it is resident (a later read pages in only what it touches).
+    void checkReleasing(const FileSection& s) const;
     const std::string& path() const { return path_; }
     [[noreturn]] void fail(uint64_t offset, const std::string& what) const;
     [[noreturn]] void failFile(const std::string& what) const;
