@@ -348,8 +348,9 @@ TEST(GridRegionReader, ReleasedPagesLeaveResidentMemoryAndReadBackTheSame) {
     EXPECT_EQ(again.values, first.values);
 }
 
-// Reading a pyramid checks every sample's block but leaves the samples out of resident memory (a renderer then holds
-// the tiles it reads, not the file: 2.3 GB at 420 M cells); the samples read afterwards are the ones written.
+// Reading a pyramid whose samples exceed the resident limit (here 0 bytes; kPyramidResidentBytes for the tools) checks
+// every sample's block but leaves the samples out of resident memory (a renderer then holds the tiles it reads, not the
+// file); the samples read afterwards are the ones written.
 TEST(SurfacePyramidFile, ReadingChecksTheSamplesWithoutKeepingThemResident) {
     if (hc::test::dataFile("lidar1m_minnesota_utm15.tif").empty()) GTEST_SKIP() << "no LiDAR raster";
     const GridOnDisk& d = lidar();
@@ -367,7 +368,8 @@ TEST(SurfacePyramidFile, ReadingChecksTheSamplesWithoutKeepingThemResident) {
     ASSERT_GT(sampleBytes, uint64_t(1) << 20) << "too small a pyramid to tell";
     const long before = residentFileKb();
     ASSERT_GE(before, 0) << "no RssFile in /proc/self/status";
-    const inf::SurfacePyramid read = inf::readSurfacePyramid(path.string(), d.grid, {});
+    const inf::SurfacePyramid read =
+        inf::readSurfacePyramid(path.string(), d.grid, d.grid.structureHash(), d.grid.contentHash(), {}, 0);
     const long after = residentFileKb();
     // The keys and parent errors stay (a few per cent of the file) and a page at each section's ends; not the samples.
     EXPECT_LT(after - before, long(sampleBytes / 1024 / 4)) << "samples " << sampleBytes / 1024 << " kB";

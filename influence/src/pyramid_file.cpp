@@ -118,7 +118,7 @@ SurfacePyramid readSurfacePyramid(const std::string& path, const GridFileInfo& g
 }
 
 SurfacePyramid readSurfacePyramid(const std::string& path, const Grid& grid, uint64_t structureHash,
-                                  uint64_t contentHash, const KernelParams& params) {
+                                  uint64_t contentHash, const KernelParams& params, uint64_t residentBytes) {
     SectionedFileReader file(path, kFormat);
     const std::byte* h = file.header();
     for (size_t i : {off::reserved0, off::reserved0 + 1, off::reserved0 + 2, off::reserved0 + 3})
@@ -177,6 +177,9 @@ SurfacePyramid readSurfacePyramid(const std::string& path, const Grid& grid, uin
         slot = &s;
     }
     p.levels.resize(size_t(levelCount));
+    uint64_t sampleBytes = 0;
+    for (int t = 0; t < levelCount; ++t)
+        if (const FileSection* samples = found[size_t(t) * 3 + 2]) sampleBytes += samples->bytes;
     for (int t = 0; t < levelCount; ++t) {
         const FileSection* keys = found[size_t(t) * 3];
         const FileSection* errors = found[size_t(t) * 3 + 1];
@@ -200,9 +203,8 @@ SurfacePyramid readSurfacePyramid(const std::string& path, const Grid& grid, uin
                                            std::to_string(samples->bytes) + " bytes, expected " +
                                            std::to_string(n * ch * plane * 4));
         // 64-byte aligned in a page-aligned mapping: the spans are properly aligned. The samples, the bulk of the file,
-        // are checked without staying resident: a renderer then holds the tiles it reads, not the pyramid (2.3 GB at
-        // 420 M cells).
-        file.checkReleasing(*samples);
+        // are checked without staying resident above residentBytes (pyramid.h).
+        if (sampleBytes > residentBytes) file.checkReleasing(*samples);
         L.keys = {reinterpret_cast<const uint64_t*>(file.data(*keys).data()), n};
         L.parentErrorM = {reinterpret_cast<const float*>(file.data(*errors).data()), n * ch};
         L.samples = {reinterpret_cast<const float*>(file.data(*samples).data()), n * ch * plane};

@@ -54,6 +54,11 @@ namespace hc::influence {
 constexpr int kPyramidTileLog2 = 4;
 constexpr int kPyramidTileSide = 1 << kPyramidTileLog2;  // samples per tile side
 constexpr size_t kPyramidTileSamples = size_t(kPyramidTileSide) * kPyramidTileSide;
+// The samples a reader keeps resident after checking them (readSurfacePyramid): up to 3 GiB (the pyramid of about 600 M
+// cells), a renderer stays under 4 GB and its moving frames read tiles already mapped (releasing them made a flight
+// over 419 M cells 25 % slower, the pages faulted back one by one); above, a renderer's memory follows the tiles it
+// reads, not the grid.
+constexpr uint64_t kPyramidResidentBytes = uint64_t(3) << 30;
 
 enum class PyramidChannel : int { Elevation = 0, WaterLevel = 1, WetShare = 2 };
 
@@ -155,8 +160,11 @@ SurfacePyramid readSurfacePyramid(const std::string& path, const Grid& grid, con
 // The same for a grid file not read whole (GridRegionReader): its geometry and the hashes its header stores.
 SurfacePyramid readSurfacePyramid(const std::string& path, const GridFileInfo& grid, const KernelParams& params);
 // Both: `grid` gives the geometry and layers (its cells are not read), the hashes are the grid's.
+// Samples of more than `residentBytes` in all are checked without staying resident (SectionedFileReader::
+// checkReleasing): a reader then holds the tiles it touches, not the file, and pages them back in as it reads them.
 SurfacePyramid readSurfacePyramid(const std::string& path, const Grid& grid, uint64_t structureHash,
-                                  uint64_t contentHash, const KernelParams& params);
+                                  uint64_t contentHash, const KernelParams& params,
+                                  uint64_t residentBytes = kPyramidResidentBytes);
 
 // Whether the file at `path` is a pyramid built for `grid` (the hashes of the step GridFileInfo selects) with `params`,
 // from its header alone (nothing else read or validated; false for a missing or unreadable file): for choosing a path
