@@ -49,9 +49,9 @@ void RenderSetup::addRenderOptions(Parser& p) {
              cachePath);
     p.flag("--out-of-core",
            "read the grid a region at a time, without lists (the default when a surface pyramid or no cache\n"
-           "is beside the grid): memory follows the cascades, not the grid (105 M cells: 0.8 GB); the GL backend then "
-           "evaluates\n"
-           "the texels a frame newly sees on the CPU, keeps its cascades on the GPU, and draws no --cells",
+           "      is beside the grid): memory follows the cascades, not the grid (105 M cells: 0.8 GB); the GL\n"
+           "      backend then evaluates the texels a frame newly sees on the CPU, keeps its cascades on the GPU,\n"
+           "      and draws no --cells",
            outOfCore);
     p.exclusive({"--cache", "--out-of-core"});
     p.option("--pyramid", "P.hcp",
