@@ -8,15 +8,17 @@
 // Each scenario then runs in its own forked child (so getrusage's peak RSS is that scenario's alone, and
 // its memory is returned before the next): generate the grid, build the influence lists (sigma 1, R 3.5;
 // timed), and render --repeat frames (default 3) at 1920 x 1080 with three 1024^2 cascades from the scene's
-// fixed oblique camera over the flood (hc::scenes::floodCamera). Before building the lists the child estimates
-// their size (hc::scenes::estimateInfluenceLists) plus what a render holds beside them; if that exceeds the memory
-// available (MemAvailable, or what ulimit -v leaves), it skips the lists and the frames and the tables say so, rather
-// than being killed for memory (today's lists take ~220 B a cell: 22 GB at 100 M cells). Stage times are the best over
-// the repeats; Gaussians/s = the cascades' kernel evaluations / approximation time; rays/s = pixels / ray casting time.
+// fixed oblique camera over the flood (hc::scenes::floodCamera). Where the lists (~220 B a cell) and a frame would not
+// fit the memory available (MemAvailable, or what ulimit -v leaves, or --memory-gb), a scenario runs as the tools do
+// by default at such sizes: the grid streamed into a temporary file, its surface pyramid built from it a node at a
+// time, the frames rendered out of core (as with --out-of-core --pyramid; at 400 M cells the lists would take 88 GB).
+// Nearer the limit the child estimates the lists' size from the generated grid (hc::scenes::estimateInfluenceLists)
+// and skips the lists and frames if they would not fit, rather than being killed for memory. Stage times are the best
+// over the repeats; Gaussians/s = the cascades' kernel evaluations / approximation time; rays/s = pixels / ray casting
+// time.
 // Targets on this 2-core machine: approximation >= 2 G Gaussians/s; ray casting of 1920 x 1080 within 250 ms
 // (>= 8.29 M rays/s at other sizes).
 // Why a program and not a test: the figures depend on the machine; tests never time anything.
-#include <algorithm>
 #include <algorithm>
 #include <array>
 #include <cmath>
@@ -45,6 +47,7 @@
 #include "heightcast/core/timer.h"
 #include "heightcast/grid/grid.h"
 #include "heightcast/influence/influence.h"
+#include "heightcast/influence/on_ranks.h"
 #include "heightcast/grid/grid_file.h"
 #include "heightcast/influence/pyramid.h"
 #include "heightcast/influence/region.h"
@@ -100,6 +103,8 @@ struct RunResult {
     // The guard before the lists: their estimated bytes, the render's estimated need, what was available.
     uint64_t listsEstimateBytes = 0, renderNeedBytes = 0, memAvailableBytes = 0;
     bool renderSkipped = false;  // the need exceeded what was available: no lists, no frames
+    bool outOfCore = false;      // the grid streamed to a file and rendered from it (--out-of-core, or lists too large)
+    bool pyramid = false;        // a surface pyramid was built (--pyramid, or out of core without --out-of-core)
     double listsMs = 0, listMean = 0;
     uint64_t listP99 = 0, listMax = 0, listBytes = 0;
     double camera[6] = {};  // x, y, z (world), yaw, pitch, fov
@@ -142,6 +147,7 @@ struct Settings {
     bool accuracy = false;  // measure the last frame's hits against the exact surface
     bool outOfCore =
         false;  // write the grid to a file and render from it out of core (render::Scene over a GridRegionReader)
+    double memoryGb = 0;  // --memory-gb: what a scenario may hold (0: what the machine has available)
 };
 
 // The rendered error (--accuracy): every terrain hit of the frame (not a wall, no water over it) against the exact
@@ -172,6 +178,40 @@ void measureAccuracy(const hc::render::Frame& f, const Grid& g, const hc::influe
     r.accuracyP99M = *p99;
 }
 
+double texelsAndPixels(const Settings& set) {
+    return double(set.options.cascades) * double(set.options.texelsPerSide) * double(set.options.texelsPerSide) +
+           double(set.width) * double(set.height);
+}
+
+// The influence lists and a frame beside them, at the lists' typical bytes a cell (influence::kListBytesPerCell) and
+// the grid's 16: where they exceed what a scenario may hold, it runs out of core from the start instead of generating a
+// grid in memory whose lists would not fit (the exact estimate after generating guards the rest).
+double listsPathBytes(const Settings& set, double cells) {
+    return cells * (hc::influence::kListBytesPerCell + 16 + kRenderBytesPerCellBesideLists) +
+           kRenderBytesPerTexelOrPixel * texelsAndPixels(set);
+}
+uint64_t memoryForScenario(const Settings& set) {
+    return set.memoryGb > 0 ? uint64_t(set.memoryGb * 1e9) : hc::bench::memoryAvailableBytes();
+}
+
+// What the tables say of a generated grid.
+void recordGrid(const Scenario& sc, const hc::scenes::Calibration& c, const Grid& shape, uint64_t cells,
+                uint64_t wetCells, const std::vector<uint64_t>& perLevel, RunResult& r) {
+    r.extentXM = hc::scenes::extentXM(sc);
+    r.extentYM = hc::scenes::extentYM(sc);
+    r.finestM = shape.finestCellM;
+    r.coarsestM = shape.levelSizeM(shape.maxLevel);
+    r.cells = cells;
+    r.wetCells = wetCells;
+    for (size_t l = 0; l < perLevel.size() && l < size_t(kMaxLevels); ++l) r.cellsPerLevel[l] = perLevel[l];
+    r.thresholdM = c.thresholdM;
+    r.calibrationS = c.calibrationS;
+    r.sampleTiles = c.sampleTiles;
+    r.tiles = c.tiles;
+    r.finestRaised = c.finestRaised;
+    r.finestLowered = c.finestLowered;
+}
+
 RunResult runScenario(const Scenario& sc, const Settings& set) {
     return inChild<RunResult>(sc.name, [&](RunResult& r) {
         auto say = [&](const char* what) {
@@ -181,27 +221,12 @@ RunResult runScenario(const Scenario& sc, const Settings& set) {
         say("generating the grid ...");
         hc::Stopwatch clock;
         r.targetCells = set.cells > 0 ? set.cells : hc::scenes::targetCells(sc, set.scale);
-        hc::scenes::Generated gen = hc::scenes::generateCells(sc, r.targetCells, set.options.threads);
-        r.generationS = clock.lap();
-        const Grid& g = gen.grid;
-        if (std::string why = g.validate(); !why.empty()) throw hc::Error("generated grid is invalid: " + why);
-        r.gridRss = hc::currentRssBytes();
-        r.extentXM = hc::scenes::extentXM(sc);
-        r.extentYM = hc::scenes::extentYM(sc);
-        r.finestM = g.finestCellM;
-        r.coarsestM = g.levelSizeM(g.maxLevel);
-        r.cells = g.cellCount();
-        for (float d : g.values[1]) r.wetCells += d > 0;
-        const auto per = g.cellsPerLevel();
-        for (size_t l = 0; l < per.size() && l < size_t(kMaxLevels); ++l) r.cellsPerLevel[l] = per[l];
-        r.thresholdM = gen.thresholdM;
-        r.calibrationS = gen.calibrationS;
-        r.sampleTiles = gen.sampleTiles;
-        r.tiles = gen.tiles;
-        r.finestRaised = gen.finestRaised;
-        r.finestLowered = gen.finestLowered;
-
-        std::optional<hc::influence::InfluenceLists> lists;
+        // Where the lists would not fit, the scenario runs as the tools do by default at such sizes: the grid streamed
+        // into a file, the surface pyramid built from it a node at a time, the frames rendered out of core.
+        r.memAvailableBytes = memoryForScenario(set);
+        r.outOfCore = set.outOfCore || listsPathBytes(set, r.targetCells) > double(r.memAvailableBytes);
+        r.pyramid = set.pyramid || (!set.outOfCore && r.outOfCore);
+        std::optional<hc::scenes::Generated> gen;  // in memory
         std::unique_ptr<hc::GridRegionReader> file;
         struct RemoveFile {
             fs::path path;
@@ -210,22 +235,33 @@ RunResult runScenario(const Scenario& sc, const Settings& set) {
                 if (!path.empty()) fs::remove(path, ec);
             }
         } written;
-        if (set.outOfCore) {
-            // Out of core: no lists; the renderer reads the grid file a region at a time.
-            say("writing the grid file ...");
+        double topM = 0;  // the highest terrain or water surface [m]
+        if (r.outOfCore) {
             written.path = fs::temp_directory_path() / fmt::format("hc_bench_{}_{}.hcg", sc.name, ::getpid());
-            hc::writeGrid(g, written.path.string());
+            const hc::scenes::GeneratedFile gf =
+                hc::scenes::generateToFile(sc, r.targetCells, set.options.threads, written.path.string());
             file = std::make_unique<hc::GridRegionReader>(written.path.string());
+            recordGrid(sc, gf, gf.shape, gf.cells, gf.wetCells, gf.cellsPerLevel, r);
+            topM = gf.topM;
         } else {
+            gen = hc::scenes::generateCells(sc, r.targetCells, set.options.threads);
+            const Grid& g = gen->grid;
+            if (std::string why = g.validate(); !why.empty()) throw hc::Error("generated grid is invalid: " + why);
+            uint64_t wet = 0;
+            for (float d : g.values[1]) wet += d > 0;
+            recordGrid(sc, *gen, g, g.cellCount(), wet, g.cellsPerLevel(), r);
+        }
+        r.generationS = clock.lap();
+        r.gridRss = hc::currentRssBytes();
+        const Grid& g = file ? file->shape() : gen->grid;  // out of core: the shape only, no cells
+
+        std::optional<hc::influence::InfluenceLists> lists;
+        if (!file) {
             // Lists that would not fit are not built: the scenario reports its grid and skips the frames.
             r.listsEstimateBytes =
                 hc::scenes::estimateInfluenceLists(g, hc::influence::KernelParams{}, kListsEstimateSample).bytes;
-            const double texelsAndPixels =
-                double(set.options.cascades) * double(set.options.texelsPerSide) * double(set.options.texelsPerSide) +
-                double(set.width) * double(set.height);
             r.renderNeedBytes = r.listsEstimateBytes + uint64_t(kRenderBytesPerCellBesideLists * double(g.cellCount()) +
-                                                                kRenderBytesPerTexelOrPixel * texelsAndPixels);
-            r.memAvailableBytes = hc::bench::memoryAvailableBytes();
+                                                                kRenderBytesPerTexelOrPixel * texelsAndPixels(set));
             if (r.renderNeedBytes > r.memAvailableBytes) {
                 r.renderSkipped = true;
                 r.peakRss = hc::peakRssBytes();
@@ -244,10 +280,13 @@ RunResult runScenario(const Scenario& sc, const Settings& set) {
         }
 
         std::optional<hc::influence::SurfacePyramid> pyramid;
-        if (set.pyramid) {
+        if (r.pyramid) {
             say("building the surface pyramid ...");
             clock.restart();
-            pyramid = hc::influence::buildSurfacePyramid(g, hc::influence::KernelParams{}, set.options.threads);
+            // Out of core as hc-influence builds it by default: a node of the file at a time (the same samples).
+            pyramid = file ? hc::influence::buildPyramidOnRanks(*file, hc::influence::KernelParams{},
+                                                                set.options.threads, false, false)
+                           : hc::influence::buildSurfacePyramid(g, hc::influence::KernelParams{}, set.options.threads);
             r.pyramidMs = clock.milliseconds();
             r.pyramidBytes = pyramid->bytes();
         }
@@ -256,13 +295,7 @@ RunResult runScenario(const Scenario& sc, const Settings& set) {
             file ? std::make_unique<hc::render::Scene>(*file, hc::influence::KernelParams{}, pyr)
                  : std::make_unique<hc::render::Scene>(g, *lists, pyr);
         hc::render::Scene& scene = *scenePtr;
-        if (file) {
-            // The same view box as in memory (the summary bounds the water's top by max elevation + max depth only).
-            double top = -HUGE_VAL;
-            for (size_t i = 0; i < g.cellCount(); ++i)
-                top = std::max(top, double(g.values[0][i]) + std::max(0.0, double(g.values[1][i])));
-            scene.zMax = top;
-        }
+        if (file) scene.zMax = topM;  // the same view box as in memory (the file's summary bounds it more loosely)
         const hc::render::Camera cam = hc::scenes::floodCamera(sc, g, set.width, set.height);
         r.camera[0] = cam.xWorld, r.camera[1] = cam.yWorld, r.camera[2] = cam.zWorld;
         r.camera[3] = cam.yawDeg, r.camera[4] = cam.pitchDeg, r.camera[5] = cam.fovYDeg;
@@ -482,7 +515,8 @@ void writeJson(const std::vector<const Scenario*>& scs, const std::vector<RunRes
         o["approximation_target"] = approximationMet(r) ? "met" : "MISSED";
         o["raycast_target"] = raycastMet(r) ? "met" : "MISSED";
         if (r.image[0]) o["image"] = std::string(r.image);
-        if (set.pyramid) {
+        o["out_of_core"] = r.outOfCore;
+        if (r.pyramid) {
             o["pyramid_ms"] = ms(r.pyramidMs);
             o["pyramid_mb"] = ms(mb(r.pyramidBytes));
         }
@@ -624,11 +658,16 @@ int main(int argc, char** argv) {
                  set.options.beamTilePx);
         p.flag(
             "--out-of-core",
-            "write each grid to a temporary .hcg and render out of core from it, without lists\n"
+            "stream each grid into a temporary .hcg and render out of core from it, without lists\n"
             "      (render::Scene over a GridRegionReader; with --pyramid the texels it holds need no cell; GL: the\n"
             "      texels a frame newly sees evaluated on the CPU, the cascades kept on the GPU, the mipmaps, ray\n"
             "      casting and shading there)",
             set.outOfCore);
+        p.option("--memory-gb", "G",
+                 "memory a scenario may hold [GB]; where its influence lists (~220 B a cell) and frame would\n"
+                 "      not fit, it runs as --out-of-core --pyramid (default: what the machine has available,\n"
+                 "      MemAvailable or what ulimit -v leaves)",
+                 set.memoryGb);
         p.flag("--accuracy",
                "measure the last frame's terrain hits against the exact surface: max, p99 and RMS of\n"
                "      |hit height - exact height| [m] (walls and water aside)",
@@ -644,6 +683,9 @@ int main(int argc, char** argv) {
             throw hc::Error("--cells " + fmt::format("{:g}", set.cells) +
                             ": must be a count in 1000 .. 4e9 (a grid holds fewer than 2^32 cells)");
         if (set.cells > 0 && set.scale != 1) throw hc::Error("--cells and --scale: give one of them");
+        if (!(set.memoryGb >= 0) || !std::isfinite(set.memoryGb))
+            throw hc::Error("--memory-gb " + fmt::format("{:g}", set.memoryGb) +
+                            ": must be a number of GB, >= 0 (0: what is available)");
         if (set.repeat < 1) throw hc::Error("--repeat " + std::to_string(set.repeat) + ": must be at least 1");
         set.backend = hc::cli::parseBackend(backendText);
         if (set.backend == hc::cli::Backend::Auto)
@@ -727,6 +769,13 @@ int main(int argc, char** argv) {
                         r.finestRaised    ? " (finest size raised: the forced cells alone exceeded the scaled count)"
                         : r.finestLowered ? " (finest size lowered: the domain held too few cells at the scenario's)"
                                           : "");
+            if (r.outOfCore && !set.outOfCore)
+                std::printf(
+                    "%-14s out of core: lists and frame ~%.1f GB (%.0f B a cell) would not fit %.1f GB available; the "
+                    "grid was\n%-14s streamed into a file, its surface pyramid built a node at a time and the frames "
+                    "rendered from the file,\n%-14s as hc-influence and hc-render do by default at this size\n",
+                    chosen[k]->name, listsPathBytes(set, r.targetCells) / 1e9, hc::influence::kListBytesPerCell,
+                    double(r.memAvailableBytes) / 1e9, "", "");
         }
         // Scenarios whose lists and frame would not fit were generated only: said here, left out of what follows.
         {
@@ -742,7 +791,8 @@ int main(int argc, char** argv) {
                 std::printf(
                     "%-14s RENDERING SKIPPED: influence lists ~%.1f GB (estimated) + frame ~%.1f GB need %.1f GB; %.1f "
                     "GB available"
-                    " (MemAvailable, or what ulimit -v leaves); grid generated in %.1f s, peak RSS %.0f MB\n",
+                    " (MemAvailable, what ulimit -v leaves or --memory-gb); grid generated in %.1f s, peak RSS %.0f "
+                    "MB\n",
                     chosen[k]->name, double(r.listsEstimateBytes) / 1e9,
                     double(r.renderNeedBytes - r.listsEstimateBytes) / 1e9, double(r.renderNeedBytes) / 1e9,
                     double(r.memAvailableBytes) / 1e9, r.generationS, mb(r.peakRss));
@@ -803,7 +853,7 @@ int main(int argc, char** argv) {
                     std::printf(", %llu interpolated", (unsigned long long)cs.pyramidInterpolated);
                 std::printf("\n");
             }
-            if (set.pyramid)
+            if (r.pyramid)
                 std::printf(
                     "  %-14s    surface pyramid built in %.1f s (not part of a frame), %.1f MB = %.1f bytes per cell\n",
                     chosen[k]->name, r.pyramidMs / 1e3, mb(r.pyramidBytes), double(r.pyramidBytes) / double(r.cells));

@@ -18,23 +18,28 @@
 //             it is larger than the finest size and (it is coarser than 96 m, or it straddles a wet/dry edge
 //             or a channel bank, or the terrain or the water depth varies over it by more than a threshold T,
 //             measured at its 3 x 3 corner / edge / centre points). A leaf's values are terrain and depth at its
-//             centre. T is calibrated per scenario by bisection, counting the cells of a fixed sample of 1/8 of
-//             the 768 m tiles (all tiles of a small domain); one count over every tile then measures the sample's
-//             bias (the river crosses few sample tiles) and the bisection repeats with it (at most 3 rounds), so
-//             the cell count lands within a few % of the target (the report's count divided by `scale`, or a
-//             count asked for). If even T = infinity
+//             centre. T is one of a fixed set of thresholds (1 mm to 10 km, 0.2 % apart), calibrated per
+//             scenario by counting cells at every threshold of the set in one walk of the tree (a node is a leaf
+//             for T between its own split value and its ancestors' least one): a fixed sample of 1/8 of the 768 m
+//             tiles (all tiles of a small domain) is walked down in T until it holds 1.3x the target, then every
+//             tile once from there, which gives the exact count at each threshold above and each tile's count
+//             near the target. T is the threshold whose count is nearest the target (the report's count divided
+//             by `scale`, or a count asked for): within a fraction of a percent. If even T = 10 km
 //             gives too many cells (the forced wet-edge and bank cells alone exceed the target: a large scale),
 //             the finest size doubles until it fits (Generated::finestRaised); if the domain holds fewer than
 //             1.5 times the count at the finest size (a count above the report's), it halves until it does
-//             (Generated::finestLowered). The grid is sized once from an exact count per tile and every tile
-//             writes its cells in place: generating holds 16 bytes a cell (code + two floats) and little else.
+//             (Generated::finestLowered). The grid is sized once from the exact count per tile and every tile
+//             writes its cells in place: generating holds 16 bytes a cell (code + two floats) and little else,
+//             or streams them into a file a batch of tiles at a time (generateToFile).
 //   camera    a fixed oblique view a user would pick over the flood: 1.5 km above the river, 10 % of the way
 //             downstream, looking 4.1 km along it (where the centre ray meets the valley floor) at pitch -20
 //             degrees, 50 degree vertical field of view.
 // Local coordinates: metres from the domain's south-west corner, x east (downstream), y north.
 #pragma once
 
+#include <cmath>
 #include <cstdint>
+#include <string>
 #include <span>
 #include <string_view>
 #include <vector>
@@ -106,19 +111,35 @@ private:
     std::vector<Wave> large_, hills_, micro_;
 };
 
-struct Generated {
-    Grid grid;              // layers elevation and water_depth; origin at the scenario's south-west corner
-    double thresholdM = 0;  // the calibrated T
+// How a grid was generated.
+struct Calibration {
+    double thresholdM = 0;                // the calibrated T
     double calibrationS = 0, buildS = 0;  // wall time finding T, and building the grid
     uint64_t sampleTiles = 0, tiles = 0;
     bool finestRaised = false;   // the finest size was doubled (see the top of this file)
     bool finestLowered = false;  // the finest size was halved (the same)
 };
 
+struct Generated : Calibration {
+    Grid grid;  // layers elevation and water_depth; origin at the scenario's south-west corner
+};
+
+// A grid streamed into a file (generateToFile): what a caller would otherwise read off the grid.
+struct GeneratedFile : Calibration {
+    Grid shape;  // geometry and layers as Generated::grid, no cells
+    uint64_t cells = 0, wetCells = 0;
+    std::vector<uint64_t> cellsPerLevel;
+    double topM = -HUGE_VAL;  // the highest terrain or water surface [m]
+};
+
 // The cell count a scale asks for: the report's count / scale (scale > 0; below 1 is more than the report's).
 double targetCells(const Scenario& sc, double scale);
 // The scenario's grid with about `targetCells` cells (> 0), on `threads` workers (0 = all cores).
 Generated generateCells(const Scenario& sc, double targetCells, unsigned threads);
+// The same grid written to the grid file `path` (atomically, with its water as one step), never held whole: tiles are
+// built in batches of about `batchCells` cells (at least a tile) and appended in order. Throws hc::Error.
+GeneratedFile generateToFile(const Scenario& sc, double targetCells, unsigned threads, const std::string& path,
+                             size_t batchCells = size_t(1) << 23);
 // generateCells(sc, targetCells(sc, scale), threads).
 Generated generate(const Scenario& sc, double scale, unsigned threads);
 
