@@ -87,6 +87,19 @@ ListIndex::ListIndex(const Grid& g, const KernelParams& params) : g_(g), params_
     }
 }
 
+void narrowCandidates(const ListIndex::Scratch& from, const Grid::Square& box, ListIndex::Scratch& to) {
+    const size_t m = from.index.size();
+    to.keep.resize(m);
+    reachMask(from.cx.data(), from.cy.data(), from.r2.data(), m, box.x0, box.y0, box.x1, box.y1, to.keep.data());
+    to.cx.resize(m), to.cy.resize(m), to.r2.resize(m), to.index.resize(m);
+    size_t kept = 0;
+    for (size_t c = 0; c < m; ++c) {  // a branch-free compaction of the mask
+        to.cx[kept] = from.cx[c], to.cy[kept] = from.cy[c], to.r2[kept] = from.r2[c], to.index[kept] = from.index[c];
+        kept += to.keep[c];
+    }
+    to.cx.resize(kept), to.cy.resize(kept), to.r2.resize(kept), to.index.resize(kept);
+}
+
 void ListIndex::candidatesFor(const Grid::Square& box, Scratch& s) const {
     s.cx.clear(), s.cy.clear(), s.r2.clear(), s.index.clear();
     for (size_t l = 0; l < byLevel_.size(); ++l) {

@@ -65,6 +65,10 @@ private:
     std::vector<std::vector<uint32_t>> levelIndex_;  // their cell indices in g
 };
 
+// The candidates of `from` (candidatesFor over a box holding `box`, or narrowed from one) whose kernels reach `box`, in
+// their order, into `to` (replacing what was there): the same as candidatesFor(box, to), without a walk of the levels.
+void narrowCandidates(const ListIndex::Scratch& from, const Grid::Square& box, ListIndex::Scratch& to);
+
 // The lists of the cells of super-blocks [s0, s1) of `superBlocks` (splitNodes of the whole grid): offsets from the
 // first of those cells (firstCell; offsets.size() = their cell count + 1) into `entries` indices. A whole-grid build is
 // the part of every super-block; a rank of mpirun builds its share (influence/src/on_ranks.cpp).

@@ -118,9 +118,9 @@ bool nodeMeetsCells(const Grid& g, uint64_t key, int level) {
 std::vector<std::vector<uint64_t>> tileKeys(const Grid& g, const KernelParams& params, int top,
                                             const std::vector<int>& sides) {
     std::vector<std::vector<uint64_t>> keys(size_t(top) + 1);
+    detail::tileKeysOfCells(g, params, 0, g.cellCount(), 0, top, top, sides, keys);
     for (int t = 0; t <= top; ++t) {
         std::vector<uint64_t>& k = keys[size_t(t)];
-        detail::tileKeysOfCells(g, params, 0, g.cellCount(), t, top, sides[size_t(t)], k);
         std::sort(k.begin(), k.end());
         k.erase(std::unique(k.begin(), k.end()), k.end());
         const int nodeLevel = t + std::countr_zero(unsigned(sides[size_t(t)]));
@@ -133,36 +133,50 @@ std::vector<std::vector<uint64_t>> tileKeys(const Grid& g, const KernelParams& p
 
 namespace detail {
 
-void tileKeysOfCells(const Grid& g, const KernelParams& params, size_t lo, size_t hi, int t, int top, int side,
-                     std::vector<uint64_t>& out) {
-    if (t >= top) {  // the top: the tiles holding any cell
-        const uint64_t mask = ~(mortonSpan(t + std::countr_zero(unsigned(side))) - 1);
-        for (size_t i = lo; i < hi; ++i) {
-            const uint64_t key = codeKey(g.codes[i]) & mask;
-            if (out.empty() || out.back() != key) out.push_back(key);
-        }
-        return;
+void tileKeysOfCells(const Grid& g, const KernelParams& params, size_t lo, size_t hi, int t0, int t1, int top,
+                     const std::vector<int>& sides, std::vector<std::vector<uint64_t>>& out) {
+    // Per level: a tile's side in finest cells, tiles per side of the domain, a tile's side in metres, the top's key
+    // mask, and the last reach box added (neighbours in Morton order mostly share it).
+    struct Level {
+        uint64_t span = 0, topMask = 0;
+        long perSide = 0;
+        double tileM = 0;
+        long last[4] = {-1, -1, -1, -1};
+    };
+    std::vector<Level> levels(size_t(t1 - t0 + 1));
+    for (int t = t0; t <= t1; ++t) {
+        Level& L = levels[size_t(t - t0)];
+        L.span = uint64_t(sides[size_t(t)]) << t;
+        L.perSide = long(((uint64_t{1} << g.rootLevel) + L.span - 1) / L.span);
+        L.tileM = g.finestCellM * double(L.span);
+        L.topMask = ~(mortonSpan(t + std::countr_zero(unsigned(sides[size_t(t)]))) - 1);
     }
-    // Below it: the tiles that the kernel reach box of a cell of level <= t meets (its own tile among them).
-    const uint64_t span = uint64_t(side) << t;  // a tile's side in finest cells
-    const long perSide = long(((uint64_t{1} << g.rootLevel) + span - 1) / span);
-    const double tileM = g.finestCellM * double(span);
-    long last[4] = {-1, -1, -1, -1};
     for (size_t i = lo; i < hi; ++i) {
-        if (codeLevel(g.codes[i]) > t) continue;
+        const int level = codeLevel(g.codes[i]);
+        const int from = std::max(t0, std::min(level, top));  // the top holds every cell
+        if (from > t1) continue;
         double cx = 0, cy = 0;
-        g.cellCenterLocal(i, cx, cy);
         const double r = params.radiusM(g.cellSizeM(i));
-        const long tx0 = std::max(0L, long(std::floor((cx - r) / tileM))),
-                   tx1 = std::min(perSide - 1, long(std::floor((cx + r) / tileM)));
-        const long ty0 = std::max(0L, long(std::floor((cy - r) / tileM))),
-                   ty1 = std::min(perSide - 1, long(std::floor((cy + r) / tileM)));
-        if (tx0 == last[0] && tx1 == last[1] && ty0 == last[2] && ty1 == last[3])
-            continue;  // neighbours in Morton order
-        last[0] = tx0, last[1] = tx1, last[2] = ty0, last[3] = ty1;
-        for (long ty = ty0; ty <= ty1; ++ty)
-            for (long tx = tx0; tx <= tx1; ++tx)
-                out.push_back(mortonEncode(uint32_t(uint64_t(tx) * span), uint32_t(uint64_t(ty) * span)));
+        if (from < top) g.cellCenterLocal(i, cx, cy);
+        for (int t = from; t <= t1; ++t) {
+            Level& L = levels[size_t(t - t0)];
+            std::vector<uint64_t>& keys = out[size_t(t)];
+            if (t >= top) {  // the top: the tiles holding any cell
+                const uint64_t key = codeKey(g.codes[i]) & L.topMask;
+                if (keys.empty() || keys.back() != key) keys.push_back(key);
+                continue;
+            }
+            // Below it: the tiles that the kernel reach box of a cell of level <= t meets (its own tile among them).
+            const long tx0 = std::max(0L, long(std::floor((cx - r) / L.tileM))),
+                       tx1 = std::min(L.perSide - 1, long(std::floor((cx + r) / L.tileM)));
+            const long ty0 = std::max(0L, long(std::floor((cy - r) / L.tileM))),
+                       ty1 = std::min(L.perSide - 1, long(std::floor((cy + r) / L.tileM)));
+            if (tx0 == L.last[0] && tx1 == L.last[1] && ty0 == L.last[2] && ty1 == L.last[3]) continue;
+            L.last[0] = tx0, L.last[1] = tx1, L.last[2] = ty0, L.last[3] = ty1;
+            for (long ty = ty0; ty <= ty1; ++ty)
+                for (long tx = tx0; tx <= tx1; ++tx)
+                    keys.push_back(mortonEncode(uint32_t(uint64_t(tx) * L.span), uint32_t(uint64_t(ty) * L.span)));
+        }
     }
 }
 
@@ -174,15 +188,56 @@ int pyramidBlockSide(const Grid& shape, const KernelParams& params, int t) {
 
 namespace {
 
-// The candidates of `from` (a gather over a box holding `box`) whose kernels reach `box`, in their order, into `to`.
-void narrowCandidates(const ListIndex::Scratch& from, const Grid::Square& box, ListIndex::Scratch& to) {
-    to.cx.clear(), to.cy.clear(), to.r2.clear(), to.index.clear();
-    for (size_t c = 0; c < from.index.size(); ++c)
-        if (kernelReaches(from.cx[c], from.cy[c], from.r2[c], box.x0, box.y0, box.x1, box.y1)) {
-            to.cx.push_back(from.cx[c]);
-            to.cy.push_back(from.cy[c]);
-            to.r2.push_back(from.r2[c]);
-            to.index.push_back(from.index[c]);
+// The levels 0..kTileGatherTop gather a tile's candidates once (buildTile); coarser tiles span so many cells that a
+// gather per block costs less than narrowing the tile's (docs/benchmarks.md, issue 42).
+constexpr int kTileGatherTop = 1;
+
+// One tile being sampled: where its samples lie and go.
+struct TileFrame {
+    const Grid& g;
+    double x0, y0, h;     // the tile's first sample and the spacing [m]
+    double tail, halfR2;  // the kernel's (KernelParams::tail, R^2 / 2)
+    const float* z;       // elevation
+    const float* depth;   // water depth, or null
+    int side, channels;   // samples a side; planes
+    float* out;           // channels planes of side^2 samples
+};
+
+// Samples [bi, bi1) x [bj, bj1) of the tile from `c`, the cells whose kernels reach the block; g0: working memory.
+void sampleBlock(const TileFrame& f, const ListIndex::Scratch& c, Gathered& g0, int bi, int bi1, int bj, int bj1) {
+    const size_t m = c.index.size(), plane = size_t(f.side) * size_t(f.side);
+    // Relative to one cell's value per block, and to one wet cell's level (as surface.cpp does per point: any value of
+    // the neighbourhood keeps the digits; a constant field stays exactly constant).
+    const double base = m ? double(f.z[c.index[0]]) : kNaN;
+    double baseLevel = kNaN;
+    for (size_t k = 0; k < m && f.depth && std::isnan(baseLevel); ++k)
+        if (const uint32_t i = c.index[k]; f.depth[i] > 0) baseLevel = double(f.z[i]) + double(f.depth[i]);
+    g0.reset(m);
+    for (size_t k = 0; k < m; ++k) {
+        const uint32_t i = c.index[k];
+        g0.ex[k] = c.cx[k], g0.ey[k] = c.cy[k], g0.r2[k] = c.r2[k];
+        g0.a[k] = f.halfR2 / c.r2[k];  // 1 / (2 sigma^2 c^2), as r2 = (R sigma c)^2
+        g0.rel0[k] = double(f.z[i]) - base;
+        if (f.depth && f.depth[i] > 0) {
+            g0.wet[k] = 1.0;
+            g0.rel1[k] = double(f.z[i]) + double(f.depth[i]) - baseLevel;
+        }
+    }
+    for (int j = bj; j < bj1; ++j)
+        for (int i = bi; i < bi1; ++i) {
+            const double px = f.x0 + i * f.h, py = f.y0 + j * f.h;
+            const size_t at = size_t(j) * size_t(f.side) + size_t(i);
+            if (!f.g.locate(px, py)) {
+                for (int k = 0; k < f.channels; ++k) f.out[size_t(k) * plane + at] = kNaN;
+                continue;
+            }
+            const KernelSums sum = sumKernels(g0, px, py, f.tail);
+            // den >= the containing cell's own weight there (kernel.h): never zero.
+            f.out[at] = float(base + sum.num0 / sum.den);
+            if (f.channels == 3) {
+                f.out[plane + at] = sum.denWet > 0 ? float(baseLevel + sum.num1 / sum.denWet) : kNaN;
+                f.out[2 * plane + at] = float(sum.denWet / sum.den);
+            }
         }
 }
 
@@ -193,61 +248,39 @@ void buildTile(const Grid& g, const ListIndex& index, const KernelParams& params
     const int block = pyramidBlockSide(g, params, t);
     const double h = g.levelSizeM(t);
     const double x0 = double(mortonX(key)) * g.finestCellM, y0 = double(mortonY(key)) * g.finestCellM;
-    const double tail = params.tail(), halfR2 = 0.5 * params.truncation * params.truncation;
-    const float* z = g.values[0].data();
-    const float* depth = depthLayer >= 0 ? g.values[size_t(depthLayer)].data() : nullptr;
-    const size_t plane = size_t(side) * size_t(side);
+    const TileFrame frame{g,
+                          x0,
+                          y0,
+                          h,
+                          params.tail(),
+                          0.5 * params.truncation * params.truncation,
+                          g.values[0].data(),
+                          depthLayer >= 0 ? g.values[size_t(depthLayer)].data() : nullptr,
+                          side,
+                          channels,
+                          out};
     const int blocksPerSide = (side + block - 1) / block;
-    // A tile of several blocks gathers its candidates once, over the whole tile, and narrows them to each block by the
-    // test the gather ends with (kernelReaches): the same candidates in the same order as a gather per block, for one
-    // walk of the levels' quadtrees a tile instead of one a block.
-    const bool perTile = onlyBlock < 0 && blocksPerSide > 1 && t == 0;
+    // A tile of several blocks on the finest levels gathers its candidates once, over the whole tile, and narrows them
+    // to each row of blocks and then to each block by the test the gather ends with (kernelReaches): the same
+    // candidates in the same order as a gather per block, for one walk of the levels' quadtrees a tile instead of one a
+    // block, and each block testing its row's few candidates, not the tile's many.
+    const bool perTile = onlyBlock < 0 && blocksPerSide > 1 && t <= kTileGatherTop;
     if (perTile) index.candidatesFor(Grid::Square{x0, y0, x0 + (side - 1) * h, y0 + (side - 1) * h}, w.tile);
-    for (int bj = 0; bj < side; bj += block)
+    for (int bj = 0; bj < side; bj += block) {
+        const int bj1 = std::min(side, bj + block);
+        if (perTile)
+            narrowCandidates(w.tile, Grid::Square{x0, y0 + bj * h, x0 + (side - 1) * h, y0 + (bj1 - 1) * h}, w.row);
         for (int bi = 0; bi < side; bi += block) {
             if (onlyBlock >= 0 && onlyBlock != (bj / block) * blocksPerSide + bi / block) continue;
-            const int bi1 = std::min(side, bi + block), bj1 = std::min(side, bj + block);
+            const int bi1 = std::min(side, bi + block);
             const Grid::Square box{x0 + bi * h, y0 + bj * h, x0 + (bi1 - 1) * h, y0 + (bj1 - 1) * h};
             if (perTile)
-                narrowCandidates(w.tile, box, w.wide);
+                narrowCandidates(w.row, box, w.wide);
             else
                 index.candidatesFor(box, w.wide);
-            const size_t m = w.wide.index.size();
-            // Relative to one cell's value per block, and to one wet cell's level (as surface.cpp does per point:
-            // any value of the neighbourhood keeps the digits; a constant field stays exactly constant).
-            const double base = m ? double(z[w.wide.index[0]]) : kNaN;
-            double baseLevel = kNaN;
-            for (size_t c = 0; c < m && depth && std::isnan(baseLevel); ++c)
-                if (const uint32_t i = w.wide.index[c]; depth[i] > 0) baseLevel = double(z[i]) + double(depth[i]);
-            detail::Gathered& g0 = w.block;
-            g0.reset(m);
-            for (size_t c = 0; c < m; ++c) {
-                const uint32_t i = w.wide.index[c];
-                g0.ex[c] = w.wide.cx[c], g0.ey[c] = w.wide.cy[c], g0.r2[c] = w.wide.r2[c];
-                g0.a[c] = halfR2 / w.wide.r2[c];  // 1 / (2 sigma^2 c^2), as r2 = (R sigma c)^2
-                g0.rel0[c] = double(z[i]) - base;
-                if (depth && depth[i] > 0) {
-                    g0.wet[c] = 1.0;
-                    g0.rel1[c] = double(z[i]) + double(depth[i]) - baseLevel;
-                }
-            }
-            for (int j = bj; j < bj1; ++j)
-                for (int i = bi; i < bi1; ++i) {
-                    const double px = x0 + i * h, py = y0 + j * h;
-                    const size_t at = size_t(j) * size_t(side) + size_t(i);
-                    if (!g.locate(px, py)) {
-                        for (int c = 0; c < channels; ++c) out[size_t(c) * plane + at] = kNaN;
-                        continue;
-                    }
-                    const detail::KernelSums sum = detail::sumKernels(g0, px, py, tail);
-                    // den >= the containing cell's own weight there (kernel.h): never zero.
-                    out[at] = float(base + sum.num0 / sum.den);
-                    if (channels == 3) {
-                        out[plane + at] = sum.denWet > 0 ? float(baseLevel + sum.num1 / sum.denWet) : kNaN;
-                        out[2 * plane + at] = float(sum.denWet / sum.den);
-                    }
-                }
+            sampleBlock(frame, w.wide, w.block, bi, bi1, bj, bj1);
         }
+    }
 }
 
 // parentErrorM of every tile below the top (pyramid.h); a parent sample p lacks is looked for in `halo` (its tiles have

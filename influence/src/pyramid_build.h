@@ -26,12 +26,13 @@ SurfacePyramid finishPyramid(SurfacePyramid p, std::shared_ptr<SurfacePyramid::S
 
 // The pieces, for builders that sample tiles from parts of a grid (a region read around them, on_ranks.cpp):
 
-// Appends to `out` the keys of the tiles of level t (side samples a side; top: the pyramid's top level) that cells
-// [lo, hi) of g keep, by pyramid.h's rule: below the top, every tile that the kernel reach box of a cell of level <= t
-// meets (the square of half-side params.radiusM(cell size) about the cell's centre); at the top, the tiles holding a
-// cell. Unsorted, with repeats (consecutive cells reaching the same tiles add them once).
-void tileKeysOfCells(const Grid& g, const KernelParams& params, size_t lo, size_t hi, int t, int top, int side,
-                     std::vector<uint64_t>& out);
+// Appends to out[t], for each level t in [t0, t1], the keys of the tiles of level t (sides[t] samples a side; top: the
+// pyramid's top level) that cells [lo, hi) of g keep, by pyramid.h's rule: below the top, every tile that the kernel
+// reach box of a cell of level <= t meets (the square of half-side params.radiusM(cell size) about the cell's centre);
+// at the top, the tiles holding a cell. Unsorted, with repeats (consecutive cells reaching the same tiles add them
+// once). One pass over the cells for every level: a cell's centre and reach are found once.
+void tileKeysOfCells(const Grid& g, const KernelParams& params, size_t lo, size_t hi, int t0, int t1, int top,
+                     const std::vector<int>& sides, std::vector<std::vector<uint64_t>>& out);
 // Appends the keys of the tiles of level t that the kernel of a wet cell among [lo, hi) reaches, grown by one tile on
 // each side (buildWaterPyramid's rule; unsorted, with repeats). depthLayer: g's water_depth layer.
 void wetMarkedTiles(const Grid& g, const KernelParams& params, int depthLayer, size_t lo, size_t hi, int t, int side,
@@ -39,7 +40,8 @@ void wetMarkedTiles(const Grid& g, const KernelParams& params, int depthLayer, s
 
 // One worker's memory for buildTile.
 struct PyramidWorkspace {
-    ListIndex::Scratch tile;  // a whole tile's candidates (buildTile narrows them to each block)
+    ListIndex::Scratch tile;  // a whole tile's candidates (buildTile narrows them to each row of blocks, then block)
+    ListIndex::Scratch row;
     ListIndex::Scratch wide;
     Gathered block;  // one block's candidates, in the local frame
 };
