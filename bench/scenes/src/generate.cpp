@@ -45,7 +45,7 @@ constexpr size_t kMaxWindow = 1024;  // edges a walk over every tile counts per 
 // visited node adds 1 to the edges in [v, m). A walk at threshold T0 visits every node that is a leaf at some T >= T0,
 // so the sums are exact at every edge from T0 up.
 struct Curves {
-    int64_t* whole = nullptr;  // difference array over every edge (edges + 1 entries), or null
+    int64_t* whole = nullptr;   // difference array over every edge (edges + 1 entries), or null
     int64_t* window = nullptr;  // difference array over edges [first, first + width) (width + 1 entries), or null
     size_t first = 0, width = 0;
 
@@ -56,7 +56,8 @@ struct Curves {
         if (k0 >= k1) return;
         if (whole) ++whole[k0], --whole[k1];
         if (window) {
-            const size_t a = std::clamp(k0, first, first + width) - first, b = std::clamp(k1, first, first + width) - first;
+            const size_t a = std::clamp(k0, first, first + width) - first,
+                         b = std::clamp(k1, first, first + width) - first;
             if (a < b) ++window[a], --window[b];
         }
     }
@@ -176,7 +177,9 @@ struct Plan {
 class Calibrator {
 public:
     Calibrator(const Terrain& terrain, Plan& p, double target, unsigned threads)
-        : p_(p), target_(target), threads_(hc::resolveThreads(threads)),
+        : p_(p),
+          target_(target),
+          threads_(hc::resolveThreads(threads)),
           refiner_(terrain, p.finest, p.maxLevel, p.ex, p.ey) {
         for (size_t k = 0; k < p.tiles.size(); ++k)
             if (p.tiles.size() < 256 || hash64(uint64_t(p.tiles[k][0]) << 32 | p.tiles[k][1]) % 8 == 0)
@@ -189,7 +192,9 @@ public:
     }
 
     // The sample's estimate of the cells at the coarsest threshold (10 km).
-    double fewest() { return double(walk(sample_, thresholdEdges().size() - 1, cap(sampleScale_), 0, 0).leaves) * sampleScale_; }
+    double fewest() {
+        return double(walk(sample_, thresholdEdges().size() - 1, cap(sampleScale_), 0, 0).leaves) * sampleScale_;
+    }
 
     // The threshold edge whose cell count over every tile is nearest the target; p.perTile filled there.
     void calibrate(bool coarsestOnly) {
@@ -247,8 +252,8 @@ private:
                 const size_t t = which[k];
                 Curves curves{diffs[worker].data(), width ? &w.tileDiffs[t * (width + 1)] : nullptr, first, width};
                 const auto& tl = p_.tiles[t];
-                const uint64_t n =
-                    refiner_.run(tl[0] << p_.tileLevel, tl[1] << p_.tileLevel, p_.tileLevel, e[k0], nullptr, &curves, cap);
+                const uint64_t n = refiner_.run(tl[0] << p_.tileLevel, tl[1] << p_.tileLevel, p_.tileLevel, e[k0],
+                                                nullptr, &curves, cap);
                 if (total.fetch_add(n) + n > cap) capped = true;
             }
         });
