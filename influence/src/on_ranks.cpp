@@ -59,22 +59,6 @@ Grid::Square nodeSquare(const Grid& shape, uint64_t key, int level) {
     return {x0, y0, x0 + side, y0 + side};
 }
 
-// detail::tileKeysOfCells for levels [t0, t1] over cells [lo, hi), the cells split among `threads` workers and their
-// keys appended in turn (a repeat at a seam is harmless: the keys are sorted and made unique after).
-void tileKeysOnThreads(const Grid& g, const KernelParams& params, size_t lo, size_t hi, int t0, int t1, int top,
-                       const std::vector<int>& sides, unsigned threads, std::vector<std::vector<uint64_t>>& out) {
-    if (t0 > t1 || lo >= hi) return;
-    const size_t parts = threads > 1 && hi - lo >= 65536 ? threads : 1;
-    std::vector<std::vector<std::vector<uint64_t>>> partKeys(parts, std::vector<std::vector<uint64_t>>(out.size()));
-    parallelFor(parts, 1, threads, [&](size_t b, size_t e, unsigned) {
-        for (size_t p = b; p < e; ++p)
-            detail::tileKeysOfCells(g, params, lo + (hi - lo) * p / parts, lo + (hi - lo) * (p + 1) / parts, t0, t1,
-                                    top, sides, partKeys[p]);
-    });
-    for (const auto& part : partKeys)
-        for (size_t t = 0; t < out.size(); ++t) out[t].insert(out[t].end(), part[t].begin(), part[t].end());
-}
-
 // A region of the file with each of its cells' index in the file.
 struct IndexedRegion {
     Grid grid;
@@ -412,8 +396,9 @@ SurfacePyramid buildPyramidOnRanks(const GridRegionReader& file, const KernelPar
             // Every level's tile keys at once: inside the node from every cell read (the node's and its margin's),
             // above it from the node's own cells.
             std::vector<std::vector<uint64_t>> levelKeys(size_t(top) + 1);
-            tileKeysOnThreads(r.grid, params, 0, r.grid.cellCount(), 0, lastInside, top, sides, threads, levelKeys);
-            tileKeysOnThreads(r.grid, params, r.lo, r.hi, lastInside + 1, top, top, sides, threads, levelKeys);
+            detail::tileKeysOnThreads(r.grid, params, 0, r.grid.cellCount(), 0, lastInside, top, sides, threads,
+                                      levelKeys);
+            detail::tileKeysOnThreads(r.grid, params, r.lo, r.hi, lastInside + 1, top, top, sides, threads, levelKeys);
             for (int t = 0; t <= top; ++t) {
                 const int side = sides[size_t(t)];
                 std::vector<uint64_t> k = std::move(levelKeys[size_t(t)]);

@@ -180,6 +180,22 @@ void tileKeysOfCells(const Grid& g, const KernelParams& params, size_t lo, size_
     }
 }
 
+// tileKeysOfCells for levels [t0, t1] over cells [lo, hi), the cells split among `threads` workers and their
+// keys appended in turn (a repeat at a seam is harmless: the keys are sorted and made unique after).
+void tileKeysOnThreads(const Grid& g, const KernelParams& params, size_t lo, size_t hi, int t0, int t1, int top,
+                       const std::vector<int>& sides, unsigned threads, std::vector<std::vector<uint64_t>>& out) {
+    if (t0 > t1 || lo >= hi) return;
+    const size_t parts = threads > 1 && hi - lo >= 65536 ? threads : 1;
+    std::vector<std::vector<std::vector<uint64_t>>> partKeys(parts, std::vector<std::vector<uint64_t>>(out.size()));
+    parallelFor(parts, 1, threads, [&](size_t b, size_t e, unsigned) {
+        for (size_t p = b; p < e; ++p)
+            detail::tileKeysOfCells(g, params, lo + (hi - lo) * p / parts, lo + (hi - lo) * (p + 1) / parts, t0, t1,
+                                    top, sides, partKeys[p]);
+    });
+    for (const auto& part : partKeys)
+        for (size_t t = 0; t < out.size(); ++t) out[t].insert(out[t].end(), part[t].begin(), part[t].end());
+}
+
 int pyramidBlockSide(const Grid& shape, const KernelParams& params, int t) {
     return shape.levelSizeM(t) >= params.radiusM(shape.levelSizeM(std::clamp(shape.maxLevel, 0, shape.rootLevel)))
                ? 1

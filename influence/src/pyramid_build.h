@@ -33,6 +33,10 @@ SurfacePyramid finishPyramid(SurfacePyramid p, std::shared_ptr<SurfacePyramid::S
 // once). One pass over the cells for every level: a cell's centre and reach are found once.
 void tileKeysOfCells(const Grid& g, const KernelParams& params, size_t lo, size_t hi, int t0, int t1, int top,
                      const std::vector<int>& sides, std::vector<std::vector<uint64_t>>& out);
+// tileKeysOfCells with the cells split among `threads` workers, their keys appended in turn (a repeat at a seam may
+// appear: callers sort the keys and make them unique).
+void tileKeysOnThreads(const Grid& g, const KernelParams& params, size_t lo, size_t hi, int t0, int t1, int top,
+                       const std::vector<int>& sides, unsigned threads, std::vector<std::vector<uint64_t>>& out);
 // Appends the keys of the tiles of level t that the kernel of a wet cell among [lo, hi) reaches, grown by one tile on
 // each side (buildWaterPyramid's rule; unsorted, with repeats). depthLayer: g's water_depth layer.
 void wetMarkedTiles(const Grid& g, const KernelParams& params, int depthLayer, size_t lo, size_t hi, int t, int side,
