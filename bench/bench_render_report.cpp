@@ -208,17 +208,16 @@ void printTables(std::vector<const Scenario*>& chosen, std::vector<RunResult>& r
         "time,\n"
         "mean / p99 / max entries per cell, offsets + indices\n\n");
     std::printf("%-14s %13s %10s %10s %10s %7s %8s %6s %7s %7s %9s %6s %5s %5s %8s\n", "scenario", "extents km",
-                "cells m", "target", "cells", "diff %", "T m", "wet %", "calib s", "build s", "lists ms", "mean",
-                "p99", "max", "lists MB");
+                "cells m", "target", "cells", "diff %", "T m", "wet %", "calib s", "build s", "lists ms", "mean", "p99",
+                "max", "lists MB");
     for (size_t k = 0; k < results.size(); ++k) {
         const RunResult& r = results[k];
         const double target = r.targetCells;
         std::printf("%-14s %13s %10s %10.0f %10llu %+7.1f %8.3g %6.1f %7.1f %7.1f %9.1f %6.1f %5llu %5llu %8.1f\n",
-                    chosen[k]->name, extentText(r).c_str(), sizesText(r).c_str(), target,
-                    (unsigned long long)r.cells, (double(r.cells) / target - 1) * 100, r.thresholdM,
-                    100.0 * double(r.wetCells) / double(r.cells), r.calibrationS, r.generationS - r.calibrationS,
-                    r.listsMs, r.listMean, (unsigned long long)r.listP99, (unsigned long long)r.listMax,
-                    mb(r.listBytes));
+                    chosen[k]->name, extentText(r).c_str(), sizesText(r).c_str(), target, (unsigned long long)r.cells,
+                    (double(r.cells) / target - 1) * 100, r.thresholdM, 100.0 * double(r.wetCells) / double(r.cells),
+                    r.calibrationS, r.generationS - r.calibrationS, r.listsMs, r.listMean,
+                    (unsigned long long)r.listP99, (unsigned long long)r.listMax, mb(r.listBytes));
     }
     for (size_t k = 0; k < results.size(); ++k) {
         const RunResult& r = results[k];
@@ -272,8 +271,8 @@ void printTables(std::vector<const Scenario*>& chosen, std::vector<RunResult>& r
         hc::cli::backendName(set.backend), results.empty() ? "-" : results[0].device, set.width, set.height,
         set.options.cascades, set.options.cascades == 1 ? "" : "s", set.options.texelsPerSide, set.repeat);
     std::printf("%-14s %13s %10s %7s %19s %19s %8s %7s %8s %8s %11s %10s %8s %11s %11s\n", "scenario", "extents km",
-                "cells m", "cells M", "approximation ms", "ray casting ms", "fit ms", "mip ms", "shade ms",
-                "total ms", "G Gauss/s", "M rays/s", "peak MB", "GTX appr ms", "GTX ray ms");
+                "cells m", "cells M", "approximation ms", "ray casting ms", "fit ms", "mip ms", "shade ms", "total ms",
+                "G Gauss/s", "M rays/s", "peak MB", "GTX appr ms", "GTX ray ms");
     for (size_t k = 0; k < results.size(); ++k) {
         const RunResult& r = results[k];
         std::printf(
@@ -281,8 +280,7 @@ void printTables(std::vector<const Scenario*>& chosen, std::vector<RunResult>& r
             "%11.1f\n",
             chosen[k]->name, extentText(r).c_str(), sizesText(r).c_str(), double(r.cells) / 1e6, r.approximationMs,
             r.worstApproximationMs, r.raycastMs, r.worstRaycastMs, r.fittingMs, r.mipmapMs, r.shadingMs, r.totalMs,
-            gaussiansPerS(r) / 1e9, raysPerS(r) / 1e6, mb(r.peakRss), chosen[k]->gpuApproxMs,
-            chosen[k]->gpuRaycastMs);
+            gaussiansPerS(r) / 1e9, raysPerS(r) / 1e6, mb(r.peakRss), chosen[k]->gpuApproxMs, chosen[k]->gpuRaycastMs);
     }
     if (set.backend == hc::cli::Backend::Gl) {
         std::printf(
@@ -294,8 +292,8 @@ void printTables(std::vector<const Scenario*>& chosen, std::vector<RunResult>& r
             "viewer's)\n");
         for (size_t k = 0; k < results.size(); ++k)
             std::printf("  %-14s total %7.2f ms   GPU %7.2f ms   CPU and waiting %7.2f ms   read back %7.2f ms\n",
-                        chosen[k]->name, results[k].totalMs, results[k].gpuMs,
-                        results[k].totalMs - results[k].gpuMs, results[k].readbackMs);
+                        chosen[k]->name, results[k].totalMs, results[k].gpuMs, results[k].totalMs - results[k].gpuMs,
+                        results[k].readbackMs);
     }
     std::printf(
         "\ncascades (best approximation frame): offsets along the view [m], texel [m], visible texels, Gaussians, "
@@ -310,8 +308,7 @@ void printTables(std::vector<const Scenario*>& chosen, std::vector<RunResult>& r
             if (cs.pyramidLevel >= 0)
                 std::printf("   %llu copied from pyramid level %d", (unsigned long long)cs.pyramidTexels,
                             cs.pyramidLevel);
-            if (cs.pyramidInterpolated)
-                std::printf(", %llu interpolated", (unsigned long long)cs.pyramidInterpolated);
+            if (cs.pyramidInterpolated) std::printf(", %llu interpolated", (unsigned long long)cs.pyramidInterpolated);
             std::printf("\n");
         }
         if (r.pyramid)
@@ -322,8 +319,7 @@ void printTables(std::vector<const Scenario*>& chosen, std::vector<RunResult>& r
             std::printf(
                 "  %-14s    rendered error (terrain hits vs exact surface, %llu hits): max %.3g m, p99 %.3g m, RMS "
                 "%.3g m\n",
-                chosen[k]->name, (unsigned long long)r.accuracySamples, r.accuracyMaxM, r.accuracyP99M,
-                r.accuracyRmsM);
+                chosen[k]->name, (unsigned long long)r.accuracySamples, r.accuracyMaxM, r.accuracyP99M, r.accuracyRmsM);
         std::printf("  %-14s    hits %.1f %% of pixels, water %.1f %%; camera %.0f, %.0f, %.0f yaw %.1f\n",
                     chosen[k]->name, 100.0 * double(r.hits) / double(r.rays),
                     100.0 * double(r.wetHits) / double(r.rays), r.camera[0], r.camera[1], r.camera[2], r.camera[3]);
@@ -337,9 +333,8 @@ void printTables(std::vector<const Scenario*>& chosen, std::vector<RunResult>& r
             "frame);\n"
             "cells = grid cells the approximation visited per frame\n\n",
             set.flyStepM, set.flyFrames, set.flyFrames);
-        std::printf("%-14s %16s %16s %6s %14s %14s %14s %12s %12s\n", "scenario", "approx ms fresh",
-                    "approx ms cache", "x", "frame ms fresh", "frame ms cache", "texels kept %", "cells fresh",
-                    "cells cache");
+        std::printf("%-14s %16s %16s %6s %14s %14s %14s %12s %12s\n", "scenario", "approx ms fresh", "approx ms cache",
+                    "x", "frame ms fresh", "frame ms cache", "texels kept %", "cells fresh", "cells cache");
         for (size_t k = 0; k < results.size(); ++k) {
             const RunResult& r = results[k];
             std::printf("%-14s %16.1f %16.1f %6.1f %14.1f %14.1f %14.1f %12.0f %12.0f\n", chosen[k]->name,
@@ -351,8 +346,7 @@ void printTables(std::vector<const Scenario*>& chosen, std::vector<RunResult>& r
         for (const RunResult& r : results) uploads = uploads || r.flyUploadFreshMB > 0;
         if (uploads) {  // the GL backend: the cascades' rows and (out of core) the texels the CPU evaluated
                         // (Timings::uploadMs)
-            std::printf("\n%-14s %16s %16s %16s %16s\n", "GL upload", "ms fresh", "ms cache", "MB fresh",
-                        "MB cache");
+            std::printf("\n%-14s %16s %16s %16s %16s\n", "GL upload", "ms fresh", "ms cache", "MB fresh", "MB cache");
             for (size_t k = 0; k < results.size(); ++k) {
                 const RunResult& r = results[k];
                 std::printf("%-14s %16.2f %16.2f %16.2f %16.3f\n", chosen[k]->name, r.flyUploadFreshMs,
@@ -401,9 +395,8 @@ void writePlot(const std::vector<const Scenario*>& chosen, const std::vector<Run
         hc::bench::BarPlot bp;
         bp.title = std::string("hc-bench, ") + (gl ? "GL" : "CPU") + " backend: best stage times of a " +
                    std::to_string(set.width) + "x" + std::to_string(set.height) + " frame, " +
-                   std::to_string(set.options.cascades) + " cascades of " +
-                   std::to_string(set.options.texelsPerSide) + "^2" +
-                   (set.cells > 0 || set.scale != 1 ? ", " + sizeText : "");
+                   std::to_string(set.options.cascades) + " cascades of " + std::to_string(set.options.texelsPerSide) +
+                   "^2" + (set.cells > 0 || set.scale != 1 ? ", " + sizeText : "");
         bp.xLabel = "milliseconds";
         // Ray casting first, so its bar ends where the ray casting target's line can meet it.
         bp.segmentNames = {"ray casting", "approximation", "mipmaps", "shading", "fitting"};
@@ -417,9 +410,8 @@ void writePlot(const std::vector<const Scenario*>& chosen, const std::vector<Run
             bp.markers.push_back(
                 {"whole-frame target " + fmt::format("{:g}", kTargetGlFrameMs) + " ms", kTargetGlFrameMs});
         else if (set.width == 1920 && set.height == 1080)
-            bp.markers.push_back(
-                {"ray casting target " + fmt::format("{:g}", kTargetRaycastMs) + " ms (first segment)",
-                 kTargetRaycastMs});
+            bp.markers.push_back({"ray casting target " + fmt::format("{:g}", kTargetRaycastMs) + " ms (first segment)",
+                                  kTargetRaycastMs});
         if (!bp.rows.empty()) {
             hc::bench::writeSvg(plot, bp.svg());
             std::printf("plot written to %s\n", plot.c_str());
