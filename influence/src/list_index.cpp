@@ -87,15 +87,15 @@ ListIndex::ListIndex(const Grid& g, const KernelParams& params) : g_(g), params_
     }
 }
 
-void narrowCandidates(const ListIndex::Scratch& from, const Grid::Square& box, ListIndex::Scratch& to) {
+void narrowCandidates(const Candidates& from, const Grid::Square& box, Candidates& to, std::vector<uint8_t>& keep) {
     const size_t m = from.index.size();
-    to.keep.resize(m);
-    reachMask(from.cx.data(), from.cy.data(), from.r2.data(), m, box.x0, box.y0, box.x1, box.y1, to.keep.data());
+    keep.resize(m);
+    reachMask(from.cx.data(), from.cy.data(), from.r2.data(), m, box.x0, box.y0, box.x1, box.y1, keep.data());
     to.cx.resize(m), to.cy.resize(m), to.r2.resize(m), to.index.resize(m);
     size_t kept = 0;
     for (size_t c = 0; c < m; ++c) {  // a branch-free compaction of the mask
         to.cx[kept] = from.cx[c], to.cy[kept] = from.cy[c], to.r2[kept] = from.r2[c], to.index[kept] = from.index[c];
-        kept += to.keep[c];
+        kept += keep[c];
     }
     to.cx.resize(kept), to.cy.resize(kept), to.r2.resize(kept), to.index.resize(kept);
 }
@@ -129,29 +129,20 @@ void ListIndex::listsFor(const NodeRange& node, Scratch& s, std::vector<uint32_t
     for (const NodeRange& blk : splitNodes(g_, node, 16)) {
         // The node's candidates narrowed to the block, then every one of those against each cell.
         const Grid::Square bbox = boundsOf(g_, blk.lo, blk.hi);
-        s.keep.resize(s.index.size());
-        reachMask(s.cx.data(), s.cy.data(), s.r2.data(), s.index.size(), bbox.x0, bbox.y0, bbox.x1, bbox.y1,
-                  s.keep.data());
-        s.ncx.clear(), s.ncy.clear(), s.nr2.clear(), s.nindex.clear();
-        for (size_t c = 0; c < s.index.size(); ++c)
-            if (s.keep[c]) {
-                s.ncx.push_back(s.cx[c]);
-                s.ncy.push_back(s.cy[c]);
-                s.nr2.push_back(s.r2[c]);
-                s.nindex.push_back(s.index[c]);
-            }
-        const size_t m = s.nindex.size();
+        narrowCandidates(s, bbox, s.narrowed, s.keep);
+        const Candidates& n = s.narrowed;
+        const size_t m = n.index.size();
         s.keep.resize(m);
         for (size_t k = blk.lo; k < blk.hi; ++k) {
             // A branch-free compaction of the mask.
             const Grid::Square q = g_.cellSquare(k);
-            reachMask(s.ncx.data(), s.ncy.data(), s.nr2.data(), m, q.x0, q.y0, q.x1, q.y1, s.keep.data());
+            reachMask(n.cx.data(), n.cy.data(), n.r2.data(), m, q.x0, q.y0, q.x1, q.y1, s.keep.data());
             const size_t before = entries.size();
             entries.resize(before + m);
             uint32_t* outp = entries.data() + before;
             size_t kept = 0;
             for (size_t c = 0; c < m; ++c) {
-                outp[kept] = s.nindex[c];
+                outp[kept] = n.index[c];
                 kept += s.keep[c];
             }
             entries.resize(before + kept);

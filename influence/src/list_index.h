@@ -36,16 +36,19 @@ NodeRange nodeCells(const Grid& g, uint64_t key, int level);
 // Cells a super-block of the list builder holds at most (one range query per level serves them all).
 constexpr size_t kSuperBlockCells = 256;
 
+// Candidate cells of a box: centres, squared kernel radii and cell indices.
+struct Candidates {
+    std::vector<double> cx, cy, r2;
+    std::vector<uint32_t> index;
+};
+
 class ListIndex {
 public:
     ListIndex(const Grid& g, const KernelParams& params);
 
-    // Per-thread working memory of listsFor().
-    struct Scratch {
-        std::vector<double> cx, cy, r2;
-        std::vector<uint32_t> index;
-        std::vector<double> ncx, ncy, nr2;
-        std::vector<uint32_t> nindex;
+    // Per-thread working memory of candidatesFor() and listsFor(): the candidates, and those narrowed to a block.
+    struct Scratch : Candidates {
+        Candidates narrowed;
         std::vector<uint32_t> hits;
         std::vector<uint8_t> keep;
     };
@@ -67,7 +70,8 @@ private:
 
 // The candidates of `from` (candidatesFor over a box holding `box`, or narrowed from one) whose kernels reach `box`, in
 // their order, into `to` (replacing what was there): the same as candidatesFor(box, to), without a walk of the levels.
-void narrowCandidates(const ListIndex::Scratch& from, const Grid::Square& box, ListIndex::Scratch& to);
+// `keep`: working memory.
+void narrowCandidates(const Candidates& from, const Grid::Square& box, Candidates& to, std::vector<uint8_t>& keep);
 
 // The lists of the cells of super-blocks [s0, s1) of `superBlocks` (splitNodes of the whole grid): offsets from the
 // first of those cells (firstCell; offsets.size() = their cell count + 1) into `entries` indices. A whole-grid build is

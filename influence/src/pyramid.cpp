@@ -220,7 +220,7 @@ struct TileFrame {
 };
 
 // Samples [bi, bi1) x [bj, bj1) of the tile from `c`, the cells whose kernels reach the block; g0: working memory.
-void sampleBlock(const TileFrame& f, const ListIndex::Scratch& c, Gathered& g0, int bi, int bi1, int bj, int bj1) {
+void sampleBlock(const TileFrame& f, const Candidates& c, Gathered& g0, int bi, int bi1, int bj, int bj1) {
     const size_t m = c.index.size(), plane = size_t(f.side) * size_t(f.side);
     // Relative to one cell's value per block, and to one wet cell's level (as surface.cpp does per point: any value of
     // the neighbourhood keeps the digits; a constant field stays exactly constant).
@@ -285,13 +285,14 @@ void buildTile(const Grid& g, const ListIndex& index, const KernelParams& params
     for (int bj = 0; bj < side; bj += block) {
         const int bj1 = std::min(side, bj + block);
         if (perTile)
-            narrowCandidates(w.tile, Grid::Square{x0, y0 + bj * h, x0 + (side - 1) * h, y0 + (bj1 - 1) * h}, w.row);
+            narrowCandidates(w.tile, Grid::Square{x0, y0 + bj * h, x0 + (side - 1) * h, y0 + (bj1 - 1) * h}, w.row,
+                             w.row.keep);
         for (int bi = 0; bi < side; bi += block) {
             if (onlyBlock >= 0 && onlyBlock != (bj / block) * blocksPerSide + bi / block) continue;
             const int bi1 = std::min(side, bi + block);
             const Grid::Square box{x0 + bi * h, y0 + bj * h, x0 + (bi1 - 1) * h, y0 + (bj1 - 1) * h};
             if (perTile)
-                narrowCandidates(w.row, box, w.wide);
+                narrowCandidates(w.row, box, w.wide, w.wide.keep);
             else
                 index.candidatesFor(box, w.wide);
             sampleBlock(frame, w.wide, w.block, bi, bi1, bj, bj1);

@@ -45,7 +45,7 @@ constexpr size_t kMaxWindow = 1024;  // edges a walk over every tile counts per 
 // visited node adds 1 to the edges in [v, m). A walk at threshold T0 visits every node that is a leaf at some T >= T0,
 // so the sums are exact at every edge from T0 up.
 struct Curves {
-    int64_t* whole = nullptr;   // difference array over every edge (edges + 1 entries), or null
+    int64_t* whole = nullptr;   // difference array over every edge (edges + 1 entries)
     int64_t* window = nullptr;  // difference array over edges [first, first + width) (width + 1 entries), or null
     size_t first = 0, width = 0;
 
@@ -54,7 +54,7 @@ struct Curves {
         const size_t k0 = size_t(std::lower_bound(e.begin(), e.end(), v) - e.begin());
         const size_t k1 = size_t(std::lower_bound(e.begin(), e.end(), m) - e.begin());
         if (k0 >= k1) return;
-        if (whole) ++whole[k0], --whole[k1];
+        ++whole[k0], --whole[k1];
         if (window) {
             const size_t a = std::clamp(k0, first, first + width) - first,
                          b = std::clamp(k1, first, first + width) - first;
@@ -166,11 +166,6 @@ struct Plan {
     uint32_t ex = 0, ey = 0;                     // extent in finest cells
     std::vector<std::array<uint32_t, 2>> tiles;  // in Morton order
     std::vector<uint64_t> perTile;               // cells of each tile at the threshold
-    uint64_t cells() const {
-        uint64_t n = 0;
-        for (uint64_t c : perTile) n += c;
-        return n;
-    }
 };
 
 // One calibration at a fixed finest size: the tiles, their sample, and walks over them.
