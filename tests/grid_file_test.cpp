@@ -374,6 +374,21 @@ TEST_F(GridFile, MissingAndForeignFilesGetClearErrors) {
     }
 }
 
+TEST(Checksum, FoldedCrcEqualsTheTable) {
+    // The carry-less-multiply path (lengths from 256 bytes on, any alignment, any starting CRC) against slicing-by-8,
+    // exactly: one wrong fold constant changes every CRC of 64 bytes or more.
+    std::mt19937_64 rng(7);
+    std::vector<std::byte> data(70000);
+    for (auto& b : data) b = static_cast<std::byte>(rng());
+    for (size_t n : {size_t{0}, size_t{255}, size_t{256}, size_t{257}, size_t{319}, size_t{320}, size_t{1000},
+                     size_t{4095}, size_t{65536}, size_t{69990}})
+        for (size_t at : {size_t{0}, size_t{1}, size_t{7}})
+            for (uint32_t start : {0u, 0xFFFFFFFFu, 0x12345678u}) {
+                const auto part = std::span(data).subspan(at, n);
+                EXPECT_EQ(hc::crc32(part, start), hc::crc32Portable(part, start)) << n << " at " << at;
+            }
+}
+
 TEST(Checksum, KnownValues) {
     // CRC-32 check value of "123456789" (the standard test vector): 0xCBF43926.
     const char* s = "123456789";

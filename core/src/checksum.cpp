@@ -4,6 +4,10 @@
 #include <bit>
 #include <cstring>
 
+#if defined(__x86_64__)
+#include <immintrin.h>
+#endif
+
 namespace hc {
 namespace {
 
@@ -25,12 +29,8 @@ constexpr CrcTables kCrc;
 
 static_assert(std::endian::native == std::endian::little, "heightcast assumes a little-endian host");
 
-}  // namespace
-
-uint32_t crc32(std::span<const std::byte> bytes, uint32_t crc) {
-    const auto* p = reinterpret_cast<const unsigned char*>(bytes.data());
-    size_t n = bytes.size();
-    uint32_t c = ~crc;
+// The register after `n` bytes from register c (no inversions): slicing-by-8, then a byte at a time.
+uint32_t crcTable(uint32_t c, const unsigned char* p, size_t n) {
     while (n >= 8) {
         uint32_t lo, hi;
         std::memcpy(&lo, p, 4);
@@ -42,7 +42,60 @@ uint32_t crc32(std::span<const std::byte> bytes, uint32_t crc) {
         n -= 8;
     }
     while (n--) c = kCrc.t[0][(c ^ *p++) & 0xFFu] ^ (c >> 8);
-    return ~c;
+    return c;
+}
+
+#if defined(__x86_64__) && (defined(__GNUC__) || defined(__clang__))
+#define HC_CRC_FOLD 1
+// Folding with carry-less multiplies (Intel's "Fast CRC Computation Using PCLMULQDQ"; the constants of Linux's
+// crc32-pclmul for this polynomial): four 16-byte lanes are each multiplied forward by x^512 mod P and the next 64
+// bytes added, then folded into one lane, which with the tail bytes has the same remainder as the whole message. The
+// table finishes those few bytes, so no Barrett reduction is needed. Several times faster than slicing-by-8
+// (docs/benchmarks.md): the grid writer checksums every byte it writes.
+#define HC_CLMUL __attribute__((target("pclmul,sse4.1")))
+// Functions, not lambdas: a lambda does not take its enclosing function's target (a build without -march fails).
+HC_CLMUL inline __m128i load(const unsigned char* q) { return _mm_loadu_si128(reinterpret_cast<const __m128i*>(q)); }
+HC_CLMUL inline __m128i fold(__m128i x, __m128i k, __m128i next) {
+    return _mm_xor_si128(_mm_xor_si128(_mm_clmulepi64_si128(x, k, 0x00), _mm_clmulepi64_si128(x, k, 0x11)), next);
+}
+
+HC_CLMUL uint32_t crcFold(uint32_t c, const unsigned char* p, size_t n) {
+    const __m128i k1k2 = _mm_set_epi64x(0x1c6e41596, 0x154442bd4);  // x^(512+-32) mod P, reflected
+    const __m128i k3k4 = _mm_set_epi64x(0x0ccaa009e, 0x1751997d0);  // x^(128+-32) mod P, reflected
+    __m128i x0 = _mm_xor_si128(load(p), _mm_cvtsi32_si128(static_cast<int>(c)));
+    __m128i x1 = load(p + 16), x2 = load(p + 32), x3 = load(p + 48);
+    p += 64, n -= 64;
+    for (; n >= 64; p += 64, n -= 64) {
+        x0 = fold(x0, k1k2, load(p));
+        x1 = fold(x1, k1k2, load(p + 16));
+        x2 = fold(x2, k1k2, load(p + 32));
+        x3 = fold(x3, k1k2, load(p + 48));
+    }
+    __m128i x = fold(fold(fold(x0, k3k4, x1), k3k4, x2), k3k4, x3);
+    for (; n >= 16; p += 16, n -= 16) x = fold(x, k3k4, load(p));
+    unsigned char rest[16];
+    _mm_storeu_si128(reinterpret_cast<__m128i*>(rest), x);
+    return crcTable(crcTable(0, rest, 16), p, n);
+}
+
+bool hasClmul() {
+    static const bool yes = __builtin_cpu_supports("pclmul") && __builtin_cpu_supports("sse4.1");
+    return yes;
+}
+#endif
+
+}  // namespace
+
+uint32_t crc32(std::span<const std::byte> bytes, uint32_t crc) {
+    const auto* p = reinterpret_cast<const unsigned char*>(bytes.data());
+#ifdef HC_CRC_FOLD
+    if (bytes.size() >= 256 && hasClmul()) return ~crcFold(~crc, p, bytes.size());
+#endif
+    return ~crcTable(~crc, p, bytes.size());
+}
+
+uint32_t crc32Portable(std::span<const std::byte> bytes, uint32_t crc) {
+    return ~crcTable(~crc, reinterpret_cast<const unsigned char*>(bytes.data()), bytes.size());
 }
 
 namespace {

@@ -27,6 +27,9 @@ constexpr size_t major = 8, minor = 10, headerBytes = 12, fileBytes = 16, sectio
                  headerCrc = 124;
 }
 
+// Sections from this size on are written past the page cache.
+constexpr uint64_t kDirectRunBytes = uint64_t{16} << 20;
+
 uint64_t alignUp(uint64_t v) { return (v + kFileSectionAlign - 1) / kFileSectionAlign * kFileSectionAlign; }
 
 // The block checksum table's own fields (sectioned_file.h).
@@ -320,7 +323,11 @@ void SectionedFileWriter::append(size_t s, std::span<const std::byte> bytes) {
     FileSection& sec = w.sections.at(s);
     if (bytes.size() > sec.bytes - w.written[s])
         throw Error(path() + ": section " + std::to_string(s) + " overflows its declared size");
-    w.out.writeAt(sec.offset + w.written[s], bytes);
+    // Sections written front to back: a long one past the page cache (AtomicFileWriter::writeRun).
+    if (sec.bytes >= kDirectRunBytes)
+        w.out.writeRun(s, sec.offset + w.written[s], bytes);
+    else
+        w.out.writeAt(sec.offset + w.written[s], bytes);
     // Block CRCs as the data passes (the section's own CRC is combined from them at commit).
     while (!bytes.empty()) {
         const uint64_t inBlock = w.written[s] % kFileBlockBytes;
@@ -333,6 +340,7 @@ void SectionedFileWriter::append(size_t s, std::span<const std::byte> bytes) {
             w.partialCrc[s] = 0;
         }
     }
+    if (w.written[s] == sec.bytes) w.out.flushRun(s);
 }
 
 void SectionedFileWriter::addSection(uint32_t kind, uint32_t index, std::span<const std::byte> bytes) {

@@ -66,19 +66,43 @@ public:
             first_ = false;
         }
         // In locals, so the loops keep them in registers.
-        uint64_t x0 = s_.boundsFinest[0], y0 = s_.boundsFinest[1], x1 = s_.boundsFinest[2], y1 = s_.boundsFinest[3];
-        uint64_t* perLevel = s_.cellsPerLevel.data();
-        for (uint64_t c : codes) {
-            const int level = codeLevel(c);
-            ++perLevel[static_cast<size_t>(level)];
-            const uint64_t key = codeKey(c), x = mortonX(key), y = mortonY(key), span = uint64_t{1} << level;
-            x0 = std::min(x0, x), y0 = std::min(y0, y), x1 = std::max(x1, x + span), y1 = std::max(y1, y + span);
-        }
-        s_.boundsFinest = {x0, y0, x1, y1};
+        // The bounds in Morton space: a key's even bits are its x spread out, and spreading keeps the order, so the
+        // least x is that of the least even bits; a cell's last finest key (its key with the level's span - 1 set)
+        // holds its last x and y. Four min/max a cell and no decoding, in a loop of their own so that it vectorises;
+        // the levels counted in four interleaved tallies, so that cells of one level do not wait on each other's
+        // increments.
+        constexpr uint64_t kEven = 0x5555555555555555ull, kOdd = kEven << 1;
+        std::array<uint64_t, 8> loX, loY, hiX{}, hiY{};
+        loX.fill(~uint64_t{0}), loY.fill(~uint64_t{0});
+        auto bound = [&](size_t k, uint64_t c) {
+            const uint64_t key = codeKey(c), last = key | (mortonSpan(codeLevel(c)) - 1);
+            loX[k] = std::min(loX[k], key & kEven), loY[k] = std::min(loY[k], key & kOdd);
+            hiX[k] = std::max(hiX[k], last & kEven), hiY[k] = std::max(hiY[k], last & kOdd);
+        };
+        size_t i = 0;
+        for (; i + 8 <= codes.size(); i += 8)
+            for (size_t k = 0; k < 8; ++k) bound(k, codes[i + k]);
+        for (; i < codes.size(); ++i) bound(0, codes[i]);
+        std::array<std::array<uint64_t, 64>, 4> tally{};
+        for (i = 0; i < codes.size(); ++i) ++tally[i & 3][size_t(codeLevel(codes[i]))];
+        for (size_t l = 0; l < s_.cellsPerLevel.size(); ++l)
+            s_.cellsPerLevel[l] += tally[0][l] + tally[1][l] + tally[2][l] + tally[3][l];
+        auto& b = s_.boundsFinest;
+        const uint64_t lx = *std::min_element(loX.begin(), loX.end()), ly = *std::min_element(loY.begin(), loY.end());
+        const uint64_t hx = *std::max_element(hiX.begin(), hiX.end()), hy = *std::max_element(hiY.begin(), hiY.end());
+        b = {std::min<uint64_t>(b[0], mortonX(lx)), std::min<uint64_t>(b[1], mortonY(ly)),
+             std::max<uint64_t>(b[2], uint64_t{mortonX(hx)} + 1), std::max<uint64_t>(b[3], uint64_t{mortonY(hy)} + 1)};
         for (size_t l = 0; l < layers_; ++l) {
-            float lo = s_.layerMin[l], hi = s_.layerMax[l];
-            for (float v : values[l]) lo = std::min(lo, v), hi = std::max(hi, v);
-            s_.layerMin[l] = lo, s_.layerMax[l] = hi;
+            // Eight lanes: independent minima and maxima, not one chain of dependent comparisons.
+            std::array<float, 8> lo, hi;
+            lo.fill(s_.layerMin[l]), hi.fill(s_.layerMax[l]);
+            const std::span<const float> v = values[l];
+            size_t j = 0;
+            for (; j + 8 <= v.size(); j += 8)
+                for (size_t k = 0; k < 8; ++k) lo[k] = std::min(lo[k], v[j + k]), hi[k] = std::max(hi[k], v[j + k]);
+            for (; j < v.size(); ++j) lo[0] = std::min(lo[0], v[j]), hi[0] = std::max(hi[0], v[j]);
+            s_.layerMin[l] = *std::min_element(lo.begin(), lo.end());
+            s_.layerMax[l] = *std::max_element(hi.begin(), hi.end());
         }
     }
     const GridSummary& summary() const { return s_; }

@@ -85,19 +85,23 @@ Node Builder::merge(const Node& a, const Node& b, const Node& c, const Node& d, 
 const Node& Builder::buildTile(size_t tx, size_t ty, std::vector<std::vector<Node>>& scratch) const {
     scratch.resize(static_cast<size_t>(tileLevel_) + 1);
     size_t side = tile_;
-    scratch[0].assign(side * side, Node{});
+    scratch[0].resize(side * side);  // every node written below: no fill first (it cost as much as the rest)
     const Block& b = blockAt(tx * tile_, ty * tile_);  // a tile lies in one share node, so in one block
     const size_t x0 = tx * tile_, y0 = ty * tile_;
     const size_t nx = std::min(side, t_.width - x0), ny = std::min(side, t_.height - y0);  // inside the raster
-    for (size_t y = 0; y < ny; ++y) {
+    for (size_t y = 0; y < side; ++y) {
         Node* row = &scratch[0][y * side];
+        const size_t inside = y < ny ? nx : 0;
         if (b.rounding) {  // the rare case (a Float64 source): pixel() widens lo and hi
-            for (size_t x = 0; x < nx; ++x) pixel(b, x0 + x, y0 + y, row[x]);
-            continue;
+            for (size_t x = 0; x < inside; ++x) row[x] = Node{}, pixel(b, x0 + x, y0 + y, row[x]);
+        } else if (inside) {
+            const float* z = &b.values[b.index(x0, y0 + y)];
+            for (size_t x = 0; x < inside; ++x) {
+                const float v = z[x];
+                row[x] = std::isnan(v) ? Node{} : Node{{v}, {v}, {v}, true};
+            }
         }
-        const float* z = &b.values[b.index(x0, y0 + y)];
-        for (size_t x = 0; x < nx; ++x)
-            if (!std::isnan(z[x])) row[x].mean[0] = row[x].lo[0] = row[x].hi[0] = z[x], row[x].leaf = true;
+        std::fill(row + inside, row + side, Node{});
     }
     for (int l = 1; l <= tileLevel_; ++l) {
         size_t childSide = side;
@@ -132,23 +136,67 @@ size_t Builder::countLeaves(const std::vector<std::vector<Node>>& scratch) const
     return count;
 }
 
-size_t Builder::emitTile(size_t tx, size_t ty, const std::vector<std::vector<Node>>& scratch, Emit& out) const {
-    size_t count = 0;
+bool Builder::anyMerged(const std::vector<std::vector<Node>>& scratch) const {
+    if (tileLevel_ == 0) return false;
+    const std::vector<Node>& up = scratch[1];
+    return std::any_of(up.begin(), up.end(), [](const Node& n) { return n.leaf; });
+}
+
+namespace {
+
+// A tile's local Morton index -> its pixel (x in the low byte, y in the high one), for tiles up to 64 x 64 pixels.
+static_assert(kTileLevelMax <= 6);
+const std::array<uint16_t, 4096> kTileXY = [] {
+    std::array<uint16_t, 4096> t{};
+    for (uint32_t m = 0; m < t.size(); ++m) t[m] = static_cast<uint16_t>(mortonX(m) | (mortonY(m) << 8));
+    return t;
+}();
+
+}  // namespace
+
+size_t Builder::emitTile(size_t tx, size_t ty, const std::vector<std::vector<Node>>* scratch, Emit& out) const {
+    // The tile's pixels in Morton order: at each, the cell that starts there is its highest leaf (a leaf's pixels are
+    // all leaves), and the walk skips that cell's pixels. A cell's key is the tile's key with the local index set.
     const Block& px = blockAt(tx * tile_, ty * tile_);
-    auto visit = [&](auto&& self, int l, size_t x, size_t y) -> void {
-        size_t side = tile_ >> l;
-        const Node& n = scratch[static_cast<size_t>(l)][y * side + x];
-        if (n.leaf) {
-            const size_t ix = tx * tile_ + (x << l), iy = ty * tile_ + (y << l);
-            writeCell(out.batch, out.at + count, ix, iy, l, n);
-            measureCell(px, ix, iy, l, n.mean[0], out.tally, out.paint);
-            ++count;
-            return;
-        }
-        if (l == 0) return;  // a hole
-        for (int q = 0; q < 4; ++q) self(self, l - 1, 2 * x + (q & 1), 2 * y + (q >> 1));
+    const size_t x0 = tx * tile_, y0 = ty * tile_;
+    const uint64_t base = mortonEncode(static_cast<uint32_t>(x0), static_cast<uint32_t>(y0));
+    uint64_t* codes = out.batch.codes.data() + out.at;
+    float* values = out.batch.values[0].data() + out.at;
+    const bool plain = !px.rounding && !(out.paint && opt_.cellElevations);  // a pixel's own cell: nothing to measure
+    auto leaf = [&](int l, size_t x, size_t y) -> const Node* {
+        const Node& n = (*scratch)[static_cast<size_t>(l)][(y >> l) * (tile_ >> l) + (x >> l)];
+        return n.leaf ? &n : nullptr;
     };
-    visit(visit, tileLevel_, 0, 0);
+    size_t count = 0;
+    for (uint64_t m = 0, end = mortonSpan(tileLevel_); m < end;) {
+        const size_t x = kTileXY[m] & 0xFFu, y = kTileXY[m] >> 8;
+        int level = 0;
+        float z = 0;
+        if (!scratch) {  // nothing merged: each valid pixel is a cell
+            if (x0 + x >= t_.width || y0 + y >= t_.height || std::isnan(z = px.values[px.index(x0 + x, y0 + y)])) {
+                ++m;
+                continue;
+            }
+        } else {
+            const Node* n = leaf(0, x, y);
+            if (!n) {  // a hole
+                ++m;
+                continue;
+            }
+            for (const Node* up; level < tileLevel_ && (up = leaf(level + 1, x, y)); ++level) n = up;
+            z = n->mean[0];
+        }
+        codes[count] = makeCellCode(base | m, level);
+        values[count] = z;
+        if (level == 0 && plain) {
+            ++out.tally.perLevel[0];
+            ++out.tally.pixels;
+        } else {
+            measureCell(px, x0 + x, y0 + y, level, z, out.tally, out.paint);
+        }
+        ++count;
+        m += mortonSpan(level);
+    }
     return count;
 }
 
@@ -212,10 +260,12 @@ void Builder::buildTileRoots(RunState& rs, Progress& progress) const {
     const size_t tiles = ntx_ * nty_;
     rs.roots = std::vector<Node>(tiles);
     rs.leafCount = std::vector<uint32_t>(tiles);
+    rs.merged = std::vector<uint8_t>(tiles);
     rs.scratch = std::vector<std::vector<std::vector<Node>>>(rs.threads);
     const std::vector<size_t>& myTiles = rs.myTiles;
     std::vector<Node>& roots = rs.roots;
     std::vector<uint32_t>& leafCount = rs.leafCount;
+    std::vector<uint8_t>& merged = rs.merged;
     std::vector<std::vector<std::vector<Node>>>& scratch = rs.scratch;
     const int rankCount = rs.rankCount;
     ranks::together([&] {
@@ -224,6 +274,7 @@ void Builder::buildTileRoots(RunState& rs, Progress& progress) const {
                 const size_t i = myTiles[k], tx = i % ntx_, ty = i / ntx_;
                 roots[i] = buildTile(tx, ty, scratch[worker]);
                 leafCount[i] = static_cast<uint32_t>(countLeaves(scratch[worker]));
+                merged[i] = anyMerged(scratch[worker]);
             }
             progress.advance((e - b) * size_t(rankCount));
         });
@@ -353,9 +404,11 @@ void Builder::fillBatch(RunState& rs, size_t u0, size_t u1, Batch& batch, std::v
                 measureCell(blockAt(unit.x * span, unit.y * span), unit.x * span, unit.y * span, unit.level, n.mean[0],
                             out.tally, out.paint);
             } else {
-                buildTile(unit.x, unit.y, rs.scratch[worker]);
-                [[maybe_unused]] const size_t written = emitTile(unit.x, unit.y, rs.scratch[worker], out);
-                assert(written == rs.leafCount[unit.y * ntx_ + unit.x]);
+                const size_t tile = unit.y * ntx_ + unit.x;
+                if (rs.merged[tile]) buildTile(unit.x, unit.y, rs.scratch[worker]);  // else its pixels are its cells
+                [[maybe_unused]] const size_t written =
+                    emitTile(unit.x, unit.y, rs.merged[tile] ? &rs.scratch[worker] : nullptr, out);
+                assert(written == rs.leafCount[tile]);
                 ++tilesDone;
             }
             unitSumSq[k - rs.myU0] = out.tally.sumSq;

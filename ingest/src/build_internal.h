@@ -186,11 +186,13 @@ private:
         std::vector<std::vector<std::vector<Node>>> scratch;  // per worker: a tile's pyramid
         std::vector<Node> roots;                              // per tile (ty * ntx + tx): its pyramid's root
         std::vector<uint32_t> leafCount;                      // per tile: its cells
-        std::vector<std::vector<Node>> coarse;                // pass B: the levels from the tiles' up to the root
-        std::vector<std::pair<size_t, size_t>> dims;          // their sizes in nodes
-        std::vector<Unit> units;                              // pass C: in Morton order
-        size_t total = 0;                                     // the cells of all units
-        size_t myU0 = 0, myU1 = 0;                            // this rank's units
+        std::vector<uint8_t>
+            merged;  // per tile of this rank: whether any pixels merged (else its cells are its pixels)
+        std::vector<std::vector<Node>> coarse;        // pass B: the levels from the tiles' up to the root
+        std::vector<std::pair<size_t, size_t>> dims;  // their sizes in nodes
+        std::vector<Unit> units;                      // pass C: in Morton order
+        size_t total = 0;                             // the cells of all units
+        size_t myU0 = 0, myU1 = 0;                    // this rank's units
         size_t offsetOf(size_t u) const { return u < units.size() ? units[u].offset : total; }
         size_t myCells() const { return offsetOf(myU1) - offsetOf(myU0); }
     };
@@ -249,8 +251,11 @@ private:
         bool paint;
         Tally tally{};  // on the worker's stack: no cache line shared with another worker's
     };
-    // Writes the leaves of a built tile pyramid in Morton order, each measured (measureCell); returns how many.
-    size_t emitTile(size_t tx, size_t ty, const std::vector<std::vector<Node>>& scratch, Emit& out) const;
+    // Writes a tile's cells in Morton order, each measured (measureCell); returns how many. Its cells are the leaves of
+    // its built pyramid `scratch`, or with none (a tile that merged no pixels) its valid pixels.
+    size_t emitTile(size_t tx, size_t ty, const std::vector<std::vector<Node>>* scratch, Emit& out) const;
+    // Whether a built tile pyramid merged any pixels.
+    bool anyMerged(const std::vector<std::vector<Node>>& scratch) const;
 
     void writeCell(Batch& b, size_t at, size_t ix, size_t iy, int level, const Node& n) const;
 

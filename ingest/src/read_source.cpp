@@ -143,8 +143,8 @@ void BandReader::read(size_t c0, size_t r0, size_t w, size_t h, float* dst, std:
             buf_.resize(n);
             rasterIO(band_, buf_.data(), GDT_Float64);
         }
-        double maxOther = tally.maxOther;  // in a register, not stored through `tally` a pixel
-        for (size_t i = 0; i < n; ++i) {
+        // The rules, pixel by pixel.
+        auto convert = [&](size_t i, double& maxOther) {
             double v = exactInFloat_ ? static_cast<double>(dst[i]) : buf_[i];
             bool isNodata =
                 std::isnan(v) ||
@@ -158,7 +158,7 @@ void BandReader::read(size_t c0, size_t r0, size_t w, size_t h, float* dst, std:
             }
             if (isNodata) {
                 dst[i] = kNaN;
-                continue;
+                return;
             }
             const double exact = v * zScale_;
             dst[i] = static_cast<float>(exact);
@@ -174,6 +174,33 @@ void BandReader::read(size_t c0, size_t r0, size_t w, size_t h, float* dst, std:
                 if (residual.empty()) residual.assign(residualSize, 0.0f);
                 residual[residualAt + i] = lost;
             }
+        };
+        double maxOther = tally.maxOther;  // in a register, not stored through `tally` a pixel
+        // A chunk of plain float32 pixels (finite, above the sentinels' range, not a nodata value) read at scale 1
+        // stays as read and only raises the maximum: checked branch-free, eight lanes at a time, before the exact
+        // pixel-by-pixel rules below take any chunk that is not all plain.
+        const bool plainPossible = exactInFloat_ && zScale_ == 1.0;
+        const float nodata32 = hasNodata_ ? static_cast<float>(nodata_) : kNaN;
+        const float userNodata32 = opt_.nodata ? static_cast<float>(*opt_.nodata) : kNaN;
+        constexpr size_t kChunk = 256;
+        for (size_t c = 0; c < n; c += kChunk) {
+            const size_t end = std::min(n, c + kChunk);
+            if (plainPossible && end - c == kChunk) {
+                std::array<float, 8> top;
+                top.fill(-HUGE_VALF);
+                bool plain = true;
+                for (size_t i = c; i < end; i += 8)
+                    for (size_t k = 0; k < 8; ++k) {
+                        const float v = dst[i + k];
+                        plain &= (v > -9999.0f) & (v < 1e36f) & (v != nodata32) & (v != userNodata32);
+                        top[k] = v > top[k] ? v : top[k];
+                    }
+                if (plain) {
+                    maxOther = std::max(maxOther, static_cast<double>(*std::max_element(top.begin(), top.end())));
+                    continue;
+                }
+            }
+            for (size_t i = c; i < end; ++i) convert(i, maxOther);
         }
         tally.maxOther = maxOther;
     }

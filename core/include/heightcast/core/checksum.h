@@ -12,7 +12,10 @@
 namespace hc {
 
 // CRC-32 of `bytes`, continuing from `crc` (pass 0 to start).
+// Carry-less multiplies (PCLMULQDQ) where the CPU has them, else slicing-by-8: the same value.
 uint32_t crc32(std::span<const std::byte> bytes, uint32_t crc = 0);
+// The same CRC by slicing-by-8 only: the yardstick the fast path is tested against.
+uint32_t crc32Portable(std::span<const std::byte> bytes, uint32_t crc = 0);
 
 // The CRC-32 of A followed by B, from crc32(A), crc32(B) and B's length (as zlib's crc32_combine):
 // O(log bytesB), no data.

@@ -45,7 +45,7 @@ constexpr uint32_t kFileSectionAlign = 64;
 constexpr uint32_t kFileBlockChecksumsKind = 0x80000001u;
 // 1 MiB blocks: the table costs 4 bytes per MiB (5 KB for a 105 M-cell grid, read and checked at open);
 // a point lookup's binary search over a 1 GB section touches ~10 distinct blocks, 10 MiB of CRC
-// (crc32's slicing-by-8, its throughput in docs/benchmarks.md), well inside a 1 s probe;
+// (crc32, its throughput in docs/benchmarks.md), well inside a 1 s probe;
 // smaller blocks would cut that but grow the table and the per-block bookkeeping, larger ones would make a
 // first touch cost more than the read it guards.
 constexpr uint32_t kFileBlockBytes = 1u << 20;
