@@ -41,6 +41,7 @@ struct RenderArgs {
     bool flyFresh = false;      // --fly-fresh: every frame of the flight from scratch (no texels kept)
     bool flyLastImage = false;  // --fly-last-image: only the last frame's outputs; GL frames before it left on the GPU
     double fps = 4;             // --fps, of the --video
+    int verifyHits = 0;         // --verify-error N: hits checked against the exact surface (0: none)
     // The numbered images' first number and count (a sequence or a flight).
     unsigned firstImage() const { return sequence ? firstStep : 0; }
     unsigned imageCount() const { return sequence ? lastStep - firstStep + 1 : flyFrames; }
@@ -158,6 +159,11 @@ bool parseOptions(int argc, char** argv, RenderArgs& a) {
         "      keeps them on the GPU); prints each frame's stage times\n"
         "      (default 0: one image, no flight)",
         a.flyFrames);
+    p.option("--verify-error", "N",
+             "check N hits (spread over the picture) against the exact surface there and print the largest,\n"
+             "99th-percentile and median error beside the frame's bound (and in --timings' JSON); the cells\n"
+             "around the points are read from the grid (default 0: none)",
+             a.verifyHits);
     p.option("--fly-step", "M", "metres the camera moves forward per --fly frame (default 10)", a.flyStepM);
     p.flag("--fly-fresh", "with --fly: evaluate every frame from scratch (no texels kept), to compare", a.flyFresh);
     p.flag("--fly-last-image",
@@ -203,6 +209,9 @@ bool parseOptions(int argc, char** argv, RenderArgs& a) {
     if (!std::isfinite(a.flyStepM) || std::fabs(a.flyStepM) > 1e6)
         throw hc::Error("--fly-step " + fmt::format("{:g}", a.flyStepM) + ": metres per frame, at most 1e6 either way");
     if (a.flyFresh && !a.flyFrames) throw hc::Error("--fly-fresh needs --fly N");
+    if (a.verifyHits && a.flyFrames) throw hc::Error("--verify-error checks one image or each of --steps, not a --fly");
+    if (a.verifyHits < 0 || a.verifyHits > 10000000)
+        throw hc::Error("--verify-error " + std::to_string(a.verifyHits) + ": a count of hits in 0..1e7");
     if (a.flyLastImage && !a.flyFrames) throw hc::Error("--fly-last-image needs --fly N");
     if (a.flyLastImage && !a.video.empty())
         throw hc::Error("--video needs every frame's image: leave out --fly-last-image");
@@ -249,12 +258,13 @@ void refuseCameraBelowTerrain(const hc::render::Scene& scene, const hc::render::
 struct Rendered {
     hc::render::Frame frame;
     hc::render::Timings timings;
-    std::string device;  // what rendered it: "CPU, N threads" or the GL renderer and version
+    std::string device;                           // what rendered it: "CPU, N threads" or the GL renderer and version
+    std::optional<hc::render::ErrorCheck> check;  // --verify-error
 };
 
 // On the backend `decision` chose (GL in a headless context of its own), after printing its note.
 Rendered renderImage(const hc::cli::BackendDecision& decision, const hc::render::Scene& scene,
-                     const hc::render::Camera& camera, const hc::render::RenderOptions& options) {
+                     const hc::render::Camera& camera, const hc::render::RenderOptions& options, int verifyHits) {
     if (!decision.note.empty()) std::fprintf(stderr, "hc-render: note: %s\n", decision.note.c_str());
     Rendered r;
     if (decision.useGl) {
@@ -265,6 +275,8 @@ Rendered renderImage(const hc::cli::BackendDecision& decision, const hc::render:
         r.device = "CPU, " + std::to_string(hc::resolveThreads(options.threads)) + " threads";
         r.frame = hc::render::renderFrame(scene, camera, options, r.timings);
     }
+    if (verifyHits > 0)
+        r.check = hc::render::verifyFrameError(scene, camera, r.frame, size_t(verifyHits), options.threads);
     return r;
 }
 
@@ -274,7 +286,8 @@ void writeOutputs(const RenderArgs& a, const Rendered& r, std::optional<unsigned
     if (!a.exr.empty()) hc::render::writeFrameExr(r.frame, name(a.exr));
     if (!a.timingsPath.empty()) {
         hc::AtomicFileWriter tw(name(a.timingsPath));
-        const std::string j = r.timings.toJson();
+        std::string j = r.timings.toJson();
+        if (r.check) j.insert(j.rfind('}'), ",\n  \"verified\": " + r.check->toJson() + "\n");
         tw.write(std::as_bytes(std::span(j)));
         tw.commit();
     }
@@ -298,6 +311,13 @@ void printSummary(const RenderArgs& a, const hc::cli::BackendDecision& decision,
         std::printf("  walls        %zu of %llu hits on the walls at hole and domain edges (EXR channel wall)\n", walls,
                     (unsigned long long)r.timings.hits);
     std::printf("%s", r.timings.toTable().c_str());
+    if (r.check) {
+        const hc::render::ErrorCheck& c = *r.check;
+        std::printf(
+            "  verified     %llu hits against the exact surface: largest %.3g m (%.3g px), 99th percentile "
+            "%.3g m, median %.3g m; bound %.3g m\n",
+            (unsigned long long)c.hits, c.maxM, c.maxPx, c.p99M, c.medianM, r.timings.errorBoundM);
+    }
 }
 
 // --fly N: one renderer for the whole flight (GL: one context; out of core the CPU-filled cascades keep their texels
@@ -394,7 +414,7 @@ int main(int argc, char** argv) {
             hc::keepFreedMemory();  // frame after frame: each reuses the last one's pages (core/heap.h)
         if (a.flyFrames) return fly(a, decision, *loaded->scene, camera);
         if (!a.sequence) {
-            const Rendered rendered = renderImage(decision, *loaded->scene, camera, a.setup.options);
+            const Rendered rendered = renderImage(decision, *loaded->scene, camera, a.setup.options, a.verifyHits);
             writeOutputs(a, rendered, std::nullopt);
             printSummary(a, decision, camera, rendered);
             const hc::Grid& shape = loaded->file ? loaded->file->shape() : loaded->grid;
@@ -417,7 +437,7 @@ int main(int argc, char** argv) {
             if (k != a.firstStep) hc::cli::switchStep("hc-render", *loaded, a.gridPath, a.setup, k);
             const double switchMs = clock.lap() * 1e3;
             if (k != a.firstStep) decision.note.clear();  // said once
-            const Rendered rendered = renderImage(decision, *loaded->scene, camera, a.setup.options);
+            const Rendered rendered = renderImage(decision, *loaded->scene, camera, a.setup.options, a.verifyHits);
             writeOutputs(a, rendered, k);
             const hc::Grid& shape = loaded->file ? loaded->file->shape() : loaded->grid;
             std::printf("  %4u %10.6g %11llu %11.1f %11.1f   %s\n", k, shape.stepTimeS(),

@@ -119,6 +119,13 @@ int main(int argc, char** argv) {
                  "      (bicubic) from a coarser stored level, at most L levels up; 0 sums them from the kernels "
                  "(default 3)",
                  set.options.pyramidInterpolateLevels);
+        p.option("--max-error", "M",
+                 "with --pyramid: error budget [m] (hc-render's --max-error): each cascade the coarsest spacing\n"
+                 "      whose error is within M; the JSON's cascades give each one's bound (default 0: none)",
+                 set.options.maxErrorM);
+        p.option("--max-error-px", "P",
+                 "with --pyramid: error budget [pixels] at each cascade's nearest point (default 0: none)",
+                 set.options.maxErrorPx);
         p.option("--beam-tile", "P",
                  "ray casting, both backends: tiles of P x P pixels march their beam first and start their rays'\n"
                  "      walks there (the same hits); 0 walks every ray from its cascade's start (default 4)",

@@ -27,6 +27,7 @@ struct CascadeOut {
     int pyramidLevel;              // -1: no pyramid level fits the cascade (or none was built)
     uint64_t pyramidTexels;        // texels copied from the pyramid
     uint64_t pyramidInterpolated;  // texels interpolated from a coarser pyramid level
+    double errorBoundM;            // CascadeStats::errorBoundM: NaN without a pyramid
 };
 
 // What a scenario's child reports. Plain bytes through a pipe, so trivially copyable.

@@ -115,15 +115,17 @@ void writeJson(const std::vector<const Scenario*>& scs, const std::vector<RunRes
         Json cascades = Json::array();
         for (int c = 0; c < r.cascadeCount; ++c) {
             const CascadeOut& cs = r.cascades[c];
-            cascades.push_back({{"near_m", ms(cs.nearM)},
-                                {"far_m", ms(cs.farM)},
-                                {"texel_m", sig6(cs.texelM)},
-                                {"visible_texels", cs.visibleTexels},
-                                {"gaussians", cs.gaussians},
-                                {"approximation_ms", ms(cs.approximationMs)},
-                                {"pyramid_level", cs.pyramidLevel},
-                                {"pyramid_texels", cs.pyramidTexels},
-                                {"pyramid_interpolated", cs.pyramidInterpolated}});
+            cascades.push_back(
+                {{"near_m", ms(cs.nearM)},
+                 {"far_m", ms(cs.farM)},
+                 {"texel_m", sig6(cs.texelM)},
+                 {"visible_texels", cs.visibleTexels},
+                 {"gaussians", cs.gaussians},
+                 {"approximation_ms", ms(cs.approximationMs)},
+                 {"pyramid_level", cs.pyramidLevel},
+                 {"pyramid_texels", cs.pyramidTexels},
+                 {"pyramid_interpolated", cs.pyramidInterpolated},
+                 {"error_bound_m", std::isfinite(cs.errorBoundM) ? Json(sig6(cs.errorBoundM)) : Json()}});
         }
         o["cascades"] = cascades;
         o["report_gtx1080_approximation_ms"] = sc.gpuApproxMs;

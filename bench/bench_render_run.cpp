@@ -250,9 +250,9 @@ RunResult runScenario(const Scenario& sc, const Settings& set) {
                     const auto& cs = tm.cascades[c];
                     r.gaussians += cs.gaussians;
                     if (c < 4)
-                        r.cascades[c] = {cs.nearM,           cs.farM,          cs.texelM,
-                                         cs.approximationMs, cs.visibleTexels, cs.gaussians,
-                                         cs.pyramidLevel,    cs.pyramidTexels, cs.pyramidInterpolated};
+                        r.cascades[c] = {
+                            cs.nearM,     cs.farM,         cs.texelM,        cs.approximationMs,     cs.visibleTexels,
+                            cs.gaussians, cs.pyramidLevel, cs.pyramidTexels, cs.pyramidInterpolated, cs.errorBoundM};
                 }
             }
             r.rays = tm.rays;

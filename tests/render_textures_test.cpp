@@ -8,6 +8,7 @@
 #include <cstdint>
 #include <cstdio>
 #include <filesystem>
+#include <limits>
 #include <random>
 #include <string>
 
@@ -22,13 +23,14 @@ using hc::Grid;
 using namespace hc::render;
 using namespace hc::test;
 
-// The timings JSON claims an error bound only for a cascade that copied texels from the pyramid: one whose texels were
-// all interpolated or summed has null there, not 0 (which would read as exact).
-TEST_F(Render, TimingsJsonClaimsABoundOnlyForCopiedTexels) {
+// The timings JSON writes a bound where one is claimed (a cascade's or the frame's, with a pyramid) and null where none
+// is (NaN: no pyramid), never 0, which would read as exact.
+TEST_F(Render, TimingsJsonClaimsABoundOnlyWhereThereIsOne) {
     Timings t;
     t.cascades.resize(2);
-    t.cascades[0].pyramidTexels = 10, t.cascades[0].errorBoundM = 1.5e-4;
-    t.cascades[1].pyramidInterpolated = 10;
+    t.cascades[0].errorBoundM = 1.5e-4;
+    t.cascades[1].errorBoundM = t.cascades[1].errorBoundPx = std::numeric_limits<double>::quiet_NaN();
+    t.errorBoundM = t.errorBoundPx = std::numeric_limits<double>::quiet_NaN();
     const std::string json = t.toJson();
     EXPECT_NE(json.find("\"error_bound_m\": 0.00015"), std::string::npos) << json;
     EXPECT_NE(json.find("\"error_bound_m\": null"), std::string::npos) << json;

@@ -2,6 +2,7 @@
 #include "view/hud.h"
 
 #include <algorithm>
+#include <cmath>
 #include <cstdio>
 #include <utility>
 #include <vector>
@@ -33,6 +34,8 @@ const char* const kHelp =
     "[ ]                previous / next water step\n"
     "Space              play / pause the water steps\n"
     "- +                playback slower / faster\n"
+    "B N                error budget in pixels: tighter / looser\n"
+    "M                  error budget off\n"
     "U                  HUD on/off\n"
     "H                  this help\n"
     "Esc                quit";
@@ -63,6 +66,12 @@ bool Hud::compose(const HudStatus& s, int fw, int fh) {
             {fmt::format("fitting {:.1f}  approximation {:.1f}  mipmaps {:.1f}  ray casting {:.1f}  shading {:.1f} ms",
                          ms.fittingMs, ms.approximationMs, ms.mipmapMs, ms.raycastMs, ms.shadingMs),
              kText});
+        lines.push_back({(std::isfinite(ms.errorBoundM) ? fmt::format("within {:.3g} m, {:.2g} px of the exact surface",
+                                                                      ms.errorBoundM, ms.errorBoundPx)
+                                                        : std::string("accuracy: no bound without a surface pyramid")) +
+                             (ms.maxErrorPx > 0 ? fmt::format("   budget {:g} px (B N, M off)", ms.maxErrorPx)
+                                                : std::string("   no budget (B N set one)")),
+                         kText});
         const render::Camera& c = s.camera;
         lines.push_back({fmt::format("camera {:.1f}, {:.1f}, {:.1f} m  yaw {:.1f}  pitch {:.1f}  fov {:.1f} deg",
                                      c.xWorld, c.yWorld, c.zWorld, c.yawDeg, c.pitchDeg, c.fovYDeg),

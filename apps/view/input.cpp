@@ -1,6 +1,8 @@
 // apps/view/input.cpp: the Viewer's input (see viewer.h and the help in hud.cpp): keys for the switches,
 // bookmarks, screenshots and quitting; held keys fly; the right mouse button looks around, the left one orbits
 // around the surface point under the centre; the wheel moves forward and back.
+#include <algorithm>
+
 #include <fmt/format.h>
 
 #include "heightcast/core/error.h"
@@ -86,6 +88,16 @@ void Viewer::onKey(int key, int action, int mods) {
         case GLFW_KEY_KP_SUBTRACT:
             stepsPerSecond_ = std::max(0.125, stepsPerSecond_ / 2),
             flash(fmt::format("{:g} steps per second", stepsPerSecond_));
+            break;
+        case GLFW_KEY_B:  // the error budget in pixels: tighter, looser, off (RenderOptions::maxErrorPx)
+        case GLFW_KEY_N:
+            options_.maxErrorPx = options_.maxErrorPx == 0 ? 1.0
+                                  : key == GLFW_KEY_B      ? std::max(1.0 / 64, options_.maxErrorPx / 2)
+                                                           : std::min(64.0, options_.maxErrorPx * 2);
+            changed(), flash(fmt::format("error budget {:g} px", options_.maxErrorPx));
+            break;
+        case GLFW_KEY_M:
+            options_.maxErrorPx = 0, changed(), flash("no error budget in pixels: texel sizes from --texels");
             break;
         case GLFW_KEY_U:
             toggles_.hud = !toggles_.hud;

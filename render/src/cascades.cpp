@@ -114,9 +114,26 @@ std::vector<double> splitOffsets(double n, double f, int count, double finestCel
     return bounds;
 }
 
-// Places cascade c's texture over its polygon (texel size from the ladder, corner on the lattice) and finds
-// its visible texels.
-void placeTexture(Cascade& c, int texelsPerSide, double finestCellM, int stepsPerOctave, bool coarser) {
+// Under an error budget (ViewVolume): the coarsest pyramid level whose error is within it, then coarser while the
+// extent needs more texels than allowed; how many levels above it texels may be interpolated from. Returns the level.
+int budgetLevel(Cascade& c, const ViewVolume& v, double extent) {
+    const std::vector<double>& e = *v.levelErrorM;
+    const int top = int(e.size()) - 1;
+    int t = -kFinerTexelLevels;
+    while (t < top && levelErrorM(e, t + 1) <= c.budgetM) ++t;
+    while (t < top && std::ceil(extent / (v.finestCellM * std::exp2(t))) + 3 > v.maxTexelsPerSide) ++t;
+    int up = 0;  // levels up a texel may be interpolated from: their error within the budget too
+    while (t + up < top && levelErrorM(e, t) + levelErrorM(e, t + up + 1) <= c.budgetM) ++up;
+    c.interpolateLevels = up;
+    return t;
+}
+
+// Places cascade c's texture over its polygon (texel size from the ladder, or the error budget's level; corner on the
+// lattice) and finds its visible texels.
+void placeTexture(Cascade& c, const ViewVolume& v, int texelsPerSide) {
+    const double finestCellM = v.finestCellM;
+    const int stepsPerOctave = v.ladderStepsPerOctave;
+    const bool coarser = v.coarserTexels;
     double bx0 = HUGE_VAL, by0 = HUGE_VAL, bx1 = -HUGE_VAL, by1 = -HUGE_VAL;
     for (const glm::dvec2& p : c.polygon) {
         bx0 = std::min(bx0, p.x);
@@ -133,11 +150,13 @@ void placeTexture(Cascade& c, int texelsPerSide, double finestCellM, int stepsPe
         // the smallest not below it, which N texels cover.
         const double t = std::log2(c.texelM / finestCellM);
         c.texelM = finestCellM * std::exp2(coarser ? std::ceil(t - 1e-9) : std::floor(t + 1e-9));
+        const bool budget = c.budgetM > 0 && v.levelErrorM && !v.levelErrorM->empty();
+        if (budget) c.texelM = finestCellM * std::exp2(budgetLevel(c, v, extent));
         // The side is rounded up to a multiple of 64 texels: as the camera moves the extent changes a little every
         // frame. Exact sides changed every 4-6 frames of a 20 m-a-frame flight at 105 M cells, and a cascade whose side
         // changed then kept none of its texels (a far cascade's millions of texels evaluated afresh). It keeps them now
         // (CascadeCache), but into new storage, where the same side moves them in place.
-        if (!coarser) c.n = (int(std::ceil(extent / c.texelM)) + 3 + 63) / 64 * 64;
+        if (!coarser || budget) c.n = (int(std::ceil(extent / c.texelM)) + 3 + 63) / 64 * 64;
     }
     // Corner on the lattice, one texel outside the box so every patch of the box is whole.
     c.x0 = (std::floor(bx0 / c.texelM) - 1) * c.texelM;
@@ -222,8 +241,12 @@ CascadeFit fitCascades(const ViewVolume& v, int count, int texelsPerSide) {
         c.farWithOverlap = k + 1 < count ? c.splitFar + std::max(0.1 * width, 4 * v.finestCellM) : c.splitFar;
         const double lo = k == 0 ? -HUGE_VAL : c.splitNear;  // the first cascade takes everything nearer
         c.polygon = clipSlab(fit.hull, fit.dir, eyeOffset + lo, eyeOffset + c.farWithOverlap);
-        if (c.polygon.size() >= 3)
-            placeTexture(c, texelsPerSide, v.finestCellM, v.ladderStepsPerOctave, v.coarserTexels);
+        // The nearest point: the camera's height over the highest terrain, or the slab's near offset.
+        c.nearestM = std::max({k == 0 ? 0.0 : c.splitNear, v.eyeLocal.z - v.boxMax.z, v.nearM, 1e-3});
+        const double screenBudget = v.maxErrorPx * v.pixelRad * c.nearestM;
+        c.budgetM = v.maxErrorM > 0 && v.maxErrorPx > 0 ? std::min(v.maxErrorM, screenBudget)
+                                                        : std::max(v.maxErrorM, screenBudget);
+        if (c.polygon.size() >= 3) placeTexture(c, v, texelsPerSide);
         fit.cascades.push_back(std::move(c));
     }
     return fit;

@@ -28,6 +28,8 @@ std::string RenderOptions::validate() const {
     if (pyramidInterpolateLevels < 0 || pyramidInterpolateLevels > 8)
         return "--pyramid-interpolate " + std::to_string(pyramidInterpolateLevels) + " is outside 0..8";
     if (beamTilePx < 0 || beamTilePx > 64) return "--beam-tile " + std::to_string(beamTilePx) + " is outside 0..64";
+    if (!(maxErrorM >= 0) || !std::isfinite(maxErrorM)) return "--max-error must be a finite number >= 0 (metres)";
+    if (!(maxErrorPx >= 0) || !std::isfinite(maxErrorPx)) return "--max-error-px must be a finite number >= 0 (pixels)";
     return {};
 }
 
@@ -135,6 +137,7 @@ Scene::Scene(const Grid& grid, const influence::InfluenceLists& lists, const inf
     zMin = elevationMin;
     zMax = surfaceMax;
     depthColorMaxM = scenarioDepthMax(grid, depthMax);
+    boundLevels();
 }
 
 Scene::Scene(const GridRegionReader& file, const influence::KernelParams& params,
@@ -159,6 +162,7 @@ Scene::Scene(const GridRegionReader& file, const influence::KernelParams& params
     zMin = elevationMin;
     zMax = elevationMax + depthMax;
     depthColorMaxM = scenarioDepthMax(grid_, depthMax);
+    boundLevels();
 }
 
 const influence::SurfaceEvaluator& Scene::evaluator() const {
@@ -280,6 +284,8 @@ FrameSetup setUpFrame(const Scene& scene, const Camera& worldCamera) {
     view.boxMax = {scene.xMax, scene.yMax, scene.zMax};
     view.finestCellM = scene.grid().finestCellM;
     if (scene.pyramid()) view.ladderStepsPerOctave = 1;
+    view.pixelRad = 2 * s.basis.tanHalfY / std::max(1, camera.height);
+    view.levelErrorM = &scene.levelErrorM();
     return s;
 }
 
@@ -289,6 +295,9 @@ CascadeFit fitFrame(const Scene& scene, const Camera& camera, const FrameSetup& 
     // A camera inside the terrain sees nothing (raycast.cpp): no cascade to fit or fill.
     ViewVolume view = setup.view;
     view.coarserTexels = options.pyramidCoarseTexels;
+    view.maxErrorM = options.maxErrorM, view.maxErrorPx = options.maxErrorPx;
+    view.maxTexelsPerSide = 2 * options.texelsPerSide;
+    timings.maxErrorM = options.maxErrorM, timings.maxErrorPx = options.maxErrorPx;
     const CascadeFit fit = cameraBelowTerrainM(scene, camera) > 0
                                ? CascadeFit{}
                                : fitCascades(view, options.cascades, options.texelsPerSide);
@@ -402,14 +411,14 @@ std::vector<detail::CascadeTextures> approximateCascades(const Scene& scene, con
         if (!c.empty()) {
             const detail::ApproximationWork work = detail::approximate(
                 scene, c, tex[k], options.waterMinDepthM, options.threads, reuse ? &*reuse : nullptr,
-                options.pyramidInterpolateLevels, fills ? &(*fills)[k].rows : nullptr,
-                fills && pyramidTiles ? &(*fills)[k].tiles : nullptr);
+                c.interpolateLevels >= 0 ? std::min(c.interpolateLevels, options.pyramidInterpolateLevels)
+                                         : options.pyramidInterpolateLevels,
+                fills ? &(*fills)[k].rows : nullptr, fills && pyramidTiles ? &(*fills)[k].tiles : nullptr);
             cs.gaussians = work.gaussians, cs.cellsVisited = work.cellsVisited, cs.reusedTexels = work.reusedTexels;
             cs.cellsRead = work.cellsRead, cs.regionsRead = work.regionsRead;
             cs.pyramidTexels = work.pyramidTexels, cs.pyramidLevel = work.pyramidLevel;
             cs.pyramidInterpolated = work.pyramidInterpolated, cs.pyramidInterpolatedUp = work.pyramidInterpolatedUp;
         }
-        if (cs.pyramidTexels) cs.errorBoundM = detail::pyramidCopyBoundM(scene);
         cs.approximationMs = clock.milliseconds();
         timings.approximationMs += cs.approximationMs;
         clock.restart();
@@ -652,6 +661,7 @@ Frame renderFrame(const Scene& scene, const Camera& camera, const RenderOptions&
     detail::shadePixels(scene, options, setup.basis, rays, f, timings);
     detail::frameToWorldAxes(scene.grid(), f);
     if (kept) keepCascades(*kept, scene, options, fit, tex);
+    detail::boundFrame(scene, setup, fit, timings);
     timings.totalMs = total.milliseconds();
     return f;
 }

@@ -1,7 +1,9 @@
 // render/src/timings.cpp: Timings (renderer.h) written out: as JSON (hc-render's timings file) and as the table
 // hc-render and hc-view print.
+#include <cmath>
 #include <cstdio>
 #include <string>
+#include <utility>
 
 #include <nlohmann/json.hpp>
 
@@ -13,6 +15,11 @@ namespace hc::render {
 namespace {
 // Milliseconds to the microsecond, metres to the millimetre.
 double threeDecimals(double v) { return rounded(v, std::chars_format::fixed, 3); }
+// A bound to three significant digits; null where there is none (no surface pyramid).
+nlohmann::ordered_json bound(double v) {
+    return std::isfinite(v) ? nlohmann::ordered_json(rounded(v, std::chars_format::general, 3))
+                            : nlohmann::ordered_json(nullptr);
+}
 }  // namespace
 
 std::string Timings::toJson() const {
@@ -33,28 +40,31 @@ std::string Timings::toJson() const {
     j["atlas_interpolated"] = atlasInterpolated;
     j["rays"] = rays;
     j["hits"] = hits;
+    j["error_bound_m"] = bound(errorBoundM);
+    j["error_bound_px"] = bound(errorBoundPx);
+    j["max_error_m"] = maxErrorM;
+    j["max_error_px"] = maxErrorPx;
     j["cascades"] = Json::array();
     for (size_t k = 0; k < cascades.size(); ++k) {
         const CascadeStats& c = cascades[k];
-        j["cascades"].push_back(
-            {{"index", k},
-             {"near_m", threeDecimals(c.nearM)},
-             {"far_m", threeDecimals(c.farM)},
-             {"texel_m", rounded(c.texelM, std::chars_format::general, 6)},
-             {"visible_texels", c.visibleTexels},
-             {"reused_texels", c.reusedTexels},
-             {"pyramid_level", c.pyramidLevel},
-             {"pyramid_texels", c.pyramidTexels},
-             {"pyramid_interpolated", c.pyramidInterpolated},
-             {"pyramid_interpolated_levels_up", c.pyramidInterpolatedUp},
-             // null where no texel was copied: the bound is the copies' (CascadeStats::errorBoundM)
-             {"error_bound_m",
-              c.pyramidTexels ? Json(rounded(c.errorBoundM, std::chars_format::general, 3)) : Json(nullptr)},
-             {"gaussians", c.gaussians},
-             {"cells_visited", c.cellsVisited},
-             {"cells_read", c.cellsRead},
-             {"regions_read", c.regionsRead},
-             {"approximation_ms", threeDecimals(c.approximationMs)}});
+        j["cascades"].push_back({{"index", k},
+                                 {"near_m", threeDecimals(c.nearM)},
+                                 {"far_m", threeDecimals(c.farM)},
+                                 {"texel_m", rounded(c.texelM, std::chars_format::general, 6)},
+                                 {"visible_texels", c.visibleTexels},
+                                 {"reused_texels", c.reusedTexels},
+                                 {"pyramid_level", c.pyramidLevel},
+                                 {"pyramid_texels", c.pyramidTexels},
+                                 {"pyramid_interpolated", c.pyramidInterpolated},
+                                 {"pyramid_interpolated_levels_up", c.pyramidInterpolatedUp},
+                                 {"error_bound_m", bound(c.errorBoundM)},
+                                 {"error_bound_px", bound(c.errorBoundPx)},
+                                 {"budget_m", bound(c.budgetM)},
+                                 {"gaussians", c.gaussians},
+                                 {"cells_visited", c.cellsVisited},
+                                 {"cells_read", c.cellsRead},
+                                 {"regions_read", c.regionsRead},
+                                 {"approximation_ms", threeDecimals(c.approximationMs)}});
     }
     return j.dump(2) + "\n";
 }
@@ -86,8 +96,8 @@ std::string Timings::toTable() const {
             s += b;
         }
         if (c.pyramidLevel >= 0) {
-            std::snprintf(b, sizeof b, ", %llu copied from pyramid level %d (within %.2g m)",
-                          (unsigned long long)c.pyramidTexels, c.pyramidLevel, c.errorBoundM);
+            std::snprintf(b, sizeof b, ", %llu copied from pyramid level %d", (unsigned long long)c.pyramidTexels,
+                          c.pyramidLevel);
             s += b;
         }
         if (c.pyramidInterpolated) {
@@ -96,6 +106,17 @@ std::string Timings::toTable() const {
                           c.pyramidInterpolatedUp == 1 ? "" : "s");
             s += b;
         }
+        if (std::isfinite(c.errorBoundM)) {
+            std::snprintf(b, sizeof b, "; within %.3g m (%.2g px)", c.errorBoundM, c.errorBoundPx);
+            s += b;
+            if (c.budgetM > 0 && c.errorBoundM > c.budgetM) {
+                std::snprintf(b, sizeof b,
+                              ", over its budget of %.3g m by %.3g m (its texels are capped at twice --texels a side, "
+                              "and none is finer than the finest cell)",
+                              c.budgetM, c.errorBoundM - c.budgetM);
+                s += b;
+            }
+        }
         s += "\n";
     }
     std::snprintf(b, sizeof b,
@@ -103,6 +124,21 @@ std::string Timings::toTable() const {
                   "total           %9.2f\n",
                   mipmapMs, raycastMs, (unsigned long long)rays, (unsigned long long)hits, shadingMs, totalMs);
     s += b;
+    if (std::isfinite(errorBoundM)) {
+        std::snprintf(b, sizeof b, "accuracy: within %.3g m of the exact surface, %.3g px at the worst texel",
+                      errorBoundM, errorBoundPx);
+        s += b;
+    } else {
+        s += "accuracy: no bound claimed, none without the grid's surface pyramid (hc-influence writes it)";
+    }
+    std::string budget;
+    for (const auto& [v, unit] : {std::pair{maxErrorM, " m"}, std::pair{maxErrorPx, " px"}})
+        if (v > 0) {
+            std::snprintf(b, sizeof b, "%s%.3g%s", budget.empty() ? " (budget " : ", ", v, unit);
+            budget += b;
+        }
+    s += budget.empty() ? "" : budget + ")";
+    s += "\n";
     if (gpuMs > 0 || readbackMs > 0) {
         std::snprintf(b, sizeof b,
                       "    GPU span      %9.2f   first stage's start to shading's end\n    read back     %9.2f   the "

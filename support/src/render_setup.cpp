@@ -69,6 +69,16 @@ void RenderSetup::addRenderOptions(Parser& p) {
              "at most\n"
              "L above; 0..8, 0 sums them from the kernels (default 3)",
              options.pyramidInterpolateLevels);
+    p.option("--max-error", "M",
+             "error budget [m]: with a surface pyramid each cascade takes the coarsest of its spacings whose\n"
+             "rendered error is within M of the exact surface (far and flat ground coarse, near and rough fine);\n"
+             "the summary says the frame's bound and where the texels could not meet it (default 0: none, texel\n"
+             "sizes as --texels gives them)",
+             options.maxErrorM);
+    p.option("--max-error-px", "P",
+             "error budget [pixels]: the same, each cascade within P pixels at its nearest point; with\n"
+             "--max-error, the smaller of the two (default 0: none)",
+             options.maxErrorPx);
     p.option("--beam-tile", "P",
              "each tile of P x P pixels marches its rays' beam over the max mipmaps first (both backends), and\n"
              "its rays start their walks where none of them can hit before (the same hits, fewer node visits); 0..64,\n"

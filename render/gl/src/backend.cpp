@@ -387,6 +387,7 @@ CascadeFit GlRenderer::Impl::runFrame(const Camera& camera, const RenderOptions&
     readCounters(fit.cascades.size(), timings);
     timings.rays = size_t(camera.width) * size_t(camera.height);
     throwOnGlError();
+    detail::boundFrame(scene, setup, fit, timings);
     timings.totalMs = frameClock.milliseconds();
     return fit;
 }

@@ -75,7 +75,6 @@ void GlRenderer::Impl::approximateOnCpu(const CascadeFit& fit, const gpu::FrameB
                 // tiles need few rows.
                 int lo = fit.cascades[k].n, hi = -1;
                 stats.pyramidTexels += placeTiles(k, tex, fill, minDepth, lo, hi);
-                if (stats.pyramidTexels) stats.errorBoundM = detail::pyramidCopyBoundM(scene);
                 placeBlocks(k, fit.cascades[k], tex, fill, options.waterMinDepthM, lo, hi);
                 spans.clear();
                 for (int j = lo; j <= hi; ++j) {

@@ -152,6 +152,16 @@ SurfacePyramid waterPyramidOf(const SurfacePyramid& whole);
 SurfacePyramid buildWaterPyramid(const Grid& grid, const KernelParams& params, unsigned threads = 0,
                                  bool progress = false);
 
+// The error of drawing channel c as the bilinear interpolant of level t's samples, per level t [m]: an estimate from
+// the tiles' measured parent errors (Level::parentErrorM), over the whole domain. Between two levels the difference
+// of their interpolants is piecewise bilinear on the finer lattice, so it is largest at a finer sample, where it is
+// that sample's parent error: |f - B_t| <= |f - B_(t-1)| + max parentErrorM(t - 1), down to level 0, whose own error
+// is taken as half of level 0's parent errors (bilinear error grows with the spacing squared: a quarter, doubled for
+// safety). Without the samples' float32 rounding (the caller's: it knows the heights). Not a proof (the parent errors
+// are measured at samples, and level 0's share is scaled): --verify-error measures the real error beside it. Empty for
+// a pyramid without c.
+std::vector<double> bilinearErrorByLevelM(const SurfacePyramid& pyramid, PyramidChannel c);
+
 // The .hcp file: written atomically; read memory-mapped, validated (checksums, sizes, keys ascending and
 // inside the domain) and checked to belong to `grid` with `params` (like the .hci cache); a water pyramid (2 channels)
 // is read for a grid with water. Throws hc::Error.

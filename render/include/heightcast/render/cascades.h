@@ -14,6 +14,7 @@
 #pragma once
 
 #include <algorithm>
+#include <cmath>
 #include <cstdint>
 #include <vector>
 
@@ -21,6 +22,16 @@
 #include <glm/vec3.hpp>
 
 namespace hc::render {
+
+// Under an error budget, texels may be up to this many levels finer than the finest cell (2^-4 of it).
+constexpr int kFinerTexelLevels = 4;
+// The rendered error at texel level t (spacing finest * 2^t) from a pyramid's per-level errors e (Scene::levelErrorM):
+// e[t], the top level's above it, and below level 0 the bilinear error shrinking with the spacing squared (texels
+// summed from the kernels: exact at their centres).
+inline double levelErrorM(const std::vector<double>& e, int t) {
+    if (t >= 0) return e[size_t(std::min(t, int(e.size()) - 1))];
+    return std::ldexp(e[0], 2 * t);
+}
 
 struct ViewVolume {
     glm::dvec3 eyeLocal;            // camera position relative to the grid origin [m]
@@ -36,6 +47,13 @@ struct ViewVolume {
     int ladderStepsPerOctave = 8;
     bool coarserTexels =
         false;  // with 1 step per octave: the smallest power of two not below the 8-step size, N texels
+    // The error budget (RenderOptions::maxErrorM, maxErrorPx; 0: none), with 1 step per octave and levelErrorM (the
+    // rendered error at each pyramid level's spacing, Scene::levelErrorM): each cascade takes the coarsest level within
+    // its budget, the world one or the screen one at its nearest point (pixelRad: a pixel's angle [rad]), with as many
+    // texels as its extent then needs, up to maxTexelsPerSide (coarser where those cannot cover it).
+    double maxErrorM = 0, maxErrorPx = 0, pixelRad = 0;
+    const std::vector<double>* levelErrorM = nullptr;
+    int maxTexelsPerSide = 8192;
 };
 
 // An inclusive span [first, last] of texel columns in a row; empty when last < first. The one span type of render/:
@@ -52,6 +70,9 @@ struct Cascade {
     double texelM = 0;                   // s
     double x0 = 0, y0 = 0;               // local position of texel (0, 0)'s centre (a multiple of s)
     int n = 0;                           // texels per side
+    double nearestM = 0;                 // a lower bound of the distance from the eye to any point of it [m]
+    double budgetM = 0;                  // the error budget at its nearest point (ViewVolume), 0: none
+    int interpolateLevels = -1;          // under a budget: the most pyramid levels up a texel may come from, else -1
     std::vector<glm::dvec2> polygon;     // the hull's slab [splitNear, farWithOverlap], local xy
     // The visible texels: inside the polygon dilated by 1.5 texels. The polygon is convex, so they are one
     // span of each row: row j's are i in [rows[j].first, rows[j].last] (none when last < first).

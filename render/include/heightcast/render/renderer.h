@@ -52,6 +52,12 @@ struct RenderOptions {
     // their block's of 4 x 4 tiles; on the GL backend a pass of its own, beams.comp); 0 or 1: every ray walks from its
     // cascade's start. 0..64. docs/benchmarks.md measures it.
     int beamTilePx = 4;
+    // The error budget (0: none, the texel sizes as above): with a surface pyramid each cascade takes the coarsest of
+    // its spacings whose rendered error (Scene::levelErrorM) is within maxErrorM [m], or within maxErrorPx pixels at
+    // the cascade's nearest point, or both (the smaller), and texels interpolated only from levels within it; far and
+    // flat ground coarse, near and rough ground fine. Timings says what each cascade's bound is and where the texels
+    // (up to 2 texelsPerSide a side) could not meet the budget.
+    double maxErrorM = 0, maxErrorPx = 0;
     std::string validate() const;  // "" or what is wrong
 };
 
@@ -77,6 +83,10 @@ struct Frame {
     double originWorldX = 0, originWorldY = 0;
 };
 
+// How far a texel summed from the kernels in float may lie from the exact surface [m] (the tests' tolerance for
+// summed texels against the exact evaluator: render_textures_test, TexelsEqualTheExactSurfaceWithin1mm).
+constexpr double kSummedTexelErrorM = 1e-3;
+
 struct CascadeStats {
     double nearM = 0, farM = 0;  // offsets along the projected view direction (far includes the overlap)
     double splitFarM = 0;        // where the blend with the next cascade starts
@@ -93,12 +103,11 @@ struct CascadeStats {
     uint64_t pyramidTexels = 0;        // visible texels copied from the pyramid's samples (the others: Gaussians)
     uint64_t pyramidInterpolated = 0;  // visible texels interpolated from a coarser level (pyramidInterpolateLevels)
     int pyramidInterpolatedUp = 0;     // the most levels above the texels' own one of them was interpolated from
-    // Largest |texel - exact surface| of the texels copied from the pyramid [m]: a sample is the exact surface
-    // rounded to float once, so half a float ulp of the largest |height|; 0 when none was copied. The texels
-    // summed from the kernels in float are not bounded here (tests: within 1 mm of the exact surface), nor are the
-    // interpolated ones (tests: within a bilinear patch's error at the spacing they came from). toJson() writes null
-    // for a cascade that copied none (its texels interpolated or summed: no bound is claimed for them).
-    double errorBoundM = 0;
+    // The rendered surface's error against the exact one in this cascade [m], with a surface pyramid (else NaN):
+    // the bilinear patches' error at the texel spacing, or at the coarsest level a texel was interpolated from
+    // (Scene::levelErrorM), plus a float32 rounding of the heights, plus kSummedTexelErrorM where texels were summed
+    // from the kernels. errorBoundPx: the same in pixels at its nearest point. budgetM: its error budget, 0 none.
+    double errorBoundM = 0, errorBoundPx = 0, budgetM = 0;
     double approximationMs = 0;
 };
 
@@ -121,6 +130,8 @@ struct Timings {
     uint64_t atlasTexels = 0, atlasTilesUploaded = 0, atlasInterpolated = 0;
     std::vector<CascadeStats> cascades;
     uint64_t rays = 0, hits = 0;
+    // The frame's bound: the largest of its cascades' (NaN without a pyramid); and the budget asked (0: none).
+    double errorBoundM = 0, errorBoundPx = 0, maxErrorM = 0, maxErrorPx = 0;
     std::string toJson() const;
     std::string toTable() const;
 };
@@ -160,6 +171,10 @@ public:
     const influence::InfluenceLists& lists() const;
     const influence::SurfacePyramid* pyramid() const { return pyramid_; }
     const influence::SurfacePyramid* waterPyramid() const { return waterPyramid_; }  // nullptr: the pyramid's own water
+    // With a pyramid: per level, the error of drawing the surface (and the water level) as the bilinear interpolant of
+    // that level's samples (influence::bilinearErrorByLevelM, the larger of the channels), plus the samples' float32
+    // rounding [m]; empty without.
+    const std::vector<double>& levelErrorM() const { return levelErrorM_; }
     bool hasWater() const { return waterLayer_ >= 0; }
     int waterLayer() const { return waterLayer_; }  // grid layer of water_depth, or -1
     // Per cell, computed once for every frame (in memory; out of core per region): centre [m local] and the
@@ -196,6 +211,8 @@ private:
     uint64_t cellCount_ = 0;
     int waterLayer_ = -1;
     std::vector<CellKernel> kernels_;
+    std::vector<double> levelErrorM_;
+    void boundLevels();
     mutable std::once_flag evaluatorMade_;
     mutable std::unique_ptr<influence::SurfaceEvaluator> evaluator_;
 };
@@ -237,6 +254,18 @@ double cameraBelowTerrainM(const Scene& scene, const Camera& camera);
 // frame of that cache evaluated (the same picture, to float rounding) and leaves this frame's there.
 Frame renderFrame(const Scene& scene, const Camera& camera, const RenderOptions& options, Timings& timings,
                   CascadeCache* cache = nullptr);
+
+// The rendered surface against the exact one (surface.h) at `samples` hits of a frame (spread evenly over the hits
+// not on a wall; all of them if fewer): each hit's height against the exact terrain there, or the exact water level
+// where it hit water. The error bound of the frame's Timings should lie above every one (error_bound.cpp).
+struct ErrorCheck {
+    uint64_t hits = 0;                       // the hits checked
+    double maxM = 0, p99M = 0, medianM = 0;  // |rendered - exact| [m]
+    double maxPx = 0;                        // the largest in pixels at its hit's distance
+    std::string toJson() const;
+};
+ErrorCheck verifyFrameError(const Scene& scene, const Camera& camera, const Frame& frame, size_t samples,
+                            unsigned threads = 0);
 
 // A camera that frames the whole grid obliquely, as a person would pick: from the south-south-west,
 // 35 degrees down, far enough back that the grid's extent fills the view.

@@ -31,7 +31,7 @@ struct RenderSetup {
     // --camera, --look-at (exclusive with each other and with `alsoExclusive`, e.g. "--view"), --near, --far.
     void addCameraOptions(Parser& p, const std::string& alsoExclusive = "");
     // --size, --cascades, --texels, --threads, --color, --cells, --no-legend, --cache, --out-of-core, --pyramid,
-    // --no-pyramid, --step, --sigma, --truncation.
+    // --no-pyramid, --max-error, --max-error-px, --step, --sigma, --truncation.
     void addRenderOptions(Parser& p);
     // After Parser::parse: validates every option and the camera's numbers (before any expensive work).
     // Throws hc::Error naming the option.

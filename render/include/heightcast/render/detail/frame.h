@@ -172,8 +172,12 @@ uint64_t interpolateBlock(const Scene& scene, const Cascade& c, const PyramidTil
                           const PyramidTiles::Block& block, double waterMinDepthM, CascadeTextures& tex,
                           std::vector<RowFill>& rows);
 
-// The error bound of a texel copied from the surface pyramid (CascadeStats::errorBoundM) [m].
+struct FrameSetup;
+// Half a float32 ulp of the scene's largest |height| [m]: a pyramid sample's rounding (the exact surface rounded once).
 double pyramidCopyBoundM(const Scene& scene);
+// Each cascade's error bound and the frame's (CascadeStats::errorBoundM, Timings::errorBoundM), once its cascades'
+// statistics are final (error_bound.cpp; both backends).
+void boundFrame(const Scene& scene, const FrameSetup& setup, const CascadeFit& fit, Timings& timings);
 
 // Copies `count` pyramid samples into a row of a cascade's textures with the water rule of surface.h: s the elevations,
 // w (nullptr: dry) the water levels with the wet shares at w + plane; NaN elevations (outside every cell) and dry

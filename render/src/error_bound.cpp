@@ -1,0 +1,138 @@
+// render/src/error_bound.cpp: what error a frame carries. Before the frame: the error of each pyramid level's bilinear
+// patches (Scene::levelErrorM), which the cascades' fit reads to meet an error budget (cascades.cpp); after it, the
+// bound of each cascade and of the frame (boundFrame); and the error measured at the frame's hits against the exact
+// surface (verifyFrameError).
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <limits>
+#include <optional>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include "heightcast/core/rounded.h"
+#include "heightcast/influence/region.h"
+#include "heightcast/render/detail/frame.h"
+#include "heightcast/render/renderer.h"
+
+namespace hc::render {
+
+void Scene::boundLevels() {
+    levelErrorM_.clear();
+    if (!pyramid_) return;
+    levelErrorM_ = influence::bilinearErrorByLevelM(*pyramid_, influence::PyramidChannel::Elevation);
+    if (hasWater()) {  // the water surface is drawn from the water level's samples: the larger of the two errors
+        const influence::SurfacePyramid& w = waterPyramid_ ? *waterPyramid_ : *pyramid_;
+        const std::vector<double> water = influence::bilinearErrorByLevelM(w, influence::PyramidChannel::WaterLevel);
+        for (size_t t = 0; t < std::min(water.size(), levelErrorM_.size()); ++t)
+            levelErrorM_[t] = std::max(levelErrorM_[t], water[t]);
+    }
+    // The samples' rounding to float32, and the heights' once more in the patch.
+    for (double& e : levelErrorM_) e += 2 * detail::pyramidCopyBoundM(*this);
+}
+
+void detail::boundFrame(const Scene& scene, const FrameSetup& setup, const CascadeFit& fit, Timings& timings) {
+    const std::vector<double>& levels = scene.levelErrorM();
+    const double nan = std::numeric_limits<double>::quiet_NaN();
+    timings.errorBoundM = timings.errorBoundPx = levels.empty() ? nan : 0.0;
+    for (size_t k = 0; k < fit.cascades.size() && k < timings.cascades.size(); ++k) {
+        const Cascade& c = fit.cascades[k];
+        CascadeStats& cs = timings.cascades[k];
+        cs.budgetM = c.budgetM;
+        if (levels.empty()) {
+            cs.errorBoundM = cs.errorBoundPx = nan;
+            continue;
+        }
+        if (c.empty()) {
+            cs.errorBoundM = cs.errorBoundPx = 0;
+            continue;
+        }
+        // The patches' error at the texel spacing, plus, where texels were interpolated from a coarser level, that
+        // level's (the interpolation is tested to lie within a bilinear patch's error at the source's spacing).
+        const int level = int(std::lround(std::log2(c.texelM / scene.grid().finestCellM)));
+        const int up = cs.pyramidInterpolated > 0 ? cs.pyramidInterpolatedUp : 0;
+        cs.errorBoundM = levelErrorM(levels, level) + (up > 0 ? levelErrorM(levels, level + up) : 0.0) +
+                         (cs.gaussians > 0 ? kSummedTexelErrorM : 0.0);
+        cs.errorBoundPx = cs.errorBoundM / (setup.view.pixelRad * c.nearestM);
+        timings.errorBoundM = std::max(timings.errorBoundM, cs.errorBoundM);
+        timings.errorBoundPx = std::max(timings.errorBoundPx, cs.errorBoundPx);
+    }
+}
+
+namespace {
+
+// The hits to check: every hit off the walls, or `samples` of them spread evenly.
+std::vector<size_t> hitsToCheck(const Frame& f, size_t samples) {
+    std::vector<size_t> hits;
+    for (size_t i = 0; i < f.distanceM.size(); ++i)
+        if (std::isfinite(f.distanceM[i]) && !(i < f.wall.size() && f.wall[i] != 0)) hits.push_back(i);
+    if (hits.size() <= samples) return hits;
+    std::vector<size_t> picked(samples);
+    for (size_t k = 0; k < samples; ++k) picked[k] = hits[(k * hits.size()) / samples];
+    return picked;
+}
+
+// The exact layer at local points: over the grid and its lists in memory, else from the file around the points.
+std::vector<std::optional<double>> exactValues(const Scene& scene, const std::vector<std::array<double, 2>>& pts,
+                                               const influence::Layer& layer, unsigned threads) {
+    if (scene.outOfCore()) return influence::valuesFromFile(*scene.file(), pts, layer, scene.params(), threads);
+    return scene.evaluator().values(pts, layer, threads);
+}
+
+double quantile(std::vector<double> v, double q) {
+    if (v.empty()) return 0;
+    const size_t k = std::min(v.size() - 1, size_t(q * double(v.size() - 1) + 0.5));
+    std::nth_element(v.begin(), v.begin() + std::ptrdiff_t(k), v.end());
+    return v[k];
+}
+
+}  // namespace
+
+ErrorCheck verifyFrameError(const Scene& scene, const Camera& camera, const Frame& f, size_t samples,
+                            unsigned threads) {
+    const std::vector<size_t> hits = hitsToCheck(f, samples);
+    const Grid& grid = scene.grid();
+    std::vector<std::array<double, 2>> dry, wet;
+    std::vector<size_t> dryAt, wetAt;
+    for (const size_t i : hits) {
+        std::array<double, 2> p{};
+        grid.worldToLocal(f.originWorldX + f.posX[i], f.originWorldY + f.posY[i], p[0], p[1]);
+        const bool water = i < f.waterDepthM.size() && f.waterDepthM[i] > 0;
+        (water ? wet : dry).push_back(p);
+        (water ? wetAt : dryAt).push_back(i);
+    }
+    ErrorCheck check;
+    std::vector<double> errors;
+    const double pixelRad = 2 * std::tan(camera.fovYDeg * M_PI / 360.0) / std::max(1, camera.height);
+    auto compare = [&](const std::vector<std::array<double, 2>>& pts, const std::vector<size_t>& at, const char* name) {
+        if (pts.empty()) return;
+        const std::vector<std::optional<double>> exact =
+            exactValues(scene, pts, influence::Layer::byName(grid, name), threads);
+        for (size_t k = 0; k < pts.size(); ++k) {
+            if (!exact[k]) continue;  // a hit on a patch over a hole's edge: no exact surface there to compare with
+            const double e = std::abs(double(f.posZ[at[k]]) - *exact[k]);
+            errors.push_back(e);
+            check.maxPx = std::max(check.maxPx, e / (pixelRad * double(f.distanceM[at[k]])));
+        }
+    };
+    compare(dry, dryAt, "elevation");
+    compare(wet, wetAt, "water_surface");
+    check.hits = errors.size();
+    check.maxM = errors.empty() ? 0 : *std::max_element(errors.begin(), errors.end());
+    check.p99M = quantile(errors, 0.99);
+    check.medianM = quantile(errors, 0.5);
+    return check;
+}
+
+std::string ErrorCheck::toJson() const {
+    nlohmann::ordered_json j;
+    j["hits"] = hits;
+    j["max_m"] = rounded(maxM, std::chars_format::general, 4);
+    j["p99_m"] = rounded(p99M, std::chars_format::general, 4);
+    j["median_m"] = rounded(medianM, std::chars_format::general, 4);
+    j["max_px"] = rounded(maxPx, std::chars_format::general, 4);
+    return j.dump();
+}
+
+}  // namespace hc::render
