@@ -258,8 +258,7 @@ void refuseCameraBelowTerrain(const hc::render::Scene& scene, const hc::render::
 struct Rendered {
     hc::render::Frame frame;
     hc::render::Timings timings;
-    std::string device;                           // what rendered it: "CPU, N threads" or the GL renderer and version
-    std::optional<hc::render::ErrorCheck> check;  // --verify-error
+    std::string device;  // what rendered it: "CPU, N threads" or the GL renderer and version
 };
 
 // On the backend `decision` chose (GL in a headless context of its own), after printing its note.
@@ -276,7 +275,7 @@ Rendered renderImage(const hc::cli::BackendDecision& decision, const hc::render:
         r.frame = hc::render::renderFrame(scene, camera, options, r.timings);
     }
     if (verifyHits > 0)
-        r.check = hc::render::verifyFrameError(scene, camera, r.frame, size_t(verifyHits), options.threads);
+        r.timings.verified = hc::render::verifyFrameError(scene, camera, r.frame, size_t(verifyHits), options.threads);
     return r;
 }
 
@@ -286,8 +285,7 @@ void writeOutputs(const RenderArgs& a, const Rendered& r, std::optional<unsigned
     if (!a.exr.empty()) hc::render::writeFrameExr(r.frame, name(a.exr));
     if (!a.timingsPath.empty()) {
         hc::AtomicFileWriter tw(name(a.timingsPath));
-        std::string j = r.timings.toJson();
-        if (r.check) j.insert(j.rfind('}'), ",\n  \"verified\": " + r.check->toJson() + "\n");
+        const std::string j = r.timings.toJson();
         tw.write(std::as_bytes(std::span(j)));
         tw.commit();
     }
@@ -311,8 +309,8 @@ void printSummary(const RenderArgs& a, const hc::cli::BackendDecision& decision,
         std::printf("  walls        %zu of %llu hits on the walls at hole and domain edges (EXR channel wall)\n", walls,
                     (unsigned long long)r.timings.hits);
     std::printf("%s", r.timings.toTable().c_str());
-    if (r.check) {
-        const hc::render::ErrorCheck& c = *r.check;
+    if (r.timings.verified) {
+        const hc::render::ErrorCheck& c = *r.timings.verified;
         std::printf(
             "  verified     %llu hits against the exact surface: largest %.3g m (%.3g px), 99th percentile "
             "%.3g m, median %.3g m; bound %.3g m\n",

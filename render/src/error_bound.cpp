@@ -9,9 +9,6 @@
 #include <optional>
 #include <vector>
 
-#include <nlohmann/json.hpp>
-
-#include "heightcast/core/rounded.h"
 #include "heightcast/influence/region.h"
 #include "heightcast/render/detail/frame.h"
 #include "heightcast/render/renderer.h"
@@ -104,7 +101,7 @@ ErrorCheck verifyFrameError(const Scene& scene, const Camera& camera, const Fram
     }
     ErrorCheck check;
     std::vector<double> errors;
-    const double pixelRad = 2 * std::tan(camera.fovYDeg * M_PI / 360.0) / std::max(1, camera.height);
+    const double pixelRad = detail::setUpFrame(scene, camera).view.pixelRad;
     auto compare = [&](const std::vector<std::array<double, 2>>& pts, const std::vector<size_t>& at, const char* name) {
         if (pts.empty()) return;
         const std::vector<std::optional<double>> exact =
@@ -123,16 +120,6 @@ ErrorCheck verifyFrameError(const Scene& scene, const Camera& camera, const Fram
     check.p99M = quantile(errors, 0.99);
     check.medianM = quantile(errors, 0.5);
     return check;
-}
-
-std::string ErrorCheck::toJson() const {
-    nlohmann::ordered_json j;
-    j["hits"] = hits;
-    j["max_m"] = rounded(maxM, std::chars_format::general, 4);
-    j["p99_m"] = rounded(p99M, std::chars_format::general, 4);
-    j["median_m"] = rounded(medianM, std::chars_format::general, 4);
-    j["max_px"] = rounded(maxPx, std::chars_format::general, 4);
-    return j.dump();
 }
 
 }  // namespace hc::render

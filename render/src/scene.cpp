@@ -1,6 +1,6 @@
-// render/src/scene.cpp: the Scene (renderer.h): a grid in memory with its lists, or a grid file read a region at a time,
-// with its surface pyramid, bounds and per-cell kernels; the terrain height under a camera and the overview camera. Its
-// error per pyramid level is in error_bound.cpp.
+// render/src/scene.cpp: the Scene (renderer.h): a grid in memory with its lists, or a grid file read a region at a
+// time, with its surface pyramid, bounds and per-cell kernels; the terrain height under a camera and the overview
+// camera. Its error per pyramid level is in error_bound.cpp.
 #include <algorithm>
 #include <cmath>
 #include <optional>

@@ -44,6 +44,12 @@ std::string Timings::toJson() const {
     j["error_bound_px"] = bound(errorBoundPx);
     j["max_error_m"] = maxErrorM;
     j["max_error_px"] = maxErrorPx;
+    if (verified)
+        j["verified"] = {{"hits", verified->hits},
+                         {"max_m", rounded(verified->maxM, std::chars_format::general, 4)},
+                         {"p99_m", rounded(verified->p99M, std::chars_format::general, 4)},
+                         {"median_m", rounded(verified->medianM, std::chars_format::general, 4)},
+                         {"max_px", rounded(verified->maxPx, std::chars_format::general, 4)}};
     j["cascades"] = Json::array();
     for (size_t k = 0; k < cascades.size(); ++k) {
         const CascadeStats& c = cascades[k];

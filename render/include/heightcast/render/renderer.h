@@ -111,6 +111,13 @@ struct CascadeStats {
     double approximationMs = 0;
 };
 
+// What verifyFrameError measured.
+struct ErrorCheck {
+    uint64_t hits = 0;                       // the hits checked
+    double maxM = 0, p99M = 0, medianM = 0;  // |rendered - exact| [m]
+    double maxPx = 0;                        // the largest in pixels at its hit's distance
+};
+
 struct Timings {
     double viewDirX = 0, viewDirY = 1;  // the horizontal direction the cascade offsets are measured along
     double fittingMs = 0, approximationMs = 0, mipmapMs = 0, raycastMs = 0, shadingMs = 0, totalMs = 0;
@@ -132,6 +139,7 @@ struct Timings {
     uint64_t rays = 0, hits = 0;
     // The frame's bound: the largest of its cascades' (NaN without a pyramid); and the budget asked (0: none).
     double errorBoundM = 0, errorBoundPx = 0, maxErrorM = 0, maxErrorPx = 0;
+    std::optional<ErrorCheck> verified;  // the frame's error measured at its hits (verifyFrameError), when asked
     std::string toJson() const;
     std::string toTable() const;
 };
@@ -257,13 +265,8 @@ Frame renderFrame(const Scene& scene, const Camera& camera, const RenderOptions&
 
 // The rendered surface against the exact one (surface.h) at `samples` hits of a frame (spread evenly over the hits
 // not on a wall; all of them if fewer): each hit's height against the exact terrain there, or the exact water level
-// where it hit water. The error bound of the frame's Timings should lie above every one (error_bound.cpp).
-struct ErrorCheck {
-    uint64_t hits = 0;                       // the hits checked
-    double maxM = 0, p99M = 0, medianM = 0;  // |rendered - exact| [m]
-    double maxPx = 0;                        // the largest in pixels at its hit's distance
-    std::string toJson() const;
-};
+// where it hit water. The error bound of the frame's Timings should lie above every one (error_bound.cpp); a caller
+// keeps it in Timings::verified.
 ErrorCheck verifyFrameError(const Scene& scene, const Camera& camera, const Frame& frame, size_t samples,
                             unsigned threads = 0);
 
