@@ -537,4 +537,47 @@ TEST_F(RenderGl, BeamsGiveTheSameHits) {
     EXPECT_LE(n.rounded, n.pixels / 1000);
 }
 
+// The error budget on the GL backend in memory, where every texel is summed from the kernels (off the pyramid's
+// ladder): every checked hit lies under the frame's bound, the bound within the budget where the texels met it, a
+// looser budget costs fewer texels, and where the budget (not the texels, N a side here against the CPU's 2N) sets the
+// spacing it is the CPU's. (Before, the GL backend in memory ignored the budget: every budget gave the default's
+// texels.) On the alpine SRTM (32 m cells) the budgets below 14 m need the finest level, which N texels cannot cover.
+TEST_F(RenderGl, ErrorBudgetHoldsInMemory) {
+    World& w = hef();
+    HC_REQUIRE_GL(w);
+    const hc::influence::SurfacePyramid pyramid = hc::influence::buildSurfacePyramid(w.grid, w.lists.params());
+    const Scene scene(w.grid, w.lists, &pyramid);
+    const std::unique_ptr<GlRenderer> gl = GlRenderer::headless(scene);
+    const Camera cam = overviewCamera(scene, 160, 100);
+    RenderOptions o = smallOptions();
+    std::vector<uint64_t> texels;
+    for (const double budget : {1.0, 30.0, 100.0}) {
+        SCOPED_TRACE("budget " + std::to_string(budget) + " m");
+        o.maxErrorM = budget;
+        Timings t, cpu;
+        gl->forgetCascades();
+        const Frame f = gl->render(cam, o, t);
+        const ErrorCheck check = verifyFrameError(scene, cam, f, 2000);
+        ASSERT_TRUE(std::isfinite(t.errorBoundM));
+        ASSERT_GT(check.hits, 1000u);
+        EXPECT_LE(check.maxM, t.errorBoundM + 5e-3);  // + float32 hit positions, as render_error_budget_test
+        (void)renderFrame(scene, cam, o, cpu);
+        ASSERT_EQ(t.cascades.size(), cpu.cascades.size());
+        bool met = true;
+        texels.push_back(0);
+        for (size_t k = 0; k < t.cascades.size(); ++k) {
+            const CascadeStats& c = t.cascades[k];
+            met = met && c.errorBoundM <= c.budgetM, texels.back() += c.visibleTexels;
+            if (budget > 14) {
+                EXPECT_EQ(c.texelM, cpu.cascades[k].texelM) << k;
+            }
+        }
+        if (met) {
+            EXPECT_LE(t.errorBoundM, budget);
+        }
+    }
+    EXPECT_GE(texels[0], texels[1]);
+    EXPECT_GT(texels[1], texels[2]);
+}
+
 }  // namespace

@@ -114,19 +114,23 @@ std::vector<double> splitOffsets(double n, double f, int count, double finestCel
     return bounds;
 }
 
-// Under an error budget (ViewVolume): the coarsest pyramid level whose error is within it, then coarser while the
-// extent needs more texels than allowed; how many levels above it texels may be interpolated from. Returns the level.
-int budgetLevel(Cascade& c, const ViewVolume& v, double extent) {
+// Under an error budget (ViewVolume): the coarsest pyramid level whose error is within it, then (`capped`) coarser
+// while the extent needs more texels than allowed; how many levels above it texels may be interpolated from. Returns
+// the level.
+int budgetLevel(Cascade& c, const ViewVolume& v, double extent, bool capped) {
     const std::vector<double>& e = *v.levelErrorM;
     const int top = int(e.size()) - 1;
     int t = -kFinerTexelLevels;
     while (t < top && levelErrorM(e, t + 1) <= c.budgetM) ++t;
-    while (t < top && std::ceil(extent / (v.finestCellM * std::exp2(t))) + 3 > v.maxTexelsPerSide) ++t;
+    while (capped && t < top && std::ceil(extent / (v.finestCellM * std::exp2(t))) + 3 > v.maxTexelsPerSide) ++t;
     int up = 0;  // levels up a texel may be interpolated from: their error within the budget too
     while (t + up < top && levelErrorM(e, t) + levelErrorM(e, t + up + 1) <= c.budgetM) ++up;
     c.interpolateLevels = up;
     return t;
 }
+
+// The texture's side for an extent at a spacing: three texels beyond it, rounded up to a multiple of 64 (see below).
+int sideFor(double extent, double texelM) { return (int(std::ceil(extent / texelM)) + 3 + 63) / 64 * 64; }
 
 // Places cascade c's texture over its polygon (texel size from the ladder, or the error budget's level; corner on the
 // lattice) and finds its visible texels.
@@ -150,13 +154,23 @@ void placeTexture(Cascade& c, const ViewVolume& v, int texelsPerSide) {
         // the smallest not below it, which N texels cover.
         const double t = std::log2(c.texelM / finestCellM);
         c.texelM = finestCellM * std::exp2(coarser ? std::ceil(t - 1e-9) : std::floor(t + 1e-9));
-        const bool budget = c.budgetM > 0 && v.levelErrorM && !v.levelErrorM->empty();
-        if (budget) c.texelM = finestCellM * std::exp2(budgetLevel(c, v, extent));
         // The side is rounded up to a multiple of 64 texels: as the camera moves the extent changes a little every
         // frame. Exact sides changed every 4-6 frames of a 20 m-a-frame flight at 105 M cells, and a cascade whose side
         // changed then kept none of its texels (a far cascade's millions of texels evaluated afresh). It keeps them now
         // (CascadeCache), but into new storage, where the same side moves them in place.
-        if (!coarser || budget) c.n = (int(std::ceil(extent / c.texelM)) + 3 + 63) / 64 * 64;
+        if (!coarser) c.n = sideFor(extent, c.texelM);
+    }
+    // Under an error budget the spacing is the budget's level. Off the pyramid's ladder (the GL backend in memory sums
+    // every texel from the kernels, at any spacing) never finer than N texels cover: where they cannot meet the budget
+    // that is as near as they come.
+    if (c.budgetM > 0 && v.levelErrorM && !v.levelErrorM->empty()) {
+        if (stepsPerOctave == 1) {
+            c.texelM = finestCellM * std::exp2(budgetLevel(c, v, extent, true));
+            c.n = sideFor(extent, c.texelM);
+        } else if (const double s = finestCellM * std::exp2(budgetLevel(c, v, extent, false)); s > c.texelM) {
+            c.texelM = s;
+            c.n = std::min(c.n, sideFor(extent, c.texelM));
+        }
     }
     // Corner on the lattice, one texel outside the box so every patch of the box is whole.
     c.x0 = (std::floor(bx0 / c.texelM) - 1) * c.texelM;

@@ -47,7 +47,8 @@ void detail::boundFrame(const Scene& scene, const FrameSetup& setup, const Casca
         }
         // The patches' error at the texel spacing, plus, where texels were interpolated from a coarser level, that
         // level's (the interpolation is tested to lie within a bilinear patch's error at the source's spacing).
-        const int level = int(std::lround(std::log2(c.texelM / scene.grid().finestCellM)));
+        // Off the pyramid's ladder (the GL backend in memory) the spacing lies between two levels: the coarser's error.
+        const int level = int(std::ceil(std::log2(c.texelM / scene.grid().finestCellM) - 1e-9));
         const int up = cs.pyramidInterpolated > 0 ? cs.pyramidInterpolatedUp : 0;
         cs.errorBoundM = levelErrorM(levels, level) + (up > 0 ? levelErrorM(levels, level + up) : 0.0) +
                          (cs.gaussians > 0 ? kSummedTexelErrorM : 0.0);

@@ -47,10 +47,11 @@ struct ViewVolume {
     int ladderStepsPerOctave = 8;
     bool coarserTexels =
         false;  // with 1 step per octave: the smallest power of two not below the 8-step size, N texels
-    // The error budget (RenderOptions::maxErrorM, maxErrorPx; 0: none), with 1 step per octave and levelErrorM (the
+    // The error budget (RenderOptions::maxErrorM, maxErrorPx; 0: none), on either ladder, with levelErrorM (the
     // rendered error at each pyramid level's spacing, Scene::levelErrorM): each cascade takes the coarsest level within
     // its budget, the world one or the screen one at its nearest point (pixelRad: a pixel's angle [rad]), with as many
-    // texels as its extent then needs, up to maxTexelsPerSide (coarser where those cannot cover it).
+    // texels as its extent then needs, up to maxTexelsPerSide (coarser where those cannot cover it); off the ladder
+    // (8 steps) never finer than N texels cover.
     double maxErrorM = 0, maxErrorPx = 0, pixelRad = 0;
     const std::vector<double>* levelErrorM = nullptr;
     int maxTexelsPerSide = 8192;
