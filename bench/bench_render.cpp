@@ -77,7 +77,8 @@ int main(int argc, char** argv) {
                  "      (default: the report's count / --scale)",
                  set.cells);
         p.option("--scenarios", "LIST",
-                 "comma-separated subset, in the order given (default Marchfeld,Petzenkirchen,Wachau,Florence)",
+                 "comma-separated subset, in the order given; with --trade-grid, none runs the grid alone\n"
+                 "      (default Marchfeld,Petzenkirchen,Wachau,Florence)",
                  scenarios);
         p.option("--size", "WxH", "image size in pixels (default 1920x1080)", size);
         p.option("--cascades", "K", "cascades per frame, 1..4 (default 3)", set.options.cascades);
@@ -150,7 +151,42 @@ int main(int argc, char** argv) {
                  "also draw each scenario's best stage times as stacked bars with the targets, SVG\n"
                  "      (default: none)",
                  plot);
+        std::string tradeGrid;
+        int tradeSamples = int(set.tradeSamples);
+        p.flag("--trade",
+               "instead of the timed frames: the speed/accuracy trade. Each scene (with its surface pyramid) is\n"
+               "      rendered from scratch under error budgets of 1 cm to 100 m and 0.5 to 2 px and under the fixed\n"
+               "      knobs (default, --pyramid-coarse, --texels 512 and 2048), best of --repeat, on each backend of\n"
+               "      --backend (here a list: cpu, gl or cpu,gl); each frame's hits are checked against the exact\n"
+               "      surface. Prints a table and the issue-43 targets; --json and --plot write its points and an SVG\n"
+               "      of error against frame time",
+               set.trade);
+        p.option("--trade-grid", "GRID.hcg",
+                 "with --trade: also a real grid file, its surface pyramid beside it (hc-influence's .hcp),\n"
+                 "      out of core, from hc-render's default camera (default: none)",
+                 tradeGrid);
+        p.option("--trade-samples", "N",
+                 "with --trade: hits per frame checked against the exact surface, 100..10000000 (default 20000)",
+                 tradeSamples);
         if (!p.parse(argc, argv)) return 0;
+        if (set.trade) {
+            if (set.options.maxErrorM > 0 || set.options.maxErrorPx > 0)
+                throw hc::Error("--trade sweeps the error budgets itself: drop --max-error and --max-error-px");
+            if (set.flyFrames || set.accuracy)
+                throw hc::Error("--trade: --fly-frames and --accuracy measure other things; run them apart");
+            if (tradeSamples < 100 || tradeSamples > 10000000)
+                throw hc::Error("--trade-samples " + std::to_string(tradeSamples) + ": must be in 100..10000000");
+            set.tradeSamples = size_t(tradeSamples);
+            if (!csv.empty()) throw hc::Error("--csv: not written with --trade (its points go to --json)");
+            for (const std::string& b : splitList(backendText, "--backend")) {
+                if (b != "cpu" && b != "gl") throw hc::Error("--backend " + b + ": with --trade, cpu, gl or cpu,gl");
+                (b == "gl" ? set.tradeGl : set.tradeCpu) = true;
+            }
+            backendText = "cpu";
+            set.pyramid = true;  // the bound needs the pyramid
+        } else if (!tradeGrid.empty() || tradeSamples != int(set.tradeSamples)) {
+            throw hc::Error("--trade-grid and --trade-samples go with --trade");
+        }
         if (!(set.scale > 0) || !std::isfinite(set.scale))
             throw hc::Error("--scale " + fmt::format("{:g}", set.scale) + ": must be a number > 0");
         if (!(set.cells >= 0) || !std::isfinite(set.cells) || (set.cells > 0 && set.cells < 1000) || set.cells >= 4e9)
@@ -179,7 +215,8 @@ int main(int argc, char** argv) {
             set.width = int(w), set.height = int(h);
         }
         std::vector<const Scenario*> chosen;
-        for (const std::string& name : splitList(scenarios, "--scenarios")) {
+        const bool gridOnly = set.trade && !tradeGrid.empty() && scenarios == "none";  // the real grid alone
+        for (const std::string& name : gridOnly ? std::vector<std::string>{} : splitList(scenarios, "--scenarios")) {
             const Scenario* found = hc::scenes::findScenario(name);
             if (!found)
                 throw hc::Error("--scenarios " + name +
@@ -208,6 +245,14 @@ int main(int argc, char** argv) {
         const hc::Stopwatch wall;
         std::vector<RunResult> results;
         for (const Scenario* sc : chosen) results.push_back(runScenario(*sc, set));
+        if (set.trade) {
+            if (!tradeGrid.empty()) results.push_back(runTradeOnGrid(tradeGrid, set));
+            if (set.interactive) std::fprintf(stderr, "\r%60s\r", "");
+            printTrade(results, set);
+            if (!json.empty()) writeTradeJson(results, set, json), std::printf("points written to %s\n", json.c_str());
+            if (!plot.empty()) writeTradePlot(results, set, plot);
+            return 0;
+        }
         if (set.interactive) std::fprintf(stderr, "\r%60s\r", "");
         const double wallS = wall.seconds();
 

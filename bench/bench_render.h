@@ -30,6 +30,22 @@ struct CascadeOut {
     double errorBoundM;            // CascadeStats::errorBoundM: NaN without a pyramid
 };
 
+// --trade: one setting's frame (best of the repeats, from scratch) and its error, on one backend.
+constexpr int kMaxTradePoints = 32;
+struct TradePoint {
+    char label[24] = {};     // "0.1 m", "2 px", "default", "--pyramid-coarse", "--texels 512"
+    bool gl = false;         // the GL backend, else the CPU
+    bool budget = false;     // an error budget in metres (a line in the plot); else a fixed knob or a pixel budget
+    bool isDefault = false;  // no option: today's picture
+    double maxErrorM = 0, maxErrorPx = 0;                        // the budget asked (0: none)
+    double totalMs = 1e300, approximationMs = 0, raycastMs = 0;  // of the fastest repeat
+    uint64_t texels = 0;                                         // visible texels over the cascades
+    double boundM = 0, boundPx = 0;                              // Timings::errorBoundM, errorBoundPx
+    uint64_t checked = 0;                                        // hits checked against the exact surface
+    double maxM = 0, p99M = 0, medianM = 0, maxPx = 0;           // their error (render::ErrorCheck)
+    char skipped[160] = {};  // why the backend could not render it (the GL driver's limits), or empty
+};
+
 // What a scenario's child reports. Plain bytes through a pipe, so trivially copyable.
 struct RunResult {
     double extentXM = 0, extentYM = 0, finestM = 0, coarsestM = 0;
@@ -71,6 +87,10 @@ struct RunResult {
     // --accuracy: |hit height - exact surface height| over terrain hits of the last frame (walls and water aside) [m].
     uint64_t accuracySamples = 0;
     double accuracyMaxM = 0, accuracyRmsM = 0, accuracyP99M = 0;
+    // --trade: every setting on every backend asked (bench_render_trade.cpp).
+    char name[64] = {};  // the scenario's, or the grid file's stem
+    int tradeCount = 0;
+    TradePoint trade[kMaxTradePoints] = {};
 };
 
 struct Settings {
@@ -88,10 +108,21 @@ struct Settings {
     bool outOfCore =
         false;  // write the grid to a file and render from it out of core (render::Scene over a GridRegionReader)
     double memoryGb = 0;  // --memory-gb: what a scenario may hold (0: what the machine has available)
+    // --trade: frame time against error over error budgets and fixed knobs, on the backends asked.
+    bool trade = false, tradeCpu = false, tradeGl = false;
+    size_t tradeSamples = 20000;  // hits checked against the exact surface per frame
 };
 
 // One scenario, generated, prepared and rendered in a forked child (bench_render_run.cpp).
 RunResult runScenario(const scenes::Scenario& sc, const Settings& set);
+
+// --trade (bench_render_trade.cpp): the sweep over a scene already built (the child's part); a real grid file with
+// its surface pyramid beside it, in a child of its own; the table and the targets; the JSON; the plot.
+void tradeSweep(const render::Scene& scene, const render::Camera& camera, const Settings& set, RunResult& r);
+RunResult runTradeOnGrid(const std::string& gridPath, const Settings& set);
+void printTrade(const std::vector<RunResult>& results, const Settings& set);
+void writeTradeJson(const std::vector<RunResult>& results, const Settings& set, const std::string& path);
+void writeTradePlot(const std::vector<RunResult>& results, const Settings& set, const std::string& path);
 
 // The tables (grids, rendering, cascades, fly-through, targets) for `results` of `chosen`; the scenarios whose
 // rendering was skipped are said so and dropped from both.

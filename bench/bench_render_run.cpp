@@ -121,6 +121,7 @@ RunResult runScenario(const Scenario& sc, const Settings& set) {
             if (set.interactive) std::fprintf(stderr, "\r%-14s %-40s", sc.name, what);
         };
         r.baselineRss = hc::currentRssBytes();
+        std::snprintf(r.name, sizeof r.name, "%s", sc.name);
         say("generating the grid ...");
         hc::Stopwatch clock;
         r.targetCells = set.cells > 0 ? set.cells : hc::scenes::targetCells(sc, set.scale);
@@ -207,6 +208,12 @@ RunResult runScenario(const Scenario& sc, const Settings& set) {
         r.width = set.width;
         r.height = set.height;
         r.repeats = set.repeat;
+        if (set.trade) {  // the sweep instead of the timed frames (bench_render_trade.cpp)
+            tradeSweep(scene, cam, set, r);
+            r.peakRss = hc::peakRssBytes();
+            say("");
+            return;
+        }
         hc::render::Frame frame;
         // The GL backend: a headless context in this child; one unmeasured warm-up frame first, since
         // drivers (llvmpipe among them) compile shaders at their first dispatch.

@@ -70,13 +70,15 @@ struct LineSeries {
     std::string color;  // empty: plotColor(index)
     std::string dash;   // SVG stroke-dasharray ("6,4", "2,3"); empty: solid
     std::vector<std::pair<double, double>>
-        points;  // drawn in this order; non-finite or (on log axes) non-positive skipped
+        points;        // drawn in this order; non-finite or (on log axes) non-positive skipped
+    bool line = true;  // false: markers only (squares), no line through them
 };
 
 struct LinePlot {
     std::string title, xLabel, yLabel;
     bool logX = false, logY = false;
     std::vector<LineSeries> series;
+    std::vector<std::pair<std::string, std::pair<double, double>>> rings;  // points circled and labelled
 
     std::string svg() const {
         const double W = 1100, H = 560, left = 80, right = 400, top = 50, bottom = 60;
@@ -146,19 +148,34 @@ struct LinePlot {
             for (auto [x, y] : s.points)
                 if (usable(x, y)) path += (path.empty() ? "" : " ") + svgNum(px(x)) + "," + svgNum(py(y));
             if (path.empty()) continue;
-            o += "<polyline points=\"" + path + "\" fill=\"none\" stroke=\"" + color + "\" stroke-width=\"1.8\"" +
-                 (s.dash.empty() ? "" : " stroke-dasharray=\"" + s.dash + "\"") + "/>\n";
+            if (s.line)
+                o += "<polyline points=\"" + path + "\" fill=\"none\" stroke=\"" + color + "\" stroke-width=\"1.8\"" +
+                     (s.dash.empty() ? "" : " stroke-dasharray=\"" + s.dash + "\"") + "/>\n";
+            auto marker = [&](double cx, double cy) {
+                return s.line ? "<circle cx=\"" + svgNum(cx) + "\" cy=\"" + svgNum(cy) + "\" r=\"3\" fill=\"" + color +
+                                    "\"/>\n"
+                              : "<rect x=\"" + svgNum(cx - 3.5) + "\" y=\"" + svgNum(cy - 3.5) +
+                                    "\" width=\"7\" height=\"7\" fill=\"none\" stroke=\"" + color +
+                                    "\" stroke-width=\"1.5\"/>\n";
+            };
             for (auto [x, y] : s.points)
-                if (usable(x, y))
-                    o += "<circle cx=\"" + svgNum(px(x)) + "\" cy=\"" + svgNum(py(y)) + "\" r=\"3\" fill=\"" + color +
-                         "\"/>\n";
+                if (usable(x, y)) o += marker(px(x), py(y));
             const double ly = top + 10 + 18 * double(i);
-            o += "<line x1=\"" + svgNum(left + pw + 14) + "\" y1=\"" + svgNum(ly) + "\" x2=\"" +
-                 svgNum(left + pw + 40) + "\" y2=\"" + svgNum(ly) + "\" stroke=\"" + color + "\" stroke-width=\"2\"" +
-                 (s.dash.empty() ? "" : " stroke-dasharray=\"" + s.dash + "\"") + "/>\n";
+            if (s.line)
+                o += "<line x1=\"" + svgNum(left + pw + 14) + "\" y1=\"" + svgNum(ly) + "\" x2=\"" +
+                     svgNum(left + pw + 40) + "\" y2=\"" + svgNum(ly) + "\" stroke=\"" + color +
+                     "\" stroke-width=\"2\"" + (s.dash.empty() ? "" : " stroke-dasharray=\"" + s.dash + "\"") + "/>\n";
+            else
+                o += marker(left + pw + 27, ly);
             o += "<text x=\"" + svgNum(left + pw + 46) + "\" y=\"" + svgNum(ly + 4) + "\">" + svgEscape(s.name) +
                  "</text>\n";
         }
+        for (const auto& [label, xy] : rings)
+            if (usable(xy.first, xy.second))
+                o += "<circle cx=\"" + svgNum(px(xy.first)) + "\" cy=\"" + svgNum(py(xy.second)) +
+                     "\" r=\"8\" fill=\"none\" stroke=\"#333\" stroke-width=\"1.5\"/>\n<text x=\"" +
+                     svgNum(px(xy.first) + 10) + "\" y=\"" + svgNum(py(xy.second) - 8) + "\" font-size=\"11\">" +
+                     svgEscape(label) + "</text>\n";
         return o + "</svg>\n";
     }
 };
