@@ -5,6 +5,11 @@
 
 #include <algorithm>
 #include <cmath>
+#include <condition_variable>
+#include <deque>
+#include <exception>
+#include <mutex>
+#include <thread>
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
@@ -261,15 +266,25 @@ struct Rendered {
     std::string device;  // what rendered it: "CPU, N threads" or the GL renderer and version
 };
 
-// On the backend `decision` chose (GL in a headless context of its own), after printing its note.
+// What the GL backend reads back for a's outputs: the picture alone unless the EXR layers or the hits are wanted.
+hc::render::GlRenderer::ReadBack readBackFor(const RenderArgs& a) {
+    return a.exr.empty() && a.verifyHits == 0 ? hc::render::GlRenderer::ReadBack::PictureOnly
+                                              : hc::render::GlRenderer::ReadBack::AllLayers;
+}
+
+// On the backend `decision` chose, after printing its note: GL on `gl` (a sequence's, kept from step to step), or in a
+// headless context of its own where gl is null.
 Rendered renderImage(const hc::cli::BackendDecision& decision, const hc::render::Scene& scene,
-                     const hc::render::Camera& camera, const hc::render::RenderOptions& options, int verifyHits) {
+                     const hc::render::Camera& camera, const hc::render::RenderOptions& options, int verifyHits,
+                     hc::render::GlRenderer* gl = nullptr,
+                     hc::render::GlRenderer::ReadBack what = hc::render::GlRenderer::ReadBack::AllLayers) {
     if (!decision.note.empty()) std::fprintf(stderr, "hc-render: note: %s\n", decision.note.c_str());
     Rendered r;
     if (decision.useGl) {
-        auto gl = hc::render::GlRenderer::headless(scene);
+        std::unique_ptr<hc::render::GlRenderer> own = gl ? nullptr : hc::render::GlRenderer::headless(scene);
+        if (own) gl = own.get();
         r.device = gl->deviceName();
-        r.frame = gl->render(camera, options, r.timings);
+        r.frame = gl->render(camera, options, r.timings, what);
     } else {
         r.device = "CPU, " + std::to_string(hc::resolveThreads(options.threads)) + " threads";
         r.frame = hc::render::renderFrame(scene, camera, options, r.timings);
@@ -290,6 +305,67 @@ void writeOutputs(const RenderArgs& a, const Rendered& r, std::optional<unsigned
         tw.commit();
     }
 }
+
+// Writes each frame's outputs (writeOutputs) on a thread of its own while the next frame renders, so that a sequence
+// or flight costs the slower of rendering and encoding a frame, not their sum. At most kInFlight frames wait (their
+// memory); the first failure is thrown by the next put() or by finish(), and nothing after it is written.
+class OutputWriter {
+public:
+    explicit OutputWriter(const RenderArgs& a) : a_(a), thread_([this] { loop(); }) {}
+    ~OutputWriter() { stop(); }
+    void put(Rendered r, std::optional<unsigned> step) {
+        std::unique_lock lock(mutex_);
+        changed_.wait(lock, [&] { return jobs_.size() < kInFlight || failure_; });
+        if (failure_) std::rethrow_exception(failure_);
+        jobs_.push_back({std::move(r), step});
+        changed_.notify_all();
+    }
+    void finish() {  // every frame written, or the first failure thrown
+        stop();
+        if (failure_) std::rethrow_exception(failure_);
+    }
+
+private:
+    static constexpr size_t kInFlight = 2;
+    struct Job {
+        Rendered r;
+        std::optional<unsigned> step;
+    };
+    void loop() {
+        for (;;) {
+            std::unique_lock lock(mutex_);
+            changed_.wait(lock, [&] { return !jobs_.empty() || done_; });
+            if (jobs_.empty()) return;
+            Job job = std::move(jobs_.front());
+            lock.unlock();
+            try {
+                if (!failure_) writeOutputs(a_, job.r, job.step);
+            } catch (...) {
+                lock.lock();
+                failure_ = std::current_exception();
+                lock.unlock();
+            }
+            lock.lock();
+            jobs_.pop_front();
+            changed_.notify_all();
+        }
+    }
+    void stop() {
+        {
+            std::lock_guard lock(mutex_);
+            done_ = true;
+        }
+        changed_.notify_all();
+        if (thread_.joinable()) thread_.join();
+    }
+    const RenderArgs& a_;
+    std::mutex mutex_;
+    std::condition_variable changed_;
+    std::deque<Job> jobs_;
+    std::exception_ptr failure_;
+    bool done_ = false;
+    std::thread thread_;  // last: started once the rest is ready
+};
 
 void printSummary(const RenderArgs& a, const hc::cli::BackendDecision& decision, const hc::render::Camera& camera,
                   const Rendered& r) {
@@ -351,6 +427,7 @@ int fly(const RenderArgs& a, const hc::cli::BackendDecision& decision, const hc:
         gl ? "  upload ms     GPU ms  readback ms" : "");
     hc::Stopwatch total;
     std::vector<double> renderMs;
+    OutputWriter writer(a);
     for (unsigned k = 0; k < a.flyFrames; ++k) {
         const hc::render::Camera camera = hc::render::flightFrame(start, a.flyStepM, k);
         Rendered r;
@@ -363,26 +440,29 @@ int fly(const RenderArgs& a, const hc::cli::BackendDecision& decision, const hc:
         if (gl && !outputs)
             gl->renderToTexture(camera, a.setup.options, r.timings);
         else
-            r.frame = gl ? gl->render(camera, a.setup.options, r.timings)
+            r.frame = gl ? gl->render(camera, a.setup.options, r.timings, readBackFor(a))
                          : hc::render::renderFrame(scene, camera, a.setup.options, r.timings, &cache);
-        if (outputs) writeOutputs(a, r, k);
+        const hc::render::Timings t = r.timings;
+        if (outputs) writer.put(std::move(r), k);
         uint64_t kept = 0, visible = 0;
-        for (const auto& c : r.timings.cascades) kept += c.reusedTexels, visible += c.visibleTexels;
-        const double ms = r.timings.totalMs - r.timings.readbackMs;
+        for (const auto& c : t.cascades) kept += c.reusedTexels, visible += c.visibleTexels;
+        const double ms = t.totalMs - t.readbackMs;
         renderMs.push_back(ms);
         std::printf("  %5u %13.3f %13.3f %11.2f %6.1f %10.2f %10.2f %10.2f %10.2f %10.2f", k, camera.xWorld,
-                    camera.yWorld, r.timings.approximationMs, visible ? 100.0 * double(kept) / double(visible) : 0.0,
-                    r.timings.fittingMs, r.timings.mipmapMs, r.timings.raycastMs, r.timings.shadingMs, ms);
-        if (gl) std::printf(" %10.2f %10.2f %12.2f", r.timings.uploadMs, r.timings.gpuMs, r.timings.readbackMs);
+                    camera.yWorld, t.approximationMs, visible ? 100.0 * double(kept) / double(visible) : 0.0,
+                    t.fittingMs, t.mipmapMs, t.raycastMs, t.shadingMs, ms);
+        if (gl) std::printf(" %10.2f %10.2f %12.2f", t.uploadMs, t.gpuMs, t.readbackMs);
         std::printf("\n");
     }
+    writer.finish();
     // The frames after the first (which has nothing to keep): their median and slowest.
     std::vector<double> later(renderMs.begin() + 1, renderMs.end());
     std::sort(later.begin(), later.end());
     std::printf(
-        "  frames 1..%u  render median %.2f ms, slowest %.2f ms; frame 0 %.2f ms; total %.3f s with the image%s\n",
+        "  frames 1..%u  render median %.2f ms, slowest %.2f ms; frame 0 %.2f ms; total %.3f s with the image%s "
+        "(%.1f frames a second)\n",
         a.flyFrames - 1, later[later.size() / 2], later.back(), renderMs[0], total.seconds(),
-        a.flyLastImage ? " (the last frame's alone)" : "s");
+        a.flyLastImage ? " (the last frame's alone)" : "s", a.flyFrames / total.seconds());
     if (!a.video.empty()) {
         writeVideo(ffmpeg, a);
         std::printf("  video        %s (%g frames per second)\n", a.video.c_str(), a.fps);
@@ -430,19 +510,30 @@ int main(int argc, char** argv) {
                     numbered(a.out, a.firstStep).c_str());
         std::printf("  step     time s   wet cells   switch ms    frame ms   image\n");
         hc::Stopwatch total;
+        // GL: one context for every step, the next step's scene handed to it (its shaders compiled once).
+        std::unique_ptr<hc::render::GlRenderer> gl =
+            decision.useGl ? hc::render::GlRenderer::headless(*loaded->scene) : nullptr;
+        OutputWriter writer(a);
         for (unsigned k = a.firstStep; k <= a.lastStep; ++k) {
             hc::Stopwatch clock;
-            if (k != a.firstStep) hc::cli::switchStep("hc-render", *loaded, a.gridPath, a.setup, k);
+            if (k != a.firstStep) {
+                hc::cli::switchStep("hc-render", *loaded, a.gridPath, a.setup, k);
+                if (gl) gl->setScene(*loaded->scene);
+            }
             const double switchMs = clock.lap() * 1e3;
             if (k != a.firstStep) decision.note.clear();  // said once
-            const Rendered rendered = renderImage(decision, *loaded->scene, camera, a.setup.options, a.verifyHits);
-            writeOutputs(a, rendered, k);
+            Rendered rendered =
+                renderImage(decision, *loaded->scene, camera, a.setup.options, a.verifyHits, gl.get(), readBackFor(a));
+            const double frameMs = rendered.timings.totalMs;
+            writer.put(std::move(rendered), k);
             const hc::Grid& shape = loaded->file ? loaded->file->shape() : loaded->grid;
             std::printf("  %4u %10.6g %11llu %11.1f %11.1f   %s\n", k, shape.stepTimeS(),
-                        (unsigned long long)(shape.steps.empty() ? 0 : shape.steps[k].wetCells), switchMs,
-                        rendered.timings.totalMs, numbered(a.out, k).c_str());
+                        (unsigned long long)(shape.steps.empty() ? 0 : shape.steps[k].wetCells), switchMs, frameMs,
+                        numbered(a.out, k).c_str());
         }
-        std::printf("  total        %.3f s for %u steps\n", total.seconds(), a.lastStep - a.firstStep + 1);
+        writer.finish();
+        std::printf("  total        %.3f s for %u steps (%.1f steps a second)\n", total.seconds(),
+                    a.lastStep - a.firstStep + 1, (a.lastStep - a.firstStep + 1) / total.seconds());
         if (!a.video.empty()) {
             writeVideo(ffmpeg, a);
             std::printf("  video        %s (%g steps per second)\n", a.video.c_str(), a.fps);

@@ -95,6 +95,22 @@ hc_cli_test(render.steps_sequence 0 [[steps 0\.\.2 -> f_0000\.png.*  +2 +7200 +[
   --exists f_0000.png --exists f_0001.png --exists f_0002.png --absent f.png --no-match [[error|not used]]
   --check "'${PNG_CHECK}' f_0000.png && '${PNG_CHECK}' f_0002.png && ! cmp -s f_0000.png f_0002.png"
   -- ${RENDER} f.hcg -o f.png --steps 0:2 --size 320x180 --texels 128 --backend cpu)
+# On GL a sequence keeps one context and hands it each step's scene (GlRenderer::setScene), and reads back the picture
+# alone: every step's image is the same bytes as that step rendered on its own (a fresh renderer, every layer read
+# back), out of core (the step pyramids' tiles in the atlas) and in memory (--cache: the cells with the step's water).
+if(HC_WITH_GL)
+  set(HEF_CAMERA --camera 624745.367,5156520.380,23220.029,20,-35,45 --size 320x180 --texels 128 --backend gl)
+  string(REPLACE ";" " " HEF_CAMERA_TEXT "${HEF_CAMERA}")
+  hc_cli_test(render.steps_sequence_gl_one_context 0 [[steps 0\.\.2 -> q_0000\.png.*total .* for 3 steps]]
+    --setup ${HEF_STEPS} --setup [[$HC_INFLUENCE f.hcg --quiet >/dev/null]] --no-match [[error]]
+    --check "for cache in '' '--cache f.hci'
+do '${RENDER}' f.hcg -o c.png --steps 0:2 ${HEF_CAMERA_TEXT} $cache >/dev/null || exit 1
+for k in 0 1 2
+do '${RENDER}' f.hcg -o s.png --step $k ${HEF_CAMERA_TEXT} $cache >/dev/null && cmp c_000$k.png s.png || exit 1
+done
+done"
+    -- ${RENDER} f.hcg -o q.png --steps 0:2 ${HEF_CAMERA})
+endif()
 # A later step's water pyramid takes the terrain from the first step's: used together, or, without the first, not at all.
 hc_cli_test(render.step_water_pyramid 0 [[using surface pyramid f\.step0002\.hcp \(water. terrain from f\.step0000\.hcp\)]]
   --setup ${HEF_STEPS} --setup [[$HC_INFLUENCE f.hcg --quiet >/dev/null]] --exists f.png

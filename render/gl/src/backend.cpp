@@ -68,7 +68,7 @@ void copyFloats(float* dst, const glm::dvec3& v) {
 }  // namespace
 
 GlRenderer::Impl::Impl(const Scene& s, std::unique_ptr<gl::HeadlessContext> context)
-    : scene(s), headless(std::move(context)), cpuCascades(s.outOfCore()) {
+    : scene(&s), headless(std::move(context)), cpuCascades(s.outOfCore()) {
     gl::requireGl43("the GL backend");
     device = gl::currentDeviceName();
     software = isSoftwareRenderer(device);
@@ -140,15 +140,15 @@ void GlRenderer::Impl::uploadScene() {
         for (Buffer& b : indexBufs) b.reserve(16);
         return;
     }
-    const Grid& g = scene.grid();
-    const auto& lists = scene.lists();
+    const Grid& g = scene->grid();
+    const auto& lists = scene->lists();
     const size_t count = g.cellCount();
     if (lists.entryCount() >= (uint64_t{1} << 32) || count >= (uint64_t{1} << 31))
         throw Error("the GL backend addresses influence lists with 32-bit indices: this grid has " +
                     std::to_string(lists.entryCount()) + " entries");
     std::vector<gpu::GpuCell> cells(count + 1);
     std::vector<uint32_t> keys(2 * count);
-    const int water = scene.waterLayer();
+    const int water = scene->waterLayer();
     const auto offsets = lists.offsets();
     for (size_t k = 0; k < count; ++k) {
         gpu::GpuCell& c = cells[k];
@@ -157,8 +157,8 @@ void GlRenderer::Impl::uploadScene() {
         c.iy = Grid::keyY(code);
         c.level = uint32_t(codeLevel(code));
         c.listBegin = uint32_t(offsets[k]);
-        c.a = scene.kernels()[k].a;
-        c.r2 = scene.kernels()[k].r2;
+        c.a = scene->kernels()[k].a;
+        c.r2 = scene->kernels()[k].r2;
         c.z = g.values[0][k];
         c.depth = water >= 0 ? g.values[size_t(water)][k] : 0.0f;
         const uint64_t key = codeKey(code);
@@ -195,7 +195,7 @@ void GlRenderer::Impl::uploadScene() {
 // The frame's constants (GpuFrame) for the shaders.
 void GlRenderer::Impl::fillFrame(gpu::GpuFrame& f, const CascadeFit& fit, const Camera& camera,
                                  const RenderOptions& options) const {
-    const Grid& g = scene.grid();
+    const Grid& g = scene->grid();
     f.eyeX = setup.eyeLocal.x, f.eyeY = setup.eyeLocal.y;
     f.finestM = g.finestCellM;
     f.domainM = g.domainSizeM();
@@ -203,7 +203,7 @@ void GlRenderer::Impl::fillFrame(gpu::GpuFrame& f, const CascadeFit& fit, const 
     f.tanHalfX = float(setup.basis.tanHalfX), f.tanHalfY = float(setup.basis.tanHalfY);
     f.nearM = float(setup.nearM), f.farM = float(setup.farM);
     f.dirX = float(fit.dir.x), f.dirY = float(fit.dir.y);
-    f.tail = float(scene.params().tail());
+    f.tail = float(scene->params().tail());
     copyFloats(f.forward, setup.basis.forward);
     copyFloats(f.right, setup.basis.right);
     copyFloats(f.up, setup.basis.up);
@@ -211,19 +211,19 @@ void GlRenderer::Impl::fillFrame(gpu::GpuFrame& f, const CascadeFit& fit, const 
     copyFloats(f.sun, {std::sin(sunAz) * std::cos(sunAlt), std::cos(sunAz) * std::cos(sunAlt), std::sin(sunAlt)});
     f.width = camera.width, f.height = camera.height;
     f.cascades = fit.hull.size() < 3 ? 0 : int(fit.cascades.size());  // no hull: every ray misses (as renderFrame)
-    f.hasWater = scene.hasWater() ? 1 : 0;
+    f.hasWater = scene->hasWater() ? 1 : 0;
     f.cellCount = cpuCascades ? 0u : uint32_t(g.cellCount());  // out of core no cell is on the GPU
     f.rootLevel = uint32_t(g.rootLevel);
     f.indexChunkShift = indexChunkShift;
     f.minDepthM = float(options.waterMinDepthM);
-    f.fogDistM = float(gpu::kFogExtents * std::hypot(scene.xMax - scene.xMin, scene.yMax - scene.yMin));
-    f.elevationMin = float(scene.elevationMin);
-    f.zRange = float(std::max(scene.elevationMax - scene.elevationMin, 1e-6));
-    f.dRange = float(std::max(scene.depthColorMaxM, 1e-6));
+    f.fogDistM = float(gpu::kFogExtents * std::hypot(scene->xMax - scene->xMin, scene->yMax - scene->yMin));
+    f.elevationMin = float(scene->elevationMin);
+    f.zRange = float(std::max(scene->elevationMax - scene->elevationMin, 1e-6));
+    f.dRange = float(std::max(scene->depthColorMaxM, 1e-6));
     f.pixelAngle = float(2.0 * setup.basis.tanHalfY / camera.height);
     f.colorMode = options.color == ColorMode::WaterDepth ? 1 : 0;
     f.cellOutlines = options.cellOutlines ? 1 : 0;
-    const detail::LegendLayout legend = detail::legendLayout(scene, options, camera.width, camera.height);
+    const detail::LegendLayout legend = detail::legendLayout(*scene, options, camera.width, camera.height);
     if (legend.shown) {
         f.legendRamp = legend.depth ? 1 : 2;
         f.legendX0 = legend.x0, f.legendY0 = legend.y0, f.legendBarW = legend.barW, f.legendBarH = legend.barH;
@@ -243,7 +243,7 @@ void GlRenderer::Impl::fillFrame(gpu::GpuFrame& f, const CascadeFit& fit, const 
         f.dryColor[c] = float(gpu::kDryColor[c]);
         f.wallColor[c] = float(gpu::kWallColor[c]);
     }
-    f.zFloor = float(scene.elevationMin);
+    f.zFloor = float(scene->elevationMin);
     f.beamTile = options.beamTilePx > 1 ? options.beamTilePx : 0;  // beams.comp, raycast.comp
 }
 
@@ -251,7 +251,7 @@ void GlRenderer::Impl::fillFrame(gpu::GpuFrame& f, const CascadeFit& fit, const 
 // Returns the floats the heights buffer needs; adds the visible row spans' ints to visibleWords.
 size_t GlRenderer::Impl::layOutCascades(gpu::FrameBlock& block, const CascadeFit& fit, Timings& timings,
                                         size_t& visibleWords) const {
-    const bool water = scene.hasWater();
+    const bool water = scene->hasWater();
     size_t heightFloats = 0;
     for (size_t k = 0; k < fit.cascades.size(); ++k) {
         const Cascade& c = fit.cascades[k];
@@ -332,16 +332,16 @@ CascadeFit GlRenderer::Impl::runFrame(const Camera& camera, const RenderOptions&
     if (cpuCascades && options.cellOutlines)
         throw Error(
             "cell outlines with the GL backend need the grid's cells on the GPU; this scene is read out of core (" +
-            scene.file()->path() +
+            scene->file()->path() +
             "): use --backend cpu, or give the grid an influence cache (hc-influence) to keep it in memory");
     if (headless) headless->makeCurrent();
     const Stopwatch frameClock;
     timings = Timings{};
-    setup = detail::setUpFrame(scene, camera);
+    setup = detail::setUpFrame(*scene, camera);
     // In memory the shaders sum the kernels of every texel: textures of N^2, not the pyramid's ladder (up to 2N a
     // side, renderer.cpp). Out of core the CPU fills them as renderFrame() does, from the pyramid where there is one.
     if (!cpuCascades) setup.view.ladderStepsPerOctave = 8;
-    const CascadeFit fit = detail::fitFrame(scene, camera, setup, options, timings);  // stage 1, on the CPU
+    const CascadeFit fit = detail::fitFrame(*scene, camera, setup, options, timings);  // stage 1, on the CPU
     gpu::FrameBlock block{};
     // The last frame's textures stay for assemble.comp to read, if that frame built them; from here until this frame
     // has built its own (dispatchAssembly), a failure leaves nothing to keep.
@@ -387,7 +387,7 @@ CascadeFit GlRenderer::Impl::runFrame(const Camera& camera, const RenderOptions&
     readCounters(fit.cascades.size(), timings);
     timings.rays = size_t(camera.width) * size_t(camera.height);
     throwOnGlError();
-    detail::boundFrame(scene, setup, fit, timings);
+    detail::boundFrame(*scene, setup, fit, timings);
     timings.totalMs = frameClock.milliseconds();
     return fit;
 }
@@ -400,18 +400,28 @@ GLuint GlRenderer::Impl::program(const std::string& name) const {
     throw Error("no GL program " + name);
 }
 
-Frame GlRenderer::Impl::readBack(const Camera& camera, Timings& timings) {
+Frame GlRenderer::Impl::readBack(const Camera& camera, Timings& timings, ReadBack what) {
     const Stopwatch clock;
     const int W = camera.width, H = camera.height;
     const size_t pixels = size_t(W) * size_t(H);
     Frame f;
     f.width = W;
     f.height = H;
-    f.originWorldX = scene.grid().originWorldX;
-    f.originWorldY = scene.grid().originWorldY;
-    std::vector<uint8_t> rgba(pixels * 4);
+    f.originWorldX = scene->grid().originWorldX;
+    f.originWorldY = scene->grid().originWorldY;
     glBindTexture(GL_TEXTURE_2D, colorTex);
     glPixelStorei(GL_PACK_ALIGNMENT, 1);
+    if (what == ReadBack::PictureOnly) {  // RGB straight into the frame, its rows flipped (the texture's row 0 is the
+        f.rgb.resize(pixels * 3);         // bottom, the frame's the top)
+        std::vector<uint8_t> rgb(pixels * 3);
+        glGetTexImage(GL_TEXTURE_2D, 0, GL_RGB, GL_UNSIGNED_BYTE, rgb.data());
+        const size_t row = size_t(W) * 3;
+        for (size_t y = 0; y < size_t(H); ++y) std::memcpy(&f.rgb[y * row], &rgb[(size_t(H) - 1 - y) * row], row);
+        timings.readbackMs = clock.milliseconds();
+        timings.totalMs += timings.readbackMs;
+        return f;
+    }
+    std::vector<uint8_t> rgba(pixels * 4);
     glGetTexImage(GL_TEXTURE_2D, 0, GL_RGBA, GL_UNSIGNED_BYTE, rgba.data());
     // The rays are copied on the GPU into a buffer of their own (readbackBuf), read through a mapping of it (no
     // staging copy in host memory) and spread over the frame's layers on all cores.
@@ -455,7 +465,7 @@ Frame GlRenderer::Impl::readBack(const Camera& camera, Timings& timings) {
             }
     });
     glUnmapBuffer(GL_SHADER_STORAGE_BUFFER);
-    detail::frameToWorldAxes(scene.grid(), f);
+    detail::frameToWorldAxes(scene->grid(), f);
     timings.readbackMs = clock.milliseconds();
     timings.totalMs += timings.readbackMs;
     return f;
@@ -473,9 +483,21 @@ std::unique_ptr<GlRenderer> GlRenderer::headless(const Scene& scene) {
     return std::unique_ptr<GlRenderer>(new GlRenderer(std::make_unique<Impl>(scene, std::move(context))));
 }
 
-Frame GlRenderer::render(const Camera& camera, const RenderOptions& options, Timings& timings) {
+Frame GlRenderer::render(const Camera& camera, const RenderOptions& options, Timings& timings, ReadBack what) {
     impl_->runFrame(camera, options, timings);
-    return impl_->readBack(camera, timings);
+    return impl_->readBack(camera, timings, what);
+}
+
+void GlRenderer::setScene(const Scene& scene) {
+    if (scene.outOfCore() != impl_->cpuCascades)
+        throw Error(std::string("the GL renderer was made for a scene ") +
+                    (impl_->cpuCascades ? "read out of core" : "in memory") + " and cannot take one " +
+                    (scene.outOfCore() ? "read out of core" : "in memory"));
+    if (impl_->headless) impl_->headless->makeCurrent();
+    impl_->scene = &scene;
+    impl_->cascadeCache.clear(), impl_->lastAssembled = false;
+    impl_->terrainAtlas.release(), impl_->waterAtlas.release();  // tiles are known by their addresses in the old one
+    impl_->uploadScene();
 }
 
 unsigned GlRenderer::renderToTexture(const Camera& camera, const RenderOptions& options, Timings& timings) {
@@ -499,7 +521,7 @@ std::vector<GlRenderer::CascadeTexels> GlRenderer::cascadeTexturesForTest() cons
                 glGetBufferSubData(GL_SHADER_STORAGE_BUFFER, GLintptr(offset) * 4, GLsizeiptr(texels * 4), to.data());
         };
         read(out[k].terrain, c.terrainOffset);
-        if (impl_->scene.hasWater()) read(out[k].water, c.waterOffset), read(out[k].depth, c.depthOffset);
+        if (impl_->scene->hasWater()) read(out[k].water, c.waterOffset), read(out[k].depth, c.depthOffset);
     }
     return out;
 }

@@ -135,7 +135,7 @@ uint64_t GlRenderer::Impl::placeTiles(size_t k, detail::CascadeTextures& tex, de
 void GlRenderer::Impl::openAtlases() {
     const size_t atlasBytes = std::min<size_t>(size_t(maxStorageBlock), size_t(96) << 20);
     terrainAtlas.open(atlasBytes, 1);
-    if (scene.hasWater()) waterAtlas.open(atlasBytes, 2);
+    if (scene->hasWater()) waterAtlas.open(atlasBytes, 2);
 }
 
 // Cascade k's blocks of texels to interpolate from level 0's tiles (detail::PyramidTiles::Block) as
@@ -163,7 +163,7 @@ void GlRenderer::Impl::placeBlocks(size_t k, const Cascade& c, detail::CascadeTe
             placed = e[2 + q] != TileAtlas::kNone && (!b.water[q] || e[11 + q] != TileAtlas::kNone);
         }
         if (!placed) {
-            detail::interpolateBlock(scene, c, p, b, waterMinDepthM, tex, fill.rows);
+            detail::interpolateBlock(*scene, c, p, b, waterMinDepthM, tex, fill.rows);
             continue;
         }
         atlasBlocks.insert(atlasBlocks.end(), e.begin(), e.end());

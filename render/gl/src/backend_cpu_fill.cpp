@@ -49,7 +49,7 @@ size_t GlRenderer::Impl::uploadRows() {
 void GlRenderer::Impl::approximateOnCpu(const CascadeFit& fit, const gpu::FrameBlock& block,
                                         const RenderOptions& options, Timings& timings, bool keep) {
     if (!keep) cascadeCache.clear();
-    const bool water = scene.hasWater();
+    const bool water = scene->hasWater();
     std::array<std::vector<float>, 3>& packed = fillTexels;
     fillRows.clear();
     for (std::vector<float>& p : packed) p.clear();
@@ -58,14 +58,14 @@ void GlRenderer::Impl::approximateOnCpu(const CascadeFit& fit, const gpu::FrameB
     double packMs = 0;
     // With a pyramid the texels it holds are copied on the GPU, from its tiles resident there (the atlas); only the
     // tiles not yet there go up, with the tiles to copy from (16 bytes a tile) and each row's spans.
-    const bool useAtlas = scene.pyramid() != nullptr;
+    const bool useAtlas = scene->pyramid() != nullptr;
     atlasTiles.clear(), atlasBlocks.clear(), atlasTexels = 0, atlasInterpolated = 0;
     std::vector<int32_t> spans;
     size_t spanBytes = 0;
     if (useAtlas) terrainAtlas.beginFrame(), waterAtlas.beginFrame();
     const float minDepth = float(options.waterMinDepthM);
     detail::approximateOnCpu(
-        scene, fit, options, cascadeCache, cpu,
+        *scene, fit, options, cascadeCache, cpu,
         [&](size_t k, detail::CascadeTextures& tex, detail::CascadeFill& fill) {
             const Stopwatch clock;
             if (useAtlas) {  // cpu.cascades: one per cascade of the fit (approximateCascades)
@@ -149,7 +149,7 @@ void GlRenderer::Impl::planOnGpu(const CascadeFit& fit, const gpu::FrameBlock& b
                                  Timings& timings, bool keep) {
     if (!keep) cascadeCache.clear();
     const Stopwatch clock;
-    const std::vector<detail::CascadeFill> fills = detail::planCascades(scene, fit, options, cascadeCache, timings);
+    const std::vector<detail::CascadeFill> fills = detail::planCascades(*scene, fit, options, cascadeCache, timings);
     fillRows.clear();
     assembly = {};
     std::vector<int32_t> spans;

@@ -127,7 +127,7 @@ void GlRenderer::Impl::dispatchMipmaps(const CascadeFit& fit, const gpu::FrameBl
     for (size_t k = 0; k < fit.cascades.size(); ++k) {
         if (fit.cascades[k].empty()) continue;
         glUniform1i(uCascade, int(k));
-        for (int w = 0; w < (scene.hasWater() ? 2 : 1); ++w) {
+        for (int w = 0; w < (scene->hasWater() ? 2 : 1); ++w) {
             glUniform1i(uWater, w);
             for (int level = 0; level < block.cascades[k].levels; ++level) {
                 glUniform1i(uLevel, level);

@@ -102,7 +102,7 @@ struct GlRenderer::Impl {
     using Buffer = gl::Buffer;
     using TileAtlas = gl::TileAtlas;
 
-    const Scene& scene;
+    const Scene* scene;                             // setScene() points it at another of the same kind
     std::unique_ptr<gl::HeadlessContext> headless;  // null when rendering into the caller's context
     GLuint approximate = 0, assemble = 0, atlas = 0, interpolate = 0, beams = 0, mipmap = 0, raycast = 0, shade = 0;
     Buffer frameBuf, cellsBuf, keysBuf, visibleBuf, heightsBuf, pixelsBuf, countersBuf;
@@ -167,7 +167,7 @@ struct GlRenderer::Impl {
                      Timings& timings);
     CascadeFit runFrame(const Camera& camera, const RenderOptions& options, Timings& timings);
     GLuint program(const std::string& name) const;
-    Frame readBack(const Camera& camera, Timings& timings);
+    Frame readBack(const Camera& camera, Timings& timings, ReadBack what);
 
     // backend_cpu_fill.cpp: stage 2's plan on the CPU (in memory), or its texels evaluated there (out of core), with
     // each cascade's rows into fillRowsBuf and fillTexelsBuf for assemble.comp.

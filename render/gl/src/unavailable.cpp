@@ -17,7 +17,8 @@ GlRenderer::~GlRenderer() = default;
 std::unique_ptr<GlRenderer> GlRenderer::inCurrentContext(const Scene&) { throw Error(kBuiltOut); }
 std::unique_ptr<GlRenderer> GlRenderer::headless(const Scene&) { throw Error(kBuiltOut); }
 // No renderer can exist, so the members below are never reached.
-Frame GlRenderer::render(const Camera&, const RenderOptions&, Timings&) { throw Error(kBuiltOut); }
+Frame GlRenderer::render(const Camera&, const RenderOptions&, Timings&, ReadBack) { throw Error(kBuiltOut); }
+void GlRenderer::setScene(const Scene&) { throw Error(kBuiltOut); }
 unsigned GlRenderer::renderToTexture(const Camera&, const RenderOptions&, Timings&) { throw Error(kBuiltOut); }
 std::string GlRenderer::deviceName() const { return ""; }
 void GlRenderer::forgetCascades() {}

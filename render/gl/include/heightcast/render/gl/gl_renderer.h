@@ -43,9 +43,13 @@ public:
     static std::unique_ptr<GlRenderer> headless(const Scene& scene);
     ~GlRenderer();
 
-    // One frame, read back into `frame` (the same content and layout as renderFrame()).
+    // What render() reads back: every layer of the Frame, or the picture alone (Frame::rgb, the other layers left
+    // empty): what images of a sequence need, 3 bytes a pixel instead of the rays' 48 and their spreading over layers.
+    enum class ReadBack { AllLayers, PictureOnly };
+    // One frame, read back into `frame` (the same content and layout as renderFrame(); with PictureOnly its rgb only).
     // Throws hc::Error for bad camera/options, shader or driver failures (with the driver's log).
-    Frame render(const Camera& camera, const RenderOptions& options, Timings& timings);
+    Frame render(const Camera& camera, const RenderOptions& options, Timings& timings,
+                 ReadBack what = ReadBack::AllLayers);
     // One frame left on the GPU: returns the name of an RGBA8 texture of camera.width x camera.height
     // (row 0 at the bottom, GL's convention) holding the shaded image, for a viewer to draw. Valid until
     // the next call.
@@ -54,6 +58,10 @@ public:
     // newly sees, as CascadeCache does for renderFrame()); after this call the next frame evaluates every texel afresh
     // (benchmarks of from-scratch frames).
     void forgetCascades();
+    // Renders `scene` from now on (another water step of the same grid, say), keeping the context and the compiled
+    // shaders: the cells (in memory) go up again and nothing is kept from the last scene (cascades, pyramid tiles).
+    // The scene must be of the same kind (in memory or out of core) and outlive the renderer; throws hc::Error if not.
+    void setScene(const Scene& scene);
     // "llvmpipe (LLVM 15.0.6, 256 bits), OpenGL 4.5 (Core Profile) Mesa 22.3.6", say.
     std::string deviceName() const;
 
