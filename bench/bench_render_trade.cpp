@@ -37,12 +37,18 @@ struct TradeSetting {
 };
 
 constexpr TradeSetting kSettings[] = {
-    {"default", false, true, 0, 0, false, 0},       {"--pyramid-coarse", false, false, 0, 0, true, 0},
-    {"--texels 512", false, false, 0, 0, false, 512}, {"--texels 2048", false, false, 0, 0, false, 2048},
-    {"1 cm", true, false, 0.01, 0, false, 0},         {"10 cm", true, false, 0.1, 0, false, 0},
-    {"1 m", true, false, 1, 0, false, 0},             {"10 m", true, false, 10, 0, false, 0},
-    {"100 m", true, false, 100, 0, false, 0},         {"0.5 px", false, false, 0, 0.5, false, 0},
-    {"1 px", false, false, 0, 1, false, 0},           {"2 px", false, false, 0, 2, false, 0},
+    {"default", false, true, 0, 0, false, 0},
+    {"--pyramid-coarse", false, false, 0, 0, true, 0},
+    {"--texels 512", false, false, 0, 0, false, 512},
+    {"--texels 2048", false, false, 0, 0, false, 2048},
+    {"1 cm", true, false, 0.01, 0, false, 0},
+    {"10 cm", true, false, 0.1, 0, false, 0},
+    {"1 m", true, false, 1, 0, false, 0},
+    {"10 m", true, false, 10, 0, false, 0},
+    {"100 m", true, false, 100, 0, false, 0},
+    {"0.5 px", false, false, 0, 0.5, false, 0},
+    {"1 px", false, false, 0, 1, false, 0},
+    {"2 px", false, false, 0, 2, false, 0},
 };
 static_assert(2 * std::size(kSettings) <= size_t(kMaxTradePoints));
 
@@ -105,11 +111,16 @@ void tradeSweep(const render::Scene& scene, const render::Camera& camera, const 
             gl->forgetCascades(), gl->renderToTexture(camera, set.options, warm);
         } while (warmUp.seconds() < 1.0);
     }
+    if (set.tradeCpu) {  // one unmeasured CPU frame first: the first frame pays page faults (an out-of-core pyramid's)
+        render::Timings warm;
+        (void)render::renderFrame(scene, camera, set.options, warm);
+    }
     for (const bool onGl : {false, true}) {
         if (onGl ? !set.tradeGl : !set.tradeCpu) continue;
         for (const TradeSetting& s : kSettings) {
             if (set.interactive)
-                std::fprintf(stderr, "\r%-14s %-40s", r.name, fmt::format("trade: {} {}", onGl ? "GL" : "CPU", s.label).c_str());
+                std::fprintf(stderr, "\r%-14s %-40s", r.name,
+                             fmt::format("trade: {} {}", onGl ? "GL" : "CPU", s.label).c_str());
             TradePoint& p = r.trade[r.tradeCount++];
             std::snprintf(p.label, sizeof p.label, "%s", s.label);
             p.gl = onGl, p.budget = s.budget, p.isDefault = s.isDefault;
@@ -135,7 +146,8 @@ void tradeSweep(const render::Scene& scene, const render::Camera& camera, const 
                 std::snprintf(p.skipped, sizeof p.skipped, "%s", e.what());
                 continue;
             }
-            const render::ErrorCheck c = render::verifyFrameError(scene, camera, frame, set.tradeSamples, set.options.threads);
+            const render::ErrorCheck c =
+                render::verifyFrameError(scene, camera, frame, set.tradeSamples, set.options.threads);
             p.checked = c.hits, p.maxM = c.maxM, p.p99M = c.p99M, p.medianM = c.medianM, p.maxPx = c.maxPx;
         }
     }
@@ -201,11 +213,12 @@ void printTrade(const std::vector<RunResult>& results, const Settings& set) {
                     r.name, ratio, kLooseOverTightTarget, ratio >= kLooseOverTightTarget ? "met" : "NOT met");
     }
     const double medianOverMax = quantile(overMax, 0.5);
-    std::printf("  every budget the texels could meet held at every checked hit: %s\n", budgetsHold ? "met" : "NOT met");
+    std::printf("  every budget the texels could meet held at every checked hit: %s\n",
+                budgetsHold ? "met" : "NOT met");
     std::printf("  every measured error at or below its frame's bound: %s\n", boundsHold ? "met" : "NOT met");
     std::printf("  the bound within %.0fx of the measured largest error on the median frame: %.1fx, %s\n",
                 kBoundOverMaxTarget, medianOverMax, medianOverMax <= kBoundOverMaxTarget ? "met" : "NOT met");
-    std::printf("  the loose budget pays on every scene: %s\n", loosePays ? "met" : "NOT met");
+    if (set.tradeCpu) std::printf("  the loose budget pays on every scene (CPU): %s\n", loosePays ? "met" : "NOT met");
 }
 
 void writeTradeJson(const std::vector<RunResult>& results, const Settings& set, const std::string& path) {
@@ -234,18 +247,20 @@ void writeTradeJson(const std::vector<RunResult>& results, const Settings& set, 
 
 void writeTradePlot(const std::vector<RunResult>& results, const Settings& set, const std::string& path) {
     LinePlot plot;
-    plot.title = fmt::format("hc-bench --trade: frame time against measured error, {}x{}, from scratch", set.width,
-                             set.height);
+    plot.title =
+        fmt::format("hc-bench --trade: frame time against measured error, {}x{}, from scratch", set.width, set.height);
     plot.xLabel = "largest error at the frame's hits against the exact surface [m] (log)";
     plot.yLabel = "frame time, best of the repeats [ms] (log)";
     plot.logX = plot.logY = true;
     size_t color = 0;
     for (const RunResult& r : results)
         for (const bool gl : {false, true}) {
-            LineSeries budgets{fmt::format("{} {}: budgets 1 cm .. 100 m", r.name, gl ? "GL" : "CPU"), plotColor(color),
-                               gl ? "6,4" : "", {}};
-            LineSeries knobs{fmt::format("{} {}: fixed knobs, px budgets", r.name, gl ? "GL" : "CPU"),
-                             plotColor(color), "", {}};
+            LineSeries budgets{fmt::format("{} {}: budgets 1 cm .. 100 m", r.name, gl ? "GL" : "CPU"),
+                               plotColor(color),
+                               gl ? "6,4" : "",
+                               {}};
+            LineSeries knobs{
+                fmt::format("{} {}: fixed knobs, px budgets", r.name, gl ? "GL" : "CPU"), plotColor(color), "", {}};
             knobs.line = false;
             for (int k = 0; k < r.tradeCount; ++k) {
                 const TradePoint& p = r.trade[k];
