@@ -1,15 +1,8 @@
 // hc-render: a picture (PNG, and EXR layers) of the smooth surface of a grid from a camera.
-#include <spawn.h>
-#include <sys/wait.h>
 #include <unistd.h>
 
 #include <algorithm>
 #include <cmath>
-#include <condition_variable>
-#include <deque>
-#include <exception>
-#include <mutex>
-#include <thread>
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
@@ -32,6 +25,7 @@
 #include "heightcast/render/gl/gl_renderer.h"
 #include "heightcast/render/image_io.h"
 #include "heightcast/render/renderer.h"
+#include "render/outputs.h"
 
 namespace {
 
@@ -52,78 +46,18 @@ struct RenderArgs {
     unsigned imageCount() const { return sequence ? lastStep - firstStep + 1 : flyFrames; }
 };
 
-// OUT.png -> OUT_0007.png for step 7 of a sequence (and likewise the EXR and timings files).
-std::string numbered(const std::string& path, unsigned step) {
-    std::filesystem::path p(path);
-    char tail[32];
-    std::snprintf(tail, sizeof tail, "_%04u", step);
-    return (p.parent_path() / (p.stem().string() + tail + p.extension().string())).string();
-}
+using hc::render_app::numbered;
+using hc::render_app::onPath;
+using hc::render_app::Rendered;
 
-// The path of a program on PATH, or "".
-std::string onPath(const std::string& program) {
-    const char* path = std::getenv("PATH");
-    std::string dirs = path ? path : "/usr/bin:/bin";
-    size_t start = 0;
-    for (;;) {
-        const size_t colon = dirs.find(':', start);
-        const std::string dir = dirs.substr(start, colon == std::string::npos ? std::string::npos : colon - start);
-        const std::string candidate = (dir.empty() ? std::string(".") : dir) + "/" + program;
-        if (::access(candidate.c_str(), X_OK) == 0) return candidate;
-        if (colon == std::string::npos) return "";
-        start = colon + 1;
-    }
-}
+// The files of a's frames.
+hc::render_app::OutputPaths pathsOf(const RenderArgs& a) { return {a.out, a.exr, a.timingsPath}; }
 
-// The numbered PNGs of a sequence's steps (or a flight's frames) as an H.264 MP4 (yuv420p, padded to even sizes)
-// through ffmpeg, written to a temporary name and renamed into place: no partial video survives a failure. Throws
-// hc::Error.
-void writeVideo(const std::string& ffmpeg, const RenderArgs& a) {
-    std::string pattern;
-    for (char c : numbered(a.out, 0)) pattern += c == '%' ? std::string("%%") : std::string(1, c);
-    pattern.replace(pattern.rfind("_0000"), 5, "_%04d");
-    const std::string tmp = a.video + ".partial";
-    std::vector<std::string> args{ffmpeg,
-                                  "-hide_banner",
-                                  "-loglevel",
-                                  "error",
-                                  "-y",
-                                  "-framerate",
-                                  fmt::format("{:g}", a.fps),
-                                  "-start_number",
-                                  std::to_string(a.firstImage()),
-                                  "-i",
-                                  pattern,
-                                  "-frames:v",
-                                  std::to_string(a.imageCount()),
-                                  "-vf",
-                                  "pad=ceil(iw/2)*2:ceil(ih/2)*2",
-                                  "-c:v",
-                                  "libx264",
-                                  "-pix_fmt",
-                                  "yuv420p",
-                                  "-f",
-                                  "mp4",
-                                  tmp};
-    std::vector<char*> argv;
-    for (auto& s : args) argv.push_back(s.data());
-    argv.push_back(nullptr);
-    pid_t pid = 0;
-    if (posix_spawn(&pid, ffmpeg.c_str(), nullptr, nullptr, argv.data(), environ) != 0)
-        throw hc::Error(ffmpeg + ": cannot be started");
-    int status = 0;
-    waitpid(pid, &status, 0);
-    std::error_code ec;
-    if (!WIFEXITED(status) || WEXITSTATUS(status) != 0) {
-        std::filesystem::remove(tmp, ec);
-        throw hc::Error(a.video + ": ffmpeg failed (exit status " +
-                        std::to_string(WIFEXITED(status) ? WEXITSTATUS(status) : -1) + "); the images are written");
-    }
-    std::filesystem::rename(tmp, a.video, ec);
-    if (ec) {
-        std::filesystem::remove(tmp, ec);
-        throw hc::Error(a.video + ": cannot be written: " + ec.message());
-    }
+// With --video: ffmpeg started, reading the frames as they come.
+std::unique_ptr<hc::render_app::VideoPipe> videoFor(const RenderArgs& a, const std::string& ffmpeg,
+                                                    const hc::render::Camera& camera) {
+    if (a.video.empty()) return nullptr;
+    return std::make_unique<hc::render_app::VideoPipe>(ffmpeg, a.video, a.fps, camera.width, camera.height);
 }
 
 // The options, validated with the camera's numbers before any expensive work; false after --help.
@@ -260,12 +194,6 @@ void refuseCameraBelowTerrain(const hc::render::Scene& scene, const hc::render::
     }
 }
 
-struct Rendered {
-    hc::render::Frame frame;
-    hc::render::Timings timings;
-    std::string device;  // what rendered it: "CPU, N threads" or the GL renderer and version
-};
-
 // What the GL backend reads back for a's outputs: the picture alone unless the EXR layers or the hits are wanted.
 hc::render::GlRenderer::ReadBack readBackFor(const RenderArgs& a) {
     return a.exr.empty() && a.verifyHits == 0 ? hc::render::GlRenderer::ReadBack::PictureOnly
@@ -293,79 +221,6 @@ Rendered renderImage(const hc::cli::BackendDecision& decision, const hc::render:
         r.timings.verified = hc::render::verifyFrameError(scene, camera, r.frame, size_t(verifyHits), options.threads);
     return r;
 }
-
-void writeOutputs(const RenderArgs& a, const Rendered& r, std::optional<unsigned> step) {
-    auto name = [&](const std::string& path) { return step ? numbered(path, *step) : path; };
-    hc::render::writePng(r.frame, name(a.out));
-    if (!a.exr.empty()) hc::render::writeFrameExr(r.frame, name(a.exr));
-    if (!a.timingsPath.empty()) {
-        hc::AtomicFileWriter tw(name(a.timingsPath));
-        const std::string j = r.timings.toJson();
-        tw.write(std::as_bytes(std::span(j)));
-        tw.commit();
-    }
-}
-
-// Writes each frame's outputs (writeOutputs) on a thread of its own while the next frame renders, so that a sequence
-// or flight costs the slower of rendering and encoding a frame, not their sum. At most kInFlight frames wait (their
-// memory); the first failure is thrown by the next put() or by finish(), and nothing after it is written.
-class OutputWriter {
-public:
-    explicit OutputWriter(const RenderArgs& a) : a_(a), thread_([this] { loop(); }) {}
-    ~OutputWriter() { stop(); }
-    void put(Rendered r, std::optional<unsigned> step) {
-        std::unique_lock lock(mutex_);
-        changed_.wait(lock, [&] { return jobs_.size() < kInFlight || failure_; });
-        if (failure_) std::rethrow_exception(failure_);
-        jobs_.push_back({std::move(r), step});
-        changed_.notify_all();
-    }
-    void finish() {  // every frame written, or the first failure thrown
-        stop();
-        if (failure_) std::rethrow_exception(failure_);
-    }
-
-private:
-    static constexpr size_t kInFlight = 2;
-    struct Job {
-        Rendered r;
-        std::optional<unsigned> step;
-    };
-    void loop() {
-        for (;;) {
-            std::unique_lock lock(mutex_);
-            changed_.wait(lock, [&] { return !jobs_.empty() || done_; });
-            if (jobs_.empty()) return;
-            Job job = std::move(jobs_.front());
-            lock.unlock();
-            try {
-                if (!failure_) writeOutputs(a_, job.r, job.step);
-            } catch (...) {
-                lock.lock();
-                failure_ = std::current_exception();
-                lock.unlock();
-            }
-            lock.lock();
-            jobs_.pop_front();
-            changed_.notify_all();
-        }
-    }
-    void stop() {
-        {
-            std::lock_guard lock(mutex_);
-            done_ = true;
-        }
-        changed_.notify_all();
-        if (thread_.joinable()) thread_.join();
-    }
-    const RenderArgs& a_;
-    std::mutex mutex_;
-    std::condition_variable changed_;
-    std::deque<Job> jobs_;
-    std::exception_ptr failure_;
-    bool done_ = false;
-    std::thread thread_;  // last: started once the rest is ready
-};
 
 void printSummary(const RenderArgs& a, const hc::cli::BackendDecision& decision, const hc::render::Camera& camera,
                   const Rendered& r) {
@@ -427,7 +282,8 @@ int fly(const RenderArgs& a, const hc::cli::BackendDecision& decision, const hc:
         gl ? "  upload ms     GPU ms  readback ms" : "");
     hc::Stopwatch total;
     std::vector<double> renderMs;
-    OutputWriter writer(a);
+    const std::unique_ptr<hc::render_app::VideoPipe> video = videoFor(a, ffmpeg, start);
+    hc::render_app::OutputWriter writer(pathsOf(a), video.get());
     for (unsigned k = 0; k < a.flyFrames; ++k) {
         const hc::render::Camera camera = hc::render::flightFrame(start, a.flyStepM, k);
         Rendered r;
@@ -455,6 +311,7 @@ int fly(const RenderArgs& a, const hc::cli::BackendDecision& decision, const hc:
         std::printf("\n");
     }
     writer.finish();
+    if (video) video->finish();
     // The frames after the first (which has nothing to keep): their median and slowest.
     std::vector<double> later(renderMs.begin() + 1, renderMs.end());
     std::sort(later.begin(), later.end());
@@ -463,8 +320,7 @@ int fly(const RenderArgs& a, const hc::cli::BackendDecision& decision, const hc:
         "(%.1f frames a second)\n",
         a.flyFrames - 1, later[later.size() / 2], later.back(), renderMs[0], total.seconds(),
         a.flyLastImage ? " (the last frame's alone)" : "s", a.flyFrames / total.seconds());
-    if (!a.video.empty()) {
-        writeVideo(ffmpeg, a);
+    if (video) {
         std::printf("  video        %s (%g frames per second)\n", a.video.c_str(), a.fps);
     }
     return 0;
@@ -493,7 +349,7 @@ int main(int argc, char** argv) {
         if (a.flyFrames) return fly(a, decision, *loaded->scene, camera);
         if (!a.sequence) {
             const Rendered rendered = renderImage(decision, *loaded->scene, camera, a.setup.options, a.verifyHits);
-            writeOutputs(a, rendered, std::nullopt);
+            pathsOf(a).write(rendered, std::nullopt);
             printSummary(a, decision, camera, rendered);
             const hc::Grid& shape = loaded->file ? loaded->file->shape() : loaded->grid;
             if (shape.steps.size() > 1)
@@ -513,7 +369,8 @@ int main(int argc, char** argv) {
         // GL: one context for every step, the next step's scene handed to it (its shaders compiled once).
         std::unique_ptr<hc::render::GlRenderer> gl =
             decision.useGl ? hc::render::GlRenderer::headless(*loaded->scene) : nullptr;
-        OutputWriter writer(a);
+        const std::unique_ptr<hc::render_app::VideoPipe> video = videoFor(a, ffmpeg, camera);
+        hc::render_app::OutputWriter writer(pathsOf(a), video.get());
         for (unsigned k = a.firstStep; k <= a.lastStep; ++k) {
             hc::Stopwatch clock;
             if (k != a.firstStep) {
@@ -532,10 +389,10 @@ int main(int argc, char** argv) {
                         numbered(a.out, k).c_str());
         }
         writer.finish();
+        if (video) video->finish();
         std::printf("  total        %.3f s for %u steps (%.1f steps a second)\n", total.seconds(),
                     a.lastStep - a.firstStep + 1, (a.lastStep - a.firstStep + 1) / total.seconds());
-        if (!a.video.empty()) {
-            writeVideo(ffmpeg, a);
+        if (video) {
             std::printf("  video        %s (%g steps per second)\n", a.video.c_str(), a.fps);
         }
         return 0;

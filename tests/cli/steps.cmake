@@ -126,7 +126,14 @@ if(HC_FFMPEG)
   hc_cli_test(render.steps_video 0 [[video +v\.mp4 \(2 steps per second\)]]
     --setup ${HEF_STEPS} --exists v.mp4 --absent v.mp4.partial --no-match [[error]]
     --check [[test "$(ffprobe -v error -count_frames -show_entries stream=nb_read_frames -of csv=p=0 v.mp4)" = 3]]
+    --check [[test "$(ffprobe -v error -show_entries stream=width,height,r_frame_rate -of csv=p=0 v.mp4)" = 322,182,2/1]]
     -- ${RENDER} f.hcg -o f.png --steps 0:2 --video v.mp4 --fps 2 --size 321x181 --texels 128 --backend cpu)
+  # The frames go to ffmpeg down a pipe as they come: an ffmpeg that stops reading (here one that exits at once) is
+  # said, and no video is left, partial or whole; the run stops, and the images written so far stay.
+  hc_cli_test(render.steps_video_ffmpeg_fails nonzero [[hc-render: error: v\.mp4: ffmpeg (stopped reading the frames|failed).*the images written so far stay]]
+    --setup ${HEF_STEPS} --setup [[mkdir bin && printf '#!/bin/sh\nexit 3\n' > bin/ffmpeg && chmod +x bin/ffmpeg]]
+    --absent v.mp4 --absent v.mp4.partial --exists f_0000.png --allow-new-files
+    -- env PATH=./bin:/usr/bin:/bin ${RENDER} f.hcg -o f.png --steps 0:2 --video v.mp4 --size 320x180 --texels 128 --backend cpu)
 else()
   hc_cli_test(render.steps_video_without_ffmpeg nonzero [[^hc-render: error: --video: ffmpeg is not installed]]
     --setup ${HEF_STEPS} --absent v.mp4 --absent f_0000.png
