@@ -242,6 +242,7 @@ int main(int argc, char** argv) {
             set.height, set.options.cascades, set.options.cascades == 1 ? "" : "s", set.options.texelsPerSide,
             set.repeat);
         std::printf("load average (1 min) at start: %s\n", loadAverage().c_str());
+        removeStaleGrids();
         const hc::Stopwatch wall;
         std::vector<RunResult> results;
         for (const Scenario* sc : chosen) results.push_back(runScenario(*sc, set));

@@ -113,6 +113,10 @@ struct Settings {
     size_t tradeSamples = 20000;  // hits checked against the exact surface per frame
 };
 
+// Removes the temporary grid files (and their writers' temporaries) of hc-bench runs that were killed: the name holds
+// the process id, so a file whose process is gone is stale. Says what it removed.
+void removeStaleGrids();
+
 // One scenario, generated, prepared and rendered in a forked child (bench_render_run.cpp).
 RunResult runScenario(const scenes::Scenario& sc, const Settings& set);
 

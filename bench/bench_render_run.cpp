@@ -12,7 +12,10 @@
 #include <vector>
 
 #include <fmt/format.h>
+#include <signal.h>
 #include <unistd.h>
+
+#include <cerrno>
 
 #include "bench_common.h"
 #include "heightcast/support/backend_choice.h"
@@ -114,6 +117,25 @@ void recordGrid(const Scenario& sc, const hc::scenes::Calibration& c, const Grid
 }
 
 }  // namespace
+
+void removeStaleGrids() {
+    // hc_bench_SCENE_PID.hcg (and its writer's OUTPUT.tmp.XXXXXX) of a process that is gone: 5 GB at 400 M cells.
+    std::error_code ec;
+    for (const fs::directory_entry& e : fs::directory_iterator(fs::temp_directory_path(), ec)) {
+        const std::string name = e.path().filename().string();
+        if (name.rfind("hc_bench_", 0) != 0) continue;
+        const size_t dot = name.find(".hcg"), under = name.rfind('_', dot);
+        if (dot == std::string::npos || under == std::string::npos || under + 1 >= dot) continue;
+        const std::string pidText = name.substr(under + 1, dot - under - 1);
+        if (pidText.find_first_not_of("0123456789") != std::string::npos || pidText.size() > 9) continue;
+        const pid_t pid = pid_t(std::stol(pidText));
+        if (pid <= 0 || pid == ::getpid() || ::kill(pid, 0) == 0 || errno != ESRCH) continue;  // alive, or not ours
+        const uintmax_t bytes = e.file_size(ec);
+        if (fs::remove(e.path(), ec))
+            std::printf("removed %s (%.1f GB), left by hc-bench process %d, which is gone\n", e.path().c_str(),
+                        double(bytes) / 1e9, int(pid));
+    }
+}
 
 RunResult runScenario(const Scenario& sc, const Settings& set) {
     return inChild<RunResult>(sc.name, [&](RunResult& r) {
