@@ -63,12 +63,30 @@ VideoPipe::VideoPipe(const std::string& ffmpeg, const std::string& path, double 
     std::signal(SIGPIPE, SIG_IGN);  // ffmpeg gone: write() fails with EPIPE, said below, instead of killing us
     int fds[2];
     if (::pipe2(fds, O_CLOEXEC) != 0) throw Error(std::string("--video: pipe: ") + std::strerror(errno));
-    std::vector<std::string> args{ffmpeg,      "-hide_banner", "-loglevel", "error",   "-y",
-                                  "-f",        "rawvideo",     "-pix_fmt",  "rgb24",   "-video_size",
-                                  fmt::format("{}x{}", width, height),      "-framerate", fmt::format("{:g}", fps),
-                                  "-i",        "-",            "-vf",       "pad=ceil(iw/2)*2:ceil(ih/2)*2",
-                                  "-c:v",      "libx264",      "-pix_fmt",  "yuv420p", "-f",
-                                  "mp4",       tmp_};
+    std::vector<std::string> args{ffmpeg,
+                                  "-hide_banner",
+                                  "-loglevel",
+                                  "error",
+                                  "-y",
+                                  "-f",
+                                  "rawvideo",
+                                  "-pix_fmt",
+                                  "rgb24",
+                                  "-video_size",
+                                  fmt::format("{}x{}", width, height),
+                                  "-framerate",
+                                  fmt::format("{:g}", fps),
+                                  "-i",
+                                  "-",
+                                  "-vf",
+                                  "pad=ceil(iw/2)*2:ceil(ih/2)*2",
+                                  "-c:v",
+                                  "libx264",
+                                  "-pix_fmt",
+                                  "yuv420p",
+                                  "-f",
+                                  "mp4",
+                                  tmp_};
     std::vector<char*> argv;
     for (auto& s : args) argv.push_back(s.data());
     argv.push_back(nullptr);
