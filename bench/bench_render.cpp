@@ -153,14 +153,15 @@ int main(int argc, char** argv) {
                  plot);
         std::string tradeGrid;
         int tradeSamples = int(set.tradeSamples);
-        p.flag("--trade",
-               "instead of the timed frames: the speed/accuracy trade. Each scene (with its surface pyramid) is\n"
-               "      rendered from scratch under error budgets of 1 cm to 100 m and 0.5 to 2 px and under the fixed\n"
-               "      knobs (default, --pyramid-coarse, --texels 512 and 2048), best of --repeat, on each backend of\n"
-               "      --backend (here a list: cpu, gl or cpu,gl); each frame's hits are checked against the exact\n"
-               "      surface. Prints a table and the issue-43 targets; --json and --plot write its points and an SVG\n"
-               "      of error against frame time",
-               set.trade);
+        p.flag(
+            "--trade",
+            "instead of the timed frames: the speed/accuracy trade. Each scene (with its surface pyramid) is\n"
+            "      rendered from scratch under error budgets of 1 cm to 100 m and 0.5 to 2 px and under the fixed\n"
+            "      knobs (default, --pyramid-coarse, half and twice --texels), best of --repeat, on each backend of\n"
+            "      --backend (here a list: cpu, gl or cpu,gl); each frame's hits are checked against the exact\n"
+            "      surface. Prints a table and the issue-43 targets; --json and --plot write its points and an SVG\n"
+            "      of error against frame time",
+            set.trade);
         p.option("--trade-grid", "GRID.hcg",
                  "with --trade: also a real grid file, its surface pyramid beside it (hc-influence's .hcp),\n"
                  "      out of core, from hc-render's default camera (default: none)",

@@ -33,22 +33,16 @@ struct TradeSetting {
     bool budget, isDefault;
     double maxErrorM, maxErrorPx;
     bool coarse;
-    int texelsPerSide;  // 0: the run's --texels
+    double texelsFactor;  // times the run's --texels (the label's N is the product)
 };
 
 constexpr TradeSetting kSettings[] = {
-    {"default", false, true, 0, 0, false, 0},
-    {"--pyramid-coarse", false, false, 0, 0, true, 0},
-    {"--texels 512", false, false, 0, 0, false, 512},
-    {"--texels 2048", false, false, 0, 0, false, 2048},
-    {"1 cm", true, false, 0.01, 0, false, 0},
-    {"10 cm", true, false, 0.1, 0, false, 0},
-    {"1 m", true, false, 1, 0, false, 0},
-    {"10 m", true, false, 10, 0, false, 0},
-    {"100 m", true, false, 100, 0, false, 0},
-    {"0.5 px", false, false, 0, 0.5, false, 0},
-    {"1 px", false, false, 0, 1, false, 0},
-    {"2 px", false, false, 0, 2, false, 0},
+    {"default", false, true, 0, 0, false, 1},     {"--pyramid-coarse", false, false, 0, 0, true, 1},
+    {"--texels", false, false, 0, 0, false, 0.5}, {"--texels", false, false, 0, 0, false, 2},
+    {"1 cm", true, false, 0.01, 0, false, 1},     {"10 cm", true, false, 0.1, 0, false, 1},
+    {"1 m", true, false, 1, 0, false, 1},         {"10 m", true, false, 10, 0, false, 1},
+    {"100 m", true, false, 100, 0, false, 1},     {"0.5 px", false, false, 0, 0.5, false, 1},
+    {"1 px", false, false, 0, 1, false, 1},       {"2 px", false, false, 0, 2, false, 1},
 };
 static_assert(2 * std::size(kSettings) <= size_t(kMaxTradePoints));
 
@@ -65,8 +59,14 @@ render::RenderOptions optionsFor(const TradeSetting& s, const render::RenderOpti
     o.maxErrorM = s.maxErrorM;
     o.maxErrorPx = s.maxErrorPx;
     o.pyramidCoarseTexels = s.coarse;
-    if (s.texelsPerSide) o.texelsPerSide = s.texelsPerSide;
+    o.texelsPerSide = std::clamp(int(std::lround(s.texelsFactor * base.texelsPerSide)), 16, 8192);
     return o;
+}
+
+// "--texels 512" for the knobs that scale --texels (N the product), else the setting's label.
+std::string labelOf(const TradeSetting& s, const render::RenderOptions& base) {
+    if (s.texelsFactor == 1) return s.label;
+    return fmt::format("{} {}", s.label, optionsFor(s, base).texelsPerSide);
 }
 
 void keepFastest(const render::Timings& tm, TradePoint& p) {
@@ -120,9 +120,9 @@ void tradeSweep(const render::Scene& scene, const render::Camera& camera, const 
         for (const TradeSetting& s : kSettings) {
             if (set.interactive)
                 std::fprintf(stderr, "\r%-14s %-40s", r.name,
-                             fmt::format("trade: {} {}", onGl ? "GL" : "CPU", s.label).c_str());
+                             fmt::format("trade: {} {}", onGl ? "GL" : "CPU", labelOf(s, set.options)).c_str());
             TradePoint& p = r.trade[r.tradeCount++];
-            std::snprintf(p.label, sizeof p.label, "%s", s.label);
+            std::snprintf(p.label, sizeof p.label, "%s", labelOf(s, set.options).c_str());
             p.gl = onGl, p.budget = s.budget, p.isDefault = s.isDefault;
             p.maxErrorM = s.maxErrorM, p.maxErrorPx = s.maxErrorPx;
             const render::RenderOptions o = optionsFor(s, set.options);
