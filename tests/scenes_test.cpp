@@ -158,6 +158,22 @@ TEST(Scenes, AskedForCellCountIsMet) {
     EXPECT_DOUBLE_EQ(targetCells(*sc, 2.0), sc->reportCellsM * 1e6 / 2);
 }
 
+TEST(Scenes, FewerCellsThanTheForcedOnesGiveTheCoarsestGrid) {
+    // Wachau at 1/256 of the report's count (7.6 k cells) holds more forced cells (wet edges, river banks) even at
+    // 48-96 m: the calibration ends at its coarsest threshold (the table shows the miss). Its walks were capped at 4x
+    // the target + 1000 leaves, and it stepped back and forth between a capped walk and too few cells until it threw
+    // "did not converge"; each of these counts must now come out.
+    const Scenario* sc = findScenario("Wachau");
+    ASSERT_NE(sc, nullptr);
+    for (const double target : {1904.0, 7617.0}) {
+        const Generated gen = generateCells(*sc, target, 0);
+        EXPECT_EQ(gen.grid.validate(), "");
+        EXPECT_TRUE(gen.finestRaised);
+        EXPECT_GT(double(gen.grid.cellCount()), target);
+        EXPECT_EQ(gen.thresholdM, 1e4);  // the coarsest threshold: as few cells as the forced ones allow
+    }
+}
+
 TEST(Scenes, MoreCellsThanTheFinestSizeHoldsLowersIt) {
     // A 1.5 x 1.2 km cut of Petzenkirchen at 3 m holds 200 k finest cells; 250 k asked for (scale < 1 in hc-bench
     // terms) needs 1.5 m cells: the finest size halves once (800 k >= 1.5 x 250 k) and the count is met.

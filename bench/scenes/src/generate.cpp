@@ -232,7 +232,10 @@ private:
         std::vector<int64_t> tileDiffs;  // per tile, the window's difference array (width + 1 each)
     };
 
-    uint64_t cap(double factor) const { return uint64_t(4 * target_ / factor) + 1000; }
+    // A walk stops past 4x the target (the sample's estimate far too low: a runaway walk), but never below about a
+    // million leaves (a second's walk): at small targets the count can jump 4x within half an octave of T, and a cap
+    // that small made the calibration step back and forth between capped and too few until it gave up.
+    uint64_t cap(double factor) const { return uint64_t((4 * target_ + double(1 << 20)) / factor); }
 
     // Walks tiles `which` at edge k0 (stops past `cap` leaves: capped); tile windows of `width` edges from `first`.
     Walk walk(const std::vector<size_t>& which, size_t k0, uint64_t cap, size_t first, size_t width) {
