@@ -173,6 +173,10 @@ public:
     std::string name() const override { return "GL"; }
     std::string device() const override { return r_->deviceName(); }
     bool drawsCellOutlines() const override { return !outOfCore_; }
+    bool setScene(const render::Scene& scene) override {
+        r_->setScene(scene);
+        return true;
+    }
 
 private:
     std::unique_ptr<render::GlRenderer> r_;

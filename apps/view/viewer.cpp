@@ -101,10 +101,10 @@ void Viewer::runScripted(int frames, const std::string& screenshot, bool play) {
 void Viewer::showStep(size_t step) {
     if (step == step_ || step >= std::max<size_t>(1, stepCount_)) return;
     const Stopwatch clock;
-    backend_->wait();
-    backend_.reset();  // it refers to the scene replaced here
+    backend_->wait();  // idle from here: it refers to the scene replaced below and renders nothing until it is set
     cli::switchStep("hc-view", loaded_, gridPath_, setup_, step);
-    backend_ = makeBackend_(*loaded_.scene);
+    // The GL backend is handed the new scene (its shaders compiled once); the CPU one is made again.
+    if (!backend_->setScene(*loaded_.scene)) backend_ = makeBackend_(*loaded_.scene);
     step_ = step;
     lastSwitchMs_ = clock.milliseconds();
     stepShownAt_ = Clock::now();

@@ -178,6 +178,11 @@ if(HC_WITH_GL AND HC_XVFB_RUN)
     --setup ${HEF_STEPS} --exists shot.png --no-match [[error|warning]]
     --check "'${PNG_CHECK}' shot.png"
     -- ${HC_XVFB_RUN} -a -s "-screen 0 1280x1024x24" $<TARGET_FILE:hc-view> f.hcg --backend cpu --frames 3 --play --screenshot shot.png --size 480x300 --texels 128)
+  # On the GL backend (llvmpipe under Xvfb) the renderer is handed each step's scene, its shaders compiled once.
+  hc_cli_test(view.play_steps_gl 0 [[step +2 of 3 \(last switch [0-9.]+ ms]]
+    --setup ${HEF_STEPS} --exists shot.png --no-match [[error|warning]]
+    --check "'${PNG_CHECK}' shot.png"
+    -- ${HC_XVFB_RUN} -a -s "-screen 0 1280x1024x24" $<TARGET_FILE:hc-view> f.hcg --backend gl --frames 3 --play --screenshot shot.png --size 480x300 --texels 128)
   hc_cli_test(view.play_needs_frames nonzero [[^hc-view: error: --play needs --frames N]]
     -- $<TARGET_FILE:hc-view> f.hcg --play)
 endif()
