@@ -17,6 +17,7 @@
 #include "heightcast/core/atomic_file.h"
 #include "heightcast/core/error.h"
 #include "heightcast/core/progress.h"
+#include "heightcast/core/quantile.h"
 #include "heightcast/core/timer.h"
 #include "heightcast/grid/grid_file.h"
 #include "heightcast/influence/pyramid.h"
@@ -89,13 +90,6 @@ std::string budgetHeld(const TradePoint& p) {
     if (p.maxErrorM > 0) return p.boundM > p.maxErrorM ? "short" : p.maxM <= p.maxErrorM + kBudgetSlackM ? "yes" : "NO";
     if (p.maxErrorPx > 0) return p.boundPx > p.maxErrorPx ? "short" : p.maxPx <= p.maxErrorPx ? "yes" : "NO";
     return "-";
-}
-
-double quantile(std::vector<double> v, double q) {
-    if (v.empty()) return 0;
-    const size_t k = std::min(v.size() - 1, size_t(q * double(v.size() - 1) + 0.5));
-    std::nth_element(v.begin(), v.begin() + std::ptrdiff_t(k), v.end());
-    return v[k];
 }
 
 }  // namespace

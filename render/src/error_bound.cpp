@@ -9,6 +9,7 @@
 #include <optional>
 #include <vector>
 
+#include "heightcast/core/quantile.h"
 #include "heightcast/influence/region.h"
 #include "heightcast/render/detail/frame.h"
 #include "heightcast/render/renderer.h"
@@ -76,13 +77,6 @@ std::vector<std::optional<double>> exactValues(const Scene& scene, const std::ve
                                                const influence::Layer& layer, unsigned threads) {
     if (scene.outOfCore()) return influence::valuesFromFile(*scene.file(), pts, layer, scene.params(), threads);
     return scene.evaluator().values(pts, layer, threads);
-}
-
-double quantile(std::vector<double> v, double q) {
-    if (v.empty()) return 0;
-    const size_t k = std::min(v.size() - 1, size_t(q * double(v.size() - 1) + 0.5));
-    std::nth_element(v.begin(), v.begin() + std::ptrdiff_t(k), v.end());
-    return v[k];
 }
 
 }  // namespace
