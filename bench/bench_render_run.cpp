@@ -142,9 +142,18 @@ RunResult runScenario(const Scenario& sc, const Settings& set) {
         auto say = [&](const char* what) {
             if (set.interactive) std::fprintf(stderr, "\r%-14s %-40s", sc.name, what);
         };
+        // A stage that may take minutes (at 400 M cells, an hour in all): on a terminal as say(), else a line with the
+        // time since the scenario began, so a log shows where a long run is.
+        const hc::Stopwatch since;
+        auto stage = [&](const char* what) {
+            if (set.interactive)
+                say(what);
+            else
+                std::fprintf(stderr, "hc-bench: %s: %s (%.0f s in)\n", sc.name, what, since.seconds());
+        };
         r.baselineRss = hc::currentRssBytes();
         std::snprintf(r.name, sizeof r.name, "%s", sc.name);
-        say("generating the grid ...");
+        stage("generating the grid ...");
         hc::Stopwatch clock;
         r.targetCells = set.cells > 0 ? set.cells : hc::scenes::targetCells(sc, set.scale);
         // Where the lists would not fit, the scenario runs as the tools do by default at such sizes: the grid streamed
@@ -196,7 +205,7 @@ RunResult runScenario(const Scenario& sc, const Settings& set) {
                 say("");
                 return;
             }
-            say("building influence lists ...");
+            stage("building influence lists ...");
             clock.restart();
             lists = hc::influence::buildInfluenceLists(g, hc::influence::KernelParams{}, set.options.threads);
             r.listsMs = clock.milliseconds();
@@ -209,7 +218,7 @@ RunResult runScenario(const Scenario& sc, const Settings& set) {
 
         std::optional<hc::influence::SurfacePyramid> pyramid;
         if (r.pyramid) {
-            say("building the surface pyramid ...");
+            stage("building the surface pyramid ...");
             clock.restart();
             // Out of core as hc-influence builds it by default: a node of the file at a time (the same samples).
             pyramid = file ? hc::influence::buildPyramidOnRanks(*file, hc::influence::KernelParams{},
@@ -245,7 +254,7 @@ RunResult runScenario(const Scenario& sc, const Settings& set) {
             // Warm-up frames, unmeasured, for at least a second: drivers compile shaders at the first dispatch, and an
             // idle GPU takes a moment to leave its idle clocks (on an H100 the first scene's stages ran 2-3x slower
             // after a single warm-up frame).
-            say("GL warm-up frames ...");
+            stage("GL warm-up frames ...");
             gl = hc::render::GlRenderer::headless(scene);
             std::snprintf(r.device, sizeof r.device, "%s", gl->deviceName().c_str());
             const hc::Stopwatch warmUp;
@@ -324,7 +333,7 @@ RunResult runScenario(const Scenario& sc, const Settings& set) {
             }
         }
         if (gl) {
-            say("reading the frame back ...");
+            stage("reading the frame back ...");
             hc::render::Timings tm;
             gl->forgetCascades();  // from scratch, as the measured frames (after a flight it would keep its last
                                    // frame's texels)
@@ -333,7 +342,7 @@ RunResult runScenario(const Scenario& sc, const Settings& set) {
         }
         for (size_t i = 0; i < frame.waterDepthM.size(); ++i) r.wetHits += frame.waterDepthM[i] > 0;
         if (set.accuracy) {
-            say("measuring hits against the exact surface ...");
+            stage("measuring hits against the exact surface ...");
             measureAccuracy(frame, g, lists ? &*lists : nullptr, file.get(), set.options.threads, r);
         }
         if (!set.imagesDir.empty()) {
