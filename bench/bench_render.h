@@ -117,6 +117,10 @@ struct Settings {
 // the process id, so a file whose process is gone is stale. Says what it removed.
 void removeStaleGrids();
 
+// Where a long run is: on a terminal the one status line, overwritten (the scene, then what it does); in a log a line
+// of its own, with the seconds since the scene began where secondsIn >= 0.
+void progressLine(bool interactive, const char* scene, const std::string& what, double secondsIn = -1);
+
 // One scenario, generated, prepared and rendered in a forked child (bench_render_run.cpp).
 RunResult runScenario(const scenes::Scenario& sc, const Settings& set);
 

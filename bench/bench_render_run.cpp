@@ -116,14 +116,30 @@ void recordGrid(const Scenario& sc, const hc::scenes::Calibration& c, const Grid
     r.finestLowered = c.finestLowered;
 }
 
+// The temporary grid of a scene run out of core by process `pid`: hc_bench_SCENE_PID.hcg in the temp folder (the one
+// name removeStaleGrids() parses).
+constexpr const char* kTempGridPrefix = "hc_bench_";
+fs::path tempGridPath(const char* scene, pid_t pid) {
+    return fs::temp_directory_path() / fmt::format("{}{}_{}.hcg", kTempGridPrefix, scene, pid);
+}
+
 }  // namespace
+
+void progressLine(bool interactive, const char* scene, const std::string& what, double secondsIn) {
+    if (interactive)
+        std::fprintf(stderr, "\r%-14s %-40s", scene, what.c_str());
+    else if (secondsIn >= 0)
+        std::fprintf(stderr, "hc-bench: %s: %s (%.0f s in)\n", scene, what.c_str(), secondsIn);
+    else
+        std::fprintf(stderr, "hc-bench: %s: %s\n", scene, what.c_str());
+}
 
 void removeStaleGrids() {
     // hc_bench_SCENE_PID.hcg (and its writer's OUTPUT.tmp.XXXXXX) of a process that is gone: 5 GB at 400 M cells.
     std::error_code ec;
     for (const fs::directory_entry& e : fs::directory_iterator(fs::temp_directory_path(), ec)) {
         const std::string name = e.path().filename().string();
-        if (name.rfind("hc_bench_", 0) != 0) continue;
+        if (name.rfind(kTempGridPrefix, 0) != 0) continue;
         const size_t dot = name.find(".hcg"), under = name.rfind('_', dot);
         if (dot == std::string::npos || under == std::string::npos || under + 1 >= dot) continue;
         const std::string pidText = name.substr(under + 1, dot - under - 1);
@@ -139,18 +155,12 @@ void removeStaleGrids() {
 
 RunResult runScenario(const Scenario& sc, const Settings& set) {
     return inChild<RunResult>(sc.name, [&](RunResult& r) {
-        auto say = [&](const char* what) {
-            if (set.interactive) std::fprintf(stderr, "\r%-14s %-40s", sc.name, what);
+        auto say = [&](const char* what) {  // a frame's progress: on a terminal only
+            if (set.interactive) progressLine(true, sc.name, what);
         };
-        // A stage that may take minutes (at 400 M cells, an hour in all): on a terminal as say(), else a line with the
-        // time since the scenario began, so a log shows where a long run is.
+        // A stage that may take minutes (at 400 M cells, an hour in all): in a log too.
         const hc::Stopwatch since;
-        auto stage = [&](const char* what) {
-            if (set.interactive)
-                say(what);
-            else
-                std::fprintf(stderr, "hc-bench: %s: %s (%.0f s in)\n", sc.name, what, since.seconds());
-        };
+        auto stage = [&](const char* what) { progressLine(set.interactive, sc.name, what, since.seconds()); };
         r.baselineRss = hc::currentRssBytes();
         std::snprintf(r.name, sizeof r.name, "%s", sc.name);
         stage("generating the grid ...");
@@ -174,7 +184,7 @@ RunResult runScenario(const Scenario& sc, const Settings& set) {
         } written;
         double topM = 0;  // the highest terrain or water surface [m]
         if (r.outOfCore) {
-            written.path = fs::temp_directory_path() / fmt::format("hc_bench_{}_{}.hcg", sc.name, ::getpid());
+            written.path = tempGridPath(sc.name, ::getpid());
             const hc::scenes::GeneratedFile gf =
                 hc::scenes::generateToFile(sc, r.targetCells, set.options.threads, written.path.string());
             file = std::make_unique<hc::GridRegionReader>(written.path.string());

@@ -112,13 +112,10 @@ void tradeSweep(const render::Scene& scene, const render::Camera& camera, const 
     for (const bool onGl : {false, true}) {
         if (onGl ? !set.tradeGl : !set.tradeCpu) continue;
         for (const TradeSetting& s : kSettings) {
-            const std::string what = fmt::format("trade: {} {}", onGl ? "GL" : "CPU", labelOf(s, set.options));
-            if (set.interactive)
-                std::fprintf(stderr, "\r%-14s %-40s", r.name, what.c_str());
-            else
-                std::fprintf(stderr, "hc-bench: %s: %s\n", r.name, what.c_str());
+            const std::string label = labelOf(s, set.options);
+            progressLine(set.interactive, r.name, fmt::format("trade: {} {}", onGl ? "GL" : "CPU", label));
             TradePoint& p = r.trade[r.tradeCount++];
-            std::snprintf(p.label, sizeof p.label, "%s", labelOf(s, set.options).c_str());
+            std::snprintf(p.label, sizeof p.label, "%s", label.c_str());
             p.gl = onGl, p.budget = s.budget, p.isDefault = s.isDefault;
             p.maxErrorM = s.maxErrorM, p.maxErrorPx = s.maxErrorPx;
             const render::RenderOptions o = optionsFor(s, set.options);
