@@ -333,15 +333,11 @@ int main(int argc, char** argv) {
         RenderArgs a;
         if (!parseOptions(argc, argv, a)) return 0;
         hc::cli::BackendDecision decision = chooseBackend(a.backend);
-        if (!a.setup.colorBy.empty()) hc::cli::requireCpu("--color-by " + a.setup.colorBy, a.backend, decision);
         checkOutputs(a);
         // Without a cache either backend reads the grid out of core (the GL one then evaluates the texels a frame newly
         // sees on the CPU and keeps its cascades on the GPU, gl_renderer.h); --color-by needs the grid and its lists in
-        // memory (the exact evaluator at every hit).
+        // memory (the exact evaluator at every hit, on the CPU for either backend).
         auto loaded = hc::cli::loadScene("hc-render", a.gridPath, a.setup, a.setup.colorBy.empty());
-        // Cell outlines on the GL backend need the cells on the GPU.
-        if (loaded->scene->outOfCore() && a.setup.options.cellOutlines)
-            hc::cli::requireCpu("--cells on a grid read out of core (no .hci cache)", a.backend, decision);
         const hc::render::Camera camera = hc::cli::initialCamera(a.setup, *loaded->scene);
         refuseCameraBelowTerrain(*loaded->scene, camera);
         if (a.flyFrames || a.sequence)

@@ -155,8 +155,7 @@ int main(int argc, char** argv) {
         hc::keepFreedMemory();  // frame after frame: each reuses the last one's pages (core/heap.h)
         hc::view::Window window("hc-view: " + a.gridPath, a.setup.width, a.setup.height, a.frames == 0);
         // --backend gl without a 4.3 context fails here, before any work.
-        hc::cli::BackendDecision decision = hc::cli::decideBackend(a.backend, window.gl());
-        if (!a.setup.colorBy.empty()) hc::cli::requireCpu("--color-by " + a.setup.colorBy, a.backend, decision);
+        const hc::cli::BackendDecision decision = hc::cli::decideBackend(a.backend, window.gl());
         auto loaded = hc::cli::loadScene("hc-view", a.gridPath, a.setup, a.setup.colorBy.empty());
         auto maker = std::make_shared<BackendMaker>(a.backend, decision, window.gl(), a.setup.options.threads);
         auto backend = (*maker)(*loaded->scene);  // the first one; a new water step's scene gets a new one from `maker`

@@ -67,26 +67,6 @@ TEST(BackendChoice, GlIsGlOrAnError) {
 
 // The probe on this machine: without the GL backend it always says the backend was built out; with it, it either
 // finds a context (and names its device) or says why not, never both.
-// What only the CPU draws (--color-by) moves auto's GPU choice to the CPU with a note, and refuses --backend gl.
-TEST(BackendChoice, CpuOnlyFeaturesMoveAutoToTheCpu) {
-    BackendDecision d = decideBackend(Backend::Auto, kGpu);
-    ASSERT_TRUE(d.useGl);
-    requireCpu("--color-by speed", Backend::Auto, d);
-    EXPECT_FALSE(d.useGl);
-    EXPECT_EQ(d.note, "--color-by speed is drawn by the CPU backend only: rendering on the CPU");
-    d = decideBackend(Backend::Gl, kGpu);
-    try {
-        requireCpu("--color-by speed", Backend::Gl, d);
-        FAIL() << "gl accepted";
-    } catch (const hc::Error& e) {
-        EXPECT_STREQ(e.what(), "--backend gl: --color-by speed is drawn by the CPU backend only (use --backend cpu)");
-    }
-    d = decideBackend(Backend::Cpu, kGpu);
-    requireCpu("--color-by speed", Backend::Cpu, d);
-    EXPECT_FALSE(d.useGl);
-    EXPECT_EQ(d.note, "") << "nothing to say when the CPU was asked for";
-}
-
 TEST(BackendChoice, ProbeOfThisBuild) {
     const GlOnHand gl = probeHeadlessGl();
 #if HC_WITH_GL

@@ -45,6 +45,7 @@ TEST_F(RenderGl, Std430LayoutsAgreeWithTheCppStructs) {
     HC_FRAME_ARRAY(labelHi), HC_FRAME_ARRAY(labelLo), HC_FRAME_ARRAY(elevationRamp), HC_FRAME_ARRAY(depthRamp);
     HC_FRAME_ARRAY(skyHorizon), HC_FRAME_ARRAY(skyZenith), HC_FRAME_ARRAY(dryColor), HC_FRAME(zFloor),
         HC_FRAME_ARRAY(wallColor), HC_FRAME(beamTile);
+    HC_FRAME(overlay), HC_FRAME(layerLo), HC_FRAME(layerRange), HC_FRAME(layerOnWater), HC_FRAME_ARRAY(layerRamp);
 #define HC_CASCADE(m) \
     expectAt("raycast", "cascades[0]." #m, cas + long(offsetof(gpu::GpuCascade, m)), long(sizeof(gpu::GpuCascade)))
 #define HC_CASCADE_ARRAY(m)                                                                \
@@ -67,6 +68,9 @@ TEST_F(RenderGl, Std430LayoutsAgreeWithTheCppStructs) {
     HC_PIXEL(t), HC_PIXEL(relX), HC_PIXEL(relY), HC_PIXEL(relZ), HC_PIXEL(nx), HC_PIXEL(ny), HC_PIXEL(nz),
         HC_PIXEL(depth);
     HC_PIXEL(cascade), HC_PIXEL(water), HC_PIXEL(wall);
+#define HC_OVERLAY(m) \
+    expectAt("shade", "overlay[0]." #m, long(offsetof(gpu::GpuOverlay, m)), long(sizeof(gpu::GpuOverlay)))
+    HC_OVERLAY(layer), HC_OVERLAY(dim), HC_OVERLAY(valued);
     // Whole sizes: the frame block, and (through the unsized arrays' strides above) each struct.
     EXPECT_EQ(gl.bufferBlockSize("shade", "FrameBlock"), long(sizeof(gpu::FrameBlock)));
     EXPECT_EQ(gl.bufferBlockSize("raycast", "FrameBlock"), long(sizeof(gpu::FrameBlock)));

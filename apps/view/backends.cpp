@@ -143,8 +143,7 @@ private:
 // tinted and uploaded like CPU frames. Renders synchronously in submit(): never busy.
 class GlBackend final : public ViewBackend {
 public:
-    GlBackend(std::unique_ptr<render::GlRenderer> r, bool outOfCore)
-        : r_(std::move(r)), tintTexture_(makeTexture()), outOfCore_(outOfCore) {}
+    explicit GlBackend(std::unique_ptr<render::GlRenderer> r) : r_(std::move(r)), tintTexture_(makeTexture()) {}
     bool busy() const override { return false; }
     void submit(const Camera& c, const RenderOptions& o, bool full, bool cascadeTint) override {
         Shown s;
@@ -172,7 +171,6 @@ public:
     void wait() override {}
     std::string name() const override { return "GL"; }
     std::string device() const override { return r_->deviceName(); }
-    bool drawsCellOutlines() const override { return !outOfCore_; }
     bool setScene(const render::Scene& scene) override {
         r_->setScene(scene);
         return true;
@@ -181,7 +179,6 @@ public:
 private:
     std::unique_ptr<render::GlRenderer> r_;
     GLuint tintTexture_;
-    bool outOfCore_;
     std::optional<Shown> next_;
 };
 
@@ -192,7 +189,7 @@ std::unique_ptr<ViewBackend> makeCpuBackend(const render::Scene& scene, unsigned
 }
 
 std::unique_ptr<ViewBackend> makeGlBackend(const render::Scene& scene) {
-    return std::make_unique<GlBackend>(render::GlRenderer::inCurrentContext(scene), scene.outOfCore());
+    return std::make_unique<GlBackend>(render::GlRenderer::inCurrentContext(scene));
 }
 
 }  // namespace hc::view

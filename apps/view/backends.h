@@ -38,7 +38,6 @@ public:
     virtual std::string name() const = 0;    // "CPU" | "GL"
     virtual std::string device() const = 0;  // "CPU, 16 threads" | the GL renderer and version
     // Whether it can outline the cells (the GL backend out of core has no cells on the GPU).
-    virtual bool drawsCellOutlines() const { return true; }
     // Renders `scene` from now on (a water step switched), when it can keep its state for it (the GL backend: its
     // compiled shaders, GlRenderer::setScene); false: make a new backend. No frame may be in flight (wait()).
     virtual bool setScene(const render::Scene&) { return false; }

@@ -45,12 +45,6 @@ void Viewer::onKey(int key, int action, int mods) {
             toggles_.water = !toggles_.water, changed(), flash(toggles_.water ? "water on" : "water off");
             break;
         case GLFW_KEY_C:
-            if (!backend_->drawsCellOutlines()) {
-                flash(
-                    "cell outlines need the cells: not on the GL backend out of core (--backend cpu, or an .hci "
-                    "cache)");
-                break;
-            }
             toggles_.cells = !toggles_.cells, changed(),
             flash(toggles_.cells ? "cell outlines on" : "cell outlines off");
             break;

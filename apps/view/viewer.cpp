@@ -31,14 +31,7 @@ Viewer::Viewer(Window& window, cli::LoadedScene& loaded, const cli::RenderSetup&
     step_ = shape.step;
     stepCount_ = shape.stepCount();
     for (const StepInfo& s : shape.steps) stepTimesS_.push_back(s.timeS);
-    toggles_.cells = options_.cellOutlines && backend_->drawsCellOutlines();
-    if (options_.cellOutlines && !toggles_.cells) {
-        const std::string why =
-            "--cells: cell outlines need the cells, not on the GL backend out of core (--backend cpu, or an .hci "
-            "cache)";
-        std::fprintf(stderr, "hc-view: note: %s\n", why.c_str());
-        flash(why);
-    }
+    toggles_.cells = options_.cellOutlines;
     baseWaterMinDepthM_ = options_.waterMinDepthM;
     const auto [fw, fh] = window_.framebufferSize();
     camera_ = cli::initialCamera(setup, *loaded_.scene);
@@ -144,7 +137,7 @@ Camera Viewer::withSize(Camera c) const {
 
 RenderOptions Viewer::currentOptions() const {
     RenderOptions o = options_;
-    o.cellOutlines = toggles_.cells && backend_->drawsCellOutlines();
+    o.cellOutlines = toggles_.cells;
     // Water off: no depth is deep enough to be drawn.
     o.waterMinDepthM = toggles_.water ? baseWaterMinDepthM_ : HUGE_VAL;
     // The tint would colour the legend too, and the legend's colours no longer hold.

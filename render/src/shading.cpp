@@ -116,18 +116,11 @@ std::string label(double v, const std::string& units = "m") {
     return b;
 }
 
-// RenderOptions::colorLayer's ramp (perceptually ordered, dark violet to yellow, as viridis), distinct from the
-// elevation and depth ramps so that a picture never reads as one of those.
-constexpr double kLayerStops[5][4] = {{0.0, 0.267, 0.005, 0.329},
-                                      {0.25, 0.229, 0.322, 0.546},
-                                      {0.5, 0.128, 0.567, 0.551},
-                                      {0.75, 0.369, 0.789, 0.383},
-                                      {1.0, 0.993, 0.906, 0.144}};
-constexpr Ramp kLayerRamp = rampOf(kLayerStops);
+constexpr Ramp kLayerRamp = rampOf(gpu::kLayerRamp);  // RenderOptions::colorLayer's
 static_assert(rampIsValid(kLayerRamp));
 
-// The layer's range over the whole scenario (every step's, from the step table; a static layer's from its
-// values), so that a colour means the same value in every step.
+}  // namespace
+
 std::pair<double, double> layerRange(const Grid& g, const influence::Layer& layer) {
     double lo = HUGE_VAL, hi = -HUGE_VAL;
     if (layer.kind == influence::Layer::WaterCells) {
@@ -142,8 +135,6 @@ std::pair<double, double> layerRange(const Grid& g, const influence::Layer& laye
     return {lo, hi};
 }
 
-// The colour layer (RenderOptions::colorLayer) at every hit it colours: the water's hits for a step layer, the
-// terrain's (not walls) for a static one; NaN elsewhere and where the field is undefined.
 std::vector<float> colorLayerValues(const Scene& scene, const influence::Layer& layer, const RenderOptions& options,
                                     const Frame& f, const std::vector<uint8_t>& isWater) {
     std::vector<float> out(f.distanceM.size(), std::numeric_limits<float>::quiet_NaN());
@@ -158,6 +149,18 @@ std::vector<float> colorLayerValues(const Scene& scene, const influence::Layer& 
         if (v[j]) out[at[j]] = float(*v[j]);
     return out;
 }
+
+double cellOutlineDim(const Scene& scene, const Frame& f, size_t i, double pixelAngle) {
+    if (!std::isfinite(f.distanceM[i]) || f.wall[i] != 0) return 1.0;
+    if (auto cell = scene.cellSquareAt(f.posX[i], f.posY[i])) {
+        const auto q = *cell;
+        const double edge = std::min({f.posX[i] - q.x0, q.x1 - f.posX[i], f.posY[i] - q.y0, q.y1 - f.posY[i]});
+        if (edge < 0.7 * f.distanceM[i] * pixelAngle) return 0.35;
+    }
+    return 1.0;
+}
+
+namespace {
 
 // A colour bar with its range, at the image's right edge.
 void drawLegend(Frame& f, const LegendLayout& l) {
@@ -345,19 +348,9 @@ void shadePixels(const Scene& scene, const RenderOptions& options, const CameraB
                          .layerValues = colorLayer ? layerValues.data() : nullptr,
                          .layerOnWater = colorLayer && colorLayer->kind == influence::Layer::WaterCells,
                          .depthMode = options.color == ColorMode::WaterDepth};
-    // Cell outlines: a hit within 0.7 pixel of its cell's edge is darkened (a scene lookup a pixel, so outside the
-    // vectorised loop: ShadeBlock::dim).
+    // Cell outlines: a scene lookup a pixel, so outside the vectorised loop (ShadeBlock::dim).
     auto outline = [&](size_t i0, size_t n, double* dim) {
-        for (size_t k = 0; k < n; ++k) {
-            const size_t i = i0 + k;
-            dim[k] = 1.0;
-            if (!std::isfinite(f.distanceM[i]) || f.wall[i] != 0) continue;
-            if (auto cell = scene.cellSquareAt(f.posX[i], f.posY[i])) {
-                const auto q = *cell;
-                const double edge = std::min({f.posX[i] - q.x0, q.x1 - f.posX[i], f.posY[i] - q.y0, q.y1 - f.posY[i]});
-                if (edge < 0.7 * f.distanceM[i] * pixelAngle) dim[k] = 0.35;
-            }
-        }
+        for (size_t k = 0; k < n; ++k) dim[k] = cellOutlineDim(scene, f, i0 + k, pixelAngle);
     };
     std::vector<uint64_t> hits(resolveThreads(options.threads), 0);
     parallelFor(size_t(H), 16, options.threads, [&](size_t b, size_t e, unsigned worker) {

@@ -30,14 +30,6 @@ GlOnHand probeHeadlessGl() {
     return gl;
 }
 
-void requireCpu(const std::string& what, Backend requested, BackendDecision& d) {
-    if (!d.useGl) return;
-    if (requested == Backend::Gl)
-        throw Error("--backend gl: " + what + " is drawn by the CPU backend only (use --backend cpu)");
-    d.useGl = false;
-    d.note = what + " is drawn by the CPU backend only: rendering on the CPU";
-}
-
 BackendDecision decideBackend(Backend requested, const GlOnHand& gl) {
     BackendDecision d;
     if (requested == Backend::Cpu) return d;

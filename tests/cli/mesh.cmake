@@ -83,6 +83,16 @@ hc_cli_test(mesh.face_layers 0 [[cells +[0-9]+ \(one per face\), 3 layers: eleva
   --check [["$HC_PROBE" s.hcg --xy 633759,5184153 --layer speed --step 2 2>/dev/null | tail -n 1 | grep -x '633759,5184153,']]
   --check "'$<TARGET_FILE:hc-render>' s.hcg -o c.png --color-by speed --step 2 --size 320x180 --texels 128 --backend cpu > r.txt 2>&1 && '${PNG_CHECK}' c.png"
   -- ${INGEST} fs.nc -o s.hcg --face-layers speed)
+# On the GL backend (llvmpipe here) too: the exact values at the hits come from the CPU, shade.comp colours them (the
+# picture against the CPU's: render_gl_parity_test); the EXR carries the values, and the picture is not the plain one.
+if(HC_WITH_GL)
+  hc_cli_test(render.color_by_gl 0 [[backend +gl \(]]
+    --setup ${SPEED_MESH} --setup [[$HC_INGEST --quiet fs.nc -o s.hcg --face-layers speed]]
+    --exists c.png --exists c.exr --no-match [[error|CPU backend only]]
+    --check "'${PNG_CHECK}' c.png"
+    --check "'$<TARGET_FILE:hc-render>' s.hcg -o p.png --step 2 --size 320x180 --texels 128 --backend gl > p.txt 2>&1 && ! cmp -s c.png p.png"
+    -- ${RENDER} s.hcg -o c.png --exr c.exr --color-by speed --step 2 --size 320x180 --texels 128 --backend gl)
+endif()
 hc_cli_test(render.color_by_unknown_layer nonzero [[^hc-render: error: no layer 'speed' in the grid \(it has: elevation, water_depth, water_surface\)]]
   --setup ${HEF_STEPS} --absent c.png --absent f.hci
   -- ${RENDER} f.hcg -o c.png --color-by speed --backend cpu)
@@ -93,12 +103,15 @@ hc_cli_test(render.color_by_out_of_core_refused nonzero [[^hc-render: error: --c
   --absent c.png
   -- ${RENDER} f.hcg -o c.png --color-by speed --out-of-core)
 
-# The viewer colours by the layer as hc-render does (its CPU backend), the legend in the layer's units.
+# The viewer colours by the layer as hc-render does, on either backend, the legend in the layer's units.
 if(HC_WITH_GL AND HC_XVFB_RUN)
-  hc_cli_test(view.color_by 0 [[backend CPU]]
-    --setup ${SPEED_MESH} --setup [[$HC_INGEST --quiet fs.nc -o s.hcg --face-layers speed]] --exists shot.png --no-match [[error]]
-    --check "'${PNG_CHECK}' shot.png"
-    -- ${HC_XVFB_RUN} -a -s "-screen 0 1280x1024x24" $<TARGET_FILE:hc-view> s.hcg --color-by speed --step 2 --frames 2 --screenshot shot.png --size 480x300 --texels 128)
+  foreach(backend cpu gl)
+    string(TOUPPER ${backend} shown)
+    hc_cli_test(view.color_by_${backend} 0 "backend ${shown}"
+      --setup ${SPEED_MESH} --setup [[$HC_INGEST --quiet fs.nc -o s.hcg --face-layers speed]] --exists shot.png --no-match [[error]]
+      --check "'${PNG_CHECK}' shot.png"
+      -- ${HC_XVFB_RUN} -a -s "-screen 0 1280x1024x24" $<TARGET_FILE:hc-view> s.hcg --color-by speed --step 2 --frames 2 --screenshot shot.png --size 480x300 --texels 128 --backend ${backend})
+  endforeach()
 endif()
 
 # Model results that are no quadtree, end to end: the bundled DEM written by hc-bench-models as a finite-element

@@ -1,13 +1,15 @@
 #version 430
 // render/gl/shaders/shade.comp: shading (docs/design.md section 5 step 5), mirroring the shading loop and
-// drawLegend() of renderFrame() in render/src/shading.cpp: hillshade light from the sun, elevation or
-// water-depth colours, cell outlines, distance fog, the sky, and the legend's colour bar and labels.
+// drawLegend() of renderFrame() in render/src/shading.cpp: hillshade light from the sun, elevation, water-depth or
+// colour-layer colours, cell outlines, distance fog, the sky, and the legend's colour bar and labels. What needs the
+// CPU (a colour layer's exact values, cell outlines out of core) comes per pixel in the overlay (GpuFrame::overlay).
 // Colours are blended in linear light; the sRGB transfer functions use the CPU's 4096-step
 // quantisation of their input so that both backends round to the same 8-bit levels.
 layout(local_size_x = HC_GROUP_2D, local_size_y = HC_GROUP_2D) in;
 
 layout(std430, binding = HC_BIND_PIXELS) readonly buffer PixelBlock { GpuPixel pixels[]; };
 layout(std430, binding = HC_BIND_COUNTERS) buffer CounterBlock { uint counters[]; };
+layout(std430, binding = HC_BIND_OVERLAY) readonly buffer OverlayBlock { GpuOverlay overlay[]; };
 layout(rgba8, binding = HC_IMAGE_COLOR) writeonly uniform image2D image;
 
 float quantised(float c) { return floor(clamp(c, 0.0, 1.0) * 4096.0 + 0.5) / 4096.0; }
@@ -22,18 +24,20 @@ float toSrgb8(float c) {
     return floor(s * 255.0 + 0.5);
 }
 
-// ramp() of shading.cpp over the stops (t, r, g, b) in GpuFrame.
-vec3 elevationColor(float t) {
+// Ramp::at() of shading.cpp over five stops (t, r, g, b), as GpuFrame holds them.
+vec3 rampOf5(const float stops[20], float t) {
     t = clamp(t, 0.0, 1.0);
     for (int i = 1; i < 5; ++i)
-        if (t <= frame.elevationRamp[4 * i]) {
-            const float a = (t - frame.elevationRamp[4 * i - 4]) / (frame.elevationRamp[4 * i] - frame.elevationRamp[4 * i - 4]);
-            const vec3 p = vec3(frame.elevationRamp[4 * i - 3], frame.elevationRamp[4 * i - 2], frame.elevationRamp[4 * i - 1]);
-            const vec3 q = vec3(frame.elevationRamp[4 * i + 1], frame.elevationRamp[4 * i + 2], frame.elevationRamp[4 * i + 3]);
+        if (t <= stops[4 * i]) {
+            const float a = (t - stops[4 * i - 4]) / (stops[4 * i] - stops[4 * i - 4]);
+            const vec3 p = vec3(stops[4 * i - 3], stops[4 * i - 2], stops[4 * i - 1]);
+            const vec3 q = vec3(stops[4 * i + 1], stops[4 * i + 2], stops[4 * i + 3]);
             return p + a * (q - p);
         }
-    return vec3(frame.elevationRamp[17], frame.elevationRamp[18], frame.elevationRamp[19]);
+    return vec3(stops[17], stops[18], stops[19]);
 }
+vec3 elevationColor(float t) { return rampOf5(frame.elevationRamp, t); }
+vec3 layerColor(float t) { return rampOf5(frame.layerRamp, t); }
 vec3 depthColor(float t) {
     t = clamp(t, 0.0, 1.0);
     for (int i = 1; i < 3; ++i)
@@ -61,7 +65,8 @@ bool labelPixel(int px, int py, int x, int y, bool hi) {
 void main() {
     const uint px = gl_GlobalInvocationID.x, py = gl_GlobalInvocationID.y;
     if (px >= uint(frame.width) || py >= uint(frame.height)) return;
-    const GpuPixel p = pixels[py * uint(frame.width) + px];
+    const uint i = py * uint(frame.width) + px;
+    const GpuPixel p = pixels[i];
     const vec3 d = rayDirection(px, py);
     const float up = clamp(d.z, 0.0, 1.0);
     const vec3 horizon = vec3(frame.skyHorizon[0], frame.skyHorizon[1], frame.skyHorizon[2]);
@@ -74,8 +79,13 @@ void main() {
         const float light = 0.3 + 0.7 * max(0.0, dot(vec3(p.nx, p.ny, p.nz), sun));
         vec3 base;
         const float posZ = frame.eyeZ + p.relZ;
-        if (p.wall != 0)
+        const bool layered = (frame.overlay & 1) != 0;  // the priorities of shadeBlock(): wall, layer, dry under a water
+        if (p.wall != 0)                                 // layer, water depth, dry (depth mode), elevation
             base = vec3(frame.wallColor[0], frame.wallColor[1], frame.wallColor[2]);
+        else if (layered && overlay[i].valued != 0)
+            base = layerColor((overlay[i].layer - frame.layerLo) / frame.layerRange);
+        else if (layered && frame.layerOnWater != 0 && p.water == 0)
+            base = vec3(frame.dryColor[0], frame.dryColor[1], frame.dryColor[2]);
         else if (p.water != 0)
             base = depthColor(p.depth / frame.dRange);
         else if (frame.colorMode == 1)
@@ -83,7 +93,9 @@ void main() {
         else
             base = elevationColor((posZ - frame.elevationMin) / frame.zRange);
         c = toLinear(base) * light;
-        if (frame.cellOutlines != 0 && p.wall == 0) {
+        if ((frame.overlay & 2) != 0) {
+            c *= overlay[i].dim;  // out of core: from the cells around the hit, on the CPU
+        } else if (frame.cellOutlines != 0 && p.wall == 0) {
             // The hit position rounded to float as the CPU's Frame holds it, then located in double.
             const double x = double(float(frame.eyeX + double(p.relX))), y = double(float(frame.eyeY + double(p.relY)));
             const int k = locateCell(x, y);
@@ -106,7 +118,7 @@ void main() {
         const int bx = x - frame.legendX0, by = y - frame.legendY0;
         if (bx >= 0 && by >= 0 && bx < frame.legendBarW && by < frame.legendBarH) {
             const float t = 1.0 - float(by) / float(frame.legendBarH - 1);
-            rgb = floor((frame.legendRamp == 1 ? depthColor(t) : elevationColor(t)) * 255.0);
+            rgb = floor((frame.legendRamp == 1 ? depthColor(t) : frame.legendRamp == 3 ? layerColor(t) : elevationColor(t)) * 255.0);
         }
         const int lx = frame.legendX0 + frame.legendBarW + 2 * frame.legendScale;
         if (labelPixel(x, y, lx, frame.legendY0, true) ||

@@ -101,8 +101,9 @@ void GlRenderer::Impl::release() {
     for (GLuint p : {approximate, assemble, atlas, interpolate, beams, mipmap, raycast, shade})
         if (p) glDeleteProgram(p);
     approximate = assemble = atlas = interpolate = beams = mipmap = raycast = shade = 0;
-    for (Buffer* b : {&frameBuf, &cellsBuf, &keysBuf, &visibleBuf, &heightsBuf, &pixelsBuf, &countersBuf, &readbackBuf,
-                      &lastHeightsBuf, &fillRowsBuf, &fillTexelsBuf, &beamsBuf, &atlasTilesBuf, &atlasBlocksBuf})
+    for (Buffer* b :
+         {&frameBuf, &cellsBuf, &keysBuf, &visibleBuf, &heightsBuf, &pixelsBuf, &countersBuf, &readbackBuf,
+          &lastHeightsBuf, &fillRowsBuf, &fillTexelsBuf, &beamsBuf, &atlasTilesBuf, &atlasBlocksBuf, &overlayBuf})
         b->release();
     terrainAtlas.release(), waterAtlas.release();
     for (Buffer& b : indexBufs) b.release();
@@ -128,7 +129,7 @@ void GlRenderer::Impl::uploadScene() {
         throw Error("the GL backend needs " + std::to_string(HC_BIND_LAST + 1) + " shader storage buffer bindings; " +
                     device + " has " + std::to_string(bindings) + ": use --backend cpu");
     for (Buffer* b : {&lastHeightsBuf, &fillRowsBuf, &fillTexelsBuf, &beamsBuf, &atlasTilesBuf, &atlasBlocksBuf,
-                      &terrainAtlas.buffer, &waterAtlas.buffer})
+                      &terrainAtlas.buffer, &waterAtlas.buffer, &overlayBuf})
         b->reserve(16);
     frameBuf.reserve(sizeof(gpu::FrameBlock));
     countersBuf.reserve(sizeof(uint32_t) * gpu::kCounterSlots * (gpu::kMaxCascades + 1));
@@ -225,7 +226,7 @@ void GlRenderer::Impl::fillFrame(gpu::GpuFrame& f, const CascadeFit& fit, const 
     f.cellOutlines = options.cellOutlines ? 1 : 0;
     const detail::LegendLayout legend = detail::legendLayout(*scene, options, camera.width, camera.height);
     if (legend.shown) {
-        f.legendRamp = legend.depth ? 1 : 2;
+        f.legendRamp = legend.layer ? 3 : legend.depth ? 1 : 2;
         f.legendX0 = legend.x0, f.legendY0 = legend.y0, f.legendBarW = legend.barW, f.legendBarH = legend.barH;
         f.legendScale = legend.scale;
         f.labelHiLen = int(std::min<size_t>(legend.hi.size(), gpu::kMaxLabelChars));
@@ -237,6 +238,15 @@ void GlRenderer::Impl::fillFrame(gpu::GpuFrame& f, const CascadeFit& fit, const 
         for (int c = 0; c < 4; ++c) f.elevationRamp[4 * i + c] = float(gpu::kElevationRamp[i][c]);
     for (int i = 0; i < 3; ++i)
         for (int c = 0; c < 4; ++c) f.depthRamp[4 * i + c] = float(gpu::kDepthRamp[i][c]);
+    for (int i = 0; i < 5; ++i)
+        for (int c = 0; c < 4; ++c) f.layerRamp[4 * i + c] = float(gpu::kLayerRamp[i][c]);
+    f.overlay = overlayBits(options);
+    if (!options.colorLayer.empty()) {  // the ramp's range and what it colours, as renderFrame()'s shading
+        const influence::Layer layer = influence::Layer::byName(scene->grid(), options.colorLayer);
+        const auto [lo, hi] = detail::layerRange(scene->grid(), layer);
+        f.layerLo = float(lo), f.layerRange = float(std::max(hi - lo, 1e-12));
+        f.layerOnWater = layer.kind == influence::Layer::WaterCells ? 1 : 0;
+    }
     for (int c = 0; c < 3; ++c) {
         f.skyHorizon[c] = float(gpu::kSkyHorizon[c]);
         f.skyZenith[c] = float(gpu::kSkyZenith[c]);
@@ -327,14 +337,10 @@ void GlRenderer::Impl::uploadFrame(gpu::FrameBlock& block, const CascadeFit& fit
 CascadeFit GlRenderer::Impl::runFrame(const Camera& camera, const RenderOptions& options, Timings& timings) {
     camera.validate();
     if (std::string why = options.validate(); !why.empty()) throw Error(why);
-    if (!options.colorLayer.empty())  // the tools choose the CPU backend for it (backend_choice.h)
-        throw Error("colouring by a layer (" + options.colorLayer + ") is the CPU backend's: use --backend cpu");
-    if (cpuCascades && options.cellOutlines)
-        throw Error(
-            "cell outlines with the GL backend need the grid's cells on the GPU; this scene is read out of core (" +
-            scene->file()->path() +
-            "): use --backend cpu, or give the grid an influence cache (hc-influence) to keep it in memory");
+    if (!options.colorLayer.empty())  // before any work: the layer exists
+        influence::Layer::byName(scene->grid(), options.colorLayer);
     if (headless) headless->makeCurrent();
+    layerValues.clear(), layerName.clear();
     const Stopwatch frameClock;
     timings = Timings{};
     setup = detail::setUpFrame(*scene, camera);
@@ -376,8 +382,9 @@ CascadeFit GlRenderer::Impl::runFrame(const Camera& camera, const RenderOptions&
         }
     }
     dispatchPerPixel(raycast, camera);
-    glMemoryBarrier(GL_SHADER_STORAGE_BARRIER_BIT);
+    glMemoryBarrier(GL_SHADER_STORAGE_BARRIER_BIT | GL_BUFFER_UPDATE_BARRIER_BIT);
     timeStamp(stamp++, frameClock);
+    if (const int bits = overlayBits(options)) fillOverlay(camera, options, bits);  // counted in the shading's time
     dispatchPerPixel(shade, camera);
     timeStamp(stamp++, frameClock);
     // The picture is read as a texture (a viewer) or back (render()); the counters and rays back.
@@ -428,15 +435,7 @@ Frame GlRenderer::Impl::readBack(const Camera& camera, Timings& timings, ReadBac
     for (auto* v : {&f.distanceM, &f.posX, &f.posY, &f.posZ, &f.nX, &f.nY, &f.nZ, &f.waterDepthM, &f.cascade, &f.wall})
         v->resize(pixels);
     f.rgb.resize(pixels * 3);
-    const size_t rayBytes = pixels * sizeof(gpu::GpuPixel);
-    readbackBuf.reserve(rayBytes);
-    glBindBuffer(GL_COPY_READ_BUFFER, pixelsBuf.name);
-    glBindBuffer(GL_COPY_WRITE_BUFFER, readbackBuf.name);
-    glCopyBufferSubData(GL_COPY_READ_BUFFER, GL_COPY_WRITE_BUFFER, 0, 0, GLsizeiptr(rayBytes));
-    glBindBuffer(GL_SHADER_STORAGE_BUFFER, readbackBuf.name);
-    const auto* px = static_cast<const gpu::GpuPixel*>(
-        glMapBufferRange(GL_SHADER_STORAGE_BUFFER, 0, GLsizeiptr(rayBytes), GL_MAP_READ_BIT));
-    if (!px) throw Error("the GL backend cannot map its rays for reading on " + device);
+    const gpu::GpuPixel* px = mapRays(pixels);
     const float inf = std::numeric_limits<float>::infinity();
     parallelFor(size_t(H), 16, 0, [&](size_t rowBegin, size_t rowEnd, unsigned) {
         for (size_t row = rowBegin; row < rowEnd; ++row)
@@ -465,6 +464,7 @@ Frame GlRenderer::Impl::readBack(const Camera& camera, Timings& timings, ReadBac
             }
     });
     glUnmapBuffer(GL_SHADER_STORAGE_BUFFER);
+    if (!layerName.empty()) f.colorLayer = layerName, f.colorLayerValue = layerValues;  // as renderFrame() gives them
     detail::frameToWorldAxes(scene->grid(), f);
     timings.readbackMs = clock.milliseconds();
     timings.totalMs += timings.readbackMs;

@@ -39,6 +39,7 @@ void GlRenderer::Impl::bindFrame() const {
     pixelsBuf.bind(HC_BIND_PIXELS);
     beamsBuf.bind(HC_BIND_BEAMS);
     countersBuf.bind(HC_BIND_COUNTERS);
+    overlayBuf.bind(HC_BIND_OVERLAY);
     glBindImageTexture(HC_IMAGE_COLOR, colorTex, 0, GL_FALSE, 0, GL_WRITE_ONLY, GL_RGBA8);
 }
 

@@ -169,6 +169,18 @@ struct GlRenderer::Impl {
     GLuint program(const std::string& name) const;
     Frame readBack(const Camera& camera, Timings& timings, ReadBack what);
 
+    // backend_overlay.cpp: what the CPU computes from the hits for shade.comp (GpuFrame::overlay): the colour layer's
+    // values and, out of core, the cell outlines' factors; the layer's values kept for readBack
+    // (Frame::colorLayerValue).
+    Buffer overlayBuf;
+    std::vector<float> layerValues;
+    std::string layerName;
+    int overlayBits(const RenderOptions& options) const;  // GpuFrame::overlay's bits for these options
+    // The rays copied on the GPU into readbackBuf and mapped for reading (bound as GL_SHADER_STORAGE_BUFFER): unmap
+    // after reading.
+    const gpu::GpuPixel* mapRays(size_t pixels);
+    void fillOverlay(const Camera& camera, const RenderOptions& options, int bits);
+
     // backend_cpu_fill.cpp: stage 2's plan on the CPU (in memory), or its texels evaluated there (out of core), with
     // each cascade's rows into fillRowsBuf and fillTexelsBuf for assemble.comp.
     size_t addRows(size_t k, const detail::CascadeFill& fill, size_t packed);

@@ -47,8 +47,11 @@ using uint = std::uint32_t;
 #define HC_BIND_ATLAS_TILES 17    // uvec4 per tile to copy from (atlas.comp)
 #define HC_BIND_ATLAS_BLOCKS \
     18  // uint[kAtlasBlockUints per block]: texels to interpolate from level 0's tiles (interpolate.comp)
-#define HC_BIND_LAST 18   // the highest binding
-#define HC_IMAGE_COLOR 0  // rgba8 image unit of the shaded picture (row 0 at the bottom)
+// Values the CPU computes from a frame's hits before shading (GpuFrame::overlay): --color-by, cell outlines out of
+// core.
+#define HC_BIND_OVERLAY 19  // GpuOverlay[width * height], row 0 at the top
+#define HC_BIND_LAST 19     // the highest binding
+#define HC_IMAGE_COLOR 0    // rgba8 image unit of the shaded picture (row 0 at the bottom)
 
 // Work-group sizes (macros: they go into layout(local_size_x = ...)).
 #define HC_GROUP_2D 8
@@ -131,7 +134,7 @@ struct GpuFrame {
     float pixelAngle;  // vertical angle of one pixel at the image centre [rad]
     int colorMode;     // 0 elevation, 1 water depth (ColorMode)
     int cellOutlines;
-    int legendRamp;  // 0 none, 1 water depth, 2 elevation
+    int legendRamp;  // 0 none, 1 water depth, 2 elevation, 3 the colour layer
     int legendX0;    // colour bar's top-left pixel (row 0 at the top), size and label scale
     int legendY0;
     int legendBarW;
@@ -149,7 +152,12 @@ struct GpuFrame {
     float zFloor;        // the terrain block's bottom: the grid's lowest elevation, local z [m] (RayContext::zFloor)
     float wallColor[3];  // kWallColor, sRGB
     int beamTile;        // raycast.comp's beams: tiles of beamTile^2 pixels, 0 or 1 none (RenderOptions::beamTilePx)
-    int pad[3];          // FrameBlock to a multiple of 16 bytes, to which Mesa rounds a buffer block's size
+    int overlay;         // what HC_BIND_OVERLAY holds: bit 1 the colour layer's values, bit 2 the outlines' factors
+    float layerLo;       // the colour layer's ramp: value at 0 and range (RenderOptions::colorLayer)
+    float layerRange;
+    int layerOnWater;        // the colour layer is a water layer: dry terrain in the dry colour
+    float layerRamp[5 * 4];  // stops (t, r, g, b), sRGB
+    int pad[3];              // FrameBlock to a multiple of 16 bytes, to which Mesa rounds a buffer block's size
 };
 
 // One pixel's ray-cast result, row 0 at the top (Frame's layout).
@@ -167,6 +175,13 @@ struct GpuPixel {
     int wall;     // 1 for a hit on a cut face of the terrain block (Frame::wall)
 };
 
+// What the CPU computed at one pixel's hit for the shading (GL backend; shading.cpp computes the same on the CPU).
+struct GpuOverlay {
+    float layer;  // the colour layer's value (where `valued`)
+    float dim;    // the cell outline's factor: 1, or 0.35 on an edge
+    int valued;   // 1 where the colour layer colours the hit
+};
+
 #ifdef __cplusplus
 // Shading constants both backends use (shading.cpp and shade.comp through GpuFrame).
 // Colour ramps: stops (t, r, g, b), sRGB.
@@ -176,6 +191,13 @@ inline constexpr double kElevationRamp[5][4] = {{0.0, 0.24, 0.47, 0.24},
                                                 {0.8, 0.6, 0.6, 0.6},
                                                 {1.0, 0.98, 0.98, 0.98}};
 inline constexpr double kDepthRamp[3][4] = {{0.0, 0.6, 0.87, 0.95}, {0.5, 0.16, 0.47, 0.8}, {1.0, 0.04, 0.12, 0.45}};
+// RenderOptions::colorLayer's ramp (perceptually ordered, dark violet to yellow, as viridis), distinct from the
+// elevation and depth ramps so that a picture never reads as one of those.
+inline constexpr double kLayerRamp[5][4] = {{0.0, 0.267, 0.005, 0.329},
+                                            {0.25, 0.229, 0.322, 0.546},
+                                            {0.5, 0.128, 0.567, 0.551},
+                                            {0.75, 0.369, 0.789, 0.383},
+                                            {1.0, 0.993, 0.906, 0.144}};
 inline constexpr double kDryColor[3] = {0.7, 0.7, 0.68};  // terrain under ColorMode::WaterDepth
 // The cut faces of the terrain block (walls at hole and domain edges, the bottom: Frame::wall), in either colour
 // mode: a soil brown darker and redder than every elevation ramp stop, so a wall never reads as terrain.

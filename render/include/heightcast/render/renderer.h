@@ -45,7 +45,8 @@ struct RenderOptions {
     // Colour by this grid layer instead ("" = by `color`): a further step layer (velocity, ...: a field of the wet
     // cells, influence::Layer::WaterCells) colours the water and leaves dry terrain grey; a static layer colours the
     // terrain. Each hit's value is the exact evaluator's at the hit (in memory only: the scene needs its lists), on
-    // a ramp over the layer's range in every step, with a legend in the layer's units. CPU backend only.
+    // a ramp over the layer's range in every step, with a legend in the layer's units. Both backends (GL: the values
+    // from the CPU).
     std::string colorLayer;
     // Both backends: the rays of each tile of beamTilePx x beamTilePx pixels start their walks where a march of the
     // tile's beam over the max mipmaps shows none of them can hit before (the same hits; the tiles' marches start from

@@ -28,8 +28,5 @@ struct BackendDecision {
 };
 // The rule above. Throws hc::Error("--backend gl: <why>") when gl was asked for and `gl.unavailable` is not empty.
 BackendDecision decideBackend(Backend requested, const GlOnHand& gl);
-// What only the CPU backend does (`what`, e.g. "--color-by velocity") moves a GL decision to the CPU with a note under
-// auto; throws hc::Error("--backend gl: ...") when gl was asked for.
-void requireCpu(const std::string& what, Backend requested, BackendDecision& decision);
 
 }  // namespace hc::cli

@@ -354,4 +354,18 @@ struct LegendLayout {
 };
 LegendLayout legendLayout(const Scene& scene, const RenderOptions& options, int width, int height);
 
+// What shading computes from a frame's hits on the CPU, on either backend (the GL one uploads it for shade.comp).
+
+// The colour layer's range over the whole scenario (every step's, from the step table; a static layer's from its
+// values), so that a colour means the same value in every step.
+std::pair<double, double> layerRange(const Grid& g, const influence::Layer& layer);
+// The colour layer (RenderOptions::colorLayer) at every hit it colours (f's distanceM, wall, posX, posY, local axes):
+// the water's hits (isWater) for a step layer, the terrain's (not walls) for a static one; NaN elsewhere and where the
+// field is undefined. One batch through the exact evaluator.
+std::vector<float> colorLayerValues(const Scene& scene, const influence::Layer& layer, const RenderOptions& options,
+                                    const Frame& f, const std::vector<uint8_t>& isWater);
+// The cell outline's factor at pixel i (RenderOptions::cellOutlines): 0.35 where the hit lies within 0.7 pixel
+// (pixelAngle [rad] at its distance) of its cell's edge, else 1.
+double cellOutlineDim(const Scene& scene, const Frame& f, size_t i, double pixelAngle);
+
 }  // namespace hc::render::detail

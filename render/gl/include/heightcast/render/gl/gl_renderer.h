@@ -10,7 +10,8 @@
 // frame newly sees are evaluated on the CPU exactly as renderFrame() evaluates them (copies and interpolations from the
 // surface pyramid, kernel sums from the cells around the rest) and uploaded; a compute shader places them beside the
 // texels kept from the last frame, and the mipmaps, ray casting and shading follow. Cell outlines
-// (RenderOptions::cellOutlines) need the cells on the GPU and are refused there.
+// (RenderOptions::cellOutlines) are looked up on the CPU there, as a colour layer's values are on either path
+// (backend_overlay.cpp): the rays are read back after the ray casting and shade.comp gets a value a pixel.
 //
 // No GL type appears here: the GL state lives behind the pimpl in render/gl/src/. A build without OpenGL
 // (-DHC_WITH_GL=OFF) has this API too, from src/unavailable.cpp: headlessGlUnavailable() says the backend was
