@@ -3,6 +3,7 @@
 // The image comes from a render backend (view/backends.h: the CPU one on a worker thread, or the GL one in the
 // window's context), chosen by the rule hc-render follows (backend_choice.h) from what the window's context
 // offers; the Viewer (view/viewer.h) draws it with a HUD over it and flies the camera.
+#include <cctype>
 #include <cstdio>
 #include <cstdlib>
 #include <memory>
@@ -24,6 +25,7 @@ struct ViewArgs {
     std::string gridPath, screenshot;
     hc::cli::Backend backend = hc::cli::Backend::Auto;
     int frames = 0;     // 0: interactive
+    std::string keys;   // --keys: pressed one before each scripted frame
     bool play = false;  // --play: scripted frames step through the water steps
     hc::cli::RenderSetup setup{"1280x720"};
 };
@@ -60,12 +62,23 @@ bool parseOptions(int argc, char** argv, ViewArgs& a) {
            "with --frames: each frame after the first shows the next water step (playback, wrapping around); the last\n"
            "      frame's switch time is printed",
            a.play);
+    p.option("--keys", "KEYS",
+             "with --frames: press these keys in turn, one before each frame, as in the window (letters, digits,\n"
+             "      space; e.g. NBB sets an error budget of 1 px and halves it twice) (default none)",
+             a.keys);
     if (!p.parse(argc, argv)) return false;
     a.setup.finish();
     a.backend = hc::cli::parseBackend(backendText);
     if (a.frames < 0 || a.frames > 100000)
         throw hc::Error("--frames " + std::to_string(a.frames) + " is outside 0..100000");
     if (a.play && a.frames == 0) throw hc::Error("--play needs --frames N (interactively, Space plays the steps)");
+    if (!a.keys.empty() && a.frames == 0) throw hc::Error("--keys needs --frames N (interactively, press them)");
+    for (const char c : a.keys)
+        if (!std::isalnum(static_cast<unsigned char>(c)) && c != ' ')
+            throw hc::Error(std::string("--keys: '") + c + "' is not a letter, a digit or a space");
+    if (a.keys.size() > size_t(a.frames))
+        throw hc::Error("--keys: " + std::to_string(a.keys.size()) + " keys for " + std::to_string(a.frames) +
+                        " frames (one a frame)");
     if (!a.screenshot.empty()) {
         if (a.frames == 0) throw hc::Error("--screenshot needs --frames N (the number of frames to render first)");
         hc::cli::checkWritable(a.screenshot, "screenshot");
@@ -167,7 +180,7 @@ int main(int argc, char** argv) {
             viewer.run();
             return 0;
         }
-        viewer.runScripted(a.frames, a.screenshot, a.play);
+        viewer.runScripted(a.frames, a.screenshot, a.play, a.keys);
         printSummary(a, viewer);
         return 0;
     });

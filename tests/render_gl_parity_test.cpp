@@ -1,7 +1,7 @@
 // The GL backend at parity with the CPU one where shading needs what the CPU computes from each hit (GpuFrame::overlay,
-// render/gl/src/backend_overlay.cpp): colouring by a further layer (--color-by: the exact evaluator's value at the hit),
-// a static layer on the terrain and a water layer on a flood, and cell outlines out of core (the cell around each hit
-// read from the file). Each GL frame against the CPU's of the same scene and camera: the same hits and picture as
+// render/gl/src/backend_overlay.cpp): colouring by a further layer (--color-by: the exact evaluator's value at the
+// hit), a static layer on the terrain and a water layer on a flood, and cell outlines out of core (the cell around each
+// hit read from the file). Each GL frame against the CPU's of the same scene and camera: the same hits and picture as
 // every GL test holds them (render_gl_world.h), the same layer values where both colour, and a picture that the
 // overlay changed. Headless as render_gl_test.cpp (HC_GL_TESTS=skip where no OpenGL 4.3 is expected).
 #include <map>
@@ -104,9 +104,10 @@ void expectColouredAsOnTheCpu(World& w, const Camera& cam, const std::string& la
     const auto [lo, hi] = detail::layerRange(w.grid, hc::influence::Layer::byName(w.grid, layer));
     ASSERT_GT(hi, lo) << name;
     const LayerAgreement a = compareLayerValues(cpu, gl, 0.01 * (hi - lo));
-    std::printf("[ %s ] %zu pixels coloured by %s on either backend, %zu on both, %zu of those within 1 %% of its "
-                "range\n",
-                name.c_str(), a.either, layer.c_str(), a.both, a.within);
+    std::printf(
+        "[ %s ] %zu pixels coloured by %s on either backend, %zu on both, %zu of those within 1 %% of its "
+        "range\n",
+        name.c_str(), a.either, layer.c_str(), a.both, a.within);
     EXPECT_GT(a.both, cpu.colorLayerValue.size() / 20) << name << ": the layer colours a part of the picture";
     EXPECT_GE(double(a.both), 0.995 * double(a.either)) << name << ": the same pixels coloured";
     EXPECT_GE(double(a.within), 0.995 * double(a.both)) << name << ": the same values";

@@ -2,6 +2,7 @@
 #include "view/viewer.h"
 
 #include <algorithm>
+#include <cctype>
 #include <cmath>
 #include <cstdio>
 
@@ -68,10 +69,12 @@ void Viewer::run() {
     }
 }
 
-void Viewer::runScripted(int frames, const std::string& screenshot, bool play) {
+void Viewer::runScripted(int frames, const std::string& screenshot, bool play, const std::string& keys) {
     const Camera end = camera_;
     for (int i = 0; i < frames && !window_.shouldClose(); ++i) {
         const int left = frames - 1 - i;
+        if (size_t(i) < keys.size())  // GLFW's codes of letters, digits and space are their upper-case ASCII codes
+            onKey(std::toupper(static_cast<unsigned char>(keys[size_t(i)])), GLFW_PRESS, 0);
         if (play && i > 0 && stepCount_ > 1) showStep((step_ + 1) % stepCount_);
         camera_ = end;
         if (left > 0) {  // approach the final view: turned a little and further back

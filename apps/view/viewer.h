@@ -40,7 +40,8 @@ public:
     // Scripted: `frames` frames of a small motion that ends at the initial camera (rendered at full
     // resolution), then, unless `screenshot` is "", the window's contents as a PNG there. `play`: each frame after
     // the first shows the next water step (wrapping around), as playback does.
-    void runScripted(int frames, const std::string& screenshot, bool play = false);
+    // `keys`: pressed in turn, one before each frame ('A'..'Z', '0'..'9', ' ': the window's keys, without modifiers).
+    void runScripted(int frames, const std::string& screenshot, bool play = false, const std::string& keys = "");
 
     // Water steps (docs/design.md section 6): the one shown, how many, and how long the last switch took [ms] (reading
     // the step, its pyramid, the new scene and backend; the frame after it is timed as any frame).
