@@ -1,6 +1,6 @@
-// The .hcg format's blocks, steps and parts: a flipped byte caught by reading its block alone, the stored summary against
-// a full pass, water steps read one at a time and checked when read, and a file written by parts (mpirun's ranks) the
-// same bytes as one written whole. Shared with grid_file_test.cpp: grid_file_world.h.
+// The .hcg format's blocks, steps and parts: a flipped byte caught by reading its block alone, the stored summary
+// against a full pass, water steps read one at a time and checked when read, and a file written by parts (mpirun's
+// ranks) the same bytes as one written whole. Shared with grid_file_test.cpp: grid_file_world.h.
 #include <gtest/gtest.h>
 
 #include <algorithm>

@@ -131,5 +131,4 @@ inline void fixAllChecksums(std::vector<char>& b) {
     fixHeaderCrc(b);
 }
 
-
 }  // namespace hc::test::gridfile

@@ -1,6 +1,6 @@
-// Ingest's silent-wrong-grid checks on real rasters (issue 11): a Float64 source checked in its own precision, the exact
-// transformer under --t_srs, infinite pixels counted, the source check against an independent one and against PROJ for
-// geographic input, and a global grid keeping every pixel. Shared with ingest_test.cpp: ingest_world.h.
+// Ingest's silent-wrong-grid checks on real rasters (issue 11): a Float64 source checked in its own precision, the
+// exact transformer under --t_srs, infinite pixels counted, the source check against an independent one and against
+// PROJ for geographic input, and a global grid keeping every pixel. Shared with ingest_test.cpp: ingest_world.h.
 #include <gtest/gtest.h>
 
 #include <cmath>

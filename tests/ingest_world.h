@@ -1,6 +1,6 @@
 // tests/ingest_world.h: what the ingest tests on real rasters share (ingest_test.cpp, ingest_checks_test.cpp): pixel
-// centres in a grid's frame, the tolerance guarantee checked pixel by pixel, a raster loaded as ingest reads it, and our
-// reading compared with GDAL's own read and with PROJ.
+// centres in a grid's frame, the tolerance guarantee checked pixel by pixel, a raster loaded as ingest reads it, and
+// our reading compared with GDAL's own read and with PROJ.
 #pragma once
 
 #include <gtest/gtest.h>

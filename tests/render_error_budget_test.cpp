@@ -5,11 +5,13 @@
 
 #include <cmath>
 #include <cstdio>
+#include <random>
 #include <string>
 #include <vector>
 
 #include "heightcast/influence/pyramid.h"
 #include "heightcast/render/cascades.h"
+#include "heightcast/render/detail/frame.h"
 #include "heightcast/render/renderer.h"
 #include "render_world.h"
 
@@ -106,6 +108,80 @@ TEST_P(ErrorBudget, VerifiedErrorLiesUnderTheBoundAndTheBudget) {
         if (c.errorBoundM <= c.budgetM) {
             EXPECT_LE(c.errorBoundPx, 1.0 + 1e-9);
         }
+}
+
+// The errors per region: over the whole domain exactly the whole pyramid's (bilinearErrorByLevelM), over any part of it
+// no more at any level, and over some parts less (the regions differ: a view of one part is not charged with the
+// roughest tile elsewhere).
+TEST_P(ErrorBudget, RegionalErrorsAreTheWholeOnesOverTheDomainAndLessOverParts) {
+    World& w = world();
+    const influence::SurfacePyramid pyramid = influence::buildSurfacePyramid(w.grid, w.lists.params());
+    const double domain = w.grid.domainSizeM();
+    const influence::RegionalLevelErrors regional(pyramid, influence::PyramidChannel::Elevation);
+    EXPECT_EQ(regional.byLevelM(0, 0, domain, domain),
+              influence::bilinearErrorByLevelM(pyramid, influence::PyramidChannel::Elevation));
+    const Scene scene(w.grid, w.lists, &pyramid);
+    const std::vector<double>& whole = scene.levelErrorM();
+    ASSERT_EQ(scene.levelErrorM(0, 0, domain, domain), whole);
+    int less = 0;
+    for (int j = 0; j < 4; ++j)
+        for (int i = 0; i < 4; ++i) {
+            const double q = domain / 4;
+            const std::vector<double> part = scene.levelErrorM(i * q, j * q, (i + 1) * q, (j + 1) * q);
+            ASSERT_EQ(part.size(), whole.size());
+            for (size_t t = 0; t < whole.size(); ++t) {
+                EXPECT_LE(part[t], whole[t]) << "level " << t << ", part " << i << ", " << j;
+                less += part[t] < whole[t];
+            }
+        }
+    EXPECT_GT(less, 0) << "every part of the domain carries the whole domain's error at every level";
+}
+
+// Cascades charged with their own ground's error: from cameras over parts of the domain, under budgets, every frame's
+// measured error still lies under its bound, and the cascades near the camera (over a part of the domain) get a bound
+// of their own, below the whole domain's at their spacing somewhere.
+TEST_P(ErrorBudget, RegionalBoundHoldsFromCamerasOverPartsOfTheDomain) {
+    World& w = world();
+    const influence::SurfacePyramid pyramid = influence::buildSurfacePyramid(w.grid, w.lists.params());
+    const Scene scene(w.grid, w.lists, &pyramid);
+    std::mt19937_64 rng(43);
+    int lower = 0, frames = 0, cascades = 0;
+    double smallest = 1;  // the least ratio of a cascade's error at its spacing to the whole domain's
+    for (int k = 0; k < 12; ++k) {
+        Camera cam = randomCamera(w, rng);
+        cam.width = 160, cam.height = 100;
+        for (const double budget : {0.0, 0.1, 2.0}) {
+            RenderOptions o;
+            o.legend = false;
+            o.texelsPerSide = 256;
+            o.maxErrorM = budget;
+            Timings t;
+            const render::Frame f = render::renderFrame(scene, cam, o, t);
+            if (!std::isfinite(t.errorBoundM)) continue;
+            const ErrorCheck check = render::verifyFrameError(scene, cam, f, kChecked);
+            if (check.hits == 0) continue;
+            ++frames;
+            EXPECT_LE(check.maxM, t.errorBoundM + kFloatPositionM)
+                << "camera " << k << ", budget " << budget << " m: median " << check.medianM;
+            const render::CascadeFit fit =
+                render::detail::fitFrame(scene, cam, render::detail::setUpFrame(scene, cam), o, t);
+            for (const render::Cascade& c : fit.cascades) {
+                if (c.empty()) continue;
+                const int level = int(std::ceil(std::log2(c.texelM / w.grid.finestCellM) - 1e-9));
+                const double own = render::levelErrorM(c.levelErrorM, level),
+                             whole = render::levelErrorM(scene.levelErrorM(), level);
+                EXPECT_LE(own, whole);
+                lower += own < whole, ++cascades;
+                smallest = std::min(smallest, own / whole);
+            }
+        }
+    }
+    std::printf(
+        "%s: %d frames checked; %d of %d cascades carry less than the whole domain's error at their spacing "
+        "(down to %.3g of it)\n",
+        GetParam().c_str(), frames, lower, cascades, smallest);
+    EXPECT_GT(frames, 18);
+    EXPECT_GT(lower, 0) << "no cascade's ground carried less than the whole domain's error";
 }
 
 INSTANTIATE_TEST_SUITE_P(RealDems, ErrorBudget, ::testing::Values("hef", "lidar"));

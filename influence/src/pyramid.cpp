@@ -512,21 +512,4 @@ SurfacePyramid waterPyramidOf(const SurfacePyramid& whole) {
     return p;
 }
 
-std::vector<double> bilinearErrorByLevelM(const SurfacePyramid& pyramid, PyramidChannel c) {
-    const int k = pyramid.channelIndex(c);
-    if (k < 0 || pyramid.levels.empty()) return {};
-    std::vector<double> parentMax(pyramid.levels.size(), 0.0);
-    for (size_t t = 0; t < pyramid.levels.size(); ++t) {
-        const SurfacePyramid::Level& L = pyramid.levels[t];
-        for (size_t tile = 0; tile < L.tileCount(); ++tile) {
-            const float e = L.parentErrorM[tile * size_t(pyramid.channels) + size_t(k)];
-            if (std::isfinite(e)) parentMax[t] = std::max(parentMax[t], double(e));
-        }
-    }
-    std::vector<double> bound(pyramid.levels.size());
-    double chain = 0.5 * parentMax[0];
-    for (size_t t = 0; t < bound.size(); ++t) bound[t] = chain += t > 0 ? parentMax[t - 1] : 0.0;
-    return bound;
-}
-
 }  // namespace hc::influence

@@ -118,7 +118,7 @@ std::vector<double> splitOffsets(double n, double f, int count, double finestCel
 // while the extent needs more texels than allowed; how many levels above it texels may be interpolated from. Returns
 // the level.
 int budgetLevel(Cascade& c, const ViewVolume& v, double extent, bool capped) {
-    const std::vector<double>& e = *v.levelErrorM;
+    const std::vector<double>& e = c.levelErrorM;
     const int top = int(e.size()) - 1;
     int t = -kFinerTexelLevels;
     while (t < top && levelErrorM(e, t + 1) <= c.budgetM) ++t;
@@ -146,6 +146,7 @@ void placeTexture(Cascade& c, const ViewVolume& v, int texelsPerSide) {
         by1 = std::max(by1, p.y);
     }
     const double extent = std::max(bx1 - bx0, by1 - by0);
+    if (v.levelErrorIn) c.levelErrorM = v.levelErrorIn(bx0, by0, bx1, by1);  // the ground under it, not the grid's
     c.n = texelsPerSide;
     c.texelM = ladderTexelSize(extent, texelsPerSide, finestCellM);
     if (stepsPerOctave == 1) {
@@ -163,7 +164,7 @@ void placeTexture(Cascade& c, const ViewVolume& v, int texelsPerSide) {
     // Under an error budget the spacing is the budget's level. Off the pyramid's ladder (the GL backend in memory sums
     // every texel from the kernels, at any spacing) never finer than N texels cover: where they cannot meet the budget
     // that is as near as they come.
-    if (c.budgetM > 0 && v.levelErrorM && !v.levelErrorM->empty()) {
+    if (c.budgetM > 0 && !c.levelErrorM.empty()) {
         if (stepsPerOctave == 1) {
             c.texelM = finestCellM * std::exp2(budgetLevel(c, v, extent, true));
             c.n = sideFor(extent, c.texelM);

@@ -19,26 +19,36 @@ namespace hc::render {
 void Scene::boundLevels() {
     levelErrorM_.clear();
     if (!pyramid_) return;
-    levelErrorM_ = influence::bilinearErrorByLevelM(*pyramid_, influence::PyramidChannel::Elevation);
-    if (hasWater()) {  // the water surface is drawn from the water level's samples: the larger of the two errors
-        const influence::SurfacePyramid& w = waterPyramid_ ? *waterPyramid_ : *pyramid_;
-        const std::vector<double> water = influence::bilinearErrorByLevelM(w, influence::PyramidChannel::WaterLevel);
-        for (size_t t = 0; t < std::min(water.size(), levelErrorM_.size()); ++t)
-            levelErrorM_[t] = std::max(levelErrorM_[t], water[t]);
+    terrainErrors_ = influence::RegionalLevelErrors(*pyramid_, influence::PyramidChannel::Elevation);
+    if (hasWater())  // the water surface is drawn from the water level's samples: the larger of the two errors
+        waterErrors_ = influence::RegionalLevelErrors(waterPyramid_ ? *waterPyramid_ : *pyramid_,
+                                                      influence::PyramidChannel::WaterLevel);
+    roundingErrorM_ = 2 * detail::pyramidCopyBoundM(*this);  // the samples' float32 rounding, the heights' in the patch
+    const double domain = grid_.domainSizeM();
+    levelErrorM_ = levelErrorM(0, 0, domain, domain);
+}
+
+std::vector<double> Scene::levelErrorM(double x0, double y0, double x1, double y1) const {
+    if (terrainErrors_.empty()) return {};
+    std::vector<double> e = terrainErrors_.byLevelM(x0, y0, x1, y1);
+    if (!waterErrors_.empty()) {
+        const std::vector<double> water = waterErrors_.byLevelM(x0, y0, x1, y1);
+        for (size_t t = 0; t < std::min(water.size(), e.size()); ++t) e[t] = std::max(e[t], water[t]);
     }
-    // The samples' rounding to float32, and the heights' once more in the patch.
-    for (double& e : levelErrorM_) e += 2 * detail::pyramidCopyBoundM(*this);
+    for (double& v : e) v += roundingErrorM_;
+    return e;
 }
 
 void detail::boundFrame(const Scene& scene, const FrameSetup& setup, const CascadeFit& fit, Timings& timings) {
-    const std::vector<double>& levels = scene.levelErrorM();
+    const bool bounded = !scene.levelErrorM().empty();
     const double nan = std::numeric_limits<double>::quiet_NaN();
-    timings.errorBoundM = timings.errorBoundPx = levels.empty() ? nan : 0.0;
+    timings.errorBoundM = timings.errorBoundPx = bounded ? 0.0 : nan;
     for (size_t k = 0; k < fit.cascades.size() && k < timings.cascades.size(); ++k) {
         const Cascade& c = fit.cascades[k];
         CascadeStats& cs = timings.cascades[k];
         cs.budgetM = c.budgetM;
-        if (levels.empty()) {
+        const std::vector<double>& levels = c.levelErrorM;  // over the cascade's polygon (placeTexture)
+        if (!bounded || levels.empty()) {
             cs.errorBoundM = cs.errorBoundPx = nan;
             continue;
         }

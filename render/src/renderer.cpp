@@ -86,7 +86,10 @@ FrameSetup setUpFrame(const Scene& scene, const Camera& worldCamera) {
     view.finestCellM = scene.grid().finestCellM;
     if (scene.pyramid()) view.ladderStepsPerOctave = 1;
     view.pixelRad = 2 * s.basis.tanHalfY / std::max(1, camera.height);
-    view.levelErrorM = &scene.levelErrorM();
+    if (!scene.levelErrorM().empty())
+        view.levelErrorIn = [&scene](double x0, double y0, double x1, double y1) {
+            return scene.levelErrorM(x0, y0, x1, y1);
+        };
     return s;
 }
 

@@ -39,6 +39,7 @@
 #include <optional>
 #include <span>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "heightcast/grid/grid.h"
@@ -156,11 +157,31 @@ SurfacePyramid buildWaterPyramid(const Grid& grid, const KernelParams& params, u
 // the tiles' measured parent errors (Level::parentErrorM), over the whole domain. Between two levels the difference
 // of their interpolants is piecewise bilinear on the finer lattice, so it is largest at a finer sample, where it is
 // that sample's parent error: |f - B_t| <= |f - B_(t-1)| + max parentErrorM(t - 1), down to level 0, whose own error
-// is taken as half of level 0's parent errors (bilinear error grows with the spacing squared: a quarter, doubled for
-// safety). Without the samples' float32 rounding (the caller's: it knows the heights). Not a proof (the parent errors
-// are measured at samples, and level 0's share is scaled): --verify-error measures the real error beside it. Empty for
-// a pyramid without c.
+// is taken as level 0's parent errors (a quarter of them for a surface smooth at that spacing, but the kernels of the
+// finest cells put detail at it: pyramid_errors.cpp). Without the samples' float32 rounding (the caller's: it knows the
+// heights). Not a proof (the parent errors are measured at samples, and level 0's own error is estimated):
+// --verify-error measures the real error beside it. Empty for a pyramid without c.
 std::vector<double> bilinearErrorByLevelM(const SurfacePyramid& pyramid, PyramidChannel c);
+// The same per region: the tiles' parent errors kept for each square of a grid of regions over the domain (up to
+// 2^kRegionsLog2 a side), so that the error over a box comes from the tiles near it: a view of flat ground gets the
+// flat ground's error, not that of mountains elsewhere in the grid. byLevelM chains, per level t, the largest parent
+// error of the regions that the box, widened by level t's spacing (the samples of the patches a point of the box
+// reads), meets; over the whole domain it is bilinearErrorByLevelM. Empty for a pyramid without channel c.
+class RegionalLevelErrors {
+public:
+    static constexpr int kRegionsLog2 = 6;
+    RegionalLevelErrors() = default;
+    RegionalLevelErrors(const SurfacePyramid& pyramid, PyramidChannel c);
+    bool empty() const { return levels_ == 0; }
+    // Over the box [x0, x1] x [y0, y1] of local metres: per level [m], as bilinearErrorByLevelM.
+    std::vector<double> byLevelM(double x0, double y0, double x1, double y1) const;
+
+private:
+    std::pair<int, int> regionsOver(double a, double b) const;
+    int levels_ = 0, side_ = 0;
+    double regionM_ = 0, finestCellM_ = 0;
+    std::vector<float> parentMax_;  // [(t * side + j) * side + i]: the largest parent error of level t's tiles there
+};
 
 // The .hcp file: written atomically; read memory-mapped, validated (checksums, sizes, keys ascending and
 // inside the domain) and checked to belong to `grid` with `params` (like the .hci cache); a water pyramid (2 channels)

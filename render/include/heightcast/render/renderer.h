@@ -54,10 +54,10 @@ struct RenderOptions {
     // cascade's start. 0..64. docs/benchmarks.md measures it.
     int beamTilePx = 4;
     // The error budget (0: none, the texel sizes as above): with a surface pyramid each cascade takes the coarsest of
-    // its spacings whose rendered error (Scene::levelErrorM) is within maxErrorM [m], or within maxErrorPx pixels at
-    // the cascade's nearest point, or both (the smaller), and texels interpolated only from levels within it; far and
-    // flat ground coarse, near and rough ground fine. Timings says what each cascade's bound is and where the texels
-    // (up to 2 texelsPerSide a side) could not meet the budget.
+    // its spacings whose rendered error over its ground (Scene::levelErrorM of its box) is within maxErrorM [m], or
+    // within maxErrorPx pixels at the cascade's nearest point, or both (the smaller), and texels interpolated only from
+    // levels within it; far and flat ground coarse, near and rough ground fine. Timings says what each cascade's bound
+    // is and where the texels (up to 2 texelsPerSide a side) could not meet the budget.
     double maxErrorM = 0, maxErrorPx = 0;
     std::string validate() const;  // "" or what is wrong
 };
@@ -106,8 +106,9 @@ struct CascadeStats {
     int pyramidInterpolatedUp = 0;     // the most levels above the texels' own one of them was interpolated from
     // The rendered surface's error against the exact one in this cascade [m], with a surface pyramid (else NaN):
     // the bilinear patches' error at the texel spacing, or at the coarsest level a texel was interpolated from
-    // (Scene::levelErrorM), plus a float32 rounding of the heights, plus kSummedTexelErrorM where texels were summed
-    // from the kernels. errorBoundPx: the same in pixels at its nearest point. budgetM: its error budget, 0 none.
+    // (Scene::levelErrorM over the cascade's box), plus a float32 rounding of the heights, plus kSummedTexelErrorM
+    // where texels were summed from the kernels. errorBoundPx: the same in pixels at its nearest point. budgetM: its
+    // error budget, 0 none.
     double errorBoundM = 0, errorBoundPx = 0, budgetM = 0;
     double approximationMs = 0;
 };
@@ -182,8 +183,10 @@ public:
     const influence::SurfacePyramid* waterPyramid() const { return waterPyramid_; }  // nullptr: the pyramid's own water
     // With a pyramid: per level, the error of drawing the surface (and the water level) as the bilinear interpolant of
     // that level's samples (influence::bilinearErrorByLevelM, the larger of the channels), plus the samples' float32
-    // rounding [m]; empty without.
+    // rounding [m]; empty without. Over the whole domain, and over a box [x0, x1] x [y0, y1] of local metres from the
+    // tiles near it (influence::RegionalLevelErrors): what a cascade over that box carries.
     const std::vector<double>& levelErrorM() const { return levelErrorM_; }
+    std::vector<double> levelErrorM(double x0, double y0, double x1, double y1) const;
     bool hasWater() const { return waterLayer_ >= 0; }
     int waterLayer() const { return waterLayer_; }  // grid layer of water_depth, or -1
     // Per cell, computed once for every frame (in memory; out of core per region): centre [m local] and the
@@ -221,6 +224,8 @@ private:
     int waterLayer_ = -1;
     std::vector<CellKernel> kernels_;
     std::vector<double> levelErrorM_;
+    influence::RegionalLevelErrors terrainErrors_, waterErrors_;
+    double roundingErrorM_ = 0;
     void boundLevels();
     mutable std::once_flag evaluatorMade_;
     mutable std::unique_ptr<influence::SurfaceEvaluator> evaluator_;
