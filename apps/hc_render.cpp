@@ -120,8 +120,8 @@ bool parseOptions(int argc, char** argv, RenderArgs& a) {
     p.option("--backend", "B",
              "gl (OpenGL 4.3 compute shaders; headless, no display needed), cpu, or auto: gl where an\n"
              "OpenGL 4.3 context on a GPU can be had, else cpu with a note saying why (no 4.3 context, or only\n"
-             "software OpenGL such as Mesa's llvmpipe, which is slower than cpu) (default auto). --threads\n"
-             "applies to cpu only",
+             "software OpenGL such as Mesa's llvmpipe, which is slower than cpu) (default auto). On gl,\n"
+             "--threads sizes the CPU's share (texels filled out of core, --color-by and --cells at the hits)",
              backendText);
     if (!p.parse(argc, argv)) return false;
     if (a.out.empty()) throw hc::Error("no output image: give -o OUT.png");

@@ -155,16 +155,16 @@ std::vector<AccuracyRow> measure(const AccuracyOptions& opt, std::vector<std::st
                     r.checkRms = std::sqrt(a.gridSumSq / n);
                     r.checkMax = a.gridMaxAbs;
                     if (a.undefined)
-                        warnings.push_back(fmt::format(
-                            "{} tol {:g} sigma {:g}: the surface is undefined at {} valid pixel centres", name, tol,
-                            sigma, a.undefined));
+                        warnings.push_back(
+                            fmt::format("{} tol {:g} sigma {:g}: the surface is undefined at {} valid pixel centres",
+                                        name, tol, sigma, a.undefined));
                     // Our own pixel-by-pixel grid error must match the ingest's (same pixels, same cells).
                     if (!sampled &&
                         (std::abs(r.checkMax - r.gridMax) > 1e-4 || std::abs(r.checkRms - r.gridRms) > 1e-4))
-                        warnings.push_back(fmt::format(
-                            "{} tol {:g}: grid error measured here (RMS {:.5f}, max {:.5f}) differs from "
-                            "Grid::stats (RMS {:.5f}, max {:.5f})",
-                            name, tol, r.checkRms, r.checkMax, r.gridRms, r.gridMax));
+                        warnings.push_back(
+                            fmt::format("{} tol {:g}: grid error measured here (RMS {:.5f}, max {:.5f}) differs from "
+                                        "Grid::stats (RMS {:.5f}, max {:.5f})",
+                                        name, tol, r.checkRms, r.checkMax, r.gridRms, r.gridMax));
                     acc.push_back(r);
                 }
             }
@@ -194,12 +194,11 @@ void print(const std::vector<AccuracyRow>& acc, const AccuracyOptions& opt, Csv&
                 "lists ms", "eval ms", "M px/s");
     for (const AccuracyRow& r : acc) {
         const double rate = static_cast<double>(r.evaluated) / r.evalS / 1e6;
-        std::printf(
-            "%-28s %9s %6.3g %5.3g %5.3g %6.4g %8llu %6.3f %7.4f %7.4f %7.4f %7.4f %7.1f %8.1f %8.1f %7.2f%s\n",
-            r.dem.c_str(), fmt::format("{}x{}", r.width, r.height).c_str(), r.pixelM, r.toleranceM, r.sigma,
-            r.maxCellM, (unsigned long long)r.cells, static_cast<double>(r.cells) / static_cast<double>(r.validPx),
-            r.gridRms, r.gridMax, r.surfRms, r.surfMax, r.entriesMean, r.buildS * 1e3, r.evalS * 1e3, rate,
-            r.sampled ? " (sample)" : "");
+        std::printf("%-28s %9s %6.3g %5.3g %5.3g %6.4g %8llu %6.3f %7.4f %7.4f %7.4f %7.4f %7.1f %8.1f %8.1f %7.2f%s\n",
+                    r.dem.c_str(), fmt::format("{}x{}", r.width, r.height).c_str(), r.pixelM, r.toleranceM, r.sigma,
+                    r.maxCellM, (unsigned long long)r.cells,
+                    static_cast<double>(r.cells) / static_cast<double>(r.validPx), r.gridRms, r.gridMax, r.surfRms,
+                    r.surfMax, r.entriesMean, r.buildS * 1e3, r.evalS * 1e3, rate, r.sampled ? " (sample)" : "");
         out.add({{"table", "accuracy"},
                  {"grid", r.dem},
                  {"source", r.path},
@@ -230,45 +229,42 @@ void print(const std::vector<AccuracyRow>& acc, const AccuracyOptions& opt, Csv&
     bool anySampled = false;
     for (const AccuracyRow& r : acc) anySampled |= r.sampled;
     if (anySampled)
-        std::printf(
-            "(sample): more than %d valid pixels: errors and time over a fixed random sample of %d of them\n",
-            maxEvalPx, std::min(maxEvalPx, 1000000));
+        std::printf("(sample): more than %d valid pixels: errors and time over a fixed random sample of %d of them\n",
+                    maxEvalPx, std::min(maxEvalPx, 1000000));
 }
 
 // Table 3 plotted: RMS error against the tolerance, per DEM, the grid dotted and the surface per sigma.
 void plotAccuracy(const std::vector<AccuracyRow>& acc, const std::vector<double>& sigmaList, const std::string& plot) {
-        // One colour per DEM; the grid's error dotted, the surface's solid for the first sigma, then dashed.
-        hc::bench::LinePlot lp;
-        lp.title = "Speed against accuracy: RMS error against the source raster (table 3)";
-        lp.xLabel = "ingest tolerance [m]";
-        lp.yLabel = "RMS error against every valid source pixel [m]";
-        lp.logX = lp.logY = true;
-        std::vector<std::string> demOrder;
+    // One colour per DEM; the grid's error dotted, the surface's solid for the first sigma, then dashed.
+    hc::bench::LinePlot lp;
+    lp.title = "Speed against accuracy: RMS error against the source raster (table 3)";
+    lp.xLabel = "ingest tolerance [m]";
+    lp.yLabel = "RMS error against every valid source pixel [m]";
+    lp.logX = lp.logY = true;
+    std::vector<std::string> demOrder;
+    for (const AccuracyRow& r : acc)
+        if (std::find(demOrder.begin(), demOrder.end(), r.dem) == demOrder.end()) demOrder.push_back(r.dem);
+    const char* dashes[] = {"", "8,4", "12,3,2,3", "4,2"};
+    for (size_t d = 0; d < demOrder.size(); ++d) {
+        const std::string color = hc::bench::plotColor(d);
+        const std::string name = fs::path(demOrder[d]).stem().string();
+        hc::bench::LineSeries grid{name + ": grid (cells)", color, "1,3", {}};
         for (const AccuracyRow& r : acc)
-            if (std::find(demOrder.begin(), demOrder.end(), r.dem) == demOrder.end()) demOrder.push_back(r.dem);
-        const char* dashes[] = {"", "8,4", "12,3,2,3", "4,2"};
-        for (size_t d = 0; d < demOrder.size(); ++d) {
-            const std::string color = hc::bench::plotColor(d);
-            const std::string name = fs::path(demOrder[d]).stem().string();
-            hc::bench::LineSeries grid{name + ": grid (cells)", color, "1,3", {}};
+            if (r.dem == demOrder[d] && r.sigma == sigmaList.front()) grid.points.emplace_back(r.toleranceM, r.gridRms);
+        lp.series.push_back(grid);
+        for (size_t k = 0; k < sigmaList.size(); ++k) {
+            hc::bench::LineSeries surf{name + ": smooth surface, sigma " + fmt::format("{:g}", sigmaList[k]),
+                                       color,
+                                       dashes[std::min<size_t>(k, 3)],
+                                       {}};
             for (const AccuracyRow& r : acc)
-                if (r.dem == demOrder[d] && r.sigma == sigmaList.front())
-                    grid.points.emplace_back(r.toleranceM, r.gridRms);
-            lp.series.push_back(grid);
-            for (size_t k = 0; k < sigmaList.size(); ++k) {
-                hc::bench::LineSeries surf{name + ": smooth surface, sigma " + fmt::format("{:g}", sigmaList[k]),
-                                           color,
-                                           dashes[std::min<size_t>(k, 3)],
-                                           {}};
-                for (const AccuracyRow& r : acc)
-                    if (r.dem == demOrder[d] && r.sigma == sigmaList[k])
-                        surf.points.emplace_back(r.toleranceM, r.surfRms);
-                lp.series.push_back(surf);
-            }
+                if (r.dem == demOrder[d] && r.sigma == sigmaList[k]) surf.points.emplace_back(r.toleranceM, r.surfRms);
+            lp.series.push_back(surf);
         }
-        hc::bench::writeSvg(plot, lp.svg());
-        std::printf("plot written to %s\n", plot.c_str());
     }
+    hc::bench::writeSvg(plot, lp.svg());
+    std::printf("plot written to %s\n", plot.c_str());
+}
 
 }  // namespace
 
