@@ -418,18 +418,26 @@ Frame GlRenderer::Impl::readBack(const Camera& camera, Timings& timings, ReadBac
     f.originWorldY = scene->grid().originWorldY;
     glBindTexture(GL_TEXTURE_2D, colorTex);
     glPixelStorei(GL_PACK_ALIGNMENT, 1);
-    if (what == ReadBack::PictureOnly) {  // RGB straight into the frame, its rows flipped (the texture's row 0 is the
-        f.rgb.resize(pixels * 3);         // bottom, the frame's the top)
-        std::vector<uint8_t> rgb(pixels * 3);
-        glGetTexImage(GL_TEXTURE_2D, 0, GL_RGB, GL_UNSIGNED_BYTE, rgb.data());
-        const size_t row = size_t(W) * 3;
-        for (size_t y = 0; y < size_t(H); ++y) std::memcpy(&f.rgb[y * row], &rgb[(size_t(H) - 1 - y) * row], row);
+    // The texture's own format, RGBA: the copy a driver makes without converting on the CPU (asking for RGB made it
+    // convert every pixel itself, on one core); the frame's RGB taken from it below, its rows flipped (the texture's
+    // row 0 is the bottom, the frame's the top), on every core.
+    std::vector<uint8_t> rgba(pixels * 4);
+    glGetTexImage(GL_TEXTURE_2D, 0, GL_RGBA, GL_UNSIGNED_BYTE, rgba.data());
+    if (what == ReadBack::PictureOnly) {
+        f.rgb.resize(pixels * 3);
+        parallelFor(size_t(H), 16, 0, [&](size_t rowBegin, size_t rowEnd, unsigned) {
+            for (size_t row = rowBegin; row < rowEnd; ++row) {
+                const uint8_t* src = &rgba[(size_t(H) - 1 - row) * size_t(W) * 4];
+                uint8_t* dst = &f.rgb[row * size_t(W) * 3];
+                for (size_t col = 0; col < size_t(W); ++col)
+                    dst[3 * col] = src[4 * col], dst[3 * col + 1] = src[4 * col + 1],
+                            dst[3 * col + 2] = src[4 * col + 2];
+            }
+        });
         timings.readbackMs = clock.milliseconds();
         timings.totalMs += timings.readbackMs;
         return f;
     }
-    std::vector<uint8_t> rgba(pixels * 4);
-    glGetTexImage(GL_TEXTURE_2D, 0, GL_RGBA, GL_UNSIGNED_BYTE, rgba.data());
     // The rays are copied on the GPU into a buffer of their own (readbackBuf), read through a mapping of it (no
     // staging copy in host memory) and spread over the frame's layers on all cores.
     for (auto* v : {&f.distanceM, &f.posX, &f.posY, &f.posZ, &f.nX, &f.nY, &f.nZ, &f.waterDepthM, &f.cascade, &f.wall})
