@@ -136,7 +136,8 @@ TEST_F(RenderGlWater, ColouredByAWaterLayerAsOnTheCpu) {
 }
 
 // Out of core the cells are not on the GPU: the outline of the cell around each hit comes from the file, on the CPU.
-// The same picture as the CPU backend's on the same scene, and one the outlines darkened.
+// The same picture as the CPU backend's on the same scene, and one the outlines darkened; a colour layer is refused
+// there on both backends.
 TEST_F(RenderGl, CellOutlinesOutOfCoreAsOnTheCpu) {
     World& w = lidar();
     HC_REQUIRE_GL(w);
@@ -159,6 +160,11 @@ TEST_F(RenderGl, CellOutlinesOutOfCoreAsOnTheCpu) {
     size_t darker = 0;
     for (size_t i = 0; i < g.rgb.size(); i += 3) darker += g.rgb[i + 1] + 20 < plain.rgb[i + 1];
     EXPECT_GT(darker, g.rgb.size() / 3 / 50) << "the outlines darken the cells' edges";
+    // A colour layer needs the exact evaluator, which needs the grid in memory: refused before any work, as on the CPU.
+    RenderOptions layered = smallOptions();
+    layered.colorLayer = "elevation";
+    EXPECT_THROW((void)gl->render(cam, layered, tp), hc::Error);
+    EXPECT_THROW((void)renderFrame(scene, cam, layered, tp), hc::Error);
 }
 
 }  // namespace

@@ -337,8 +337,10 @@ void GlRenderer::Impl::uploadFrame(gpu::FrameBlock& block, const CascadeFit& fit
 CascadeFit GlRenderer::Impl::runFrame(const Camera& camera, const RenderOptions& options, Timings& timings) {
     camera.validate();
     if (std::string why = options.validate(); !why.empty()) throw Error(why);
-    if (!options.colorLayer.empty())  // before any work: the layer exists
+    if (!options.colorLayer.empty()) {  // before any work: the layer exists, and the evaluator can be had
         influence::Layer::byName(scene->grid(), options.colorLayer);
+        scene->evaluator();
+    }
     if (headless) headless->makeCurrent();
     layerValues.clear(), layerName.clear();
     const Stopwatch frameClock;
