@@ -47,8 +47,7 @@ void detail::boundFrame(const Scene& scene, const FrameSetup& setup, const Casca
         const Cascade& c = fit.cascades[k];
         CascadeStats& cs = timings.cascades[k];
         cs.budgetM = c.budgetM;
-        const std::vector<double>& levels = c.levelErrorM;  // over the cascade's polygon (placeTexture)
-        if (!bounded || levels.empty()) {
+        if (!bounded) {
             cs.errorBoundM = cs.errorBoundPx = nan;
             continue;
         }
@@ -56,6 +55,8 @@ void detail::boundFrame(const Scene& scene, const FrameSetup& setup, const Casca
             cs.errorBoundM = cs.errorBoundPx = 0;
             continue;
         }
+        // Over the cascade's polygon (placeTexture); the whole domain's for a cascade fitted without them.
+        const std::vector<double>& levels = c.levelErrorM.empty() ? scene.levelErrorM() : c.levelErrorM;
         // The patches' error at the texel spacing, plus, where texels were interpolated from a coarser level, that
         // level's (the interpolation is tested to lie within a bilinear patch's error at the source's spacing).
         // Off the pyramid's ladder (the GL backend in memory) the spacing lies between two levels: the coarser's error.
