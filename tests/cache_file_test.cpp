@@ -30,14 +30,8 @@ protected:
     CacheFile() : TempDirTest("hc_cache_") {}
 };
 
-std::vector<char> readBytes(const std::string& p) {
-    std::ifstream in(p, std::ios::binary);
-    return {std::istreambuf_iterator<char>(in), {}};
-}
-void writeBytes(const std::string& p, const std::vector<char>& b, size_t n) {
-    std::ofstream out(p, std::ios::binary | std::ios::trunc);
-    out.write(b.data(), static_cast<std::streamsize>(n));
-}
+using hc::test::readBytes;
+using hc::test::writeBytes;
 
 // Six cells of two sizes (the grid of grid_file_test's golden file).
 Grid tinyGrid() {

@@ -53,14 +53,8 @@ inline Grid tinyGrid() {
     return g;
 }
 
-inline std::vector<char> readBytes(const std::string& path) {
-    std::ifstream in(path, std::ios::binary);
-    return {std::istreambuf_iterator<char>(in), {}};
-}
-inline void writeBytes(const std::string& path, const std::vector<char>& bytes, size_t n) {
-    std::ofstream out(path, std::ios::binary | std::ios::trunc);
-    out.write(bytes.data(), static_cast<std::streamsize>(n));
-}
+using hc::test::readBytes;
+using hc::test::writeBytes;
 
 class GridFile : public hc::test::TempDirTest {
 protected:

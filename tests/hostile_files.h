@@ -1,7 +1,8 @@
 // tests/hostile_files.h: crafted .hcg and .hci files whose checksums are all VALID (issue 11). A reader that
 // trusts a declared count because its CRC matches is the bug these files expose, so every one of them is
 // written through the real container writer (hc::SectionedFileWriter), which computes every CRC and the
-// declared size. Used by grid_file_test, influence_test and the CLI tests' helper (cli/hostile_craft.cpp).
+// declared size. Used by grid_file_test, grid_file_blocks_test, cache_file_test and the CLI tests' helper
+// (cli/hostile_craft.cpp).
 #pragma once
 
 #include <cstdint>

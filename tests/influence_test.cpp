@@ -18,7 +18,6 @@
 #include "heightcast/influence/surface.h"
 #include "heightcast/ingest/build.h"
 #include "heightcast/ingest/ingest.h"
-#include "hostile_files.h"
 #include "temp_dir.h"
 #include "test_data.h"
 #include "test_grids.h"

@@ -9,8 +9,11 @@
 
 #include <algorithm>
 #include <filesystem>
+#include <fstream>
+#include <iterator>
 #include <string>
 #include <utility>
+#include <vector>
 
 namespace hc::test {
 
@@ -37,6 +40,16 @@ protected:
 private:
     std::string prefix_;
 };
+
+// A file's bytes, and the first n of `bytes` written as a file (the format tests' truncations and flipped bytes).
+inline std::vector<char> readBytes(const std::string& path) {
+    std::ifstream in(path, std::ios::binary);
+    return {std::istreambuf_iterator<char>(in), {}};
+}
+inline void writeBytes(const std::string& path, const std::vector<char>& bytes, size_t n) {
+    std::ofstream out(path, std::ios::binary | std::ios::trunc);
+    out.write(bytes.data(), static_cast<std::streamsize>(n));
+}
 
 // TempDirTest for TEST_P: GetParam() as in ::testing::TestWithParam<P>.
 template <typename P>
