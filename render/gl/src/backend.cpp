@@ -464,9 +464,8 @@ Frame GlRenderer::Impl::readBack(const Camera& camera, Timings& timings, ReadBac
                 }
                 f.distanceM[i] = p.t;
                 // Camera-relative offsets back to the local frame in double.
-                f.posX[i] = float(setup.eyeLocal.x + double(p.relX));
-                f.posY[i] = float(setup.eyeLocal.y + double(p.relY));
-                f.posZ[i] = float(setup.eyeLocal.z + double(p.relZ));
+                const glm::vec3 at = hitLocal(p);
+                f.posX[i] = at.x, f.posY[i] = at.y, f.posZ[i] = at.z;
                 f.nX[i] = p.nx, f.nY[i] = p.ny, f.nZ[i] = p.nz;
                 f.cascade[i] = float(p.cascade);
                 f.waterDepthM[i] = p.depth;
@@ -474,7 +473,8 @@ Frame GlRenderer::Impl::readBack(const Camera& camera, Timings& timings, ReadBac
             }
     });
     glUnmapBuffer(GL_SHADER_STORAGE_BUFFER);
-    if (!layerName.empty()) f.colorLayer = layerName, f.colorLayerValue = layerValues;  // as renderFrame() gives them
+    if (!layerName.empty())  // as renderFrame() gives them; the frame's own, read back once
+        f.colorLayer = std::move(layerName), f.colorLayerValue = std::move(layerValues);
     detail::frameToWorldAxes(scene->grid(), f);
     timings.readbackMs = clock.milliseconds();
     timings.totalMs += timings.readbackMs;

@@ -14,6 +14,8 @@
 #include <unordered_map>
 #include <vector>
 
+#include <glm/vec3.hpp>
+
 #include "context.h"
 #include "gl.h"
 #include "heightcast/core/timer.h"
@@ -179,6 +181,12 @@ struct GlRenderer::Impl {
     // The rays copied on the GPU into readbackBuf and mapped for reading (bound as GL_SHADER_STORAGE_BUFFER): unmap
     // after reading.
     const gpu::GpuPixel* mapRays(size_t pixels);
+    // A hit's local position as the Frame holds it: the camera-relative offset added to the eye in double, then float
+    // (what readBack() and fillOverlay() both give: the overlay's values are taken where the frame says the hit is).
+    glm::vec3 hitLocal(const gpu::GpuPixel& p) const {
+        return {float(setup.eyeLocal.x + double(p.relX)), float(setup.eyeLocal.y + double(p.relY)),
+                float(setup.eyeLocal.z + double(p.relZ))};
+    }
     void fillOverlay(const Camera& camera, const RenderOptions& options, int bits);
 
     // backend_cpu_fill.cpp: stage 2's plan on the CPU (in memory), or its texels evaluated there (out of core), with

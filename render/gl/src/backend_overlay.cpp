@@ -44,8 +44,8 @@ void GlRenderer::Impl::fillOverlay(const Camera& camera, const RenderOptions& op
             const gpu::GpuPixel& p = px[i];
             const bool hit = p.t < inf;
             hits.distanceM[i] = hit ? p.t : inf;
-            hits.posX[i] = hit ? float(setup.eyeLocal.x + double(p.relX)) : 0.0f;  // as readBack() gives them
-            hits.posY[i] = hit ? float(setup.eyeLocal.y + double(p.relY)) : 0.0f;
+            const glm::vec3 at = hitLocal(p);
+            hits.posX[i] = hit ? at.x : 0.0f, hits.posY[i] = hit ? at.y : 0.0f;
             hits.wall[i] = hit && p.wall ? 1.0f : 0.0f;
             isWater[i] = hit && p.water ? 1 : 0;
         }
