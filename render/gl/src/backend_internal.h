@@ -1,7 +1,8 @@
 // render/gl/src/backend_internal.h: the GL backend's renderer (GlRenderer::Impl: its programs, buffers and the state
 // it keeps from frame to frame) and the buffers it holds (Buffer, TileAtlas), shared by the files that define its
 // parts: backend.cpp (set-up, uploads, the frame, read-back), backend_cpu_fill.cpp (stage 2 from the CPU),
-// backend_atlas.cpp (the pyramid's tiles on the GPU) and backend_dispatch.cpp (the dispatches). backend.cpp's first
+// backend_atlas.cpp (the pyramid's tiles on the GPU), backend_overlay.cpp (what shading needs from the CPU at the hits)
+// and backend_dispatch.cpp (the dispatches). backend.cpp's first
 // comment describes the backend as a whole. Private to render/gl/src/.
 #pragma once
 
