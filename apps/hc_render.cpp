@@ -5,6 +5,7 @@
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
+#include <deque>
 #include <filesystem>
 #include <memory>
 #include <optional>
@@ -194,6 +195,11 @@ void refuseCameraBelowTerrain(const hc::render::Scene& scene, const hc::render::
     }
 }
 
+// The backend decision's note (why auto chose as it did), if it has one, on stderr.
+void sayNote(const hc::cli::BackendDecision& decision) {
+    if (!decision.note.empty()) std::fprintf(stderr, "hc-render: note: %s\n", decision.note.c_str());
+}
+
 // What the GL backend reads back for a's outputs: the picture alone unless the EXR layers or the hits are wanted.
 hc::render::GlRenderer::ReadBack readBackFor(const RenderArgs& a) {
     return a.exr.empty() && a.verifyHits == 0 ? hc::render::GlRenderer::ReadBack::PictureOnly
@@ -206,7 +212,7 @@ Rendered renderImage(const hc::cli::BackendDecision& decision, const hc::render:
                      const hc::render::Camera& camera, const hc::render::RenderOptions& options, int verifyHits,
                      hc::render::GlRenderer* gl = nullptr,
                      hc::render::GlRenderer::ReadBack what = hc::render::GlRenderer::ReadBack::AllLayers) {
-    if (!decision.note.empty()) std::fprintf(stderr, "hc-render: note: %s\n", decision.note.c_str());
+    sayNote(decision);
     Rendered r;
     if (decision.useGl) {
         std::unique_ptr<hc::render::GlRenderer> own = gl ? nullptr : hc::render::GlRenderer::headless(scene);
@@ -265,7 +271,7 @@ int fly(const RenderArgs& a, const hc::cli::BackendDecision& decision, const hc:
     if (!a.video.empty() && ffmpeg.empty())
         throw hc::Error(
             "--video: ffmpeg is not installed (Debian: apt install ffmpeg); the images alone need no --video");
-    if (!decision.note.empty()) std::fprintf(stderr, "hc-render: note: %s\n", decision.note.c_str());
+    sayNote(decision);
     std::unique_ptr<hc::render::GlRenderer> gl;
     std::string device = "CPU, " + std::to_string(hc::resolveThreads(a.setup.options.threads)) + " threads";
     if (decision.useGl) {
@@ -284,20 +290,8 @@ int fly(const RenderArgs& a, const hc::cli::BackendDecision& decision, const hc:
     std::vector<double> renderMs;
     const std::unique_ptr<hc::render_app::VideoPipe> video = videoFor(a, ffmpeg, start);
     hc::render_app::OutputWriter writer(pathsOf(a), video.get());
-    for (unsigned k = 0; k < a.flyFrames; ++k) {
-        const hc::render::Camera camera = hc::render::flightFrame(start, a.flyStepM, k);
-        Rendered r;
-        r.device = device;
-        if (a.flyFresh) {
-            if (gl) gl->forgetCascades();
-            cache.clear();
-        }
-        const bool outputs = !a.flyLastImage || k + 1 == a.flyFrames;
-        if (gl && !outputs)
-            gl->renderToTexture(camera, a.setup.options, r.timings);
-        else
-            r.frame = gl ? gl->render(camera, a.setup.options, r.timings, readBackFor(a))
-                         : hc::render::renderFrame(scene, camera, a.setup.options, r.timings, &cache);
+    // A frame's row, and its files where it has outputs; in frame order.
+    auto report = [&](unsigned k, const hc::render::Camera& camera, Rendered&& r, bool outputs) {
         const hc::render::Timings t = r.timings;
         if (outputs) writer.put(std::move(r), k);
         uint64_t kept = 0, visible = 0;
@@ -309,7 +303,39 @@ int fly(const RenderArgs& a, const hc::cli::BackendDecision& decision, const hc:
                     t.fittingMs, t.mipmapMs, t.raycastMs, t.shadingMs, ms);
         if (gl) std::printf(" %10.2f %10.2f %12.2f", t.uploadMs, t.gpuMs, t.readbackMs);
         std::printf("\n");
+    };
+    // GL pictures alone: frames in flight (GlRenderer::submitPicture), each reported when its picture is collected.
+    const bool ring = gl && readBackFor(a) == hc::render::GlRenderer::ReadBack::PictureOnly;
+    std::deque<std::pair<unsigned, hc::render::Camera>> inFlight;
+    auto collectOne = [&] {
+        hc::render::GlRenderer::Picture p = gl->collectPicture();
+        report(inFlight.front().first, inFlight.front().second, Rendered{std::move(p.frame), p.timings, device}, true);
+        inFlight.pop_front();
+    };
+    for (unsigned k = 0; k < a.flyFrames; ++k) {
+        const hc::render::Camera camera = hc::render::flightFrame(start, a.flyStepM, k);
+        if (a.flyFresh) {
+            if (gl) gl->forgetCascades();
+            cache.clear();
+        }
+        const bool outputs = !a.flyLastImage || k + 1 == a.flyFrames;
+        if (ring && outputs) {
+            if (gl->picturesInFlight() == hc::render::GlRenderer::kPicturesInFlight) collectOne();
+            gl->submitPicture(camera, a.setup.options);
+            inFlight.emplace_back(k, camera);
+            continue;
+        }
+        while (!inFlight.empty()) collectOne();
+        Rendered r;
+        r.device = device;
+        if (gl && !outputs)
+            gl->renderToTexture(camera, a.setup.options, r.timings);
+        else
+            r.frame = gl ? gl->render(camera, a.setup.options, r.timings, readBackFor(a))
+                         : hc::render::renderFrame(scene, camera, a.setup.options, r.timings, &cache);
+        report(k, camera, std::move(r), outputs);
     }
+    while (!inFlight.empty()) collectOne();
     writer.finish();
     if (video) video->finish();
     // The frames after the first (which has nothing to keep): their median and slowest.
@@ -367,23 +393,47 @@ int main(int argc, char** argv) {
             decision.useGl ? hc::render::GlRenderer::headless(*loaded->scene) : nullptr;
         const std::unique_ptr<hc::render_app::VideoPipe> video = videoFor(a, ffmpeg, camera);
         hc::render_app::OutputWriter writer(pathsOf(a), video.get());
+        // A step's row, and its files; in step order.
+        struct Step {
+            unsigned k;
+            double timeS;
+            unsigned long long wetCells;
+            double switchMs;
+        };
+        auto report = [&](const Step& s, Rendered&& r) {
+            const double frameMs = r.timings.totalMs;
+            writer.put(std::move(r), s.k);
+            std::printf("  %4u %10.6g %11llu %11.1f %11.1f   %s\n", s.k, s.timeS, s.wetCells, s.switchMs, frameMs,
+                        numbered(a.out, s.k).c_str());
+        };
+        // GL pictures alone: steps in flight (GlRenderer::submitPicture), each reported when its picture is collected.
+        const bool ring = gl && readBackFor(a) == hc::render::GlRenderer::ReadBack::PictureOnly;
+        std::deque<Step> inFlight;
+        auto collectOne = [&] {
+            hc::render::GlRenderer::Picture p = gl->collectPicture();
+            report(inFlight.front(), Rendered{std::move(p.frame), p.timings, gl->deviceName()});
+            inFlight.pop_front();
+        };
         for (unsigned k = a.firstStep; k <= a.lastStep; ++k) {
             hc::Stopwatch clock;
             if (k != a.firstStep) {
                 hc::cli::switchStep("hc-render", *loaded, a.gridPath, a.setup, k);
                 if (gl) gl->setScene(*loaded->scene);
             }
-            const double switchMs = clock.lap() * 1e3;
-            if (k != a.firstStep) decision.note.clear();  // said once
-            Rendered rendered =
-                renderImage(decision, *loaded->scene, camera, a.setup.options, a.verifyHits, gl.get(), readBackFor(a));
-            const double frameMs = rendered.timings.totalMs;
-            writer.put(std::move(rendered), k);
             const hc::Grid& shape = loaded->file ? loaded->file->shape() : loaded->grid;
-            std::printf("  %4u %10.6g %11llu %11.1f %11.1f   %s\n", k, shape.stepTimeS(),
-                        (unsigned long long)(shape.steps.empty() ? 0 : shape.steps[k].wetCells), switchMs, frameMs,
-                        numbered(a.out, k).c_str());
+            const Step step{k, shape.stepTimeS(), shape.steps.empty() ? 0 : shape.steps[k].wetCells, clock.lap() * 1e3};
+            if (k != a.firstStep) decision.note.clear();  // said once
+            if (ring) {
+                if (gl->picturesInFlight() == hc::render::GlRenderer::kPicturesInFlight) collectOne();
+                sayNote(decision);
+                gl->submitPicture(camera, a.setup.options);
+                inFlight.push_back(step);
+                continue;
+            }
+            report(step, renderImage(decision, *loaded->scene, camera, a.setup.options, a.verifyHits, gl.get(),
+                                     readBackFor(a)));
         }
+        while (!inFlight.empty()) collectOne();
         writer.finish();
         if (video) video->finish();
         std::printf("  total        %.3f s for %u steps (%.1f steps a second)\n", total.seconds(),

@@ -1,7 +1,7 @@
 // The GL backend's batch output (issue 44): the picture read back alone (GlRenderer::ReadBack::PictureOnly) is the
-// picture of the whole read-back, and one renderer handed another scene (GlRenderer::setScene, a sequence's water
-// steps) draws what a renderer made for that scene draws. Headless as render_gl_test.cpp (HC_GL_TESTS=skip where no
-// OpenGL 4.3 is expected).
+// picture of the whole read-back, pictures in flight are the pictures read at once, and one renderer handed another
+// scene (GlRenderer::setScene, a sequence's water steps) draws what a renderer made for that scene draws. Headless as
+// render_gl_test.cpp (HC_GL_TESTS=skip where no OpenGL 4.3 is expected).
 #include "render_gl_world.h"
 
 namespace {
@@ -26,6 +26,62 @@ TEST_F(RenderGl, PictureOnlyIsTheWholeReadBacksPicture) {
         EXPECT_EQ(picture.hits, all.hits);  // the counters still come back
         EXPECT_GT(picture.readbackMs, 0.0);
     }
+}
+
+// Pictures in flight (submitPicture / collectPicture): collected in the order submitted, each the same bytes as the
+// picture read back at once, whatever the size (the ring's buffers grow), with its own timings; a full ring and an
+// empty one refuse; a scene handed over between a submit and its collect leaves the submitted picture as it was.
+TEST_F(RenderGl, PicturesInFlightAreThePicturesReadAtOnce) {
+    World& a = hef();
+    World& b = lidar();
+    HC_REQUIRE_GL(a);
+    HC_REQUIRE_GL(b);
+    const std::vector<Camera> cams{overviewCamera(*a.scene, 241, 157), lowOblique(*a.scene, 160, 90),
+                                   overviewCamera(*a.scene, 320, 200), lowOblique(*a.scene, 97, 61),
+                                   overviewCamera(*a.scene, 64, 48)};
+    std::vector<Frame> want;
+    std::vector<uint64_t> hits;
+    for (const Camera& cam : cams) {
+        Timings t;
+        a.gl->forgetCascades();
+        want.push_back(a.gl->render(cam, smallOptions(), t, GlRenderer::ReadBack::PictureOnly));
+        hits.push_back(t.hits);
+    }
+    const std::unique_ptr<GlRenderer> gl = GlRenderer::headless(*a.scene);
+    EXPECT_THROW(gl->collectPicture(), hc::Error);
+    size_t next = 0;
+    auto collect = [&] {
+        const GlRenderer::Picture p = gl->collectPicture();
+        ASSERT_LT(next, want.size());
+        EXPECT_EQ(p.frame.width, want[next].width);
+        EXPECT_EQ(p.frame.height, want[next].height);
+        EXPECT_TRUE(p.frame.rgb == want[next].rgb) << "picture " << next << " differs from the one read at once";
+        EXPECT_EQ(p.timings.hits, hits[next]);
+        EXPECT_GT(p.timings.readbackMs, 0.0);
+        ++next;
+    };
+    for (const Camera& cam : cams) {
+        if (gl->picturesInFlight() == GlRenderer::kPicturesInFlight) {
+            EXPECT_THROW(gl->submitPicture(cam, smallOptions()), hc::Error);
+            collect();
+        }
+        gl->forgetCascades();
+        gl->submitPicture(cam, smallOptions());
+    }
+    while (gl->picturesInFlight() > 0) collect();
+    EXPECT_EQ(next, cams.size());
+    // Another scene between a submit and its collect, and a picture read at once meanwhile.
+    next = 0;
+    gl->forgetCascades();
+    gl->submitPicture(cams[0], smallOptions());
+    gl->setScene(*b.scene);
+    const Camera other = overviewCamera(*b.scene, 160, 100);
+    Timings t1, t2;
+    b.gl->forgetCascades();
+    const Frame wantB = b.gl->render(other, smallOptions(), t1, GlRenderer::ReadBack::PictureOnly);
+    const Frame gotB = gl->render(other, smallOptions(), t2, GlRenderer::ReadBack::PictureOnly);
+    EXPECT_TRUE(gotB.rgb == wantB.rgb);
+    collect();
 }
 
 // One renderer, its scene switched between two grids in memory (their cells uploaded again) and back: each frame the

@@ -106,6 +106,7 @@ void GlRenderer::Impl::release() {
           &lastHeightsBuf, &fillRowsBuf, &fillTexelsBuf, &beamsBuf, &atlasTilesBuf, &atlasBlocksBuf, &overlayBuf})
         b->release();
     terrainAtlas.release(), waterAtlas.release();
+    releasePictures();
     for (Buffer& b : indexBufs) b.release();
     if (colorTex) glDeleteTextures(1, &colorTex);
     colorTex = 0;
@@ -426,16 +427,7 @@ Frame GlRenderer::Impl::readBack(const Camera& camera, Timings& timings, ReadBac
     std::vector<uint8_t> rgba(pixels * 4);
     glGetTexImage(GL_TEXTURE_2D, 0, GL_RGBA, GL_UNSIGNED_BYTE, rgba.data());
     if (what == ReadBack::PictureOnly) {
-        f.rgb.resize(pixels * 3);
-        parallelFor(size_t(H), 16, 0, [&](size_t rowBegin, size_t rowEnd, unsigned) {
-            for (size_t row = rowBegin; row < rowEnd; ++row) {
-                const uint8_t* src = &rgba[(size_t(H) - 1 - row) * size_t(W) * 4];
-                uint8_t* dst = &f.rgb[row * size_t(W) * 3];
-                for (size_t col = 0; col < size_t(W); ++col)
-                    dst[3 * col] = src[4 * col], dst[3 * col + 1] = src[4 * col + 1],
-                            dst[3 * col + 2] = src[4 * col + 2];
-            }
-        });
+        gl::rgbFromTexture(rgba.data(), W, H, f.rgb);
         timings.readbackMs = clock.milliseconds();
         timings.totalMs += timings.readbackMs;
         return f;

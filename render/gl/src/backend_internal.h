@@ -1,8 +1,8 @@
 // render/gl/src/backend_internal.h: the GL backend's renderer (GlRenderer::Impl: its programs, buffers and the state
 // it keeps from frame to frame) and the buffers it holds (Buffer, TileAtlas), shared by the files that define its
 // parts: backend.cpp (set-up, uploads, the frame, read-back), backend_cpu_fill.cpp (stage 2 from the CPU),
-// backend_atlas.cpp (the pyramid's tiles on the GPU), backend_overlay.cpp (what shading needs from the CPU at the hits)
-// and backend_dispatch.cpp (the dispatches). backend.cpp's first
+// backend_atlas.cpp (the pyramid's tiles on the GPU), backend_overlay.cpp (what shading needs from the CPU at the
+// hits), backend_pictures.cpp (the pictures in flight) and backend_dispatch.cpp (the dispatches). backend.cpp's first
 // comment describes the backend as a whole. Private to render/gl/src/.
 #pragma once
 
@@ -98,6 +98,10 @@ struct TileAtlas {
     void upload();
     void release();
 };
+
+// A picture read from the colour texture as RGBA (`rgba`, W x H, row 0 at the bottom: GL's) into a Frame's RGB (row 0
+// at the top), on every core (backend_pictures.cpp).
+void rgbFromTexture(const uint8_t* rgba, int W, int H, std::vector<uint8_t>& rgb);
 
 }  // namespace gl
 
@@ -206,6 +210,22 @@ struct GlRenderer::Impl {
     void openAtlases();
     void placeBlocks(size_t k, const Cascade& c, detail::CascadeTextures& tex, detail::CascadeFill& fill,
                      double waterMinDepthM, int& rowLo, int& rowHi);
+
+    // backend_pictures.cpp: the pictures in flight (GlRenderer::submitPicture), a ring of pixel buffers, each with the
+    // fence after its copy and the frame it holds (its size, its world origin and its timings, taken when it was
+    // submitted: a sequence may hand the renderer another scene before the picture is collected).
+    struct PictureSlot {
+        GLuint buffer = 0;
+        size_t bytes = 0;
+        GLsync fence = nullptr;
+        Frame frame;  // size and origin only
+        Timings timings;
+    };
+    std::array<PictureSlot, GlRenderer::kPicturesInFlight> pictures{};
+    size_t picturesFirst = 0, picturesCount = 0;
+    void startPictureCopy(const Camera& camera, const Timings& timings);
+    GlRenderer::Picture finishPictureCopy();
+    void releasePictures();
 
     // backend_dispatch.cpp: the bindings, the compute dispatches of each stage, the time stamps and counters.
     // assemble.comp's texels an invocation (kRun) and invocations a work group (local_size_x).

@@ -19,6 +19,9 @@ std::unique_ptr<GlRenderer> GlRenderer::headless(const Scene&) { throw Error(kBu
 // No renderer can exist, so the members below are never reached.
 Frame GlRenderer::render(const Camera&, const RenderOptions&, Timings&, ReadBack) { throw Error(kBuiltOut); }
 void GlRenderer::setScene(const Scene&) { throw Error(kBuiltOut); }
+void GlRenderer::submitPicture(const Camera&, const RenderOptions&) { throw Error(kBuiltOut); }
+size_t GlRenderer::picturesInFlight() const { return 0; }
+GlRenderer::Picture GlRenderer::collectPicture() { throw Error(kBuiltOut); }
 unsigned GlRenderer::renderToTexture(const Camera&, const RenderOptions&, Timings&) { throw Error(kBuiltOut); }
 std::string GlRenderer::deviceName() const { return ""; }
 void GlRenderer::forgetCascades() {}

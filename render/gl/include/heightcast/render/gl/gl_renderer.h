@@ -51,6 +51,20 @@ public:
     // Throws hc::Error for bad camera/options, shader or driver failures (with the driver's log).
     Frame render(const Camera& camera, const RenderOptions& options, Timings& timings,
                  ReadBack what = ReadBack::AllLayers);
+    // Frames in flight, for batch output (sequences, flights, videos): submitPicture() renders a frame and starts
+    // copying its picture into the next of a ring of kPicturesInFlight pixel buffers, without waiting for the copy;
+    // collectPicture() returns the oldest frame submitted, waiting for its copy alone: its picture (Frame::rgb, the
+    // same bytes as render(..., PictureOnly)) and its timings (readbackMs: that wait and the conversion). Meanwhile the
+    // CPU fits the next frame or encodes the last. submitPicture() with the ring full throws hc::Error, as does
+    // collectPicture() with none in flight; render(), renderToTexture() and setScene() may come between the two.
+    static constexpr size_t kPicturesInFlight = 3;
+    struct Picture {
+        Frame frame;
+        Timings timings;
+    };
+    void submitPicture(const Camera& camera, const RenderOptions& options);
+    size_t picturesInFlight() const;
+    Picture collectPicture();
     // One frame left on the GPU: returns the name of an RGBA8 texture of camera.width x camera.height
     // (row 0 at the bottom, GL's convention) holding the shaded image, for a viewer to draw. Valid until
     // the next call.
