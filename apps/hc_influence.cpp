@@ -142,23 +142,14 @@ struct PyramidSummary {
             worstM.push_back(worst);
         }
     }
+    PyramidSummary(const hc::influence::PyramidFileSummary& f, double finestM)
+        : channels(f.channels),
+          finestCellM(finestM),
+          tiles(f.tiles),
+          worstM(f.worstM),
+          samples(f.samples),
+          bytes(f.bytes) {}
     double spacingM(size_t t) const { return finestCellM * double(uint64_t{1} << t); }
-    // The whole pyramid's, from every rank's part (collective; doubles hold the counts exactly below 2^53).
-    PyramidSummary combined() const {
-        std::vector<double> mine{double(samples), double(bytes)};
-        for (size_t t = 0; t < tiles.size(); ++t) mine.push_back(double(tiles[t])), mine.push_back(double(worstM[t]));
-        PyramidSummary all = *this;
-        all.samples = all.bytes = 0;
-        std::fill(all.tiles.begin(), all.tiles.end(), 0);
-        std::fill(all.worstM.begin(), all.worstM.end(), 0.0f);
-        for (const auto& v : hc::ranks::allGatherVectors(mine)) {
-            if (v.size() != mine.size()) throw hc::Error("a rank holds a pyramid of another height");
-            all.samples += uint64_t(v[0]), all.bytes += uint64_t(v[1]);
-            for (size_t t = 0; t < tiles.size(); ++t)
-                all.tiles[t] += uint64_t(v[2 + 2 * t]), all.worstM[t] = std::max(all.worstM[t], float(v[3 + 2 * t]));
-        }
-        return all;
-    }
 };
 
 void printPyramidSummary(const std::string& path, const hc::Grid& grid, uint64_t cells, const PyramidSummary& p,
@@ -264,19 +255,15 @@ void runByNodes(const InfluenceArgs& a) {
     for (size_t i = 0; a.pyramid && i < a.pyramidPaths.size(); ++i) {
         if (a.step < 0 && i > 0) ranks::together([&] { file = std::make_unique<hc::GridRegionReader>(a.gridPath, i); });
         const hc::Grid& shape = file->shape();
-        clock.lap();
         const bool waterOnly = shape.steps.size() > 1 && shape.step > 0;
-        inf::SurfacePyramid pyramid;
         inf::RankShare stepShare;
-        ranks::together(
-            [&] { pyramid = inf::buildPyramidOnRanks(*file, a.params, a.threads, progress, waterOnly, &stepShare); });
+        const inf::PyramidFileSummary whole =
+            inf::writePyramidOnRanks(*file, a.params, a.threads, progress, waterOnly, a.pyramidPaths[i], &stepShare);
         pyramidShare.tiles += stepShare.tiles, pyramidShare.seconds += stepShare.seconds;
         pyramidShare.cellsRead = std::max(pyramidShare.cellsRead, stepShare.cellsRead);
-        const double buildS = clock.lap();
-        inf::writePyramidOnRanks(pyramid, a.pyramidPaths[i]);
-        const double writeS = clock.lap();
-        const PyramidSummary whole = PyramidSummary(pyramid).combined();
-        if (root) printPyramidSummary(a.pyramidPaths[i], shape, file->cellCount(), whole, buildS, writeS);
+        if (root)
+            printPyramidSummary(a.pyramidPaths[i], shape, file->cellCount(), PyramidSummary(whole, shape.finestCellM),
+                                whole.buildSeconds, whole.writeSeconds);
     }
     std::string line = fmt::format("{} nodes, {} cells", myNodes, myCells);
     if (a.lists)
@@ -298,8 +285,9 @@ int main(int argc, char** argv) {
         hc::ranks::together([&] { go = parseOptions(argc, argv, a); });
         if (!go) return 0;
         // Without lists nothing needs the grid whole: one process builds the pyramid as one rank would, a node of the
-        // grid at a time, so that its memory follows a node and the pyramid, not the grid (a fraction of the
-        // whole grid's peak, in the same time and to the same bytes: docs/benchmarks.md).
+        // grid at a time, each node's tiles written out before the next (writePyramidOnRanks), so that its memory
+        // follows a node, neither the grid nor the pyramid (in the same time and to the same bytes:
+        // docs/benchmarks.md).
         if (hc::ranks::distributed() || !a.lists)
             runByNodes(a);
         else

@@ -135,7 +135,8 @@ void progressLine(bool interactive, const char* scene, const std::string& what, 
 }
 
 void removeStaleGrids() {
-    // hc_bench_SCENE_PID.hcg (and its writer's OUTPUT.tmp.XXXXXX) of a process that is gone: 5 GB at 400 M cells.
+    // hc_bench_SCENE_PID.hcg (its pyramid hc_bench_SCENE_PID.hcg.hcp, and their writers' OUTPUT.tmp.XXXXXX) of a
+    // process that is gone: 5 GB at 400 M cells, and the pyramid 7-11 GB.
     std::error_code ec;
     for (const fs::directory_entry& e : fs::directory_iterator(fs::temp_directory_path(), ec)) {
         const std::string name = e.path().filename().string();
@@ -181,7 +182,7 @@ RunResult runScenario(const Scenario& sc, const Settings& set) {
                 std::error_code ec;
                 if (!path.empty()) fs::remove(path, ec);
             }
-        } written;
+        } written, writtenPyramid;
         double topM = 0;  // the highest terrain or water surface [m]
         if (r.outOfCore) {
             written.path = tempGridPath(sc.name, ::getpid());
@@ -230,10 +231,17 @@ RunResult runScenario(const Scenario& sc, const Settings& set) {
         if (r.pyramid) {
             stage("building the surface pyramid ...");
             clock.restart();
-            // Out of core as hc-influence builds it by default: a node of the file at a time (the same samples).
-            pyramid = file ? hc::influence::buildPyramidOnRanks(*file, hc::influence::KernelParams{},
-                                                                set.options.threads, false, false)
-                           : hc::influence::buildSurfacePyramid(g, hc::influence::KernelParams{}, set.options.threads);
+            // Out of core as hc-influence builds it by default: a node of the file at a time into a file beside the
+            // grid (the same samples), read back as a renderer reads it.
+            if (file) {
+                writtenPyramid.path = written.path.string() + ".hcp";  // removeStaleGrids() parses it as the grid's
+                hc::influence::writePyramidOnRanks(*file, hc::influence::KernelParams{}, set.options.threads, false,
+                                                   false, writtenPyramid.path.string());
+                pyramid = hc::influence::readSurfacePyramid(writtenPyramid.path.string(), file->info(),
+                                                            hc::influence::KernelParams{});
+            } else {
+                pyramid = hc::influence::buildSurfacePyramid(g, hc::influence::KernelParams{}, set.options.threads);
+            }
             r.pyramidMs = clock.milliseconds();
             r.pyramidBytes = pyramid->bytes();
         }

@@ -455,28 +455,38 @@ TEST(Ranks, BuildFromRegionsEqualsTheWholeGridsBitForBit) {
         for (bool waterOnly : {false, true}) {
             const inf::SurfacePyramid a =
                 waterOnly ? inf::buildWaterPyramid(g, params) : inf::buildSurfacePyramid(g, params);
-            const inf::SurfacePyramid b = inf::buildPyramidOnRanks(file, params, 2, false, waterOnly);
+            // Built and written a node at a time (one process: the whole), writeSurfacePyramid's bytes, and read back
+            // the same tiles, samples and errors.
+            const fs::path pyramidByParts = d->path.string() + ".parts.hcp",
+                           pyramidWhole = d->path.string() + ".whole.hcp";
+            const inf::PyramidFileSummary sum =
+                inf::writePyramidOnRanks(file, params, 2, false, waterOnly, pyramidByParts.string());
+            inf::writeSurfacePyramid(a, pyramidWhole.string());
+            EXPECT_EQ(fileBytes(pyramidByParts), fileBytes(pyramidWhole)) << (waterOnly ? "water pyramid" : "pyramid");
+            const inf::SurfacePyramid b = inf::readSurfacePyramid(pyramidByParts.string(), file.info(), params);
             ASSERT_EQ(a.channels, b.channels);
             ASSERT_EQ(a.levels.size(), b.levels.size());
             EXPECT_EQ(a.contentHash, b.contentHash);
+            EXPECT_EQ(sum.channels, a.channels);
+            EXPECT_EQ(sum.samples, a.sampleCount());
+            EXPECT_EQ(sum.bytes, a.bytes());
             uint64_t tiles = 0;
             for (size_t t = 0; t < a.levels.size(); ++t) {
                 const auto &x = a.levels[t], &y = b.levels[t];
                 ASSERT_EQ(x.tileCount(), y.tileCount()) << "level " << t;
+                EXPECT_EQ(sum.tiles[t], x.tileCount()) << "level " << t;
                 tiles += x.tileCount();
                 if (x.keys.empty()) continue;  // empty spans' data() may be null: no memcmp
                 EXPECT_TRUE(std::equal(x.keys.begin(), x.keys.end(), y.keys.begin())) << "level " << t;
                 EXPECT_EQ(0, std::memcmp(x.samples.data(), y.samples.data(), x.samples.size_bytes())) << "level " << t;
                 EXPECT_EQ(0, std::memcmp(x.parentErrorM.data(), y.parentErrorM.data(), x.parentErrorM.size_bytes()))
                     << "level " << t;
+                float worst = 0;
+                for (size_t i = 0; i < x.parentErrorM.size(); i += size_t(a.channels))
+                    worst = std::max(worst, x.parentErrorM[i]);
+                EXPECT_EQ(sum.worstM[t], worst) << "level " << t;
             }
             EXPECT_GT(tiles, 10u);
-            // Written by parts (one process: the whole), writeSurfacePyramid's bytes.
-            const fs::path pyramidByParts = d->path.string() + ".parts.hcp",
-                           pyramidWhole = d->path.string() + ".whole.hcp";
-            inf::writePyramidOnRanks(b, pyramidByParts.string());
-            inf::writeSurfacePyramid(a, pyramidWhole.string());
-            EXPECT_EQ(fileBytes(pyramidByParts), fileBytes(pyramidWhole)) << (waterOnly ? "water pyramid" : "pyramid");
             fs::remove(pyramidByParts), fs::remove(pyramidWhole);
         }
     }

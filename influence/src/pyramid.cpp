@@ -395,6 +395,13 @@ std::vector<std::vector<uint64_t>> wetReachedKeys(const Grid& g, const KernelPar
 
 namespace detail {
 
+bool waterDrawnIn(const float* tile, size_t plane) {
+    const float *z = tile, *level = tile + plane, *share = tile + 2 * plane;
+    for (size_t s = 0; s < plane; ++s)
+        if (double(share[s]) >= kWetShareMin && level[s] > z[s]) return true;  // NaN compares false
+    return false;
+}
+
 std::vector<int> pyramidTileSides(const Grid& shape) {
     const int top = std::max(0, shape.rootLevel - kPyramidTileLog2);
     std::vector<int> sides(size_t(top) + 1);
@@ -494,10 +501,7 @@ SurfacePyramid waterPyramidOf(const SurfacePyramid& whole) {
         for (size_t tile = 0; tile < L.tileCount(); ++tile) {
             const float* z = L.samples.data() + tile * 3 * plane;
             const float* level = z + plane;
-            const float* share = z + 2 * plane;
-            bool drawn = false;  // the water rule at some sample (surface.h; NaN compares false)
-            for (size_t s = 0; s < plane && !drawn; ++s) drawn = double(share[s]) >= kWetShareMin && level[s] > z[s];
-            if (!drawn) continue;
+            if (!detail::waterDrawnIn(z, plane)) continue;
             owned->keys[t].push_back(L.keys[tile]);
             owned->samples[t].insert(owned->samples[t].end(), level, level + 2 * plane);
             const float* errors =

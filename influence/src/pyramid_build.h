@@ -14,6 +14,9 @@
 
 namespace hc::influence::detail {
 
+// Whether water is drawn at some sample of a 3-channel tile (its planes of `plane` samples at `tile`: elevation, water
+// level, wet share) by the water rule (surface.h): the tiles a water pyramid (2 channels) keeps.
+bool waterDrawnIn(const float* tile, size_t plane);
 // Tile sides per level 0..top of a grid of this shape (kPyramidTileSide; less where the domain is smaller than a tile).
 std::vector<int> pyramidTileSides(const Grid& shape);
 // The pyramid p (its fields but levels and storage set) over `owned` (per level its tile keys, ascending, and their

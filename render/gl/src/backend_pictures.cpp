@@ -1,8 +1,8 @@
-// render/gl/src/backend_pictures.cpp: the GL backend's pictures in flight (GlRenderer::submitPicture), for batch output.
-// A frame's picture is copied from the colour texture into a pixel buffer of a ring (GL_PIXEL_PACK_BUFFER: the driver
-// copies on the GPU's side, asynchronously), a fence after the copy; it is mapped and converted only when collected,
-// by then usually copied. With a synchronous read (render()) the CPU waits for the copy of each frame before it can fit
-// the next.
+// render/gl/src/backend_pictures.cpp: the GL backend's pictures in flight (GlRenderer::submitPicture), for batch
+// output. A frame's picture is copied from the colour texture into a pixel buffer of a ring (GL_PIXEL_PACK_BUFFER: the
+// driver copies on the GPU's side, asynchronously), a fence after the copy; it is mapped and converted only when
+// collected, by then usually copied. With a synchronous read (render()) the CPU waits for the copy of each frame before
+// it can fit the next.
 #include <cstring>
 
 #include "backend_internal.h"
@@ -33,7 +33,8 @@ void GlRenderer::Impl::startPictureCopy(const Camera& camera, const Timings& tim
     const size_t bytes = size_t(camera.width) * size_t(camera.height) * 4;
     if (!s.buffer) glGenBuffers(1, &s.buffer);
     glBindBuffer(GL_PIXEL_PACK_BUFFER, s.buffer);
-    if (s.bytes < bytes) glBufferData(GL_PIXEL_PACK_BUFFER, GLsizeiptr(bytes), nullptr, GL_STREAM_READ), s.bytes = bytes;
+    if (s.bytes < bytes)
+        glBufferData(GL_PIXEL_PACK_BUFFER, GLsizeiptr(bytes), nullptr, GL_STREAM_READ), s.bytes = bytes;
     glBindTexture(GL_TEXTURE_2D, colorTex);
     glPixelStorei(GL_PACK_ALIGNMENT, 1);
     glGetTexImage(GL_TEXTURE_2D, 0, GL_RGBA, GL_UNSIGNED_BYTE, nullptr);  // into the bound buffer, at offset 0

@@ -8,14 +8,16 @@
 // the lists of the node's cells and the pyramid tiles inside the node, then drops the region. Tiles larger than a
 // node (the few coarsest levels) are shared out one by one, each block of 4 x 4 samples from a region read around it.
 // Every list and sample is then the same bits as from the whole grid (region.h's argument; tests/cli/mpi.cmake
-// compares the files). Nothing is assembled on one rank: each rank keeps its nodes' lists and tiles and writes them at
-// their place in the file rank 0 opens (writeInfluenceCacheOnRanks, writePyramidOnRanks), so no rank holds more than
-// its share (the lists: ~200 bytes a cell) and the pyramid's few coarse levels. Each rank measures its tiles' parent
-// errors; the ranks share for it the tiles of the coarse levels and the first row and column of their tiles on the
-// low edges of their nodes (what the tiles of the nodes beside them read as parent samples).
+// compares the files). Nothing is assembled on one rank: each rank keeps its nodes' lists and writes them at their
+// place in the file rank 0 opens (writeInfluenceCacheOnRanks), so no rank holds more than its share (the lists: ~200
+// bytes a cell). The pyramid's tiles go, a node at a time, to a temporary file of the rank's, and from there to their
+// place in the file (writePyramidOnRanks): a rank holds one node's tiles, the tiles on its nodes' edges and the few
+// coarse levels. Each rank measures its tiles' parent errors; the ranks share for it the tiles of the coarse levels
+// and the first row and column of their tiles on the low edges of their nodes (what the tiles of the nodes beside
+// them read as parent samples).
 //
-// With one process (no mpirun) hc-influence reads the grid whole and calls buildInfluenceLists and
-// build{Surface,Water}Pyramid, as before.
+// One process (no mpirun) takes this path as rank 0 of 1 where it builds no lists (hc-influence's default above 4.5 M
+// cells); with lists it reads the grid whole and calls buildInfluenceLists and build{Surface,Water}Pyramid.
 #pragma once
 
 #include <cstdint>
@@ -77,13 +79,24 @@ InfluenceListsPart buildInfluenceListsOnRanks(const GridRegionReader& file, cons
 // must lie on a file system every rank sees; nothing appears at `path` if any rank fails), and returns the whole lists'
 // Stats on every rank.
 InfluenceLists::Stats writeInfluenceCacheOnRanks(const InfluenceListsPart& part, const std::string& path);
-// The pyramid (waterOnly: what buildWaterPyramid builds, a scenario's later step; else buildSurfacePyramid): the tiles
-// a rank writes, with their parent errors: on the levels whose tiles lie inside a partition node the tiles of its
-// nodes, on the coarser levels every tile on rank 0 and none on the others.
-SurfacePyramid buildPyramidOnRanks(const GridRegionReader& file, const KernelParams& params, unsigned threads,
-                                   bool progress, bool waterOnly, RankShare* share = nullptr);
-// Collective: writes the pyramid whose parts the ranks hold to `path`, the bytes writeSurfacePyramid writes of the
-// whole (as writeInfluenceCacheOnRanks does).
-void writePyramidOnRanks(const SurfacePyramid& part, const std::string& path);
+// The figures of a pyramid file writePyramidOnRanks wrote (the whole pyramid's, on every rank), as hc-influence prints
+// them.
+struct PyramidFileSummary {
+    int channels = 1;
+    std::vector<uint64_t> tiles;  // per level
+    std::vector<float> worstM;    // per level: the largest parent error of the first channel
+    uint64_t samples = 0, bytes = 0;
+    double buildSeconds = 0, writeSeconds = 0;  // this rank's
+};
+// Collective: builds the pyramid (waterOnly: what buildWaterPyramid builds, a scenario's later step; else
+// buildSurfacePyramid) and writes it to `path`, the bytes writeSurfacePyramid writes of the whole (as
+// writeInfluenceCacheOnRanks: rank 0 places the sections, the others write theirs in place; nothing appears at `path`
+// if any rank fails). A node at a time: each node's tiles go to a temporary file beside `path` (unlinked at once; as
+// large as the rank's share of the pyramid) once their parent errors are measured, and a rank holds in memory one
+// node's region and tiles, every tile's key and error, the tiles on its nodes' edges and the few coarse levels
+// (pyramid_on_ranks.cpp), not its share of the samples.
+PyramidFileSummary writePyramidOnRanks(const GridRegionReader& file, const KernelParams& params, unsigned threads,
+                                       bool progress, bool waterOnly, const std::string& path,
+                                       RankShare* share = nullptr);
 
 }  // namespace hc::influence
