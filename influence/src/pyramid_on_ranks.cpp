@@ -4,12 +4,12 @@
 // parent errors from the node's own tiles and go to the rank's sample spill (a temporary file beside the pyramid), in
 // key order; the node's samples are then dropped. Only keys and errors (12-20 bytes a tile) stay for every tile, and
 // whole tiles only where an error must wait: a tile whose parent samples lie partly in the next node (on the node's
-// high x or y edge), and a tile of the last level inside a node (its parents are coarse tiles, sampled after the nodes).
-// Kept beside them are the tiles on the nodes' low edges above level 0: the parent samples those read in the nodes
-// beside. Once the coarse tiles are sampled (shared out among the ranks as before), the waiting errors are measured over
-// the kept tiles, the coarse ones and the other ranks' halo (detail::finishPyramid), and the file is written from the
-// spill, a chunk at a time. Every sample and error is the same bits as a pyramid held whole: the errors read the same
-// parent samples (measureParentErrorsInto), the samples are region.h's argument.
+// high x or y edge), and a tile of the last level inside a node (its parents are coarse tiles, sampled after the
+// nodes). Kept beside them are the tiles on the nodes' low edges above level 0: the parent samples those read in the
+// nodes beside. Once the coarse tiles are sampled (shared out among the ranks as before), the waiting errors are
+// measured over the kept tiles, the coarse ones and the other ranks' halo (detail::finishPyramid), and the file is
+// written from the spill, a chunk at a time. Every sample and error is the same bits as a pyramid held whole: the
+// errors read the same parent samples (measureParentErrorsInto), the samples are region.h's argument.
 #include <algorithm>
 #include <bit>
 #include <limits>
@@ -125,7 +125,7 @@ private:
     // time) or, on the coarse levels, in memory.
     struct Level {
         std::vector<uint64_t> keys;
-        std::vector<float> errors;  // per tile, per channel written
+        std::vector<float> errors;                             // per tile, per channel written
         std::vector<std::pair<uint64_t, uint64_t>> spillRuns;  // (offset, bytes) until the spill is mapped
         std::vector<float> samples;                            // the coarse levels
     };
@@ -440,7 +440,8 @@ void PyramidBuild::measureWaiting() {
             if (!written(tile, t)) continue;
             o.keys.push_back(L.keys[i]);
             appendErrors(o.errors, &L.parentErrorM[i * ch]);
-            o.samples.insert(o.samples.end(), tile + size_t(firstOut_) * plane, tile + (size_t(firstOut_) + chOut) * plane);
+            o.samples.insert(o.samples.end(), tile + size_t(firstOut_) * plane,
+                             tile + (size_t(firstOut_) + chOut) * plane);
         }
     }
 }

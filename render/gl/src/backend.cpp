@@ -344,6 +344,7 @@ CascadeFit GlRenderer::Impl::runFrame(const Camera& camera, const RenderOptions&
     }
     if (headless) headless->makeCurrent();
     layerValues.clear(), layerName.clear();
+    raysCopied = false;
     const Stopwatch frameClock;
     timings = Timings{};
     setup = detail::setUpFrame(*scene, camera);

@@ -183,9 +183,10 @@ struct GlRenderer::Impl {
     std::vector<float> layerValues;
     std::string layerName;
     int overlayBits(const RenderOptions& options) const;  // GpuFrame::overlay's bits for these options
-    // The rays copied on the GPU into readbackBuf and mapped for reading (bound as GL_SHADER_STORAGE_BUFFER): unmap
-    // after reading.
+    // The rays copied on the GPU into readbackBuf (once a frame: raysCopied) and mapped for reading (bound as
+    // GL_SHADER_STORAGE_BUFFER): unmap after reading.
     const gpu::GpuPixel* mapRays(size_t pixels);
+    bool raysCopied = false;  // this frame's rays are in readbackBuf
     // A hit's local position as the Frame holds it: the camera-relative offset added to the eye in double, then float
     // (what readBack() and fillOverlay() both give: the overlay's values are taken where the frame says the hit is).
     glm::vec3 hitLocal(const gpu::GpuPixel& p) const {

@@ -19,10 +19,13 @@ int GlRenderer::Impl::overlayBits(const RenderOptions& options) const {
 
 const gpu::GpuPixel* GlRenderer::Impl::mapRays(size_t pixels) {
     const size_t rayBytes = pixels * sizeof(gpu::GpuPixel);
-    readbackBuf.reserve(rayBytes);
-    glBindBuffer(GL_COPY_READ_BUFFER, pixelsBuf.name);
-    glBindBuffer(GL_COPY_WRITE_BUFFER, readbackBuf.name);
-    glCopyBufferSubData(GL_COPY_READ_BUFFER, GL_COPY_WRITE_BUFFER, 0, 0, GLsizeiptr(rayBytes));
+    if (!raysCopied) {  // shading reads the rays, never writes them: a frame copies them once
+        readbackBuf.reserve(rayBytes);
+        glBindBuffer(GL_COPY_READ_BUFFER, pixelsBuf.name);
+        glBindBuffer(GL_COPY_WRITE_BUFFER, readbackBuf.name);
+        glCopyBufferSubData(GL_COPY_READ_BUFFER, GL_COPY_WRITE_BUFFER, 0, 0, GLsizeiptr(rayBytes));
+        raysCopied = true;
+    }
     glBindBuffer(GL_SHADER_STORAGE_BUFFER, readbackBuf.name);
     const auto* px = static_cast<const gpu::GpuPixel*>(
         glMapBufferRange(GL_SHADER_STORAGE_BUFFER, 0, GLsizeiptr(rayBytes), GL_MAP_READ_BIT));
