@@ -353,6 +353,67 @@ TEST_F(RenderGlWater, OutOfCoreWaterStepInterpolatedOnTheGpuAsOnTheCpu) {
 // after forgetCascades) to 1 mm with no surface at the same texels (a kept texel was summed at a centre computed
 // from another frame's lattice origin: equal to double rounding); and its picture is the CPU's. Fails when the kept
 // texels are shifted, or summed again (the Gaussians), or when approximate.comp writes outside its spans.
+// The bytes the cascades of a frame take in the GL backend's heights buffer, counted here from their sides (n):
+// every cascade's texels (terrain, water level, depth) and its max mipmaps (terrain and water, side n - 1 halving to
+// 1), 4 bytes each.
+uint64_t heightsBytes(const std::vector<GlRenderer::CascadeTexels>& cascades, bool water) {
+    uint64_t floats = 0;
+    for (const GlRenderer::CascadeTexels& c : cascades) {
+        if (c.n == 0) continue;
+        floats += uint64_t(c.n) * uint64_t(c.n) * (water ? 3 : 1);
+        for (uint64_t side = uint64_t(c.n) - 1;; side = (side + 1) / 2) {
+            floats += side * side * (water ? 2 : 1);
+            if (side <= 1) break;
+        }
+    }
+    return floats * 4;
+}
+
+// Where the driver's largest storage buffer cannot hold the cascades at the pyramid's spacings (up to 2N texels a
+// side: 153 MiB at 1920x1080 over the hef flood, llvmpipe allows 128), the GL backend draws N texels a side at the next
+// coarser spacing, the CPU's picture with --pyramid-coarse, and says so in the frame's notes; where it can, the
+// ladder's picture and no note.
+TEST_F(RenderGl, OutOfCoreTexturesHeldToTheDriversStorageBuffer) {
+    World& w = hef();
+    HC_REQUIRE_GL(w);
+    const GridOnDisk disk(w, dir_ / "held.hcg");
+    const hc::GridRegionReader file(disk.path.string());
+    const Scene scene(file, {}, &disk.pyramid);
+    const Camera cam = lowOblique(scene, 320, 200);
+    const RenderOptions o = smallOptions();
+    RenderOptions coarse = o;
+    coarse.pyramidCoarseTexels = true;
+    // The two layouts' sizes, from a renderer with the driver's own limit.
+    uint64_t ladderBytes = 0, coarseBytes = 0;
+    {
+        const std::unique_ptr<GlRenderer> gl = GlRenderer::headless(scene);
+        Timings t;
+        (void)gl->render(cam, coarse, t);
+        coarseBytes = heightsBytes(gl->cascadeTexturesForTest(), scene.hasWater());
+        gl->forgetCascades();
+        const Frame g = gl->render(cam, o, t);
+        ladderBytes = heightsBytes(gl->cascadeTexturesForTest(), scene.hasWater());
+        Timings tc;
+        expectSameFrames(renderFrame(scene, cam, o, tc), g, tc, t, "ladder, room enough");
+        EXPECT_TRUE(t.notes.empty());
+    }
+    ASSERT_GT(ladderBytes, coarseBytes) << "the ladder's textures are larger than N texels a side";
+    GlRenderer::limitStorageBlockForTest((ladderBytes + coarseBytes) / 2);
+    const std::unique_ptr<GlRenderer> held = GlRenderer::headless(scene);
+    GlRenderer::limitStorageBlockForTest(0);
+    Timings tg, tc;
+    const Frame g = held->render(cam, o, tg);
+    const Frame cpu = renderFrame(scene, cam, coarse, tc);
+    expectSameFrames(cpu, g, tc, tg, "held to the storage buffer");
+    ASSERT_EQ(tg.cascades.size(), tc.cascades.size());
+    for (size_t k = 0; k < tc.cascades.size(); ++k)
+        EXPECT_EQ(tg.cascades[k].texelM, tc.cascades[k].texelM) << "cascade " << k << ": --pyramid-coarse's spacing";
+    ASSERT_EQ(tg.notes.size(), 1u);
+    EXPECT_NE(tg.notes[0].find("next coarser spacing"), std::string::npos) << tg.notes[0];
+    EXPECT_NE(tg.toTable().find("note: the cascade textures"), std::string::npos);
+    EXPECT_NE(tg.toJson().find("\"notes\""), std::string::npos);
+}
+
 TEST_F(RenderGl, InMemoryMovingCameraSumsOnlyTheNewTexels) {
     World& w = hef();
     HC_REQUIRE_GL(w);

@@ -44,6 +44,7 @@ std::string Timings::toJson() const {
     j["error_bound_px"] = bound(errorBoundPx);
     j["max_error_m"] = maxErrorM;
     j["max_error_px"] = maxErrorPx;
+    if (!notes.empty()) j["notes"] = notes;
     if (verified)
         j["verified"] = {{"hits", verified->hits},
                          {"max_m", rounded(verified->maxM, std::chars_format::general, 4)},
@@ -145,6 +146,7 @@ std::string Timings::toTable() const {
         }
     s += budget.empty() ? "" : budget + ")";
     s += "\n";
+    for (const std::string& n : notes) s += "note: " + n + "\n";
     if (gpuMs > 0 || readbackMs > 0) {
         std::snprintf(b, sizeof b,
                       "    GPU span      %9.2f   first stage's start to shading's end\n    read back     %9.2f   the "

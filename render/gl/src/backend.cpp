@@ -60,6 +60,9 @@ uint64_t gIndexChunkLimitForTest = uint64_t{1} << 31;
 // GlRenderer::limitAtlasForTest: the most pyramid tiles an atlas may hold (0: as many as its storage allows), for the
 // renderers made after it.
 uint32_t gAtlasTileLimitForTest = 0;
+// GlRenderer::limitStorageBlockForTest: the storage buffer size renderers made after it take as the driver's (0: the
+// driver's own).
+uint64_t gStorageBlockLimitForTest = 0;
 
 void copyFloats(float* dst, const glm::dvec3& v) {
     for (int i = 0; i < 3; ++i) dst[i] = float(v[i]);
@@ -75,6 +78,7 @@ GlRenderer::Impl::Impl(const Scene& s, std::unique_ptr<gl::HeadlessContext> cont
     glGetInteger64v(GL_MAX_SHADER_STORAGE_BLOCK_SIZE, &maxStorageBlock);
     terrainAtlas.limit = waterAtlas.limit = gAtlasTileLimitForTest;
     if (maxStorageBlock <= 0) maxStorageBlock = GLint64{1} << 24;  // OpenGL 4.3's minimum
+    if (gStorageBlockLimitForTest > 0) maxStorageBlock = std::min(maxStorageBlock, GLint64(gStorageBlockLimitForTest));
     glGenQueries(kStamps, stamps.data());
     try {
         approximate = gl::compileEmbedded("approximate");
@@ -297,6 +301,14 @@ size_t GlRenderer::Impl::layOutCascades(gpu::FrameBlock& block, const CascadeFit
     return heightFloats;
 }
 
+// The bytes of the cascade textures and their mipmaps `fit` needs in the heights buffer (layOutCascades' count).
+uint64_t GlRenderer::Impl::cascadeBytes(const CascadeFit& fit) const {
+    gpu::FrameBlock block{};
+    Timings scratch;
+    size_t visibleWords = 0;
+    return uint64_t(layOutCascades(block, fit, scratch, visibleWords)) * 4;
+}
+
 // The frame's constants, the cascades' places in the heights and visibility buffers and their row spans,
 // into the buffers (grown as needed); the counters zeroed; the colour texture at the frame's size.
 void GlRenderer::Impl::uploadFrame(gpu::FrameBlock& block, const CascadeFit& fit, const Camera& camera,
@@ -351,7 +363,20 @@ CascadeFit GlRenderer::Impl::runFrame(const Camera& camera, const RenderOptions&
     // In memory the shaders sum the kernels of every texel: textures of N^2, not the pyramid's ladder (up to 2N a
     // side, renderer.cpp). Out of core the CPU fills them as renderFrame() does, from the pyramid where there is one.
     if (!cpuCascades) setup.view.ladderStepsPerOctave = 8;
-    const CascadeFit fit = detail::fitFrame(*scene, camera, setup, options, timings);  // stage 1, on the CPU
+    CascadeFit fit = detail::fitFrame(*scene, camera, setup, options, timings);  // stage 1, on the CPU
+    if (cpuCascades && !options.pyramidCoarseTexels && cascadeBytes(fit) > uint64_t(maxStorageBlock)) {
+        // The pyramid's ladder (up to 2N texels a side) does not fit the driver's storage buffer: N texels a side at
+        // the next coarser spacing (--pyramid-coarse), said in the frame's notes.
+        const uint64_t need = cascadeBytes(fit);
+        RenderOptions coarser = options;
+        coarser.pyramidCoarseTexels = true;
+        timings = Timings{};
+        fit = detail::fitFrame(*scene, camera, setup, coarser, timings);
+        timings.notes.push_back("the cascade textures at the pyramid's spacings need " + std::to_string(need >> 20) +
+                                " MiB in one storage buffer and " + device + " allows " +
+                                std::to_string(maxStorageBlock >> 20) +
+                                " MiB: drawn with N texels a side at the next coarser spacing (as --pyramid-coarse)");
+    }
     gpu::FrameBlock block{};
     // The last frame's textures stay for assemble.comp to read, if that frame built them; from here until this frame
     // has built its own (dispatchAssembly), a failure leaves nothing to keep.
@@ -535,6 +560,7 @@ void GlRenderer::limitIndexChunksForTest(uint64_t entries) {
     gIndexChunkLimitForTest = entries ? entries : uint64_t{1} << 31;
 }
 void GlRenderer::limitAtlasForTest(uint32_t tiles) { gAtlasTileLimitForTest = tiles; }
+void GlRenderer::limitStorageBlockForTest(uint64_t bytes) { gStorageBlockLimitForTest = bytes; }
 
 void GlRenderer::compileForTest(const std::string& name, const std::string& source) const {
     if (impl_->headless) impl_->headless->makeCurrent();

@@ -170,6 +170,7 @@ struct GlRenderer::Impl {
     void uploadScene();
     void fillFrame(gpu::GpuFrame& f, const CascadeFit& fit, const Camera& camera, const RenderOptions& options) const;
     size_t layOutCascades(gpu::FrameBlock& block, const CascadeFit& fit, Timings& timings, size_t& visibleWords) const;
+    uint64_t cascadeBytes(const CascadeFit& fit) const;
     void uploadFrame(gpu::FrameBlock& block, const CascadeFit& fit, const Camera& camera, const RenderOptions& options,
                      Timings& timings);
     CascadeFit runFrame(const Camera& camera, const RenderOptions& options, Timings& timings);

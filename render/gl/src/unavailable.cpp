@@ -27,6 +27,7 @@ std::string GlRenderer::deviceName() const { return ""; }
 void GlRenderer::forgetCascades() {}
 void GlRenderer::limitIndexChunksForTest(uint64_t) {}
 void GlRenderer::limitAtlasForTest(uint32_t) {}
+void GlRenderer::limitStorageBlockForTest(uint64_t) {}
 void GlRenderer::compileForTest(const std::string&, const std::string&) const { throw Error(kBuiltOut); }
 GlRenderer::VariableLayout GlRenderer::bufferVariableLayout(const std::string&, const std::string&) const { return {}; }
 long GlRenderer::bufferBlockSize(const std::string&, const std::string&) const { return -1; }

@@ -142,6 +142,9 @@ struct Timings {
     // The frame's bound: the largest of its cascades' (NaN without a pyramid); and the budget asked (0: none).
     double errorBoundM = 0, errorBoundPx = 0, maxErrorM = 0, maxErrorPx = 0;
     std::optional<ErrorCheck> verified;  // the frame's error measured at its hits (verifyFrameError), when asked
+    // What the renderer changed from what the options asked, and why (the GL backend's textures held to what its
+    // driver allows, say); printed by toTable, "notes" in toJson.
+    std::vector<std::string> notes;
     std::string toJson() const;
     std::string toTable() const;
 };

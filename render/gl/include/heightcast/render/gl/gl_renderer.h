@@ -87,6 +87,9 @@ public:
     // Holds the pyramid tiles of renderers made after this call (out of core) in atlases of at most `tiles` slots (0:
     // as many as their storage allows), so that tests exercise eviction and a frame that needs more tiles than fit.
     static void limitAtlasForTest(uint32_t tiles);
+    // Takes `bytes` as the driver's largest storage buffer in renderers made after this call (0: the driver's own), so
+    // that tests exercise the textures held to it out of core.
+    static void limitStorageBlockForTest(uint64_t bytes);
     // Compiles and links `source` as a compute shader named `name` and deletes it again. Throws
     // hc::Error with the name and the driver's info log when it fails.
     void compileForTest(const std::string& name, const std::string& source) const;
