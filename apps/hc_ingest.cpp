@@ -12,6 +12,7 @@
 #include "heightcast/core/ranks.h"
 #include "heightcast/core/timer.h"
 #include "heightcast/core/error.h"
+#include "heightcast/core/heap.h"
 #include "heightcast/grid/grid_file.h"
 #include "heightcast/core/progress.h"
 #include "heightcast/ingest/ingest.h"
@@ -24,7 +25,7 @@ constexpr int kBandNotGiven =
     -1000000;  // --band's value before parsing: tells "not given" from any number a user types
 
 void printSummary(const hc::ingest::BuildSummary& b, const hc::ingest::LoadReport& r, const std::string& out,
-                  bool timesGuessed) {
+                  bool timesGuessed, double heldMB) {
     const hc::Grid& g = b.shape;
     const hc::IngestStats& s = g.stats;
     const bool mesh = !s.sourceKind.empty();  // faces taken as cells (a sampled mesh is built as a raster)
@@ -92,6 +93,11 @@ void printSummary(const hc::ingest::BuildSummary& b, const hc::ingest::LoadRepor
     std::printf("  memory       peak %.1f MB resident (the grid streams to disk: %zu bytes per cell there%s)\n",
                 double(hc::peakRssBytes()) / 1e6, size_t(8 + 4 * g.firstStepLayer()),
                 b.steps.empty() ? "" : ", and 8 per wet cell and step");
+    if (r.heldInPieces)
+        std::printf(
+            "  raster       read window by window in pieces of at most %.3g MB (float32), each read twice "
+            "(--raster-memory)\n",
+            double(heldMB));
 }
 
 // A variable of a model's results named as a raster (NETCDF:"run.nc":zs, HDF5:"plan.hdf"://...): the file behind it, if
@@ -210,6 +216,13 @@ bool parseOptions(int argc, char** argv, hc::ingest::Options& o, std::string& ou
              "      stored per step on the wet faces as a layer of that name and the variable's units (default none)",
              faceLayers);
     p.option("--threads", "N", "worker threads (default 0 = all cores; under mpirun: per rank)", o.threads);
+    p.option(
+        "--raster-memory", "MB",
+        fmt::format("one process, terrain without water: the most memory the working raster may take as\n"
+                    "      float32, MB; a larger one is read window by window in pieces, each read twice, into the "
+                    "same\n      bytes (default {:.0f})",
+                    hc::ingest::kDefaultRasterMemoryMB),
+        o.rasterMemoryMB);
     p.flag("--quiet", "print only warnings and failures (no progress, no summary)", quiet);
     p.exclusive({"--water", "--water-surface", "--water-level"});
     if (!p.parse(argc, argv)) return false;
@@ -323,6 +336,9 @@ hc::ingest::BuildSummary buildGrid(const hc::ingest::Options& o, const std::stri
 }  // namespace
 
 int main(int argc, char** argv) {
+    // GDAL's block buffers (256 kB for a 256 x 256 float32 tile) from the heap, reused: as fresh mmaps, each window
+    // read by windows (mpirun, --raster-memory) faulted its blocks' pages in again (a third of its time at 419 M px).
+    hc::keepFreedMemory(size_t(1) << 20, size_t(64) << 20);
     return hc::cli::runOnRanks("hc-ingest", argc, argv, [&] {
         namespace ranks = hc::ranks;
         hc::ingest::Options o;
@@ -350,7 +366,8 @@ int main(int argc, char** argv) {
             ranks::together([&] { summary = buildGrid(o, out, report, mesh); });
         }
         if (!quiet && ranks::rank() == 0)
-            printSummary(summary, report, out, o.timesS.empty() && !mesh && o.waterMesh.empty());
+            printSummary(summary, report, out, o.timesS.empty() && !mesh && o.waterMesh.empty(),
+                         double(hc::ingest::heldPixelsMax(o)) * sizeof(float) / 1e6);
         if (ranks::distributed() && ranks::rank() == 0)
             ranks::log("hc-ingest", fmt::format("{} ranks, {:.3f} s in all", ranks::count(), clock.seconds()));
         return 0;

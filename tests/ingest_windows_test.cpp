@@ -40,6 +40,37 @@ protected:
 
 bool sameBits(float a, float b) { return std::memcmp(&a, &b, sizeof a) == 0; }
 
+// One process reading the working raster in pieces (Options::rasterMemoryMB at a tenth of its float32 size: about ten
+// runs of share nodes, each read for its tiles' roots and again for its cells) writes the same bytes as `wholeGrid`,
+// which ingestToFile wrote holding it whole (`wholeReport`), and reports the same: the same reading counts (each
+// window's second read not counted again), warnings and check against the source (its RMS to 1e-12: the sum of squares
+// is added in another order).
+void compareInPieces(const fs::path& dir, const Options& o, const std::string& wholeGrid,
+                     const LoadReport& wholeReport) {
+    EXPECT_FALSE(wholeReport.heldInPieces);
+    LoadReport rep;
+    std::unique_ptr<detail::TerrainWindows> windows = detail::openTerrainWindows(o, rep);
+    const Raster& s = windows->shape();
+    Options small = o;
+    small.rasterMemoryMB = double(s.width * s.height) * sizeof(float) / 10 / 1e6;
+    LoadReport pieces;
+    const std::string grid = (dir / "windows_pieces.hcg").string();
+    hc::ingest::ingestToFile(small, grid, pieces);
+    EXPECT_TRUE(pieces.heldInPieces);
+    EXPECT_TRUE(hc::test::readBytes(grid) == hc::test::readBytes(wholeGrid)) << "in pieces: " << grid;
+    EXPECT_EQ(pieces.method, wholeReport.method);
+    EXPECT_EQ(pieces.warnings, wholeReport.warnings);
+    EXPECT_EQ(pieces.sourceValidPixels, wholeReport.sourceValidPixels);
+    EXPECT_EQ(pieces.infPixels, wholeReport.infPixels);
+    EXPECT_EQ(pieces.sourcePrecisionDouble, wholeReport.sourcePrecisionDouble);
+    const auto &a = pieces.sourceCheck, &b = wholeReport.sourceCheck;
+    EXPECT_EQ(a.done, b.done);
+    EXPECT_EQ(a.checked, b.checked);
+    EXPECT_EQ(a.missed, b.missed);
+    EXPECT_EQ(a.maxDevM, b.maxDevM);
+    EXPECT_NEAR(a.rmsDevM, b.rmsDevM, 1e-12 * (1 + b.rmsDevM));
+}
+
 // Reads `o` whole and window by window: windows of awkward sizes tiling the working raster (so every pixel is read
 // once, its edges included) plus random ones overlapping them; every pixel compared bit for bit. Returns the number
 // of valid pixels compared (so a caller can see the comparison was not vacuous). The grid it writes goes into `dir`.
@@ -66,7 +97,7 @@ size_t compareWindows(const fs::path& dir, const Options& o, const std::string& 
     size_t valid = 0, mismatches = 0;
     std::vector<float> values, rounding;
     auto check = [&](size_t c0, size_t r0, size_t w, size_t h, bool count) {
-        windows->read(c0, r0, w, h, values, rounding);
+        windows->read(c0, r0, w, h, values, rounding, true);
         ASSERT_EQ(values.size(), w * h);
         for (size_t r = 0; r < h; ++r)
             for (size_t c = 0; c < w; ++c) {
@@ -111,6 +142,7 @@ size_t compareWindows(const fs::path& dir, const Options& o, const std::string& 
         // And the tally of that pass is still every source pixel once.
         EXPECT_EQ(windows->tally().validPixels, wholeReport.sourceValidPixels);
     }
+    EXPECT_NO_FATAL_FAILURE(compareInPieces(dir, o, grid, fileReport));
     return valid;
 }
 
@@ -187,6 +219,29 @@ TEST_F(IngestWindows, KeptSourceReadsTheSameBitsByWindow) {
     Options o;
     o.input = src;
     EXPECT_GT(compareWindows(dir_, o, "kept as is", 45, 33), 1000u);
+}
+
+// A kept source whose rows run south-up and whose values float32 cannot hold (Float64: each window keeps the rounding
+// too), read in strips of a few rows (GDAL's default blocks for a GeoTIFF it writes): the windows are its own pixels,
+// mirrored.
+TEST_F(IngestWindows, KeptSouthUpFloat64SourceReadsTheSameBitsByWindow) {
+    HC_REQUIRE_DATA(src, "south_glacier_utm7.tif");
+    GDALAllRegister();
+    const std::string path = (dir_ / "glacier_south_up.tif").string();
+    size_t height = 0;
+    {
+        GDALDatasetUniquePtr in(GDALDataset::Open(src.c_str(), GDAL_OF_RASTER | GDAL_OF_READONLY));
+        ASSERT_TRUE(in);
+        ASSERT_EQ(in->GetRasterBand(1)->GetRasterDataType(), GDT_Float64);
+        height = size_t(in->GetRasterYSize());
+    }
+    ASSERT_NO_FATAL_FAILURE(copyWithGeoTransform(src, path, [&](double* gt) {
+        gt[3] += gt[5] * double(height);  // the southern edge, rows running north
+        gt[5] = -gt[5];
+    }));
+    Options o;
+    o.input = path;
+    EXPECT_GT(compareWindows(dir_, o, "south-up rows flipped north-up", 31, 47), 1000u);
 }
 
 // --t_srs (GDAL's warper, exact transformer): each window warped on its own from the source blocks it reaches, on the
@@ -316,7 +371,7 @@ TEST_F(IngestWindows, WarpAcross180ReadsTheSameBitsByWindow) {
     std::vector<float> values, rounding;
     uint64_t valid = 0;
     for (size_t r0 = 0; r0 < s.height; r0 += 64) {
-        windows->read(0, r0, s.width, std::min<size_t>(64, s.height - r0), values, rounding);
+        windows->read(0, r0, s.width, std::min<size_t>(64, s.height - r0), values, rounding, true);
         valid += uint64_t(std::count_if(values.begin(), values.end(), [](float v) { return !std::isnan(v); }));
     }
     try {

@@ -255,30 +255,42 @@ Stats Builder::run(CellSink& sink) {
     return sum;
 }
 
-// Pass A: tile roots and leaf counts, of this rank's tiles (gatherTileRoots brings the others').
-void Builder::buildTileRoots(RunState& rs, Progress& progress) const {
+// Pass A: tile roots and leaf counts, of this rank's tiles (gatherTileRoots brings the others'). A build in pieces
+// reads each piece's pixels before its tiles, and checks the pixels read once all are (takeShare).
+void Builder::buildTileRoots(RunState& rs, Progress& progress) {
     const size_t tiles = ntx_ * nty_;
     rs.roots = std::vector<Node>(tiles);
     rs.leafCount = std::vector<uint32_t>(tiles);
     rs.merged = std::vector<uint8_t>(tiles);
     rs.scratch = std::vector<std::vector<std::vector<Node>>>(rs.threads);
-    const std::vector<size_t>& myTiles = rs.myTiles;
     std::vector<Node>& roots = rs.roots;
     std::vector<uint32_t>& leafCount = rs.leafCount;
     std::vector<uint8_t>& merged = rs.merged;
     std::vector<std::vector<std::vector<Node>>>& scratch = rs.scratch;
     const int rankCount = rs.rankCount;
-    ranks::together([&] {
-        parallelFor(myTiles.size(), 16, rs.threads, [&](size_t b, size_t e, unsigned worker) {
-            for (size_t k = b; k < e; ++k) {
-                const size_t i = myTiles[k], tx = i % ntx_, ty = i / ntx_;
-                roots[i] = buildTile(tx, ty, scratch[worker]);
-                leafCount[i] = static_cast<uint32_t>(countLeaves(scratch[worker]));
-                merged[i] = anyMerged(scratch[worker]);
-            }
-            progress.advance((e - b) * size_t(rankCount));
+    auto build = [&](const std::vector<size_t>& myTiles) {
+        ranks::together([&] {
+            parallelFor(myTiles.size(), 16, rs.threads, [&](size_t b, size_t e, unsigned worker) {
+                for (size_t k = b; k < e; ++k) {
+                    const size_t i = myTiles[k], tx = i % ntx_, ty = i / ntx_;
+                    roots[i] = buildTile(tx, ty, scratch[worker]);
+                    leafCount[i] = static_cast<uint32_t>(countLeaves(scratch[worker]));
+                    merged[i] = anyMerged(scratch[worker]);
+                }
+                progress.advance((e - b) * size_t(rankCount));
+            });
         });
-    });
+    };
+    if (rs.pieces.empty()) return build(rs.myTiles);
+    uint64_t valid = 0;
+    for (size_t p = 0; p + 1 < rs.pieces.size(); ++p) {
+        rs.pixelsRead += holdPixels(rs.pieces[p], rs.pieces[p + 1], true, false);
+        rs.windowsRead += blocks_.size();
+        valid += validHeld();
+        build(tilesOf(rs.pieces[p], rs.pieces[p + 1]));
+    }
+    holdPixels(0, 0, false, false);  // none held
+    if (windows_->checkHeld) windows_->checkHeld(valid);
 }
 
 // Pass B: coarse levels over tile roots, level tileLevel+1 .. rootLevel.
@@ -338,7 +350,7 @@ void Builder::walkUnits(RunState& rs) const {
 // deviations are summed per unit, then over the units in order: the same figure (bits) on any number of
 // threads and ranks. Returns this rank's statistics; its units' sums of squares go to unitSumSq.
 Stats Builder::writeUnits(RunState& rs, CellSink& sink, GridFilePart* part, std::vector<double>& unitSumSq,
-                          Progress& progress) const {
+                          Progress& progress) {
     std::vector<Stats> acc(rs.threads);
     for (auto& a : acc) a.perLevel.assign(static_cast<size_t>(maxLevel_) + 1, 0);
     // Two batches: the workers fill one while a thread of its own hands the other to the sink (checks, hashes,
@@ -356,11 +368,18 @@ Stats Builder::writeUnits(RunState& rs, CellSink& sink, GridFilePart* part, std:
     };
     ranks::together([&] {
         std::future<void> handing;  // declared after the batches: waited for before they go
-        size_t u0 = rs.myU0, next = 0;
+        // A build in pieces reads a piece's pixels again before its first unit (no batch spans two pieces; the batch
+        // being handed holds no pixel).
+        size_t u0 = rs.myU0, next = 0, piece = 0, end = rs.pieces.empty() ? rs.myU1 : rs.myU0;
         while (u0 < rs.myU1) {
+            while (u0 == end) {
+                end = firstUnitAt(rs, rs.pieces[piece + 1]);
+                holdPixels(rs.pieces[piece], rs.pieces[piece + 1], false, false);
+                ++piece;
+            }
             size_t u1 = u0;
             const size_t first = rs.units[u0].offset;
-            while (u1 < rs.myU1 && (u1 == u0 || rs.units[u1].offset - first < (size_t{1} << 16))) ++u1;
+            while (u1 < end && (u1 == u0 || rs.units[u1].offset - first < (size_t{1} << 16))) ++u1;
             const size_t last = rs.offsetOf(u1);
             Batch& batch = batches[next];
             batch.codes.resize(last - first);
@@ -373,6 +392,7 @@ Stats Builder::writeUnits(RunState& rs, CellSink& sink, GridFilePart* part, std:
         }
         if (handing.valid()) handing.get();
     });
+    if (!rs.pieces.empty()) holdPixels(0, 0, false, false);  // none held
     Stats sum;
     sum.perLevel.assign(static_cast<size_t>(maxLevel_) + 1, 0);
     sum.firstCell = rs.offsetOf(rs.myU0), sum.ownCells = rs.myCells();

@@ -182,7 +182,11 @@ private:
         bool root = true;
         std::vector<uint64_t> cuts;   // the shares: rank r's share nodes are codes [cuts[r], cuts[r + 1])
         std::vector<size_t> myTiles;  // pass A's tiles of this rank
-        uint64_t pixelsRead = 0;      // pixels this rank read (windows_)
+        // One process building in pieces (RasterWindows::heldPixelsMax): piece i is share nodes [pieces[i],
+        // pieces[i + 1]), its pixels held in pass A and again in pass C. Empty: the share's pixels held at once.
+        std::vector<uint64_t> pieces;
+        uint64_t pixelsRead = 0;  // pixels this rank read (windows_; a build in pieces: its first reads)
+        size_t windowsRead = 0;   // likewise, the windows
         std::vector<std::vector<std::vector<Node>>> scratch;  // per worker: a tile's pyramid
         std::vector<Node> roots;                              // per tile (ty * ntx + tx): its pyramid's root
         std::vector<uint32_t> leafCount;                      // per tile: its cells
@@ -197,11 +201,11 @@ private:
         size_t myCells() const { return offsetOf(myU1) - offsetOf(myU0); }
     };
     // build.cpp: the passes.
-    void buildTileRoots(RunState& rs, Progress& progress) const;
+    void buildTileRoots(RunState& rs, Progress& progress);
     void buildCoarseLevels(RunState& rs) const;
     void walkUnits(RunState& rs) const;
     Stats writeUnits(RunState& rs, CellSink& sink, GridFilePart* part, std::vector<double>& unitSumSq,
-                     Progress& progress) const;
+                     Progress& progress);
     void fillBatch(RunState& rs, size_t u0, size_t u1, Batch& batch, std::vector<Stats>& acc,
                    std::vector<double>& unitSumSq, Progress& progress) const;
     // build_on_ranks.cpp: the shares, and what goes between the ranks.
@@ -209,6 +213,8 @@ private:
     void maskOwnNodes(bool root);
     void gatherTileRoots(RunState& rs) const;
     void findOwnUnits(RunState& rs) const;
+    // The first unit at or after share node `code` (units.size() past the last).
+    size_t firstUnitAt(const RunState& rs, uint64_t code) const;
     std::unique_ptr<GridFilePart> openPart(const RunState& rs, CellSink& sink) const;
     void logShare(const RunState& rs, const Stopwatch& rankStart) const;
     std::vector<std::byte> hashInTurn(const RunState& rs, CellSink& sink, GridFilePart* part) const;
@@ -232,8 +238,14 @@ private:
     // Pass A's tiles (index ty * ntx + tx) inside share nodes [c0, c1).
     std::vector<size_t> tilesOf(uint64_t c0, uint64_t c1) const;
     // This rank's pixels: the whole raster, or (windows_) the windows of share nodes [c0, c1), read in maximal
-    // aligned squares. Returns the pixels read.
-    uint64_t holdPixels(uint64_t c0, uint64_t c1);
+    // aligned squares, in place of those held before. `first`: their first read (RasterWindows::read); `progress`: a
+    // bar of its own. Returns the pixels read.
+    uint64_t holdPixels(uint64_t c0, uint64_t c1, bool first, bool progress);
+    // The valid pixels held.
+    uint64_t validHeld() const;
+    // One process reading by windows, no water steps, a raster over RasterWindows::heldPixelsMax: the pieces
+    // (RunState::pieces) of share nodes [c0, c1); else none.
+    std::vector<uint64_t> piecesOf(uint64_t c0, uint64_t c1, int rankCount) const;
 
     // The merge rule (build.h); (x, y) is the parent node at `level`, for the water steps' mask.
     Node merge(const Node& a, const Node& b, const Node& c, const Node& d, int level, size_t x, size_t y) const;

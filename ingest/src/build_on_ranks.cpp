@@ -14,6 +14,7 @@
 
 #include "build_internal.h"
 #include "heightcast/core/error.h"
+#include "heightcast/core/heap.h"
 #include "heightcast/core/parallel.h"
 #include "heightcast/core/progress.h"
 #include "heightcast/core/ranks.h"
@@ -50,9 +51,37 @@ std::vector<size_t> Builder::tilesOf(uint64_t c0, uint64_t c1) const {
     return out;
 }
 
-uint64_t Builder::holdPixels(uint64_t c0, uint64_t c1) {
-    blockOf_.assign(nbx_ * nby_, -1);
+std::vector<uint64_t> Builder::piecesOf(uint64_t c0, uint64_t c1, int rankCount) const {
+    const uint64_t total = uint64_t(t_.width) * t_.height;
+    if (!windows_ || rankCount > 1 || windows_->heldPixelsMax == 0 || total <= windows_->heldPixelsMax ||
+        !windows_->stepTimesS.empty())
+        return {};
+    // Runs of about equal area, each within heldPixelsMax but for one share node (shareCuts' rounding).
+    const uint64_t nodes = uint64_t(nbx_) * nby_;  // no piece smaller than a share node
+    const int count = int(std::min(nodes, (total + windows_->heldPixelsMax - 1) / windows_->heldPixelsMax));
+    std::vector<uint64_t> cuts = shareCuts(count);
+    cuts.front() = c0, cuts.back() = c1;  // one process: [c0, c1) is every node
+    return cuts;
+}
+
+uint64_t Builder::validHeld() const {
+    uint64_t valid = 0;
+    for (const Block& b : blocks_)
+        valid += uint64_t(std::count_if(b.values, b.values + b.w * b.h, [](float v) { return !std::isnan(v); }));
+    return valid;
+}
+
+uint64_t Builder::holdPixels(uint64_t c0, uint64_t c1, bool first, bool showProgress) {
+    // blockOf_ over the share nodes of a block (whose corners lie on their lattice, or on the raster's edge).
+    auto mark = [&](const Block& b, int32_t value) {
+        const size_t side = size_t{1} << shareLevel_;
+        for (size_t y = b.y0 / side; y < (b.y0 + b.h + side - 1) / side; ++y)
+            for (size_t x = b.x0 / side; x < (b.x0 + b.w + side - 1) / side; ++x) blockOf_[y * nbx_ + x] = value;
+    };
+    if (blockOf_.size() != nbx_ * nby_) blockOf_.assign(nbx_ * nby_, -1);
+    for (const Block& b : blocks_) mark(b, -1);  // those held before (not all nodes: a build in pieces holds many)
     blocks_.clear();
+    windowValues_.clear(), windowRounding_.clear();  // those held before, freed
     if (!windows_) {
         blocks_.push_back(
             {0, 0, t_.width, t_.height, t_.values.data(), t_.roundingM.empty() ? nullptr : t_.roundingM.data()});
@@ -73,7 +102,8 @@ uint64_t Builder::holdPixels(uint64_t c0, uint64_t c1) {
         m += uint64_t{1} << (2 * k);
     }
     uint64_t read = 0;
-    Progress progress("reading the raster's windows", squares.size(), opt_.progress && ranks::rank() == 0);
+    Progress progress("reading the raster's windows", squares.size(),
+                      showProgress && opt_.progress && ranks::rank() == 0);
     for (const Square& q : squares) {
         const size_t x0 = size_t(mortonX(q.m)) << shareLevel_, y0 = size_t(mortonY(q.m)) << shareLevel_;
         const size_t side = size_t{1} << (shareLevel_ + q.k);
@@ -82,14 +112,14 @@ uint64_t Builder::holdPixels(uint64_t c0, uint64_t c1) {
         Block b{x0, y0, std::min(side, t_.width - x0), std::min(side, t_.height - y0), nullptr, nullptr};
         windowValues_.emplace_back();
         windowRounding_.emplace_back();
-        windows_->read(b.x0, t_.height - (b.y0 + b.h), b.w, b.h, windowValues_.back(), windowRounding_.back());
+        windowValues_.back().reserve(b.w * b.h);  // huge pages before the read touches it (heap.h): fewer faults
+        adviseHugePages(windowValues_.back().data(), b.w * b.h * sizeof(float));
+        windows_->read(b.x0, t_.height - (b.y0 + b.h), b.w, b.h, windowValues_.back(), windowRounding_.back(), first);
         if (windowValues_.back().size() != b.w * b.h) throw Error("internal: a window read the wrong number of pixels");
         b.values = windowValues_.back().data();
         b.rounding = windowRounding_.back().empty() ? nullptr : windowRounding_.back().data();
         read += uint64_t(b.w) * b.h;
-        for (size_t y = y0 >> shareLevel_; y < std::min(nby_, (y0 + side) >> shareLevel_); ++y)
-            for (size_t x = x0 >> shareLevel_; x < std::min(nbx_, (x0 + side) >> shareLevel_); ++x)
-                blockOf_[y * nbx_ + x] = int32_t(blocks_.size());
+        mark(b, int32_t(blocks_.size()));
         blocks_.push_back(b);
     }
     progress.finish();
@@ -97,17 +127,21 @@ uint64_t Builder::holdPixels(uint64_t c0, uint64_t c1) {
 }
 
 // The shares: runs of share nodes in Morton order, about equal in area. A rank builds the tiles (pass A) and writes
-// the cells (pass C) inside its own nodes, so it reads (windows_) or touches only their pixels.
+// the cells (pass C) inside its own nodes, so it reads (windows_) or touches only their pixels. A build in pieces
+// (piecesOf) reads them piece by piece in passes A and C, and checks them after pass A.
 void Builder::takeShare(RunState& rs) {
     const int rank = rs.rank;
     rs.cuts = shareCuts(rs.rankCount);
     const std::vector<uint64_t>& cuts = rs.cuts;
     rs.myTiles = tilesOf(cuts[size_t(rank)], cuts[size_t(rank) + 1]);
-    ranks::together([&] { rs.pixelsRead = holdPixels(cuts[size_t(rank)], cuts[size_t(rank) + 1]); });
+    rs.pieces = piecesOf(cuts[size_t(rank)], cuts[size_t(rank) + 1], rs.rankCount);
+    if (!rs.pieces.empty()) return;
+    ranks::together([&] {
+        rs.pixelsRead = holdPixels(cuts[size_t(rank)], cuts[size_t(rank) + 1], true, true);
+        rs.windowsRead = blocks_.size();
+    });
     if (windows_ && windows_->checkHeld) {
-        uint64_t valid = 0;
-        for (const Block& b : blocks_)
-            valid += uint64_t(std::count_if(b.values, b.values + b.w * b.h, [](float v) { return !std::isnan(v); }));
+        const uint64_t valid = validHeld();
         uint64_t all = 0;
         for (const auto& v : ranks::allGatherVectors(std::vector<uint64_t>{valid})) all += v.empty() ? 0 : v[0];
         ranks::together([&] { windows_->checkHeld(all); });
@@ -163,19 +197,19 @@ void Builder::gatherTileRoots(RunState& rs) const {
 // This rank's units: those inside its share nodes (a unit, no larger than a share node, lies in one; the
 // units' nodes ascend in Morton order as the units do).
 void Builder::findOwnUnits(RunState& rs) const {
-    const std::vector<Unit>& units = rs.units;
-    const std::vector<uint64_t>& cuts = rs.cuts;
     const int rank = rs.rank, rankCount = rs.rankCount;
+    rs.myU0 = firstUnitAt(rs, rs.cuts[size_t(rank)]);
+    rs.myU1 = rank + 1 == rankCount ? rs.units.size() : firstUnitAt(rs, rs.cuts[size_t(rank) + 1]);
+}
+
+size_t Builder::firstUnitAt(const RunState& rs, uint64_t code) const {
     const int shareLevel = shareLevel_;  // captured by value below
-    auto firstUnit = [&](int r) {
-        return size_t(std::lower_bound(units.begin(), units.end(), cuts[size_t(r)],
-                                       [shareLevel](const Unit& u, uint64_t c) {
-                                           return mortonEncode(uint32_t((u.x << u.level) >> shareLevel),
-                                                               uint32_t((u.y << u.level) >> shareLevel)) < c;
-                                       }) -
-                      units.begin());
-    };
-    rs.myU0 = firstUnit(rank), rs.myU1 = rank + 1 == rankCount ? units.size() : firstUnit(rank + 1);
+    return size_t(std::lower_bound(rs.units.begin(), rs.units.end(), code,
+                                   [shareLevel](const Unit& u, uint64_t c) {
+                                       return mortonEncode(uint32_t((u.x << u.level) >> shareLevel),
+                                                           uint32_t((u.y << u.level) >> shareLevel)) < c;
+                                   }) -
+                  rs.units.begin());
 }
 
 // Under mpirun every rank writes its own cells into rank 0's file in place (GridFilePart): rank 0 says where, the
@@ -200,8 +234,10 @@ std::unique_ptr<GridFilePart> Builder::openPart(const RunState& rs, CellSink& si
 // What this rank read, built and wrote, into the ranks' log.
 void Builder::logShare(const RunState& rs, const Stopwatch& rankStart) const {
     const uint64_t pixelsRead = rs.pixelsRead;
-    const std::string reads = windows_ ? fmt::format("{} window{} read, {} px ({:.1f} % of the raster), ",
-                                                     blocks_.size(), blocks_.size() == 1 ? "" : "s", pixelsRead,
+    const std::string pieces =
+        rs.pieces.empty() ? std::string() : fmt::format(" in {} pieces, each read twice", rs.pieces.size() - 1);
+    const std::string reads = windows_ ? fmt::format("{} window{} read{}, {} px ({:.1f} % of the raster), ",
+                                                     rs.windowsRead, rs.windowsRead == 1 ? "" : "s", pieces, pixelsRead,
                                                      100.0 * double(pixelsRead) / double(t_.width * t_.height))
                                        : std::string("the whole raster held, ");
     ranks::log("hc-ingest",

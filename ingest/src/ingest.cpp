@@ -12,6 +12,7 @@
 #include "heightcast/core/parallel.h"
 #include "heightcast/core/ranks.h"
 #include "heightcast/core/timer.h"
+#include "gdal_util.h"
 #include "load_water.h"
 #include "model/model_ingest.h"
 #include "resample.h"
@@ -200,14 +201,18 @@ detail::SourceCheckSums allRanksCheck(const detail::SourceCheckSums& mine) {
 
 // Under mpirun, a terrain and its water steps read window by window: every rank reads only the windows of its share
 // (buildGridFile over RasterWindows), each step's raster warped onto the same windows (or a level's bathtub flooded
-// over them by the builder), the readers' counts are added over the ranks, and rank 0 reports them.
-BuildSummary ingestByWindows(const Options& opt, const std::string& path, LoadReport& report, const Stopwatch& clock) {
-    std::unique_ptr<detail::TerrainWindows> windows = detail::openTerrainWindows(opt, report);
+// over them by the builder), the readers' counts are added over the ranks, and rank 0 reports them. In one process, a
+// terrain without water larger than heldPixelsMax (RasterWindows): the same, the windows read in pieces.
+BuildSummary ingestByWindows(const Options& opt, std::unique_ptr<detail::TerrainWindows> windows,
+                             uint64_t heldPixelsMax, const std::string& path, LoadReport& report,
+                             const Stopwatch& clock) {
     RasterWindows w;
     w.shape = windows->shape();
     w.source = opt.input;
+    w.heldPixelsMax = heldPixelsMax;
     w.read = [&](size_t c0, size_t r0, size_t width, size_t height, std::vector<float>& values,
-                 std::vector<float>& rounding) { windows->read(c0, r0, width, height, values, rounding); };
+                 std::vector<float>& rounding,
+                 bool first) { windows->read(c0, r0, width, height, values, rounding, first); };
     w.checkHeld = [&](uint64_t valid) { windows->checkValid(valid); };
     // Water steps from rasters: each window of a step warped onto the working raster as the whole would be
     // (detail::WaterStepWarp), step by step (the builder reads every window of step k before step k + 1).
@@ -269,13 +274,41 @@ BuildSummary ingestByWindows(const Options& opt, const std::string& path, LoadRe
     return b;
 }
 
+// One process: the window reader of a terrain without water whose working raster exceeds Options::rasterMemoryMB (as
+// float32; each window then read twice), else none (the raster held whole). The source's size decides whether the
+// working raster's is looked at (opening its reader settles the georeferencing): a resampled raster holds at most a few
+// times the source's pixels (square pixels of the smaller side, at high latitudes).
+std::unique_ptr<detail::TerrainWindows> windowsOverMemory(const Options& opt, uint64_t heldPixelsMax,
+                                                          LoadReport& report) {
+    if (!opt.waterMesh.empty() || waterStepCount(opt) > 0) return nullptr;  // pieces take no water (Builder::piecesOf)
+    {
+        const detail::DatasetPtr ds = detail::openRaster(opt.input, "terrain");
+        if (uint64_t(ds->GetRasterXSize()) * uint64_t(ds->GetRasterYSize()) * 8 <= heldPixelsMax) return nullptr;
+    }
+    LoadReport opened = report;
+    std::unique_ptr<detail::TerrainWindows> w = detail::openTerrainWindows(opt, opened);
+    if (uint64_t(w->shape().width) * w->shape().height <= heldPixelsMax) return nullptr;
+    report = std::move(opened);
+    return w;
+}
+
 }  // namespace
+
+uint64_t heldPixelsMax(const Options& opt) {
+    const double mb = opt.rasterMemoryMB > 0 ? opt.rasterMemoryMB : kDefaultRasterMemoryMB;
+    return uint64_t(std::max(1.0, mb * 1e6 / sizeof(float)));
+}
 
 BuildSummary ingestToFile(const Options& opt, const std::string& path, LoadReport& report) {
     const Stopwatch clock;
     if (ranks::distributed() && !opt.waterMesh.empty())
         throw Error("--water-mesh runs in one process: run hc-ingest without mpirun");
-    if (ranks::distributed()) return ingestByWindows(opt, path, report, clock);  // each rank its own windows
+    if (ranks::distributed())  // each rank its own windows
+        return ingestByWindows(opt, detail::openTerrainWindows(opt, report), 0, path, report, clock);
+    if (std::unique_ptr<detail::TerrainWindows> w = windowsOverMemory(opt, heldPixelsMax(opt), report)) {
+        report.heldInPieces = true;
+        return ingestByWindows(opt, std::move(w), heldPixelsMax(opt), path, report, clock);
+    }
     Prepared p = prepare(opt, report);
     setBuild(p, opt, report);
     if (opt.waterMesh.empty())

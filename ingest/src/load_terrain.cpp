@@ -204,6 +204,8 @@ void validateOptions(const Options& o) {
         bad("--min-cell " + fmt(*o.minCellM) + ": must be a positive number of metres");
     if (o.maxCellM && !(std::isfinite(*o.maxCellM) && *o.maxCellM > 0))
         bad("--max-cell " + fmt(*o.maxCellM) + ": must be a positive number of metres");
+    if (!(std::isfinite(o.rasterMemoryMB) && o.rasterMemoryMB >= 0))
+        bad("--raster-memory " + fmt(o.rasterMemoryMB) + ": must be a finite number of MB > 0 (0: the default)");
     if (o.minCellM && o.maxCellM && *o.minCellM > *o.maxCellM)
         bad("--min-cell " + fmt(*o.minCellM) + " m is larger than --max-cell " + fmt(*o.maxCellM) + " m");
     if (!std::isfinite(o.zScale) || o.zScale == 0)

@@ -61,6 +61,7 @@ public:
     // up to whole rows of the file's blocks. A strip thinner than a block would decode every tile of a tiled file once
     // per strip (dropCache throws it away between strips): 21 times for 256-row tiles and 12-row strips.
     size_t stripRows(size_t bytes) const;
+    size_t blockRows() const { return blockRows_; }
     // Drops GDAL's cached blocks of what was read (a second copy of the file otherwise).
     void dropCache();
     // The counts and warnings of a tally (the whole band's, every window and rank added) into report.

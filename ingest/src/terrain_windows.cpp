@@ -40,13 +40,24 @@ public:
         keptGeometry(o_.gt, o_.band->width(), o_.band->height(), shape_, flipX_, flipY_, report);
     }
     const Raster& shape() const override { return shape_; }
-    void read(size_t col0, size_t row0, size_t w, size_t h, std::vector<float>& values,
-              std::vector<float>& rounding) override {
+    void read(size_t col0, size_t row0, size_t w, size_t h, std::vector<float>& values, std::vector<float>& rounding,
+              bool first) override {
         if (col0 + w > shape_.width || row0 + h > shape_.height) throw Error("window outside the working raster");
         const size_t c0 = flipX_ ? shape_.width - col0 - w : col0, r0 = flipY_ ? shape_.height - row0 - h : row0;
         values.assign(w * h, kNaN);
         rounding.clear();
-        o_.band->read(c0, r0, w, h, values.data(), rounding, 0, w * h, tally_);
+        // Whole rows of blocks at a time, about 4 MB, GDAL's copy of them dropped after each: a large window held no
+        // second copy of itself in GDAL's cache, whose freed blocks then came back as fresh pages to fault in.
+        detail::SourceTally again;  // a window read a second time is counted once
+        const size_t block = o_.band->blockRows();
+        const size_t chunk = std::max<size_t>(1, (size_t{4} << 20) / (w * sizeof(float)) / block) * block;
+        for (size_t r = r0; r < r0 + h;) {
+            const size_t next = std::min(r0 + h, (r / block + chunk / block) * block);
+            o_.band->read(c0, r, w, next - r, values.data() + (r - r0) * w, rounding, (r - r0) * w, w * h,
+                          first ? tally_ : again);
+            o_.band->dropCache();
+            r = next;
+        }
         if (flipX_ || flipY_) {
             auto mirror = [&](std::vector<float>& v) {
                 if (v.empty()) return;
@@ -106,8 +117,8 @@ public:
     void checkValid(uint64_t validPixels) const override {
         if (warp_) warp_->checkValid(validPixels);
     }
-    void read(size_t col0, size_t row0, size_t w, size_t h, std::vector<float>& values,
-              std::vector<float>& rounding) override {
+    void read(size_t col0, size_t row0, size_t w, size_t h, std::vector<float>& values, std::vector<float>& rounding,
+              bool /*first: the source is counted by stripPass*/) override {
         if (col0 + w > plan_.shape.width || row0 + h > plan_.shape.height)
             throw Error("window outside the working raster");
         values.assign(w * h, kNaN);

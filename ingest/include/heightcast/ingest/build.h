@@ -87,15 +87,20 @@ struct WaterSteps {
 Grid buildGrid(const Raster& terrain, const Raster* waterDepth, const BuildOptions& options);
 
 // A working raster read window by window (hc-ingest under mpirun: each rank reads only the windows of its share, so
-// no rank holds the raster whole; docs/design.md section 7).
+// no rank holds the raster whole; in one process, a raster larger than heldPixelsMax; docs/design.md section 7).
 struct RasterWindows {
     Raster shape;        // geometry and CRS; values empty
     std::string source;  // the file, for messages
     // Fills values (and rounding: Raster::roundingM, left empty when float32 holds the source) with the working pixels
-    // [col0, col0 + w) x [row0, row0 + h), row 0 the northern-most, row-major. Throws hc::Error.
+    // [col0, col0 + w) x [row0, row0 + h), row 0 the northern-most, row-major. Throws hc::Error. `first`: the window's
+    // first read (a build in pieces reads each window twice; what the reader counts, it counts once).
     std::function<void(size_t col0, size_t row0, size_t w, size_t h, std::vector<float>& values,
-                       std::vector<float>& rounding)>
+                       std::vector<float>& rounding, bool first)>
         read;
+    // One process without water steps: the most working pixels held at once (0: no limit). A larger raster is built in
+    // pieces (runs of share nodes in Morton order), each read for the tiles' roots and again for their cells: the
+    // same bytes as the raster held whole, memory about heldPixelsMax pixels.
+    uint64_t heldPixelsMax = 0;
     // Water steps read window by window too (none without): their times [s], and readStep, which fills `depth` with
     // step k's depths [m] at the same working pixels as read(), given the terrain's elevations there (`terrain`, as
     // read() gave them). Each window of each step is read twice: for the merge masks (`first`: count what it reports

@@ -70,7 +70,14 @@ struct Options {
     bool samplingGiven = false;  // --tolerance, --min-cell or --max-cell was given: refused for faces taken as cells
     unsigned threads = 0;        // 0 = all cores
     bool progress = false;       // terminal progress on stderr
+    // One process, no water: the most memory the working raster may take as float32 [MB] (0 = the default,
+    // kDefaultRasterMemoryMB); a larger one is read window by window in pieces, each read twice (same bytes).
+    double rasterMemoryMB = 0;
 };
+
+constexpr double kDefaultRasterMemoryMB = 256;
+// The working pixels one process holds at once (Options::rasterMemoryMB as float32 pixels).
+uint64_t heldPixelsMax(const Options& options);
 
 // What the loading stages did, for the tool's summary.
 struct LoadReport {
@@ -82,6 +89,7 @@ struct LoadReport {
     std::vector<std::string> warnings;   // things the user should know (no CRS, assumed units, ...)
     uint64_t sourceValidPixels = 0;      // valid pixels of the source as read (before any resampling)
     uint64_t infPixels = 0;              // +-inf pixels taken as nodata (counted in no other figure)
+    bool heldInPieces = false;           // the working raster was read in pieces (Options::rasterMemoryMB)
     bool sourcePrecisionDouble = false;  // the source holds more than float32 (Float64, Int32, ...): the
                                          // build checks the tolerance against its own values
     // Every valid source pixel against the cell covering its centre, after the build. Done only when the

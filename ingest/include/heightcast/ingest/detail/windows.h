@@ -55,10 +55,10 @@ public:
     // The working raster's geometry and CRS (values empty).
     virtual const Raster& shape() const = 0;
     // Working pixels [col0, col0 + w) x [row0, row0 + h) (row 0 north) into values (w h, NaN = nodata, metres) and
-    // rounding (empty, or w h: Raster::roundingM).
+    // rounding (empty, or w h: Raster::roundingM). `first`: the window's first read; tally() counts only those.
     virtual void read(size_t col0, size_t row0, size_t w, size_t h, std::vector<float>& values,
-                      std::vector<float>& rounding) = 0;
-    // What the reads so far found.
+                      std::vector<float>& rounding, bool first) = 0;
+    // What the first reads so far found.
     virtual const SourceTally& tally() const = 0;
     // Once every rank has read its windows, before anything is written: the whole working raster's valid pixels (every
     // rank's windows added). Throws hc::Error where a whole raster's read would have failed on them (a --t_srs warp
