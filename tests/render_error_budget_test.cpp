@@ -12,6 +12,7 @@
 #include "heightcast/influence/pyramid.h"
 #include "heightcast/render/cascades.h"
 #include "heightcast/render/detail/frame.h"
+#include "heightcast/render/gpu_layout.h"
 #include "heightcast/render/renderer.h"
 #include "render_world.h"
 
@@ -184,16 +185,79 @@ TEST_P(ErrorBudget, RegionalBoundHoldsFromCamerasOverPartsOfTheDomain) {
     EXPECT_GT(lower, 0) << "no cascade's ground carried less than the whole domain's error";
 }
 
+// Without a pyramid the bound comes from the texels (and the relief under them where they are coarser than the kernels
+// at the finest cell): it lies above every verified error, from cameras over parts of the domain, at texel counts whose
+// spacings resolve the surface and at counts too coarse for it; where they resolve it, the bound is the texels' own
+// estimate, tighter than the relief's; the JSON says where it came from.
+TEST_P(ErrorBudget, BoundWithoutAPyramidHoldsFromTheTexels) {
+    World& w = world();
+    const Scene& scene = *w.scene;
+    ASSERT_EQ(scene.pyramid(), nullptr);
+    std::mt19937_64 rng(44);
+    int frames = 0, resolved = 0, tighter = 0;
+    for (int k = 0; k < 8; ++k) {
+        Camera cam = k == 0 ? render::overviewCamera(scene, 160, 100) : randomCamera(w, rng);
+        cam.width = 160, cam.height = 100;
+        for (const int texels : {32, 256, 1024}) {
+            RenderOptions o;
+            o.legend = false;
+            o.texelsPerSide = texels;
+            Timings t;
+            const render::Frame f = render::renderFrame(scene, cam, o, t);
+            const ErrorCheck check = render::verifyFrameError(scene, cam, f, kChecked);
+            if (check.hits == 0) continue;
+            ++frames;
+            SCOPED_TRACE("camera " + std::to_string(k) + ", " + std::to_string(texels) + " texels");
+            ASSERT_TRUE(std::isfinite(t.errorBoundM));
+            EXPECT_TRUE(t.boundFromTexels);
+            EXPECT_LE(check.maxM, t.errorBoundM + kFloatPositionM) << "median " << check.medianM;
+            for (const render::CascadeStats& c : t.cascades) {
+                if (c.visibleTexels == 0 || c.texelM > w.grid.finestCellM) continue;
+                ++resolved;
+                EXPECT_GE(c.errorBoundM, c.texelEstimateM);
+                tighter += c.errorBoundM < scene.zMax - scene.zMin;
+            }
+        }
+    }
+    std::printf("%s without a pyramid: %d frames checked, %d of %d resolved cascades bounded below the grid's relief\n",
+                GetParam().c_str(), frames, tighter, resolved);
+    EXPECT_GT(frames, 12);
+    EXPECT_GT(tighter, 0);
+}
+
 INSTANTIATE_TEST_SUITE_P(RealDems, ErrorBudget, ::testing::Values("hef", "lidar"));
 
-// Without a pyramid no bound is claimed: NaN in Timings, null in the JSON, and the table says why.
-TEST(ErrorBound, NoneWithoutAPyramid) {
+// The texels' estimate of a patch (gpu::patchErrorEstimateM): for v = a x^2 + b y^2 sampled at spacing s, half the
+// second differences, (|a| + |b|) s^2: four times the bilinear patch's largest error, (|a| + |b|) s^2 / 4; none where a
+// texel has no surface.
+TEST(ErrorBound, PatchEstimateIsFourTimesAQuadraticsPatchError) {
+    const float s = 0.5f, a = 3.0f, b = -1.0f;
+    auto v = [&](float x, float y) { return 1000.0f + a * x * x + b * y * y; };
+    const float e = render::gpu::patchErrorEstimateM(v(0, 0), v(s, 0), v(2 * s, 0), v(0, s), v(0, 2 * s));
+    EXPECT_NEAR(e, (std::abs(a) + std::abs(b)) * s * s, 1e-3);  // float32 at 1000 m: 6e-5 a texel
+    // The patch's error at its centre, against the bilinear mean of its corners: (a + b) s^2 / 4 in size.
+    const double centre = v(s / 2, s / 2), bilinear = (v(0, 0) + v(s, 0) + v(0, s) + v(s, s)) / 4.0;
+    EXPECT_NEAR(std::abs(centre - bilinear), std::abs(a + b) * s * s / 4, 1e-3);
+    EXPECT_EQ(render::gpu::patchErrorEstimateM(v(0, 0), -HUGE_VALF, v(2 * s, 0), v(0, s), v(0, 2 * s)), 0.0f);
+    EXPECT_EQ(render::gpu::patchErrorEstimateM(7, 7, 7, 7, 7), 0.0f);
+}
+
+// The relief under a box (Scene::reliefM): over the whole domain with squares as large as it, the grid's range of
+// values (elevations and water levels); over a part of the domain with small squares, no more, and over some parts
+// less.
+TEST(ErrorBound, ReliefIsTheGridsRangeOverTheDomainAndLessOverParts) {
     World& w = hef();
-    const Rendered r = renderChecked(*w.scene, RenderOptions{});
-    EXPECT_TRUE(std::isnan(r.timings.errorBoundM));
-    EXPECT_NE(r.timings.toJson().find("\"error_bound_m\": null"), std::string::npos);
-    EXPECT_NE(r.timings.toTable().find("none without the grid's surface pyramid"), std::string::npos);
-    EXPECT_GT(r.check.hits, 0u);  // the check needs no pyramid
+    const Scene& scene = *w.scene;
+    const double domain = w.grid.domainSizeM(), whole = scene.reliefM(0, 0, domain, domain, domain);
+    EXPECT_NEAR(whole, scene.zMax - scene.zMin, 1e-3 * (scene.zMax - scene.zMin));  // float32 extremes
+    int less = 0;
+    for (int j = 0; j < 8; ++j)
+        for (int i = 0; i < 8; ++i) {
+            const double x = domain * i / 8, y = domain * j / 8, part = scene.reliefM(x, y, x + domain / 16, y, 64);
+            EXPECT_LE(part, whole);
+            less += part < 0.5 * whole;
+        }
+    EXPECT_GT(less, 8);
 }
 
 }  // namespace

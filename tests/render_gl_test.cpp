@@ -584,4 +584,32 @@ TEST_F(RenderGl, ErrorBudgetHoldsInMemory) {
     EXPECT_GT(texels[1], texels[2]);
 }
 
+// Without a pyramid the GL backend estimates the bound from its texels as the CPU does (mipmap.comp against
+// Heightfield::errorEstimateM, on the flooded alpine DEM: terrain and water surface), and the bound holds.
+TEST_F(RenderGl, BoundWithoutAPyramidAsOnTheCpu) {
+    World& w = hef();
+    HC_REQUIRE_GL(w);
+    const Scene& scene = *w.scene;
+    for (const Camera& cam : {overviewCamera(scene, 160, 100), lowOblique(scene, 160, 100)}) {
+        Timings t, cpu;
+        w.gl->forgetCascades();
+        const Frame f = w.gl->render(cam, smallOptions(), t);
+        (void)renderFrame(scene, cam, smallOptions(), cpu);
+        ASSERT_TRUE(std::isfinite(t.errorBoundM));
+        EXPECT_TRUE(t.boundFromTexels);
+        ASSERT_EQ(t.cascades.size(), cpu.cascades.size());
+        for (size_t k = 0; k < t.cascades.size(); ++k) {
+            // Texels summed in float on either side lie within kSummedTexelErrorM of the exact surface: the estimate's
+            // second differences (three texels, weights 1, 2, 1, halved, two axes) within 4 of it.
+            EXPECT_NEAR(t.cascades[k].texelEstimateM, cpu.cascades[k].texelEstimateM,
+                        4 * hc::render::kSummedTexelErrorM)
+                << k;
+            EXPECT_GT(t.cascades[k].texelEstimateM, 0.0) << k;
+        }
+        const ErrorCheck check = verifyFrameError(scene, cam, f, 2000);
+        ASSERT_GT(check.hits, 1000u);
+        EXPECT_LE(check.maxM, t.errorBoundM + 5e-3);  // + float32 hit positions, as render_error_budget_test
+    }
+}
+
 }  // namespace

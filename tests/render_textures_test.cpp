@@ -13,6 +13,7 @@
 #include <string>
 
 #include "heightcast/influence/pyramid.h"
+#include "heightcast/render/gpu_layout.h"
 #include "heightcast/render/camera.h"
 #include "render_world.h"
 
@@ -23,8 +24,8 @@ using hc::Grid;
 using namespace hc::render;
 using namespace hc::test;
 
-// The timings JSON writes a bound where one is claimed (a cascade's or the frame's, with a pyramid) and null where none
-// is (NaN: no pyramid), never 0, which would read as exact.
+// The timings JSON writes a bound where one is claimed (a cascade's or the frame's) and null where none is (NaN: none
+// made), never 0, which would read as exact.
 TEST_F(Render, TimingsJsonClaimsABoundOnlyWhereThereIsOne) {
     Timings t;
     t.cascades.resize(2);
@@ -39,7 +40,8 @@ TEST_F(Render, TimingsJsonClaimsABoundOnlyWhereThereIsOne) {
 }
 
 // The max mipmap (Heightfield::buildMip): every node of every level holds the largest height of the texels under its
-// patches, found here by brute force, and the combined mipmap (buildBothMip) the larger of terrain's and water's.
+// patches, found here by brute force, and the combined mipmap (buildBothMip) the larger of terrain's and water's; and
+// the texels' error estimate (errorEstimateM) the largest of its patches'.
 // Sides with odd levels (patches 1, 7, 8, 9, 16, 17, 99, 256, 399: the last on several workers), texels with holes
 // (-inf), one worker and all.
 TEST_F(Render, MaxMipmapHoldsTheLargestHeightUnderEveryNode) {
@@ -64,6 +66,17 @@ TEST_F(Render, MaxMipmapHoldsTheLargestHeightUnderEveryNode) {
         }
         tex.buildBothMip(threads);
         const detail::Heightfield& hf = tex.terrain;
+        // The texels' error estimate (errorEstimateM) is the largest of every patch's, found here one by one.
+        float estimate = 0;
+        for (int j = 0; j + 2 < n; ++j)
+            for (int i = 0; i + 2 < n; ++i) {
+                const auto h = [&](int a, int b) { return hf.h[size_t(j + b) * size_t(n) + size_t(i + a)]; };
+                estimate = std::max(estimate, gpu::patchErrorEstimateM(h(0, 0), h(1, 0), h(2, 0), h(0, 1), h(0, 2)));
+            }
+        EXPECT_EQ(hf.errorEstimateM(threads), estimate) << "n " << n;
+        if (n >= 100) {
+            EXPECT_GT(estimate, 0.0f) << "n " << n;
+        }
         ASSERT_EQ(hf.mipSide.front(), n - 1);
         ASSERT_EQ(hf.mipSide.back(), 1);
         for (size_t l = 0; l < hf.mip.size(); ++l) {

@@ -66,9 +66,10 @@ bool Hud::compose(const HudStatus& s, int fw, int fh) {
             {fmt::format("fitting {:.1f}  approximation {:.1f}  mipmaps {:.1f}  ray casting {:.1f}  shading {:.1f} ms",
                          ms.fittingMs, ms.approximationMs, ms.mipmapMs, ms.raycastMs, ms.shadingMs),
              kText});
-        lines.push_back({(std::isfinite(ms.errorBoundM) ? fmt::format("within {:.3g} m, {:.2g} px of the exact surface",
-                                                                      ms.errorBoundM, ms.errorBoundPx)
-                                                        : std::string("accuracy: no bound without a surface pyramid")) +
+        lines.push_back({(std::isfinite(ms.errorBoundM)
+                              ? fmt::format("within {:.3g} m, {:.2g} px of the exact surface{}", ms.errorBoundM,
+                                            ms.errorBoundPx, ms.boundFromTexels ? " (from the texels: no pyramid)" : "")
+                              : std::string("accuracy: no bound claimed")) +
                              (ms.maxErrorPx > 0 ? fmt::format("   budget {:g} px (B N, M off)", ms.maxErrorPx)
                                                 : std::string("   no budget (B N set one)")),
                          kText});

@@ -8,6 +8,7 @@
 #include <cmath>
 #include <cstring>
 #include <limits>
+#include <mutex>
 #include <utility>
 #include <vector>
 
@@ -15,6 +16,7 @@
 #include "heightcast/core/error.h"
 #include "heightcast/core/parallel.h"
 #include "heightcast/influence/region.h"
+#include "heightcast/render/gpu_layout.h"
 
 namespace hc::render::detail {
 namespace {
@@ -424,6 +426,26 @@ void Heightfield::buildMip(unsigned threads) {
             }
         });
     }
+}
+
+float Heightfield::errorEstimateM(unsigned threads) const {
+    if (n < 3) return 0;
+    std::mutex mutex;
+    float largest = 0;
+    const size_t rows = size_t(n - 2);
+    parallelFor(rows, std::max<size_t>(16, rows / 64), threads, [&](size_t b, size_t e, unsigned) {
+        float m = 0;
+        for (size_t j = b; j < e; ++j) {
+            const float* r0 = &h[j * size_t(n)];
+            const float* r1 = r0 + n;
+            const float* r2 = r1 + n;
+            for (int i = 0; i + 2 < n; ++i)
+                m = std::max(m, gpu::patchErrorEstimateM(r0[i], r0[i + 1], r0[i + 2], r1[i], r2[i]));
+        }
+        const std::lock_guard<std::mutex> lock(mutex);
+        largest = std::max(largest, m);
+    });
+    return largest;
 }
 
 std::vector<RowFill> rowFills(const Cascade& c, const TexelReuse* reuse, uint64_t& kept) {

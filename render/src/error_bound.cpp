@@ -1,7 +1,7 @@
 // render/src/error_bound.cpp: what error a frame carries. Before the frame: the error of each pyramid level's bilinear
 // patches (Scene::levelErrorM), which the cascades' fit reads to meet an error budget (cascades.cpp); after it, the
-// bound of each cascade and of the frame (boundFrame); and the error measured at the frame's hits against the exact
-// surface (verifyFrameError).
+// bound of each cascade and of the frame (boundFrame), from the pyramid or, without one, from the texels' own estimate
+// (gpu::patchErrorEstimateM); and the error measured at the frame's hits against the exact surface (verifyFrameError).
 #include <algorithm>
 #include <array>
 #include <cmath>
@@ -28,6 +28,56 @@ void Scene::boundLevels() {
     levelErrorM_ = levelErrorM(0, 0, domain, domain);
 }
 
+void Scene::boundRelief() {
+    if (pyramid_ || outOfCore()) return;
+    const int side = 1 << influence::RegionalLevelErrors::kRegionsLog2;
+    reliefSide_ = side, reliefRegionM_ = grid_.domainSizeM() / side;
+    reliefMin_.assign(size_t(side) * size_t(side), HUGE_VALF);
+    reliefMax_.assign(size_t(side) * size_t(side), -HUGE_VALF);
+    auto at = [&](double x) { return std::clamp(int(std::floor(x / reliefRegionM_)), 0, side - 1); };
+    for (size_t c = 0; c < grid_.cellCount(); ++c) {
+        const CellKernel& k = kernels_[c];
+        const double r = std::sqrt(double(k.r2));
+        const float z = grid_.values[0][c];
+        const float d = waterLayer_ >= 0 ? grid_.values[size_t(waterLayer_)][c] : 0.0f;
+        const float top = d > 0 ? z + d : z;  // a wet cell's water level too
+        for (int j = at(k.cy - r); j <= at(k.cy + r); ++j)
+            for (int i = at(k.cx - r); i <= at(k.cx + r); ++i) {
+                const size_t g = size_t(j) * size_t(side) + size_t(i);
+                reliefMin_[g] = std::min(reliefMin_[g], z), reliefMax_[g] = std::max(reliefMax_[g], top);
+            }
+    }
+}
+
+double Scene::reliefM(double x0, double y0, double x1, double y1, double spanM) const {
+    if (reliefSide_ == 0) return zMax - zMin;
+    const int side = reliefSide_, k = int(std::ceil(spanM / reliefRegionM_));
+    auto at = [&](double x) { return std::clamp(int(std::floor(x / reliefRegionM_)), 0, side - 1); };
+    const int i0 = at(x0), i1 = at(x1), j0 = at(y0), j1 = at(y1), jEnd = std::min(side - 1, j1 + k);
+    // A square with its corner in region (i, j) lies in regions i .. i + k, j .. j + k: their extremes, rows first.
+    const size_t w = size_t(i1 - i0 + 1);
+    std::vector<float> rowMin(w * size_t(jEnd - j0 + 1)), rowMax(rowMin.size());
+    for (int j = j0; j <= jEnd; ++j)
+        for (int i = i0; i <= i1; ++i) {
+            float lo = HUGE_VALF, hi = -HUGE_VALF;
+            for (int a = i; a <= std::min(side - 1, i + k); ++a) {
+                const size_t r = size_t(j) * size_t(side) + size_t(a);
+                lo = std::min(lo, reliefMin_[r]), hi = std::max(hi, reliefMax_[r]);
+            }
+            rowMin[size_t(j - j0) * w + size_t(i - i0)] = lo, rowMax[size_t(j - j0) * w + size_t(i - i0)] = hi;
+        }
+    double relief = 0;
+    for (int j = j0; j <= j1; ++j)
+        for (int i = i0; i <= i1; ++i) {
+            float lo = HUGE_VALF, hi = -HUGE_VALF;
+            for (int b = j; b <= std::min(jEnd, j + k); ++b)
+                lo = std::min(lo, rowMin[size_t(b - j0) * w + size_t(i - i0)]),
+                hi = std::max(hi, rowMax[size_t(b - j0) * w + size_t(i - i0)]);
+            if (hi >= lo) relief = std::max(relief, double(hi) - double(lo));
+        }
+    return relief;
+}
+
 std::vector<double> Scene::levelErrorM(double x0, double y0, double x1, double y1) const {
     if (terrainErrors_.empty()) return {};
     std::vector<double> e = terrainErrors_.byLevelM(x0, y0, x1, y1);
@@ -39,35 +89,58 @@ std::vector<double> Scene::levelErrorM(double x0, double y0, double x1, double y
     return e;
 }
 
+namespace {
+
+// Without a pyramid, the error of a cascade's patches: the relief under them (Scene::reliefM) bounds it; where the
+// texels are no coarser than the kernels' width at the finest cell they resolve the surface, and their own estimate
+// (`estimateM`, CascadeStats::texelEstimateM) gives it where that is less. Coarser, a feature of the finest cells can
+// lie between samples unseen: the relief alone.
+double texelPatchErrorM(const Scene& scene, const Cascade& c, double estimateM) {
+    const double s = c.texelM;
+    double x0 = HUGE_VAL, y0 = HUGE_VAL, x1 = -HUGE_VAL, y1 = -HUGE_VAL;
+    for (const glm::dvec2& p : c.polygon)
+        x0 = std::min(x0, p.x), y0 = std::min(y0, p.y), x1 = std::max(x1, p.x), y1 = std::max(y1, p.y);
+    // Its texels lie within 1.5 texels of the polygon (Cascade::rows), its patches' corners too.
+    const double relief = scene.reliefM(x0 - 2 * s, y0 - 2 * s, x1 + 2 * s, y1 + 2 * s, s);
+    const bool resolved = s <= scene.params().sigma * scene.grid().finestCellM;
+    return resolved ? std::min(estimateM, relief) : relief;
+}
+
+}  // namespace
+
 void detail::boundFrame(const Scene& scene, const FrameSetup& setup, const CascadeFit& fit, Timings& timings) {
-    const bool bounded = !scene.levelErrorM().empty();
-    const double nan = std::numeric_limits<double>::quiet_NaN();
-    timings.errorBoundM = timings.errorBoundPx = bounded ? 0.0 : nan;
+    const bool fromPyramid = !scene.levelErrorM().empty();
+    timings.boundFromTexels = !fromPyramid;
+    timings.errorBoundM = timings.errorBoundPx = 0.0;
+    bool unbounded = false;
     for (size_t k = 0; k < fit.cascades.size() && k < timings.cascades.size(); ++k) {
         const Cascade& c = fit.cascades[k];
         CascadeStats& cs = timings.cascades[k];
         cs.budgetM = c.budgetM;
-        if (!bounded) {
-            cs.errorBoundM = cs.errorBoundPx = nan;
-            continue;
-        }
         if (c.empty()) {
             cs.errorBoundM = cs.errorBoundPx = 0;
             continue;
         }
-        // Over the cascade's polygon (placeTexture); the whole domain's for a cascade fitted without them.
-        const std::vector<double>& levels = c.levelErrorM.empty() ? scene.levelErrorM() : c.levelErrorM;
-        // The patches' error at the texel spacing, plus, where texels were interpolated from a coarser level, that
-        // level's (the interpolation is tested to lie within a bilinear patch's error at the source's spacing).
-        // Off the pyramid's ladder (the GL backend in memory) the spacing lies between two levels: the coarser's error.
-        const int level = int(std::ceil(std::log2(c.texelM / scene.grid().finestCellM) - 1e-9));
-        const int up = cs.pyramidInterpolated > 0 ? cs.pyramidInterpolatedUp : 0;
-        cs.errorBoundM = levelErrorM(levels, level) + (up > 0 ? levelErrorM(levels, level + up) : 0.0) +
-                         (cs.gaussians > 0 ? kSummedTexelErrorM : 0.0);
+        if (fromPyramid) {
+            // Over the cascade's polygon (placeTexture); the whole domain's for a cascade fitted without them.
+            const std::vector<double>& levels = c.levelErrorM.empty() ? scene.levelErrorM() : c.levelErrorM;
+            // The patches' error at the texel spacing, plus, where texels were interpolated from a coarser level, that
+            // level's (the interpolation is tested to lie within a bilinear patch's error at the source's spacing).
+            // Off the pyramid's ladder (the GL backend in memory) the spacing lies between two levels: the coarser's.
+            const int level = int(std::ceil(std::log2(c.texelM / scene.grid().finestCellM) - 1e-9));
+            const int up = cs.pyramidInterpolated > 0 ? cs.pyramidInterpolatedUp : 0;
+            cs.errorBoundM = levelErrorM(levels, level) + (up > 0 ? levelErrorM(levels, level + up) : 0.0) +
+                             (cs.gaussians > 0 ? kSummedTexelErrorM : 0.0);
+        } else {  // every texel summed from the kernels: their patches' error, float32 rounding and the sum's error
+            cs.errorBoundM = texelPatchErrorM(scene, c, cs.texelEstimateM) + 2 * detail::pyramidCopyBoundM(scene) +
+                             kSummedTexelErrorM;
+        }
         cs.errorBoundPx = cs.errorBoundM / (setup.view.pixelRad * c.nearestM);
+        unbounded = unbounded || !std::isfinite(cs.errorBoundM);  // no estimate made (a bug): no bound claimed
         timings.errorBoundM = std::max(timings.errorBoundM, cs.errorBoundM);
         timings.errorBoundPx = std::max(timings.errorBoundPx, cs.errorBoundPx);
     }
+    if (unbounded) timings.errorBoundM = timings.errorBoundPx = std::numeric_limits<double>::quiet_NaN();
 }
 
 namespace {

@@ -229,6 +229,9 @@ std::vector<detail::CascadeTextures> approximateCascades(const Scene& scene, con
         if (!c.empty() && mipmaps) {
             tex[k].terrain.buildMip(options.threads);
             if (tex[k].hasWater) tex[k].water.buildMip(options.threads), tex[k].buildBothMip(options.threads);
+            if (scene.levelErrorM().empty())  // no pyramid's bound: estimated from the texels (error_bound.cpp)
+                cs.texelEstimateM = std::max(tex[k].terrain.errorEstimateM(options.threads),
+                                             tex[k].hasWater ? tex[k].water.errorEstimateM(options.threads) : 0.0f);
         }
         timings.mipmapMs += clock.milliseconds();
         timings.cascades.push_back(cs);

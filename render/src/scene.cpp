@@ -120,6 +120,7 @@ Scene::Scene(const Grid& grid, const influence::InfluenceLists& lists, const inf
     zMax = surfaceMax;
     depthColorMaxM = scenarioDepthMax(grid, depthMax);
     boundLevels();
+    boundRelief();
 }
 
 Scene::Scene(const GridRegionReader& file, const influence::KernelParams& params,

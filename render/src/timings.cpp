@@ -42,6 +42,7 @@ std::string Timings::toJson() const {
     j["hits"] = hits;
     j["error_bound_m"] = bound(errorBoundM);
     j["error_bound_px"] = bound(errorBoundPx);
+    j["error_bound_from"] = boundFromTexels ? "texels" : "pyramid";
     j["max_error_m"] = maxErrorM;
     j["max_error_px"] = maxErrorPx;
     if (!notes.empty()) j["notes"] = notes;
@@ -67,6 +68,7 @@ std::string Timings::toJson() const {
                                  {"error_bound_m", bound(c.errorBoundM)},
                                  {"error_bound_px", bound(c.errorBoundPx)},
                                  {"budget_m", bound(c.budgetM)},
+                                 {"texel_estimate_m", bound(c.texelEstimateM)},
                                  {"gaussians", c.gaussians},
                                  {"cells_visited", c.cellsVisited},
                                  {"cells_read", c.cellsRead},
@@ -117,10 +119,11 @@ std::string Timings::toTable() const {
             std::snprintf(b, sizeof b, "; within %.3g m (%.2g px)", c.errorBoundM, c.errorBoundPx);
             s += b;
             if (c.budgetM > 0 && c.errorBoundM > c.budgetM) {
-                std::snprintf(b, sizeof b,
-                              ", over its budget of %.3g m by %.3g m (its texels are capped at twice --texels a side, "
-                              "and none is finer than the finest cell)",
-                              c.budgetM, c.errorBoundM - c.budgetM);
+                std::snprintf(b, sizeof b, ", over its budget of %.3g m by %.3g m (%s)", c.budgetM,
+                              c.errorBoundM - c.budgetM,
+                              boundFromTexels ? "no surface pyramid to choose its texel size by"
+                                              : "its texels are capped at twice --texels a side, and none is finer "
+                                                "than the finest cell");
                 s += b;
             }
         }
@@ -132,11 +135,14 @@ std::string Timings::toTable() const {
                   mipmapMs, raycastMs, (unsigned long long)rays, (unsigned long long)hits, shadingMs, totalMs);
     s += b;
     if (std::isfinite(errorBoundM)) {
-        std::snprintf(b, sizeof b, "accuracy: within %.3g m of the exact surface, %.3g px at the worst texel",
-                      errorBoundM, errorBoundPx);
+        std::snprintf(b, sizeof b, "accuracy: within %.3g m of the exact surface, %.3g px at the worst texel%s",
+                      errorBoundM, errorBoundPx,
+                      boundFromTexels
+                          ? ", from the texels and the relief under them (no surface pyramid: hc-influence writes one)"
+                          : "");
         s += b;
     } else {
-        s += "accuracy: no bound claimed, none without the grid's surface pyramid (hc-influence writes it)";
+        s += "accuracy: no bound claimed";
     }
     std::string budget;
     for (const auto& [v, unit] : {std::pair{maxErrorM, " m"}, std::pair{maxErrorPx, " px"}})

@@ -197,12 +197,14 @@ void attachScene(const char* program, LoadedScene& s, const std::string& gridPat
                          program, e.what());
         }
     }
-    // An error budget needs the pyramid's level errors: without them it cannot steer anything, and the user is told.
+    // An error budget needs the pyramid's level errors: without them it cannot steer the texel sizes, and the user is
+    // told.
     if (!s.pyramid && !quiet && (setup.options.maxErrorM > 0 || setup.options.maxErrorPx > 0))
-        std::fprintf(stderr,
-                     "%s: note: --max-error and --max-error-px need the surface pyramid (its level errors): without "
-                     "one the texel sizes are as --texels gives them and no bound is claimed\n",
-                     program);
+        std::fprintf(
+            stderr,
+            "%s: note: --max-error and --max-error-px need the surface pyramid (its level errors): without "
+            "one the texel sizes are as --texels gives them (the accuracy line gives the bound from the texels)\n",
+            program);
     const bool waterOnly = s.pyramid && s.pyramid->waterOnly();
     const influence::SurfacePyramid* base = waterOnly ? &*s.basePyramid : s.pyramid ? &*s.pyramid : nullptr;
     const influence::SurfacePyramid* water = waterOnly ? &*s.pyramid : nullptr;

@@ -18,10 +18,16 @@ v = t['verified']
 assert t['error_bound_m'] is not None and t['max_error_m'] == 0.5 and v['hits'] == 500, t
 assert v['max_m'] <= t['error_bound_m'] + 0.005, t"]]
   -- ${RENDER} k.hcg -o k.png --timings t.json --size 160x90 --texels 64 --backend cpu --max-error 0.5 --verify-error 500)
-# A budget without the pyramid steers nothing: said, the frame drawn as without it, no bound claimed.
-hc_cli_test(render.max_error_without_pyramid 0 [[note: --max-error and --max-error-px need the surface pyramid .its level errors.: without one the texel sizes are as --texels gives them and no bound is claimed.*accuracy: no bound claimed]]
-  --setup ${KOOTENAI_GRID} --exists k.png
-  -- ${RENDER} k.hcg -o k.png --size 64x48 --backend cpu --max-error 0.5)
+# A budget without the pyramid steers no texel size: said, the frame drawn as without it, its bound from the texels.
+hc_cli_test(render.max_error_without_pyramid 0 [[note: --max-error and --max-error-px need the surface pyramid .its level errors.: without one the texel sizes are as --texels gives them .the accuracy line gives the bound from the texels.*accuracy: within [0-9.e+-]+ m of the exact surface, [0-9.e+-]+ px at the worst texel, from the texels and the relief under them .no surface pyramid: hc-influence writes one.]]
+  --setup ${KOOTENAI_GRID} --exists k.png --exists t.json
+  --check [[python3 -c "import json
+t = json.load(open('t.json'))
+v = t['verified']
+assert t['error_bound_m'] is not None and t['error_bound_from'] == 'texels' and v['hits'] == 500, t
+assert all(c['texel_estimate_m'] is not None for c in t['cascades']), t
+assert v['max_m'] <= t['error_bound_m'] + 0.005, t"]]
+  -- ${RENDER} k.hcg -o k.png --size 64x48 --backend cpu --max-error 0.5 --timings t.json --verify-error 500)
 hc_cli_test(render.max_error_negative nonzero [[^hc-render: error: --max-error must be a finite number >= 0 .metres.]] --absent k.png
   --setup ${KOOTENAI_WITH_PYRAMID} -- ${RENDER} k.hcg -o k.png --size 64x48 --max-error -1)
 # A cache and a pyramid beside the grid (hc-influence's defaults on a small grid): the default reads the grid out of

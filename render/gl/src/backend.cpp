@@ -137,7 +137,7 @@ void GlRenderer::Impl::uploadScene() {
                       &terrainAtlas.buffer, &waterAtlas.buffer, &overlayBuf})
         b->reserve(16);
     frameBuf.reserve(sizeof(gpu::FrameBlock));
-    countersBuf.reserve(sizeof(uint32_t) * gpu::kCounterSlots * (gpu::kMaxCascades + 1));
+    countersBuf.reserve(sizeof(uint32_t) * gpu::kCounterUints);
     if (cpuCascades) {
         const gpu::GpuCell sentinel{};
         cellsBuf.reserve(sizeof sentinel);

@@ -4,6 +4,7 @@
 // stage times and the shaders' counters read back, and GL's errors.
 #include <algorithm>
 #include <cstdio>
+#include <cstring>
 #include <string>
 #include <tuple>
 #include <vector>
@@ -125,6 +126,7 @@ void GlRenderer::Impl::dispatchMipmaps(const CascadeFit& fit, const gpu::FrameBl
     glUseProgram(mipmap);
     const GLint uCascade = glGetUniformLocation(mipmap, "uCascade"), uWater = glGetUniformLocation(mipmap, "uWater"),
                 uLevel = glGetUniformLocation(mipmap, "uLevel");
+    glUniform1i(glGetUniformLocation(mipmap, "uEstimate"), estimatesError() ? 1 : 0);
     for (size_t k = 0; k < fit.cascades.size(); ++k) {
         if (fit.cascades[k].empty()) continue;
         glUniform1i(uCascade, int(k));
@@ -182,6 +184,12 @@ void GlRenderer::Impl::readCounters(size_t cascadeCount, Timings& timings) const
             timings.cascades[k].gaussians += counters[k * gpu::kCounterSlots + size_t(s)];
     for (int s = 0; s < gpu::kCounterSlots; ++s)
         timings.hits += counters[size_t(gpu::kMaxCascades * gpu::kCounterSlots + s)];
+    if (estimatesError())
+        for (size_t k = 0; k < cascadeCount; ++k) {
+            float estimate;
+            std::memcpy(&estimate, &counters[size_t(gpu::kEstimateCounter) + k], sizeof estimate);
+            timings.cascades[k].texelEstimateM = estimate;
+        }
 }
 
 void GlRenderer::Impl::throwOnGlError() const {

@@ -243,6 +243,8 @@ struct GlRenderer::Impl {
     void dispatchPerPixel(GLuint program, const Camera& camera) const;
     void readStageTimes(int stampCount, size_t cascadeCount, Timings& timings);
     void readCounters(size_t cascadeCount, Timings& timings) const;
+    // Without a surface pyramid's bound, the frame's is estimated from the texels (mipmap.comp, CascadeStats).
+    bool estimatesError() const { return scene->levelErrorM().empty(); }
     void throwOnGlError() const;
 };
 

@@ -14,9 +14,15 @@
 #define HEIGHTCAST_RENDER_GPU_LAYOUT_H
 
 #ifdef __cplusplus
+#include <algorithm>
+#include <cmath>
 #include <cstdint>
 namespace hc::render::gpu {
+using std::abs, std::min;
 using uint = std::uint32_t;
+#define HC_LAYOUT_FN inline
+#else
+#define HC_LAYOUT_FN
 #endif
 
 // Buffer binding points (macros: GLSL 4.30 layout qualifiers take literals only).
@@ -30,9 +36,11 @@ using uint = std::uint32_t;
 #define HC_BIND_VISIBLE \
     4  // int[]: per cascade 4 ints a row: the spans to evaluate (RowFill a0, a1, b0, b1); out of core the
        //   spans atlas.comp copies the pyramid's texels in
-#define HC_BIND_HEIGHTS 5   // float[]: per cascade terrain, water, depth textures and both max mipmaps
-#define HC_BIND_PIXELS 6    // GpuPixel[width * height], row 0 at the top
-#define HC_BIND_COUNTERS 7  // uint[kCounterSlots * (kMaxCascades + 1)]: Gaussians per cascade, then hits
+#define HC_BIND_HEIGHTS 5  // float[]: per cascade terrain, water, depth textures and both max mipmaps
+#define HC_BIND_PIXELS 6   // GpuPixel[width * height], row 0 at the top
+#define HC_BIND_COUNTERS \
+    7  // uint[kCounterSlots * (kMaxCascades + 1) + kMaxCascades]: Gaussians per cascade, then hits, then per cascade
+       //   the float bits of its texels' error estimate (patchErrorEstimateM; uint order is float order for >= 0)
 // Out of core (assemble.comp): the last frame's heights buffer, and what the CPU evaluated this frame.
 #define HC_BIND_LAST_HEIGHTS 11  // float[]: the last frame's HC_BIND_HEIGHTS
 #define HC_BIND_FILL_ROWS \
@@ -57,11 +65,13 @@ using uint = std::uint32_t;
 #define HC_GROUP_2D 8
 
 const int kMaxCascades = 4;
-const int kMaxMipLevels = 16;   // a 8192^2 cascade has 14 levels
-const int kCounterSlots = 64;   // a counter is spread over slots so that no uint overflows
-const int kMaxLabelChars = 12;  // legend labels ("-10994m")
-const int kIndexChunks = 4;     // storage buffers the influence lists' entries may span
-const int kFillRowInts = 8;     // a row of HC_BIND_FILL_ROWS: keptFirst, keptLast, a0, a1, b0, b1, packed a0, packed b0
+const int kMaxMipLevels = 16;  // a 8192^2 cascade has 14 levels
+const int kCounterSlots = 64;  // a counter is spread over slots so that no uint overflows
+const int kEstimateCounter = kCounterSlots * (kMaxCascades + 1);  // HC_BIND_COUNTERS: cascade 0's error estimate
+const int kCounterUints = kEstimateCounter + kMaxCascades;        // the whole HC_BIND_COUNTERS buffer
+const int kMaxLabelChars = 12;                                    // legend labels ("-10994m")
+const int kIndexChunks = 4;  // storage buffers the influence lists' entries may span
+const int kFillRowInts = 8;  // a row of HC_BIND_FILL_ROWS: keptFirst, keptLast, a0, a1, b0, b1, packed a0, packed b0
 const int kAtlasPlane =
     256;  // floats a channel of an atlas slot: a pyramid tile's samples (16^2; fewer where its side is less)
 const int kAtlasBlockUints =
@@ -181,6 +191,18 @@ struct GpuOverlay {
     float dim;    // the cell outline's factor: 1, or 0.35 on an edge
     int valued;   // 1 where the colour layer colours the hit
 };
+
+// Without a surface pyramid a frame's error is estimated from its texels alone (both backends: Heightfield::
+// errorEstimateM, mipmap.comp): at the patch whose corner texel is h00 = h(i, j), the error of patches twice as large
+// at the texels between their corners, along x (h(i, j), h(i + 1, j), h(i + 2, j): h00, h10, h20) and along y (h00,
+// h01, h02), i.e. half the second differences, added. Where the texels resolve the surface that is four times the
+// patch's own bilinear error (s^2/2 against s^2/8 times |v_xx| + |v_yy|): a margin; a feature narrower than a texel
+// that lies between samples goes unseen. 0 where any of the five has no surface (-inf).
+HC_LAYOUT_FN float patchErrorEstimateM(float h00, float h10, float h20, float h01, float h02) {
+    if (min(min(h00, h10), min(h20, min(h01, h02))) < -1.0e37f) return 0.0f;
+    return 0.5f * (abs(h00 - 2.0f * h10 + h20) + abs(h00 - 2.0f * h01 + h02));
+}
+#undef HC_LAYOUT_FN
 
 #ifdef __cplusplus
 // Shading constants both backends use (shading.cpp and shade.comp through GpuFrame).

@@ -8,6 +8,7 @@
 #pragma once
 
 #include <cstdint>
+#include <limits>
 #include <memory>
 #include <mutex>
 #include <optional>
@@ -104,12 +105,15 @@ struct CascadeStats {
     uint64_t pyramidTexels = 0;        // visible texels copied from the pyramid's samples (the others: Gaussians)
     uint64_t pyramidInterpolated = 0;  // visible texels interpolated from a coarser level (pyramidInterpolateLevels)
     int pyramidInterpolatedUp = 0;     // the most levels above the texels' own one of them was interpolated from
-    // The rendered surface's error against the exact one in this cascade [m], with a surface pyramid (else NaN):
-    // the bilinear patches' error at the texel spacing, or at the coarsest level a texel was interpolated from
-    // (Scene::levelErrorM over the cascade's box), plus a float32 rounding of the heights, plus kSummedTexelErrorM
-    // where texels were summed from the kernels. errorBoundPx: the same in pixels at its nearest point. budgetM: its
-    // error budget, 0 none.
+    // The rendered surface's error against the exact one in this cascade [m]: with a surface pyramid the bilinear
+    // patches' error at the texel spacing, or at the coarsest level a texel was interpolated from (Scene::levelErrorM
+    // over the cascade's box), plus a float32 rounding of the heights, plus kSummedTexelErrorM where texels were summed
+    // from the kernels; without one texelEstimateM plus the same two. errorBoundPx: the same in pixels at its nearest
+    // point. budgetM: its error budget, 0 none.
     double errorBoundM = 0, errorBoundPx = 0, budgetM = 0;
+    // Without a surface pyramid: the largest error estimate of its patches from its texels alone (terrain and water
+    // surface; gpu::patchErrorEstimateM) [m]; NaN with a pyramid.
+    double texelEstimateM = std::numeric_limits<double>::quiet_NaN();
     double approximationMs = 0;
 };
 
@@ -139,8 +143,10 @@ struct Timings {
     uint64_t atlasTexels = 0, atlasTilesUploaded = 0, atlasInterpolated = 0;
     std::vector<CascadeStats> cascades;
     uint64_t rays = 0, hits = 0;
-    // The frame's bound: the largest of its cascades' (NaN without a pyramid); and the budget asked (0: none).
+    // The frame's bound: the largest of its cascades'; and the budget asked (0: none). boundFromTexels: estimated from
+    // the texels (CascadeStats::texelEstimateM), the scene having no surface pyramid.
     double errorBoundM = 0, errorBoundPx = 0, maxErrorM = 0, maxErrorPx = 0;
+    bool boundFromTexels = false;
     std::optional<ErrorCheck> verified;  // the frame's error measured at its hits (verifyFrameError), when asked
     // What the renderer changed from what the options asked, and why (the GL backend's textures held to what its
     // driver allows, say); printed by toTable, "notes" in toJson.
@@ -190,6 +196,11 @@ public:
     // tiles near it (influence::RegionalLevelErrors): what a cascade over that box carries.
     const std::vector<double>& levelErrorM() const { return levelErrorM_; }
     std::vector<double> levelErrorM(double x0, double y0, double x1, double y1) const;
+    // Without a pyramid: the largest range of the cell values (elevations, and water levels of wet cells) whose kernels
+    // reach a square of side spanM [m] with a corner in the box [x0, x1] x [y0, y1] of local metres: a bound of the
+    // error of a bilinear patch of that side there (the exact surface and the patch are both convex combinations of
+    // those values), from 64 x 64 regions over the domain in memory, the whole grid's range out of core.
+    double reliefM(double x0, double y0, double x1, double y1, double spanM) const;
     bool hasWater() const { return waterLayer_ >= 0; }
     int waterLayer() const { return waterLayer_; }  // grid layer of water_depth, or -1
     // Per cell, computed once for every frame (in memory; out of core per region): centre [m local] and the
@@ -230,6 +241,12 @@ private:
     influence::RegionalLevelErrors terrainErrors_, waterErrors_;
     double roundingErrorM_ = 0;
     void boundLevels();
+    // reliefM's regions (in memory, without a pyramid): reliefSide_^2 of side reliefRegionM_, per region the least
+    // and largest value of the cells whose kernel reach square meets it.
+    int reliefSide_ = 0;
+    double reliefRegionM_ = 0;
+    std::vector<float> reliefMin_, reliefMax_;
+    void boundRelief();
     mutable std::once_flag evaluatorMade_;
     mutable std::unique_ptr<influence::SurfaceEvaluator> evaluator_;
 };

@@ -54,6 +54,9 @@ struct Heightfield {
     std::vector<std::vector<float>> mip;  // mip[0]: (n-1)^2 patch maxima, then halving to 1 x 1
     std::vector<int> mipSide;             // side of each mip level
     void buildMip(unsigned threads);      // the rows of its large levels on `threads` workers (0 = all cores)
+    // The largest error estimate of its patches (gpu::patchErrorEstimateM over each patch with texels i + 2 and
+    // j + 2; 0 for none) [m]: the bound without a surface pyramid (error_bound.cpp). Rows on `threads` workers.
+    float errorEstimateM(unsigned threads) const;
 };
 
 // Levels of at least this many nodes are built on several workers (waking parallelFor's threads costs microseconds).
