@@ -70,7 +70,7 @@ TEST_F(Render, MaxMipmapHoldsTheLargestHeightUnderEveryNode) {
         float estimate = 0;
         for (int j = 0; j + 2 < n; ++j)
             for (int i = 0; i + 2 < n; ++i) {
-                const auto h = [&](int a, int b) { return hf.h[size_t(j + b) * size_t(n) + size_t(i + a)]; };
+                const auto h = [&](int a, int b) { return hf.h[size_t(j + b) * size_t(hf.n) + size_t(i + a)]; };
                 estimate = std::max(estimate, gpu::patchErrorEstimateM(h(0, 0), h(1, 0), h(2, 0), h(0, 1), h(0, 2)));
             }
         EXPECT_EQ(hf.errorEstimateM(threads), estimate) << "n " << n;
