@@ -252,6 +252,11 @@ void printSummary(const RenderArgs& a, const hc::cli::BackendDecision& decision,
             "  verified     %llu hits against the exact surface: largest %.3g m (%.3g px), 99th percentile "
             "%.3g m, median %.3g m; bound %.3g m\n",
             (unsigned long long)c.hits, c.maxM, c.maxPx, c.p99M, c.medianM, r.timings.errorBoundM);
+        if (c.water)
+            std::printf(
+                "  shoreline    %llu of them drawn dry where the ray came down through the exact water, %llu drawn on "
+                "water where the exact surface is dry\n",
+                (unsigned long long)c.drawnDryOverWater, (unsigned long long)c.drawnWetOverDry);
     }
 }
 

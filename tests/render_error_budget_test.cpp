@@ -227,6 +227,30 @@ TEST_P(ErrorBudget, BoundWithoutAPyramidHoldsFromTheTexels) {
 
 INSTANTIATE_TEST_SUITE_P(RealDems, ErrorBudget, ::testing::Values("hef", "lidar"));
 
+// The shoreline check (ErrorCheck::drawnDryOverWater, drawnWetOverDry) on the flooded alpine DEM: by default few of the
+// checked hits lie on the other side of the exact shoreline; water drawn only where deeper than 200 m (a shore moved
+// into the lake on purpose) puts many more dry hits over exact water; a grid without water has no such check.
+TEST(ErrorBound, ShorelineCheckSeesAShoreMovedOnPurpose) {
+    World& w = hef();
+    ASSERT_TRUE(w.scene->hasWater());
+    RenderOptions o;
+    o.legend = false;
+    o.texelsPerSide = 256;
+    const Rendered plain = renderChecked(*w.scene, o);
+    o.waterMinDepthM = 200;
+    const Rendered moved = renderChecked(*w.scene, o);
+    ASSERT_TRUE(plain.check.water);
+    const uint64_t plainMisses = plain.check.drawnDryOverWater + plain.check.drawnWetOverDry;
+    std::printf("shoreline: %llu + %llu of %llu hits by default, %llu dry over water with water drawn from 200 m\n",
+                (unsigned long long)plain.check.drawnDryOverWater, (unsigned long long)plain.check.drawnWetOverDry,
+                (unsigned long long)plain.check.hits, (unsigned long long)moved.check.drawnDryOverWater);
+    // Under 5 % (3 % here): a band up to a texel wide (about 100 m here) along the shores, where a patch of water with
+    // a dry texel is not drawn.
+    EXPECT_LT(plainMisses, plain.check.hits / 20);
+    EXPECT_GT(moved.check.drawnDryOverWater, 3 * plain.check.drawnDryOverWater);
+    EXPECT_FALSE(renderChecked(*lidar().scene, RenderOptions{}).check.water);
+}
+
 // The texels' estimate of a patch (gpu::patchErrorEstimateM): for v = a x^2 + b y^2 sampled at spacing s, half the
 // second differences, (|a| + |b|) s^2: four times the bilinear patch's largest error, (|a| + |b|) s^2 / 4; none where a
 // texel has no surface.

@@ -163,6 +163,37 @@ std::vector<std::optional<double>> exactValues(const Scene& scene, const std::ve
     return scene.evaluator().values(pts, layer, threads);
 }
 
+// Which side of the shoreline each checked hit was drawn on, against the exact water depth there (water_depth: level
+// minus terrain where the exact water stands, 0 where it is dry). A hit over a hole's edge has no exact value: skipped.
+// A dry hit under exact water counts only where its ray came down through the exact water surface: where the ray meets
+// the exact level (terrain plus depth at the hit) the exact water stands too. Water has no sides, so a ray from beside
+// the domain or below the level reaches the ground under it without passing any shoreline: not counted.
+void checkShoreline(const Scene& scene, const Camera& camera, const Frame& f,
+                    const std::vector<std::array<double, 2>>& dry, const std::vector<size_t>& dryAt,
+                    const std::vector<std::array<double, 2>>& wet, unsigned threads, ErrorCheck& check) {
+    check.water = true;
+    std::vector<std::array<double, 2>> pts(dry);
+    pts.insert(pts.end(), wet.begin(), wet.end());
+    if (pts.empty()) return;
+    const influence::Layer depthLayer = influence::Layer::byName(scene.grid(), "water_depth");
+    const std::vector<std::optional<double>> depth = exactValues(scene, pts, depthLayer, threads);
+    for (size_t k = 0; k < wet.size(); ++k)
+        if (const std::optional<double>& d = depth[dry.size() + k]; d && !(*d > 0)) ++check.drawnWetOverDry;
+    double ex = 0, ey = 0;
+    scene.grid().worldToLocal(camera.xWorld, camera.yWorld, ex, ey);
+    std::vector<std::array<double, 2>> entries;  // where each dry hit under exact water has its ray at the level
+    for (size_t k = 0; k < dry.size(); ++k) {
+        if (!depth[k] || !(*depth[k] > 0)) continue;
+        const double level = double(f.posZ[dryAt[k]]) + *depth[k],
+                     s = (level - camera.zWorld) / (double(f.posZ[dryAt[k]]) - camera.zWorld);
+        if (!(camera.zWorld > level) || !(s > 0 && s < 1)) continue;  // the camera below the level: a side view
+        entries.push_back({ex + s * (dry[k][0] - ex), ey + s * (dry[k][1] - ey)});
+    }
+    if (entries.empty()) return;
+    const std::vector<std::optional<double>> above = exactValues(scene, entries, depthLayer, threads);
+    for (const std::optional<double>& d : above) check.drawnDryOverWater += d && *d > 0;
+}
+
 }  // namespace
 
 ErrorCheck verifyFrameError(const Scene& scene, const Camera& camera, const Frame& f, size_t samples,
@@ -194,6 +225,7 @@ ErrorCheck verifyFrameError(const Scene& scene, const Camera& camera, const Fram
     };
     compare(dry, dryAt, "elevation");
     compare(wet, wetAt, "water_surface");
+    if (scene.hasWater()) checkShoreline(scene, camera, f, dry, dryAt, wet, threads, check);
     check.hits = errors.size();
     check.maxM = errors.empty() ? 0 : *std::max_element(errors.begin(), errors.end());
     check.p99M = quantile(errors, 0.99);

@@ -52,6 +52,10 @@ std::string Timings::toJson() const {
                          {"p99_m", rounded(verified->p99M, std::chars_format::general, 4)},
                          {"median_m", rounded(verified->medianM, std::chars_format::general, 4)},
                          {"max_px", rounded(verified->maxPx, std::chars_format::general, 4)}};
+    if (verified && verified->water) {
+        j["verified"]["drawn_dry_over_water"] = verified->drawnDryOverWater;
+        j["verified"]["drawn_wet_over_dry"] = verified->drawnWetOverDry;
+    }
     j["cascades"] = Json::array();
     for (size_t k = 0; k < cascades.size(); ++k) {
         const CascadeStats& c = cascades[k];

@@ -122,6 +122,10 @@ struct ErrorCheck {
     uint64_t hits = 0;                       // the hits checked
     double maxM = 0, p99M = 0, medianM = 0;  // |rendered - exact| [m]
     double maxPx = 0;                        // the largest in pixels at its hit's distance
+    // The shoreline, with water (`water`): hits drawn on dry ground whose ray came down through the exact water, and
+    // hits drawn on water where the exact surface is dry: hits on the other side of the exact shoreline.
+    bool water = false;
+    uint64_t drawnDryOverWater = 0, drawnWetOverDry = 0;
 };
 
 struct Timings {
