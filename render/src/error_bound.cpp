@@ -28,21 +28,24 @@ void Scene::boundLevels() {
     levelErrorM_ = levelErrorM(0, 0, domain, domain);
 }
 
+int Scene::reliefRegionAt(double x) const {
+    return std::clamp(int(std::floor(x / reliefRegionM_)), 0, reliefSide_ - 1);
+}
+
 void Scene::boundRelief() {
     if (pyramid_ || outOfCore()) return;
     const int side = 1 << influence::RegionalLevelErrors::kRegionsLog2;
     reliefSide_ = side, reliefRegionM_ = grid_.domainSizeM() / side;
     reliefMin_.assign(size_t(side) * size_t(side), HUGE_VALF);
     reliefMax_.assign(size_t(side) * size_t(side), -HUGE_VALF);
-    auto at = [&](double x) { return std::clamp(int(std::floor(x / reliefRegionM_)), 0, side - 1); };
     for (size_t c = 0; c < grid_.cellCount(); ++c) {
         const CellKernel& k = kernels_[c];
         const double r = std::sqrt(double(k.r2));
         const float z = grid_.values[0][c];
         const float d = waterLayer_ >= 0 ? grid_.values[size_t(waterLayer_)][c] : 0.0f;
         const float top = d > 0 ? z + d : z;  // a wet cell's water level too
-        for (int j = at(k.cy - r); j <= at(k.cy + r); ++j)
-            for (int i = at(k.cx - r); i <= at(k.cx + r); ++i) {
+        for (int j = reliefRegionAt(k.cy - r); j <= reliefRegionAt(k.cy + r); ++j)
+            for (int i = reliefRegionAt(k.cx - r); i <= reliefRegionAt(k.cx + r); ++i) {
                 const size_t g = size_t(j) * size_t(side) + size_t(i);
                 reliefMin_[g] = std::min(reliefMin_[g], z), reliefMax_[g] = std::max(reliefMax_[g], top);
             }
@@ -52,8 +55,8 @@ void Scene::boundRelief() {
 double Scene::reliefM(double x0, double y0, double x1, double y1, double spanM) const {
     if (reliefSide_ == 0) return zMax - zMin;
     const int side = reliefSide_, k = int(std::ceil(spanM / reliefRegionM_));
-    auto at = [&](double x) { return std::clamp(int(std::floor(x / reliefRegionM_)), 0, side - 1); };
-    const int i0 = at(x0), i1 = at(x1), j0 = at(y0), j1 = at(y1), jEnd = std::min(side - 1, j1 + k);
+    const int i0 = reliefRegionAt(x0), i1 = reliefRegionAt(x1), j0 = reliefRegionAt(y0), j1 = reliefRegionAt(y1),
+              jEnd = std::min(side - 1, j1 + k);
     // A square with its corner in region (i, j) lies in regions i .. i + k, j .. j + k: their extremes, rows first.
     const size_t w = size_t(i1 - i0 + 1);
     std::vector<float> rowMin(w * size_t(jEnd - j0 + 1)), rowMax(rowMin.size());

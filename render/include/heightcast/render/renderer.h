@@ -250,6 +250,7 @@ private:
     int reliefSide_ = 0;
     double reliefRegionM_ = 0;
     std::vector<float> reliefMin_, reliefMax_;
+    int reliefRegionAt(double x) const;  // the region column (or row) of a local coordinate [m], clamped to the grid's
     void boundRelief();
     mutable std::once_flag evaluatorMade_;
     mutable std::unique_ptr<influence::SurfaceEvaluator> evaluator_;
