@@ -353,10 +353,11 @@ TEST_F(Render, InterpolatedPyramidTexelsStayWithinACoarserPatchError) {
         (unsigned long long)edge, worst, worstDepth);
 }
 
-// The ray walk's shortcut under water (raycast.cpp, PatchWalk::endsAt: a patch with water at all four corners skips the
-// terrain's intersection for a ray that enters above the water) rests on this: wherever a texel holds water, its level
-// is at or above the terrain's texel, from every fill path (the kernels, pyramid samples copied, texels interpolated
-// from a coarser level) and with the minimum depth drawn at 0 as well as the default.
+// Wherever the approximation puts water in a texel its level is at or above the terrain's texel, from every fill path
+// (the kernels, pyramid samples copied, texels interpolated from a coarser level) and with the minimum depth drawn at 0
+// as well as the default: the water drawn stands above the terrain; only the shore texels made after it
+// (ShoreTexelsHoldTheLevelWhereTheGroundRisesAboveIt) lie below it, and the ray walk's shortcut under water
+// (raycast.cpp, PatchWalk::endsAt) checks for them.
 TEST_F(Render, WaterTexelsLieAtOrAboveTheTerrain) {
     uint64_t wet = 0, strictlyAbove = 0;
     for (World* w : {&lidarFlood(), &hef()}) {
@@ -387,6 +388,50 @@ TEST_F(Render, WaterTexelsLieAtOrAboveTheTerrain) {
     EXPECT_GT(wet, 100000u) << "the floods are in view";
     std::printf("%llu wet texels, %llu strictly above the terrain\n", (unsigned long long)wet,
                 (unsigned long long)strictlyAbove);
+}
+
+// The water at the shores (CascadeTextures::extendWaterToShores, water_rule.h), on both floods' cascades against the
+// rule applied texel by texel: a texel whose water does not stand above its terrain holds the highest level of its 8
+// neighbours' that do where its terrain rises above that level, else none; the others keep their level; made again
+// from textures it already ran on (a kept cascade's), nothing changes.
+TEST_F(Render, ShoreTexelsHoldTheLevelWhereTheGroundRisesAboveIt) {
+    uint64_t shore = 0, hollow = 0;
+    for (World* w : {&lidarFlood(), &hef()}) {
+        const Camera c = overviewCamera(*w->scene, 320, 200);
+        const CascadeFit fit = fitCascades(detail::setUpFrame(*w->scene, c).view, 3, 256);
+        for (const Cascade& k : fit.cascades) {
+            detail::CascadeTextures tex;
+            detail::approximate(*w->scene, k, tex, 0.01, 0);
+            const hc::render::detail::Texels drawn = tex.water.h;
+            tex.extendWaterToShores(0);
+            const int n = k.n;
+            for (int j = 0; j < n; ++j)
+                for (int i = 0; i < n; ++i) {
+                    const size_t at = size_t(j) * size_t(n) + size_t(i);
+                    const float terrain = tex.terrain.h[at];
+                    if (drawn[at] > terrain) {
+                        ASSERT_EQ(tex.water.h[at], drawn[at]) << "a drawn texel keeps its level";
+                        continue;
+                    }
+                    float around = -std::numeric_limits<float>::infinity();
+                    for (int y = std::max(j - 1, 0); y <= std::min(j + 1, n - 1); ++y)
+                        for (int x = std::max(i - 1, 0); x <= std::min(i + 1, n - 1); ++x) {
+                            const size_t q = size_t(y) * size_t(n) + size_t(x);
+                            if (drawn[q] > tex.terrain.h[q]) around = std::max(around, drawn[q]);
+                        }
+                    const float expected = around < terrain ? around : -std::numeric_limits<float>::infinity();
+                    ASSERT_EQ(tex.water.h[at], expected) << "texel " << i << ", " << j << " of " << k.texelM << " m";
+                    shore += std::isfinite(expected);
+                    hollow += std::isfinite(around) && !std::isfinite(expected);
+                }
+            const hc::render::detail::Texels once = tex.water.h;
+            tex.extendWaterToShores(1);
+            EXPECT_TRUE(once == tex.water.h) << "made again, the shore is the same";
+        }
+    }
+    std::printf("%llu shore texels, %llu beside water but below its level\n", (unsigned long long)shore,
+                (unsigned long long)hollow);
+    EXPECT_GT(shore, 1000u) << "both floods have shores in view";
 }
 
 TEST_F(Render, StableFittingKeepsTexelsOnTheLattice) {

@@ -2,8 +2,8 @@
 // those the surface pyramid holds copied or interpolated (approximate_copy.cpp, approximate_interpolate.cpp), then the
 // Gaussian RBF sum (docs/design.md section 3) at the rest (approximate_sum.cpp): over the scene's cells in memory, or
 // out of core over blocks of texels whose cells are read from the grid file (here). What these files share is in
-// approximate_internal.h. The cascades' max mipmaps (Heightfield::buildMip, CascadeTextures::buildBothMip) are built
-// here too, after the pass.
+// approximate_internal.h. The water at the shores (CascadeTextures::extendWaterToShores) and the cascades' max mipmaps
+// (Heightfield::buildMip, CascadeTextures::buildBothMip) are made here too, after the pass.
 #include <algorithm>
 #include <cmath>
 #include <cstring>
@@ -17,6 +17,7 @@
 #include "heightcast/core/parallel.h"
 #include "heightcast/influence/region.h"
 #include "heightcast/render/gpu_layout.h"
+#include "heightcast/render/water_rule.h"
 
 namespace hc::render::detail {
 namespace {
@@ -374,6 +375,35 @@ void sumOutOfCore(const CascadeJob& job, const std::vector<Todo>& todo, std::vec
 }
 
 }  // namespace
+
+void CascadeTextures::extendWaterToShores(unsigned threads) {
+    if (!hasWater) return;
+    const size_t n = size_t(water.n);
+    constexpr float kNone = -std::numeric_limits<float>::infinity();
+    // Each texel's level where its water stands above its terrain, else -inf; then each texel whose water does not
+    // takes the largest of those around it (3 x 3, itself -inf), as the column maxima of three rows and their maxima
+    // along the row: the loops vectorise, and they read no texel another worker writes.
+    Texels standing(n * n);
+    parallelFor(n, 64, threads, [&](size_t b, size_t e, unsigned) {
+        for (size_t k = b * n; k < e * n; ++k)
+            standing[k] = water::standsAbove(water.h[k], terrain.h[k]) ? water.h[k] : kNone;
+    });
+    parallelFor(n, 64, threads, [&](size_t b, size_t e, unsigned) {
+        std::vector<float> column(n + 2, kNone);  // column[i + 1]: the largest of texel i's column over rows j +- 1
+        for (size_t j = b; j < e; ++j) {
+            const float* above = &standing[(j > 0 ? j - 1 : j) * n];
+            const float* row = &standing[j * n];
+            const float* below = &standing[(j + 1 < n ? j + 1 : j) * n];
+            for (size_t i = 0; i < n; ++i) column[i + 1] = std::max(std::max(above[i], row[i]), below[i]);
+            float* w = &water.h[j * n];
+            const float* t = &terrain.h[j * n];
+            for (size_t i = 0; i < n; ++i) {
+                const float around = std::max(std::max(column[i], column[i + 1]), column[i + 2]);
+                w[i] = row[i] > kNone ? row[i] : water::shoreLevel(t[i], around);
+            }
+        }
+    });
+}
 
 void CascadeTextures::buildBothMip(unsigned threads) {
     bothMip.resize(terrain.mip.size());

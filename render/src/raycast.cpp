@@ -17,6 +17,7 @@
 #include <glm/vec2.hpp>
 
 #include "heightcast/render/detail/frame.h"
+#include "heightcast/render/water_rule.h"
 
 namespace hc::render::detail {
 namespace {
@@ -75,6 +76,14 @@ std::optional<PatchCorners> cornersOf(const Heightfield& hf, int iu, int iv) {
     return p;
 }
 bool patchDefined(const Heightfield& hf, int iu, int iv) { return cornersOf(hf, iu, iv).has_value(); }
+
+// Whether the water at the corners `w` stands above the terrain at each (water::standsAbove).
+bool standsAbove(const PatchCorners& w, const Heightfield& terrain) {
+    const size_t n = size_t(terrain.n);
+    const float* t0 = &terrain.h[size_t(w.iv) * n + size_t(w.iu)];
+    return water::standsAbove(float(w.h00), t0[0]) && water::standsAbove(float(w.h10), t0[1]) &&
+           water::standsAbove(float(w.h01), t0[n]) && water::standsAbove(float(w.h11), t0[n + 1]);
+}
 
 // Where a ray first meets a bilinear patch within its span. Below: the ray enters the patch at or under the
 // surface (tau = 0).
@@ -190,14 +199,14 @@ struct PatchWalk {
     // Patch (iu, iv) over `segment`, intersected with both surfaces under the block's rules (traverse()): true
     // when that ends the walk, the result in res; false when the ray goes on past the patch.
     bool endsAt(int iu, int iv, const RaySpan& segment) {
-        // Water over the whole patch lies above its terrain: a texel holds water only where its level exceeds the
-        // terrain by more than the minimum depth (approximate.cpp), so the water's bilinear surface is at or above the
-        // terrain's everywhere in the patch. A ray that enters the patch above the water then enters above the terrain
-        // too, and meets the water first (the water wins a tie below), or neither: the terrain's intersection can be
-        // skipped: a share of the patch tests on every flood scene, the frames byte-identical. The GL walk
-        // (raycast.comp) intersects both, as before.
+        // Where the water of all four texels stands above their terrain (water_rule.h: not at a shore, where the
+        // terrain may rise through the water), the water's bilinear surface is above the terrain's everywhere in the
+        // patch. A ray that enters the patch above the water then enters above the terrain too, and meets the water
+        // first (the water wins a tie below), or neither: the terrain's intersection can be skipped: a share of the
+        // patch tests on every flood scene, the frames byte-identical. The GL walk (raycast.comp) intersects both.
         if (water) {
-            if (const std::optional<PatchCorners> wc = cornersOf(tex.water, iu, iv)) {
+            if (const std::optional<PatchCorners> wc = cornersOf(tex.water, iu, iv);
+                wc && standsAbove(*wc, tex.terrain)) {
                 const PatchContact cw = patchContact(*wc, ray, segment);
                 if (cw.kind != Contact::Below) {
                     st.touchedTerrain = st.touchedWater = true;  // entered above both (patchContact: C > 0)

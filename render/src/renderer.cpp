@@ -227,6 +227,7 @@ std::vector<detail::CascadeTextures> approximateCascades(const Scene& scene, con
         timings.approximationMs += cs.approximationMs;
         clock.restart();
         if (!c.empty() && mipmaps) {
+            tex[k].extendWaterToShores(options.threads);
             tex[k].terrain.buildMip(options.threads);
             if (tex[k].hasWater) tex[k].water.buildMip(options.threads), tex[k].buildBothMip(options.threads);
             if (scene.levelErrorM().empty())  // no pyramid's bound: estimated from the texels (error_bound.cpp)

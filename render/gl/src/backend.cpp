@@ -1,10 +1,10 @@
 // The OpenGL 4.3 compute backend (docs/design.md sections 5 and 9): GlRenderer.
 //
 // Per frame: cascade fitting on the CPU (fitCascades, shared with renderFrame()), then four compute
-// stages, each mirroring a CPU function: approximate.comp (detail::approximate), mipmap.comp
-// (Heightfield::buildMip), raycast.comp (detail::castRay) and shade.comp (renderFrame's shading and
-// drawLegend). The scene (cells, sorted Morton keys, influence lists) is uploaded once; per frame only
-// the FrameBlock (gpu_layout.h) and the cascades' visible row spans go up. GPU stage times come from
+// stages, each mirroring a CPU function: approximate.comp (detail::approximate), shore.comp and mipmap.comp
+// (CascadeTextures::extendWaterToShores, Heightfield::buildMip), raycast.comp (detail::castRay) and shade.comp
+// (renderFrame's shading and drawLegend). The scene (cells, sorted Morton keys, influence lists) is uploaded once; per
+// frame only the FrameBlock (gpu_layout.h) and the cascades' visible row spans go up. GPU stage times come from
 // GL_TIMESTAMP queries between the dispatches.
 //
 // The cascades stay on the GPU from one frame to the next (two heights buffers, swapped each frame): assemble.comp
@@ -86,6 +86,7 @@ GlRenderer::Impl::Impl(const Scene& s, std::unique_ptr<gl::HeadlessContext> cont
         atlas = gl::compileEmbedded("atlas");
         interpolate = gl::compileEmbedded("interpolate");
         beams = gl::compileEmbedded("beams");
+        shore = gl::compileEmbedded("shore");
         mipmap = gl::compileEmbedded("mipmap");
         raycast = gl::compileEmbedded("raycast");
         shade = gl::compileEmbedded("shade");
@@ -102,9 +103,9 @@ GlRenderer::Impl::~Impl() {
 }
 
 void GlRenderer::Impl::release() {
-    for (GLuint p : {approximate, assemble, atlas, interpolate, beams, mipmap, raycast, shade})
+    for (GLuint p : {approximate, assemble, atlas, interpolate, beams, shore, mipmap, raycast, shade})
         if (p) glDeleteProgram(p);
-    approximate = assemble = atlas = interpolate = beams = mipmap = raycast = shade = 0;
+    approximate = assemble = atlas = interpolate = beams = shore = mipmap = raycast = shade = 0;
     for (Buffer* b :
          {&frameBuf, &cellsBuf, &keysBuf, &visibleBuf, &heightsBuf, &pixelsBuf, &countersBuf, &readbackBuf,
           &lastHeightsBuf, &fillRowsBuf, &fillTexelsBuf, &beamsBuf, &atlasTilesBuf, &atlasBlocksBuf, &overlayBuf})

@@ -1,7 +1,7 @@
 // render/gl/src/backend_dispatch.cpp: the GL backend's compute dispatches (backend.cpp's first comment): the buffers
-// at their bindings, stage 2 (assemble.comp, atlas.comp and interpolate.comp, approximate.comp), stage 3 (mipmap.comp)
-// and stages 4 and 5 (raycast.comp, shade.comp) as runFrame() orders them, with the time stamps between them, the
-// stage times and the shaders' counters read back, and GL's errors.
+// at their bindings, stage 2 (assemble.comp, atlas.comp and interpolate.comp, approximate.comp), stage 3 (shore.comp,
+// mipmap.comp) and stages 4 and 5 (raycast.comp, shade.comp) as runFrame() orders them, with the time stamps between
+// them, the stage times and the shaders' counters read back, and GL's errors.
 #include <algorithm>
 #include <cstdio>
 #include <cstring>
@@ -121,8 +121,19 @@ void GlRenderer::Impl::dispatchApproximation(const CascadeFit& fit, const Stopwa
     glMemoryBarrier(GL_SHADER_STORAGE_BARRIER_BIT);
 }
 
-// Stage 3: the max mipmaps, one dispatch per level of each cascade's terrain (and water).
+// Stage 3: the water at the shores (shore.comp, one dispatch per cascade), then the max mipmaps, one dispatch per
+// level of each cascade's terrain (and water).
 void GlRenderer::Impl::dispatchMipmaps(const CascadeFit& fit, const gpu::FrameBlock& block) {
+    if (scene->hasWater()) {
+        glUseProgram(shore);
+        const GLint uCascade = glGetUniformLocation(shore, "uCascade");
+        for (size_t k = 0; k < fit.cascades.size(); ++k) {
+            if (fit.cascades[k].empty()) continue;
+            glUniform1i(uCascade, int(k));
+            glDispatchCompute(groups(fit.cascades[k].n), groups(fit.cascades[k].n), 1);
+        }
+        glMemoryBarrier(GL_SHADER_STORAGE_BARRIER_BIT);
+    }
     glUseProgram(mipmap);
     const GLint uCascade = glGetUniformLocation(mipmap, "uCascade"), uWater = glGetUniformLocation(mipmap, "uWater"),
                 uLevel = glGetUniformLocation(mipmap, "uLevel");

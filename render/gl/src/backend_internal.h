@@ -111,7 +111,8 @@ struct GlRenderer::Impl {
 
     const Scene* scene;                             // setScene() points it at another of the same kind
     std::unique_ptr<gl::HeadlessContext> headless;  // null when rendering into the caller's context
-    GLuint approximate = 0, assemble = 0, atlas = 0, interpolate = 0, beams = 0, mipmap = 0, raycast = 0, shade = 0;
+    GLuint approximate = 0, assemble = 0, atlas = 0, interpolate = 0, beams = 0, shore = 0, mipmap = 0, raycast = 0,
+           shade = 0;
     Buffer frameBuf, cellsBuf, keysBuf, visibleBuf, heightsBuf, pixelsBuf, countersBuf;
     Buffer beamsBuf;  // beams.comp's start depths, beamSlots of them this frame (0: no beams)
     size_t beamSlots = 0, outerBeamSlots = 0;

@@ -63,13 +63,16 @@ struct Heightfield {
 constexpr size_t kMipParallelNodes = size_t{1} << 16;
 
 struct CascadeTextures {
-    Heightfield terrain, water;  // water: surface height where wet (depth > min), else -inf
+    Heightfield terrain, water;  // water: surface height where wet (depth > min) or at a shore, else -inf
     Texels depth;                // water depth at texels (0 where dry)
     bool hasWater = false;
     // With water: the larger of the two max mipmaps, level by level (buildBothMip, after both buildMip): the ray walk
     // over both surfaces reads one maximum a node instead of two. Empty: the walk reads both.
     std::vector<std::vector<float>> bothMip;
     void buildBothMip(unsigned threads);
+    // The water at the shores (water_rule.h: shoreLevel), after the texels and before the mipmaps: every texel whose
+    // water does not stand above its terrain is made again from its neighbours (so a kept shore texel is too).
+    void extendWaterToShores(unsigned threads);
 };
 
 // The last frame's textures of a cascade with the same texel size, side and lattice: this frame's texel (i, j)
