@@ -1,7 +1,8 @@
 // render/src/error_bound.cpp: what error a frame carries. Before the frame: the error of each pyramid level's bilinear
 // patches (Scene::levelErrorM), which the cascades' fit reads to meet an error budget (cascades.cpp); after it, the
 // bound of each cascade and of the frame (boundFrame), from the pyramid or, without one, from the texels' own estimate
-// (gpu::patchErrorEstimateM); and the error measured at the frame's hits against the exact surface (verifyFrameError).
+// (gpu::patchErrorEstimateM), which without a pyramid also predicts each level's error for a budget's fit
+// (predictLevelErrorM); and the error measured at the frame's hits against the exact surface (verifyFrameError).
 #include <algorithm>
 #include <array>
 #include <cmath>
@@ -110,6 +111,44 @@ double texelPatchErrorM(const Scene& scene, const Cascade& c, double estimateM) 
 }
 
 }  // namespace
+
+std::vector<double> detail::predictLevelErrorM(const Scene& scene, double x0, double y0, double x1, double y1,
+                                               double waterMinDepthM, unsigned threads) {
+    // The probe: the box's surface at one spacing on the ladder of powers of two of the finest cell, the coarsest that
+    // resolves it (texelPatchErrorM), or coarser where that takes more than kProbeSide texels a side.
+    constexpr int kProbeSide = 256;
+    // The probe's estimate, scaled, fell short of the texels' own by up to 1.37x on the bundled and test DEMs (a finer
+    // spacing sees features the probe's smooths): taken twice.
+    constexpr double kPredictionMargin = 2.0;
+    const double finest = scene.grid().finestCellM, resolvedM = scene.params().sigma * finest;
+    const double extent = std::max({x1 - x0, y1 - y0, finest});
+    int probeLevel = int(std::floor(std::log2(resolvedM / finest) + 1e-9));
+    while (std::ceil(extent / std::ldexp(finest, probeLevel)) + 3 > kProbeSide) ++probeLevel;
+    Cascade probe;
+    probe.texelM = std::ldexp(finest, probeLevel);
+    probe.n = int(std::ceil(extent / probe.texelM)) + 3;
+    probe.x0 = (std::floor(x0 / probe.texelM) - 1) * probe.texelM;
+    probe.y0 = (std::floor(y0 / probe.texelM) - 1) * probe.texelM;
+    probe.polygon = {{x0, y0}, {x1, y0}, {x1, y1}, {x0, y1}};
+    probe.rows.assign(size_t(probe.n), Cascade::RowSpan{0, probe.n - 1});
+    CascadeTextures tex;
+    approximate(scene, probe, tex, waterMinDepthM, threads);
+    tex.extendWaterToShores(threads);  // as approximateCascades() before its estimate
+    const double probeM =
+        std::max(tex.terrain.errorEstimateM(threads), tex.hasWater ? tex.water.errorEstimateM(threads) : 0.0f);
+    // Level t's patches: the probe's estimate scaled with the square of the spacing while that resolves the surface,
+    // at most the relief under the box; coarser, the relief (texelPatchErrorM); then what boundFrame adds.
+    const double margin = 2 * pyramidCopyBoundM(scene) + kSummedTexelErrorM;
+    std::vector<double> levels;
+    for (int t = 0;; ++t) {
+        const double s = std::ldexp(finest, t);
+        const double relief = scene.reliefM(x0 - 2 * s, y0 - 2 * s, x1 + 2 * s, y1 + 2 * s, s);
+        const double ratio = s / probe.texelM;
+        levels.push_back((s <= resolvedM ? std::min(kPredictionMargin * probeM * ratio * ratio, relief) : relief) +
+                         margin);
+        if (s >= extent) return levels;
+    }
+}
 
 void detail::boundFrame(const Scene& scene, const FrameSetup& setup, const CascadeFit& fit, Timings& timings) {
     const bool fromPyramid = !scene.levelErrorM().empty();

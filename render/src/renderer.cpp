@@ -101,6 +101,10 @@ CascadeFit fitFrame(const Scene& scene, const Camera& camera, const FrameSetup& 
     view.coarserTexels = options.pyramidCoarseTexels;
     view.maxErrorM = options.maxErrorM, view.maxErrorPx = options.maxErrorPx;
     view.maxTexelsPerSide = 2 * options.texelsPerSide;
+    if (scene.levelErrorM().empty() && (options.maxErrorM > 0 || options.maxErrorPx > 0))
+        view.levelErrorIn = [&scene, &options](double x0, double y0, double x1, double y1) {
+            return predictLevelErrorM(scene, x0, y0, x1, y1, options.waterMinDepthM, options.threads);
+        };
     timings.maxErrorM = options.maxErrorM, timings.maxErrorPx = options.maxErrorPx;
     const CascadeFit fit = cameraBelowTerrainM(scene, camera) > 0
                                ? CascadeFit{}

@@ -71,9 +71,9 @@ void RenderSetup::addRenderOptions(Parser& p) {
              options.pyramidInterpolateLevels);
     p.option("--max-error", "M",
              "error budget [m]: with a surface pyramid each cascade takes the coarsest of its spacings whose\n"
-             "rendered error is within M of the exact surface (far and flat ground coarse, near and rough fine);\n"
-             "the summary says the frame's bound and where the texels could not meet it (default 0: none, texel\n"
-             "sizes as --texels gives them)",
+             "rendered error is within M of the exact surface (far and flat ground coarse, near and rough fine;\n"
+             "without one, predicted from a coarse probe); the summary says the frame's bound and where the texels\n"
+             "could not meet it (default 0: none, texel sizes as --texels gives them)",
              options.maxErrorM);
     p.option("--max-error-px", "P",
              "error budget [pixels]: the same, each cascade within P pixels at its nearest point; with\n"
@@ -197,14 +197,14 @@ void attachScene(const char* program, LoadedScene& s, const std::string& gridPat
                          program, e.what());
         }
     }
-    // An error budget needs the pyramid's level errors: without them it cannot steer the texel sizes, and the user is
-    // told.
+    // An error budget reads the pyramid's measured level errors; without them the texel sizes come from a prediction
+    // (detail::predictLevelErrorM), and the user is told.
     if (!s.pyramid && !quiet && (setup.options.maxErrorM > 0 || setup.options.maxErrorPx > 0))
-        std::fprintf(
-            stderr,
-            "%s: note: --max-error and --max-error-px need the surface pyramid (its level errors): without "
-            "one the texel sizes are as --texels gives them (the accuracy line gives the bound from the texels)\n",
-            program);
+        std::fprintf(stderr,
+                     "%s: note: without the surface pyramid (hc-influence writes it) --max-error and --max-error-px "
+                     "choose texel sizes from a prediction, a coarse probe of each cascade's ground; the accuracy line "
+                     "gives the bound the texels carry\n",
+                     program);
     const bool waterOnly = s.pyramid && s.pyramid->waterOnly();
     const influence::SurfacePyramid* base = waterOnly ? &*s.basePyramid : s.pyramid ? &*s.pyramid : nullptr;
     const influence::SurfacePyramid* water = waterOnly ? &*s.pyramid : nullptr;

@@ -18,8 +18,8 @@ v = t['verified']
 assert t['error_bound_m'] is not None and t['max_error_m'] == 0.5 and v['hits'] == 500, t
 assert v['max_m'] <= t['error_bound_m'] + 0.005, t"]]
   -- ${RENDER} k.hcg -o k.png --timings t.json --size 160x90 --texels 64 --backend cpu --max-error 0.5 --verify-error 500)
-# A budget without the pyramid steers no texel size: said, the frame drawn as without it, its bound from the texels.
-hc_cli_test(render.max_error_without_pyramid 0 [[note: --max-error and --max-error-px need the surface pyramid .its level errors.: without one the texel sizes are as --texels gives them .the accuracy line gives the bound from the texels.*accuracy: within [0-9.e+-]+ m of the exact surface, [0-9.e+-]+ px at the worst texel, from the texels and the relief under them .no surface pyramid: hc-influence writes one.]]
+# A budget without the pyramid steers the texel sizes from a prediction: said; the frame's bound from its texels.
+hc_cli_test(render.max_error_without_pyramid 0 [[note: without the surface pyramid .hc-influence writes it. --max-error and --max-error-px choose texel sizes from a prediction, a coarse probe of each cascade's ground. the accuracy line gives the bound the texels carry.*accuracy: within [0-9.e+-]+ m of the exact surface, [0-9.e+-]+ px at the worst texel, from the texels and the relief under them .no surface pyramid: hc-influence writes one.]]
   --setup ${KOOTENAI_GRID} --exists k.png --exists t.json
   --check [[python3 -c "import json
 t = json.load(open('t.json'))

@@ -54,8 +54,9 @@ struct ViewVolume {
     // as many texels as its extent then needs, up to maxTexelsPerSide (coarser where those cannot cover it); off the
     // ladder (8 steps) never finer than N texels cover.
     double maxErrorM = 0, maxErrorPx = 0, pixelRad = 0;
-    // With a pyramid: the rendered error per level over a box [x0, x1] x [y0, y1] of local metres (Scene::levelErrorM),
-    // asked for each cascade's polygon; empty without.
+    // The rendered error per level over a box [x0, x1] x [y0, y1] of local metres, asked for each cascade's polygon:
+    // with a pyramid measured (Scene::levelErrorM); without one, under a budget, predicted (predictLevelErrorM);
+    // else empty.
     std::function<std::vector<double>(double x0, double y0, double x1, double y1)> levelErrorIn;
     int maxTexelsPerSide = 8192;
 };
@@ -77,7 +78,7 @@ struct Cascade {
     double nearestM = 0;                 // a lower bound of the distance from the eye to any point of it [m]
     double budgetM = 0;                  // the error budget at its nearest point (ViewVolume), 0: none
     int interpolateLevels = -1;          // under a budget: the most pyramid levels up a texel may come from, else -1
-    std::vector<double> levelErrorM;     // with a pyramid: the rendered error per level over the polygon's box
+    std::vector<double> levelErrorM;     // the rendered error per level over the polygon's box (levelErrorIn)
     std::vector<glm::dvec2> polygon;     // the hull's slab [splitNear, farWithOverlap], local xy
     // The visible texels: inside the polygon dilated by 1.5 texels. The polygon is convex, so they are one
     // span of each row: row j's are i in [rows[j].first, rows[j].last] (none when last < first).

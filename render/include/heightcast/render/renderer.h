@@ -57,8 +57,9 @@ struct RenderOptions {
     // The error budget (0: none, the texel sizes as above): with a surface pyramid each cascade takes the coarsest of
     // its spacings whose rendered error over its ground (Scene::levelErrorM of its box) is within maxErrorM [m], or
     // within maxErrorPx pixels at the cascade's nearest point, or both (the smaller), and texels interpolated only from
-    // levels within it; far and flat ground coarse, near and rough ground fine. Timings says what each cascade's bound
-    // is and where the texels (up to 2 texelsPerSide a side) could not meet the budget.
+    // levels within it; far and flat ground coarse, near and rough ground fine. Without a pyramid the errors are
+    // predicted (detail::predictLevelErrorM) and the texels never finer than texelsPerSide gives. Timings says what
+    // each cascade's bound is and where the texels (up to 2 texelsPerSide a side) could not meet the budget.
     double maxErrorM = 0, maxErrorPx = 0;
     std::string validate() const;  // "" or what is wrong
 };

@@ -181,6 +181,15 @@ uint64_t interpolateBlock(const Scene& scene, const Cascade& c, const PyramidTil
 struct FrameSetup;
 // Half a float32 ulp of the scene's largest |height| [m]: a pyramid sample's rounding (the exact surface rounded once).
 double pyramidCopyBoundM(const Scene& scene);
+// Without a surface pyramid, under an error budget: the bound each level's spacing (finest cell * 2^t, t = 0 up to the
+// box's extent) would give a cascade over the box [x0, x1] x [y0, y1] (local m), for the fit
+// (ViewVolume::levelErrorIn). Predicted from a probe: the box's surface summed at one spacing (the coarsest that
+// resolves it, or coarser where that takes more than 256 texels a side) and its texels' estimate
+// (Heightfield::errorEstimateM), which grows with the square of the spacing while the texels resolve the surface; at
+// most, and coarser than that, the relief under the box (Scene::reliefM); plus what boundFrame adds. A prediction only:
+// the frame's bound is still its own texels' (boundFrame).
+std::vector<double> predictLevelErrorM(const Scene& scene, double x0, double y0, double x1, double y1,
+                                       double waterMinDepthM, unsigned threads);
 // Each cascade's error bound and the frame's (CascadeStats::errorBoundM, Timings::errorBoundM), once its cascades'
 // statistics are final (error_bound.cpp; both backends).
 void boundFrame(const Scene& scene, const FrameSetup& setup, const CascadeFit& fit, Timings& timings);
