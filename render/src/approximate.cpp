@@ -408,7 +408,7 @@ void CascadeTextures::extendWaterToShores(unsigned threads) {
 void CascadeTextures::buildBothMip(unsigned threads) {
     bothMip.resize(terrain.mip.size());
     for (size_t l = 0; l < terrain.mip.size(); ++l) {
-        const std::vector<float>&a = terrain.mip[l], &b = water.mip[l];
+        const Texels &a = terrain.mip[l], &b = water.mip[l];
         bothMip[l].resize(a.size());
         parallelFor(a.size(), a.size() < kMipParallelNodes ? a.size() : size_t{1} << 16, threads,
                     [&](size_t begin, size_t end, unsigned) {
@@ -429,7 +429,7 @@ void Heightfield::buildMip(unsigned threads) {
     // past the lower level's side is none); the rows of the large levels on the workers.
     for (size_t l = 0; l < mip.size(); ++l) {
         const int side = mipSide[l];
-        std::vector<float>& level = mip[l];
+        Texels& level = mip[l];
         level.resize(size_t(side) * size_t(side));
         const size_t rowsPerChunk = size_t(side) * size_t(side) < kMipParallelNodes ? size_t(side) : 16;
         parallelFor(size_t(side), rowsPerChunk, threads, [&](size_t b, size_t e, unsigned) {
@@ -443,7 +443,7 @@ void Heightfield::buildMip(unsigned threads) {
                     continue;
                 }
                 const int lower = mipSide[l - 1];
-                const std::vector<float>& lo = mip[l - 1];
+                const Texels& lo = mip[l - 1];
                 const float* c0 = &lo[2 * j * size_t(lower)];
                 const float* c1 = 2 * j + 1 < size_t(lower) ? c0 + lower : nullptr;
                 for (int i = 0; i < side; ++i) {

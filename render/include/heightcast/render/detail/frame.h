@@ -16,6 +16,7 @@
 
 #include <glm/vec3.hpp>
 
+#include "heightcast/core/heap.h"
 #include "heightcast/render/camera.h"
 #include "heightcast/render/cascades.h"
 #include "heightcast/render/renderer.h"
@@ -25,7 +26,9 @@ namespace hc::render::detail {
 // An allocator whose vectors leave new elements uninitialised where std::vector would zero them: a cascade's
 // textures are sized before every texel that is read is written (approximate(): copyReusedTexels writes every texel,
 // with RowFill spans every texel of a span, and no other is read), and zeroing them first cost a measurable share of
-// every fresh frame (a 1344^2 texture is 7 MB; docs/benchmarks.md).
+// every fresh frame (a 1344^2 texture is 7 MB; docs/benchmarks.md). Blocks of 4 MB and more are advised to the
+// kernel's huge pages before their first touch (core/heap.h): a fresh process's textures and mipmaps (hundreds of MB
+// at 1920 x 1080) fault in 2 MB at a time instead of 4 kB.
 template <class T>
 struct UninitialisedAllocator : std::allocator<T> {
     template <class U>
@@ -35,6 +38,11 @@ struct UninitialisedAllocator : std::allocator<T> {
     UninitialisedAllocator() = default;
     template <class U>
     UninitialisedAllocator(const UninitialisedAllocator<U>&) noexcept {}
+    T* allocate(size_t n) {
+        T* p = std::allocator<T>::allocate(n);
+        if (n * sizeof(T) >= (size_t(4) << 20)) adviseHugePages(p, n * sizeof(T));
+        return p;
+    }
     template <class U>
     void construct(U* p) noexcept {
         ::new (static_cast<void*>(p)) U;  // default-initialised: for float, nothing written
@@ -49,11 +57,11 @@ using Texels = std::vector<float, UninitialisedAllocator<float>>;
 // One heightfield in a cascade: heights at texel centres and its max mipmap over patches.
 // -inf marks "no surface" (a hole, dry land for water, or a texel outside the visible polygon).
 struct Heightfield {
-    int n = 0;                            // texels per side; patches per side = n - 1
-    Texels h;                             // n * n [m, local z]
-    std::vector<std::vector<float>> mip;  // mip[0]: (n-1)^2 patch maxima, then halving to 1 x 1
-    std::vector<int> mipSide;             // side of each mip level
-    void buildMip(unsigned threads);      // the rows of its large levels on `threads` workers (0 = all cores)
+    int n = 0;                        // texels per side; patches per side = n - 1
+    Texels h;                         // n * n [m, local z]
+    std::vector<Texels> mip;          // mip[0]: (n-1)^2 patch maxima, then halving to 1 x 1
+    std::vector<int> mipSide;         // side of each mip level
+    void buildMip(unsigned threads);  // the rows of its large levels on `threads` workers (0 = all cores)
     // The largest error estimate of its patches (gpu::patchErrorEstimateM over each patch with texels i + 2 and
     // j + 2; 0 for none) [m]: the bound without a surface pyramid (error_bound.cpp). Rows on `threads` workers.
     float errorEstimateM(unsigned threads) const;
@@ -68,7 +76,7 @@ struct CascadeTextures {
     bool hasWater = false;
     // With water: the larger of the two max mipmaps, level by level (buildBothMip, after both buildMip): the ray walk
     // over both surfaces reads one maximum a node instead of two. Empty: the walk reads both.
-    std::vector<std::vector<float>> bothMip;
+    std::vector<Texels> bothMip;
     void buildBothMip(unsigned threads);
     // The water at the shores (water_rule.h: shoreLevel), after the texels and before the mipmaps: every texel whose
     // water does not stand above its terrain is made again from its neighbours (so a kept shore texel is too).
