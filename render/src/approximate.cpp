@@ -405,6 +405,10 @@ void CascadeTextures::extendWaterToShores(unsigned threads) {
     });
 }
 
+float CascadeTextures::errorEstimateM(unsigned threads) const {
+    return std::max(terrain.errorEstimateM(threads), hasWater ? water.errorEstimateM(threads) : 0.0f);
+}
+
 void CascadeTextures::buildBothMip(unsigned threads) {
     bothMip.resize(terrain.mip.size());
     for (size_t l = 0; l < terrain.mip.size(); ++l) {

@@ -95,32 +95,41 @@ std::vector<double> Scene::levelErrorM(double x0, double y0, double x1, double y
 
 namespace {
 
-// Without a pyramid, the error of a cascade's patches: the relief under them (Scene::reliefM) bounds it; where the
-// texels are no coarser than the kernels' width at the finest cell they resolve the surface, and their own estimate
-// (`estimateM`, CascadeStats::texelEstimateM) gives it where that is less. Coarser, a feature of the finest cells can
-// lie between samples unseen: the relief alone.
+// The coarsest texel spacing that resolves the surface: the kernels' width at the finest cell [m].
+double resolvedSpacingM(const Scene& scene) { return scene.params().sigma * scene.grid().finestCellM; }
+
+// Without a pyramid, the error of patches of spacing s over the box [x0, x1] x [y0, y1] of a cascade's polygon: the
+// relief under them (Scene::reliefM) bounds it; where the texels resolve the surface, their estimate (`estimateM`:
+// CascadeStats::texelEstimateM, or predictLevelErrorM's) gives it where that is less. Coarser, a feature of the finest
+// cells can lie between samples unseen: the relief alone.
+double texelPatchErrorM(const Scene& scene, double x0, double y0, double x1, double y1, double s, double estimateM) {
+    // The texels lie within 1.5 texels of the polygon (Cascade::rows), their patches' corners too.
+    const double relief = scene.reliefM(x0 - 2 * s, y0 - 2 * s, x1 + 2 * s, y1 + 2 * s, s);
+    return s <= resolvedSpacingM(scene) ? std::min(estimateM, relief) : relief;
+}
+
+// The same for cascade c's patches, over its polygon's box.
 double texelPatchErrorM(const Scene& scene, const Cascade& c, double estimateM) {
-    const double s = c.texelM;
     double x0 = HUGE_VAL, y0 = HUGE_VAL, x1 = -HUGE_VAL, y1 = -HUGE_VAL;
     for (const glm::dvec2& p : c.polygon)
         x0 = std::min(x0, p.x), y0 = std::min(y0, p.y), x1 = std::max(x1, p.x), y1 = std::max(y1, p.y);
-    // Its texels lie within 1.5 texels of the polygon (Cascade::rows), its patches' corners too.
-    const double relief = scene.reliefM(x0 - 2 * s, y0 - 2 * s, x1 + 2 * s, y1 + 2 * s, s);
-    const bool resolved = s <= scene.params().sigma * scene.grid().finestCellM;
-    return resolved ? std::min(estimateM, relief) : relief;
+    return texelPatchErrorM(scene, x0, y0, x1, y1, c.texelM, estimateM);
 }
+
+// What a frame of texels summed from the kernels adds to its patches' error: float32 rounding and the sum's error [m].
+double summedTexelsErrorM(const Scene& scene) { return 2 * detail::pyramidCopyBoundM(scene) + kSummedTexelErrorM; }
 
 }  // namespace
 
 std::vector<double> detail::predictLevelErrorM(const Scene& scene, double x0, double y0, double x1, double y1,
                                                double waterMinDepthM, unsigned threads) {
     // The probe: the box's surface at one spacing on the ladder of powers of two of the finest cell, the coarsest that
-    // resolves it (texelPatchErrorM), or coarser where that takes more than kProbeSide texels a side.
+    // resolves it (resolvedSpacingM), or coarser where that takes more than kProbeSide texels a side.
     constexpr int kProbeSide = 256;
     // The probe's estimate, scaled, fell short of the texels' own by up to 1.37x on the bundled and test DEMs (a finer
     // spacing sees features the probe's smooths): taken twice.
     constexpr double kPredictionMargin = 2.0;
-    const double finest = scene.grid().finestCellM, resolvedM = scene.params().sigma * finest;
+    const double finest = scene.grid().finestCellM, resolvedM = resolvedSpacingM(scene);
     const double extent = std::max({x1 - x0, y1 - y0, finest});
     int probeLevel = int(std::floor(std::log2(resolvedM / finest) + 1e-9));
     while (std::ceil(extent / std::ldexp(finest, probeLevel)) + 3 > kProbeSide) ++probeLevel;
@@ -134,24 +143,19 @@ std::vector<double> detail::predictLevelErrorM(const Scene& scene, double x0, do
     CascadeTextures tex;
     approximate(scene, probe, tex, waterMinDepthM, threads);
     tex.extendWaterToShores(threads);  // as approximateCascades() before its estimate
-    const double probeM =
-        std::max(tex.terrain.errorEstimateM(threads), tex.hasWater ? tex.water.errorEstimateM(threads) : 0.0f);
-    // Level t's patches: the probe's estimate scaled with the square of the spacing while that resolves the surface,
-    // at most the relief under the box; coarser, the relief (texelPatchErrorM); then what boundFrame adds.
-    const double margin = 2 * pyramidCopyBoundM(scene) + kSummedTexelErrorM;
+    const double probeM = tex.errorEstimateM(threads);
+    // Level t's patches as boundFrame will bound them, with the probe's estimate scaled with the square of the spacing.
     std::vector<double> levels;
     for (int t = 0;; ++t) {
-        const double s = std::ldexp(finest, t);
-        const double relief = scene.reliefM(x0 - 2 * s, y0 - 2 * s, x1 + 2 * s, y1 + 2 * s, s);
-        const double ratio = s / probe.texelM;
-        levels.push_back((s <= resolvedM ? std::min(kPredictionMargin * probeM * ratio * ratio, relief) : relief) +
-                         margin);
+        const double s = std::ldexp(finest, t), ratio = s / probe.texelM;
+        levels.push_back(texelPatchErrorM(scene, x0, y0, x1, y1, s, kPredictionMargin * probeM * ratio * ratio) +
+                         summedTexelsErrorM(scene));
         if (s >= extent) return levels;
     }
 }
 
 void detail::boundFrame(const Scene& scene, const FrameSetup& setup, const CascadeFit& fit, Timings& timings) {
-    const bool fromPyramid = !scene.levelErrorM().empty();
+    const bool fromPyramid = !scene.boundFromTexels();
     timings.boundFromTexels = !fromPyramid;
     timings.errorBoundM = timings.errorBoundPx = 0.0;
     bool unbounded = false;
@@ -174,8 +178,7 @@ void detail::boundFrame(const Scene& scene, const FrameSetup& setup, const Casca
             cs.errorBoundM = levelErrorM(levels, level) + (up > 0 ? levelErrorM(levels, level + up) : 0.0) +
                              (cs.gaussians > 0 ? kSummedTexelErrorM : 0.0);
         } else {  // every texel summed from the kernels: their patches' error, float32 rounding and the sum's error
-            cs.errorBoundM = texelPatchErrorM(scene, c, cs.texelEstimateM) + 2 * detail::pyramidCopyBoundM(scene) +
-                             kSummedTexelErrorM;
+            cs.errorBoundM = texelPatchErrorM(scene, c, cs.texelEstimateM) + summedTexelsErrorM(scene);
         }
         cs.errorBoundPx = cs.errorBoundM / (setup.view.pixelRad * c.nearestM);
         unbounded = unbounded || !std::isfinite(cs.errorBoundM);  // no estimate made (a bug): no bound claimed

@@ -86,7 +86,7 @@ FrameSetup setUpFrame(const Scene& scene, const Camera& worldCamera) {
     view.finestCellM = scene.grid().finestCellM;
     if (scene.pyramid()) view.ladderStepsPerOctave = 1;
     view.pixelRad = 2 * s.basis.tanHalfY / std::max(1, camera.height);
-    if (!scene.levelErrorM().empty())
+    if (!scene.boundFromTexels())
         view.levelErrorIn = [&scene](double x0, double y0, double x1, double y1) {
             return scene.levelErrorM(x0, y0, x1, y1);
         };
@@ -101,7 +101,7 @@ CascadeFit fitFrame(const Scene& scene, const Camera& camera, const FrameSetup& 
     view.coarserTexels = options.pyramidCoarseTexels;
     view.maxErrorM = options.maxErrorM, view.maxErrorPx = options.maxErrorPx;
     view.maxTexelsPerSide = 2 * options.texelsPerSide;
-    if (scene.levelErrorM().empty() && (options.maxErrorM > 0 || options.maxErrorPx > 0))
+    if (scene.boundFromTexels() && (options.maxErrorM > 0 || options.maxErrorPx > 0))
         view.levelErrorIn = [&scene, &options](double x0, double y0, double x1, double y1) {
             return predictLevelErrorM(scene, x0, y0, x1, y1, options.waterMinDepthM, options.threads);
         };
@@ -234,9 +234,7 @@ std::vector<detail::CascadeTextures> approximateCascades(const Scene& scene, con
             tex[k].extendWaterToShores(options.threads);
             tex[k].terrain.buildMip(options.threads);
             if (tex[k].hasWater) tex[k].water.buildMip(options.threads), tex[k].buildBothMip(options.threads);
-            if (scene.levelErrorM().empty())  // no pyramid's bound: estimated from the texels (error_bound.cpp)
-                cs.texelEstimateM = std::max(tex[k].terrain.errorEstimateM(options.threads),
-                                             tex[k].hasWater ? tex[k].water.errorEstimateM(options.threads) : 0.0f);
+            if (scene.boundFromTexels()) cs.texelEstimateM = tex[k].errorEstimateM(options.threads);
         }
         timings.mipmapMs += clock.milliseconds();
         timings.cascades.push_back(cs);

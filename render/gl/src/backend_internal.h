@@ -245,7 +245,7 @@ struct GlRenderer::Impl {
     void readStageTimes(int stampCount, size_t cascadeCount, Timings& timings);
     void readCounters(size_t cascadeCount, Timings& timings) const;
     // Without a surface pyramid's bound, the frame's is estimated from the texels (mipmap.comp, CascadeStats).
-    bool estimatesError() const { return scene->levelErrorM().empty(); }
+    bool estimatesError() const { return scene->boundFromTexels(); }
     void throwOnGlError() const;
 };
 

@@ -201,6 +201,9 @@ public:
     // tiles near it (influence::RegionalLevelErrors): what a cascade over that box carries.
     const std::vector<double>& levelErrorM() const { return levelErrorM_; }
     std::vector<double> levelErrorM(double x0, double y0, double x1, double y1) const;
+    // Without those level errors a frame's bound comes from its own texels (error_bound.cpp), which then estimate it,
+    // and an error budget's texel sizes from a prediction (detail::predictLevelErrorM).
+    bool boundFromTexels() const { return levelErrorM_.empty(); }
     // Without a pyramid: the largest range of the cell values (elevations, and water levels of wet cells) whose kernels
     // reach a square of side spanM [m] with a corner in the box [x0, x1] x [y0, y1] of local metres: a bound of the
     // error of a bilinear patch of that side there (the exact surface and the patch are both convex combinations of

@@ -78,6 +78,8 @@ struct CascadeTextures {
     // over both surfaces reads one maximum a node instead of two. Empty: the walk reads both.
     std::vector<Texels> bothMip;
     void buildBothMip(unsigned threads);
+    // The larger of the terrain's and (with water) the drawn water's Heightfield::errorEstimateM [m].
+    float errorEstimateM(unsigned threads) const;
     // The water at the shores (water_rule.h: shoreLevel), after the texels and before the mipmaps: every texel whose
     // water does not stand above its terrain is made again from its neighbours (so a kept shore texel is too).
     void extendWaterToShores(unsigned threads);
