@@ -257,6 +257,11 @@ void printSummary(const RenderArgs& a, const hc::cli::BackendDecision& decision,
                 "  shoreline    %llu of them drawn dry where the ray came down through the exact water, %llu drawn on "
                 "water where the exact surface is dry\n",
                 (unsigned long long)c.drawnDryOverWater, (unsigned long long)c.drawnWetOverDry);
+        if (c.drawnDryOverWater + c.drawnWetOverDry > 0)
+            std::printf(
+                "               the exact shore at most %.3g m (%.3g px) away from them (bound %.3g m); water drawn "
+                "at most %.3g m over the exact ground\n",
+                c.shoreDistanceM, c.shoreDistancePx, r.timings.shoreBoundM, c.shoreMaxM);
     }
 }
 

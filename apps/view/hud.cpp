@@ -70,6 +70,7 @@ bool Hud::compose(const HudStatus& s, int fw, int fh) {
                               ? fmt::format("within {:.3g} m, {:.2g} px of the exact surface{}", ms.errorBoundM,
                                             ms.errorBoundPx, ms.boundFromTexels ? " (from the texels: no pyramid)" : "")
                               : std::string("accuracy: no bound claimed")) +
+                             (ms.shoreBoundM > 0 ? fmt::format(", shore {:.3g} m", ms.shoreBoundM) : std::string()) +
                              (ms.maxErrorPx > 0 ? fmt::format("   budget {:g} px (B N, M off)", ms.maxErrorPx)
                                                 : std::string("   no budget (B N set one)")),
                          kText});

@@ -2,15 +2,15 @@
 // patches (Scene::levelErrorM), which the cascades' fit reads to meet an error budget (cascades.cpp); after it, the
 // bound of each cascade and of the frame (boundFrame), from the pyramid or, without one, from the texels' own estimate
 // (gpu::patchErrorEstimateM), which without a pyramid also predicts each level's error for a budget's fit
-// (predictLevelErrorM); and the error measured at the frame's hits against the exact surface (verifyFrameError).
+// (predictLevelErrorM). The error measured at a frame's hits is verify_error.cpp's.
 #include <algorithm>
 #include <array>
 #include <cmath>
 #include <limits>
+#include <numbers>
 #include <optional>
 #include <vector>
 
-#include "heightcast/core/quantile.h"
 #include "heightcast/influence/region.h"
 #include "heightcast/render/detail/frame.h"
 #include "heightcast/render/renderer.h"
@@ -157,7 +157,7 @@ std::vector<double> detail::predictLevelErrorM(const Scene& scene, double x0, do
 void detail::boundFrame(const Scene& scene, const FrameSetup& setup, const CascadeFit& fit, Timings& timings) {
     const bool fromPyramid = !scene.boundFromTexels();
     timings.boundFromTexels = !fromPyramid;
-    timings.errorBoundM = timings.errorBoundPx = 0.0;
+    timings.errorBoundM = timings.errorBoundPx = timings.shoreBoundM = timings.shoreBoundPx = 0.0;
     bool unbounded = false;
     for (size_t k = 0; k < fit.cascades.size() && k < timings.cascades.size(); ++k) {
         const Cascade& c = fit.cascades[k];
@@ -181,101 +181,17 @@ void detail::boundFrame(const Scene& scene, const FrameSetup& setup, const Casca
             cs.errorBoundM = texelPatchErrorM(scene, c, cs.texelEstimateM) + summedTexelsErrorM(scene);
         }
         cs.errorBoundPx = cs.errorBoundM / (setup.view.pixelRad * c.nearestM);
+        if (scene.hasWater()) {  // Timings::shoreBoundM
+            const int up = cs.pyramidInterpolated > 0 ? cs.pyramidInterpolatedUp : 0;
+            const double shoreM = std::numbers::sqrt2 * std::ldexp(c.texelM, up);
+            timings.shoreBoundM = std::max(timings.shoreBoundM, shoreM);
+            timings.shoreBoundPx = std::max(timings.shoreBoundPx, shoreM / (setup.view.pixelRad * c.nearestM));
+        }
         unbounded = unbounded || !std::isfinite(cs.errorBoundM);  // no estimate made (a bug): no bound claimed
         timings.errorBoundM = std::max(timings.errorBoundM, cs.errorBoundM);
         timings.errorBoundPx = std::max(timings.errorBoundPx, cs.errorBoundPx);
     }
     if (unbounded) timings.errorBoundM = timings.errorBoundPx = std::numeric_limits<double>::quiet_NaN();
-}
-
-namespace {
-
-// The hits to check: every hit off the walls, or `samples` of them spread evenly.
-std::vector<size_t> hitsToCheck(const Frame& f, size_t samples) {
-    std::vector<size_t> hits;
-    for (size_t i = 0; i < f.distanceM.size(); ++i)
-        if (std::isfinite(f.distanceM[i]) && !(i < f.wall.size() && f.wall[i] != 0)) hits.push_back(i);
-    if (hits.size() <= samples) return hits;
-    std::vector<size_t> picked(samples);
-    for (size_t k = 0; k < samples; ++k) picked[k] = hits[(k * hits.size()) / samples];
-    return picked;
-}
-
-// The exact layer at local points: over the grid and its lists in memory, else from the file around the points.
-std::vector<std::optional<double>> exactValues(const Scene& scene, const std::vector<std::array<double, 2>>& pts,
-                                               const influence::Layer& layer, unsigned threads) {
-    if (scene.outOfCore()) return influence::valuesFromFile(*scene.file(), pts, layer, scene.params(), threads);
-    return scene.evaluator().values(pts, layer, threads);
-}
-
-// Which side of the shoreline each checked hit was drawn on, against the exact water depth there (water_depth: level
-// minus terrain where the exact water stands, 0 where it is dry). A hit over a hole's edge has no exact value: skipped.
-// A dry hit under exact water counts only where its ray came down through the exact water surface: where the ray meets
-// the exact level (terrain plus depth at the hit) the exact water stands too. Water has no sides, so a ray from beside
-// the domain or below the level reaches the ground under it without passing any shoreline: not counted.
-void checkShoreline(const Scene& scene, const Camera& camera, const Frame& f,
-                    const std::vector<std::array<double, 2>>& dry, const std::vector<size_t>& dryAt,
-                    const std::vector<std::array<double, 2>>& wet, unsigned threads, ErrorCheck& check) {
-    check.water = true;
-    std::vector<std::array<double, 2>> pts(dry);
-    pts.insert(pts.end(), wet.begin(), wet.end());
-    if (pts.empty()) return;
-    const influence::Layer depthLayer = influence::Layer::byName(scene.grid(), "water_depth");
-    const std::vector<std::optional<double>> depth = exactValues(scene, pts, depthLayer, threads);
-    for (size_t k = 0; k < wet.size(); ++k)
-        if (const std::optional<double>& d = depth[dry.size() + k]; d && !(*d > 0)) ++check.drawnWetOverDry;
-    double ex = 0, ey = 0;
-    scene.grid().worldToLocal(camera.xWorld, camera.yWorld, ex, ey);
-    std::vector<std::array<double, 2>> entries;  // where each dry hit under exact water has its ray at the level
-    for (size_t k = 0; k < dry.size(); ++k) {
-        if (!depth[k] || !(*depth[k] > 0)) continue;
-        const double level = double(f.posZ[dryAt[k]]) + *depth[k],
-                     s = (level - camera.zWorld) / (double(f.posZ[dryAt[k]]) - camera.zWorld);
-        if (!(camera.zWorld > level) || !(s > 0 && s < 1)) continue;  // the camera below the level: a side view
-        entries.push_back({ex + s * (dry[k][0] - ex), ey + s * (dry[k][1] - ey)});
-    }
-    if (entries.empty()) return;
-    const std::vector<std::optional<double>> above = exactValues(scene, entries, depthLayer, threads);
-    for (const std::optional<double>& d : above) check.drawnDryOverWater += d && *d > 0;
-}
-
-}  // namespace
-
-ErrorCheck verifyFrameError(const Scene& scene, const Camera& camera, const Frame& f, size_t samples,
-                            unsigned threads) {
-    const std::vector<size_t> hits = hitsToCheck(f, samples);
-    const Grid& grid = scene.grid();
-    std::vector<std::array<double, 2>> dry, wet;
-    std::vector<size_t> dryAt, wetAt;
-    for (const size_t i : hits) {
-        std::array<double, 2> p{};
-        grid.worldToLocal(f.originWorldX + f.posX[i], f.originWorldY + f.posY[i], p[0], p[1]);
-        const bool water = i < f.waterDepthM.size() && f.waterDepthM[i] > 0;
-        (water ? wet : dry).push_back(p);
-        (water ? wetAt : dryAt).push_back(i);
-    }
-    ErrorCheck check;
-    std::vector<double> errors;
-    const double pixelRad = detail::setUpFrame(scene, camera).view.pixelRad;
-    auto compare = [&](const std::vector<std::array<double, 2>>& pts, const std::vector<size_t>& at, const char* name) {
-        if (pts.empty()) return;
-        const std::vector<std::optional<double>> exact =
-            exactValues(scene, pts, influence::Layer::byName(grid, name), threads);
-        for (size_t k = 0; k < pts.size(); ++k) {
-            if (!exact[k]) continue;  // a hit on a patch over a hole's edge: no exact surface there to compare with
-            const double e = std::abs(double(f.posZ[at[k]]) - *exact[k]);
-            errors.push_back(e);
-            check.maxPx = std::max(check.maxPx, e / (pixelRad * double(f.distanceM[at[k]])));
-        }
-    };
-    compare(dry, dryAt, "elevation");
-    compare(wet, wetAt, "water_surface");
-    if (scene.hasWater()) checkShoreline(scene, camera, f, dry, dryAt, wet, threads, check);
-    check.hits = errors.size();
-    check.maxM = errors.empty() ? 0 : *std::max_element(errors.begin(), errors.end());
-    check.p99M = quantile(errors, 0.99);
-    check.medianM = quantile(errors, 0.5);
-    return check;
 }
 
 }  // namespace hc::render

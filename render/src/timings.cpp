@@ -43,6 +43,10 @@ std::string Timings::toJson() const {
     j["error_bound_m"] = bound(errorBoundM);
     j["error_bound_px"] = bound(errorBoundPx);
     j["error_bound_from"] = boundFromTexels ? "texels" : "pyramid";
+    if (shoreBoundM > 0) {
+        j["shore_bound_m"] = bound(shoreBoundM);
+        j["shore_bound_px"] = bound(shoreBoundPx);
+    }
     j["max_error_m"] = maxErrorM;
     j["max_error_px"] = maxErrorPx;
     if (!notes.empty()) j["notes"] = notes;
@@ -55,6 +59,9 @@ std::string Timings::toJson() const {
     if (verified && verified->water) {
         j["verified"]["drawn_dry_over_water"] = verified->drawnDryOverWater;
         j["verified"]["drawn_wet_over_dry"] = verified->drawnWetOverDry;
+        j["verified"]["shore_max_m"] = rounded(verified->shoreMaxM, std::chars_format::general, 4);
+        j["verified"]["shore_distance_m"] = rounded(verified->shoreDistanceM, std::chars_format::general, 4);
+        j["verified"]["shore_distance_px"] = rounded(verified->shoreDistancePx, std::chars_format::general, 4);
     }
     j["cascades"] = Json::array();
     for (size_t k = 0; k < cascades.size(); ++k) {
@@ -155,6 +162,10 @@ std::string Timings::toTable() const {
             budget += b;
         }
     s += budget.empty() ? "" : budget + ")";
+    if (shoreBoundM > 0) {
+        std::snprintf(b, sizeof b, "; the shoreline within %.3g m (%.2g px)", shoreBoundM, shoreBoundPx);
+        s += b;
+    }
     s += "\n";
     for (const std::string& n : notes) s += "note: " + n + "\n";
     if (gpuMs > 0 || readbackMs > 0) {

@@ -127,6 +127,11 @@ struct ErrorCheck {
     // hits drawn on water where the exact surface is dry: hits on the other side of the exact shoreline.
     bool water = false;
     uint64_t drawnDryOverWater = 0, drawnWetOverDry = 0;
+    // Of those hits: the largest height of water drawn over the exact ground (drawnWetOverDry) [m]; the largest
+    // distance to the exact shore [m], and in pixels at its hit's distance, from a hit drawn on water to the nearest
+    // exact water and from where a ray drawn dry came down through the exact water to the nearest place without it
+    // (measured on rings of points: verify_error.cpp). 0 where none is on the wrong side.
+    double shoreMaxM = 0, shoreDistanceM = 0, shoreDistancePx = 0;
 };
 
 struct Timings {
@@ -152,6 +157,12 @@ struct Timings {
     // the texels (CascadeStats::texelEstimateM), the scene having no surface pyramid.
     double errorBoundM = 0, errorBoundPx = 0, maxErrorM = 0, maxErrorPx = 0;
     bool boundFromTexels = false;
+    // With water, the shoreline's bound, the largest of its cascades': a patch's diagonal, sqrt(2) times the spacing of
+    // the samples its water came from (the texels', or the coarser level's they were interpolated from). The drawn
+    // shore lies in the patch between a texel with water and one without, and so does the exact one: the texels are
+    // the exact surface's samples (error_bound.cpp). Water shallower than RenderOptions::waterMinDepthM is not drawn,
+    // and its own edge is not bounded. 0 without water.
+    double shoreBoundM = 0, shoreBoundPx = 0;
     std::optional<ErrorCheck> verified;  // the frame's error measured at its hits (verifyFrameError), when asked
     // What the renderer changed from what the options asked, and why (the GL backend's textures held to what its
     // driver allows, say); printed by toTable, "notes" in toJson.
