@@ -159,8 +159,8 @@ int main(int argc, char** argv) {
             "      rendered from scratch under error budgets of 1 cm to 100 m and 0.5 to 2 px and under the fixed\n"
             "      knobs (default, --pyramid-coarse, half and twice --texels), best of --repeat, on each backend of\n"
             "      --backend (here a list: cpu, gl or cpu,gl); each frame's hits are checked against the exact\n"
-            "      surface. Prints a table and the issue-43 targets; --json and --plot write its points and an SVG\n"
-            "      of error against frame time",
+            "      surface (with water, the shoreline too). Prints a table and the issue-43 targets; --json and\n"
+            "      --plot write its points and an SVG of error against frame time",
             set.trade);
         p.option("--trade-grid", "GRID.hcg",
                  "with --trade: also a real grid file, its surface pyramid beside it (hc-influence's .hcp),\n"

@@ -43,7 +43,8 @@ struct TradePoint {
     double boundM = 0, boundPx = 0;                              // Timings::errorBoundM, errorBoundPx
     uint64_t checked = 0;                                        // hits checked against the exact surface
     double maxM = 0, p99M = 0, medianM = 0, maxPx = 0;           // their error (render::ErrorCheck)
-    char skipped[160] = {};  // why the backend could not render it (the GL driver's limits), or empty
+    double shoreBoundM = 0, shoreM = 0;  // with water: Timings::shoreBoundM, ErrorCheck::shoreDistanceM (0: none)
+    char skipped[160] = {};              // why the backend could not render it (the GL driver's limits), or empty
 };
 
 // What a scenario's child reports. Plain bytes through a pipe, so trivially copyable.

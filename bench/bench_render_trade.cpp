@@ -73,7 +73,7 @@ std::string labelOf(const TradeSetting& s, const render::RenderOptions& base) {
 void keepFastest(const render::Timings& tm, TradePoint& p) {
     if (!(tm.totalMs < p.totalMs)) return;
     p.totalMs = tm.totalMs, p.approximationMs = tm.approximationMs, p.raycastMs = tm.raycastMs;
-    p.boundM = tm.errorBoundM, p.boundPx = tm.errorBoundPx;
+    p.boundM = tm.errorBoundM, p.boundPx = tm.errorBoundPx, p.shoreBoundM = tm.shoreBoundM;
     p.texels = 0;
     for (const auto& c : tm.cascades) p.texels += c.visibleTexels;
 }
@@ -142,6 +142,7 @@ void tradeSweep(const render::Scene& scene, const render::Camera& camera, const 
             const render::ErrorCheck c =
                 render::verifyFrameError(scene, camera, frame, set.tradeSamples, set.options.threads);
             p.checked = c.hits, p.maxM = c.maxM, p.p99M = c.p99M, p.medianM = c.medianM, p.maxPx = c.maxPx;
+            p.shoreM = c.shoreDistanceM;
         }
     }
 }
@@ -173,11 +174,13 @@ void printTrade(const std::vector<RunResult>& results, const Settings& set) {
         "%zu hits checked a frame against the exact surface\n"
         "bound = the frame's reported bound (Timings error_bound_m, _px); max / p99 / median = measured |rendered - "
         "exact|; b/max = bound / max; held = the setting's own budget met at every checked hit (metres: + %g mm "
-        "float32), short = the texels could not meet it (the bound is above it)\n",
+        "float32), short = the texels could not meet it (the bound is above it); with water, shore = the shoreline's "
+        "bound (Timings shore_bound_m) and the farthest the exact shore lay from a hit on its wrong side\n",
         set.repeat, set.width, set.height, set.tradeSamples, kBudgetSlackM * 1e3);
-    std::printf("%-14s %-4s %-17s %7s %8s %9s %9s %8s %9s %9s %9s %8s %6s %5s\n", "scene", "", "setting", "cells M",
-                "texels M", "frame ms", "bound m", "bound px", "max m", "p99 m", "median m", "max px", "b/max", "held");
-    bool boundsHold = true, budgetsHold = true, loosePays = true;
+    std::printf("%-14s %-4s %-17s %7s %8s %9s %9s %8s %9s %9s %9s %8s %6s %5s %9s %9s\n", "scene", "", "setting",
+                "cells M", "texels M", "frame ms", "bound m", "bound px", "max m", "p99 m", "median m", "max px",
+                "b/max", "held", "shore m", "measured");
+    bool boundsHold = true, budgetsHold = true, loosePays = true, shoresHold = true;
     std::vector<double> overMax;
     for (const RunResult& r : results) {
         for (int k = 0; k < r.tradeCount; ++k) {
@@ -190,10 +193,12 @@ void printTrade(const std::vector<RunResult>& results, const Settings& set) {
             overMax.push_back(p.maxM > 0 ? p.boundM / p.maxM : HUGE_VAL);
             boundsHold = boundsHold && p.maxM <= p.boundM;
             budgetsHold = budgetsHold && held != "NO";
-            std::printf("%-14s %-4s %-17s %7.2f %8.2f %9.1f %9.4f %8.3f %9.4f %9.4f %9.5f %8.3f %6.1f %5s%s\n", r.name,
-                        p.gl ? "GL" : "CPU", p.label, double(r.cells) / 1e6, double(p.texels) / 1e6, p.totalMs,
-                        p.boundM, p.boundPx, p.maxM, p.p99M, p.medianM, p.maxPx, overMax.back(), held.c_str(),
-                        p.maxM <= p.boundM ? "" : "  (above its bound)");
+            shoresHold = shoresHold && p.shoreM <= p.shoreBoundM * render::kShoreRingStep;
+            std::printf(
+                "%-14s %-4s %-17s %7.2f %8.2f %9.1f %9.4f %8.3f %9.4f %9.4f %9.5f %8.3f %6.1f %5s %9.4g %9.4g%s\n",
+                r.name, p.gl ? "GL" : "CPU", p.label, double(r.cells) / 1e6, double(p.texels) / 1e6, p.totalMs,
+                p.boundM, p.boundPx, p.maxM, p.p99M, p.medianM, p.maxPx, overMax.back(), held.c_str(), p.shoreBoundM,
+                p.shoreM, p.maxM <= p.boundM ? "" : "  (above its bound)");
         }
     }
     std::printf("\ntargets (issue 43):\n");
@@ -209,6 +214,8 @@ void printTrade(const std::vector<RunResult>& results, const Settings& set) {
     std::printf("  every budget the texels could meet held at every checked hit: %s\n",
                 budgetsHold ? "met" : "NOT met");
     std::printf("  every measured error at or below its frame's bound: %s\n", boundsHold ? "met" : "NOT met");
+    std::printf("  every measured shore distance within its frame's shoreline bound (+ %.0f %%, the rings' step): %s\n",
+                (render::kShoreRingStep - 1) * 100, shoresHold ? "met" : "NOT met");
     std::printf("  the bound within %.0fx of the measured largest error on the median frame: %.1fx, %s\n",
                 kBoundOverMaxTarget, medianOverMax, medianOverMax <= kBoundOverMaxTarget ? "met" : "NOT met");
     if (set.tradeCpu) std::printf("  the loose budget pays on every scene (CPU): %s\n", loosePays ? "met" : "NOT met");
@@ -226,10 +233,11 @@ void writeTradeJson(const std::vector<RunResult>& results, const Settings& set, 
                 "\"max_error_m\": {:g}, \"max_error_px\": {:g}, \"width\": {}, \"height\": {}, \"frame_ms\": {:.3f}, "
                 "\"approximation_ms\": {:.3f}, \"raycast_ms\": {:.3f}, \"visible_texels\": {}, \"bound_m\": {:.6g}, "
                 "\"bound_px\": {:.6g}, \"checked_hits\": {}, \"error_max_m\": {:.6g}, \"error_p99_m\": {:.6g}, "
-                "\"error_median_m\": {:.6g}, \"error_max_px\": {:.6g}}}",
+                "\"error_median_m\": {:.6g}, \"error_max_px\": {:.6g}, \"shore_bound_m\": {:.6g}, "
+                "\"shore_distance_m\": {:.6g}}}",
                 first ? "" : ",\n", r.name, r.cells, p.gl ? "gl" : "cpu", p.label, p.isDefault, p.maxErrorM,
                 p.maxErrorPx, set.width, set.height, p.totalMs, p.approximationMs, p.raycastMs, p.texels, p.boundM,
-                p.boundPx, p.checked, p.maxM, p.p99M, p.medianM, p.maxPx);
+                p.boundPx, p.checked, p.maxM, p.p99M, p.medianM, p.maxPx, p.shoreBoundM, p.shoreM);
             first = false;
         }
     o += "\n]\n";

@@ -259,15 +259,12 @@ TEST_P(ErrorBudget, BudgetWithoutAPyramidChoosesTexelsFromAPrediction) {
 
 INSTANTIATE_TEST_SUITE_P(RealDems, ErrorBudget, ::testing::Values("hef", "lidar"));
 
-// verifyFrameError measures the distance to the exact shore on rings of points 2^(1/8) apart (verify_error.cpp): up to
-// 9 % long.
-const double kShoreRingStep = std::exp2(1.0 / 8);
-
 // The shoreline check (ErrorCheck::drawnDryOverWater, drawnWetOverDry) on the flooded alpine DEM, at 256 texels a side
 // (coarse enough for the shore texels to matter): by default few of the checked hits lie on the other side of the exact
-// shoreline, and the exact shore lies within the frame's shoreline bound of each (Timings::shoreBoundM), here and at 64
-// and 1024 texels a side; water drawn only where deeper than 200 m (a shore moved into the lake on purpose) puts many
-// more dry hits over exact water, beyond that bound; a grid without water has no such check.
+// shoreline, and the exact shore lies within the frame's shoreline bound of each (Timings::shoreBoundM; measured up to
+// kShoreRingStep long), here and at 64 and 1024 texels a side; water drawn only where deeper than 200 m (a shore moved
+// into the lake on purpose) puts many more dry hits over exact water, beyond that bound; a grid without water has no
+// such check.
 TEST(ErrorBound, ShorelineCheckSeesAShoreMovedOnPurpose) {
     World& w = hef();
     ASSERT_TRUE(w.scene->hasWater());
@@ -291,7 +288,7 @@ TEST(ErrorBound, ShorelineCheckSeesAShoreMovedOnPurpose) {
                 plain.check.shoreDistanceM, plain.timings.shoreBoundM, moved.check.shoreDistanceM);
     ASSERT_GT(plainMisses, 0u);  // else there is no distance to check
     EXPECT_GT(plain.check.shoreDistanceM, 0.0);
-    EXPECT_LE(plain.check.shoreDistanceM, plain.timings.shoreBoundM * kShoreRingStep);
+    EXPECT_LE(plain.check.shoreDistanceM, plain.timings.shoreBoundM * render::kShoreRingStep);
     EXPECT_GT(moved.check.shoreDistanceM, 2 * moved.timings.shoreBoundM);
     for (const int texels : {64, 1024}) {
         o.waterMinDepthM = RenderOptions{}.waterMinDepthM;
@@ -300,7 +297,7 @@ TEST(ErrorBound, ShorelineCheckSeesAShoreMovedOnPurpose) {
         std::printf("at %d texels: the exact shore at most %.1f m from %llu hits, bound %.1f m\n", texels,
                     r.check.shoreDistanceM, (unsigned long long)(r.check.drawnDryOverWater + r.check.drawnWetOverDry),
                     r.timings.shoreBoundM);
-        EXPECT_LE(r.check.shoreDistanceM, r.timings.shoreBoundM * kShoreRingStep) << texels << " texels";
+        EXPECT_LE(r.check.shoreDistanceM, r.timings.shoreBoundM * render::kShoreRingStep) << texels << " texels";
     }
     EXPECT_GT(plain.check.shoreMaxM, 0.0);  // water drawn over dry ground stands above it
     EXPECT_FALSE(renderChecked(*lidar().scene, RenderOptions{}).check.water);

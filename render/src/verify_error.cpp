@@ -45,18 +45,18 @@ Values exactValues(const Scene& scene, const Points& pts, const char* layer, uns
 
 // The distance from each point to the nearest point whose exact water is drawn (water_depth > 0) where wet[k], and
 // to the nearest where it is not (dry, in a hole or outside the grid) where not: searched on rings of kDirections
-// points, their radii growing by kRingStep from start[k] up to twice the domain's size. The first ring that holds such
-// a point gives the distance: at most kRingStep times too long (start[k] where it is nearer), and short only where the
-// shore passes between two of a ring's points. Infinity where no ring holds one.
+// points, their radii growing by kShoreRingStep from start[k] up to twice the domain's size. The first ring that holds
+// such a point gives the distance: at most kShoreRingStep times too long (start[k] where it is nearer), and short only
+// where the shore passes between two of a ring's points. Infinity where no ring holds one.
 std::vector<double> distanceToExactShore(const Scene& scene, const Points& pts, const std::vector<bool>& wet,
                                          const std::vector<double>& start, unsigned threads) {
     constexpr int kDirections = 16;
-    const double kRingStep = std::exp2(1.0 / 8), farthest = 2 * scene.grid().domainSizeM();
+    const double farthest = 2 * scene.grid().domainSizeM();
     std::vector<double> dist(pts.size(), std::numeric_limits<double>::infinity());
     std::vector<size_t> pending;
     for (size_t k = 0; k < pts.size(); ++k)
         if (start[k] > 0) pending.push_back(k);
-    for (double scale = 1; !pending.empty(); scale *= kRingStep) {
+    for (double scale = 1; !pending.empty(); scale *= kShoreRingStep) {
         Points ring;
         ring.reserve(pending.size() * kDirections);
         for (const size_t k : pending)
@@ -74,7 +74,7 @@ std::vector<double> distanceToExactShore(const Scene& scene, const Points& pts, 
             }
             if (found)
                 dist[pending[n]] = start[pending[n]] * scale;
-            else if (start[pending[n]] * scale * kRingStep <= farthest)
+            else if (start[pending[n]] * scale * kShoreRingStep <= farthest)
                 still.push_back(pending[n]);
         }
         pending.swap(still);
@@ -117,7 +117,8 @@ void checkShoreline(const Scene& scene, const Camera& camera, const Frame& f, co
     check.drawnWetOverDry = wetOverDry.size();
     const Values ground = exactValues(scene, wetOverDry, "elevation", threads);
     for (size_t k = 0; k < wetOverDry.size(); ++k)
-        if (ground[k]) check.shoreMaxM = std::max(check.shoreMaxM, std::abs(double(f.posZ[wetOverDryAt[k]]) - *ground[k]));
+        if (ground[k])
+            check.shoreMaxM = std::max(check.shoreMaxM, std::abs(double(f.posZ[wetOverDryAt[k]]) - *ground[k]));
     double ex = 0, ey = 0;
     scene.grid().worldToLocal(camera.xWorld, camera.yWorld, ex, ey);
     Points entries;  // where each dry hit under exact water has its ray at the level

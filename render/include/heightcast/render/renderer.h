@@ -118,6 +118,10 @@ struct CascadeStats {
     double approximationMs = 0;
 };
 
+// verifyFrameError searches for the exact shore on rings of points, each this much (2^(1/8)) wider than the last: a
+// distance it measures is up to this factor long.
+inline constexpr double kShoreRingStep = 1.0905077326652577;
+
 // What verifyFrameError measured.
 struct ErrorCheck {
     uint64_t hits = 0;                       // the hits checked
