@@ -33,6 +33,13 @@ TEST_F(RenderGl, ErrorBudgetHoldsInMemory) {
         ASSERT_TRUE(std::isfinite(t.errorBoundM));
         ASSERT_GT(check.hits, 1000u);
         EXPECT_LE(check.maxM, t.errorBoundM + 5e-3);  // + float32 hit positions, as render_error_budget_test
+        // The shoreline too (shore.comp's texels): the exact shore within the bound of every hit on its wrong side.
+        std::printf(
+            "budget %g m: %llu hits on the wrong side of the shore, the exact one at most %.1f m away, bound %.1f m\n",
+            budget, (unsigned long long)(check.drawnDryOverWater + check.drawnWetOverDry), check.shoreDistanceM,
+            t.shoreBoundM);
+        EXPECT_GT(t.shoreBoundM, 0.0);
+        EXPECT_LE(check.shoreDistanceM, t.shoreBoundM * kShoreRingStep);
         (void)renderFrame(scene, cam, o, cpu);
         ASSERT_EQ(t.cascades.size(), cpu.cascades.size());
         bool met = true;
@@ -53,7 +60,8 @@ TEST_F(RenderGl, ErrorBudgetHoldsInMemory) {
 }
 
 // Without a pyramid the GL backend estimates the bound from its texels as the CPU does (mipmap.comp against
-// Heightfield::errorEstimateM, on the flooded alpine DEM: terrain and water surface), and the bound holds.
+// Heightfield::errorEstimateM, on the flooded alpine DEM: terrain and water surface), and the bound holds, the
+// shoreline's too.
 TEST_F(RenderGl, BoundWithoutAPyramidAsOnTheCpu) {
     World& w = hef();
     HC_REQUIRE_GL(w);
@@ -77,6 +85,7 @@ TEST_F(RenderGl, BoundWithoutAPyramidAsOnTheCpu) {
         const ErrorCheck check = verifyFrameError(scene, cam, f, 2000);
         ASSERT_GT(check.hits, 1000u);
         EXPECT_LE(check.maxM, t.errorBoundM + 5e-3);  // + float32 hit positions, as render_error_budget_test
+        EXPECT_LE(check.shoreDistanceM, t.shoreBoundM * kShoreRingStep);
     }
 }
 
