@@ -1,7 +1,7 @@
 // render/src/verify_error.cpp: the error measured at a frame's hits against the exact surface (verifyFrameError): each
 // checked hit's height against the exact one, and with water which side of the exact shoreline each hit was drawn on
-// and, for the hits on the wrong side, the height between the drawn surface and the exact one there and the distance
-// to the exact shore. The bound the frame claims is error_bound.cpp's.
+// and, for the hits on the wrong side, the distance to the exact shore and the height of water drawn over dry ground.
+// The bounds the frame claims are error_bound.cpp's.
 #include <algorithm>
 #include <array>
 #include <cmath>
