@@ -3,12 +3,14 @@
 // The image comes from a render backend (view/backends.h: the CPU one on a worker thread, or the GL one in the
 // window's context), chosen by the rule hc-render follows (backend_choice.h) from what the window's context
 // offers; the Viewer (view/viewer.h) draws it with a HUD over it and flies the camera.
+#include <algorithm>
 #include <cctype>
 #include <cstdio>
 #include <cstdlib>
 #include <memory>
 #include <string>
 
+#include "heightcast/core/quantile.h"
 #include "heightcast/support/backend_choice.h"
 #include "heightcast/support/cli.h"
 #include "heightcast/support/render_setup.h"
@@ -17,6 +19,7 @@
 #include "view/window.h"
 #include "heightcast/support/view_support.h"
 #include "heightcast/core/error.h"
+#include "heightcast/core/quantile.h"
 #include "heightcast/core/heap.h"
 
 namespace {
@@ -156,6 +159,16 @@ void printSummary(const ViewArgs& a, const hc::view::Viewer& viewer) {
             "  step         %zu of %zu (last switch %.1f ms: the step's water, its pyramid, a new scene and backend)\n",
             viewer.step(), viewer.stepCount(), viewer.lastSwitchMs());
     std::printf("%s", viewer.lastTimings().toTable().c_str());
+    // The frame rate over the whole script: what a person flying would see, not the last frame's stages.
+    const std::vector<double>& ms = viewer.scriptedFrameMs();
+    double sum = 0;
+    for (const double m : ms) sum += m;
+    if (!ms.empty() && sum > 0)
+        std::printf(
+            "frames: %zu in %.2f s, %.1f a second; a frame median %.1f ms, 99th percentile %.1f ms, slowest "
+            "%.1f ms (scheduled, rendered, drawn and shown; vsync off)\n",
+            ms.size(), sum / 1e3, 1e3 * double(ms.size()) / sum, hc::quantile(ms, 0.5), hc::quantile(ms, 0.99),
+            *std::max_element(ms.begin(), ms.end()));
 }
 
 }  // namespace

@@ -71,7 +71,9 @@ void Viewer::run() {
 
 void Viewer::runScripted(int frames, const std::string& screenshot, bool play, const std::string& keys) {
     const Camera end = camera_;
+    scriptedFrameMs_.clear();
     for (int i = 0; i < frames && !window_.shouldClose(); ++i) {
+        const Stopwatch frame;
         const int left = frames - 1 - i;
         if (size_t(i) < keys.size())  // GLFW's codes of letters, digits and space are their upper-case ASCII codes
             onKey(std::toupper(static_cast<unsigned char>(keys[size_t(i)])), GLFW_PRESS, 0);
@@ -91,6 +93,7 @@ void Viewer::runScripted(int frames, const std::string& screenshot, bool play, c
         if (i == frames - 1 && !screenshot.empty()) saveScreenshot(window_, screenshot);
         window_.swapBuffers();
         window_.pollEvents();
+        scriptedFrameMs_.push_back(frame.milliseconds());
     }
 }
 

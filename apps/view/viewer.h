@@ -42,6 +42,8 @@ public:
     // the first shows the next water step (wrapping around), as playback does.
     // `keys`: pressed in turn, one before each frame ('A'..'Z', '0'..'9', ' ': the window's keys, without modifiers).
     void runScripted(int frames, const std::string& screenshot, bool play = false, const std::string& keys = "");
+    // Each scripted frame's wall time [ms]: scheduled, rendered, drawn with the HUD and swapped (vsync off).
+    const std::vector<double>& scriptedFrameMs() const { return scriptedFrameMs_; }
 
     // Water steps (docs/design.md section 6): the one shown, how many, and how long the last switch took [ms] (reading
     // the step, its pyramid, the new scene and backend; the frame after it is timed as any frame).
@@ -107,6 +109,7 @@ private:
     bool playing_ = false;
     double stepsPerSecond_ = 2;
     double lastSwitchMs_ = 0;
+    std::vector<double> scriptedFrameMs_;
     Clock::time_point stepShownAt_ = Clock::now();
 };
 

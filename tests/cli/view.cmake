@@ -36,8 +36,9 @@ if(HC_WITH_GL)
         set(extra --no-match [[hc-view: backend GL \((llvmpipe|softpipe)]])
       endif()
       # The last frame's stage times, each above zero (on llvmpipe in a window, timer queries once gave 0 ms for
-      # the approximation and shading).
+      # the approximation and shading), and the frame rate over the 30 frames.
       hc_cli_test(view.screenshot_${backend} 0 [[hc-view: hef\.hcg -> shot\.png \(30 frames\)]] ${extra}
+        --match [[frames: 30 in [0-9.]+ s, [0-9.]+ a second. a frame median [0-9.]+ ms, 99th percentile [0-9.]+ ms]]
         --match [=[approximation +[0-9]*[1-9][0-9]*\.[0-9]+|approximation +0\.[0-9]*[1-9]]=]
         --match [=[shading +[0-9]*[1-9][0-9]*\.[0-9]+|shading +0\.[0-9]*[1-9]]=]
         --setup ${HEF_FLOODED} --exists shot.png --no-match [[error|warning]] --match [[hc-view: backend (CPU|GL) \(]]
