@@ -164,7 +164,8 @@ struct Timings {
     // With water, the shoreline's bound, the largest of its cascades': a patch's diagonal, sqrt(2) times the spacing of
     // the samples its water came from (the texels', or the coarser level's they were interpolated from). The drawn
     // shore lies in the patch between a texel with water and one without, and so does the exact one: the texels are
-    // the exact surface's samples (error_bound.cpp). Water shallower than RenderOptions::waterMinDepthM is not drawn,
+    // the exact surface's samples (error_bound.cpp). Interpolated texels are not; they are taken to draw their level's
+    // shore (an estimate: docs/tools/hc-render.md). Water shallower than RenderOptions::waterMinDepthM is not drawn,
     // and its own edge is not bounded. 0 without water.
     double shoreBoundM = 0, shoreBoundPx = 0;
     std::optional<ErrorCheck> verified;  // the frame's error measured at its hits (verifyFrameError), when asked
