@@ -5,8 +5,9 @@
 //
 // The helper threads are kept between calls (one pool per process, grown to the most threads asked for): a frame
 // calls parallelFor some 50 times, and starting and joining threads each time cost a measurable share of a frame at
-// 16 threads (docs/benchmarks.md). A call made while the pool serves another (from one of its own workers, or from a
-// second thread of the caller's program) starts its own threads, as every call used to.
+// 16 threads (docs/benchmarks.md). After a call they spin briefly for the next before they sleep (parallel.cpp). A call
+// made while the pool serves another (from one of its own workers, or from a second thread of the caller's program)
+// starts its own threads, as every call used to.
 #pragma once
 
 #include <algorithm>
