@@ -19,7 +19,6 @@
 #include "view/window.h"
 #include "heightcast/support/view_support.h"
 #include "heightcast/core/error.h"
-#include "heightcast/core/quantile.h"
 #include "heightcast/core/heap.h"
 
 namespace {
