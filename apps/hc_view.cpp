@@ -26,9 +26,10 @@ namespace {
 struct ViewArgs {
     std::string gridPath, screenshot;
     hc::cli::Backend backend = hc::cli::Backend::Auto;
-    int frames = 0;     // 0: interactive
-    std::string keys;   // --keys: pressed one before each scripted frame
-    bool play = false;  // --play: scripted frames step through the water steps
+    int frames = 0;          // 0: interactive
+    std::string keys;        // --keys: pressed one before each scripted frame
+    bool play = false;       // --play: scripted frames step through the water steps
+    bool offscreen = false;  // --offscreen, or scripted frames without a display
     hc::cli::RenderSetup setup{"1280x720"};
 };
 
@@ -45,7 +46,7 @@ bool parseOptions(int argc, char** argv, ViewArgs& a) {
         "the camera and the height above ground. Coordinates in the grid's CRS [m]; angles in degrees:\n"
         "yaw 0 looks north, 90 east; pitch negative looks down. Without a camera option: hc-render's\n"
         "overview. Bookmarks (Shift+1-9 saves, 1-9 loads) live in GRID.bookmarks.json beside the grid.\n"
-        "Needs a display (DISPLAY); without one: xvfb-run -a hc-view GRID.hcg --frames 30 --screenshot OUT.png");
+        "Needs a display (DISPLAY) for a window; without one, --frames N renders its frames offscreen.");
     p.positional("GRID.hcg", "grid file", a.gridPath);
     a.setup.addCameraOptions(p, "--bookmark");
     p.option("--bookmark", "N", "first view: bookmark N (1..9) of GRID.bookmarks.json (default: none)", bookmarkSlot);
@@ -64,6 +65,10 @@ bool parseOptions(int argc, char** argv, ViewArgs& a) {
            "with --frames: each frame after the first shows the next water step (playback, wrapping around); the last\n"
            "      frame's switch time is printed",
            a.play);
+    p.flag("--offscreen",
+           "with --frames: no window; the frames render into a framebuffer of --size in a headless OpenGL context\n"
+           "      (EGL: a GPU without a display, else Mesa's llvmpipe) (default: only where there is no display)",
+           a.offscreen);
     p.option("--keys", "KEYS",
              "with --frames: press these keys in turn, one before each frame, as in the window (letters, digits,\n"
              "      space; e.g. NBB sets an error budget of 1 px and halves it twice) (default none)",
@@ -74,6 +79,7 @@ bool parseOptions(int argc, char** argv, ViewArgs& a) {
     if (a.frames < 0 || a.frames > 100000)
         throw hc::Error("--frames " + std::to_string(a.frames) + " is outside 0..100000");
     if (a.play && a.frames == 0) throw hc::Error("--play needs --frames N (interactively, Space plays the steps)");
+    if (a.offscreen && a.frames == 0) throw hc::Error("--offscreen needs --frames N (a window is needed to fly)");
     if (!a.keys.empty() && a.frames == 0) throw hc::Error("--keys needs --frames N (interactively, press them)");
     for (const char c : a.keys)
         if (!std::isalnum(static_cast<unsigned char>(c)) && c != ' ')
@@ -100,13 +106,21 @@ bool parseOptions(int argc, char** argv, ViewArgs& a) {
     return true;
 }
 
-void requireDisplay() {
+// Whether there is a display to open a window on; without one, scripted frames go offscreen (saying so) and an
+// interactive run is refused.
+void chooseDisplay(ViewArgs& a) {
     const char* display = std::getenv("DISPLAY");
     const char* wayland = std::getenv("WAYLAND_DISPLAY");
-    if ((!display || !*display) && (!wayland || !*wayland))
+    if ((display && *display) || (wayland && *wayland) || a.offscreen) return;
+    if (a.frames == 0)
         throw hc::Error(
-            "no display: DISPLAY is not set (hc-view needs an X display; without one, run it under "
-            "xvfb-run -a, or render images with hc-render)");
+            "no display: DISPLAY is not set (hc-view needs an X display for its window; without one, --frames N "
+            "renders scripted frames offscreen, or run it under xvfb-run -a, or render images with hc-render)");
+    a.offscreen = true;
+    std::fprintf(stderr,
+                 "hc-view: note: no display (DISPLAY is not set): the %d frames render offscreen, in a headless "
+                 "OpenGL context (--offscreen)\n",
+                 a.frames);
 }
 
 // The backend `decision` gave, made in the window's context (`gl`). Where the GL backend cannot be made there
@@ -176,17 +190,20 @@ int main(int argc, char** argv) {
     return hc::cli::run("hc-view", [&] {
         ViewArgs a;
         if (!parseOptions(argc, argv, a)) return 0;
-        requireDisplay();
+        chooseDisplay(a);
         hc::keepFreedMemory();  // frame after frame: each reuses the last one's pages (core/heap.h)
-        hc::view::Window window("hc-view: " + a.gridPath, a.setup.width, a.setup.height, a.frames == 0);
+        auto window = a.offscreen ? std::make_unique<hc::view::Window>(hc::view::Window::Offscreen{}, a.setup.width,
+                                                                       a.setup.height)
+                                  : std::make_unique<hc::view::Window>("hc-view: " + a.gridPath, a.setup.width,
+                                                                       a.setup.height, a.frames == 0);
         // --backend gl without a 4.3 context fails here, before any work.
-        const hc::cli::BackendDecision decision = hc::cli::decideBackend(a.backend, window.gl());
+        const hc::cli::BackendDecision decision = hc::cli::decideBackend(a.backend, window->gl());
         auto loaded = hc::cli::loadScene("hc-view", a.gridPath, a.setup, a.setup.colorBy.empty());
-        auto maker = std::make_shared<BackendMaker>(a.backend, decision, window.gl(), a.setup.options.threads);
+        auto maker = std::make_shared<BackendMaker>(a.backend, decision, window->gl(), a.setup.options.threads);
         auto backend = (*maker)(*loaded->scene);  // the first one; a new water step's scene gets a new one from `maker`
-        window.show();
+        window->show();
         hc::view::Viewer viewer(
-            window, *loaded, a.setup, a.gridPath, std::move(backend),
+            *window, *loaded, a.setup, a.gridPath, std::move(backend),
             [maker](const hc::render::Scene& scene) { return (*maker)(scene); }, maker->note());
         if (a.frames == 0) {
             viewer.run();

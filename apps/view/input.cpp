@@ -15,6 +15,7 @@ Viewer* viewerOf(GLFWwindow* w) { return static_cast<Viewer*>(glfwGetWindowUserP
 
 void Viewer::installCallbacks() {
     GLFWwindow* w = window_.handle();
+    if (!w) return;  // offscreen: no input but --keys
     glfwSetWindowUserPointer(w, this);
     glfwSetKeyCallback(
         w, [](GLFWwindow* win, int key, int, int action, int mods) { viewerOf(win)->onKey(key, action, mods); });
@@ -28,6 +29,7 @@ void Viewer::installCallbacks() {
 // The window outlives the viewer: no callback may reach it afterwards.
 Viewer::~Viewer() {
     GLFWwindow* w = window_.handle();
+    if (!w) return;
     glfwSetKeyCallback(w, nullptr);
     glfwSetScrollCallback(w, nullptr);
     glfwSetMouseButtonCallback(w, nullptr);

@@ -1,8 +1,11 @@
-// apps/view/window.cpp: the GLFW window, its context, and the fullscreen triangle (see window.h).
+// apps/view/window.cpp: the GLFW window or the offscreen framebuffer, its context, and the fullscreen triangle (see
+// window.h).
 #include "view/window.h"
 
 #include <algorithm>
+#include <chrono>
 #include <cstdlib>
+#include <thread>
 #include <vector>
 
 #include "heightcast/core/error.h"
@@ -112,6 +115,7 @@ Window::Session::Session() {
 Window::Session::~Session() { glfwTerminate(); }
 
 Window::Window(const std::string& title, int width, int height, bool vsync) {
+    session_.emplace();
     window_ = openWindow(title, width, height, 4, 3);
     if (!window_) {
         gl_.unavailable = "no OpenGL 4.3 core context (" + glfwMessage + ")";
@@ -125,17 +129,64 @@ Window::Window(const std::string& title, int width, int height, bool vsync) {
     quad_.emplace();
 }
 
-Window::~Window() { glfwDestroyWindow(window_); }
+Window::Window(Offscreen, int width, int height) : headless_(render::gl::HeadlessContext::create()) {
+    width_ = width, height_ = height;
+    glGenRenderbuffers(1, &colour_);
+    glBindRenderbuffer(GL_RENDERBUFFER, colour_);
+    glRenderbufferStorage(GL_RENDERBUFFER, GL_RGBA8, width, height);
+    glGenFramebuffers(1, &framebuffer_);
+    glBindFramebuffer(GL_FRAMEBUFFER, framebuffer_);
+    glFramebufferRenderbuffer(GL_FRAMEBUFFER, GL_COLOR_ATTACHMENT0, GL_RENDERBUFFER, colour_);
+    if (glCheckFramebufferStatus(GL_FRAMEBUFFER) != GL_FRAMEBUFFER_COMPLETE)
+        throw Error("cannot make an offscreen framebuffer of " + std::to_string(width) + "x" + std::to_string(height) +
+                    " pixels");
+    gl_.device = std::string(reinterpret_cast<const char*>(glGetString(GL_RENDERER))) + ", OpenGL " +
+                 reinterpret_cast<const char*>(glGetString(GL_VERSION));
+    quad_.emplace();
+}
 
-void Window::show() { glfwShowWindow(window_); }
-bool Window::shouldClose() const { return glfwWindowShouldClose(window_); }
-void Window::close() { glfwSetWindowShouldClose(window_, 1); }
-double Window::seconds() const { return glfwGetTime(); }
-void Window::swapBuffers() { glfwSwapBuffers(window_); }
-void Window::pollEvents() { glfwPollEvents(); }
-void Window::waitEvents(double timeoutS) { glfwWaitEventsTimeout(timeoutS); }
+Window::~Window() {
+    if (window_) {
+        glfwDestroyWindow(window_);
+        return;
+    }
+    quad_.reset();
+    glDeleteFramebuffers(1, &framebuffer_);
+    glDeleteRenderbuffers(1, &colour_);
+}
+
+void Window::show() {
+    if (window_) glfwShowWindow(window_);
+}
+bool Window::shouldClose() const { return window_ ? glfwWindowShouldClose(window_) : closed_; }
+void Window::close() {
+    if (window_)
+        glfwSetWindowShouldClose(window_, 1);
+    else
+        closed_ = true;
+}
+double Window::seconds() const {
+    if (window_) return glfwGetTime();
+    return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();
+}
+void Window::swapBuffers() {
+    if (window_)
+        glfwSwapBuffers(window_);
+    else
+        glFinish();
+}
+void Window::pollEvents() {
+    if (window_) glfwPollEvents();
+}
+void Window::waitEvents(double timeoutS) {
+    if (window_)
+        glfwWaitEventsTimeout(timeoutS);
+    else
+        std::this_thread::sleep_for(std::chrono::duration<double>(timeoutS));
+}
 
 std::pair<int, int> Window::framebufferSize() const {
+    if (!window_) return {width_, height_};
     int fw = 0, fh = 0;
     glfwGetFramebufferSize(window_, &fw, &fh);
     return {fw, fh};
@@ -143,7 +194,7 @@ std::pair<int, int> Window::framebufferSize() const {
 
 void Window::clear() {
     const auto [fw, fh] = framebufferSize();
-    glBindFramebuffer(GL_FRAMEBUFFER, 0);
+    glBindFramebuffer(GL_FRAMEBUFFER, framebuffer_);  // 0: the window's
     glViewport(0, 0, fw, fh);
     glDisable(GL_BLEND);
     glDisable(GL_DEPTH_TEST);
@@ -168,7 +219,8 @@ render::Frame Window::readBackBuffer() const {
     f.width = fw, f.height = fh;
     std::vector<uint8_t> up(size_t(fw) * size_t(fh) * 3);
     glPixelStorei(GL_PACK_ALIGNMENT, 1);
-    glReadBuffer(GL_BACK);
+    glBindFramebuffer(GL_READ_FRAMEBUFFER, framebuffer_);
+    glReadBuffer(window_ ? GL_BACK : GL_COLOR_ATTACHMENT0);
     glReadPixels(0, 0, fw, fh, GL_RGB, GL_UNSIGNED_BYTE, up.data());
     f.rgb.resize(up.size());
     const size_t row = size_t(fw) * 3;  // GL's row 0 is the bottom one

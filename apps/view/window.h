@@ -1,8 +1,10 @@
-// apps/view/window.h: hc-view's window: the GLFW session and one window with its OpenGL context, textures, and
-// the fullscreen triangle that draws a texture over the window. GLFW and OpenGL are called here and, beside it,
-// only in backends.cpp (the GL backend's texture) and input.cpp (GLFW's keys and mouse).
+// apps/view/window.h: hc-view's window: the GLFW session and one window with its OpenGL context (or an offscreen
+// framebuffer in a headless context), textures, and the fullscreen triangle that draws a texture over the window.
+// GLFW and OpenGL are called here and, beside it, only in backends.cpp (the GL backend's texture) and input.cpp
+// (GLFW's keys and mouse).
 #pragma once
 
+#include <memory>
 #include <optional>
 #include <string>
 #include <utility>
@@ -13,6 +15,7 @@
 #include <GLFW/glfw3.h>
 
 #include "heightcast/support/backend_choice.h"
+#include "heightcast/render/gl/headless_context.h"
 #include "heightcast/render/renderer.h"
 
 namespace hc::view {
@@ -34,14 +37,19 @@ private:
     GLint flipLoc_ = -1;
 };
 
-// GLFW and one hidden window with a core context made current: OpenGL 4.3 (what the GL compute backend needs)
-// or, where there is none, 3.3 (enough to show CPU frames). Owns both: the destructor closes the window and
-// ends GLFW.
+// Where hc-view draws: a GLFW window with its core context made current, OpenGL 4.3 (what the GL compute backend
+// needs) or, where there is none, 3.3 (enough to show CPU frames); or, offscreen, a framebuffer object of a fixed
+// size in a headless EGL context (a GPU without a display, or Mesa's llvmpipe), for scripted frames. Owns both: the
+// destructor closes the window and ends GLFW.
 class Window {
 public:
-    // Throws hc::Error when the display cannot be opened or not even a 3.3 context can be had.
-    // `vsync` off for scripted runs, which should not wait for the screen.
+    // A hidden window, shown by show(). Throws hc::Error when the display cannot be opened or not even a 3.3
+    // context can be had. `vsync` off for scripted runs, which should not wait for the screen.
     Window(const std::string& title, int width, int height, bool vsync);
+    struct Offscreen {};
+    // No window: a width x height RGBA8 framebuffer in a headless OpenGL 4.3 context. Throws hc::Error (EGL's
+    // reason) when no such context can be had.
+    Window(Offscreen, int width, int height);
     ~Window();
     Window(const Window&) = delete;
     Window& operator=(const Window&) = delete;
@@ -49,13 +57,15 @@ public:
     // The context as the backend choice sees it: unavailable = "no OpenGL 4.3 core context (GLFW's reason)"
     // when only 3.3 could be had; device = "GL_RENDERER, OpenGL GL_VERSION".
     const cli::GlOnHand& gl() const { return gl_; }
-    GLFWwindow* handle() const { return window_; }
+    bool offscreen() const { return window_ == nullptr; }
+    GLFWwindow* handle() const { return window_; }  // null offscreen: no input
 
     void show();
     bool shouldClose() const;
     void close();
     std::pair<int, int> framebufferSize() const;  // [pixels]
-    double seconds() const;                       // GLFW's clock, for frame steps
+    double seconds() const;                       // for frame steps
+    // Shows the back buffer; offscreen, waits until the frame is drawn (glFinish): what a swap would show.
     void swapBuffers();
     void pollEvents();
     void waitEvents(double timeoutS);
@@ -71,8 +81,13 @@ private:
     struct Session {  // glfwInit .. glfwTerminate, which also closes a window left open by a failing constructor
         Session();
         ~Session();
-    } session_;
+    };
+    std::optional<Session> session_;  // none offscreen
     GLFWwindow* window_ = nullptr;
+    std::unique_ptr<render::gl::HeadlessContext> headless_;  // offscreen: the context, its framebuffer and size
+    GLuint framebuffer_ = 0, colour_ = 0;
+    int width_ = 0, height_ = 0;
+    bool closed_ = false;
     cli::GlOnHand gl_;
     std::optional<QuadProgram> quad_;  // made once the context is current
 };

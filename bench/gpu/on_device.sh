@@ -16,6 +16,9 @@
 #           those flights, saying so)
 #   same    (after the scale or grid part) the earlier builds' hc-render (HC_GPU_AB) against this one's: the look-at
 #           flight from scratch (3 frames, PNG and EXR) and moving (6 frames, PNG), each file compared byte for byte
+#   view    (after the scale or grid part) hc-view offscreen on the GPU (no display needed: a framebuffer in an EGL
+#           context): 600 (HC_GPU_VIEW_FRAMES) scripted frames at 1920x1080 flying to the look-at view and to the overview, vsync off; the
+#           frame rate, median and 99th percentile frame, and the last frame's screenshot
 #   pool    hc-bench-parallel on the machine's cores: what a parallelFor call costs beyond its work (a fresh frame makes
 #           a dozen), back to back and after pauses
 set -uo pipefail
@@ -167,6 +170,19 @@ if [[ $parts == *,same,* ]]; then
         done
     } > "$out/same.txt" 2>&1
     cat "$out/same.txt"
+fi
+if [[ $parts == *,view,* ]]; then
+    [[ -r $work/grid.hcg ]] || { echo "on_device.sh: view: $work/grid.hcg missing (run the scale or grid part first)" >&2; exit 1; }
+    n=${HC_GPU_VIEW_FRAMES:-600}
+    {
+        for round in 1 2; do
+            echo "== look-at, round $round"
+            hc-view "$work/grid.hcg" --offscreen --backend gl --size 1920x1080 "${look[@]}" --frames "$n" --screenshot "$out/view_look.png"
+            echo "== overview, round $round"
+            hc-view "$work/grid.hcg" --offscreen --backend gl --size 1920x1080 --frames "$n" --screenshot "$out/view_over.png"
+        done
+    } > "$out/view.txt" 2>&1
+    grep -E "^== |backend|^frames:|error" "$out/view.txt"
 fi
 if [[ $parts == *,pool,* ]]; then
     hc-bench-parallel --threads "$(nproc),$(($(nproc) / 2)),2" > "$out/pool.txt" 2>&1

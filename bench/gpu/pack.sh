@@ -15,7 +15,7 @@ set -euo pipefail
 here=$(cd "$(dirname "$0")/../.." && pwd)
 kit=${1:-$here/.devkit}
 bin=${HC_BIN:-$here/build/bin}
-tools=(hc-ingest hc-info hc-influence hc-probe hc-render hc-bench hc-bench-parallel)
+tools=(hc-ingest hc-info hc-influence hc-probe hc-render hc-view hc-bench hc-bench-parallel)
 for t in "${tools[@]}"; do [[ -x $bin/$t ]] || { echo "pack.sh: error: $bin/$t: not built (bash scripts/build.sh)" >&2; exit 1; }; done
 for p in gdalinfo /usr/bin/time xz python3; do command -v "$p" > /dev/null || { echo "pack.sh: error: $p: not installed" >&2; exit 1; }; done
 

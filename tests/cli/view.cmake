@@ -1,4 +1,4 @@
-# tests/cli/view.cmake: hc-view end to end under Xvfb (included by CMakeLists.txt, whose helpers and variables it uses):
+# tests/cli/view.cmake: hc-view end to end under Xvfb and offscreen (included by CMakeLists.txt, whose helpers and variables it uses):
 # scripted flights on both backends, out of core, the error budget and its keys, bookmarks, and its refusals.
 # hc-view needs a window and OpenGL: built, and tested, with HC_WITH_GL only.
 if(HC_WITH_GL)
@@ -9,9 +9,18 @@ if(HC_WITH_GL)
   hc_cli_test(view.help 0 [[usage: hc-view]] --match [[--backend gl\|cpu\|auto]] --match [[default auto]] --match [[default 1280x720]]
     --match [[--frames N]] --match [[yaw 0 looks north]] --match [[press H in the window]] --match [[--max-error-px P]]
     --no-match [[error:]] -- ${VIEW} --help)
+  # Without a display: a window is refused (no --frames), scripted frames render offscreen in a headless context.
   hc_cli_test(view.no_display nonzero [[^hc-view: error: no display: DISPLAY is not set]]
-    --setup ${KOOTENAI} --absent k.hci --absent shot.png
-    -- env -u DISPLAY -u WAYLAND_DISPLAY ${VIEW} k.hcg --frames 3 --screenshot shot.png)
+    --match [[--frames N renders scripted frames offscreen]] --setup ${KOOTENAI} --absent k.hci
+    -- env -u DISPLAY -u WAYLAND_DISPLAY ${VIEW} k.hcg)
+  hc_cli_test(view.offscreen_needs_frames nonzero [[^hc-view: error: --offscreen needs --frames N]]
+    -- ${VIEW} k.hcg --offscreen)
+  # The GL backend offscreen on llvmpipe (EGL's surfaceless platform): its frames drawn into the framebuffer object.
+  hc_cli_test(view.offscreen_gl 0 [[hc-view: note: no display \(DISPLAY is not set\): the 4 frames render offscreen]]
+    --match [[hc-view: backend GL \(]] --match [[hc-view: k\.hcg -> shot\.png \(4 frames\)]]
+    --match [[frames: 4 in [0-9.]+ s]] --no-match [[error|warning]]
+    --setup ${KOOTENAI} --exists shot.png --check "'${PNG_CHECK}' shot.png"
+    -- env -u DISPLAY -u WAYLAND_DISPLAY ${VIEW} k.hcg --backend gl --frames 4 --screenshot shot.png --size 320x240 --texels 256)
   hc_cli_test(view.unknown_option nonzero [[^hc-view: error: unknown option --frobnicate \(see --help\)]]
     -- ${VIEW} k.hcg --frobnicate)
   hc_cli_test(view.bad_camera_text nonzero [[^hc-view: error: --camera 1,2,3: expected 6 or 7 comma-separated numbers]]
@@ -45,6 +54,13 @@ if(HC_WITH_GL)
         --check "'${PNG_CHECK}' shot.png"
         -- ${HC_XVFB_RUN} -a -s "-screen 0 1280x1024x24" ${VIEW} hef.hcg --backend ${backend} --frames 30 --screenshot shot.png --size 640x400 --texels 256)
     endforeach()
+    # Offscreen (no DISPLAY) the CPU backend's frames are the window's to the byte: the screenshots are the same under
+    # the HUD (rows 0-119 hold its text, whose timings differ from run to run).
+    hc_cli_test(view.offscreen_same_as_window 0 [[hc-view: note: no display \(DISPLAY is not set\): the 6 frames render offscreen]]
+      --match [[hc-view: backend CPU \(]] --no-match [[error|warning]]
+      --setup ${HEF_FLOODED} --exists off.png --check "'${PNG_CHECK}' off.png"
+      --check "'${HC_XVFB_RUN}' -a -s '-screen 0 1280x1024x24' '${VIEW}' hef.hcg --backend cpu --frames 6 --screenshot win.png --size 640x400 --texels 256 > /dev/null 2>&1 && '${PNG_CHECK}' --same-below 120 off.png win.png"
+      -- env -u DISPLAY -u WAYLAND_DISPLAY ${VIEW} hef.hcg --backend cpu --frames 6 --screenshot off.png --size 640x400 --texels 256)
     # Out of core (no lists: the frames read the cells they need; the ground under the camera from the cells around it):
     # the scripted flight draws, and no cache is written.
     hc_cli_test(view.out_of_core 0 [[hc-view: hef\.hcg -> shot\.png \(30 frames\)]]
@@ -104,7 +120,7 @@ if(HC_WITH_GL)
       -- env MESA_GL_VERSION_OVERRIDE=3.3 ${HC_XVFB_RUN} -a -s "-screen 0 1280x1024x24" ${VIEW} k.hcg --backend gl --frames 3 --screenshot shot.png)
     # xvfb-run -a picks a free display number, but two starting at once can pick the same one: one at a time.
     set_tests_properties(cli.view.screenshot_cpu cli.view.screenshot_auto cli.view.out_of_core cli.view.broken_bookmarks cli.view.invalid_bookmark
-                         cli.view.fallback_gl33 cli.view.gl_without_gl43 cli.view.start_at_bookmark PROPERTIES RESOURCE_LOCK xvfb)
+                         cli.view.fallback_gl33 cli.view.gl_without_gl43 cli.view.start_at_bookmark cli.view.offscreen_same_as_window PROPERTIES RESOURCE_LOCK xvfb)
   else()
     message(WARNING "tests/cli: xvfb-run not found (Debian: xvfb xauth): the hc-view window tests are left out")
   endif()

@@ -1,26 +1,12 @@
-// render/gl/src/context.h: OpenGL contexts for the GL backend.
+// render/gl/src/context.h: OpenGL contexts for the GL backend: the headless one (public: headless_context.h) and
+// checks of the current one.
 #pragma once
 
-#include <memory>
 #include <string>
 
+#include "heightcast/render/gl/headless_context.h"
+
 namespace hc::render::gl {
-
-// A headless OpenGL 4.3+ core context (EGL: a GPU device first, else Mesa's surfaceless platform; no display,
-// no window).
-class HeadlessContext {
-public:
-    // Throws hc::Error saying which step failed when no such context can be had.
-    static std::unique_ptr<HeadlessContext> create();
-    ~HeadlessContext();
-    // Makes the context current on the calling thread (a context is current on one thread at a time).
-    void makeCurrent() const;
-
-private:
-    HeadlessContext() = default;
-    void* display_ = nullptr;  // EGLDisplay
-    void* context_ = nullptr;  // EGLContext
-};
 
 // Throws hc::Error unless a context is current on this thread and offers OpenGL 4.3 (compute shaders).
 void requireGl43(const char* who);

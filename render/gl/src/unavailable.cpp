@@ -2,6 +2,7 @@
 // backend was built out, so `--backend gl` fails with that reason and `auto` renders on the CPU. Links no GL.
 #include "heightcast/core/error.h"
 #include "heightcast/render/gl/gl_renderer.h"
+#include "heightcast/render/gl/headless_context.h"
 
 namespace hc::render {
 namespace {
@@ -32,5 +33,10 @@ void GlRenderer::compileForTest(const std::string&, const std::string&) const { 
 GlRenderer::VariableLayout GlRenderer::bufferVariableLayout(const std::string&, const std::string&) const { return {}; }
 long GlRenderer::bufferBlockSize(const std::string&, const std::string&) const { return -1; }
 std::vector<GlRenderer::CascadeTexels> GlRenderer::cascadeTexturesForTest() const { return {}; }
+
+// No context can exist either.
+std::unique_ptr<gl::HeadlessContext> gl::HeadlessContext::create() { throw Error(kBuiltOut); }
+gl::HeadlessContext::~HeadlessContext() = default;
+void gl::HeadlessContext::makeCurrent() const {}
 
 }  // namespace hc::render
