@@ -11,6 +11,7 @@
 #include <cstdint>
 #include <cstdio>
 #include <memory>
+#include <string>
 #include <utility>
 #include <vector>
 
@@ -98,4 +99,52 @@ TEST(Heap, RefusesValuesMallocCannotTake) {
     // mallopt takes an int: larger values are refused, and nothing is changed.
     EXPECT_FALSE(hc::keepFreedMemory(size_t(1) << 40, size_t(1) << 30));
     EXPECT_FALSE(hc::keepFreedMemory(size_t(32) << 20, size_t(1) << 40));
+}
+
+namespace {
+// Whether the kernel backs madvise(MADV_HUGEPAGE) ranges with huge pages at their first touch: THP enabled for them,
+// and allowed to compact memory to find a huge page then (defrag), so that the fault does not fall back to 4 kB pages.
+bool hugePagesAtFault() {
+    auto selected = [](const char* path) {
+        std::FILE* f = std::fopen(path, "r");
+        if (!f) return std::string();
+        char line[256] = {};
+        const bool read = std::fgets(line, sizeof line, f) != nullptr;
+        std::fclose(f);
+        const std::string s = read ? line : "";
+        const size_t open = s.find('['), close = s.find(']');
+        return open == std::string::npos || close == std::string::npos ? std::string()
+                                                                       : s.substr(open + 1, close - open - 1);
+    };
+    const std::string enabled = selected("/sys/kernel/mm/transparent_hugepage/enabled");
+    const std::string defrag = selected("/sys/kernel/mm/transparent_hugepage/defrag");
+    return (enabled == "always" || enabled == "madvise") && (defrag == "always" || defrag == "madvise");
+}
+}  // namespace
+
+// A frame's layer, assigned on huge pages: the values asked for, storage it already has kept, and a fresh 16 MiB layer
+// faulted in as a few 2 MiB pages instead of 4096 of 4 kB (what a program's first frame pays: docs/benchmarks.md).
+TEST(Heap, LayersAssignedOnHugePages) {
+    std::vector<float> layer;
+    const size_t n = size_t(4) << 20;  // 16 MiB of floats
+    const long before = minorFaults();
+    hc::assignOnHugePages(layer, n, 2.5f);
+    const long faults = minorFaults() - before;
+    ASSERT_EQ(layer.size(), n);
+    EXPECT_EQ(layer.front(), 2.5f);
+    EXPECT_EQ(layer.back(), 2.5f);
+    const float* storage = layer.data();
+    hc::assignOnHugePages(layer, n / 2, -1.0f);  // smaller: the same storage, the new values
+    EXPECT_EQ(layer.data(), storage);
+    ASSERT_EQ(layer.size(), n / 2);
+    EXPECT_EQ(layer.back(), -1.0f);
+#if defined(HC_TEST_ASAN)
+    std::printf("AddressSanitizer's allocator: page faults not checked (%ld)\n", faults);
+#else
+    if (!hugePagesAtFault())
+        GTEST_SKIP() << "this kernel does not give huge pages at the first touch of a madvised range";
+    // 4096 faults with 4 kB pages; with 2 MiB ones 8, plus the unaligned ends (at most 2 x 511 small pages). Half of
+    // 4096 tells the two apart on any alignment.
+    EXPECT_LT(faults, 2048) << "a fresh 16 MiB layer took " << faults << " page faults";
+#endif
 }

@@ -12,6 +12,7 @@
 #include <glm/geometric.hpp>
 
 #include "heightcast/core/error.h"
+#include "heightcast/core/heap.h"
 #include "heightcast/core/parallel.h"
 #include "heightcast/core/timer.h"
 #include "heightcast/influence/region.h"
@@ -320,11 +321,11 @@ detail::PixelRays castRays(const Scene& scene, const detail::FrameSetup& setup, 
     parallelFor(kLayers + 2, 1, options.threads, [&](size_t b, size_t e, unsigned) {
         for (size_t i = b; i < e; ++i) {
             if (i < kLayers)
-                layers[i].first->assign(pixels, layers[i].second);
+                assignOnHugePages(*layers[i].first, pixels, layers[i].second);
             else if (i == kLayers)
-                rays.dirZ.assign(pixels, 0.0f);
+                assignOnHugePages(rays.dirZ, pixels, 0.0f);
             else
-                rays.isWater.assign(pixels, 0);
+                assignOnHugePages(rays.isWater, pixels, uint8_t(0));
         }
     });
     const CameraBasis& basis = setup.basis;

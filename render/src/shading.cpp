@@ -10,6 +10,7 @@
 #include <string>
 #include <utility>
 
+#include "heightcast/core/heap.h"
 #include "heightcast/core/parallel.h"
 #include "heightcast/core/timer.h"
 #include "heightcast/render/detail/frame.h"
@@ -314,7 +315,7 @@ void shadePixels(const Scene& scene, const RenderOptions& options, const CameraB
                  Frame& f, Timings& timings) {
     const Stopwatch clock;
     const int W = f.width, H = f.height;
-    f.rgb.assign(size_t(W) * size_t(H) * 3, 0);
+    assignOnHugePages(f.rgb, size_t(W) * size_t(H) * 3, uint8_t(0));
     const double sunAz = gpu::kSunAzimuthDeg * M_PI / 180, sunAlt = gpu::kSunAltitudeDeg * M_PI / 180;
     const double sun[3] = {std::sin(sunAz) * std::cos(sunAlt), std::cos(sunAz) * std::cos(sunAlt), std::sin(sunAlt)};
     const double fogDist = gpu::kFogExtents * std::hypot(scene.xMax - scene.xMin, scene.yMax - scene.yMin);
