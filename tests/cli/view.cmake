@@ -1,6 +1,6 @@
-# tests/cli/view.cmake: hc-view end to end under Xvfb and offscreen (included by CMakeLists.txt, whose helpers and variables it uses):
-# scripted flights on both backends, out of core, the error budget and its keys, bookmarks, and its refusals.
-# hc-view needs a window and OpenGL: built, and tested, with HC_WITH_GL only.
+# tests/cli/view.cmake: hc-view end to end under Xvfb and offscreen (included by CMakeLists.txt, whose helpers and
+# variables it uses): scripted flights on both backends, out of core, the error budget and its keys, bookmarks, and
+# its refusals. hc-view needs a window or a headless context, and OpenGL: built, and tested, with HC_WITH_GL only.
 if(HC_WITH_GL)
   # The window runs under Xvfb (a virtual X server: no screen needed); png_check (png_check.cpp) asserts that
   # the screenshot shows terrain, not a blank window.
