@@ -338,3 +338,45 @@ TEST(ErrorBound, ReliefIsTheGridsRangeOverTheDomainAndLessOverParts) {
 
 }  // namespace
 }  // namespace hc::test
+
+namespace hc::test {
+namespace {
+
+// Under a budget, neighbouring cascades at one spacing become one (fitCascades' merge): a ray then walks one texture.
+// With the same error everywhere, every cascade takes the same level, so the three become one over the whole hull,
+// at that spacing and on its lattice; where the error grows with the box (a far cascade's box is larger), the merged
+// spacing meets the budget. Without a budget nothing is merged.
+TEST(CascadeMerge, NeighboursAtOneSpacingBecomeOneCascade) {
+    World& w = hef();
+    render::ViewVolume v = render::detail::setUpFrame(*w.scene, render::overviewCamera(*w.scene, 320, 200)).view;
+    v.ladderStepsPerOctave = 1;
+    const render::CascadeFit plain = render::fitCascades(v, 3, 256);
+    ASSERT_EQ(plain.cascades.size(), 3u);
+    v.maxErrorM = 5;
+    v.maxTexelsPerSide = 8192;
+    v.levelErrorIn = [](double, double, double, double) { return std::vector<double>{0.1, 0.4, 1.6, 6.4, 25.6}; };
+    const render::CascadeFit one = render::fitCascades(v, 3, 256);
+    ASSERT_EQ(one.cascades.size(), 1u);
+    const render::Cascade& c = one.cascades[0];
+    EXPECT_EQ(c.texelM, 4 * v.finestCellM);  // level 2: 1.6 m, within 5 m; level 3 is not
+    EXPECT_EQ(c.splitNear, plain.cascades.front().splitNear);
+    EXPECT_EQ(c.splitFar, plain.cascades.back().splitFar);
+    EXPECT_EQ(c.x0 / c.texelM, std::round(c.x0 / c.texelM));
+    EXPECT_EQ(c.y0 / c.texelM, std::round(c.y0 / c.texelM));
+    // The error grows with the box: the near cascades could be coarser than the far one, and what is merged must
+    // still meet the budget at its spacing.
+    v.levelErrorIn = [](double x0, double y0, double x1, double y1) {
+        const double k = std::max(x1 - x0, y1 - y0) / 5000;
+        return std::vector<double>{0.1 * k, 0.4 * k, 1.6 * k, 6.4 * k, 25.6 * k};
+    };
+    const render::CascadeFit grown = render::fitCascades(v, 3, 256);
+    ASSERT_FALSE(grown.cascades.empty());
+    for (const render::Cascade& g : grown.cascades) {
+        const int t = int(std::lround(std::log2(g.texelM / v.finestCellM)));
+        EXPECT_LE(render::levelErrorM(g.levelErrorM, t), g.budgetM) << g.splitNear << ".." << g.splitFar;
+    }
+    std::printf("error growing with the box: %zu cascade(s)\n", grown.cascades.size());
+}
+
+}  // namespace
+}  // namespace hc::test

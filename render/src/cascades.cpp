@@ -133,8 +133,9 @@ int budgetLevel(Cascade& c, const ViewVolume& v, double extent, bool capped) {
 int sideFor(double extent, double texelM) { return (int(std::ceil(extent / texelM)) + 3 + 63) / 64 * 64; }
 
 // Places cascade c's texture over its polygon (texel size from the ladder, or the error budget's level; corner on the
-// lattice) and finds its visible texels.
-void placeTexture(Cascade& c, const ViewVolume& v, int texelsPerSide) {
+// lattice) and finds its visible texels. `measure`: ask levelErrorIn for the error under the polygon's box (else
+// c.levelErrorM is already set).
+void placeTexture(Cascade& c, const ViewVolume& v, int texelsPerSide, bool measure = true) {
     const double finestCellM = v.finestCellM;
     const int stepsPerOctave = v.ladderStepsPerOctave;
     const bool coarser = v.coarserTexels;
@@ -146,7 +147,7 @@ void placeTexture(Cascade& c, const ViewVolume& v, int texelsPerSide) {
         by1 = std::max(by1, p.y);
     }
     const double extent = std::max(bx1 - bx0, by1 - by0);
-    if (v.levelErrorIn) c.levelErrorM = v.levelErrorIn(bx0, by0, bx1, by1);  // the ground under it, not the grid's
+    if (v.levelErrorIn && measure) c.levelErrorM = v.levelErrorIn(bx0, by0, bx1, by1);  // the ground under it
     c.n = texelsPerSide;
     c.texelM = ladderTexelSize(extent, texelsPerSide, finestCellM);
     if (stepsPerOctave == 1) {
@@ -192,6 +193,52 @@ void placeTexture(Cascade& c, const ViewVolume& v, int texelsPerSide) {
         const int i0 = std::max(0, int(std::floor((xl - m - c.x0) / c.texelM)));
         const int i1 = std::min(c.n - 1, int(std::ceil((xr + m - c.x0) / c.texelM)));
         c.rows[size_t(j)] = {i0, i1};
+    }
+}
+
+// Under an error budget neighbouring cascades often come out at the same spacing, or nearly (a loose budget: all of
+// them). One cascade over both then holds about the same texels, and a ray walks one texture instead of crossing from
+// one into the next (its set-up, clip and walk again; docs/benchmarks.md has the gain). The merged cascade takes the
+// spacing the budget allows over both: its error per level is the larger of the two (each was measured over its part's
+// box, and the merged visible texels lie in those parts), its budget the tighter. It replaces the two
+// - at their common spacing: its texels are theirs (the same lattice, the same samples), so no texel is worse; or
+// - at a spacing that meets the budget (not coarsened by the cap on texels a side) and is no finer than the finer of
+//   theirs, with no more than kMergeTexels times their visible texels together (a small near cascade at the far
+//   one's spacing, say).
+// `eyeOffset`: as in fitCascades.
+constexpr double kMergeTexels = 1.1;
+
+void mergeCascades(CascadeFit& fit, const ViewVolume& v, int texelsPerSide, double eyeOffset) {
+    std::vector<Cascade>& cs = fit.cascades;
+    for (size_t k = 0; k + 1 < cs.size();) {
+        const Cascade &a = cs[k], &b = cs[k + 1];
+        Cascade m;
+        if (!a.empty() && !b.empty() && a.levelErrorM.size() == b.levelErrorM.size()) {
+            m.splitNear = a.splitNear, m.splitFar = b.splitFar, m.farWithOverlap = b.farWithOverlap;
+            const double lo = k == 0 ? -HUGE_VAL : a.splitNear;  // the first cascade takes everything nearer
+            m.polygon = clipSlab(fit.hull, fit.dir, eyeOffset + lo, eyeOffset + m.farWithOverlap);
+            m.nearestM = std::min(a.nearestM, b.nearestM);
+            m.budgetM = std::min(a.budgetM, b.budgetM);
+            m.levelErrorM.resize(a.levelErrorM.size());
+            for (size_t l = 0; l < m.levelErrorM.size(); ++l)
+                m.levelErrorM[l] = std::max(a.levelErrorM[l], b.levelErrorM[l]);
+        }
+        if (m.polygon.size() >= 3) placeTexture(m, v, texelsPerSide, false);
+        bool merge = false;
+        if (!m.empty() && m.texelM == a.texelM && m.texelM == b.texelM) {
+            merge = true;
+        } else if (!m.empty() && m.texelM >= std::min(a.texelM, b.texelM)) {
+            // The level at or above the spacing (the 8-step ladder's lie between two).
+            const int t = int(std::ceil(std::log2(m.texelM / v.finestCellM) - 1e-9));
+            merge = levelErrorM(m.levelErrorM, t) <= m.budgetM &&
+                    double(m.visibleTexels()) <= kMergeTexels * double(a.visibleTexels() + b.visibleTexels());
+        }
+        if (!merge) {
+            ++k;
+            continue;
+        }
+        cs[k] = std::move(m);
+        cs.erase(cs.begin() + std::ptrdiff_t(k) + 1);
     }
 }
 
@@ -264,6 +311,7 @@ CascadeFit fitCascades(const ViewVolume& v, int count, int texelsPerSide) {
         if (c.polygon.size() >= 3) placeTexture(c, v, texelsPerSide);
         fit.cascades.push_back(std::move(c));
     }
+    if (v.maxErrorM > 0 || v.maxErrorPx > 0) mergeCascades(fit, v, texelsPerSide, eyeOffset);
     return fit;
 }
 
