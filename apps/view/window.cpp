@@ -40,6 +40,12 @@ GLFWwindow* openWindow(const std::string& title, int width, int height, int majo
     return glfwCreateWindow(width, height, title.c_str(), nullptr, nullptr);
 }
 
+// "GL_RENDERER, OpenGL GL_VERSION" of the current context.
+std::string currentDevice() {
+    return std::string(reinterpret_cast<const char*>(glGetString(GL_RENDERER))) + ", OpenGL " +
+           reinterpret_cast<const char*>(glGetString(GL_VERSION));
+}
+
 }  // namespace
 
 GLuint makeTexture() {
@@ -124,8 +130,7 @@ Window::Window(const std::string& title, int width, int height, bool vsync) {
     if (!window_) throw Error("cannot create an OpenGL 3.3 core window: " + glfwMessage);
     glfwMakeContextCurrent(window_);
     glfwSwapInterval(vsync ? 1 : 0);
-    gl_.device = std::string(reinterpret_cast<const char*>(glGetString(GL_RENDERER))) + ", OpenGL " +
-                 reinterpret_cast<const char*>(glGetString(GL_VERSION));
+    gl_.device = currentDevice();
     quad_.emplace();
 }
 
@@ -140,8 +145,7 @@ Window::Window(Offscreen, int width, int height) : headless_(render::gl::Headles
     if (glCheckFramebufferStatus(GL_FRAMEBUFFER) != GL_FRAMEBUFFER_COMPLETE)
         throw Error("cannot make an offscreen framebuffer of " + std::to_string(width) + "x" + std::to_string(height) +
                     " pixels");
-    gl_.device = std::string(reinterpret_cast<const char*>(glGetString(GL_RENDERER))) + ", OpenGL " +
-                 reinterpret_cast<const char*>(glGetString(GL_VERSION));
+    gl_.device = currentDevice();
     quad_.emplace();
 }
 

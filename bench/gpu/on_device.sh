@@ -17,8 +17,8 @@
 #   same    (after the scale or grid part) the earlier builds' hc-render (HC_GPU_AB) against this one's: the look-at
 #           flight from scratch (3 frames, PNG and EXR) and moving (6 frames, PNG), each file compared byte for byte
 #   view    (after the scale or grid part) hc-view offscreen on the GPU (no display needed: a framebuffer in an EGL
-#           context): 600 (HC_GPU_VIEW_FRAMES) scripted frames at 1920x1080 flying to the look-at view and to the overview, vsync off; the
-#           frame rate, median and 99th percentile frame, and the last frame's screenshot
+#           context): 600 (HC_GPU_VIEW_FRAMES) scripted frames at 1920x1080 flying to the look-at view and to the
+#           overview, vsync off; the frame rate, median and 99th percentile frame, and the last frame's screenshot
 #   pool    hc-bench-parallel on the machine's cores: what a parallelFor call costs beyond its work (a fresh frame makes
 #           a dozen), back to back and after pauses
 set -uo pipefail
