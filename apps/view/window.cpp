@@ -154,7 +154,6 @@ Window::~Window() {
         glfwDestroyWindow(window_);
         return;
     }
-    quad_.reset();
     glDeleteFramebuffers(1, &framebuffer_);
     glDeleteRenderbuffers(1, &colour_);
 }

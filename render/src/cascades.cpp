@@ -196,6 +196,13 @@ void placeTexture(Cascade& c, const ViewVolume& v, int texelsPerSide, bool measu
     }
 }
 
+// Cascade c's polygon: the hull's slab [splitNear, farWithOverlap] along the view, the first (k = 0) reaching back to
+// the eye and past it. `eyeOffset`: the eye's offset along the view direction (the slab's are relative to it).
+std::vector<glm::dvec2> slabPolygon(const CascadeFit& fit, size_t k, const Cascade& c, double eyeOffset) {
+    const double lo = k == 0 ? -HUGE_VAL : c.splitNear;
+    return clipSlab(fit.hull, fit.dir, eyeOffset + lo, eyeOffset + c.farWithOverlap);
+}
+
 // Under an error budget neighbouring cascades often come out at the same spacing, or nearly (a loose budget: all of
 // them). One cascade over both then holds about the same texels, and a ray walks one texture instead of crossing from
 // one into the next (its set-up, clip and walk again; docs/benchmarks.md has the gain). The merged cascade takes the
@@ -205,7 +212,7 @@ void placeTexture(Cascade& c, const ViewVolume& v, int texelsPerSide, bool measu
 // - at a spacing that meets the budget (not coarsened by the cap on texels a side) and is no finer than the finer of
 //   theirs, with no more than kMergeTexels times their visible texels together (a small near cascade at the far
 //   one's spacing, say).
-// `eyeOffset`: as in fitCascades.
+// `eyeOffset`: as in slabPolygon.
 constexpr double kMergeTexels = 1.1;
 
 void mergeCascades(CascadeFit& fit, const ViewVolume& v, int texelsPerSide, double eyeOffset) {
@@ -215,8 +222,7 @@ void mergeCascades(CascadeFit& fit, const ViewVolume& v, int texelsPerSide, doub
         Cascade m;
         if (!a.empty() && !b.empty() && a.levelErrorM.size() == b.levelErrorM.size()) {
             m.splitNear = a.splitNear, m.splitFar = b.splitFar, m.farWithOverlap = b.farWithOverlap;
-            const double lo = k == 0 ? -HUGE_VAL : a.splitNear;  // the first cascade takes everything nearer
-            m.polygon = clipSlab(fit.hull, fit.dir, eyeOffset + lo, eyeOffset + m.farWithOverlap);
+            m.polygon = slabPolygon(fit, k, m, eyeOffset);
             m.nearestM = std::min(a.nearestM, b.nearestM);
             m.budgetM = std::min(a.budgetM, b.budgetM);
             m.levelErrorM.resize(a.levelErrorM.size());
@@ -301,8 +307,7 @@ CascadeFit fitCascades(const ViewVolume& v, int count, int texelsPerSide) {
         c.splitFar = bounds[size_t(k) + 1];
         const double width = c.splitFar - std::max(c.splitNear, 0.0);
         c.farWithOverlap = k + 1 < count ? c.splitFar + std::max(0.1 * width, 4 * v.finestCellM) : c.splitFar;
-        const double lo = k == 0 ? -HUGE_VAL : c.splitNear;  // the first cascade takes everything nearer
-        c.polygon = clipSlab(fit.hull, fit.dir, eyeOffset + lo, eyeOffset + c.farWithOverlap);
+        c.polygon = slabPolygon(fit, size_t(k), c, eyeOffset);
         // The nearest point: the camera's height over the highest terrain, or the slab's near offset.
         c.nearestM = std::max({k == 0 ? 0.0 : c.splitNear, v.eyeLocal.z - v.boxMax.z, v.nearM, 1e-3});
         const double screenBudget = v.maxErrorPx * v.pixelRad * c.nearestM;
