@@ -15,6 +15,7 @@
 #include <utility>
 #include <vector>
 
+#include "asan.h"
 #include "heightcast/core/heap.h"
 
 namespace {
@@ -59,14 +60,6 @@ long minorFaults() {
 // pattern and 108,000 in every 3840 x 2160 one, as many as in the first (tried: the 1920 x 1080 frames then took 350 ms
 // against 70 ms); with it, none after the heap has grown once. At 3840 x 2160 the layers are 33 MB, over the 32 MiB
 // that glibc's own thresholds stop at.
-// AddressSanitizer: gcc says so with __SANITIZE_ADDRESS__, clang 14 only through __has_feature.
-#if defined(__SANITIZE_ADDRESS__)
-#define HC_TEST_ASAN 1
-#elif defined(__has_feature)
-#if __has_feature(address_sanitizer)
-#define HC_TEST_ASAN 1
-#endif
-#endif
 
 TEST(Heap, FramesReuseTheirPredecessorsPages) {
 #if defined(HC_TEST_ASAN)

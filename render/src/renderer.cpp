@@ -318,14 +318,17 @@ detail::PixelRays castRays(const Scene& scene, const detail::FrameSetup& setup, 
                                                             {&f.cascade, -1.0f},
                                                             {&f.wall, 0.0f}};
     constexpr size_t kLayers = std::size(layers);
+    for (const auto& [layer, value] : layers) reserveOnHugePages(*layer, pixels);  // here, not on a worker (heap.h)
+    reserveOnHugePages(rays.dirZ, pixels);
+    reserveOnHugePages(rays.isWater, pixels);
     parallelFor(kLayers + 2, 1, options.threads, [&](size_t b, size_t e, unsigned) {
         for (size_t i = b; i < e; ++i) {
             if (i < kLayers)
-                assignOnHugePages(*layers[i].first, pixels, layers[i].second);
+                layers[i].first->assign(pixels, layers[i].second);
             else if (i == kLayers)
-                assignOnHugePages(rays.dirZ, pixels, 0.0f);
+                rays.dirZ.assign(pixels, 0.0f);
             else
-                assignOnHugePages(rays.isWater, pixels, uint8_t(0));
+                rays.isWater.assign(pixels, uint8_t(0));
         }
     });
     const CameraBasis& basis = setup.basis;

@@ -27,15 +27,23 @@ bool keepFreedMemory(size_t mmapAboveBytes = size_t(256) << 20, size_t keepBytes
 // kernel has THP off or the range holds no whole huge page.
 void adviseHugePages(const void* data, size_t bytes);
 
-// v.assign(n, value), with storage that is new (never touched) advised onto huge pages first: a frame's layers of
+// Room for n values in v, with storage that is new (never touched) advised onto huge pages: a frame's layers of
 // several MB then fault in as a few 2 MiB pages instead of thousands of 4 kB ones. Storage v already has is reused.
+// Call it on the thread that keeps the frame (then fill on workers): a worker's blocks come from its own malloc arena,
+// whose heaps glibc unmaps as soon as they are empty, whatever keepFreedMemory() asked, so each frame would fault
+// and zero its layers afresh.
+template <class T>
+void reserveOnHugePages(std::vector<T>& v, size_t n) {
+    if (v.capacity() >= n) return;
+    std::vector<T>().swap(v);
+    v.reserve(n);
+    adviseHugePages(v.data(), n * sizeof(T));
+}
+
+// v.assign(n, value) in storage from reserveOnHugePages().
 template <class T>
 void assignOnHugePages(std::vector<T>& v, size_t n, const T& value) {
-    if (v.capacity() < n) {
-        std::vector<T>().swap(v);
-        v.reserve(n);
-        adviseHugePages(v.data(), n * sizeof(T));
-    }
+    reserveOnHugePages(v, n);
     v.assign(n, value);
 }
 
