@@ -18,12 +18,16 @@
 #                      output) and STATUS (its exit status); what it prints is shown if it fails.
 #   --allow-new-files  a failing command may leave new files in DIR (otherwise, when STATUS is not 0, any file
 #                      that was not there after --setup counts as left behind)
+#   --keep             keep DIR after a pass: other tests read its files (a FIXTURES_SETUP test)
+#
+# A passing test's DIR is removed (the suite's outputs would otherwise fill gigabytes a build: CI makes three
+# builds on one disk), unless --keep or HC_CLI_KEEP=1 in the environment; a failing test's DIR always stays.
 #
 # Whatever the STATUS, a temporary file of an atomic write (NAME.tmp.XXXXXX) left in DIR fails the test.
 # On failure, everything that was expected and everything that came out is printed, and the exit status is 1.
 set -u
 
-usage() { echo "usage: expect.sh STATUS REGEX [--dir D] [--setup S] [--absent P] [--exists P] [--match R] [--no-match R] [--check S] [--allow-new-files] -- COMMAND [ARG...]" >&2; exit 2; }
+usage() { echo "usage: expect.sh STATUS REGEX [--dir D] [--setup S] [--absent P] [--exists P] [--match R] [--no-match R] [--check S] [--allow-new-files] [--keep] -- COMMAND [ARG...]" >&2; exit 2; }
 
 [ $# -ge 3 ] || usage
 want_status=$1
@@ -36,6 +40,7 @@ esac
 
 dir=""
 allow_new=0
+keep=0
 setups=() absents=() exists=() matches=("$want_regex") nomatches=() checks=()
 while [ $# -gt 0 ]; do
   case $1 in
@@ -48,6 +53,7 @@ while [ $# -gt 0 ]; do
     --no-match) [ $# -ge 2 ] || usage; nomatches+=("$2"); shift 2 ;;
     --check) [ $# -ge 2 ] || usage; checks+=("$2"); shift 2 ;;
     --allow-new-files) allow_new=1; shift ;;
+    --keep) keep=1; shift ;;
     *) echo "expect.sh: unknown option '$1' (the command goes after --)" >&2; usage ;;
   esac
 done
@@ -150,6 +156,7 @@ done
 
 if [ ${#failures[@]} -eq 0 ]; then
   echo "ok: $(quoted_command "$@")  (exit status $status)"
+  if [ -n "$dir" ] && [ $keep -eq 0 ] && [ "${HC_CLI_KEEP:-0}" != 1 ]; then cd / && rm -rf -- "$dir"; fi
   exit 0
 fi
 echo "FAIL: $(quoted_command "$@")"

@@ -141,3 +141,5 @@ for f in "${outputs[@]}"; do rm -f "kill/$f"; done
 verify "the full run after the kills" || fail "the full run after the kills left temporaries: $(ls -A kill | grep '\.tmp\.' | tr '\n' ' ')"
 for f in "${outputs[@]}"; do check "$f" || fail "the full run after the kills wrote an invalid $f"; done
 echo "$case_name: $((NKILL + NTEMP)) kills: $mid mid-write (a temporary left), $before before any output, $between between two outputs, $done_ after all outputs were in place; every output absent or valid, every leftover a temporary, removed by the next run"
+# Passed: its grids and caches go (as expect.sh's do), unless HC_CLI_KEEP=1.
+[ "${HC_CLI_KEEP:-0}" = 1 ] || { cd / && rm -rf -- "$work"; }
