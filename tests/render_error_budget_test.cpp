@@ -336,12 +336,6 @@ TEST(ErrorBound, ReliefIsTheGridsRangeOverTheDomainAndLessOverParts) {
     EXPECT_GT(less, 8);
 }
 
-}  // namespace
-}  // namespace hc::test
-
-namespace hc::test {
-namespace {
-
 // Under a budget, neighbouring cascades at one spacing become one (fitCascades' merge): a ray then walks one texture.
 // With the same error everywhere, every cascade takes the same level, so the three become one over the whole hull,
 // at that spacing and on its lattice; where the error grows with the box (a far cascade's box is larger), the merged
