@@ -5,6 +5,7 @@
 
 #include <cmath>
 #include <cstdio>
+#include <limits>
 #include <random>
 #include <string>
 #include <vector>
@@ -183,6 +184,55 @@ TEST_P(ErrorBudget, RegionalBoundHoldsFromCamerasOverPartsOfTheDomain) {
         GetParam().c_str(), frames, lower, cascades, smallest);
     EXPECT_GT(frames, 18);
     EXPECT_GT(lower, 0) << "no cascade's ground carried less than the whole domain's error";
+}
+
+// The bounds in pixels are charged at each cascade's nearest hit: every verified error in pixels lies under the frame's
+// (plus the float32 rounding of a hit's height, in pixels at the frame's nearest hit), and the bound is never looser
+// than one charged at the nearest point the fit could bound, and far tighter from cameras below the highest terrain,
+// where that point is the near plane.
+TEST_P(ErrorBudget, PixelBoundIsChargedAtTheNearestHitAndHolds) {
+    World& w = world();
+    const influence::SurfacePyramid pyramid = influence::buildSurfacePyramid(w.grid, w.lists.params());
+    const Scene scene(w.grid, w.lists, &pyramid);
+    std::mt19937_64 rng(44);
+    int frames = 0, below = 0, tighter = 0;
+    for (int k = 0; k < 16; ++k) {
+        const Camera cam = randomCamera(w, rng);
+        for (const double budgetPx : {0.0, 1.0}) {
+            RenderOptions o;
+            o.legend = false;
+            o.texelsPerSide = 256;
+            o.maxErrorPx = budgetPx;
+            Timings t;
+            const render::Frame f = render::renderFrame(scene, cam, o, t);
+            const ErrorCheck check = render::verifyFrameError(scene, cam, f, kChecked);
+            if (check.hits == 0 || !std::isfinite(t.errorBoundPx)) continue;
+            ++frames;
+            double nearest = HUGE_VAL;
+            for (const float d : f.distanceM) nearest = std::min(nearest, double(d));
+            const double pixelRad = 2 * std::tan(cam.fovYDeg * M_PI / 360) / cam.height;
+            EXPECT_LE(check.maxPx, t.errorBoundPx + kFloatPositionM / (pixelRad * nearest))
+                << "camera " << k << ", " << budgetPx << " px";
+            // The same frame's bounds charged where the fit put each cascade's nearest point (no hits measured).
+            const render::detail::FrameSetup setup = render::detail::setUpFrame(scene, cam);
+            Timings fitted = t, scratch;
+            for (render::CascadeStats& c : fitted.cascades) c.nearestHitM = std::numeric_limits<double>::quiet_NaN();
+            const render::CascadeFit fit = render::detail::fitFrame(scene, cam, setup, o, scratch);
+            render::detail::boundFrame(scene, setup, fit, fitted);
+            EXPECT_EQ(t.errorBoundM, fitted.errorBoundM);
+            EXPECT_LE(t.errorBoundPx, fitted.errorBoundPx * (1 + 1e-12)) << "camera " << k;
+            const bool camBelow = cam.zWorld < scene.zMax;
+            below += camBelow;
+            tighter += camBelow && t.errorBoundPx < fitted.errorBoundPx / 10;
+        }
+    }
+    std::printf(
+        "%s: %d frames checked, %d from below the highest terrain, %d of those with a pixel bound under a "
+        "tenth of the fit's\n",
+        GetParam().c_str(), frames, below, tighter);
+    EXPECT_GT(frames, 20);
+    EXPECT_GT(below, 4);
+    EXPECT_GT(tighter, below / 2);
 }
 
 // Without a pyramid the bound comes from the texels (and the relief under them where they are coarser than the kernels

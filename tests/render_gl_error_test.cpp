@@ -93,4 +93,31 @@ TEST_F(RenderGl, BoundWithoutAPyramidAsOnTheCpu) {
     }
 }
 
+// The pixel bound is charged at each cascade's nearest hit on GL as on the CPU (error_bound.cpp): shade.comp's counter
+// is the read-back frame's own nearest hit of each cascade, bit for bit, and the verified error in pixels lies under
+// the bound (plus the float32 rounding of a hit's height, in pixels at the frame's nearest hit).
+TEST_F(RenderGl, NearestHitsAreTheFramesOwn) {
+    World& w = hef();
+    HC_REQUIRE_GL(w);
+    const Scene& scene = *w.scene;
+    for (const Camera& cam : {overviewCamera(scene, 160, 100), lowOblique(scene, 160, 100)}) {
+        Timings t;
+        w.gl->forgetCascades();
+        const Frame f = w.gl->render(cam, smallOptions(), t);
+        std::vector<float> nearest(t.cascades.size(), std::numeric_limits<float>::infinity());
+        float frameNearest = std::numeric_limits<float>::infinity();
+        for (size_t i = 0; i < f.distanceM.size(); ++i)
+            if (f.cascade[i] >= 0) {
+                float& n = nearest[size_t(f.cascade[i])];
+                n = std::min(n, f.distanceM[i]), frameNearest = std::min(frameNearest, f.distanceM[i]);
+            }
+        ASSERT_FALSE(t.cascades.empty());
+        for (size_t k = 0; k < t.cascades.size(); ++k) EXPECT_EQ(t.cascades[k].nearestHitM, double(nearest[k])) << k;
+        const ErrorCheck check = verifyFrameError(scene, cam, f, 2000);
+        ASSERT_GT(check.hits, 1000u);
+        const double pixelRad = 2 * std::tan(cam.fovYDeg * M_PI / 360) / cam.height;
+        EXPECT_LE(check.maxPx, t.errorBoundPx + 5e-3 / (pixelRad * frameNearest));
+    }
+}
+
 }  // namespace

@@ -11,6 +11,7 @@
 #include <optional>
 #include <vector>
 
+#include "heightcast/core/parallel.h"
 #include "heightcast/influence/region.h"
 #include "heightcast/render/detail/frame.h"
 #include "heightcast/render/renderer.h"
@@ -154,6 +155,38 @@ std::vector<double> detail::predictLevelErrorM(const Scene& scene, double x0, do
     }
 }
 
+void detail::measureNearestHits(const Frame& f, unsigned threads, Timings& timings) {
+    const size_t cascades = timings.cascades.size(), pixels = f.distanceM.size(), chunk = 1 << 16;
+    std::vector<std::vector<float>> nearest(resolveThreads(threads),
+                                            std::vector<float>(cascades, std::numeric_limits<float>::infinity()));
+    parallelFor(pixels, chunk, threads, [&](size_t b, size_t e, unsigned worker) {
+        std::vector<float>& mine = nearest[worker];
+        for (size_t i = b; i < e; ++i) {
+            const float k = f.cascade[i];  // -1: a miss
+            if (k >= 0 && size_t(k) < cascades) mine[size_t(k)] = std::min(mine[size_t(k)], f.distanceM[i]);
+        }
+    });
+    for (size_t k = 0; k < cascades; ++k) {
+        timings.cascades[k].nearestHitM = HUGE_VAL;
+        for (const std::vector<float>& mine : nearest)
+            timings.cascades[k].nearestHitM = std::min(timings.cascades[k].nearestHitM, double(mine[k]));
+    }
+}
+
+namespace {
+
+// Where cascade k's bound in pixels is charged [m]: the nearest hit that shows its surface, its own or a blend's
+// labelled with the cascade before it (Frame::cascade names the nearer of the two), never nearer than the fit's bound
+// of its slab (Cascade::nearestM), which is all there is where the hits were not measured.
+double pixelBoundDistanceM(const CascadeFit& fit, size_t k, const Timings& timings) {
+    const double fitted = fit.cascades[k].nearestM;
+    const double own = timings.cascades[k].nearestHitM, before = k > 0 ? timings.cascades[k - 1].nearestHitM : HUGE_VAL;
+    if (std::isnan(own) || std::isnan(before)) return fitted;
+    return std::max(fitted, std::min(own, before));
+}
+
+}  // namespace
+
 void detail::boundFrame(const Scene& scene, const FrameSetup& setup, const CascadeFit& fit, Timings& timings) {
     const bool fromPyramid = !scene.boundFromTexels();
     timings.boundFromTexels = !fromPyramid;
@@ -180,12 +213,13 @@ void detail::boundFrame(const Scene& scene, const FrameSetup& setup, const Casca
         } else {  // every texel summed from the kernels: their patches' error, float32 rounding and the sum's error
             cs.errorBoundM = texelPatchErrorM(scene, c, cs.texelEstimateM) + summedTexelsErrorM(scene);
         }
-        cs.errorBoundPx = cs.errorBoundM / (setup.view.pixelRad * c.nearestM);
+        const double footprintM = setup.view.pixelRad * pixelBoundDistanceM(fit, k, timings);  // a pixel's, there
+        cs.errorBoundPx = cs.errorBoundM / footprintM;
         if (scene.hasWater()) {  // Timings::shoreBoundM
             const int up = cs.pyramidInterpolated > 0 ? cs.pyramidInterpolatedUp : 0;
             const double shoreM = std::numbers::sqrt2 * std::ldexp(c.texelM, up);
             timings.shoreBoundM = std::max(timings.shoreBoundM, shoreM);
-            timings.shoreBoundPx = std::max(timings.shoreBoundPx, shoreM / (setup.view.pixelRad * c.nearestM));
+            timings.shoreBoundPx = std::max(timings.shoreBoundPx, shoreM / footprintM);
         }
         unbounded = unbounded || !std::isfinite(cs.errorBoundM);  // no estimate made (a bug): no bound claimed
         timings.errorBoundM = std::max(timings.errorBoundM, cs.errorBoundM);

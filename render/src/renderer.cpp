@@ -475,6 +475,7 @@ Frame renderFrame(const Scene& scene, const Camera& camera, const RenderOptions&
     detail::shadePixels(scene, options, setup.basis, rays, f, timings);
     detail::frameToWorldAxes(scene.grid(), f);
     if (kept) keepCascades(*kept, scene, options, fit, tex);
+    detail::measureNearestHits(f, options.threads, timings);
     detail::boundFrame(scene, setup, fit, timings);
     timings.totalMs = total.milliseconds();
     return f;

@@ -78,6 +78,7 @@ std::string Timings::toJson() const {
                                  {"pyramid_interpolated_levels_up", c.pyramidInterpolatedUp},
                                  {"error_bound_m", bound(c.errorBoundM)},
                                  {"error_bound_px", bound(c.errorBoundPx)},
+                                 {"nearest_hit_m", bound(c.nearestHitM)},
                                  {"budget_m", bound(c.budgetM)},
                                  {"texel_estimate_m", bound(c.texelEstimateM)},
                                  {"gaussians", c.gaussians},

@@ -74,7 +74,11 @@ void main() {
     const vec3 sky = horizon + up * (zenith - horizon);
     vec3 c;
     if (p.t < kInf) {
-        atomicAdd(counters[uint(kMaxCascades * kCounterSlots) + (gl_WorkGroupID.x + 7u * gl_WorkGroupID.y) % uint(kCounterSlots)], 1u);
+        const uint slot = (gl_WorkGroupID.x + 7u * gl_WorkGroupID.y) % uint(kCounterSlots);
+        atomicAdd(counters[uint(kMaxCascades * kCounterSlots) + slot], 1u);
+        if (p.cascade >= 0)  // its cascade's nearest hit (HC_BIND_COUNTERS)
+            atomicMax(counters[uint(kNearestHitCounter + p.cascade * kCounterSlots) + slot],
+                      kNearestHitBits - floatBitsToUint(max(p.t, 0.0)));
         const vec3 sun = vec3(frame.sun[0], frame.sun[1], frame.sun[2]);
         const float light = 0.3 + 0.7 * max(0.0, dot(vec3(p.nx, p.ny, p.nz), sun));
         vec3 base;

@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <cstdio>
 #include <cstring>
+#include <limits>
 #include <string>
 #include <tuple>
 #include <vector>
@@ -195,6 +196,17 @@ void GlRenderer::Impl::readCounters(size_t cascadeCount, Timings& timings) const
             timings.cascades[k].gaussians += counters[k * gpu::kCounterSlots + size_t(s)];
     for (int s = 0; s < gpu::kCounterSlots; ++s)
         timings.hits += counters[size_t(gpu::kMaxCascades * gpu::kCounterSlots + s)];
+    for (size_t k = 0; k < cascadeCount; ++k) {  // shade.comp's nearest hits
+        uint32_t most = 0;
+        for (int s = 0; s < gpu::kCounterSlots; ++s)
+            most = std::max(most, counters[size_t(gpu::kNearestHitCounter) + k * gpu::kCounterSlots + size_t(s)]);
+        float nearest = std::numeric_limits<float>::infinity();
+        if (most > 0) {
+            const uint32_t bits = gpu::kNearestHitBits - most;
+            std::memcpy(&nearest, &bits, sizeof nearest);
+        }
+        timings.cascades[k].nearestHitM = nearest;
+    }
     if (estimatesError())
         for (size_t k = 0; k < cascadeCount; ++k) {
             float estimate;

@@ -39,8 +39,9 @@ using uint = std::uint32_t;
 #define HC_BIND_HEIGHTS 5  // float[]: per cascade terrain, water, depth textures and both max mipmaps
 #define HC_BIND_PIXELS 6   // GpuPixel[width * height], row 0 at the top
 #define HC_BIND_COUNTERS \
-    7  // uint[kCounterSlots * (kMaxCascades + 1) + kMaxCascades]: Gaussians per cascade, then hits, then per cascade
-       //   the float bits of its texels' error estimate (patchErrorEstimateM; uint order is float order for >= 0)
+    7  // uint[kCounterUints]: Gaussians per cascade, then hits, then per cascade the float bits of its texels' error
+       //   estimate (patchErrorEstimateM; uint order is float order for >= 0), then per cascade its nearest hit
+       //   (CascadeStats::nearestHitM) as kNearestHitBits minus the distance's float bits, 0 none, the largest winning
 // Out of core (assemble.comp): the last frame's heights buffer, and what the CPU evaluated this frame.
 #define HC_BIND_LAST_HEIGHTS 11  // float[]: the last frame's HC_BIND_HEIGHTS
 #define HC_BIND_FILL_ROWS \
@@ -68,8 +69,10 @@ const int kMaxCascades = 4;
 const int kMaxMipLevels = 16;  // a 8192^2 cascade has 14 levels
 const int kCounterSlots = 64;  // a counter is spread over slots so that no uint overflows
 const int kEstimateCounter = kCounterSlots * (kMaxCascades + 1);  // HC_BIND_COUNTERS: cascade 0's error estimate
-const int kCounterUints = kEstimateCounter + kMaxCascades;        // the whole HC_BIND_COUNTERS buffer
-const int kMaxLabelChars = 12;                                    // legend labels ("-10994m")
+const int kNearestHitCounter = kEstimateCounter + kMaxCascades;   // HC_BIND_COUNTERS: cascade 0's nearest hit's slots
+const uint kNearestHitBits = 0x7f800000u;  // +inf's float bits: a nearest hit d counts as kNearestHitBits - bits(d)
+const int kCounterUints = kNearestHitCounter + kMaxCascades * kCounterSlots;  // the whole HC_BIND_COUNTERS buffer
+const int kMaxLabelChars = 12;                                                // legend labels ("-10994m")
 const int kIndexChunks = 4;  // storage buffers the influence lists' entries may span
 const int kFillRowInts = 8;  // a row of HC_BIND_FILL_ROWS: keptFirst, keptLast, a0, a1, b0, b1, packed a0, packed b0
 const int kAtlasPlane =

@@ -109,9 +109,13 @@ struct CascadeStats {
     // The rendered surface's error against the exact one in this cascade [m]: with a surface pyramid the bilinear
     // patches' error at the texel spacing, or at the coarsest level a texel was interpolated from (Scene::levelErrorM
     // over the cascade's box), plus a float32 rounding of the heights, plus kSummedTexelErrorM where texels were summed
-    // from the kernels; without one texelEstimateM plus the same two. errorBoundPx: the same in pixels at its nearest
-    // point. budgetM: its error budget, 0 none.
+    // from the kernels; without one texelEstimateM plus the same two. errorBoundPx: the same in pixels at the nearest
+    // hit that shows its surface (nearestHitM; error_bound.cpp). budgetM: its error budget, 0 none.
     double errorBoundM = 0, errorBoundPx = 0, budgetM = 0;
+    // The distance of its nearest hit in the frame [m] (Frame::cascade: the nearer cascade of a blend); +inf where it
+    // gave none; NaN where the backend did not measure it (the pixel bound is then charged at the nearest point the
+    // fit could bound: Cascade::nearestM, the near plane for a camera below the highest terrain).
+    double nearestHitM = std::numeric_limits<double>::quiet_NaN();
     // Without a surface pyramid: the largest error estimate of its patches from its texels alone (terrain and water
     // surface; gpu::patchErrorEstimateM) [m]; NaN with a pyramid.
     double texelEstimateM = std::numeric_limits<double>::quiet_NaN();

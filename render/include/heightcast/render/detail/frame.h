@@ -200,8 +200,11 @@ double pyramidCopyBoundM(const Scene& scene);
 // the frame's bound is still its own texels' (boundFrame).
 std::vector<double> predictLevelErrorM(const Scene& scene, double x0, double y0, double x1, double y1,
                                        double waterMinDepthM, unsigned threads);
+// CascadeStats::nearestHitM of every cascade of `timings` from frame `f`'s hits (the GL backend's shade.comp counts
+// it).
+void measureNearestHits(const Frame& f, unsigned threads, Timings& timings);
 // Each cascade's error bound and the frame's (CascadeStats::errorBoundM, Timings::errorBoundM), once its cascades'
-// statistics are final (error_bound.cpp; both backends).
+// statistics are final, nearestHitM included (error_bound.cpp; both backends).
 void boundFrame(const Scene& scene, const FrameSetup& setup, const CascadeFit& fit, Timings& timings);
 
 // Copies `count` pyramid samples into a row of a cascade's textures with the water rule of surface.h: s the elevations,
