@@ -31,6 +31,15 @@ constexpr double kFloatPositionM = 5e-3;
 // Hits checked a frame: enough for a largest error that is rarely beaten (the 99th percentile has 40 beyond it).
 constexpr size_t kChecked = 4000;
 
+// The tests' frames: no legend, cascades of 256^2 texels, the budgets given (0: none).
+RenderOptions budgetOptions(double maxErrorM = 0, double maxErrorPx = 0) {
+    RenderOptions o;
+    o.legend = false;
+    o.texelsPerSide = 256;
+    o.maxErrorM = maxErrorM, o.maxErrorPx = maxErrorPx;
+    return o;
+}
+
 struct Rendered {
     Timings timings;
     ErrorCheck check;
@@ -74,9 +83,7 @@ TEST_P(ErrorBudget, VerifiedErrorLiesUnderTheBoundAndTheBudget) {
     World& w = world();
     const influence::SurfacePyramid pyramid = influence::buildSurfacePyramid(w.grid, w.lists.params());
     const Scene scene(w.grid, w.lists, &pyramid);
-    RenderOptions o;
-    o.legend = false;
-    o.texelsPerSide = 256;
+    RenderOptions o = budgetOptions();
     uint64_t lastTexels = UINT64_MAX;
     for (const double budget : {0.0, 0.01, 0.1, 1.0, 10.0}) {
         o.maxErrorM = budget;
@@ -153,10 +160,7 @@ TEST_P(ErrorBudget, RegionalBoundHoldsFromCamerasOverPartsOfTheDomain) {
         Camera cam = randomCamera(w, rng);
         cam.width = 160, cam.height = 100;
         for (const double budget : {0.0, 0.1, 2.0}) {
-            RenderOptions o;
-            o.legend = false;
-            o.texelsPerSide = 256;
-            o.maxErrorM = budget;
+            const RenderOptions o = budgetOptions(budget);
             Timings t;
             const render::Frame f = render::renderFrame(scene, cam, o, t);
             if (!std::isfinite(t.errorBoundM)) continue;
@@ -199,10 +203,7 @@ TEST_P(ErrorBudget, PixelBoundIsChargedAtTheNearestHitAndHolds) {
     for (int k = 0; k < 16; ++k) {
         const Camera cam = randomCamera(w, rng);
         for (const double budgetPx : {0.0, 1.0}) {
-            RenderOptions o;
-            o.legend = false;
-            o.texelsPerSide = 256;
-            o.maxErrorPx = budgetPx;
+            const RenderOptions o = budgetOptions(0, budgetPx);
             Timings t;
             const render::Frame f = render::renderFrame(scene, cam, o, t);
             const ErrorCheck check = render::verifyFrameError(scene, cam, f, kChecked);
@@ -318,9 +319,7 @@ INSTANTIATE_TEST_SUITE_P(RealDems, ErrorBudget, ::testing::Values("hef", "lidar"
 TEST(ErrorBound, ShorelineCheckSeesAShoreMovedOnPurpose) {
     World& w = hef();
     ASSERT_TRUE(w.scene->hasWater());
-    RenderOptions o;
-    o.legend = false;
-    o.texelsPerSide = 256;
+    RenderOptions o = budgetOptions();
     const Rendered plain = renderChecked(*w.scene, o);
     o.waterMinDepthM = 200;
     const Rendered moved = renderChecked(*w.scene, o);
