@@ -211,11 +211,10 @@ TEST_P(ErrorBudget, PixelBoundIsChargedAtTheNearestHitAndHolds) {
             ++frames;
             double nearest = HUGE_VAL;
             for (const float d : f.distanceM) nearest = std::min(nearest, double(d));
-            const double pixelRad = 2 * std::tan(cam.fovYDeg * M_PI / 360) / cam.height;
-            EXPECT_LE(check.maxPx, t.errorBoundPx + kFloatPositionM / (pixelRad * nearest))
+            const render::detail::FrameSetup setup = render::detail::setUpFrame(scene, cam);
+            EXPECT_LE(check.maxPx, t.errorBoundPx + kFloatPositionM / (setup.view.pixelRad * nearest))
                 << "camera " << k << ", " << budgetPx << " px";
             // The same frame's bounds charged where the fit put each cascade's nearest point (no hits measured).
-            const render::detail::FrameSetup setup = render::detail::setUpFrame(scene, cam);
             Timings fitted = t, scratch;
             for (render::CascadeStats& c : fitted.cascades) c.nearestHitM = std::numeric_limits<double>::quiet_NaN();
             const render::CascadeFit fit = render::detail::fitFrame(scene, cam, setup, o, scratch);

@@ -104,18 +104,17 @@ TEST_F(RenderGl, NearestHitsAreTheFramesOwn) {
         Timings t;
         w.gl->forgetCascades();
         const Frame f = w.gl->render(cam, smallOptions(), t);
-        std::vector<float> nearest(t.cascades.size(), std::numeric_limits<float>::infinity());
-        float frameNearest = std::numeric_limits<float>::infinity();
-        for (size_t i = 0; i < f.distanceM.size(); ++i)
-            if (f.cascade[i] >= 0) {
-                float& n = nearest[size_t(f.cascade[i])];
-                n = std::min(n, f.distanceM[i]), frameNearest = std::min(frameNearest, f.distanceM[i]);
-            }
+        Timings measured = t;  // the CPU's scan of the read-back frame (detail::measureNearestHits)
+        detail::measureNearestHits(f, 0, measured);
         ASSERT_FALSE(t.cascades.empty());
-        for (size_t k = 0; k < t.cascades.size(); ++k) EXPECT_EQ(t.cascades[k].nearestHitM, double(nearest[k])) << k;
+        double frameNearest = HUGE_VAL;
+        for (size_t k = 0; k < t.cascades.size(); ++k) {
+            EXPECT_EQ(t.cascades[k].nearestHitM, measured.cascades[k].nearestHitM) << k;
+            frameNearest = std::min(frameNearest, measured.cascades[k].nearestHitM);
+        }
         const ErrorCheck check = verifyFrameError(scene, cam, f, 2000);
         ASSERT_GT(check.hits, 1000u);
-        const double pixelRad = 2 * std::tan(cam.fovYDeg * M_PI / 360) / cam.height;
+        const double pixelRad = detail::setUpFrame(scene, cam).view.pixelRad;
         EXPECT_LE(check.maxPx, t.errorBoundPx + 5e-3 / (pixelRad * frameNearest));
     }
 }
