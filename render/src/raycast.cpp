@@ -194,7 +194,7 @@ struct PatchWalk {
     double zFloor;  // the terrain block's bottom
     bool water;     // the water surface is drawn for this ray (until it is found under it)
     RayState& st;
-    PatchHit res;
+    PatchHit& res;  // traverse()'s result, written in place (a copy of it out cost a store-forwarding stall)
 
     // Patch (iu, iv) over `segment`, intersected with both surfaces under the block's rules (traverse()): true
     // when that ends the walk, the result in res; false when the ray goes on past the patch.
@@ -307,9 +307,10 @@ PatchHit traverse(const CascadeTextures& tex, const Cascade& c, const glm::dvec3
                   double tOut, double zFloor, RayState& st, double tFrom, const RaySetups::Cascade& setup, size_t i,
                   double tFloor) {
     const Heightfield& hf = tex.terrain;
-    if (hf.mip.empty() || !(tIn < tOut)) return PatchHit{};
+    PatchHit res;  // the one result every path returns (named: built in the caller's slot)
+    if (hf.mip.empty() || !(tIn < tOut)) return res;
     const TexelRay ray = texelRay(c, setup, i, o, d);
-    PatchWalk walk{tex, ray, tIn, zFloor, tex.hasWater && !st.underWater && !tex.water.mip.empty(), st, PatchHit{}};
+    PatchWalk walk{tex, ray, tIn, zFloor, tex.hasWater && !st.underWater && !tex.water.mip.empty(), st, res};
     const double u0 = ray.u0, v0 = ray.v0, du = ray.du, dv = ray.dv;
     const double invDu = setup.invDu[i], invDv = setup.invDv[i];  // du != 0 ? 1 / du : 0, and likewise
     const int top = int(hf.mip.size()) - 1;
@@ -321,7 +322,7 @@ PatchHit traverse(const CascadeTextures& tex, const Cascade& c, const glm::dvec3
         return std::max(hf.mip[size_t(level)][idx], tex.water.mip[size_t(level)][idx]);
     };
     if (!clipToHeights(ray, maxAt(top, 0), zFloor, walk.water ? setup.tTopWet[i] : setup.tTopDry[i], tFloor, tIn, tOut))
-        return PatchHit{};
+        return res;
     // The walk carries its node as integers (level, iu, iv) and steps to the neighbour across the edge the ray
     // leaves by, as a grid walk does; each node's exit follows from its integers. It used to find each node
     // again from the ray's point a hair past t, a chain from float to int and back through every visit; now
@@ -342,7 +343,7 @@ PatchHit traverse(const CascadeTextures& tex, const Cascade& c, const glm::dvec3
     int iu = 0, iv = 0;
     double t = tIn;
     if (tFrom > tIn) {
-        if (!(tFrom < tOut)) return walk.res;  // the beam meets nothing of this cascade within the ray's span
+        if (!(tFrom < tOut)) return res;  // the beam meets nothing of this cascade within the ray's span
         if (patchAfter(tFrom, iu, iv)) {
             // Entered across the later of its two edges: the same expression as the exit of the node before it below.
             const double enterU = du > 0 ? (iu - u0) * invDu : du < 0 ? (iu + 1 - u0) * invDu : -HUGE_VAL;
@@ -354,7 +355,7 @@ PatchHit traverse(const CascadeTextures& tex, const Cascade& c, const glm::dvec3
         }
     }
     if (!(tFrom > tIn)) {
-        if (!patchAfter(tIn, iu, iv)) return walk.res;
+        if (!patchAfter(tIn, iu, iv)) return res;
         iu >>= level, iv >>= level;
     }
     const int stepU = du > 0 ? 1 : -1, stepV = dv > 0 ? 1 : -1;
@@ -379,7 +380,7 @@ PatchHit traverse(const CascadeTextures& tex, const Cascade& c, const glm::dvec3
                 continue;
             }
             // A patch: exact intersection with its bilinear surfaces.
-            if (walk.endsAt(iu, iv, RaySpan{t, tExit - t})) return walk.res;
+            if (walk.endsAt(iu, iv, RaySpan{t, tExit - t})) return res;
         }
         // Past the node (empty space, or a patch the ray misses): on to the neighbour across the edge it leaves
         // by, and a level up when that neighbour has another parent.
@@ -395,25 +396,27 @@ PatchHit traverse(const CascadeTextures& tex, const Cascade& c, const glm::dvec3
         }
         if (leavesParent && level < top) ++level, iu >>= 1, iv >>= 1;  // >> floors: -1 stays outside
     }
-    return walk.res;
+    return res;
 }
 
-Hit hitIn(const RayContext& ctx, size_t k, const glm::dvec3& o, const glm::dvec3& d, const RaySetups& setups,
-          size_t ray, RayState& st, bool& underground, double tFrom) {
-    Hit h;
+// The ray's hit in cascade k, into `h` (written in place: castRay's copies of a returned Hit cost a store-forwarding
+// stall a ray).
+void hitIn(const RayContext& ctx, size_t k, const glm::dvec3& o, const glm::dvec3& d, const RaySetups& setups,
+           size_t ray, RayState& st, bool& underground, double tFrom, Hit& h) {
+    h = Hit{};
     const Cascade& c = ctx.fit->cascades[k];
     const CascadeTextures& tex = (*ctx.tex)[k];
-    if (c.empty()) return h;
+    if (c.empty()) return;
     const RaySetups::Cascade& setup = setups.cascades[k];
     const double t0 = setup.t0[ray], t1 = setup.t1[ray];  // the ray's span in the cascade's slab and over its patches
-    if (!(t0 < t1) || !(tFrom < t1)) return h;  // past tFrom the beam meets nothing of this cascade (traverse())
+    if (!(t0 < t1) || !(tFrom < t1)) return;  // past tFrom the beam meets nothing of this cascade (traverse())
     const PatchHit best = traverse(tex, c, o, d, t0, t1, ctx.zFloor, st, tFrom, setup, ray, setups.tFloor[ray]);
     if (best.terrainUnderground) {
         underground = true;
-        return h;
+        return;
     }
     if (best.waterUnderground) st.underWater = true;
-    if (!best.hit) return h;
+    if (!best.hit) return;
     h.hit = true;
     h.t = best.t;
     h.water = best.water;
@@ -421,7 +424,7 @@ Hit hitIn(const RayContext& ctx, size_t k, const glm::dvec3& o, const glm::dvec3
     h.cascade = int(k);
     if (h.wall) {
         h.nx = best.nx, h.ny = best.ny, h.nz = best.nz;
-        return h;
+        return;
     }
     h.slopeOnly = true;  // the normal: normalOfSlope, by the caller
     h.gx = best.gx, h.gy = best.gy, h.texelM = c.texelM;
@@ -432,7 +435,6 @@ Hit hitIn(const RayContext& ctx, size_t k, const glm::dvec3& o, const glm::dvec3
         const float* r0 = &tex.depth[size_t(j) * size_t(c.n) + size_t(i)];
         h.depth = (1 - b) * ((1 - a) * r0[0] + a * r0[1]) + b * ((1 - a) * r0[c.n] + a * r0[c.n + 1]);
     }
-    return h;
 }
 
 }  // namespace
@@ -442,12 +444,13 @@ Hit castRay(const RayContext& ctx, const glm::dvec3& dir, const RaySetups& setup
     const auto& cs = ctx.fit->cascades;
     RayState st;
     bool underground = false;
+    Hit h;  // the one result every path returns (named: built in the caller's slot)
     // Where the beam lets this ray's walk through cascade k start (t = tau |direction|; a hair early for rounding).
     auto from = [&](size_t k) { return beam ? beam->startDepth(k) * dirLength * (1 - 1e-12) : 0.0; };
     for (size_t k = 0; k < cs.size(); ++k) {
         if (beam && beam->passesOver(k)) continue;  // the ray walks nothing there (Beam::passesOver)
-        Hit h = hitIn(ctx, k, ctx.eyeLocal, dir, setups, ray, st, underground, from(k));
-        if (underground) return Hit{};
+        hitIn(ctx, k, ctx.eyeLocal, dir, setups, ray, st, underground, from(k), h);
+        if (underground) return h;  // hitIn left it a miss
         if (!h.hit) continue;
         // In the overlap with the next cascade: blend both hits by a convex combination, if they are on the same
         // surface (issue 11: a blend of a ridge in one cascade and the slope behind it in the next, which the
@@ -463,7 +466,8 @@ Hit castRay(const RayContext& ctx, const glm::dvec3& dir, const RaySetups& setup
                 RayState st2 = st;
                 st2.touchedTerrain = st2.touchedWater = true;
                 bool under2 = false;
-                Hit h2 = hitIn(ctx, k + 1, ctx.eyeLocal, dir, setups, ray, st2, under2, from(k + 1));
+                Hit h2;
+                hitIn(ctx, k + 1, ctx.eyeLocal, dir, setups, ray, st2, under2, from(k + 1), h2);
                 if (h2.hit && h2.water == h.water && !h2.wall &&
                     std::abs(h2.t - h.t) <= std::max(cs[k].texelM, cs[k + 1].texelM)) {
                     for (Hit* x : {&h, &h2})
@@ -481,7 +485,7 @@ Hit castRay(const RayContext& ctx, const glm::dvec3& dir, const RaySetups& setup
         }
         return h;
     }
-    return Hit{};
+    return h;  // a miss: Hit{}, or as the last hitIn left it (a miss)
 }
 
 namespace {
