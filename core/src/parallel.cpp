@@ -17,8 +17,9 @@ thread_local bool tServing = false;  // this thread's call is being served (a ca
 
 // Waits a little on the CPU before sleeping: up to kSpin for a condition that another thread is about to make true.
 // A frame makes some 50 calls, most of them a few microseconds after the last one ends; a helper asleep in the kernel
-// takes tens of microseconds to wake, one still spinning well under one (hc-bench-parallel, docs/benchmarks.md). The
-// spin is bounded so that a pool with nothing to do soon gives its cores back (to the PNG encoder of a flight, say).
+// takes tens of microseconds to wake, one still spinning well under one (hc-bench-parallel measures both; commit
+// 8b54b6e has the figures). The spin is bounded so that a pool with nothing to do soon gives its cores back (to the PNG
+// encoder of a flight, say).
 constexpr auto kSpin = std::chrono::microseconds(50);
 
 inline void cpuRelax() {

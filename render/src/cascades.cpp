@@ -205,7 +205,7 @@ std::vector<glm::dvec2> slabPolygon(const CascadeFit& fit, size_t k, const Casca
 
 // Under an error budget neighbouring cascades often come out at the same spacing, or nearly (a loose budget: all of
 // them). One cascade over both then holds about the same texels, and a ray walks one texture instead of crossing from
-// one into the next (its set-up, clip and walk again; docs/benchmarks.md has the gain). The merged cascade takes the
+// one into the next (its set-up, clip and walk again; commit d250930 measured the gain). The merged cascade takes the
 // spacing the budget allows over both: its error per level is the larger of the two (each was measured over its part's
 // box, and the merged visible texels lie in those parts), its budget the tighter. It replaces the two
 // - at their common spacing: its texels are theirs (the same lattice, the same samples), so no texel is worse; or
