@@ -30,7 +30,7 @@ Beam::Beam(const RayContext& ctx, const CameraBasis& basis, double sx0, double s
     depth_.fill(std::numeric_limits<double>::quiet_NaN());
 }
 
-double Beam::startDepth(size_t k) {
+double Beam::firstStartDepth(size_t k) {
     if (k >= depth_.size() || k >= ctx_.fit->cascades.size()) return 0;
     if (std::isnan(depth_[k])) depth_[k] = march(k);
     return depth_[k];

@@ -66,7 +66,7 @@ struct PatchCorners {
 };
 
 // The corners of patch (iu, iv) of `hf` if it has a surface (four defined corners); outside the texture it has none.
-std::optional<PatchCorners> cornersOf(const Heightfield& hf, int iu, int iv) {
+[[gnu::always_inline]] inline std::optional<PatchCorners> cornersOf(const Heightfield& hf, int iu, int iv) {
     if (iu < 0 || iv < 0 || iu >= hf.n - 1 || iv >= hf.n - 1) return std::nullopt;
     const size_t n = size_t(hf.n);
     const float* r0 = &hf.h[size_t(iv) * n + size_t(iu)];
@@ -76,6 +76,14 @@ std::optional<PatchCorners> cornersOf(const Heightfield& hf, int iu, int iv) {
     return p;
 }
 bool patchDefined(const Heightfield& hf, int iu, int iv) { return cornersOf(hf, iu, iv).has_value(); }
+
+// Whether patch (iu, iv), inside the texture, may have a surface: false where its max-mipmap node (the largest of its
+// four corners) is -inf, which no finite corner gives (std::max never prefers -inf to a number): all four undefined,
+// so cornersOf() has none. One load where cornersOf() makes four and tests them: on a flood scene most patches a walk
+// reaches are dry, and the water's test of each was a twentieth of ray casting's instructions.
+bool mayHaveSurface(const Heightfield& hf, int iu, int iv) {
+    return hf.mip[0][size_t(iv) * size_t(hf.n - 1) + size_t(iu)] != -std::numeric_limits<float>::infinity();
+}
 
 // Whether the water at the corners `w` stands above the terrain at each (water::standsAbove).
 bool standsAbove(const PatchCorners& w, const Heightfield& terrain) {
@@ -95,7 +103,8 @@ struct PatchContact {
     bool enteredAbove = false;  // the ray entered the patch above its surface (RayState's `touched`)
 };
 
-PatchContact patchContact(const PatchCorners& p, const TexelRay& ray, const RaySpan& span) {
+[[gnu::always_inline]] inline PatchContact patchContact(const PatchCorners& p, const TexelRay& ray,
+                                                        const RaySpan& span) {
     PatchContact out;
     const double h00 = p.h00, h10 = p.h10, h01 = p.h01, h11 = p.h11;
     const double du = ray.du, dv = ray.dv;
@@ -137,7 +146,8 @@ PatchContact patchContact(const PatchCorners& p, const TexelRay& ray, const RayS
 }
 
 // patchContact with patch (iu, iv) of `hf`: none where the patch has no surface.
-PatchContact patchContact(const Heightfield& hf, int iu, int iv, const TexelRay& ray, const RaySpan& span) {
+[[gnu::always_inline]] inline PatchContact patchContact(const Heightfield& hf, int iu, int iv, const TexelRay& ray,
+                                                        const RaySpan& span) {
     const std::optional<PatchCorners> p = cornersOf(hf, iu, iv);
     return p ? patchContact(*p, ray, span) : PatchContact{};
 }
@@ -205,7 +215,8 @@ struct PatchWalk {
         // first (the water wins a tie below), or neither: the terrain's intersection can be skipped: a share of the
         // patch tests on every flood scene, the frames byte-identical. The GL walk (raycast.comp) intersects both.
         if (water) {
-            if (const std::optional<PatchCorners> wc = cornersOf(tex.water, iu, iv);
+            if (const std::optional<PatchCorners> wc =
+                    mayHaveSurface(tex.water, iu, iv) ? cornersOf(tex.water, iu, iv) : std::nullopt;
                 wc && standsAbove(*wc, tex.terrain)) {
                 const PatchContact cw = patchContact(*wc, ray, segment);
                 if (cw.kind != Contact::Below) {
@@ -246,7 +257,7 @@ struct PatchWalk {
             ct.kind = Contact::Hit;  // a seam: the hit is where the ray went under (tau = 0)
         }
         PatchContact cw;
-        if (water) {
+        if (water && mayHaveSurface(tex.water, iu, iv)) {
             cw = patchContact(tex.water, iu, iv, ray, segment);
             st.touchedWater = st.touchedWater || cw.enteredAbove;
             // Under the water surface at its first contact (a camera in a lake), or come in under it through its
@@ -303,9 +314,13 @@ struct PatchWalk {
 // ray's state are the same.
 //
 // `setup`, `i`, `tFloor`: the ray's setup in this cascade (RaySetups).
-PatchHit traverse(const CascadeTextures& tex, const Cascade& c, const glm::dvec3& o, const glm::dvec3& d, double tIn,
-                  double tOut, double zFloor, RayState& st, double tFrom, const RaySetups::Cascade& setup, size_t i,
-                  double tFloor) {
+//
+// Inlined into hitIn(), as the patch tests are into it: the calls, a dozen arguments and a patch's corners passed
+// through memory, were a tenth of a ray's instructions (docs/benchmarks.md, issue 44).
+[[gnu::always_inline]] inline PatchHit traverse(const CascadeTextures& tex, const Cascade& c, const glm::dvec3& o,
+                                                const glm::dvec3& d, double tIn, double tOut, double zFloor,
+                                                RayState& st, double tFrom, const RaySetups::Cascade& setup, size_t i,
+                                                double tFloor) {
     const Heightfield& hf = tex.terrain;
     PatchHit res;  // the one result every path returns (named: built in the caller's slot)
     if (hf.mip.empty() || !(tIn < tOut)) return res;
@@ -363,7 +378,8 @@ PatchHit traverse(const CascadeTextures& tex, const Cascade& c, const glm::dvec3
                  edgeV = dv > 0 ? 1.0 : 0.0;  // the side of a node the ray leaves by, in nodes
     for (int guard = 0; guard < 1 << 20; ++guard) {
         const int side = hf.mipSide[size_t(level)];
-        if (iu < 0 || iv < 0 || iu >= side || iv >= side) break;  // left the texture
+        // Left the texture (side >= 1; a negative index wraps to a large unsigned one).
+        if (unsigned(iu) >= unsigned(side) || unsigned(iv) >= unsigned(side)) break;
         const double span = double(1 << level);
         // Where the ray leaves this node.
         const double tExitU = du != 0 ? ((iu + edgeU) * span - u0) * invDu : HUGE_VAL;

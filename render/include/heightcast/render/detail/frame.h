@@ -279,8 +279,11 @@ public:
     Beam(const RayContext& ctx, const CameraBasis& basis, double sx0, double sy0, double sx1, double sy1,
          Beam* outer = nullptr);
     // The depth tau before which no ray of the beam meets cascade k's surfaces or walls; marched once a tile, when
-    // a ray first walks cascade k.
-    double startDepth(size_t k);
+    // a ray first walks cascade k. Inline: every ray asks twice a cascade, and all but the first find it marched.
+    double startDepth(size_t k) {
+        if (k < depth_.size() && !std::isnan(depth_[k])) return depth_[k];
+        return firstStartDepth(k);
+    }
     // True when no ray of the beam meets cascade k at all: its march passed over every depth of the cascade's slab
     // (or the outer beam's did), so a ray's entry into it would only clip its span and walk nothing.
     bool passesOver(size_t k) {
@@ -289,6 +292,7 @@ public:
     }
 
 private:
+    double firstStartDepth(size_t k);
     double march(size_t k);
     const RayContext& ctx_;
     Beam* outer_;
