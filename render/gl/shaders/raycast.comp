@@ -277,7 +277,7 @@ Hit hitIn(int k, vec3 d, float lo, float hi, inout RayState st, inout bool under
     Hit h = noHit();
     if (cascades[k].n == 0) return h;
     float t0 = frame.nearM, t1 = frame.farM;
-    // The slab clip of setUpSpans() (raycast.cpp): the eye is the origin, so the offset at t = 0 is 0.
+    // The slab clip of setUpSpans() (ray_setup.cpp): the eye is the origin, so the offset at t = 0 is 0.
     const float rate = d.x * frame.dirX + d.y * frame.dirY;
     if (abs(rate) < 1e-15) {
         if (!(0.0 >= lo && 0.0 <= hi)) return h;
