@@ -1,5 +1,6 @@
-// render/src/ray_setup.cpp: what each ray's walk through each cascade needs from its direction alone (detail::setUpRays,
-// frame.h: RaySetups), for a rectangle of rays at once, in vector registers; raycast.cpp's walks read it.
+// render/src/ray_setup.cpp: what each ray's walk through each cascade needs from its direction alone
+// (detail::setUpRays, frame.h: RaySetups), for a rectangle of rays at once, in vector registers; raycast.cpp's walks
+// read it.
 #include <cmath>
 #include <vector>
 
@@ -24,10 +25,10 @@ struct SpanConstants {
     double topDryNum, topWetNum;  // the cascade's highest point without water and with it, less o.z
 };
 
-// The spans, steps and crossings of n rays in one cascade (RaySetups), in the operations of a walk's set-up (raycast.cpp:
-// hitIn()'s clips, traverse()'s texel ray and clipToHeights()), in vector registers: a lane's value differs from those
-// of that code only where the ray has nothing in the cascade (t1 = -inf there, where those returned at once). Every
-// condition is a select of two values computed in full: this file is built without floating-point traps
+// The spans, steps and crossings of n rays in one cascade (RaySetups), in the operations of a walk's set-up
+// (raycast.cpp: hitIn()'s clips, traverse()'s texel ray and clipToHeights()), in vector registers: a lane's value
+// differs from those of that code only where the ray has nothing in the cascade (t1 = -inf there, where those returned
+// at once). Every condition is a select of two values computed in full: this file is built without floating-point traps
 // (render/CMakeLists.txt).
 void setUpSpans(size_t n, const double* __restrict dx, const double* __restrict dy, const double* __restrict dz,
                 const SpanConstants& k, double* __restrict t0s, double* __restrict t1s, double* __restrict dus,
@@ -109,6 +110,5 @@ void setUpRays(const RayContext& ctx, size_t n, const double* dx, const double* 
                    r.invDv.data(), r.tTopDry.data(), r.tTopWet.data());
     }
 }
-
 
 }  // namespace hc::render::detail

@@ -316,7 +316,7 @@ struct PatchWalk {
 // `setup`, `i`, `tFloor`: the ray's setup in this cascade (RaySetups).
 //
 // Inlined into hitIn(), as the patch tests are into it: the calls, a dozen arguments and a patch's corners passed
-// through memory, were a tenth of a ray's instructions (docs/benchmarks.md, issue 44).
+// through memory, were a twentieth of a ray's instructions (docs/benchmarks.md, issue 44).
 [[gnu::always_inline]] inline PatchHit traverse(const CascadeTextures& tex, const Cascade& c, const glm::dvec3& o,
                                                 const glm::dvec3& d, double tIn, double tOut, double zFloor,
                                                 RayState& st, double tFrom, const RaySetups::Cascade& setup, size_t i,
