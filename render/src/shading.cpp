@@ -3,6 +3,7 @@
 // (detail::legendLayout, which shade.comp draws the same way).
 #include <algorithm>
 #include <array>
+#include <bit>
 #include <cmath>
 #include <cstdio>
 #include <limits>
@@ -20,8 +21,9 @@
 namespace hc::render::detail {
 namespace {
 
+// In float, as shade.comp: the shading loop then works on twice the lanes (shadeBlock).
 struct Rgb {
-    double r, g, b;
+    float r, g, b;
 };
 
 // A colour ramp: stops (position, sRGB colour), positions rising from 0 to 1, padded to kRampStops by repeating the
@@ -29,13 +31,13 @@ struct Rgb {
 // branch, so that the shading loop vectorises (shadeBlock); t is clamped to [0, 1] and NaN takes the last stop.
 constexpr size_t kRampStops = 5;
 struct Ramp {
-    std::array<double, kRampStops> t{}, r{}, g{}, b{};
-    Rgb at(double x) const {
+    std::array<float, kRampStops> t{}, r{}, g{}, b{};
+    Rgb at(float x) const {
         // std::clamp's value for every x but NaN, in two unconditional selects (the vectoriser does not speculate a
         // comparison that one select would make conditional).
-        x = x < 0.0 ? 0.0 : x;
-        x = x <= 1.0 ? x : 1.0;
-        double t0 = t[0], t1 = t[1], r0 = r[0], r1 = r[1], g0 = g[0], g1 = g[1], b0 = b[0], b1 = b[1];
+        x = x < 0.0f ? 0.0f : x;
+        x = x <= 1.0f ? x : 1.0f;
+        float t0 = t[0], t1 = t[1], r0 = r[0], r1 = r[1], g0 = g[0], g1 = g[1], b0 = b[0], b1 = b[1];
         for (size_t k = 1; k + 1 < kRampStops; ++k) {
             const bool past = x > t[k];
             t0 = past ? t[k] : t0, t1 = past ? t[k + 1] : t1;
@@ -43,7 +45,7 @@ struct Ramp {
             g0 = past ? g[k] : g0, g1 = past ? g[k + 1] : g1;
             b0 = past ? b[k] : b0, b1 = past ? b[k + 1] : b1;
         }
-        const double a = (x - t0) / (t1 - t0);
+        const float a = (x - t0) / (t1 - t0);
         return {r0 + a * (r1 - r0), g0 + a * (g1 - g0), b0 + a * (b1 - b0)};
     }
 };
@@ -55,7 +57,7 @@ constexpr Ramp rampOf(const double (&stops)[N][4]) {
     Ramp ramp;
     for (size_t k = 0; k < kRampStops; ++k) {
         const auto& s = stops[std::min(k, N - 1)];
-        ramp.t[k] = s[0], ramp.r[k] = s[1], ramp.g[k] = s[2], ramp.b[k] = s[3];
+        ramp.t[k] = float(s[0]), ramp.r[k] = float(s[1]), ramp.g[k] = float(s[2]), ramp.b[k] = float(s[3]);
     }
     return ramp;
 }
@@ -70,7 +72,7 @@ constexpr Ramp kDepth = rampOf(gpu::kDepthRamp);
 static_assert(rampIsValid(kElevation) && rampIsValid(kDepth));
 constexpr Ramp kDryRamp = [] {
     Ramp ramp = kElevation;
-    ramp.r.fill(gpu::kDryColor[0]), ramp.g.fill(gpu::kDryColor[1]), ramp.b.fill(gpu::kDryColor[2]);
+    ramp.r.fill(float(gpu::kDryColor[0])), ramp.g.fill(float(gpu::kDryColor[1])), ramp.b.fill(float(gpu::kDryColor[2]));
     return ramp;
 }();
 
@@ -168,7 +170,7 @@ void drawLegend(Frame& f, const LegendLayout& l) {
     if (!l.shown) return;
     const Ramp& ramp = l.layer ? kLayerRamp : l.depth ? kDepth : kElevation;
     for (int y = 0; y < l.barH; ++y) {
-        const Rgb c = ramp.at(1.0 - double(y) / (l.barH - 1));
+        const Rgb c = ramp.at(float(1.0 - double(y) / (l.barH - 1)));
         for (int x = 0; x < l.barW; ++x) {
             uint8_t* p = &f.rgb[(size_t(l.y0 + y) * size_t(f.width) + size_t(l.x0 + x)) * 3];
             p[0] = static_cast<uint8_t>(c.r * 255), p[1] = static_cast<uint8_t>(c.g * 255),
@@ -193,31 +195,46 @@ struct ShadeInputs {
     bool depthMode;               // ColorMode::WaterDepth: dry terrain in the dry colour
 };
 
+// exp(x) for x <= 0 (-inf included) within 2 float ulps, in arithmetic the vectoriser takes (std::exp is a call a
+// lane): e^x = 2^n e^r, n the nearest integer to x / ln 2, |r| <= ln 2 / 2, e^r by Cephes' expf polynomial. Below -87
+// (e^-87 ~ 1.6e-38, the smallest normal float's order) it gives e^-87: the fog's share is 0.5 there to the last bit.
+inline float expOfNegative(float x) {
+    x = x < -87.0f ? -87.0f : x;  // -inf and the tail: a select
+    const float n = std::floor(x * 1.44269504088896341f + 0.5f);
+    const float r = (x - n * 0.693359375f) + n * 2.12194440e-4f;  // x - n ln 2, ln 2 in two parts (Cody-Waite)
+    float p = 1.9875691500e-4f;
+    for (float c : {1.3981999507e-3f, 8.3334519073e-3f, 4.1665795894e-2f, 1.6666665459e-1f, 5.0000001201e-1f})
+        p = p * r + c;
+    const float er = p * r * r + r + 1.0f;
+    return er * std::bit_cast<float>((int(n) + 127) << 23);  // n >= -126: a normal power of two
+}
+
 // A worker's buffers for a run of up to kShadeBlock pixels of a row.
 constexpr size_t kShadeBlock = 256;
 struct ShadeBlock {
-    std::array<double, kShadeBlock> fog;  // the fog's share
-    std::array<double, kShadeBlock>
+    std::array<float, kShadeBlock> fog;  // the fog's share
+    std::array<float, kShadeBlock>
         dim;  // the cell outline's factor: 1, or 0.35 on an edge (RenderOptions::cellOutlines)
     std::array<int, kShadeBlock> water;    // PixelRays::isWater
     std::array<int, kShadeBlock> r, g, b;  // indices into the sRGB tables
-    ShadeBlock() { dim.fill(1.0); }
+    ShadeBlock() { dim.fill(1.0f); }
 };
 
 // Shades pixels i0 .. i0 + n - 1 into rgb (3 bytes a pixel); returns how many are hits. The colour of a pixel is
 // computed without branches (every ramp at every pixel, chosen by selects) so that the compiler vectorises the loop:
-// the arithmetic of a pixel, 17 ns on one core before, was 90 % of the stage. The exponential of the fog stays a
-// scalar loop (std::exp, as before), so that every pixel gets the same bytes as before (docs/benchmarks.md).
+// the arithmetic of a pixel, 17 ns on one core before, was 90 % of the stage. It is float, as shade.comp's (twice the
+// lanes of double), the fog's exponential too (expOfNegative).
 template <bool Layer>
 uint64_t shadeBlock(const ShadeInputs& in, size_t i0, size_t n, ShadeBlock& blk, uint8_t* rgb) {
     const Frame& f = in.f;
     const float* dist = f.distanceM.data() + i0;
     uint64_t hits = 0;
     const uint8_t* water = in.rays.isWater.data() + i0;
+    const float invFog = float(1.0 / in.fogDist);
     for (size_t k = 0; k < n; ++k) {
         const bool hit = std::isfinite(dist[k]);
         hits += hit;
-        blk.fog[k] = hit ? 0.5 * (1.0 - std::exp(-dist[k] / in.fogDist)) : 0.0;
+        blk.fog[k] = hit ? 0.5f * (1.0f - expOfNegative(-dist[k] * invFog)) : 0.0f;
         blk.water[k] = water[k];  // bytes: out of the vectorised loop (a vector of bytes would make it 64 lanes wide)
     }
     const float* nX = f.nX.data() + i0;
@@ -231,42 +248,44 @@ uint64_t shadeBlock(const ShadeInputs& in, size_t i0, size_t n, ShadeBlock& blk,
     const float* toLin = kSrgb.toLinear.data();
     // std::clamp(c, 0, 1) by value, in two unconditional selects (std::clamp returns a reference, a branch to the
     // vectoriser, as is a comparison made only when another fails).
-    auto unit = [](double c) {
-        c = c < 0.0 ? 0.0 : c;
-        return 1.0 < c ? 1.0 : c;
+    auto unit = [](float c) {
+        c = c < 0.0f ? 0.0f : c;
+        return 1.0f < c ? 1.0f : c;
     };
     // The nearest entry of kSrgb's tables (adding 0.5 and truncating rounds as lround does).
-    auto index = [&](double c) { return int(unit(c) * 4096.0 + 0.5); };
+    auto index = [&](float c) { return int(unit(c) * 4096.0f + 0.5f); };
     const Rgb hz = in.skyHorizon, zn = in.skyZenith,
-              wallColor{gpu::kWallColor[0], gpu::kWallColor[1], gpu::kWallColor[2]},
-              dry{gpu::kDryColor[0], gpu::kDryColor[1], gpu::kDryColor[2]};
-    const double sun0 = in.sun[0], sun1 = in.sun[1], sun2 = in.sun[2];
+              wallColor{float(gpu::kWallColor[0]), float(gpu::kWallColor[1]), float(gpu::kWallColor[2])},
+              dry{float(gpu::kDryColor[0]), float(gpu::kDryColor[1]), float(gpu::kDryColor[2])};
+    const float sun0 = float(in.sun[0]), sun1 = float(in.sun[1]), sun2 = float(in.sun[2]);
+    const float zMin = float(in.zMin), zScale = float(1.0 / in.zRange), dScale = float(1.0 / in.dRange);
+    const float layerLo = float(in.layerLo), layerScale = float(1.0 / in.layerRange);
     // Dry land in ColorMode::WaterDepth: a ramp of the dry colour at every stop, which gives that colour exactly (a
     // select on a flag the loop does not change is not vectorised).
     const Ramp& landRamp = in.depthMode ? kDryRamp : kElevation;
     for (size_t k = 0; k < n; ++k) {
-        const double up = unit(dirZ[k]);
+        const float up = unit(dirZ[k]);
         const Rgb sky{hz.r + up * (zn.r - hz.r), hz.g + up * (zn.g - hz.g), hz.b + up * (zn.b - hz.b)};
         const Rgb skyLin{toLin[index(sky.r)], toLin[index(sky.g)], toLin[index(sky.b)]};
         // The base colour, by priority: wall, colour layer, dry under a water layer, water depth, dry (depth mode),
-        // elevation (each a select of plain doubles: a select of a struct is a branch to the vectoriser).
+        // elevation (each a select of plain floats: a select of a struct is a branch to the vectoriser).
         const bool isWater = blk.water[k] != 0, wall = wallAt[k] != 0;
-        const Rgb land = landRamp.at((posZ[k] - in.zMin) / in.zRange), wet = kDepth.at(depth[k] / in.dRange);
-        double br = isWater ? wet.r : land.r, bg = isWater ? wet.g : land.g, bb = isWater ? wet.b : land.b;
+        const Rgb land = landRamp.at((posZ[k] - zMin) * zScale), wet = kDepth.at(depth[k] * dScale);
+        float br = isWater ? wet.r : land.r, bg = isWater ? wet.g : land.g, bb = isWater ? wet.b : land.b;
         if constexpr (Layer) {
             const bool dryUnder = in.layerOnWater && !isWater;
             br = dryUnder ? dry.r : br, bg = dryUnder ? dry.g : bg, bb = dryUnder ? dry.b : bb;
             const float v = layerAt[k];
-            const Rgb l = kLayerRamp.at((v - in.layerLo) / in.layerRange);
+            const Rgb l = kLayerRamp.at((v - layerLo) * layerScale);
             const bool valued = !std::isnan(v);
             br = valued ? l.r : br, bg = valued ? l.g : bg, bb = valued ? l.b : bb;
         }
         br = wall ? wallColor.r : br, bg = wall ? wallColor.g : bg, bb = wall ? wallColor.b : bb;
-        const double lambert = nX[k] * sun0 + nY[k] * sun1 + nZ[k] * sun2;
-        const double light = 0.3 + 0.7 * (0.0 < lambert ? lambert : 0.0);  // std::max(0.0, lambert)
+        const float lambert = nX[k] * sun0 + nY[k] * sun1 + nZ[k] * sun2;
+        const float light = 0.3f + 0.7f * (0.0f < lambert ? lambert : 0.0f);  // std::max(0.0f, lambert)
         Rgb c{toLin[index(br)] * light, toLin[index(bg)] * light, toLin[index(bb)] * light};
-        c = {c.r * blk.dim[k], c.g * blk.dim[k], c.b * blk.dim[k]};  // 1 or 0.35: exact either way
-        const double fog = blk.fog[k];
+        c = {c.r * blk.dim[k], c.g * blk.dim[k], c.b * blk.dim[k]};  // 1 or 0.35
+        const float fog = blk.fog[k];
         const bool hit = std::isfinite(dist[k]);
         const Rgb fogged{c.r + fog * (skyLin.r - c.r), c.g + fog * (skyLin.g - c.g), c.b + fog * (skyLin.b - c.b)};
         c = {hit ? fogged.r : skyLin.r, hit ? fogged.g : skyLin.g, hit ? fogged.b : skyLin.b};
@@ -319,8 +338,8 @@ void shadePixels(const Scene& scene, const RenderOptions& options, const CameraB
     const double sunAz = gpu::kSunAzimuthDeg * M_PI / 180, sunAlt = gpu::kSunAltitudeDeg * M_PI / 180;
     const double sun[3] = {std::sin(sunAz) * std::cos(sunAlt), std::cos(sunAz) * std::cos(sunAlt), std::sin(sunAlt)};
     const double fogDist = gpu::kFogExtents * std::hypot(scene.xMax - scene.xMin, scene.yMax - scene.yMin);
-    const Rgb skyHorizon{gpu::kSkyHorizon[0], gpu::kSkyHorizon[1], gpu::kSkyHorizon[2]};
-    const Rgb skyZenith{gpu::kSkyZenith[0], gpu::kSkyZenith[1], gpu::kSkyZenith[2]};
+    const Rgb skyHorizon{float(gpu::kSkyHorizon[0]), float(gpu::kSkyHorizon[1]), float(gpu::kSkyHorizon[2])};
+    const Rgb skyZenith{float(gpu::kSkyZenith[0]), float(gpu::kSkyZenith[1]), float(gpu::kSkyZenith[2])};
     const double zRange = std::max(scene.elevationMax - scene.elevationMin, 1e-6);
     const double dRange = std::max(scene.depthColorMaxM, 1e-6);
     const double pixelAngle = 2.0 * basis.tanHalfY / H;
@@ -350,8 +369,8 @@ void shadePixels(const Scene& scene, const RenderOptions& options, const CameraB
                          .layerOnWater = colorLayer && colorLayer->kind == influence::Layer::WaterCells,
                          .depthMode = options.color == ColorMode::WaterDepth};
     // Cell outlines: a scene lookup a pixel, so outside the vectorised loop (ShadeBlock::dim).
-    auto outline = [&](size_t i0, size_t n, double* dim) {
-        for (size_t k = 0; k < n; ++k) dim[k] = cellOutlineDim(scene, f, i0 + k, pixelAngle);
+    auto outline = [&](size_t i0, size_t n, float* dim) {
+        for (size_t k = 0; k < n; ++k) dim[k] = float(cellOutlineDim(scene, f, i0 + k, pixelAngle));
     };
     std::vector<uint64_t> hits(resolveThreads(options.threads), 0);
     parallelFor(size_t(H), 16, options.threads, [&](size_t b, size_t e, unsigned worker) {
