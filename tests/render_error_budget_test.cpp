@@ -209,6 +209,11 @@ TEST_P(ErrorBudget, PixelBoundIsChargedAtTheNearestHitAndHolds) {
             const ErrorCheck check = render::verifyFrameError(scene, cam, f, kChecked);
             if (check.hits == 0 || !std::isfinite(t.errorBoundPx)) continue;
             ++frames;
+            // The nearest hits the rays counted as they landed are the frame's own.
+            Timings scanned = t;
+            render::detail::measureNearestHits(f, 0, scanned);
+            for (size_t c = 0; c < t.cascades.size(); ++c)
+                EXPECT_EQ(t.cascades[c].nearestHitM, scanned.cascades[c].nearestHitM) << "camera " << k << ", " << c;
             double nearest = HUGE_VAL;
             for (const float d : f.distanceM) nearest = std::min(nearest, double(d));
             const render::detail::FrameSetup setup = render::detail::setUpFrame(scene, cam);

@@ -339,8 +339,16 @@ detail::PixelRays castRays(const Scene& scene, const detail::FrameSetup& setup, 
     std::vector<double> sxAt(static_cast<size_t>(W)), syAt(static_cast<size_t>(H));  // each pixel column's and row's
     for (int px = 0; px < W; ++px) sxAt[size_t(px)] = sxOf(px);
     for (int py = 0; py < H; ++py) syAt[size_t(py)] = syOf(py);
+    // Each worker's nearest hit of each cascade (CascadeStats::nearestHitM), counted as the rays land: a scan of the
+    // frame after them (detail::measureNearestHits, which the tests compare) read 16 MB more a frame.
+    constexpr size_t kMaxCascades = 8;
+    using Nearest = std::array<float, kMaxCascades>;
+    Nearest none;
+    none.fill(std::numeric_limits<float>::infinity());
+    std::vector<Nearest> nearest(resolveThreads(options.threads), none);
     // Pixel (px, py) of the rectangle `dirs` holds (RayDirections::compute).
-    auto cast = [&](int px, int py, const RayDirections& dirs, detail::Beam* beam, PendingNormals& normals) {
+    auto cast = [&](int px, int py, const RayDirections& dirs, detail::Beam* beam, PendingNormals& normals,
+                    Nearest& near) {
         const size_t k = dirs.at(px, py);
         const glm::dvec3 d{dirs.x[k], dirs.y[k], dirs.z[k]};
         const double length = dirs.length[k];
@@ -350,6 +358,7 @@ detail::PixelRays castRays(const Scene& scene, const detail::FrameSetup& setup, 
         const detail::Hit h = detail::castRay(ctx, d, dirs.setups, k, beam, length);
         if (!h.hit) return;
         f.distanceM[i] = float(h.t);
+        if (size_t(h.cascade) < kMaxCascades) near[size_t(h.cascade)] = std::min(near[size_t(h.cascade)], float(h.t));
         f.posX[i] = float(eye.x + d.x * h.t);
         f.posY[i] = float(eye.y + d.y * h.t);
         f.posZ[i] = float(eye.z + d.z * h.t);
@@ -365,19 +374,19 @@ detail::PixelRays castRays(const Scene& scene, const detail::FrameSetup& setup, 
     const Stopwatch clock;
     const int tile = options.beamTilePx;
     if (tile <= 1) {
-        parallelFor(size_t(H), 4, options.threads, [&](size_t b, size_t e, unsigned) {
+        parallelFor(size_t(H), 4, options.threads, [&](size_t b, size_t e, unsigned worker) {
             PendingNormals normals;
             RayDirections dirs;
             for (size_t py = b; py < e; ++py) {
                 dirs.compute(ctx, basis, sxAt.data(), syAt.data(), 0, W, int(py), int(py) + 1);
-                for (int px = 0; px < W; ++px) cast(px, int(py), dirs, nullptr, normals);
+                for (int px = 0; px < W; ++px) cast(px, int(py), dirs, nullptr, normals, nearest[worker]);
             }
             normals.flush(f);
         });
     } else {  // a row of blocks of 4 x 4 tiles a task; each tile's rays with their beam (detail::Beam), inside its
               // block's
         const int block = 4 * tile;
-        parallelFor(size_t((H + block - 1) / block), 1, options.threads, [&](size_t b, size_t e, unsigned) {
+        parallelFor(size_t((H + block - 1) / block), 1, options.threads, [&](size_t b, size_t e, unsigned worker) {
             PendingNormals normals;
             RayDirections dirs;
             for (size_t by = b; by < e; ++by) {
@@ -391,7 +400,7 @@ detail::PixelRays castRays(const Scene& scene, const detail::FrameSetup& setup, 
                             const int py1 = std::min(qy1, py0 + tile), px1 = std::min(qx1, px0 + tile);
                             detail::Beam beam(ctx, basis, sxOf(px0), syOf(py0), sxOf(px1 - 1), syOf(py1 - 1), &outer);
                             for (int py = py0; py < py1; ++py)
-                                for (int px = px0; px < px1; ++px) cast(px, py, dirs, &beam, normals);
+                                for (int px = px0; px < px1; ++px) cast(px, py, dirs, &beam, normals, nearest[worker]);
                         }
                 }
             }
@@ -400,6 +409,12 @@ detail::PixelRays castRays(const Scene& scene, const detail::FrameSetup& setup, 
     }
     timings.raycastMs = clock.milliseconds();
     timings.rays = pixels;
+    for (size_t k = 0; k < timings.cascades.size(); ++k) {
+        timings.cascades[k].nearestHitM = HUGE_VAL;  // +inf: no hit
+        for (const Nearest& mine : nearest)
+            if (k < kMaxCascades)
+                timings.cascades[k].nearestHitM = std::min(timings.cascades[k].nearestHitM, double(mine[k]));
+    }
     return rays;
 }
 
@@ -475,7 +490,6 @@ Frame renderFrame(const Scene& scene, const Camera& camera, const RenderOptions&
     detail::shadePixels(scene, options, setup.basis, rays, f, timings);
     detail::frameToWorldAxes(scene.grid(), f);
     if (kept) keepCascades(*kept, scene, options, fit, tex);
-    detail::measureNearestHits(f, options.threads, timings);
     detail::boundFrame(scene, setup, fit, timings);
     timings.totalMs = total.milliseconds();
     return f;

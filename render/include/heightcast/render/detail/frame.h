@@ -200,8 +200,8 @@ double pyramidCopyBoundM(const Scene& scene);
 // the frame's bound is still its own texels' (boundFrame).
 std::vector<double> predictLevelErrorM(const Scene& scene, double x0, double y0, double x1, double y1,
                                        double waterMinDepthM, unsigned threads);
-// CascadeStats::nearestHitM of every cascade of `timings` from frame `f`'s hits (the GL backend's shade.comp counts
-// it).
+// CascadeStats::nearestHitM of every cascade of `timings` from a scan of frame `f`'s hits: the reference the tests hold
+// both backends' own counts to (the CPU counts as its rays land, the GL backend's shade.comp as it shades).
 void measureNearestHits(const Frame& f, unsigned threads, Timings& timings);
 // Each cascade's error bound and the frame's (CascadeStats::errorBoundM, Timings::errorBoundM), once its cascades'
 // statistics are final, nearestHitM included (error_bound.cpp; both backends).
