@@ -358,6 +358,23 @@ TEST_F(Render, GoldenImage) {
     EXPECT_GE(p, 40.0) << "see render_golden_actual.png and render_golden_diff.png";
 }
 
+// The shading's fog exponential (detail::expOfNegative) against double std::exp: within 2 float ulps of e^x at a
+// million points over [-87, 0] (Cephes' polynomial is good to about one; the second covers float rounding of x / ln 2),
+// and 1 - e^x exactly 1 below -87 and at -inf, where a miss's fog would otherwise be NaN.
+TEST(RenderShading, FogExponentialIsExpWithinTwoUlps) {
+    double worst = 0;
+    for (int i = 0; i <= 1000000; ++i) {
+        const float x = float(-87.0 * i / 1000000.0);
+        const double want = std::exp(double(x));
+        const float got = detail::expOfNegative(x);
+        const double ulp = double(float(want)) - double(std::nextafter(float(want), 0.0f));  // the float spacing there
+        worst = std::max(worst, std::abs(double(got) - want) / ulp);
+    }
+    EXPECT_LE(worst, 2.0);
+    for (const float x : {-87.5f, -1000.0f, -HUGE_VALF}) EXPECT_EQ(1.0f - detail::expOfNegative(x), 1.0f) << x;
+    EXPECT_EQ(detail::expOfNegative(0.0f), 1.0f);
+}
+
 // ---------------------------------------------------------------------------------------------------------
 // The water level field (docs/design.md section 6; issue 11, "The water surface is not level"). The old renderer
 // drew water as smoothed terrain + smoothed depth, which rose up to 40 m above a bathtub flood's level near

@@ -19,6 +19,26 @@
 #include "renderer_internal.h"
 
 namespace hc::render::detail {
+
+namespace {
+
+// detail::expOfNegative (frame.h), inline: the shading loop's calls of it vectorise (a call to a function the library
+// exports, which -fPIC lets another library replace, is not inlined).
+inline float expNegative(float x) {
+    x = x < -87.0f ? -87.0f : x;  // -inf and the tail: a select
+    const float n = std::floor(x * 1.44269504088896341f + 0.5f);
+    const float r = (x - n * 0.693359375f) + n * 2.12194440e-4f;  // x - n ln 2, ln 2 in two parts (Cody-Waite)
+    float p = 1.9875691500e-4f;                                   // e^r = 1 + r + r^2 p(r), Cephes' expf
+    for (float c : {1.3981999507e-3f, 8.3334519073e-3f, 4.1665795894e-2f, 1.6666665459e-1f, 5.0000001201e-1f})
+        p = p * r + c;
+    const float er = p * r * r + r + 1.0f;
+    return er * std::bit_cast<float>((int(n) + 127) << 23);  // n >= -126: a normal power of two
+}
+
+}  // namespace
+
+float expOfNegative(float x) { return expNegative(x); }
+
 namespace {
 
 // In float, as shade.comp: the shading loop then works on twice the lanes (shadeBlock).
@@ -195,20 +215,6 @@ struct ShadeInputs {
     bool depthMode;               // ColorMode::WaterDepth: dry terrain in the dry colour
 };
 
-// exp(x) for x <= 0 (-inf included) within 2 float ulps, in arithmetic the vectoriser takes (std::exp is a call a
-// lane): e^x = 2^n e^r, n the nearest integer to x / ln 2, |r| <= ln 2 / 2, e^r by Cephes' expf polynomial. Below -87
-// (e^-87 ~ 1.6e-38, the smallest normal float's order) it gives e^-87: the fog's share is 0.5 there to the last bit.
-inline float expOfNegative(float x) {
-    x = x < -87.0f ? -87.0f : x;  // -inf and the tail: a select
-    const float n = std::floor(x * 1.44269504088896341f + 0.5f);
-    const float r = (x - n * 0.693359375f) + n * 2.12194440e-4f;  // x - n ln 2, ln 2 in two parts (Cody-Waite)
-    float p = 1.9875691500e-4f;
-    for (float c : {1.3981999507e-3f, 8.3334519073e-3f, 4.1665795894e-2f, 1.6666665459e-1f, 5.0000001201e-1f})
-        p = p * r + c;
-    const float er = p * r * r + r + 1.0f;
-    return er * std::bit_cast<float>((int(n) + 127) << 23);  // n >= -126: a normal power of two
-}
-
 // A worker's buffers for a run of up to kShadeBlock pixels of a row.
 constexpr size_t kShadeBlock = 256;
 struct ShadeBlock {
@@ -223,7 +229,7 @@ struct ShadeBlock {
 // Shades pixels i0 .. i0 + n - 1 into rgb (3 bytes a pixel); returns how many are hits. The colour of a pixel is
 // computed without branches (every ramp at every pixel, chosen by selects) so that the compiler vectorises the loop:
 // the arithmetic of a pixel, 17 ns on one core before, was 90 % of the stage. It is float, as shade.comp's (twice the
-// lanes of double), the fog's exponential too (expOfNegative).
+// lanes of double), the fog's exponential too (expNegative).
 template <bool Layer>
 uint64_t shadeBlock(const ShadeInputs& in, size_t i0, size_t n, ShadeBlock& blk, uint8_t* rgb) {
     const Frame& f = in.f;
@@ -234,7 +240,7 @@ uint64_t shadeBlock(const ShadeInputs& in, size_t i0, size_t n, ShadeBlock& blk,
     for (size_t k = 0; k < n; ++k) {
         const bool hit = std::isfinite(dist[k]);
         hits += hit;
-        blk.fog[k] = hit ? 0.5f * (1.0f - expOfNegative(-dist[k] * invFog)) : 0.0f;
+        blk.fog[k] = hit ? 0.5f * (1.0f - expNegative(-dist[k] * invFog)) : 0.0f;
         blk.water[k] = water[k];  // bytes: out of the vectorised loop (a vector of bytes would make it 64 lanes wide)
     }
     const float* nX = f.nX.data() + i0;
