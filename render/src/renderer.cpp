@@ -17,6 +17,7 @@
 #include "heightcast/core/timer.h"
 #include "heightcast/influence/region.h"
 #include "heightcast/render/detail/frame.h"
+#include "heightcast/render/gpu_layout.h"
 #include "renderer_internal.h"
 
 namespace hc::render {
@@ -341,7 +342,7 @@ detail::PixelRays castRays(const Scene& scene, const detail::FrameSetup& setup, 
     for (int py = 0; py < H; ++py) syAt[size_t(py)] = syOf(py);
     // Each worker's nearest hit of each cascade (CascadeStats::nearestHitM), counted as the rays land: a scan of the
     // frame after them (detail::measureNearestHits, which the tests compare) read 16 MB more a frame.
-    constexpr size_t kMaxCascades = 8;
+    constexpr size_t kMaxCascades = gpu::kMaxCascades;
     using Nearest = std::array<float, kMaxCascades>;
     Nearest none;
     none.fill(std::numeric_limits<float>::infinity());
@@ -409,11 +410,10 @@ detail::PixelRays castRays(const Scene& scene, const detail::FrameSetup& setup, 
     }
     timings.raycastMs = clock.milliseconds();
     timings.rays = pixels;
-    for (size_t k = 0; k < timings.cascades.size(); ++k) {
-        timings.cascades[k].nearestHitM = HUGE_VAL;  // +inf: no hit
+    for (size_t k = 0; k < std::min(timings.cascades.size(), kMaxCascades); ++k) {  // RenderOptions: at most 4
+        timings.cascades[k].nearestHitM = HUGE_VAL;                                 // +inf: no hit
         for (const Nearest& mine : nearest)
-            if (k < kMaxCascades)
-                timings.cascades[k].nearestHitM = std::min(timings.cascades[k].nearestHitM, double(mine[k]));
+            timings.cascades[k].nearestHitM = std::min(timings.cascades[k].nearestHitM, double(mine[k]));
     }
     return rays;
 }
