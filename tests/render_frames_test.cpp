@@ -360,7 +360,7 @@ TEST_F(Render, GoldenImage) {
 
 // The shading's fog exponential (detail::expOfNegative) against double std::exp: within 2 float ulps of e^x at a
 // million points over [-87, 0] (Cephes' polynomial is good to about one; the second covers float rounding of x / ln 2),
-// and 1 - e^x exactly 1 below -87 and at -inf, where a miss's fog would otherwise be NaN.
+// and 1 - e^x exactly 1 below -87 and at -inf (a miss's distance: the vectorised loop computes it for every lane).
 TEST(RenderShading, FogExponentialIsExpWithinTwoUlps) {
     double worst = 0;
     for (int i = 0; i <= 1000000; ++i) {

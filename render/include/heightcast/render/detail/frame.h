@@ -202,8 +202,8 @@ std::vector<double> predictLevelErrorM(const Scene& scene, double x0, double y0,
                                        double waterMinDepthM, unsigned threads);
 // e^x for x <= 0 (-inf included) in float, in arithmetic the vectoriser takes where std::exp is a call a lane (the
 // shading's fog, shading.cpp): e^x = 2^n e^r, n the nearest integer to x / ln 2, |r| <= ln 2 / 2. Within 2 float ulps
-// of e^x (Render.FogExponentialIsExpWithinTwoUlps). Below -87 (e^-87 ~ 1.6e-38, near the smallest normal float) it
-// gives e^-87, which leaves 1 - e^x exactly 1.
+// of e^x (RenderShading.FogExponentialIsExpWithinTwoUlps). Below -87 (e^-87 ~ 1.6e-38, near the smallest normal float)
+// it gives e^-87, which leaves 1 - e^x exactly 1.
 float expOfNegative(float x);
 // CascadeStats::nearestHitM of every cascade of `timings` from a scan of frame `f`'s hits: the reference the tests hold
 // both backends' own counts to (the CPU counts as its rays land, the GL backend's shade.comp as it shades).
